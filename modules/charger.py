@@ -1,0 +1,7 @@
+"""The charger module's user program (placeholder until its real program lands)."""
+
+from modules.common.placeholder import PlaceholderProgram
+
+
+class Program(PlaceholderProgram):
+    module = "charger"

@@ -1,0 +1,340 @@
+"""``tokenring bench``: token round trips of the real ring against a bare Zenoh ring.
+
+Both rings have N processes on this machine and are measured in the same run (alternating when
+``--repeat`` > 1), so the ratio is meaningful even where absolute times are noisy. The ring's
+round trip is timed by its round master (the time between two of its visits); the baseline's by
+its process 0. Reports median, p90, p99 and max, per-hop cost, handler time, RSS and CPU.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import os
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tokenring import keys
+from tokenring.cliutil import format_table, free_port, query
+from tokenring.errors import TokenRingError, UsageError
+from tokenring.launcher import Launcher, NodePlan
+from tokenring.zconfig import make_config, open_session
+
+CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+
+
+def generated_ids(n: int) -> list[int]:
+    """``n`` node IDs spread over 1..255 (so new nodes could fit between, as in protocol.yaml)."""
+    if not 2 <= n <= 255:
+        raise UsageError(f"--nodes must be 2..255, not {n}")
+    if n == 255:
+        return list(range(1, 256))
+    ids = sorted({round(1 + i * 254 / (n - 1)) for i in range(n)})
+    return ids
+
+
+def summarize(seconds: list[float] | np.ndarray) -> dict[str, float]:
+    values = np.asarray(seconds) * 1e3
+    if not len(values):
+        return {
+            "median": float("nan"),
+            "p90": float("nan"),
+            "p99": float("nan"),
+            "max": float("nan"),
+            "n": 0,
+        }
+    return {
+        "median": float(np.median(values)),
+        "p90": float(np.percentile(values, 90)),
+        "p99": float(np.percentile(values, 99)),
+        "max": float(values.max()),
+        "mean": float(values.mean()),
+        "n": len(values),
+    }
+
+
+def proc_rss_mb(pid: int) -> float:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return float("nan")
+
+
+def proc_cpu_s(pid: int) -> float:
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
+    except (OSError, IndexError, ValueError):
+        return float("nan")
+
+
+def progress(text: str, quiet: bool = False) -> None:
+    if not quiet:
+        sys.stderr.write(text + "\n")
+        sys.stderr.flush()
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def run_bare(n: int, rounds: int, warmup: int, timeout: float = 120.0) -> list[float]:
+    """Round times (s) of a bare Zenoh ring of ``n`` processes."""
+    port = free_port()
+    ring = f"b{os.getpid()}x{port}"
+    base = [sys.executable, "-m", "tokenring.bench_bare", "--count", str(n), "--port", str(port)]
+    base += [
+        "--rounds",
+        str(rounds),
+        "--warmup",
+        str(warmup),
+        "--ring",
+        ring,
+        "--timeout",
+        str(timeout),
+    ]
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    first = subprocess.Popen([*base, "--index", "0"], stdout=subprocess.PIPE, text=True, env=env)
+    others = [
+        subprocess.Popen([*base, "--index", str(i)], stdout=subprocess.DEVNULL, env=env) for i in range(1, n)
+    ]
+    try:
+        out, _ = first.communicate(timeout=timeout + 30)
+    except subprocess.TimeoutExpired:
+        first.kill()
+        out = ""
+    finally:
+        for proc in others:
+            try:
+                proc.wait(5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(2)
+        if first.poll() is None:
+            first.kill()
+            first.wait(2)
+    lines = [line for line in out.splitlines() if line.startswith("{")]
+    if not lines:
+        raise TokenRingError(f"the bare ring of {n} produced no result")
+    result = json.loads(lines[-1])
+    if "error" in result:
+        raise TokenRingError(f"bare ring of {n}: {result['error']}")
+    return result["rounds_s"]
+
+
+@dataclass
+class RingRun:
+    rounds_s: list[float]
+    rss_mb: list[float]
+    cpu_s: list[float]
+    handler_us: dict[str, float]
+    wall_s: float
+    stats: dict[str, Any] = field(default_factory=dict)
+
+
+def run_ring(
+    n: int,
+    rounds: int,
+    warmup: int,
+    *,
+    bitrate: str = "max",
+    ack_mode: str = "adaptive",
+    timeout: float = 120.0,
+    programs: dict[int, str] | None = None,
+    ids: list[int] | None = None,
+    extra_node_args: list[str] | None = None,
+) -> RingRun:
+    """Round times (s) of the real ring of ``n`` node processes, with RSS and CPU per node."""
+    ids = ids or generated_ids(n)
+    port = free_port()
+    ring = f"r{os.getpid()}x{port}"
+    plans = [NodePlan(i, f"node{i}", (programs or {}).get(i)) for i in ids]
+    launcher = Launcher(
+        plans,
+        ring=ring,
+        bitrate=bitrate,
+        ack_mode=ack_mode,
+        listen=[f"tcp/127.0.0.1:{port}"],
+        log_level="warning",
+        output=io.StringIO(),
+        extra_node_args=extra_node_args or [],
+    )
+    from tokenring.protocol import default_protocol
+
+    main_id = default_protocol().nodes["main"].id if "main" in default_protocol().nodes else None
+    master = main_id if main_id in ids else min(ids)
+    launcher.start()
+    try:
+        config = make_config(connect=[f"tcp/127.0.0.1:{port}"])
+        with open_session(config) as session:
+            key = keys.control(ring, master, "stats")
+            deadline = time.monotonic() + timeout
+            stats: dict[str, Any] = {}
+            while time.monotonic() < deadline:
+                replies = query(session, key, timeout=1.0)
+                if replies and replies[0][1].get("ok"):
+                    stats = replies[0][1]["result"]
+                    if len(stats["active"]) == len(ids) and stats["stats"]["visits"] >= warmup:
+                        break
+                dead = [c for c in launcher.children.values() if c.process.poll() is not None]
+                if dead:
+                    raise TokenRingError(f"node {dead[0].plan.name} died while the ring formed")
+                time.sleep(0.1)
+            else:
+                raise TokenRingError(
+                    f"ring of {n} did not form in {timeout:.0f} s "
+                    f"(active {len(stats.get('active', []))}, visits {stats.get('stats', {}).get('visits', 0)})"
+                )
+            cpu0 = {c.process.pid: proc_cpu_s(c.process.pid) for c in launcher.children.values()}
+            t0 = time.monotonic()
+            start_visits = stats["stats"]["visits"]
+            visits_key = keys.control(ring, master, "visits")
+            while time.monotonic() < deadline:
+                time.sleep(0.2)
+                replies = query(session, visits_key, timeout=1.0)  # cheap: one integer
+                if replies and replies[0][1].get("ok") and replies[0][1]["result"] >= start_visits + rounds:
+                    break
+            else:
+                raise TokenRingError(f"ring of {n}: measurement did not finish in {timeout:.0f} s")
+            wall = time.monotonic() - t0
+            cpu = [proc_cpu_s(c.process.pid) - cpu0[c.process.pid] for c in launcher.children.values()]
+            rss = [proc_rss_mb(c.process.pid) for c in launcher.children.values()]
+            stats = query(session, key, timeout=2.0)[0][1]["result"]
+            round_list = query(session, keys.control(ring, master, "rounds"), timeout=2.0)[0][1]["result"]
+            return RingRun(round_list[-rounds:], rss, cpu, stats["handler_us"], wall, stats)
+    finally:
+        launcher.stop()
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "bench",
+        help="token round trip against a bare Zenoh ring, measured in the same run",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--nodes", type=int, default=8, help="ring size 2..255 (default %(default)s)")
+    p.add_argument("--rounds", type=int, default=2000, help="rounds measured per run (default %(default)s)")
+    p.add_argument("--warmup", type=int, default=300, help="rounds discarded first (default %(default)s)")
+    p.add_argument("--bitrate", default="max", help="emulated bitrate of the ring (default %(default)s)")
+    p.add_argument("--ack", default="adaptive", choices=("adaptive", "always", "never"))
+    p.add_argument("--repeat", type=int, default=1, help="alternate bare/ring runs this many times")
+    p.add_argument("--timeout", type=float, default=120.0, help="seconds allowed per run")
+    p.add_argument("--json", metavar="FILE", help="write the results as JSON ('-' for stdout)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def run(args: argparse.Namespace) -> int:
+    ids = generated_ids(args.nodes)
+    if not 10 <= args.rounds <= 16000:
+        raise UsageError("--rounds must be 10..16000")
+    if args.repeat < 1:
+        raise UsageError("--repeat must be at least 1")
+    from tokenring.ring import parse_bitrate
+
+    parse_bitrate(args.bitrate)
+    bare: list[float] = []
+    ring: list[float] = []
+    rss: list[float] = []
+    cpu: list[float] = []
+    handler: list[dict[str, float]] = []
+    wall = 0.0
+    total = 2 * args.repeat
+    step = 0
+    for _ in range(args.repeat):
+        step += 1
+        progress(
+            f"[{step}/{total}] bare Zenoh ring, {args.nodes} processes, {args.rounds} rounds ...",
+            args.quiet,
+        )
+        part = run_bare(args.nodes, args.rounds, args.warmup, args.timeout)
+        bare += part
+        progress(f"        median {summarize(part)['median']:.3f} ms", args.quiet)
+        step += 1
+        progress(
+            f"[{step}/{total}] tokenring ring, {args.nodes} nodes, bitrate {args.bitrate}, ack {args.ack} ...",
+            args.quiet,
+        )
+        result = run_ring(
+            args.nodes,
+            args.rounds,
+            args.warmup,
+            bitrate=args.bitrate,
+            ack_mode=args.ack,
+            timeout=args.timeout,
+            ids=ids,
+        )
+        ring += result.rounds_s
+        rss += result.rss_mb
+        cpu += [c / result.wall_s for c in result.cpu_s]
+        handler.append(result.handler_us)
+        wall += result.wall_s
+        progress(f"        median {summarize(result.rounds_s)['median']:.3f} ms", args.quiet)
+    ring_s, bare_s = summarize(ring), summarize(bare)
+    report = {
+        "nodes": args.nodes,
+        "rounds": args.rounds * args.repeat,
+        "bitrate": args.bitrate,
+        "ack": args.ack,
+        "rtt_ms": ring_s,
+        "baseline_rtt_ms": bare_s,
+        "ratio_median": ring_s["median"] / bare_s["median"],
+        "ratio_p99": ring_s["p99"] / bare_s["p99"],
+        "per_hop_us": {
+            "ring": ring_s["median"] * 1e3 / args.nodes,
+            "baseline": bare_s["median"] * 1e3 / args.nodes,
+        },
+        "handler_us": {
+            "median": float(np.median([h["median"] for h in handler])),
+            "p99": float(np.median([h["p99"] for h in handler])),
+        },
+        "rss_mb": {"max": max(rss), "mean": float(np.mean(rss))},
+        "cpu_per_node_pct": {"mean": float(np.mean(cpu) * 100), "max": float(np.max(cpu) * 100)},
+        "machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]},
+    }
+    rows = [
+        [
+            "tokenring",
+            f"{ring_s['median']:.3f}",
+            f"{ring_s['p90']:.3f}",
+            f"{ring_s['p99']:.3f}",
+            f"{ring_s['max']:.3f}",
+            f"{report['per_hop_us']['ring']:.0f}",
+        ],
+        [
+            "bare Zenoh",
+            f"{bare_s['median']:.3f}",
+            f"{bare_s['p90']:.3f}",
+            f"{bare_s['p99']:.3f}",
+            f"{bare_s['max']:.3f}",
+            f"{report['per_hop_us']['baseline']:.0f}",
+        ],
+    ]
+    print(
+        f"token round trip, {args.nodes} nodes, {report['rounds']} rounds, bitrate {args.bitrate}, ack {args.ack}"
+    )
+    print(format_table(rows, ["ring", "median ms", "p90 ms", "p99 ms", "max ms", "per hop us"]))
+    print(
+        f"ratio (median) {report['ratio_median']:.2f}x   ratio (p99) {report['ratio_p99']:.2f}x   "
+        f"handler median {report['handler_us']['median']:.1f} us   "
+        f"RSS max {report['rss_mb']['max']:.0f} MB   CPU/node {report['cpu_per_node_pct']['mean']:.0f} %"
+    )
+    if args.json:
+        text = json.dumps(report, indent=2)
+        if args.json == "-":
+            print(text)
+        else:
+            Path(args.json).write_text(text + "\n")
+    return 0

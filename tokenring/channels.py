@@ -1,0 +1,330 @@
+"""User channels: what the node OS copies between the token and a user program's structures.
+
+A **data channel** is a broadcast: its owner stores a structure into it at every visit, every
+interested node gets a copy out of it. A **command channel** is an inbox with the seed's
+registered-letter semantics:
+
+* the sender's OS writes a command into the target inbox only when that inbox is **free** in
+  the token, and marks it occupied;
+* the receiver's OS copies it into the user's structure only if the inbox is **unlocked**, sets
+  the acknowledge state and **locks** the inbox (the user unlocks it to receive the next one);
+  a command whose (sender, seq) was already taken is acknowledged but never handed over twice;
+* when the token is back at the sender, its OS records transmitted/acknowledged and **clears**
+  the inbox in every case. There is no retry: the user program resends if it wants.
+
+The objects here run inside the token handler: each ``visit`` is a handful of byte operations.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from tokenring.errors import ChannelError
+from tokenring.protocol import Channel, Command, CommandChannel, Protocol
+
+
+class ChannelBuffer:
+    """A user program's structure for one channel: raw bytes plus typed field access.
+
+    Reads and writes through this object are atomic with respect to the token handler, which
+    copies under the same mutex — the Pythonic form of the seed's lock/unlock guard.
+    """
+
+    def __init__(self, channel: Channel) -> None:
+        self.channel = channel
+        self.raw = bytearray(channel.size)
+        self.fields = np.ndarray((), dtype=channel.dtype, buffer=self.raw)
+        self.mutex = threading.Lock()
+        self.visits = 0  # how many visits copied into/out of this buffer
+
+    def read(self) -> dict[str, Any]:
+        """All fields as plain Python values, consistent with one visit."""
+        with self.mutex:
+            return {f.name: f.to_python(self.fields[f.name]) for f in self.channel.fields}
+
+    def snapshot(self) -> np.ndarray:
+        """A copy of the structured record (numpy), consistent with one visit."""
+        with self.mutex:
+            return self.fields.copy()
+
+    def write(self, **values: Any) -> None:
+        """Set several fields at once; unknown names and out-of-range values are refused."""
+        names = {f.name: f for f in self.channel.fields}
+        for name, value in values.items():
+            if name not in names:
+                raise ChannelError(f"{self.channel.name} has no field {name!r} (fields: {', '.join(names)})")
+            _check_value(self.channel.name, names[name], value)
+        with self.mutex:
+            for name, value in values.items():
+                self.fields[name] = value.encode("ascii") if isinstance(value, str) else value
+
+    def __getitem__(self, name: str) -> Any:
+        field = next((f for f in self.channel.fields if f.name == name), None)
+        if field is None:
+            raise ChannelError(f"{self.channel.name} has no field {name!r}")
+        with self.mutex:
+            return field.to_python(self.fields[name])
+
+    def __setitem__(self, name: str, value: Any) -> None:
+        self.write(**{name: value})
+
+
+def _check_value(where: str, field: Any, value: Any) -> None:
+    dtype = field.dtype.base if field.dtype.shape else field.dtype
+    if field.is_text:
+        if not isinstance(value, str | bytes) or len(value) > field.size:
+            raise ChannelError(f"{where}.{field.name}: text of at most {field.size} characters expected")
+        return
+    values = np.ravel(np.asarray(value))
+    if field.dtype.shape and values.size != int(np.prod(field.dtype.shape)):
+        raise ChannelError(f"{where}.{field.name}: expected {field.dtype.shape[0]} values, got {values.size}")
+    if dtype.kind in "iu":
+        info = np.iinfo(dtype)
+        for v in values.tolist():
+            if not isinstance(v, int | bool) and not float(v).is_integer():
+                raise ChannelError(f"{where}.{field.name}: {v!r} is not an integer")
+            if not info.min <= int(v) <= info.max:
+                raise ChannelError(
+                    f"{where}.{field.name}: {v} does not fit {field.type_name} ({info.min}..{info.max})"
+                )
+
+
+@dataclass(frozen=True)
+class ReceivedCommand:
+    """A command taken from this node's inbox."""
+
+    sender: int
+    name: str
+    code: int
+    seq: int
+    args: dict[str, Any]
+
+
+class _Offsets:
+    """Command header offsets and state values, compiled once from the protocol."""
+
+    def __init__(self, protocol: Protocol) -> None:
+        head = {f.name: f.offset for f in protocol.command_header}
+        self.sender = head["sender"]
+        self.state = head["state"]
+        self.code = head["code"]
+        self.seq = head["seq"]
+        self.FREE = protocol.command_states["FREE"]
+        self.OCCUPIED = protocol.command_states["OCCUPIED"]
+        self.ACKNOWLEDGED = protocol.command_states["ACKNOWLEDGED"]
+
+
+class DataRegistration:
+    """A data channel registered with get_data (token -> user) or store_data (user -> token)."""
+
+    __slots__ = ("buffer", "channel", "end", "kind", "locked", "start")
+
+    def __init__(self, channel: Channel, kind: str, buffer: ChannelBuffer) -> None:
+        self.channel = channel
+        self.kind = kind  # "get" or "store"
+        self.buffer = buffer
+        self.start = channel.address
+        self.end = channel.end
+        self.locked = True  # the seed: every channel starts locked
+
+    def visit(self, work: bytearray) -> None:
+        buffer = self.buffer
+        with buffer.mutex:
+            if self.kind == "get":
+                buffer.raw[:] = work[self.start : self.end]
+            else:
+                work[self.start : self.end] = buffer.raw
+            buffer.visits += 1
+
+
+class Inbox:
+    """This node's own command channel (set_own_input_id + get_data)."""
+
+    __slots__ = (
+        "_off",
+        "buffer",
+        "channel",
+        "end",
+        "event",
+        "last_seq",
+        "live",
+        "locked",
+        "received",
+        "refused",
+        "start",
+        "stats",
+    )
+
+    def __init__(self, channel: CommandChannel, offsets: _Offsets, live: set[int], stats: Any) -> None:
+        self.channel = channel
+        self.buffer = ChannelBuffer(channel)
+        self.start = channel.address
+        self.end = channel.end
+        self._off = offsets
+        self.locked = True
+        self.received = False
+        self.event = threading.Event()
+        self.last_seq: dict[int, int] = {}
+        self.live = live
+        self.refused = 0
+        self.stats = stats
+
+    def visit(self, work: bytearray) -> None:
+        off, a = self._off, self.start
+        state = work[a + off.state]
+        if state == off.FREE:
+            return
+        sender = work[a + off.sender]
+        if sender not in self.live:
+            # the sender is gone and will never come back to clear its command
+            work[a : self.end] = bytes(self.end - a)
+            self.stats.stale_commands_cleared += 1
+            return
+        if state != off.OCCUPIED:
+            return
+        seq = work[a + off.seq]
+        if self.last_seq.get(sender) == seq:
+            work[a + off.state] = off.ACKNOWLEDGED  # already taken once: ack, never twice
+            self.stats.duplicate_commands += 1
+            return
+        if self.locked:
+            self.refused += 1
+            self.stats.inbox_full += 1
+            return
+        with self.buffer.mutex:
+            self.buffer.raw[:] = work[a : self.end]
+        self.last_seq[sender] = seq
+        work[a + off.state] = off.ACKNOWLEDGED
+        self.locked = True  # the flap closes by itself
+        self.received = True
+        self.stats.commands_received += 1
+        self.event.set()
+
+    def take(self) -> ReceivedCommand:
+        """Decode the received command (the caller unlocks the inbox for the next one)."""
+        off = self._off
+        with self.buffer.mutex:
+            raw = bytes(self.buffer.raw)
+        code = raw[off.code]
+        try:
+            command = self.channel.command(code)
+        except ChannelError:
+            return ReceivedCommand(raw[off.sender], f"UNKNOWN_{code}", code, raw[off.seq], {})
+        view = np.ndarray((), dtype=command.dtype, buffer=raw)
+        args = {f.name: f.to_python(view[f.name]) for f in command.args}
+        return ReceivedCommand(raw[off.sender], command.name, code, raw[off.seq], args)
+
+
+class Outbox:
+    """A command from this node into another module's inbox, and its fate."""
+
+    __slots__ = (
+        "_off",
+        "acknowledged",
+        "channel",
+        "command",
+        "done",
+        "end",
+        "image",
+        "own_id",
+        "queued_at",
+        "rounds_waited",
+        "seq",
+        "start",
+        "state",
+        "stats",
+        "transmitted",
+    )
+
+    WAITING, IN_TOKEN, DONE = 0, 1, 2
+
+    def __init__(
+        self,
+        channel: CommandChannel,
+        command: Command,
+        offsets: _Offsets,
+        own_id: int,
+        seq: int,
+        args: dict[str, Any],
+        stats: Any,
+    ) -> None:
+        self.channel = channel
+        self.command = command
+        self._off = offsets
+        self.own_id = own_id
+        self.seq = seq
+        self.start = channel.address
+        self.end = channel.end
+        self.image = encode_command(channel, command, own_id, seq, offsets.OCCUPIED, args)
+        self.state = Outbox.WAITING
+        self.transmitted = False
+        self.acknowledged = False
+        self.done = threading.Event()
+        self.rounds_waited = 0
+        self.queued_at = time.monotonic()
+        self.stats = stats
+
+    def visit(self, work: bytearray) -> bool:
+        """Returns True when this outbox is finished (the handler drops it)."""
+        off, a = self._off, self.start
+        if self.state == Outbox.IN_TOKEN:
+            ours = work[a + off.sender] == self.own_id and work[a + off.seq] == self.seq
+            if ours and work[a + off.state] != off.FREE:
+                self.transmitted = True
+                self.acknowledged = work[a + off.state] == off.ACKNOWLEDGED
+                work[a : self.end] = bytes(self.end - a)  # cleared in every case
+            if self.acknowledged:
+                self.stats.commands_acknowledged += 1
+            else:
+                self.stats.commands_unacknowledged += 1
+            self.state = Outbox.DONE
+            self.done.set()
+            return True
+        if work[a + off.state] == off.FREE:
+            work[a : self.end] = self.image
+            self.state = Outbox.IN_TOKEN
+            self.stats.commands_sent += 1
+        else:
+            self.rounds_waited += 1
+        return False
+
+    def cancel(self) -> None:
+        self.state = Outbox.DONE
+        self.done.set()
+
+
+def encode_command(
+    channel: CommandChannel,
+    command: Command,
+    sender: int,
+    seq: int,
+    state: int,
+    args: dict[str, Any],
+) -> bytes:
+    """The full channel image of a command; arguments are checked against ``protocol.yaml``."""
+    names = command.arg_names()
+    unknown = set(args) - set(names)
+    if unknown:
+        raise ChannelError(
+            f"{channel.name} {command.name}: unknown argument(s) {', '.join(sorted(unknown))} "
+            f"(takes: {', '.join(names) or 'none'})"
+        )
+    missing = [n for n in names if n not in args]
+    if missing:
+        raise ChannelError(f"{channel.name} {command.name}: missing argument(s) {', '.join(missing)}")
+    raw = bytearray(channel.size)
+    view = np.ndarray((), dtype=command.dtype, buffer=raw)
+    view["sender"] = sender
+    view["state"] = state
+    view["code"] = command.code
+    view["seq"] = seq
+    for field in command.args:
+        value = args[field.name]
+        _check_value(f"{channel.name} {command.name}", field, value)
+        view[field.name] = value.encode("ascii") if isinstance(value, str) else value
+    return bytes(raw)

@@ -1,0 +1,138 @@
+"""Argument helpers and small utilities shared by the ``tokenring`` sub-commands."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import socket
+import sys
+from typing import Any
+
+import msgpack
+import zenoh
+
+from tokenring import keys
+from tokenring.errors import TransportError, UsageError
+from tokenring.zconfig import make_config, open_session
+
+
+def add_ring_options(parser: argparse.ArgumentParser, *, listen: bool = True) -> None:
+    """--ring, --connect, --listen, --mode, --zenoh-config, --protocol."""
+    group = parser.add_argument_group("ring and Zenoh")
+    group.add_argument(
+        "--ring", default=keys.DEFAULT_RING, help="ring name (a key namespace; default %(default)s)"
+    )
+    group.add_argument(
+        "-e",
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        help=f"Zenoh endpoint to connect to (default for tools: {keys.DEFAULT_ENDPOINT})",
+    )
+    if listen:
+        group.add_argument(
+            "-l",
+            "--listen",
+            action="append",
+            metavar="ENDPOINT",
+            help="Zenoh endpoint to listen on",
+        )
+    group.add_argument(
+        "--mode",
+        default="peer",
+        choices=("peer", "client"),
+        help="Zenoh mode (default %(default)s)",
+    )
+    group.add_argument("--zenoh-config", metavar="FILE", help="Zenoh config file (also $ZENOH_CONFIG)")
+    group.add_argument("--protocol", metavar="FILE", help="protocol.yaml to use (also $TOKENRING_PROTOCOL)")
+
+
+def add_json_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true", help="machine-readable JSON output")
+
+
+def tap_session(args: argparse.Namespace) -> zenoh.Session:
+    """A session for a tool joining a running ring (connects to the tap endpoint by default)."""
+    connect = list(args.connect or [keys.DEFAULT_ENDPOINT])
+    config = make_config(
+        mode=getattr(args, "mode", "peer"),
+        connect=connect,
+        listen=getattr(args, "listen", None) or [],
+        config_file=getattr(args, "zenoh_config", None),
+    )
+    return open_session(config)
+
+
+def query(
+    session: zenoh.Session, key: str, request: Any = None, timeout: float = 2.0
+) -> list[tuple[str, Any]]:
+    """Query a control key; returns (key, decoded reply) for every answer."""
+    payload = msgpack.packb(request) if request is not None else None
+    out: list[tuple[str, Any]] = []
+    try:
+        options: dict[str, Any] = {
+            "timeout": timeout,
+            "target": zenoh.QueryTarget.ALL,
+            "consolidation": zenoh.ConsolidationMode.NONE,
+        }
+        if payload is not None:
+            options["payload"] = payload
+        replies = session.get(key, **options)
+        for reply in replies:
+            if reply.ok is not None:
+                out.append((str(reply.ok.key_expr), msgpack.unpackb(reply.ok.payload.to_bytes())))
+    except zenoh.ZError as exc:
+        raise TransportError(f"query {key} failed: {exc}") from exc
+    return out
+
+
+def query_one(session: zenoh.Session, key: str, request: Any = None, timeout: float = 2.0) -> Any:
+    """The result of one control request; raises if nobody answers or it failed."""
+    replies = query(session, key, request, timeout)
+    if not replies:
+        raise UsageError(f"nobody answered {key} (is the ring running, and is --ring right?)")
+    _, reply = replies[0]
+    if not reply.get("ok"):
+        raise UsageError(reply.get("error", "request failed"))
+    return reply.get("result")
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that is free right now (tests and benchmarks)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def print_json(value: Any, stream: Any = None) -> None:
+    (stream or sys.stdout).write(json.dumps(value, default=_default) + "\n")
+
+
+def _default(value: Any) -> Any:
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if isinstance(value, bytes):
+        return value.hex()
+    if isinstance(value, set | tuple):
+        return list(value)
+    return str(value)
+
+
+def format_table(rows: list[list[Any]], headers: list[str]) -> str:
+    """A plain aligned text table."""
+    cells = [[str(h) for h in headers]] + [[str(c) for c in row] for row in rows]
+    widths = [max(len(row[i]) for row in cells) for i in range(len(headers))]
+    lines = [
+        "  ".join(c.rjust(w) if _numeric(c) else c.ljust(w) for c, w in zip(row, widths, strict=True))
+        for row in cells
+    ]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(line.rstrip() for line in lines)
+
+
+def _numeric(text: str) -> bool:
+    try:
+        float(text.rstrip("%x"))
+        return True
+    except ValueError:
+        return False

@@ -1,0 +1,74 @@
+"""Every Zenoh key tokenring uses, in one place. ``<ring>`` is the ring's name (default ``default``).
+
+=======================================  ========================================================
+key                                      what travels on it
+=======================================  ========================================================
+``tokenring/<ring>/token/<DID>``         frames only: 512-byte token + CRC-16/ARC (514 bytes)
+``tokenring/<ring>/node/<ID>``           liveliness token held by every live node
+``tokenring/<ring>/ack/<ID>``            pass acknowledgements and stale-token notices to ``ID``
+``tokenring/<ring>/ring/event``          ring events: a node excluded, a node rejoining
+``tokenring/<ring>/ctl/<ID>/<verb>``     queryables of node ``ID``: ``stats``, ``fault``, ...
+``tokenring/<ring>/ctl/launcher/<verb>`` queryables of the launcher (``status``)
+``tokenring/<ring>/pc/<verb>``           the PC link ("serial line") to main
+``tokenring/<ring>/hw/<module>/<what>``  the simulated hardware of one module
+``tokenring/<ring>/world/<what>``        world simulator: ground truth (logs/scoring only)
+``tokenring/<ring>/lcd/<what>``          the LCD's screen and keypad (hardware, not the ring)
+=======================================  ========================================================
+"""
+
+from __future__ import annotations
+
+PREFIX = "tokenring"
+DEFAULT_RING = "default"
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+
+
+def check_ring_name(ring: str) -> str:
+    """Ring names become one key chunk: no slashes, wildcards or spaces."""
+    if not ring or any(c in ring for c in "/*$?# ") or ring.startswith("@"):
+        from tokenring.errors import UsageError
+
+        raise UsageError(f"ring name {ring!r} must be one word without / * $ ? # or spaces")
+    return ring
+
+
+def token(ring: str, did: int | str) -> str:
+    return f"{PREFIX}/{ring}/token/{did}"
+
+
+def node(ring: str, node_id: int | str) -> str:
+    return f"{PREFIX}/{ring}/node/{node_id}"
+
+
+def ack(ring: str, node_id: int | str) -> str:
+    return f"{PREFIX}/{ring}/ack/{node_id}"
+
+
+def ring_event(ring: str) -> str:
+    return f"{PREFIX}/{ring}/ring/event"
+
+
+def control(ring: str, node_id: int | str, verb: str = "**") -> str:
+    return f"{PREFIX}/{ring}/ctl/{node_id}/{verb}"
+
+
+def pc_link(ring: str, verb: str) -> str:
+    return f"{PREFIX}/{ring}/pc/{verb}"
+
+
+def hardware(ring: str, module: str, what: str) -> str:
+    return f"{PREFIX}/{ring}/hw/{module}/{what}"
+
+
+def world(ring: str, what: str) -> str:
+    return f"{PREFIX}/{ring}/world/{what}"
+
+
+def lcd(ring: str, what: str) -> str:
+    return f"{PREFIX}/{ring}/lcd/{what}"
+
+
+def id_from_key(key: str) -> int | None:
+    """The trailing numeric chunk of a key (``.../node/20`` -> 20), or None."""
+    tail = key.rsplit("/", 1)[-1]
+    return int(tail) if tail.isdigit() else None

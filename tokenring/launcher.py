@@ -1,0 +1,373 @@
+"""``tokenring up``: every node as its own OS process on one Zenoh network, supervised.
+
+The launcher holds the ring's tap endpoint (``tcp/127.0.0.1:7447`` unless ``--listen`` says
+otherwise; if that port is taken by another ring it joins that network instead — rings are
+namespaces), starts one ``tokenring node`` process per node with its log lines prefixed by the
+node's name, reports any node that dies with its exit code, and on Ctrl-C, SIGTERM or the end
+of ``--duration`` stops every process it started within 2 s. Children also carry
+``PR_SET_PDEATHSIG`` so that even a killed launcher leaves no orphans.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import os
+import selectors
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import msgpack
+import zenoh
+
+from tokenring import keys
+from tokenring.errors import TransportError, UsageError
+from tokenring.zconfig import make_config, open_session
+
+#: exit code of a node process killed on purpose by the ``crash`` fault
+CRASH_EXIT_CODE = 70
+STOP_TIMEOUT_S = 1.5
+
+
+def _set_pdeathsig() -> None:  # pragma: no cover - runs in the child between fork and exec
+    libc = ctypes.CDLL("libc.so.6", use_errno=True)
+    libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+
+
+def describe_exit(code: int | None) -> str:
+    """'exited with code 3', 'killed by SIGKILL', 'crashed on purpose (fault)'."""
+    if code is None:
+        return "still running"
+    if code == CRASH_EXIT_CODE:
+        return f"crashed on purpose (crash fault, exit code {code})"
+    if code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exited with code {code}"
+
+
+@dataclass
+class NodePlan:
+    """One node the launcher runs."""
+
+    node_id: int
+    name: str
+    program: str | None = None
+    extra_args: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Child:
+    plan: NodePlan
+    process: subprocess.Popen
+    started: float
+    restarts: int = 0
+    reported: bool = False
+
+
+class Launcher:
+    """Starts, watches and stops the node processes of one ring."""
+
+    def __init__(
+        self,
+        plans: Sequence[NodePlan],
+        *,
+        ring: str = keys.DEFAULT_RING,
+        bitrate: str = "2.5M",
+        ack_mode: str = "adaptive",
+        connect: Sequence[str] = (),
+        listen: Sequence[str] = (),
+        zenoh_config: str | None = None,
+        protocol_path: str | None = None,
+        log_level: str = "info",
+        respawn: bool = False,
+        output: IO[str] | None = None,
+        extra_node_args: Sequence[str] = (),
+    ) -> None:
+        self.plans = list(plans)
+        self.ring = keys.check_ring_name(ring)
+        self.bitrate = bitrate
+        self.ack_mode = ack_mode
+        self.connect = list(connect)
+        self.listen = list(listen)
+        self.zenoh_config = zenoh_config
+        self.protocol_path = protocol_path
+        self.log_level = log_level
+        self.respawn = respawn
+        self.output = output or sys.stdout
+        self.extra_node_args = list(extra_node_args)
+        self.session: zenoh.Session | None = None
+        self.endpoint: str | None = None
+        self.joined_existing = False
+        self.children: dict[int, Child] = {}
+        self.deaths: list[tuple[str, int, int | None]] = []
+        self._stop = threading.Event()
+        self._stop_signal: int | None = None
+        self._selector = selectors.DefaultSelector()
+        self._selector_lock = threading.Lock()
+        self._reader: threading.Thread | None = None
+        self._print_lock = threading.Lock()
+        self._queryable: Any = None
+        width = max((len(p.name) for p in self.plans), default=4)
+        self._width = max(width, 4)
+
+    # -- output ---------------------------------------------------------------------------------
+    def say(self, text: str, name: str = "up") -> None:
+        with self._print_lock:
+            self.output.write(f"{name:>{self._width}} | {text}\n")
+            self.output.flush()
+
+    def _read_outputs(self) -> None:
+        """Copy every child's output lines, prefixed with its name, until all pipes close."""
+        while True:
+            with self._selector_lock:
+                watching = bool(self._selector.get_map())
+            if not watching:
+                if self._stop.is_set():
+                    return
+                time.sleep(0.05)
+                continue
+            for key, _ in self._selector.select(timeout=0.1):
+                stream, name = key.fileobj, key.data
+                line = stream.readline()  # type: ignore[union-attr]
+                if line:
+                    self.say(line.rstrip("\n"), name)
+                    continue
+                with self._selector_lock, contextlib.suppress(KeyError, ValueError):
+                    self._selector.unregister(stream)
+
+    # -- session --------------------------------------------------------------------------------
+    def _open_session(self) -> None:
+        if self.listen:
+            config = make_config(listen=self.listen, connect=self.connect, config_file=self.zenoh_config)
+            self.session = open_session(config)
+            self.endpoint = self.listen[0]
+            return
+        if self.connect:
+            config = make_config(connect=self.connect, config_file=self.zenoh_config)
+            self.session = open_session(config)
+            self.endpoint = None
+            self.joined_existing = True
+            return
+        try:
+            config = make_config(listen=[keys.DEFAULT_ENDPOINT], config_file=self.zenoh_config)
+            self.session = open_session(config)
+            self.endpoint = keys.DEFAULT_ENDPOINT
+        except TransportError as exc:
+            if "in use" not in str(exc):
+                raise
+            config = make_config(connect=[keys.DEFAULT_ENDPOINT], config_file=self.zenoh_config)
+            self.session = open_session(config)
+            self.endpoint = None
+            self.joined_existing = True
+            self.say(f"{keys.DEFAULT_ENDPOINT} is taken: joining that Zenoh network (ring {self.ring!r})")
+
+    def node_connect(self) -> list[str]:
+        return [self.endpoint] if self.endpoint else list(self.connect or [keys.DEFAULT_ENDPOINT])
+
+    def node_listen(self) -> list[str]:
+        host = "127.0.0.1"
+        if self.endpoint:
+            host = self.endpoint.split("/", 1)[1].rsplit(":", 1)[0]
+            if host in ("0.0.0.0", "[::]"):
+                host = "0.0.0.0"
+        return [f"tcp/{host}:0"]
+
+    # -- children -------------------------------------------------------------------------------
+    def command_for(self, plan: NodePlan) -> list[str]:
+        cmd = [sys.executable, "-m", "tokenring", "--log-level", self.log_level, "node"]
+        cmd += ["--id", str(plan.node_id), "--ring", self.ring, "--bitrate", self.bitrate]
+        cmd += ["--ack", self.ack_mode]
+        if plan.name and not plan.name.startswith("node"):
+            cmd += ["--name", plan.name]
+        if self.protocol_path:
+            cmd += ["--protocol", self.protocol_path]
+        if self.zenoh_config:
+            cmd += ["--zenoh-config", self.zenoh_config]
+        for endpoint in self.node_connect():
+            cmd += ["--connect", endpoint]
+        for endpoint in self.node_listen():
+            cmd += ["--listen", endpoint]
+        if plan.program:
+            cmd += ["--program", plan.program]
+        return cmd + self.extra_node_args + plan.extra_args
+
+    def spawn(self, plan: NodePlan) -> Child:
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        process = subprocess.Popen(
+            self.command_for(plan),
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            bufsize=1,
+            env=env,
+            preexec_fn=_set_pdeathsig,
+        )
+        assert process.stdout is not None
+        with self._selector_lock:
+            self._selector.register(process.stdout, selectors.EVENT_READ, plan.name)
+        child = Child(plan, process, time.monotonic())
+        previous = self.children.get(plan.node_id)
+        if previous is not None:
+            child.restarts = previous.restarts + 1
+        self.children[plan.node_id] = child
+        return child
+
+    def start(self) -> None:
+        """Open the tap session and start every node."""
+        self._open_session()
+        assert self.session is not None
+        self._queryable = self.session.declare_queryable(
+            keys.control(self.ring, "launcher", "*"), self._on_query
+        )
+        where = self.endpoint or ", ".join(self.node_connect())
+        self.say(
+            f"ring {self.ring!r}: starting {len(self.plans)} nodes "
+            f"({', '.join(f'{p.name}={p.node_id}' for p in self.plans)}) on {where}, "
+            f"bitrate {self.bitrate}"
+        )
+        for plan in self.plans:
+            self.spawn(plan)
+        self._reader = threading.Thread(target=self._read_outputs, name="launcher-output", daemon=True)
+        self._reader.start()
+
+    def status(self) -> dict[str, Any]:
+        return {
+            "ring": self.ring,
+            "endpoint": self.endpoint,
+            "nodes": [
+                {
+                    "id": c.plan.node_id,
+                    "name": c.plan.name,
+                    "pid": c.process.pid,
+                    "running": c.process.poll() is None,
+                    "exit": describe_exit(c.process.poll()) if c.process.poll() is not None else None,
+                    "restarts": c.restarts,
+                }
+                for c in self.children.values()
+            ],
+        }
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        verb = str(query.key_expr).rsplit("/", 1)[-1]
+        if verb == "status":
+            result = {"ok": True, "result": self.status()}
+        else:
+            result = {"ok": False, "error": f"the launcher has no verb {verb!r} (has: status)"}
+        query.reply(query.key_expr, msgpack.packb(result))
+
+    def check_children(self) -> None:
+        """Report nodes that died; restart them if ``--respawn``."""
+        for child in list(self.children.values()):
+            code = child.process.poll()
+            if code is None or child.reported:
+                continue
+            child.reported = True
+            plan = child.plan
+            self.deaths.append((plan.name, plan.node_id, code))
+            self.say(f"node {plan.name} (id {plan.node_id}) {describe_exit(code)}")
+            if self.respawn and not self._stop.is_set():
+                self.say(f"respawning {plan.name} (id {plan.node_id})")
+                self.spawn(plan)
+
+    def request_stop(self, signum: int | None = None) -> None:
+        if self._stop_signal is None:
+            self._stop_signal = signum
+        self._stop.set()
+
+    def run(self, duration: float | None = None) -> int:
+        """Supervise until the duration ends or a stop is requested; returns the exit code."""
+        deadline = None if duration is None else time.monotonic() + duration
+        while not self._stop.is_set():
+            self.check_children()
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+            if (
+                self.children
+                and all(c.process.poll() is not None for c in self.children.values())
+                and not self.respawn
+            ):
+                self.say("every node has exited")
+                break
+            self._stop.wait(0.1)
+        self.stop()
+        if self._stop_signal == signal.SIGINT:
+            return 130
+        unexpected = [d for d in self.deaths if d[2] != CRASH_EXIT_CODE]
+        return 1 if unexpected else 0
+
+    def stop(self) -> None:
+        """Stop every child: SIGTERM (clean leave), then SIGKILL whatever is left after 1.5 s."""
+        self._stop.set()
+        running = [c for c in self.children.values() if c.process.poll() is None]
+        for child in running:
+            with contextlib.suppress(ProcessLookupError):
+                child.process.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + STOP_TIMEOUT_S
+        for child in running:
+            remaining = max(0.0, deadline - time.monotonic())
+            try:
+                child.process.wait(remaining)
+            except subprocess.TimeoutExpired:
+                self.say(f"node {child.plan.name} did not stop in {STOP_TIMEOUT_S} s: killing it")
+                child.process.kill()
+                child.process.wait(1.0)
+            child.reported = True
+        if self._reader is not None:
+            self._reader.join(timeout=1.0)
+        for child in self.children.values():
+            if child.process.stdout is not None:
+                child.process.stdout.close()
+        if self._queryable is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self._queryable.undeclare()
+            self._queryable = None
+        if self.session is not None:
+            self.session.close()
+            self.session = None
+
+
+def plans_from_protocol(
+    protocol: Any, selection: Sequence[str] | None, programs_dir: str | Path | None
+) -> list[NodePlan]:
+    """Nodes to start: all of ``protocol.yaml`` or the ``--nodes`` selection (names or IDs)."""
+    if selection:
+        specs = []
+        for item in selection:
+            try:
+                specs.append(protocol.node(int(item) if item.isdigit() else item))
+            except Exception as exc:
+                raise UsageError(str(exc)) from None
+    else:
+        specs = list(protocol.nodes.values())
+    plans = []
+    seen: set[int] = set()
+    for spec in specs:
+        if spec.id in seen:
+            continue
+        seen.add(spec.id)
+        program = None
+        if programs_dir is not None:
+            candidate = Path(programs_dir) / f"{spec.name}.py"
+            if candidate.exists():
+                program = str(candidate)
+        plans.append(NodePlan(spec.id, spec.name, program))
+    return sorted(plans, key=lambda p: p.node_id)
+
+
+def install_signal_handlers(launcher: Launcher) -> None:
+    def handler(signum: int, _frame: Any) -> None:
+        launcher.request_stop(signum)
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)

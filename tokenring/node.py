@@ -1,0 +1,972 @@
+"""The node operating system: one token handler per visit, the ring's bookkeeping, the user API.
+
+The handler (``_on_frame``) runs once per token visit, on the transport's receive thread:
+
+1. check the frame (length, CRC-16/ARC, markers, DID, SID a ring member, pass not a repeat,
+   epoch not stale) — anything else is dropped and counted, never raised;
+2. system commands (a hook filled by :mod:`tokenring.system`); while one is active the user
+   channels pause everywhere;
+3. the registered, unlocked user channels (data copies, inbox, outgoing commands);
+4. main (the round master) increments the counter; the token goes to the successor at once.
+
+Everything slower — timeouts, retries, regeneration, statistics — happens on a watchdog thread
+off that path. User programs run in their own thread and talk to the handler only through
+:class:`~tokenring.channels.ChannelBuffer` objects and a few flags.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import random
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from typing import Any
+
+from tokenring import ring as R
+from tokenring.channels import (
+    ChannelBuffer,
+    DataRegistration,
+    Inbox,
+    Outbox,
+    ReceivedCommand,
+    _Offsets,
+)
+from tokenring.errors import ChannelError, TokenRingError
+from tokenring.frame import crc16_arc
+from tokenring.protocol import Channel, CommandChannel, Protocol
+from tokenring.ring import ACK_REQUESTED, EPOCH_MASK
+from tokenring.transport.base import Transport
+
+log = logging.getLogger("tokenring.node")
+perf_counter = time.perf_counter
+
+
+class NodeStats:
+    """Per-node counters, in the spirit of the Linux arcnet driver's."""
+
+    FIELDS = (
+        "frames_received",
+        "frames_sent",
+        "rejected_length",
+        "rejected_crc",
+        "rejected_marker",
+        "rejected_did",
+        "rejected_sid",
+        "duplicate_passes",
+        "stale_tokens",
+        "rounds",
+        "rounds_missed",
+        "visits",
+        "passes_acked",
+        "pass_retries",
+        "unacked_passes",
+        "successors_declared_dead",
+        "successor_changes",
+        "reconfigurations",
+        "tokens_regenerated",
+        "epoch_changes",
+        "commands_sent",
+        "commands_acknowledged",
+        "commands_unacknowledged",
+        "commands_received",
+        "duplicate_commands",
+        "stale_commands_cleared",
+        "inbox_full",
+        "send_errors",
+        "system_commands",
+    )
+    __slots__ = FIELDS
+
+    def __init__(self) -> None:
+        for name in self.FIELDS:
+            setattr(self, name, 0)
+
+    def as_dict(self) -> dict[str, int]:
+        return {name: getattr(self, name) for name in self.FIELDS}
+
+
+class NodeOS:
+    """One node of the ring: the token handler, ring membership and the user-program API."""
+
+    def __init__(
+        self,
+        protocol: Protocol,
+        node_id: int,
+        transport: Transport,
+        *,
+        name: str | None = None,
+        bitrate: float | None = None,
+        ack_mode: str = "adaptive",
+        master_id: int | None = None,
+    ) -> None:
+        if not 1 <= node_id <= 255:
+            raise TokenRingError(f"node ID {node_id} is outside 1..255")
+        if ack_mode not in ("adaptive", "always", "never"):
+            raise TokenRingError(f"ack mode must be adaptive, always or never, not {ack_mode!r}")
+        self.protocol = protocol
+        self.node_id = node_id
+        self.transport = transport
+        spec = protocol.by_id.get(node_id)
+        self.spec = spec
+        self.name = name or (spec.name if spec else f"node{node_id}")
+        self.stats = NodeStats()
+        self.timing = R.Timing(bitrate, ack_mode)
+        self.membership = R.Membership(node_id)
+        if master_id is None and "main" in protocol.nodes:
+            master_id = protocol.nodes["main"].id
+        self.preferred_master = master_id
+        self._master = node_id
+
+        header = protocol.header
+        self._o_sid = header.sid
+        self._o_did = header.did
+        self._o_counter = header.counter
+        self._o_issuer = header.syscmd_issuer
+        self._o_epoch = header.epoch
+        self._o_origin = header.epoch_origin
+        consts = sorted((header.offsets[n], v) for n, v in header.consts.items())
+        self._const_lo = consts[0][0] if consts else 0
+        self._const_hi = consts[-1][0] + 1 if consts else 0
+        expected = bytearray(self._const_hi - self._const_lo)
+        for offset, value in consts:
+            expected[offset - self._const_lo] = value
+        if consts and len(consts) != len(expected):
+            raise TokenRingError("protocol.yaml: the constant header markers must be adjacent bytes")
+        self._const_bytes = bytes(expected)
+        self._token_size = protocol.token_size
+        self._frame_size = protocol.frame_size
+        self._cmd = _Offsets(protocol)
+
+        self._work = bytearray(self._frame_size)
+        self._token_lock = threading.RLock()
+        self._epoch = 0
+        self._origin = 0
+        self._accepted_crc = -1
+        self._accepted_sid = -1
+        self._has_sent = False
+        self._last_sent_did = 0
+        self._last_sent_crc = 0
+        self._last_sent_time = 0.0
+        self._senders: dict[int, Any] = {}
+        self._live = self.membership.live  # the same set objects, read on the token path
+        self._excluded = self.membership.excluded
+        self._hop = self.timing.hop
+        self._ack_adaptive = ack_mode == "adaptive"
+        self._ack_always = ack_mode == "always"
+        self._ack_interval = self.timing.current.ack_interval
+        self._rounds_add = self.timing.rounds.add
+        self._handler_add = self.timing.handler.add
+        self._ack_pending = False
+        self._retries = 0
+        self._confirmed_did = 0
+        self._confirmed_at = 0.0
+        self._recovery_until = 0.0
+        self._last_seen = 0.0
+        self._last_visit = 0.0
+        self._last_counter = -1
+        self._exclusion_backoff: dict[int, float] = {}
+        self._leaving_nodes: set[int] = set()
+        self._started_at = 0.0
+        self._paced = 0.0  # seconds the last pass slept to emulate wire time
+
+        # user channels
+        self._regs: dict[str, DataRegistration] = {}
+        self._inbox: Inbox | None = None
+        self._outboxes: dict[str, Outbox] = {}
+        self._active: tuple[Any, ...] = ()
+        self._pending_outboxes: list[Outbox] = []
+        self._regs_lock = threading.Lock()
+        self._cmd_seq = random.randrange(256)
+        self._visit_waiters = 0
+        self._visit_cond = threading.Condition()
+
+        # hooks filled by later layers (system commands, fault injection)
+        self.system_handler: Callable[[bytearray], bool] | None = None
+        self.rx_fault: Callable[[bytes, bytes | None], bool] | None = None
+        self.tx_fault: Callable[[int, bytes, bytes], bool] | None = None
+
+        self._joined = False
+        self._leaving = False
+        self._stopping = threading.Event()
+        # the watchdog sleeps on a raw lock (a C-level binary semaphore): waking it from the
+        # token path costs ~0.1 us where threading.Event.set costs tens of microseconds cold
+        self._wake_lock = threading.Lock()
+        self._wake_lock.acquire()
+        self._watchdog: threading.Thread | None = None
+        self._program: Any = None
+        self._program_thread: threading.Thread | None = None
+        self.program_error: str | None = None
+
+    # =========================================================================================
+    # life cycle
+
+    def start(self) -> None:
+        """Join the ring: learn who is live, announce this node, start the watchdog."""
+        members = self.transport.open(self._on_frame, self._on_message, self._on_membership)
+        for member in members:
+            self.membership.set_live(member, True)
+            self.transport.prepare(member)
+        self._update_master()
+        self.transport.prepare(self.membership.successor)
+        now = perf_counter()
+        self._started_at = now
+        self._last_seen = now
+        self.transport.announce()
+        self._joined = True
+        self._watchdog = threading.Thread(target=self._watch, name=f"watchdog-{self.node_id}", daemon=True)
+        self._watchdog.start()
+        log.info(
+            "node %s (id %d) joined; live: %s",
+            self.name,
+            self.node_id,
+            sorted(self.membership.live),
+        )
+
+    def leave(self, grace: float | None = None) -> None:
+        """Leave cleanly: tell the ring, stop being live, keep forwarding until traffic stops."""
+        if not self._joined or self._leaving:
+            self.close()
+            return
+        self.stop_program()
+        self._leaving = True
+        try:
+            self.transport.broadcast(
+                R.RING_EVENT.pack(R.EVENT_LEAVING, self.node_id, self.node_id, self._epoch, self._origin)
+            )
+            time.sleep(0.02)
+            self.transport.withdraw()
+        except TokenRingError as exc:
+            log.warning("leaving: %s", exc)
+        quiet = max(0.05, 3 * self.timing.rounds.percentile(99, 0.0), 3 * self.timing.hop)
+        deadline = time.monotonic() + (grace if grace is not None else 2.0)
+        while time.monotonic() < deadline:
+            since = perf_counter() - self._last_seen
+            if since >= quiet and perf_counter() - self._started_at > quiet:
+                break
+            time.sleep(min(quiet, 0.02))
+        self.close()
+
+    def close(self) -> None:
+        """Stop everything at once (no goodbye); safe to call twice."""
+        self._stopping.set()
+        self._wake()
+        self.stop_program()
+        if self._watchdog is not None and self._watchdog is not threading.current_thread():
+            self._watchdog.join(timeout=1.0)
+        try:
+            self.transport.close()
+        except TokenRingError as exc:
+            log.warning("closing transport: %s", exc)
+        with self._visit_cond:
+            self._visit_cond.notify_all()
+
+    @property
+    def stopping(self) -> bool:
+        return self._stopping.is_set()
+
+    # =========================================================================================
+    # the token handler
+
+    def _on_frame(self, frame: bytes) -> None:
+        t_in = perf_counter()
+        stats = self.stats
+        stats.frames_received += 1
+        if self.rx_fault is not None and self.rx_fault(frame):
+            return
+        size = self._token_size
+        if len(frame) != self._frame_size:
+            stats.rejected_length += 1
+            return
+        crc = frame[size] | (frame[size + 1] << 8)
+        if crc16_arc(memoryview(frame)[:size]) != crc:
+            stats.rejected_crc += 1
+            return
+        if frame[self._const_lo : self._const_hi] != self._const_bytes:
+            stats.rejected_marker += 1
+            return
+        if frame[self._o_did] != self.node_id:
+            stats.rejected_did += 1
+            return
+        sid = frame[self._o_sid]
+        if sid not in self._live:
+            stats.rejected_sid += 1
+            return
+        flags = frame[self._o_epoch]
+        if crc == self._accepted_crc and sid == self._accepted_sid:
+            stats.duplicate_passes += 1  # a retry of a pass we already took
+            if flags & ACK_REQUESTED:
+                self._send_ack(sid, crc)
+            return
+        epoch, origin = flags & EPOCH_MASK, frame[self._o_origin]
+        if epoch != self._epoch or origin != self._origin:
+            if R.epoch_order(epoch, origin, self._epoch, self._origin) < 0:
+                stats.stale_tokens += 1
+                self._send_message(
+                    sid, R.ACK_MESSAGE.pack(b"S", self.node_id, crc, self._epoch, self._origin)
+                )
+                return
+            self._adopt_epoch(epoch, origin, t_in)
+        self._accepted_crc, self._accepted_sid = crc, sid
+        if sid in self._excluded:
+            self._include(sid)
+        with self._token_lock:
+            work = self._work
+            work[:] = frame
+            self._last_seen = t_in
+            if self._leaving:
+                self._forward(t_in)
+                if flags & ACK_REQUESTED:
+                    self._send_ack(sid, crc)
+                return
+            if self._last_visit:
+                self._rounds_add(t_in - self._last_visit)
+            self._last_visit = t_in
+            counter = work[self._o_counter]
+            if (counter - self._last_counter) & 0xFF > 1 and self._last_counter >= 0:
+                stats.rounds_missed += ((counter - self._last_counter) & 0xFF) - 1
+            self._last_counter = counter
+            stats.visits += 1
+            system = self.system_handler
+            if not (system(work) if system is not None else work[self._o_issuer]):
+                finished = None
+                for item in self._active:
+                    if item.visit(work) is True:
+                        finished = finished or []
+                        finished.append(item)
+                if finished:
+                    self._drop_outboxes(finished)
+                if self._pending_outboxes:
+                    self._activate_outboxes()
+                if t_in < self._recovery_until and self._outboxes:
+                    self._sweep_own_commands(work)
+            if self._master == self.node_id:
+                work[self._o_counter] = (counter + 1) & 0xFF
+                stats.rounds += 1
+            self._paced = 0.0
+            self._forward(t_in)
+        if flags & ACK_REQUESTED:  # after the pass: the token must not wait for our ack
+            self._send_ack(sid, crc)
+        self._handler_add(perf_counter() - t_in - self._paced)
+        if self._visit_waiters:
+            with self._visit_cond:
+                self._visit_cond.notify_all()
+
+    def _forward(self, t_in: float) -> None:
+        """Seal and pass the working token to the successor (caller holds the token lock).
+
+        The working buffer is the last frame sent until the next accepted one replaces it, so
+        retries and regeneration need no copy.
+        """
+        work = self._work
+        did = self.membership.successor
+        work[self._o_sid] = self.node_id
+        work[self._o_did] = did
+        now = perf_counter()
+        if did == self.node_id:
+            want_ack = False
+        elif self._ack_adaptive:
+            want_ack = (
+                did != self._confirmed_did
+                or now < self._recovery_until
+                or now - self._confirmed_at > self._ack_interval
+            )
+        else:
+            want_ack = self._ack_always
+        work[self._o_epoch] = self._epoch | ACK_REQUESTED if want_ack else self._epoch
+        work[self._o_origin] = self._origin
+        size = self._token_size
+        crc = crc16_arc(memoryview(work)[:size])
+        work[size] = crc & 0xFF
+        work[size + 1] = crc >> 8
+        hop = self._hop if did != self.node_id else max(self._hop, 0.001)
+        if hop:
+            delay = t_in + hop - perf_counter()
+            if delay > 0:
+                time.sleep(delay)  # emulated wire time; a lone node also waits 1 ms per pass
+                self._paced += delay
+                now = perf_counter()
+        self._last_sent_did = did
+        self._last_sent_crc = crc
+        self._last_sent_time = now
+        self._has_sent = True
+        self._ack_pending = want_ack
+        self._retries = 0
+        self._transmit(did)
+        if want_ack:
+            self._wake()
+
+    def _wake(self) -> None:
+        """Wake the watchdog (idempotent)."""
+        with contextlib.suppress(RuntimeError):  # already awake
+            self._wake_lock.release()
+
+    def _transmit(self, did: int) -> None:
+        if self._stopping.is_set():
+            return
+        if self.tx_fault is not None and self.tx_fault(did, self._work):
+            return
+        sender = self._senders.get(did)
+        try:
+            if sender is None:
+                sender = self._senders[did] = self.transport.sender(did)
+            stats = self.stats
+            if stats.frames_sent & 15:
+                sender(self._work)
+            else:  # every 16th send is timed
+                t0 = perf_counter()
+                sender(self._work)
+                self.timing.send.add(perf_counter() - t0)
+            stats.frames_sent += 1
+        except Exception as exc:
+            self.stats.send_errors += 1
+            error = exc if isinstance(exc, TokenRingError) else self.transport.translate(did, exc)
+            log.warning("%s", error)
+
+    def _adopt_epoch(self, epoch: int, origin: int, now: float) -> None:
+        self._epoch, self._origin = epoch & EPOCH_MASK, origin
+        self.stats.epoch_changes += 1
+        self._recovery_until = now + max(0.02, 2 * self.timing.round_median)
+
+    def _bump_epoch(self, now: float) -> None:
+        self._adopt_epoch((self._epoch + 1) & EPOCH_MASK, self.node_id, now)
+
+    # =========================================================================================
+    # messages, membership and the watchdog
+
+    def _send_ack(self, did: int, crc: int) -> None:
+        self._send_message(did, R.ACK_MESSAGE.pack(b"A", self.node_id, crc, self._epoch, self._origin))
+
+    def _send_message(self, did: int, payload: bytes) -> None:
+        try:
+            self.transport.send_message(did, payload)
+        except TokenRingError as exc:
+            log.debug("message to %d: %s", did, exc)
+
+    def _on_message(self, payload: bytes) -> None:
+        kind = payload[:1]
+        if kind in (b"A", b"S"):
+            if len(payload) != R.ACK_MESSAGE.size:
+                return
+            _, sender, crc, epoch, origin = R.ACK_MESSAGE.unpack(payload)
+            now = perf_counter()
+            if sender in self._excluded:
+                self._include(sender)
+            if kind == b"S" and R.epoch_order(epoch, origin, self._epoch, self._origin) > 0:
+                self._adopt_epoch(epoch, origin, now)  # our token is the stale one
+            with self._token_lock:
+                if sender == self._last_sent_did and crc == self._last_sent_crc:
+                    if self._ack_pending:
+                        self.timing.ack_latency.add(now - self._last_sent_time)
+                        self.stats.passes_acked += 1
+                    self._ack_pending = False
+                    self._confirmed_did = sender
+                    self._confirmed_at = now
+            return
+        if len(payload) != R.RING_EVENT.size:
+            return
+        kind, node_id, by, epoch, origin = R.RING_EVENT.unpack(payload)
+        if by != self.node_id and R.epoch_order(epoch, origin, self._epoch, self._origin) > 0:
+            self._adopt_epoch(epoch, origin, perf_counter())
+        if kind == R.EVENT_EXCLUDED and by != self.node_id:
+            if node_id == self.node_id:
+                log.warning("excluded from the ring by node %d; asking to rejoin", by)
+                self._announce_rejoin()
+            elif self.membership.exclude(node_id, self._backoff(node_id)):
+                self._successor_changed()
+        elif kind == R.EVENT_REJOIN and node_id != self.node_id:
+            self._include(node_id)
+        elif kind == R.EVENT_LEAVING:
+            self._leaving_nodes.add(node_id)
+
+    def _announce_rejoin(self) -> None:
+        try:
+            self.transport.broadcast(
+                R.RING_EVENT.pack(R.EVENT_REJOIN, self.node_id, self.node_id, self._epoch, self._origin)
+            )
+        except TokenRingError as exc:
+            log.debug("rejoin: %s", exc)
+
+    def _backoff(self, node_id: int) -> float:
+        previous = self._exclusion_backoff.get(node_id, 0.5)
+        value = min(8.0, previous * 2)
+        self._exclusion_backoff[node_id] = value
+        return value
+
+    def _include(self, node_id: int) -> None:
+        self._exclusion_backoff.pop(node_id, None)
+        if self.membership.include(node_id):
+            self._successor_changed()
+
+    def _on_membership(self, node_id: int, alive: bool) -> None:
+        if node_id == self.node_id:
+            return
+        changed = self.membership.set_live(node_id, alive)
+        if alive:
+            self._leaving_nodes.discard(node_id)
+            self.transport.prepare(node_id)
+        else:
+            self._senders.pop(node_id, None)
+        self._update_master()
+        if changed:
+            self._successor_changed()
+        if not alive:
+            self._lost_member(node_id)
+            self._leaving_nodes.discard(node_id)
+
+    def _lost_member(self, node_id: int) -> None:
+        """A node vanished (crash or leave). If our last pass went to it, pass again."""
+        if self._stopping.is_set():
+            return
+        with self._token_lock:
+            if (
+                node_id != self._last_sent_did
+                or node_id in self._leaving_nodes
+                or not self._has_sent
+                or self._last_visit > self._last_sent_time
+                or self._leaving
+            ):
+                return
+            log.info("node %d vanished holding our last pass; passing again", node_id)
+            self.stats.reconfigurations += 1
+            self._repass(perf_counter())
+
+    def _repass(self, now: float) -> None:
+        """Send our last copy of the token (still in the working buffer) on, in a new epoch."""
+        self._bump_epoch(now)
+        self._forward(now)
+
+    def _successor_changed(self) -> None:
+        self.stats.successor_changes += 1
+        self.transport.prepare(self.membership.successor)
+
+    def _update_master(self) -> None:
+        self._master = self.membership.master(self.preferred_master)
+
+    def _watch(self) -> None:
+        refresh_at = 0.0
+        while not self._stopping.is_set():
+            now = perf_counter()
+            if now >= refresh_at:
+                self._ack_interval = self.timing.refresh(len(self.membership.active)).ack_interval
+                refresh_at = now + 0.5
+                for node_id in self.membership.expire_exclusions(time.monotonic()):
+                    log.info("retrying excluded node %d", node_id)
+                    self._successor_changed()
+            timeouts = self.timing.current
+            deadlines = [refresh_at]
+            with self._token_lock:
+                if self._ack_pending:
+                    due = self._last_sent_time + timeouts.ack
+                    if now >= due:
+                        self._pass_timed_out(now)
+                    else:
+                        deadlines.append(due)
+            if self._joined and not self._leaving:
+                due = self._regeneration_deadline(timeouts)
+                if now >= due:
+                    self._regenerate(now)
+                else:
+                    deadlines.append(due)
+            wait = max(0.0, min(deadlines) - perf_counter())
+            self._wake_lock.acquire(timeout=wait)
+
+    def _regeneration_deadline(self, timeouts: R.Timeouts) -> float:
+        booting = self._last_visit == 0.0 and not self._has_sent
+        if booting and self.preferred_master == self.node_id:
+            # main starts the ring: wait briefly for a token that may already circulate
+            return self._started_at + max(0.15, 4 * timeouts.hop * len(self.membership.active))
+        deadline = self._last_seen + timeouts.recon + self.membership.rank() * timeouts.slot
+        if booting and self.preferred_master in self._live:
+            deadline += 1.0  # main is up and will start the token: give it time
+        return deadline
+
+    def _pass_timed_out(self, now: float) -> None:
+        """No acknowledgement in time: retry the same pass, then declare the successor dead."""
+        did = self._last_sent_did
+        self.stats.unacked_passes += 1
+        if self._retries < R.ACK_RETRIES:
+            self._retries += 1
+            self.stats.pass_retries += 1
+            self._last_sent_time = now
+            self._transmit(did)  # the working buffer still holds the frame, bit for bit
+            return
+        self._ack_pending = False
+        self.stats.successors_declared_dead += 1
+        self.stats.reconfigurations += 1
+        log.warning("successor %d did not acknowledge %d passes; skipping it", did, R.ACK_RETRIES + 1)
+        if self.membership.exclude(did, self._backoff(did)):
+            self._successor_changed()
+        self._bump_epoch(now)
+        try:
+            self.transport.broadcast(
+                R.RING_EVENT.pack(R.EVENT_EXCLUDED, did, self.node_id, self._epoch, self._origin)
+            )
+        except TokenRingError as exc:
+            log.debug("exclude event: %s", exc)
+        self._forward(now)
+
+    def _regenerate(self, now: float) -> None:
+        """No token seen for the reconfiguration timeout: this node restarts the ring."""
+        with self._token_lock:
+            recon = self.timing.current.recon
+            if self._last_visit and perf_counter() - self._last_seen < recon:
+                return
+            first = self._last_visit == 0.0 and not self._has_sent
+            self.stats.tokens_regenerated += 1
+            if not first:
+                self.stats.reconfigurations += 1
+                log.warning(
+                    "no token for %.0f ms: regenerating it (rank %d)",
+                    (now - self._last_seen) * 1e3,
+                    self.membership.rank(),
+                )
+            self._bump_epoch(now)
+            if first:  # the seed: main initialises the token with zeros
+                work = self._work
+                work[:] = bytes(self._frame_size)
+                for offset in range(self._const_lo, self._const_hi):
+                    work[offset] = self._const_bytes[offset - self._const_lo]
+            self._last_seen = now
+            self._forward(now)
+
+    # =========================================================================================
+    # the user-program API (the seed's calls, in Pythonic form)
+
+    def channel(self, name: str) -> Channel:
+        """A channel by ``node.kind``, seed name (``ROBSONAR_DATA``) or, for inboxes, node name."""
+        if name in self.protocol.nodes:
+            return self.protocol.nodes[name].command
+        return self.protocol.channel(name)
+
+    def set_token_area(self, channel: str, address: int | None = None) -> Channel:
+        """Seed call; addresses come from protocol.yaml, so this only checks they agree."""
+        ch = self.channel(channel)
+        if address is not None and address != ch.address:
+            raise ChannelError(f"{ch.name} lives at byte {ch.address} per protocol.yaml, not {address}")
+        return ch
+
+    def set_own_input_id(self, channel: str | None = None) -> None:
+        """Declare this node's own command channel (default: the one protocol.yaml gives it)."""
+        ch = self.channel(channel) if channel else (self.spec.command if self.spec else None)
+        if not isinstance(ch, CommandChannel):
+            raise ChannelError(f"{channel!r} is not a command channel")
+        if self.spec is not None and ch.name != self.spec.command.name:
+            raise ChannelError(f"{ch.name} belongs to {ch.node}, not to {self.name}")
+        with self._regs_lock:
+            if self._inbox is None or self._inbox.channel is not ch:
+                self._inbox = Inbox(ch, self._cmd, self.membership.live, self.stats)
+            self._rebuild_active()
+
+    def get_data(self, channel: str) -> ChannelBuffer:
+        """Copy ``channel`` out of the token at every visit (once unlocked); returns the buffer."""
+        ch = self.channel(channel)
+        if isinstance(ch, CommandChannel):
+            if self.spec is not None and ch.node == self.spec.name:
+                self.set_own_input_id(ch.name)
+                assert self._inbox is not None
+                return self._inbox.buffer
+            raise ChannelError(f"{ch.name} is another module's inbox: use send_command")
+        return self._register(ch, "get")
+
+    def store_data(self, channel: str) -> ChannelBuffer:
+        """Copy the returned buffer into ``channel`` at every visit (once unlocked)."""
+        ch = self.channel(channel)
+        if isinstance(ch, CommandChannel):
+            raise ChannelError(f"{ch.name} is a command channel: use send_command")
+        if self.spec is not None and ch.node != self.spec.name:
+            raise ChannelError(f"{ch.name} belongs to {ch.node}; only its owner may store into it")
+        return self._register(ch, "store")
+
+    def _register(self, ch: Channel, kind: str) -> ChannelBuffer:
+        with self._regs_lock:
+            reg = self._regs.get(ch.name)
+            if reg is None or reg.kind != kind:
+                reg = DataRegistration(ch, kind, ChannelBuffer(ch))
+                self._regs[ch.name] = reg
+                self._rebuild_active()
+            return reg.buffer
+
+    def lock_data(self, channel: str) -> None:
+        """Stop copying this channel (the seed's semaphore)."""
+        self._set_locked(channel, True)
+
+    def unlock_data(self, channel: str) -> None:
+        """Resume copying this channel; for the own inbox: ready to receive the next command."""
+        self._set_locked(channel, False)
+
+    def _set_locked(self, channel: str, locked: bool) -> None:
+        ch = self.channel(channel)
+        with self._regs_lock:
+            if self._inbox is not None and ch.name == self._inbox.channel.name:
+                if not locked:
+                    self._inbox.received = False
+                    self._inbox.event.clear()
+                self._inbox.locked = locked
+                return
+            reg = self._regs.get(ch.name)
+            if reg is None:
+                raise ChannelError(
+                    f"{ch.name} is not registered on {self.name}: call get_data/store_data first"
+                )
+            reg.locked = locked
+            self._rebuild_active()
+
+    def cancel_data(self, channel: str) -> None:
+        """Remove a registration."""
+        ch = self.channel(channel)
+        with self._regs_lock:
+            if self._inbox is not None and ch.name == self._inbox.channel.name:
+                self._inbox = None
+            else:
+                self._regs.pop(ch.name, None)
+            self._rebuild_active()
+
+    def subscribe(self, channel: str) -> ChannelBuffer:
+        """get_data + unlock_data in one call."""
+        buffer = self.get_data(channel)
+        self.unlock_data(channel)
+        return buffer
+
+    def publish(self, channel: str | None = None) -> ChannelBuffer:
+        """store_data + unlock_data of this node's own data channel (or ``channel``)."""
+        name = channel or (self.spec.data.name if self.spec else "")
+        buffer = self.store_data(name)
+        self.unlock_data(name)
+        return buffer
+
+    def send_command(self, target: str, command: str | int, **args: Any) -> Outbox:
+        """Queue a command for another module's inbox; the OS writes it when the inbox is free."""
+        ch = self.channel(target)
+        if not isinstance(ch, CommandChannel):
+            raise ChannelError(f"{ch.name} is not a command channel")
+        cmd = ch.command(command)
+        # token lock first (the handler's order): a waiting outbox is never replaced mid-visit
+        with self._token_lock, self._regs_lock:
+            current = self._outboxes.get(ch.name)
+            if current is not None and current.state == Outbox.IN_TOKEN:
+                raise ChannelError(f"a command to {ch.name} is still travelling; wait for it first")
+            if current is not None:
+                current.cancel()
+            self._cmd_seq = (self._cmd_seq + 1) & 0xFF
+            outbox = Outbox(ch, cmd, self._cmd, self.node_id, self._cmd_seq, args, self.stats)
+            self._outboxes[ch.name] = outbox
+            self._pending_outboxes.append(outbox)
+        return outbox
+
+    def _sweep_own_commands(self, work: bytearray) -> None:
+        """After a regeneration from an old copy, clear our own finished commands from it."""
+        off = self._cmd
+        for outbox in tuple(self._outboxes.values()):
+            a = outbox.start
+            if (
+                outbox.state == Outbox.DONE
+                and work[a + off.sender] == self.node_id
+                and work[a + off.seq] == outbox.seq
+                and work[a + off.state] != off.FREE
+            ):
+                work[a : outbox.end] = bytes(outbox.end - a)
+                self.stats.stale_commands_cleared += 1
+
+    def _activate_outboxes(self) -> None:
+        with self._regs_lock:
+            self._rebuild_active()
+
+    def _drop_outboxes(self, finished: list[Any]) -> None:
+        with self._regs_lock:
+            self._rebuild_active(exclude=finished)
+
+    def _rebuild_active(self, exclude: list[Any] | None = None) -> None:
+        """Recompute what the handler visits (caller holds the registration lock)."""
+        items: list[Any] = [r for r in self._regs.values() if not r.locked]
+        if self._inbox is not None:
+            items.append(self._inbox)
+        items.extend(
+            o
+            for o in self._outboxes.values()
+            if o.state != Outbox.DONE and (exclude is None or o not in exclude)
+        )
+        self._active = tuple(items)
+        self._pending_outboxes = []
+
+    def command_transmitted(self, target: str) -> bool:
+        """The last command to ``target`` was written into the token and came back."""
+        outbox = self._outboxes.get(self.channel(target).name)
+        return bool(outbox and outbox.transmitted)
+
+    def command_acknowledged(self, target: str) -> bool:
+        """... and the receiver's OS copied it into its structure."""
+        outbox = self._outboxes.get(self.channel(target).name)
+        return bool(outbox and outbox.acknowledged)
+
+    def command_received(self, channel: str | None = None) -> bool:
+        """Has a command arrived in this node's inbox (which is now locked)?"""
+        return bool(self._inbox and self._inbox.received)
+
+    def get_command(self) -> ReceivedCommand:
+        """Decode the command in the inbox (call unlock_data on the inbox for the next one)."""
+        if self._inbox is None or not self._inbox.received:
+            raise ChannelError(f"no command received on {self.name}")
+        return self._inbox.take()
+
+    def receive_command(self, timeout: float | None = None) -> ReceivedCommand | None:
+        """Wait for the next command, take it and reopen the inbox; None on timeout or stop."""
+        inbox = self._inbox
+        if inbox is None:
+            self.set_own_input_id()
+            inbox = self._inbox
+            assert inbox is not None
+        if inbox.locked and not inbox.received:
+            self.unlock_data(inbox.channel.name)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while not inbox.received:
+            if self.stopping:
+                return None
+            remaining = 0.1 if deadline is None else min(0.1, deadline - time.monotonic())
+            if remaining <= 0:
+                return None
+            inbox.event.wait(remaining)
+        received = inbox.take()
+        self.unlock_data(inbox.channel.name)
+        return received
+
+    def deliver(self, target: str, command: str | int, *, timeout: float = 5.0, **args: Any) -> bool:
+        """Send until acknowledged (resending after each unacknowledged round) or timeout."""
+        deadline = time.monotonic() + timeout
+        while not self.stopping:
+            outbox = self.send_command(target, command, **args)
+            while not outbox.done.wait(0.05):
+                if self.stopping or time.monotonic() > deadline:
+                    outbox.cancel()
+                    return False
+            if outbox.acknowledged:
+                return True
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(min(0.002, max(0.0, deadline - time.monotonic())))
+        return False
+
+    def wait_visit(self, timeout: float | None = None) -> bool:
+        """Block until the token's next visit; False on timeout or stop."""
+        with self._visit_cond:
+            self._visit_waiters += 1
+            try:
+                before = self.stats.visits
+                ok = self._visit_cond.wait_for(lambda: self.stats.visits != before or self.stopping, timeout)
+                return bool(ok) and not self.stopping
+            finally:
+                self._visit_waiters -= 1
+
+    @property
+    def counter(self) -> int:
+        """The token counter seen at the last visit."""
+        return max(self._last_counter, 0)
+
+    # =========================================================================================
+    # user programs
+
+    def start_program(self, program_class: type, *args: Any) -> None:
+        """Instantiate and run a user program in its own thread (``setup`` then ``run``)."""
+        self.stop_program()
+        self.program_error = None
+        program = program_class(self, *args)
+        self._program = program
+
+        def runner() -> None:
+            try:
+                program.setup()
+                program.run()
+            except Exception as exc:  # a user program's bug must not take the node down
+                last = traceback.format_exception_only(type(exc), exc)[-1].strip()
+                self.program_error = last
+                log.error("user program %s failed: %s", type(program).__name__, last)
+                log.debug("traceback:\n%s", traceback.format_exc())
+            finally:
+                try:
+                    program.teardown()
+                except Exception as exc:
+                    log.error("user program teardown failed: %s", exc)
+
+        self._program_thread = threading.Thread(target=runner, name=f"program-{self.name}", daemon=True)
+        self._program_thread.start()
+
+    def stop_program(self, timeout: float = 1.0) -> bool:
+        """Ask the running program to stop, wait for it, drop its registrations."""
+        program, thread = self._program, self._program_thread
+        if program is None:
+            return True
+        program.stop_requested.set()
+        with self._visit_cond:
+            self._visit_cond.notify_all()
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout)
+        stopped = thread is None or not thread.is_alive()
+        if not stopped:
+            log.warning("user program %s did not stop within %.1f s", type(program).__name__, timeout)
+        with self._regs_lock:
+            self._regs.clear()
+            self._inbox = None
+            for outbox in self._outboxes.values():
+                if outbox.state == Outbox.WAITING:
+                    outbox.cancel()
+            self._rebuild_active()
+        self._program = None
+        self._program_thread = None
+        return stopped
+
+    @property
+    def program(self) -> Any:
+        return self._program
+
+    # =========================================================================================
+    # introspection
+
+    def snapshot(self) -> dict[str, Any]:
+        """Counters, membership and timing for ``stats`` queries, the monitor and benchmarks."""
+        timing = self.timing
+        t = timing.current
+        rounds = timing.rounds.values()
+        handler = timing.handler.values()
+        send = timing.send.values()
+
+        def pct(values: Any, q: float) -> float:
+            import numpy as np
+
+            return float(np.percentile(values, q) * 1e3) if len(values) else 0.0
+
+        return {
+            "id": self.node_id,
+            "name": self.name,
+            "epoch": [self._epoch, self._origin],
+            "counter": self.counter,
+            "master": self._master,
+            "successor": self.membership.successor,
+            "live": sorted(self.membership.live),
+            "active": list(self.membership.active),
+            "excluded": sorted(self.membership.excluded),
+            "stats": self.stats.as_dict(),
+            "timeouts_ms": {
+                "hop": t.hop * 1e3,
+                "ack": t.ack * 1e3,
+                "recon": t.recon * 1e3,
+                "slot": t.slot * 1e3,
+                "ack_interval": t.ack_interval * 1e3,
+            },
+            "round_ms": {"median": pct(rounds, 50), "p99": pct(rounds, 99), "n": len(rounds)},
+            "handler_us": {
+                "median": pct(handler, 50) * 1e3,
+                "p99": pct(handler, 99) * 1e3,
+                "n": len(handler),
+            },
+            "send_us": {"median": pct(send, 50) * 1e3, "p99": pct(send, 99) * 1e3},
+            "program": type(self._program).__name__ if self._program is not None else None,
+            "program_error": self.program_error,
+            "bitrate": timing.bitrate,
+            "ack_mode": timing.ack_mode,
+        }
+
+    def round_times(self) -> list[float]:
+        """Seconds between this node's last visits (up to 1024)."""
+        return self.timing.rounds.values().tolist()

@@ -1,0 +1,177 @@
+"""One node as an OS process: a Zenoh session, the node OS, its control queryable, its program.
+
+Started by ``tokenring up`` (one per module) or by hand with ``tokenring node``. SIGINT and
+SIGTERM make the node leave the ring cleanly and exit 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import signal
+import sys
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import msgpack
+import zenoh
+
+from tokenring import keys
+from tokenring.errors import TokenRingError, UsageError
+from tokenring.node import NodeOS
+from tokenring.program import load_program_file
+from tokenring.protocol import Protocol, load_protocol
+from tokenring.ring import parse_bitrate
+from tokenring.transport.zenoh import ZenohTransport
+from tokenring.zconfig import make_config, open_session
+
+log = logging.getLogger("tokenring.nodeproc")
+
+ControlHandler = Callable[[dict[str, Any]], Any]
+
+
+class NodeProcess:
+    """The process around a :class:`NodeOS`: session, control plane, program, shutdown."""
+
+    def __init__(
+        self,
+        protocol: Protocol,
+        node_id: int,
+        *,
+        ring: str = keys.DEFAULT_RING,
+        name: str | None = None,
+        session: zenoh.Session,
+        bitrate: float | None = 2.5e6,
+        ack_mode: str = "adaptive",
+    ) -> None:
+        self.protocol = protocol
+        self.ring = ring
+        self.session = session
+        self.transport = ZenohTransport(session, ring, node_id, protocol.frame_size)
+        self.os = NodeOS(protocol, node_id, self.transport, name=name, bitrate=bitrate, ack_mode=ack_mode)
+        self.stop_event = threading.Event()
+        self.control: dict[str, ControlHandler] = {
+            "stats": lambda _: self.os.snapshot(),
+            "rounds": lambda _: self.os.round_times(),
+            "visits": lambda _: self.os.stats.visits,
+            "leave": self._request_leave,
+            "program": self._program_report,
+        }
+        self._queryable: Any = None
+
+    def _program_report(self, _: dict[str, Any]) -> dict[str, Any]:
+        program = self.os.program
+        return {
+            "program": type(program).__name__ if program is not None else None,
+            "error": self.os.program_error,
+            "report": program.report() if program is not None else {},
+        }
+
+    def _request_leave(self, _: dict[str, Any]) -> dict[str, Any]:
+        self.stop_event.set()
+        return {"ok": True}
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        verb = str(query.key_expr).rsplit("/", 1)[-1]
+        handler = self.control.get(verb)
+        try:
+            if handler is None:
+                raise UsageError(
+                    f"node {self.os.name} has no control verb {verb!r} (has: {', '.join(sorted(self.control))})"
+                )
+            payload = query.payload
+            request = msgpack.unpackb(payload.to_bytes()) if payload is not None else {}
+            result = {"ok": True, "result": handler(request or {})}
+        except TokenRingError as exc:
+            result = {"ok": False, "error": str(exc)}
+        except Exception as exc:  # a control request must never take the node down
+            log.exception("control verb %s failed", verb)
+            result = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
+        query.reply(query.key_expr, msgpack.packb(result, default=_jsonable))
+
+    def start(self) -> None:
+        self._queryable = self.session.declare_queryable(
+            keys.control(self.ring, self.os.node_id, "*"), self._on_query
+        )
+        self.os.start()
+
+    def run_program(self, path: str | Path | None) -> None:
+        if path is None:
+            return
+        program_class, _ = load_program_file(path)
+        wanted = getattr(program_class, "module", "")
+        if wanted and wanted != self.os.name:
+            raise UsageError(f"{path} is the program of {wanted!r}, not of node {self.os.name!r}")
+        self.os.start_program(program_class)
+
+    def wait(self, duration: float | None = None) -> None:
+        self.stop_event.wait(duration)
+
+    def shutdown(self) -> None:
+        self.os.leave(grace=1.0)
+        if self._queryable is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self._queryable.undeclare()
+
+
+def _jsonable(value: Any) -> Any:
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if isinstance(value, set | tuple):
+        return list(value)
+    return str(value)
+
+
+def add_node_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--id", type=int, required=True, help="node ID 1..255")
+    parser.add_argument("--name", help="node name (default: from protocol.yaml, else nodeID)")
+    parser.add_argument("--program", help="user program file to run on this node")
+    parser.add_argument("--duration", type=float, help="leave after this many seconds")
+
+
+def run_node(args: argparse.Namespace) -> int:
+    """Entry of ``tokenring node``: run one node until SIGINT/SIGTERM or ``--duration``."""
+    sys.setswitchinterval(0.0005)  # let the token handler in quickly beside a busy program
+    protocol = load_protocol(args.protocol)
+    if not 1 <= args.id <= 255:
+        raise UsageError(f"--id {args.id} is outside 1..255")
+    spec = protocol.by_id.get(args.id)
+    if args.name and spec is not None and spec.name != args.name:
+        raise UsageError(f"ID {args.id} is {spec.name!r} in protocol.yaml, not {args.name!r}")
+    ring = keys.check_ring_name(args.ring)
+    bitrate = parse_bitrate(args.bitrate)
+    config = make_config(
+        mode=args.mode,
+        connect=args.connect or [],
+        listen=args.listen or [],
+        config_file=args.zenoh_config,
+    )
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: Any) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    with open_session(config) as session:
+        node = NodeProcess(
+            protocol,
+            args.id,
+            ring=ring,
+            name=args.name,
+            session=session,
+            bitrate=bitrate,
+            ack_mode=args.ack,
+        )
+        node.stop_event = stop
+        node.start()
+        try:
+            node.run_program(args.program)
+            node.wait(args.duration)
+        finally:
+            node.shutdown()
+    log.info("node %s left the ring", node.os.name)
+    return 0

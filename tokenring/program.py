@@ -1,0 +1,92 @@
+"""User programs: what runs on a node beside the OS, and how a program's source is loaded.
+
+A program is one Python file defining a class ``Program`` derived from :class:`UserProgram`.
+The node OS calls ``setup()`` then ``run()`` in the program's own thread; ``run`` returns when
+:attr:`UserProgram.running` turns false. Programs reach other modules only through the token
+(``self.os``) and their hardware only through ``self.hw`` (set by the node process).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+import types
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from tokenring.errors import ProgramError
+
+if TYPE_CHECKING:
+    from tokenring.node import NodeOS
+
+
+class UserProgram:
+    """Base class of a module's user program."""
+
+    #: the module this program is written for (checked against the node it is loaded into)
+    module: str = ""
+
+    def __init__(self, os: NodeOS, hardware: Any = None) -> None:
+        self.os = os
+        self.hw = hardware
+        self.stop_requested = threading.Event()
+
+    @property
+    def running(self) -> bool:
+        return not self.stop_requested.is_set() and not self.os.stopping
+
+    def sleep(self, seconds: float) -> bool:
+        """Sleep unless asked to stop; returns False if the program should end."""
+        return not self.stop_requested.wait(seconds) and not self.os.stopping
+
+    def setup(self) -> None:
+        """Register channels (``self.os.subscribe``, ``publish``, ``set_own_input_id``)."""
+
+    def run(self) -> None:
+        """The program's loop; the default just follows the token until stopped."""
+        while self.running:
+            self.os.wait_visit(0.5)
+
+    def teardown(self) -> None:
+        """Release what ``setup`` took (hardware handles, files)."""
+
+    def report(self) -> dict[str, Any]:
+        """What the program wants to tell tools (``tokenring status``, tests); plain values."""
+        return {}
+
+
+def program_digest(source: bytes) -> str:
+    """The end-to-end integrity hash of a program (SHA-256, hex)."""
+    return hashlib.sha256(source).hexdigest()
+
+
+def load_program(source: bytes | str, filename: str = "<program>") -> type[UserProgram]:
+    """Compile a program's source and return its ``Program`` class; raises :class:`ProgramError`."""
+    text = source.decode("utf-8") if isinstance(source, bytes) else source
+    module_name = f"tokenring_program_{Path(filename).stem}"
+    module = types.ModuleType(module_name)
+    module.__file__ = filename
+    try:
+        code = compile(text, filename, "exec")
+    except SyntaxError as exc:
+        raise ProgramError(f"{filename}:{exc.lineno}: syntax error: {exc.msg}") from None
+    try:
+        exec(code, module.__dict__)
+    except Exception as exc:
+        raise ProgramError(f"{filename}: importing the program failed: {type(exc).__name__}: {exc}") from None
+    program = module.__dict__.get("Program")
+    if not (isinstance(program, type) and issubclass(program, UserProgram)):
+        raise ProgramError(f"{filename}: no class Program(UserProgram) found; this is not a module program")
+    return program
+
+
+def load_program_file(path: str | Path) -> tuple[type[UserProgram], bytes]:
+    """Read and load a program file; returns the class and the exact bytes read."""
+    file = Path(path)
+    try:
+        source = file.read_bytes()
+    except FileNotFoundError:
+        raise ProgramError(f"{file}: no such program file") from None
+    except OSError as exc:
+        raise ProgramError(f"{file}: cannot read: {exc.strerror}") from None
+    return load_program(source, str(file)), source

@@ -1,0 +1,726 @@
+"""Load, validate and compile ``protocol.yaml`` into numpy structured dtypes over the token.
+
+The file is checked completely before anything starts: overlapping channels, channels in the
+header or past the token, fields that do not fit their channel, duplicate IDs, names, seed names
+or addresses, unknown types and typos in keys are each refused with a :class:`ProtocolError`
+naming the entry. After compilation every channel offers a zero-copy view over a token buffer.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from tokenring.errors import ChannelError, ProtocolError
+
+SCALAR_TYPES: dict[str, str] = {
+    "u8": "<u1",
+    "i8": "<i1",
+    "u16": "<u2",
+    "i16": "<i2",
+    "u32": "<u4",
+    "i32": "<i4",
+    "u64": "<u8",
+    "i64": "<i8",
+    "f32": "<f4",
+    "f64": "<f8",
+}
+_TYPE_RE = re.compile(r"^(?P<base>[a-z]+[0-9]*)(?:\[(?P<count>[0-9]+)\])?$")
+HEADER_FIELDS = (
+    "sid",
+    "did",
+    "long_marker",
+    "size_marker",
+    "counter",
+    "syscmd_issuer",
+    "syscmd_target",
+    "syscmd_code",
+    "syscmd_length",
+    "syscmd_ack",
+    "epoch",
+    "epoch_origin",
+)
+COMMAND_HEADER_FIELDS = ("sender", "state", "code", "seq")
+_TOP_KEYS = {"version", "token", "system", "command_channel", "common_commands", "enums", "nodes"}
+_FIELD_KEYS = {"type", "unit", "enum", "doc", "offset", "const"}
+
+
+# --------------------------------------------------------------------------------------------
+# compiled objects
+
+
+@dataclass(frozen=True)
+class Field:
+    """One typed field inside a channel, at ``offset`` bytes from the channel's start."""
+
+    name: str
+    type_name: str
+    dtype: np.dtype
+    offset: int
+    unit: str = ""
+    enum: str = ""
+    doc: str = ""
+
+    @property
+    def size(self) -> int:
+        return self.dtype.itemsize
+
+    @property
+    def is_text(self) -> bool:
+        return self.type_name.startswith("str[")
+
+    def to_python(self, value: Any) -> Any:
+        """Turn a numpy value of this field into plain Python (int, float, list or str)."""
+        if self.is_text:
+            return bytes(value).rstrip(b"\0").decode("ascii", "replace")
+        if isinstance(value, np.ndarray):
+            return value.tolist()
+        return value.item() if hasattr(value, "item") else value
+
+
+@dataclass(frozen=True)
+class Channel:
+    """A command or data channel: a named byte range of the token with typed fields."""
+
+    name: str
+    seed_name: str
+    node: str
+    kind: str
+    address: int
+    size: int
+    fields: tuple[Field, ...]
+    dtype: np.dtype
+
+    @property
+    def end(self) -> int:
+        return self.address + self.size
+
+    def view(self, buffer: bytearray | memoryview | bytes) -> np.ndarray:
+        """A zero-copy 0-d structured view of this channel inside a token (or frame) buffer."""
+        return np.ndarray((), dtype=self.dtype, buffer=buffer, offset=self.address)
+
+    def decode(self, buffer: bytes | bytearray | memoryview) -> dict[str, Any]:
+        """The channel's fields as plain Python values."""
+        view = self.view(buffer)
+        return {f.name: f.to_python(view[f.name]) for f in self.fields}
+
+
+@dataclass(frozen=True)
+class Command:
+    """A command code accepted by an inbox, with its argument fields (after the header)."""
+
+    name: str
+    code: int
+    args: tuple[Field, ...]
+    dtype: np.dtype
+    doc: str = ""
+    common: bool = False
+
+    def arg_names(self) -> tuple[str, ...]:
+        return tuple(a.name for a in self.args)
+
+
+@dataclass(frozen=True)
+class CommandChannel(Channel):
+    """A module's inbox: the common command header followed by per-command arguments."""
+
+    commands: Mapping[str, Command] = field(default_factory=dict)
+    by_code: Mapping[int, Command] = field(default_factory=dict)
+
+    def command(self, name_or_code: str | int) -> Command:
+        """Look up a command by name or code; :class:`ChannelError` names the inbox if unknown."""
+        found = (
+            self.by_code.get(name_or_code)
+            if isinstance(name_or_code, int)
+            else self.commands.get(name_or_code)
+        )
+        if found is None:
+            known = ", ".join(sorted(self.commands))
+            raise ChannelError(f"{self.name}: unknown command {name_or_code!r} (known: {known})")
+        return found
+
+    def decode_command(self, buffer: bytes | bytearray | memoryview) -> dict[str, Any]:
+        """Header plus, if the code is known, the command's name and arguments."""
+        head = self.view(buffer)
+        out: dict[str, Any] = {f.name: f.to_python(head[f.name]) for f in self.fields}
+        cmd = self.by_code.get(out["code"])
+        if cmd is not None and out["state"] != 0:
+            view = np.ndarray((), dtype=cmd.dtype, buffer=buffer, offset=self.address)
+            out["command"] = cmd.name
+            out["args"] = {a.name: a.to_python(view[a.name]) for a in cmd.args}
+        return out
+
+
+@dataclass(frozen=True)
+class NodeSpec:
+    """A module of the ring: ID, names and its two channels."""
+
+    name: str
+    id: int
+    seed_name: str
+    command: CommandChannel
+    data: Channel
+
+
+@dataclass(frozen=True)
+class Header:
+    """Byte offsets of the token header fields and the constant marker values."""
+
+    offsets: Mapping[str, int]
+    consts: Mapping[str, int]
+    fields: tuple[Field, ...]
+
+    def __getattr__(self, name: str) -> int:
+        try:
+            return self.offsets[name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """The compiled ``protocol.yaml``."""
+
+    source: str
+    token_size: int
+    header: Header
+    header_size: int
+    system_data_offset: int
+    system_data_size: int
+    user_area_offset: int
+    user_area_size: int
+    all_nodes: int
+    system_commands: Mapping[str, int]
+    command_header: tuple[Field, ...]
+    command_states: Mapping[str, int]
+    common_commands: Mapping[str, Command]
+    enums: Mapping[str, Mapping[str, int]]
+    nodes: Mapping[str, NodeSpec]
+    by_id: Mapping[int, NodeSpec]
+    channels: Mapping[str, Channel]
+
+    @property
+    def frame_size(self) -> int:
+        return self.token_size + 2
+
+    def node(self, name_or_id: str | int) -> NodeSpec:
+        """A node by short name, seed name or ID; :class:`ChannelError` lists the known ones."""
+        if isinstance(name_or_id, int):
+            spec = self.by_id.get(name_or_id)
+        else:
+            spec = self.nodes.get(name_or_id)
+            if spec is None:
+                for candidate in self.nodes.values():
+                    if candidate.seed_name == name_or_id:
+                        spec = candidate
+                if spec is None and name_or_id.isdigit():
+                    spec = self.by_id.get(int(name_or_id))
+        if spec is None:
+            known = ", ".join(f"{n.name}={n.id}" for n in self.nodes.values())
+            raise ChannelError(f"unknown node {name_or_id!r} (known: {known})")
+        return spec
+
+    def channel(self, name: str) -> Channel:
+        """A channel by ``node.kind`` (``sonar.data``) or seed name (``ROBSONAR_DATA``)."""
+        found = self.channels.get(name)
+        if found is None:
+            for ch in self.channels.values():
+                if ch.seed_name == name:
+                    return ch
+            known = ", ".join(sorted(self.channels))
+            raise ChannelError(f"unknown channel {name!r} (known: {known})")
+        return found
+
+    def enum_name(self, enum: str, value: int) -> str:
+        """The symbolic name of ``value`` in ``enum``, or the number as text if it has none."""
+        for name, number in self.enums.get(enum, {}).items():
+            if number == value:
+                return name
+        return str(value)
+
+    def system_command_name(self, code: int) -> str:
+        """``ARCNET_SCAN`` for 1, ``NONE`` for 0, the number as text if unknown."""
+        for name, number in self.system_commands.items():
+            if number == code:
+                return name
+        return "NONE" if code == 0 else str(code)
+
+
+# --------------------------------------------------------------------------------------------
+# loading
+
+
+def _strict_loader(source: str) -> type[yaml.SafeLoader]:
+    """A SafeLoader that refuses duplicate keys (PyYAML silently keeps the last one)."""
+
+    class StrictLoader(yaml.SafeLoader):
+        pass
+
+    def construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode) -> dict:
+        seen: dict[Any, int] = {}
+        for key_node, _ in node.value:
+            key = loader.construct_object(key_node)
+            line = key_node.start_mark.line + 1
+            if key in seen:
+                raise ProtocolError(
+                    source, f"line {line}", f"duplicate key {key!r} (first at line {seen[key]})"
+                )
+            seen[key] = line
+        return loader.construct_mapping(node)
+
+    StrictLoader.add_constructor(
+        yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
+        construct_mapping,  # type: ignore[arg-type]
+    )
+    return StrictLoader
+
+
+def default_protocol_path() -> Path:
+    """``$TOKENRING_PROTOCOL``, else the repository's ``protocol.yaml``, else the packaged copy."""
+    env = os.environ.get("TOKENRING_PROTOCOL")
+    if env:
+        return Path(env)
+    here = Path(__file__).resolve().parent
+    repo_copy = here.parent / "protocol.yaml"
+    if repo_copy.exists():
+        return repo_copy
+    return here / "_data" / "protocol.yaml"
+
+
+def load_protocol(path: str | os.PathLike[str] | None = None) -> Protocol:
+    """Read and compile a protocol file; raises :class:`ProtocolError` naming what is wrong."""
+    file = Path(path) if path is not None else default_protocol_path()
+    source = str(file)
+    try:
+        text = file.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ProtocolError(source, "", "file not found") from None
+    except OSError as exc:
+        raise ProtocolError(source, "", f"cannot read: {exc.strerror}") from None
+    return parse_protocol(text, source)
+
+
+@cache
+def default_protocol() -> Protocol:
+    """The protocol at :func:`default_protocol_path`, loaded once per process."""
+    return load_protocol()
+
+
+def parse_protocol(text: str, source: str = "<protocol>") -> Protocol:
+    """Compile protocol text (YAML); raises :class:`ProtocolError`."""
+    try:
+        doc = yaml.load(text, Loader=_strict_loader(source))
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark
+        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        raise ProtocolError(source, where, f"YAML syntax error: {exc.problem}") from None
+    except yaml.YAMLError as exc:
+        raise ProtocolError(source, "", f"YAML error: {exc}") from None
+    return _Compiler(source).compile(doc)
+
+
+class _Compiler:
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, entry: str, problem: str) -> ProtocolError:
+        return ProtocolError(self.source, entry, problem)
+
+    # -- small checked getters -----------------------------------------------------------------
+    def mapping(self, value: Any, entry: str) -> dict:
+        if not isinstance(value, dict):
+            raise self.fail(entry, f"expected a mapping, found {type(value).__name__}")
+        return value
+
+    def integer(self, value: Any, entry: str, lo: int, hi: int) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(entry, f"expected an integer, found {value!r}")
+        if not lo <= value <= hi:
+            raise self.fail(entry, f"{value} is outside {lo}..{hi}")
+        return value
+
+    def get(self, mapping: dict, key: str, entry: str) -> Any:
+        if key not in mapping:
+            raise self.fail(entry, f"missing key {key!r}")
+        return mapping[key]
+
+    def only_keys(self, mapping: dict, allowed: Iterable[str], entry: str) -> None:
+        extra = set(mapping) - set(allowed)
+        if extra:
+            raise self.fail(
+                entry,
+                f"unknown key(s) {', '.join(sorted(map(str, extra)))} "
+                f"(allowed: {', '.join(sorted(allowed))})",
+            )
+
+    # -- types and fields ----------------------------------------------------------------------
+    def field_dtype(self, type_name: Any, entry: str) -> np.dtype:
+        if not isinstance(type_name, str):
+            raise self.fail(entry, f"type must be text such as 'u8' or 'i16[4]', got {type_name!r}")
+        match = _TYPE_RE.match(type_name.strip())
+        if not match:
+            raise self.fail(entry, f"cannot read type {type_name!r}")
+        base, count = match.group("base"), match.group("count")
+        if base == "str":
+            if count is None or int(count) < 1:
+                raise self.fail(entry, f"text type needs a length, e.g. 'str[12]', got {type_name!r}")
+            return np.dtype(f"S{int(count)}")
+        if base not in SCALAR_TYPES:
+            known = ", ".join([*SCALAR_TYPES, "str[N]"])
+            raise self.fail(entry, f"unknown type {base!r} (known: {known})")
+        if count is None:
+            return np.dtype(SCALAR_TYPES[base])
+        if int(count) < 1:
+            raise self.fail(entry, f"array length must be at least 1 in {type_name!r}")
+        return np.dtype((SCALAR_TYPES[base], (int(count),)))
+
+    def fields(self, spec: Any, entry: str, start: int, limit: int, enums: Mapping[str, Any]) -> list[Field]:
+        """Fields packed from ``start``; each must end at or before ``limit`` (channel size)."""
+        if spec is None:
+            return []
+        spec = self.mapping(spec, entry)
+        out: list[Field] = []
+        offset = start
+        for name, raw in spec.items():
+            where = f"{entry}.{name}"
+            if not isinstance(name, str) or not name.isidentifier():
+                raise self.fail(where, f"field name {name!r} is not a valid identifier")
+            unit = doc = enum = ""
+            if isinstance(raw, dict):
+                self.only_keys(raw, _FIELD_KEYS - {"const"}, where)
+                type_name = self.get(raw, "type", where)
+                unit = str(raw.get("unit", ""))
+                doc = str(raw.get("doc", ""))
+                enum = str(raw.get("enum", ""))
+                if enum and enum not in enums:
+                    raise self.fail(where, f"unknown enum {enum!r}")
+                if "offset" in raw:
+                    offset = self.integer(raw["offset"], f"{where}.offset", 0, limit)
+            else:
+                type_name = raw
+            dtype = self.field_dtype(type_name, where)
+            if offset + dtype.itemsize > limit:
+                raise self.fail(
+                    where,
+                    f"field {name!r} ({type_name}, {dtype.itemsize} bytes at offset {offset}) "
+                    f"overflows the {limit}-byte channel by {offset + dtype.itemsize - limit} bytes",
+                )
+            for other in out:
+                if offset < other.offset + other.size and other.offset < offset + dtype.itemsize:
+                    raise self.fail(where, f"field {name!r} overlaps field {other.name!r}")
+            out.append(Field(name, str(type_name), dtype, offset, unit, enum, doc))
+            offset += dtype.itemsize
+        return out
+
+    @staticmethod
+    def struct(fields: Iterable[Field], itemsize: int) -> np.dtype:
+        fields = list(fields)
+        return np.dtype(
+            {
+                "names": [f.name for f in fields],
+                "formats": [f.dtype for f in fields],
+                "offsets": [f.offset for f in fields],
+                "itemsize": itemsize,
+            }
+        )
+
+    # -- sections ------------------------------------------------------------------------------
+    def compile(self, doc: Any) -> Protocol:
+        if doc is None:
+            raise self.fail("", "the file is empty")
+        doc = self.mapping(doc, "(top level)")
+        self.only_keys(doc, _TOP_KEYS, "(top level)")
+        self.integer(self.get(doc, "version", "(top level)"), "version", 1, 1)
+        enums = self.enums(doc.get("enums") or {})
+        token = self.mapping(self.get(doc, "token", "(top level)"), "token")
+        self.only_keys(token, {"size", "crc", "header", "system_data", "user_area"}, "token")
+        token_size = self.integer(self.get(token, "size", "token"), "token.size", 512, 512)
+        crc = token.get("crc", "crc16-arc")
+        if crc != "crc16-arc":
+            raise self.fail("token.crc", f"only crc16-arc is supported, got {crc!r}")
+        header, header_size = self.header(self.get(token, "header", "token"), enums)
+        sys_off, sys_size = self.area(token, "system_data", header_size, token_size)
+        user_off, user_size = self.area(token, "user_area", header_size, token_size)
+        if not (user_off <= sys_off and sys_off + sys_size <= user_off + user_size):
+            raise self.fail("token.system_data", "must lie inside token.user_area")
+
+        system = self.mapping(self.get(doc, "system", "(top level)"), "system")
+        self.only_keys(system, {"all_nodes", "commands"}, "system")
+        all_nodes = self.integer(self.get(system, "all_nodes", "system"), "system.all_nodes", 0, 255)
+        system_commands = self.codes(self.get(system, "commands", "system"), "system.commands")
+
+        cc = self.mapping(self.get(doc, "command_channel", "(top level)"), "command_channel")
+        self.only_keys(cc, {"header"}, "command_channel")
+        cmd_header = self.fields(
+            self.get(cc, "header", "command_channel"), "command_channel.header", 0, 255, enums
+        )
+        names = tuple(f.name for f in cmd_header)
+        missing = [n for n in COMMAND_HEADER_FIELDS if n not in names]
+        if missing:
+            raise self.fail("command_channel.header", f"missing field(s): {', '.join(missing)}")
+        head_size = max(f.offset + f.size for f in cmd_header)
+        states = enums.get("command_state")
+        if not states or {"FREE", "OCCUPIED", "ACKNOWLEDGED"} - set(states):
+            raise self.fail("enums.command_state", "needs FREE, OCCUPIED and ACKNOWLEDGED")
+        if states["FREE"] != 0:
+            raise self.fail("enums.command_state.FREE", "must be 0 (a zeroed token is all free)")
+
+        common_raw = self.mapping(doc.get("common_commands") or {}, "common_commands")
+        common_specs = self.command_specs(common_raw, "common_commands", enums)
+
+        nodes, by_id, channels = self.nodes(
+            self.get(doc, "nodes", "(top level)"),
+            enums,
+            cmd_header,
+            head_size,
+            common_specs,
+            (user_off, user_off + user_size),
+        )
+        # a common command compiled against the smallest inbox, for decoding without a node
+        common_commands = {}
+        if nodes:
+            first_inbox = next(iter(nodes.values())).command
+            common_commands = {n: c for n, c in first_inbox.commands.items() if c.common}
+        return Protocol(
+            source=self.source,
+            token_size=token_size,
+            header=header,
+            header_size=header_size,
+            system_data_offset=sys_off,
+            system_data_size=sys_size,
+            user_area_offset=user_off,
+            user_area_size=user_size,
+            all_nodes=all_nodes,
+            system_commands=system_commands,
+            command_header=tuple(cmd_header),
+            command_states=dict(states),
+            common_commands=common_commands,
+            enums=enums,
+            nodes=nodes,
+            by_id=by_id,
+            channels=channels,
+        )
+
+    def enums(self, raw: Any) -> dict[str, dict[str, int]]:
+        raw = self.mapping(raw, "enums")
+        out: dict[str, dict[str, int]] = {}
+        for name, values in raw.items():
+            values = self.mapping(values, f"enums.{name}")
+            seen: dict[int, str] = {}
+            for key, number in values.items():
+                number = self.integer(number, f"enums.{name}.{key}", 0, 2**32 - 1)
+                if number in seen:
+                    raise self.fail(
+                        f"enums.{name}.{key}", f"value {number} is already used by {seen[number]!r}"
+                    )
+                seen[number] = key
+            out[str(name)] = dict(values)
+        return out
+
+    def codes(self, raw: Any, entry: str) -> dict[str, int]:
+        raw = self.mapping(raw, entry)
+        seen: dict[int, str] = {}
+        for name, code in raw.items():
+            code = self.integer(code, f"{entry}.{name}", 1, 255)
+            if code in seen:
+                raise self.fail(f"{entry}.{name}", f"code {code} is already used by {seen[code]!r}")
+            seen[code] = name
+        return dict(raw)
+
+    def header(self, raw: Any, enums: Mapping[str, Any]) -> tuple[Header, int]:
+        raw = self.mapping(raw, "token.header")
+        missing = [n for n in HEADER_FIELDS if n not in raw]
+        if missing:
+            raise self.fail("token.header", f"missing field(s): {', '.join(missing)}")
+        fields: list[Field] = []
+        consts: dict[str, int] = {}
+        for name, spec in raw.items():
+            where = f"token.header.{name}"
+            spec = self.mapping(spec, where)
+            self.only_keys(spec, _FIELD_KEYS, where)
+            offset = self.integer(self.get(spec, "offset", where), f"{where}.offset", 0, 511)
+            dtype = self.field_dtype(self.get(spec, "type", where), where)
+            for other in fields:
+                if offset < other.offset + other.size and other.offset < offset + dtype.itemsize:
+                    raise self.fail(where, f"overlaps header field {other.name!r}")
+            if "const" in spec:
+                consts[name] = self.integer(spec["const"], f"{where}.const", 0, 255)
+            fields.append(Field(name, str(spec["type"]), dtype, offset, "", str(spec.get("enum", ""))))
+        if any(f.size != 1 for f in fields if f.name in HEADER_FIELDS):
+            bad = next(f for f in fields if f.name in HEADER_FIELDS and f.size != 1)
+            raise self.fail(f"token.header.{bad.name}", "the seed's header fields are one byte")
+        size = max(f.offset + f.size for f in fields)
+        return Header({f.name: f.offset for f in fields}, consts, tuple(fields)), size
+
+    def area(self, token: dict, key: str, header_size: int, token_size: int) -> tuple[int, int]:
+        where = f"token.{key}"
+        spec = self.mapping(self.get(token, key, "token"), where)
+        self.only_keys(spec, {"offset", "size"}, where)
+        offset = self.integer(self.get(spec, "offset", where), f"{where}.offset", 0, token_size)
+        size = self.integer(self.get(spec, "size", where), f"{where}.size", 1, token_size)
+        if offset < header_size:
+            raise self.fail(where, f"starts at byte {offset}, inside the {header_size}-byte header")
+        if offset + size > token_size:
+            raise self.fail(where, f"ends at byte {offset + size - 1}, past byte {token_size - 1}")
+        return offset, size
+
+    def command_specs(
+        self, raw: dict, entry: str, enums: Mapping[str, Any]
+    ) -> dict[str, tuple[int, Any, str]]:
+        out: dict[str, tuple[int, Any, str]] = {}
+        seen: dict[int, str] = {}
+        for name, spec in raw.items():
+            where = f"{entry}.{name}"
+            spec = self.mapping(spec, where)
+            self.only_keys(spec, {"code", "args", "doc"}, where)
+            code = self.integer(self.get(spec, "code", where), f"{where}.code", 1, 254)
+            if code in seen:
+                raise self.fail(where, f"code {code} is already used by {seen[code]!r}")
+            seen[code] = name
+            out[str(name)] = (code, spec.get("args"), str(spec.get("doc", "")))
+        return out
+
+    def nodes(
+        self,
+        raw: Any,
+        enums: Mapping[str, Any],
+        cmd_header: list[Field],
+        head_size: int,
+        common: Mapping[str, tuple[int, Any, str]],
+        user_area: tuple[int, int],
+    ) -> tuple[dict[str, NodeSpec], dict[int, NodeSpec], dict[str, Channel]]:
+        raw = self.mapping(raw, "nodes")
+        if not raw:
+            raise self.fail("nodes", "no nodes defined")
+        nodes: dict[str, NodeSpec] = {}
+        by_id: dict[int, NodeSpec] = {}
+        seed_names: dict[str, str] = {}
+        channels: dict[str, Channel] = {}
+        for name, spec in raw.items():
+            where = f"nodes.{name}"
+            if not isinstance(name, str) or not re.fullmatch(r"[a-z][a-z0-9_]*", name):
+                raise self.fail(where, "node names are lower-case identifiers")
+            spec = self.mapping(spec, where)
+            self.only_keys(spec, {"id", "seed_name", "command", "data"}, where)
+            node_id = self.integer(self.get(spec, "id", where), f"{where}.id", 1, 255)
+            if node_id in by_id:
+                raise self.fail(
+                    f"{where}.id", f"ID {node_id} is already used by node {by_id[node_id].name!r}"
+                )
+            seed = str(spec.get("seed_name", f"ROB{name.upper()}"))
+            if seed in seed_names:
+                raise self.fail(
+                    f"{where}.seed_name",
+                    f"seed name {seed!r} is already used by {seed_names[seed]!r}",
+                )
+            seed_names[seed] = name
+            command = self.command_channel(spec, name, seed, enums, cmd_header, head_size, common, user_area)
+            data = self.data_channel(spec, name, seed, enums, user_area)
+            for ch in (command, data):
+                for other in channels.values():
+                    if ch.address < other.end and other.address < ch.end:
+                        raise self.fail(
+                            f"nodes.{name}.{ch.kind}",
+                            f"channel {ch.name} (bytes {ch.address}..{ch.end - 1}) overlaps "
+                            f"{other.name} (bytes {other.address}..{other.end - 1})",
+                        )
+                channels[ch.name] = ch
+            node = NodeSpec(name, node_id, seed, command, data)
+            nodes[name] = node
+            by_id[node_id] = node
+        return nodes, by_id, channels
+
+    def placement(self, spec: dict, where: str, user_area: tuple[int, int]) -> tuple[int, int]:
+        address = self.integer(self.get(spec, "address", where), f"{where}.address", 0, 1 << 16)
+        size = self.integer(self.get(spec, "size", where), f"{where}.size", 1, 1 << 16)
+        lo, hi = user_area
+        if address < lo:
+            raise self.fail(where, f"address {address} is inside the token header (user area starts at {lo})")
+        if address + size > hi:
+            raise self.fail(
+                where,
+                f"bytes {address}..{address + size - 1} run past the token's last byte {hi - 1}",
+            )
+        return address, size
+
+    def data_channel(
+        self, spec: dict, node: str, seed: str, enums: Mapping[str, Any], user_area: tuple[int, int]
+    ) -> Channel:
+        where = f"nodes.{node}.data"
+        raw = self.mapping(self.get(spec, "data", f"nodes.{node}"), where)
+        self.only_keys(raw, {"address", "size", "fields"}, where)
+        address, size = self.placement(raw, where, user_area)
+        fields = self.fields(raw.get("fields"), f"{where}.fields", 0, size, enums)
+        return Channel(
+            f"{node}.data",
+            f"{seed}_DATA",
+            node,
+            "data",
+            address,
+            size,
+            tuple(fields),
+            self.struct(fields, size),
+        )
+
+    def command_channel(
+        self,
+        spec: dict,
+        node: str,
+        seed: str,
+        enums: Mapping[str, Any],
+        cmd_header: list[Field],
+        head_size: int,
+        common: Mapping[str, tuple[int, Any, str]],
+        user_area: tuple[int, int],
+    ) -> CommandChannel:
+        where = f"nodes.{node}.command"
+        raw = self.mapping(self.get(spec, "command", f"nodes.{node}"), where)
+        self.only_keys(raw, {"address", "size", "commands"}, where)
+        address, size = self.placement(raw, where, user_area)
+        if size < head_size:
+            raise self.fail(where, f"size {size} is smaller than the {head_size}-byte command header")
+        own = self.command_specs(self.mapping(raw.get("commands") or {}, where), f"{where}.commands", enums)
+        commands: dict[str, Command] = {}
+        by_code: dict[int, Command] = {}
+        merged = [(n, s, False) for n, s in own.items()] + [(n, s, True) for n, s in common.items()]
+        for cmd_name, (code, args_raw, doc), is_common in merged:
+            entry = f"common_commands.{cmd_name}" if is_common else f"{where}.commands.{cmd_name}"
+            if cmd_name in commands:
+                raise self.fail(entry, f"command name {cmd_name!r} clashes with a common command")
+            if code in by_code:
+                raise self.fail(
+                    entry,
+                    f"code {code} of {cmd_name!r} clashes with {by_code[code].name!r} in {node}'s inbox",
+                )
+            args = self.fields(args_raw, f"{entry}.args", head_size, size, enums)
+            clash = {a.name for a in args} & {f.name for f in cmd_header}
+            if clash:
+                raise self.fail(
+                    entry,
+                    f"argument name(s) {', '.join(sorted(clash))} clash with the command header",
+                )
+            cmd = Command(
+                cmd_name, code, tuple(args), self.struct([*cmd_header, *args], size), doc, is_common
+            )
+            commands[cmd_name] = cmd
+            by_code[code] = cmd
+        return CommandChannel(
+            f"{node}.command",
+            f"{seed}_COMMAND",
+            node,
+            "command",
+            address,
+            size,
+            tuple(cmd_header),
+            self.struct(cmd_header, size),
+            commands,
+            by_code,
+        )

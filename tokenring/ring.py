@@ -1,0 +1,267 @@
+"""The logical ring's rules: membership and successor, epochs, pacing and timeouts.
+
+Timeouts (all derived, never guessed; see README "Timing"):
+
+* **hop time** — emulated ARCNET wire time of one pass: a 516-byte long packet at 11 bit times
+  per byte plus the 15.6 µs token pass, scaled by ``2.5 Mbit/s / bitrate`` (2.286 ms at the
+  default 2.5 Mbit/s, 0 at ``max``).
+* **ack timeout** — ARCNET's 74.7 µs response timeout scaled by bitrate, but never below
+  4 x the 99th percentile of the measured ack latency nor below 2 ms (Python and the OS
+  scheduler cannot promise less on a loaded 2-core machine).
+* **reconfiguration timeout** — ARCNET's 840 ms scaled by bitrate, but never below 8 x the
+  99th-percentile round time, 3 hop times per live node, nor 30 ms. The highest live ID
+  regenerates a lost token after it; every next lower rank waits one more ``slot``.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+ARCNET_BITRATE = 2_500_000
+ARCNET_PACKET_BYTES = 516
+ARCNET_BITS_PER_BYTE = 11
+ARCNET_ITT_S = 15.6e-6
+ARCNET_RESPONSE_TIMEOUT_S = 74.7e-6
+ARCNET_RECON_TIMEOUT_S = 0.840
+
+ACK_FLOOR_S = 0.002
+RECON_FLOOR_S = 0.030
+ACK_RETRIES = 2
+
+# header byte ``epoch``: bits 0-6 the ring epoch (mod 128), bit 7 "acknowledge this pass"
+EPOCH_MASK = 0x7F
+ACK_REQUESTED = 0x80
+
+# small messages on the ack key: b"A" ack, b"S" stale-token notice; a pass is named by its CRC
+ACK_MESSAGE = struct.Struct("<cBHBB")  # kind, from, frame CRC, epoch, origin
+# ring events: kind, node, by, epoch, origin
+RING_EVENT = struct.Struct("<cBBBB")
+EVENT_EXCLUDED = b"X"
+EVENT_REJOIN = b"J"
+EVENT_LEAVING = b"L"
+
+
+def parse_bitrate(text: str | float | int | None) -> float | None:
+    """``max`` (or None) means no pacing; otherwise bits per second, e.g. ``2.5M``, ``500k``."""
+    if text is None:
+        return None
+    if isinstance(text, int | float):
+        value = float(text)
+    else:
+        raw = text.strip().lower().removesuffix("bit/s").removesuffix("bps")
+        if raw in ("max", "inf", "unlimited"):
+            return None
+        scale = 1.0
+        if raw.endswith("k"):
+            scale, raw = 1e3, raw[:-1]
+        elif raw.endswith("m"):
+            scale, raw = 1e6, raw[:-1]
+        elif raw.endswith("g"):
+            scale, raw = 1e9, raw[:-1]
+        try:
+            value = float(raw) * scale
+        except ValueError:
+            from tokenring.errors import UsageError
+
+            raise UsageError(f"bitrate {text!r}: expected 'max' or a rate like 2.5M, 500k") from None
+    if not math.isfinite(value) or value <= 0:
+        from tokenring.errors import UsageError
+
+        raise UsageError(f"bitrate must be positive, got {text!r}")
+    return value
+
+
+def hop_time(bitrate: float | None) -> float:
+    """Emulated wire time of one token pass at ``bitrate`` (0 at max)."""
+    if bitrate is None:
+        return 0.0
+    scale = ARCNET_BITRATE / bitrate
+    return ARCNET_PACKET_BYTES * ARCNET_BITS_PER_BYTE / bitrate + ARCNET_ITT_S * scale
+
+
+def epoch_order(a_epoch: int, a_origin: int, b_epoch: int, b_origin: int) -> int:
+    """+1 if epoch ``a`` is newer than ``b``, -1 if older, 0 if the same.
+
+    Epochs are 7-bit serial numbers (RFC 1982 style, window 64); equal epochs started by
+    different nodes are ordered by the starting node's ID, so two partitions that both
+    regenerated a token agree on which one survives.
+    """
+    diff = (a_epoch - b_epoch) & EPOCH_MASK
+    if diff == 0:
+        return (a_origin > b_origin) - (a_origin < b_origin)
+    return 1 if diff < 64 else -1
+
+
+class RollingStats:
+    """A fixed ring buffer of float samples: O(1) ``add`` on the token path (a plain list is
+    cheaper there than numpy), percentiles computed off it."""
+
+    __slots__ = ("_count", "_index", "_size", "_values")
+
+    def __init__(self, size: int = 2048) -> None:
+        self._values = [0.0] * size
+        self._count = 0
+        self._index = 0
+        self._size = size
+
+    def add(self, value: float) -> None:
+        index = self._index
+        self._values[index] = value
+        self._index = index + 1 if index + 1 < self._size else 0
+        self._count += 1
+
+    def __len__(self) -> int:
+        return min(self._count, self._size)
+
+    def values(self) -> np.ndarray:
+        """Samples oldest first."""
+        n = len(self)
+        if self._count <= self._size:
+            return np.array(self._values[:n])
+        return np.array(self._values[self._index :] + self._values[: self._index])
+
+    def recent(self, count: int) -> list[float]:
+        """The last ``count`` samples (any order)."""
+        n = len(self)
+        if count >= n:
+            return self._values[:n]
+        index = self._index
+        if index >= count:
+            return self._values[index - count : index]
+        return self._values[: index] + self._values[self._size - (count - index) :]
+
+    def percentile(self, q: float, default: float = 0.0, last: int = 512) -> float:
+        """Percentile of the last ``last`` samples (bounded work, off the token path)."""
+        values = self.recent(last)
+        return float(np.percentile(values, q)) if values else default
+
+
+@dataclass
+class Timeouts:
+    """The ring's current timeouts in seconds (see the module docstring for the rules)."""
+
+    hop: float
+    ack: float
+    recon: float
+    slot: float
+    ack_interval: float
+
+
+class Timing:
+    """Derives the ring's timeouts from the bitrate and the measured pass and round times."""
+
+    def __init__(self, bitrate: float | None, ack_mode: str = "adaptive") -> None:
+        self.bitrate = bitrate
+        self.ack_mode = ack_mode
+        self.scale = 0.0 if bitrate is None else ARCNET_BITRATE / bitrate
+        self.hop = hop_time(bitrate)
+        self.rounds = RollingStats(16384)  # seconds between two visits of this node
+        self.ack_latency = RollingStats(256)  # seconds from pass to its acknowledgement
+        self.handler = RollingStats(4096)  # seconds spent in the handler per visit
+        self.send = RollingStats(4096)  # seconds the transport took to send a frame
+        self._lock = threading.Lock()
+        self.round_median = 0.0
+        self.current = self._derive(live=2)
+
+    def _derive(self, live: int) -> Timeouts:
+        round_p99 = self.rounds.percentile(99, default=0.0)
+        self.round_median = self.rounds.percentile(50, default=0.0)
+        ack_p99 = self.ack_latency.percentile(99, default=0.0)
+        ack = max(ACK_FLOOR_S, 4 * ack_p99, ARCNET_RESPONSE_TIMEOUT_S * self.scale)
+        recon = max(
+            RECON_FLOOR_S,
+            8 * round_p99,
+            3 * self.hop * live,
+            ARCNET_RECON_TIMEOUT_S * self.scale,
+            (ACK_RETRIES + 1) * ack * 2,
+        )
+        if not len(self.rounds):
+            recon = max(recon, 0.2)  # nothing measured yet: be patient at start-up
+        return Timeouts(
+            hop=self.hop,
+            ack=ack,
+            recon=recon,
+            slot=recon / 4,
+            ack_interval=max(0.050, 20 * round_p99),
+        )
+
+    def refresh(self, live: int) -> Timeouts:
+        """Recompute from the latest measurements (called by the watchdog, not per visit)."""
+        with self._lock:
+            self.current = self._derive(live)
+            return self.current
+
+
+class Membership:
+    """Live IDs (from liveliness) minus excluded ones; the successor is the next higher active ID."""
+
+    def __init__(self, own_id: int) -> None:
+        self.own_id = own_id
+        self.live: set[int] = {own_id}
+        self.excluded: dict[int, float] = {}  # node -> time its exclusion may be retried
+        self._lock = threading.Lock()
+        self.active: tuple[int, ...] = (own_id,)
+        self.successor = own_id
+        self.changes = 0
+
+    def _recompute(self) -> bool:
+        active = tuple(sorted(i for i in self.live if i not in self.excluded or i == self.own_id))
+        higher = [i for i in active if i > self.own_id]
+        successor = higher[0] if higher else active[0]
+        changed = successor != self.successor
+        self.active = active
+        self.successor = successor
+        self.changes += 1
+        return changed
+
+    def set_live(self, node_id: int, live: bool) -> bool:
+        """Record a liveliness change; returns True if the successor changed."""
+        with self._lock:
+            if live:
+                self.live.add(node_id)
+                self.excluded.pop(node_id, None)
+            elif node_id != self.own_id:
+                self.live.discard(node_id)
+                self.excluded.pop(node_id, None)
+            return self._recompute()
+
+    def exclude(self, node_id: int, retry_after: float) -> bool:
+        with self._lock:
+            if node_id == self.own_id:
+                return False
+            self.excluded[node_id] = time.monotonic() + retry_after
+            return self._recompute()
+
+    def include(self, node_id: int) -> bool:
+        with self._lock:
+            if self.excluded.pop(node_id, None) is None:
+                return False
+            return self._recompute()
+
+    def expire_exclusions(self, now: float) -> list[int]:
+        """Exclusions whose retry time has come: they are probed again by the next pass."""
+        with self._lock:
+            due = [i for i, t in self.excluded.items() if t <= now and i in self.live]
+            for node_id in due:
+                del self.excluded[node_id]
+            if due:
+                self._recompute()
+            return due
+
+    def rank(self) -> int:
+        """0 for the highest active ID, 1 for the next lower, ..."""
+        active = self.active
+        return len(active) - 1 - active.index(self.own_id) if self.own_id in active else len(active)
+
+    def master(self, preferred: int | None) -> int:
+        """The round master (counts rounds): ``preferred`` if active, else the lowest active ID."""
+        active = self.active
+        if preferred is not None and preferred in active:
+            return preferred
+        return active[0]

@@ -1,0 +1,157 @@
+"""An in-process transport: several nodes in one Python process, for fast ring-logic tests.
+
+Each node gets its own delivery thread fed by a queue, so handlers run asynchronously as they
+do over Zenoh. A :class:`MemoryHub` is the shared medium; it can also emulate a crashed node
+(:meth:`MemoryHub.crash`) or a hung one (:meth:`MemoryHub.freeze`).
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from collections.abc import Callable
+
+from tokenring.transport.base import FrameHandler, MembershipHandler, MessageHandler, Transport
+
+_STOP = object()
+
+
+class MemoryHub:
+    """The shared medium of a set of :class:`MemoryTransport` nodes."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._nodes: dict[int, MemoryTransport] = {}
+        self._live: set[int] = set()
+        self.frames_delivered = 0
+
+    def attach(self, transport: MemoryTransport) -> set[int]:
+        with self._lock:
+            self._nodes[transport.node_id] = transport
+            return set(self._live)
+
+    def detach(self, node_id: int) -> None:
+        with self._lock:
+            self._nodes.pop(node_id, None)
+            was_live = node_id in self._live
+            self._live.discard(node_id)
+            targets = list(self._nodes.values())
+        if was_live:
+            for node in targets:
+                node._deliver(("member", node_id, False))
+
+    def set_live(self, node_id: int, live: bool) -> None:
+        with self._lock:
+            if live:
+                self._live.add(node_id)
+            else:
+                self._live.discard(node_id)
+            targets = list(self._nodes.values())
+        for node in targets:
+            node._deliver(("member", node_id, live))
+
+    def send(self, did: int, item: tuple) -> None:
+        with self._lock:
+            node = self._nodes.get(did)
+        if node is not None:
+            if item[0] == "frame":
+                self.frames_delivered += 1
+            node._deliver(item)
+
+    def broadcast(self, item: tuple) -> None:
+        with self._lock:
+            targets = list(self._nodes.values())
+        for node in targets:
+            node._deliver(item)
+
+    def crash(self, node_id: int) -> None:
+        """The node vanishes at once: it receives nothing more and its liveliness drops."""
+        with self._lock:
+            node = self._nodes.get(node_id)
+        if node is not None:
+            node._dead = True
+        self.detach(node_id)
+
+    def freeze(self, node_id: int, frozen: bool = True) -> None:
+        """Like SIGSTOP/SIGCONT: the node stays live but handles nothing until thawed."""
+        with self._lock:
+            node = self._nodes.get(node_id)
+        if node is not None:
+            if frozen:
+                node._thawed.clear()
+            else:
+                node._thawed.set()
+
+
+class MemoryTransport(Transport):
+    """A node on a :class:`MemoryHub`."""
+
+    kind = "memory"
+
+    def __init__(self, hub: MemoryHub, ring: str, node_id: int, frame_size: int = 514) -> None:
+        super().__init__(ring, node_id, frame_size)
+        self.hub = hub
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._thread: threading.Thread | None = None
+        self._thawed = threading.Event()
+        self._thawed.set()
+        self._dead = False
+        self._handlers: tuple[FrameHandler, MessageHandler, MembershipHandler] | None = None
+
+    def _deliver(self, item: tuple) -> None:
+        if not self._dead:
+            self._queue.put(item)
+
+    def _run(self) -> None:
+        assert self._handlers is not None
+        on_frame, on_message, on_membership = self._handlers
+        dispatch: dict[str, Callable[..., None]] = {
+            "frame": on_frame,
+            "message": on_message,
+            "member": on_membership,
+        }
+        while True:
+            item = self._queue.get()
+            if item is _STOP:
+                return
+            self._thawed.wait()
+            if self._dead:
+                return
+            dispatch[item[0]](*item[1:])
+
+    def _open(
+        self, on_frame: FrameHandler, on_message: MessageHandler, on_membership: MembershipHandler
+    ) -> set[int]:
+        self._handlers = (on_frame, on_message, on_membership)
+        members = self.hub.attach(self)
+        self._thread = threading.Thread(
+            target=self._run, name=f"memory-transport-{self.node_id}", daemon=True
+        )
+        self._thread.start()
+        members.discard(self.node_id)
+        return members
+
+    def _send_frame(self, did: int, frame: bytes | bytearray) -> None:
+        if not self._dead:
+            self.hub.send(did, ("frame", bytes(frame)))
+
+    def _send_message(self, did: int, payload: bytes) -> None:
+        if not self._dead:
+            self.hub.send(did, ("message", payload))
+
+    def _broadcast(self, payload: bytes) -> None:
+        if not self._dead:
+            self.hub.broadcast(("message", payload))
+
+    def _announce(self) -> None:
+        self.hub.set_live(self.node_id, True)
+
+    def _withdraw(self) -> None:
+        self.hub.set_live(self.node_id, False)
+
+    def _close(self) -> None:
+        self.hub.detach(self.node_id)
+        self._thawed.set()
+        self._queue.put(_STOP)
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)

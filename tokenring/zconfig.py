@@ -1,0 +1,64 @@
+"""Zenoh configuration for tokenring processes: peers on loopback, multicast scouting off.
+
+Precedence, as in zenoh-python's examples: a config file (``--zenoh-config`` or
+``$ZENOH_CONFIG``) is the base; ``--mode``, ``--connect`` and ``--listen`` override it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+
+import zenoh
+
+from tokenring.errors import TransportError, UsageError
+
+VALID_SCHEMES = ("tcp/", "udp/", "tls/", "quic/", "unixsock-stream/", "ws/")
+
+
+def check_endpoint(endpoint: str) -> str:
+    """Refuse endpoints Zenoh would reject later with a less helpful message."""
+    if not endpoint.startswith(VALID_SCHEMES) or ":" not in endpoint.split("/", 1)[1]:
+        raise UsageError(
+            f"endpoint {endpoint!r} is not of the form tcp/HOST:PORT "
+            f"(schemes: {', '.join(s.rstrip('/') for s in VALID_SCHEMES)})"
+        )
+    return endpoint
+
+
+def make_config(
+    *,
+    mode: str = "peer",
+    connect: Sequence[str] = (),
+    listen: Sequence[str] = (),
+    config_file: str | None = None,
+) -> zenoh.Config:
+    """A Zenoh config; peers listen on an ephemeral loopback port unless told otherwise."""
+    path = config_file or os.environ.get("ZENOH_CONFIG")
+    try:
+        config = zenoh.Config.from_file(path) if path else zenoh.Config()
+    except zenoh.ZError as exc:
+        raise UsageError(f"cannot read Zenoh config {path}: {exc}") from None
+    if mode not in ("peer", "client", "router"):
+        raise UsageError(f"Zenoh mode must be peer, client or router, not {mode!r}")
+    for endpoint in (*connect, *listen):
+        check_endpoint(endpoint)
+    config.insert_json5("mode", json.dumps(mode))
+    if not path:
+        config.insert_json5("scouting/multicast/enabled", "false")
+    if listen:
+        config.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    elif mode == "peer" and not path:
+        config.insert_json5("listen/endpoints", json.dumps(["tcp/127.0.0.1:0"]))
+    if connect:
+        config.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    return config
+
+
+def open_session(config: zenoh.Config) -> zenoh.Session:
+    """Open a session; Zenoh's own errors become :class:`TransportError` here, once."""
+    try:
+        return zenoh.open(config)
+    except zenoh.ZError as exc:
+        raise TransportError(f"cannot open a Zenoh session: {exc}") from exc
