@@ -27,7 +27,7 @@ def add_ring_options(parser: argparse.ArgumentParser, *, listen: bool = True) ->
         "--connect",
         action="append",
         metavar="ENDPOINT",
-        help=f"Zenoh endpoint to connect to (default for tools: {keys.DEFAULT_ENDPOINT})",
+        help=f"Zenoh endpoint to connect to (default for tools: {keys.default_endpoint()})",
     )
     if listen:
         group.add_argument(
@@ -53,7 +53,7 @@ def add_json_option(parser: argparse.ArgumentParser) -> None:
 
 def tap_session(args: argparse.Namespace) -> zenoh.Session:
     """A session for a tool joining a running ring (connects to the tap endpoint by default)."""
-    connect = list(args.connect or [keys.DEFAULT_ENDPOINT])
+    connect = list(args.connect or [keys.default_endpoint()])
     config = make_config(
         mode=getattr(args, "mode", "peer"),
         connect=connect,

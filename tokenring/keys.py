@@ -23,6 +23,13 @@ DEFAULT_RING = "default"
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 
 
+def default_endpoint() -> str:
+    """The ring's tap endpoint: ``$TOKENRING_ENDPOINT`` if set, else ``tcp/127.0.0.1:7447``."""
+    import os
+
+    return os.environ.get("TOKENRING_ENDPOINT") or DEFAULT_ENDPOINT
+
+
 def check_ring_name(ring: str) -> str:
     """Ring names become one key chunk: no slashes, wildcards or spaces."""
     if not ring or any(c in ring for c in "/*$?# ") or ring.startswith("@"):

@@ -159,20 +159,20 @@ class Launcher:
             self.joined_existing = True
             return
         try:
-            config = make_config(listen=[keys.DEFAULT_ENDPOINT], config_file=self.zenoh_config)
+            config = make_config(listen=[keys.default_endpoint()], config_file=self.zenoh_config)
             self.session = open_session(config)
-            self.endpoint = keys.DEFAULT_ENDPOINT
+            self.endpoint = keys.default_endpoint()
         except TransportError as exc:
             if "in use" not in str(exc):
                 raise
-            config = make_config(connect=[keys.DEFAULT_ENDPOINT], config_file=self.zenoh_config)
+            config = make_config(connect=[keys.default_endpoint()], config_file=self.zenoh_config)
             self.session = open_session(config)
             self.endpoint = None
             self.joined_existing = True
-            self.say(f"{keys.DEFAULT_ENDPOINT} is taken: joining that Zenoh network (ring {self.ring!r})")
+            self.say(f"{keys.default_endpoint()} is taken: joining that Zenoh network (ring {self.ring!r})")
 
     def node_connect(self) -> list[str]:
-        return [self.endpoint] if self.endpoint else list(self.connect or [keys.DEFAULT_ENDPOINT])
+        return [self.endpoint] if self.endpoint else list(self.connect or [keys.default_endpoint()])
 
     def node_listen(self) -> list[str]:
         host = "127.0.0.1"

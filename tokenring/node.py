@@ -226,27 +226,32 @@ class NodeOS:
         )
 
     def leave(self, grace: float | None = None) -> None:
-        """Leave cleanly: tell the ring, stop being live, keep forwarding until traffic stops."""
+        """Leave cleanly, like a handover: announce it (the others route around this node but
+        still accept its frames), forward whatever token still arrives until it stops coming,
+        then withdraw the liveliness token and close."""
         if not self._joined or self._leaving:
             self.close()
             return
         self.stop_program()
         self._leaving = True
+        announced = perf_counter()
         try:
             self.transport.broadcast(
                 R.RING_EVENT.pack(R.EVENT_LEAVING, self.node_id, self.node_id, self._epoch, self._origin)
             )
-            time.sleep(0.02)
-            self.transport.withdraw()
         except TokenRingError as exc:
             log.warning("leaving: %s", exc)
         quiet = max(0.05, 3 * self.timing.rounds.percentile(99, 0.0), 3 * self.timing.hop)
         deadline = time.monotonic() + (grace if grace is not None else 2.0)
         while time.monotonic() < deadline:
-            since = perf_counter() - self._last_seen
-            if since >= quiet and perf_counter() - self._started_at > quiet:
+            now = perf_counter()
+            if now - announced >= quiet and now - self._last_seen >= quiet:
                 break
             time.sleep(min(quiet, 0.02))
+        try:
+            self.transport.withdraw()
+        except TokenRingError as exc:
+            log.warning("leaving: %s", exc)
         self.close()
 
     def close(self) -> None:
@@ -478,8 +483,11 @@ class NodeOS:
                 self._successor_changed()
         elif kind == R.EVENT_REJOIN and node_id != self.node_id:
             self._include(node_id)
-        elif kind == R.EVENT_LEAVING:
+        elif kind == R.EVENT_LEAVING and node_id != self.node_id:
+            # route around it at once, but keep accepting its frames until it withdraws
             self._leaving_nodes.add(node_id)
+            if self.membership.exclude(node_id, retry_after=60.0):
+                self._successor_changed()
 
     def _announce_rejoin(self) -> None:
         try:
@@ -496,6 +504,8 @@ class NodeOS:
         return value
 
     def _include(self, node_id: int) -> None:
+        if node_id in self._leaving_nodes:
+            return  # it still answers while it hands over, but it is on its way out
         self._exclusion_backoff.pop(node_id, None)
         if self.membership.include(node_id):
             self._successor_changed()

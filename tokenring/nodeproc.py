@@ -21,6 +21,7 @@ import zenoh
 
 from tokenring import keys
 from tokenring.errors import TokenRingError, UsageError
+from tokenring.hardware import open_hardware
 from tokenring.node import NodeOS
 from tokenring.program import load_program_file
 from tokenring.protocol import Protocol, load_protocol
@@ -61,6 +62,7 @@ class NodeProcess:
             "program": self._program_report,
         }
         self._queryable: Any = None
+        self.hardware: Any = None
 
     def _program_report(self, _: dict[str, Any]) -> dict[str, Any]:
         program = self.os.program
@@ -105,7 +107,9 @@ class NodeProcess:
         wanted = getattr(program_class, "module", "")
         if wanted and wanted != self.os.name:
             raise UsageError(f"{path} is the program of {wanted!r}, not of node {self.os.name!r}")
-        self.os.start_program(program_class)
+        if self.hardware is None:
+            self.hardware = open_hardware(self.os.name, self.session, self.ring)
+        self.os.start_program(program_class, self.hardware)
 
     def wait(self, duration: float | None = None) -> None:
         self.stop_event.wait(duration)

@@ -134,7 +134,7 @@ class RollingStats:
         index = self._index
         if index >= count:
             return self._values[index - count : index]
-        return self._values[: index] + self._values[self._size - (count - index) :]
+        return self._values[:index] + self._values[self._size - (count - index) :]
 
     def percentile(self, q: float, default: float = 0.0, last: int = 512) -> float:
         """Percentile of the last ``last`` samples (bounded work, off the token path)."""

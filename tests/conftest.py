@@ -1,0 +1,115 @@
+"""Shared fixtures: unique ring names and ports, and process tracking that fails leaky tests.
+
+Every process a test starts goes through :class:`Processes`; at teardown anything still running
+(or any child a launcher reported that is still alive) is killed by PID and the test fails —
+the shape of python-can's conftest that fails tests leaking a bus.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tokenring.cliutil import free_port as _free_port
+
+REPO = Path(__file__).resolve().parent.parent
+TOKENRING = [sys.executable, "-m", "tokenring"]
+
+
+def pid_alive(pid: int) -> bool:
+    """True if ``pid`` exists and is not a zombie."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return False
+    return state != "Z"
+
+
+def wait_gone(pids: list[int], timeout: float) -> list[int]:
+    deadline = time.monotonic() + timeout
+    alive = [p for p in pids if pid_alive(p)]
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.05)
+        alive = [p for p in alive if pid_alive(p)]
+    return alive
+
+
+class Processes:
+    """Starts processes for a test and guarantees they are gone afterwards."""
+
+    def __init__(self) -> None:
+        self.started: list[subprocess.Popen] = []
+        self.extra_pids: set[int] = set()
+
+    def start(self, args: list[str], **kwargs) -> subprocess.Popen:
+        kwargs.setdefault("stdout", subprocess.PIPE)
+        kwargs.setdefault("stderr", subprocess.STDOUT)
+        kwargs.setdefault("text", True)
+        kwargs.setdefault("cwd", REPO)
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        env.update(kwargs.pop("env", {}) or {})
+        proc = subprocess.Popen(args, env=env, **kwargs)
+        self.started.append(proc)
+        return proc
+
+    def tokenring(self, *args: str, **kwargs) -> subprocess.Popen:
+        return self.start([*TOKENRING, *args], **kwargs)
+
+    def watch(self, pids: list[int]) -> None:
+        """Also make sure these PIDs (e.g. a launcher's children) are gone at teardown."""
+        self.extra_pids.update(pids)
+
+    def cleanup(self) -> list[str]:
+        leaked: list[str] = []
+        for proc in self.started:
+            if proc.poll() is None:
+                leaked.append(f"pid {proc.pid}: {' '.join(map(str, proc.args))[:120]}")
+                with contextlib.suppress(ProcessLookupError):
+                    proc.send_signal(signal.SIGTERM)
+        for proc in self.started:
+            try:
+                proc.wait(3)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(3)
+            for stream in (proc.stdout, proc.stderr):
+                if stream is not None:
+                    stream.close()
+        for pid in wait_gone(sorted(self.extra_pids), 2.0):
+            leaked.append(f"child pid {pid}")
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        return leaked
+
+
+@pytest.fixture
+def procs() -> Iterator[Processes]:
+    tracker = Processes()
+    yield tracker
+    leaked = tracker.cleanup()
+    if leaked:
+        pytest.fail("test left processes running: " + "; ".join(leaked))
+
+
+@pytest.fixture
+def ring_name() -> str:
+    return f"t{uuid.uuid4().hex[:10]}"
+
+
+@pytest.fixture
+def port() -> int:
+    return _free_port()
+
+
+@pytest.fixture
+def endpoint(port: int) -> str:
+    return f"tcp/127.0.0.1:{port}"

@@ -1,0 +1,56 @@
+"""An in-process ring on the memory transport, for fast tests of the ring and channel logic."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterable
+
+from tokenring.node import NodeOS
+from tokenring.protocol import Protocol, default_protocol
+from tokenring.transport.memory import MemoryHub, MemoryTransport
+
+
+def wait_for(condition: Callable[[], object], timeout: float = 5.0, what: str = "condition") -> object:
+    """Poll ``condition`` until it is truthy; fail with ``what`` after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = condition()
+        if value:
+            return value
+        time.sleep(0.002)
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+class MemoryRing:
+    """A set of NodeOS instances sharing one MemoryHub."""
+
+    def __init__(
+        self, ids: Iterable[int] | None = None, protocol: Protocol | None = None, **node_options
+    ) -> None:
+        self.protocol = protocol or default_protocol()
+        self.hub = MemoryHub()
+        self.options = node_options
+        self.nodes: dict[int, NodeOS] = {}
+        for node_id in ids if ids is not None else [n.id for n in self.protocol.nodes.values()]:
+            self.add(node_id)
+
+    def add(self, node_id: int) -> NodeOS:
+        node = NodeOS(self.protocol, node_id, MemoryTransport(self.hub, "mem", node_id), **self.options)
+        node.start()
+        self.nodes[node_id] = node
+        return node
+
+    def by_name(self, name: str) -> NodeOS:
+        return self.nodes[self.protocol.node(name).id]
+
+    def wait_rounds(self, rounds: int, node_id: int | None = None, timeout: float = 5.0) -> None:
+        node = self.nodes[node_id if node_id is not None else min(self.nodes)]
+        start = node.stats.visits
+        wait_for(lambda: node.stats.visits >= start + rounds, timeout, f"{rounds} rounds")
+
+    def regenerated(self) -> int:
+        return sum(n.stats.tokens_regenerated for n in self.nodes.values())
+
+    def close(self) -> None:
+        for node in self.nodes.values():
+            node.close()

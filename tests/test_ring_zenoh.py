@@ -1,0 +1,316 @@
+"""The real thing: node processes passing the token over Zenoh on loopback."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import zenoh
+from conftest import REPO, pid_alive, wait_gone
+from ringutil import control, launcher_pids, stats, tap, wait_ring, wait_until, write_probe_programs
+
+from tokenring import keys
+from tokenring.frame import Token
+from tokenring.protocol import default_protocol
+
+PROTOCOL = default_protocol()
+ALL_IDS = [n.id for n in PROTOCOL.nodes.values()]
+
+
+def up(procs, ring, endpoint, *extra, env=None):
+    return procs.tokenring("up", "--ring", ring, "--listen", endpoint, *extra, env=env)
+
+
+class FrameTap:
+    """Collects every frame addressed to one node, from a tap session."""
+
+    def __init__(self, session: zenoh.Session, ring: str, did: int | str) -> None:
+        self.frames: list[bytes] = []
+        self._lock = threading.Lock()
+        self._sub = session.declare_subscriber(keys.token(ring, did), self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            self.frames.append(sample.payload.to_bytes())
+
+    def take(self) -> list[bytes]:
+        with self._lock:
+            return list(self.frames)
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+def test_ring_of_eight_forms_counts_rounds_shares_data_and_delivers_commands(
+    procs, ring_name, endpoint, tmp_path
+):
+    programs = write_probe_programs(tmp_path / "programs")
+    launcher = up(
+        procs, ring_name, endpoint, "--duration", "14", "--bitrate", "10M", "--programs", str(programs)
+    )
+    with tap(endpoint) as session:
+        found = wait_ring(session, ring_name, ALL_IDS)
+        pids = launcher_pids(session, ring_name)
+        procs.watch(pids)
+        assert len(pids) == 8 and len(set(pids)) == 8
+        assert {i: found[i]["successor"] for i in ALL_IDS} == {
+            10: 20,
+            20: 30,
+            30: 40,
+            40: 50,
+            50: 60,
+            60: 70,
+            70: 80,
+            80: 10,
+        }
+        # the counter: every frame reaching main carries the counter main sent one round before + 1
+        frames = FrameTap(session, ring_name, 10)
+        wait_until(lambda: len(frames.take()) >= 60, 10, "60 frames to main")
+        frames.close()
+        counters = [Token.from_frame(f).counter for f in frames.take()]
+        steps = [(b - a) & 0xFF for a, b in itertools.pairwise(counters)]
+        assert steps and all(step == 1 for step in steps), steps
+        # data written by one module is read by every node that unlocked it
+        reports = {}
+
+        def all_reported():
+            for node in PROTOCOL.nodes.values():
+                reports[node.name] = control(session, ring_name, node.id, "program")["report"]
+            return (
+                all(r.get("seen") for r in reports.values())
+                and "sonar_acknowledged" in reports["main"]["results"]
+            )
+
+        wait_until(all_reported, 15, "every probe to report")
+        for reader, report in reports.items():
+            for channel, value in report["seen"].items():
+                owner = PROTOCOL.channel(channel).node
+                if reader == "lcd" and owner == "sonar":
+                    assert value == 0, "lcd never unlocked sonar.data, yet it was copied"
+                else:
+                    assert value == PROTOCOL.nodes[owner].id, (reader, channel, value)
+        # commands: exactly once; a locked inbox gives transmitted without acknowledged
+        assert reports["main"]["results"]["motor_acked"] == 5
+        distances = [r[2]["distance_mm"] for r in reports["motor"]["received"]]
+        assert distances == [1, 2, 3, 4, 5]
+        assert all(r[1] == 10 for r in reports["motor"]["received"])
+        assert reports["main"]["results"]["sonar_transmitted"] is True
+        assert reports["main"]["results"]["sonar_acknowledged"] is False
+        # ... and the sender freed the channel on return: no frame carries it any more
+        sonar_inbox = PROTOCOL.channel("sonar.command")
+        later = FrameTap(session, ring_name, "*")
+        wait_until(lambda: len(later.take()) >= 40, 10, "more frames")
+        later.close()
+        assert not any(any(f[sonar_inbox.address : sonar_inbox.end]) for f in later.take())
+        totals = stats(session, ring_name)
+        assert sum(n["stats"]["tokens_regenerated"] for n in totals.values()) == 1
+    assert launcher.wait(30) == 0
+    assert wait_gone(pids, 2) == []
+
+
+def test_late_joiner_is_inserted_and_a_leaver_removed_without_losing_the_token(procs, ring_name, endpoint):
+    launcher = up(
+        procs, ring_name, endpoint, "--nodes", "main,sonar,copro", "--bitrate", "max", "--no-programs"
+    )
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10, 30, 50])
+        procs.watch(launcher_pids(session, ring_name))
+        joiner = procs.tokenring(
+            "node", "--id", "40", "--ring", ring_name, "--connect", endpoint, "--bitrate", "max"
+        )
+        found = wait_ring(session, ring_name, [10, 30, 40, 50])
+        assert found[30]["successor"] == 40 and found[40]["successor"] == 50
+        joiner.send_signal(signal.SIGTERM)
+        assert joiner.wait(5) == 0
+        wait_until(
+            lambda: stats(session, ring_name).get(30, {}).get("successor") == 50, 5, "sonar to pass to copro"
+        )
+        before = stats(session, ring_name)[10]["stats"]["visits"]
+        wait_until(
+            lambda: stats(session, ring_name)[10]["stats"]["visits"] > before + 100, 5, "the ring to go on"
+        )
+        totals = stats(session, ring_name)
+        assert set(totals) == {10, 30, 50}
+        assert sum(n["stats"]["tokens_regenerated"] for n in totals.values()) == 1  # never lost
+        assert sum(n["stats"]["stale_tokens"] for n in totals.values()) == 0  # never duplicated
+    launcher.send_signal(signal.SIGTERM)
+    assert launcher.wait(5) == 0
+
+
+def test_corrupt_short_foreign_and_misaddressed_frames_are_dropped_and_counted(procs, ring_name, endpoint):
+    launcher = up(
+        procs, ring_name, endpoint, "--nodes", "main,motor,sonar", "--bitrate", "max", "--no-programs"
+    )
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10, 20, 30])
+        procs.watch(launcher_pids(session, ring_name))
+        before = stats(session, ring_name, 30)[30]["stats"]
+        token = Token()
+        token.sid, token.did = 20, 30
+        good = token.to_frame()
+        session.put(keys.token(ring_name, 30), good[:300])
+        session.put(keys.token(ring_name, 30), good[:100] + bytes([good[100] ^ 0xFF]) + good[101:])
+        token.sid = 99
+        session.put(keys.token(ring_name, 30), token.to_frame())
+        token.sid, token.did = 20, 10
+        session.put(keys.token(ring_name, 30), token.to_frame())
+
+        def counted():
+            now = stats(session, ring_name, 30)[30]["stats"]
+            return all(
+                now[k] >= before[k] + 1
+                for k in ("rejected_length", "rejected_crc", "rejected_sid", "rejected_did")
+            )
+
+        wait_until(counted, 5, "the four bad frames to be counted")
+        visits = stats(session, ring_name, 30)[30]["stats"]["visits"]
+        wait_until(
+            lambda: stats(session, ring_name, 30)[30]["stats"]["visits"] > visits + 50, 5, "the ring to go on"
+        )
+    launcher.send_signal(signal.SIGTERM)
+    assert launcher.wait(5) == 0
+
+
+def test_up_for_ten_seconds_with_sniff_json_exits_zero_and_leaves_nothing(procs, ring_name, endpoint):
+    started = time.monotonic()
+    launcher = up(procs, ring_name, endpoint, "--duration", "10")
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, ALL_IDS)
+        pids = launcher_pids(session, ring_name)
+        procs.watch(pids)
+    sniff = procs.tokenring(
+        "sniff", "--ring", ring_name, "-e", endpoint, "--json", "-n", "80", stderr=subprocess.DEVNULL
+    )
+    out, _ = sniff.communicate(timeout=30)
+    assert sniff.returncode == 0
+    records = [json.loads(line) for line in out.splitlines()]
+    assert len(records) == 80
+    for record in records:
+        assert record["ok"] and record["crc_ok"]
+        assert record["header"]["long_marker"] == 0 and record["header"]["size_marker"] == 4
+        assert record["key_did"] == record["header"]["did"]
+    to_main = [r["header"]["counter"] for r in records if r["header"]["did"] == 10]
+    assert len(to_main) >= 5
+    assert all((b - a) & 0xFF == 1 for a, b in itertools.pairwise(to_main))
+    assert launcher.wait(30) == 0
+    assert time.monotonic() - started < 10 + 8
+    assert wait_gone(pids, 2) == []
+    output = launcher.stdout.read()
+    assert "stopped (exit code 0)" in output
+    for name in ("main", "charger"):
+        assert f"{name} |" in output  # log lines are prefixed with the node's name
+
+
+def test_sigint_stops_everything_within_two_seconds(procs, ring_name, endpoint):
+    launcher = up(procs, ring_name, endpoint)
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, ALL_IDS)
+        pids = launcher_pids(session, ring_name)
+        procs.watch(pids)
+    t0 = time.monotonic()
+    launcher.send_signal(signal.SIGINT)
+    code = launcher.wait(10)
+    elapsed = time.monotonic() - t0
+    assert code == 130
+    assert elapsed < 2.0, f"took {elapsed:.2f} s"
+    assert wait_gone(pids, 0.5) == []
+
+
+def test_a_node_that_dies_is_reported_with_its_exit_code(procs, ring_name, endpoint):
+    launcher = up(
+        procs, ring_name, endpoint, "--nodes", "main,motor,sonar,compass", "--bitrate", "max", "--no-programs"
+    )
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10, 20, 30, 40])
+        status = control(session, ring_name, "launcher", "status")
+        procs.watch([n["pid"] for n in status["nodes"]])
+        sonar_pid = next(n["pid"] for n in status["nodes"] if n["name"] == "sonar")
+        os.kill(sonar_pid, signal.SIGKILL)
+        wait_until(lambda: not pid_alive(sonar_pid), 5, "sonar to die")
+        wait_until(
+            lambda: stats(session, ring_name, 20).get(20, {}).get("successor") == 40, 5, "motor to skip sonar"
+        )
+        visits = stats(session, ring_name, 40)[40]["stats"]["visits"]
+        wait_until(
+            lambda: stats(session, ring_name, 40)[40]["stats"]["visits"] > visits + 50, 5, "the ring to go on"
+        )
+    launcher.send_signal(signal.SIGTERM)
+    assert launcher.wait(5) == 1  # a node died unexpectedly during the run
+    assert "node sonar (id 30) killed by SIGKILL" in launcher.stdout.read()
+
+
+def test_a_second_ring_joins_the_network_when_the_default_port_is_taken(procs, endpoint):
+    env = {"TOKENRING_ENDPOINT": endpoint}
+    first = procs.tokenring(
+        "up", "--ring", "alpha" + endpoint[-5:], "--nodes", "main,motor", "--no-programs", env=env
+    )
+    with tap(endpoint) as session:
+        wait_ring(session, "alpha" + endpoint[-5:], [10, 20])
+        procs.watch(launcher_pids(session, "alpha" + endpoint[-5:]))
+        second = procs.tokenring(
+            "up", "--ring", "beta" + endpoint[-5:], "--nodes", "main,sonar", "--no-programs", env=env
+        )
+        found = wait_ring(session, "beta" + endpoint[-5:], [10, 30])
+        procs.watch(launcher_pids(session, "beta" + endpoint[-5:]))
+        assert set(found) == {10, 30}  # rings are namespaces: each sees only its own nodes
+        assert set(stats(session, "alpha" + endpoint[-5:])) == {10, 20}
+    for launcher in (second, first):
+        launcher.send_signal(signal.SIGTERM)
+        assert launcher.wait(5) == 0
+    assert "is taken: joining that Zenoh network" in second.stdout.read()
+
+
+def test_bench_cli_writes_the_promised_json(procs, tmp_path):
+    out = tmp_path / "bench.json"
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "tokenring",
+            "bench",
+            "--nodes",
+            "3",
+            "--rounds",
+            "200",
+            "--warmup",
+            "50",
+            "--json",
+            str(out),
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=REPO,
+    )
+    assert result.returncode == 0, result.stderr
+    report = json.loads(out.read_text())
+    assert report["nodes"] == 3 and report["rounds"] == 200
+    for key in ("rtt_ms", "baseline_rtt_ms"):
+        assert report[key]["median"] > 0 and report[key]["p99"] >= report[key]["median"]
+    assert report["ratio_median"] == report["rtt_ms"]["median"] / report["baseline_rtt_ms"]["median"]
+    assert "ratio (median)" in result.stdout
+
+
+def test_bad_command_line_input_exits_2_with_a_message():
+    cases = [
+        (["up", "--nodes", "main,radar"], "unknown node 'radar'"),
+        (["up", "--bitrate", "fast"], "bitrate 'fast'"),
+        (["up", "--ring", "a/b"], "ring name"),
+        (["sniff", "--channels", "radar.data", "--duration", "0.1"], "unknown channel 'radar.data'"),
+        (["bench", "--nodes", "1"], "--nodes must be 2..255"),
+        (["up", "--connect", "localhost:7447"], "not of the form tcp/HOST:PORT"),
+    ]
+    for args, message in cases:
+        result = subprocess.run(
+            [sys.executable, "-m", "tokenring", *args], capture_output=True, text=True, timeout=30, cwd=REPO
+        )
+        assert result.returncode == 2, (args, result.stderr)
+        assert message in result.stderr, (args, result.stderr)
+        assert "Traceback" not in result.stderr

@@ -1,0 +1,63 @@
+"""``tokenring status``: membership and counters of a running ring."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring.cliutil import add_json_option, add_ring_options
+
+    p = sub.add_parser("status", help="membership and counters of a running ring")
+    p.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for answers")
+    add_json_option(p)
+    add_ring_options(p, listen=False)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tokenring import keys
+    from tokenring.cliutil import format_table, print_json, query, tap_session
+
+    with tap_session(args) as session:
+        replies = query(session, keys.control(args.ring, "*", "stats"), timeout=args.timeout)
+    nodes = sorted((r["result"] for _, r in replies if r.get("ok")), key=lambda n: n["id"])
+    if args.json:
+        print_json({"ring": args.ring, "nodes": nodes})
+        return 0 if nodes else 1
+    if not nodes:
+        print(f"no node of ring {args.ring!r} answered", file=sys.stderr)
+        return 1
+    rows = [
+        [
+            n["id"],
+            n["name"],
+            n["successor"],
+            n["counter"],
+            f"{n['round_ms']['median']:.3f}",
+            f"{n['round_ms']['p99']:.3f}",
+            f"{n['handler_us']['median']:.1f}",
+            n["stats"]["rejected_crc"],
+            n["stats"]["reconfigurations"],
+            n["program"] or "-",
+        ]
+        for n in nodes
+    ]
+    print(
+        format_table(
+            rows,
+            [
+                "id",
+                "name",
+                "next",
+                "counter",
+                "rtt ms",
+                "p99 ms",
+                "handler us",
+                "crc rej",
+                "reconf",
+                "program",
+            ],
+        )
+    )
+    return 0

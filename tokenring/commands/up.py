@@ -1,0 +1,80 @@
+"""``tokenring up``: launch the whole ring, every node its own process."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from tokenring.errors import UsageError
+
+
+def default_programs_dir() -> Path:
+    """The ``modules/`` directory holding the eight user programs."""
+    import modules
+
+    return Path(modules.__file__).resolve().parent
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring.cliutil import add_ring_options
+
+    p = sub.add_parser(
+        "up",
+        help="launch the whole ring (every node its own process)",
+        description="Launch every node of protocol.yaml as its own OS process on one Zenoh network "
+        "and supervise them until Ctrl-C, SIGTERM or --duration.",
+    )
+    p.add_argument("--nodes", help="comma-separated subset of nodes (names or IDs); default all")
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument(
+        "--bitrate",
+        default="2.5M",
+        help="emulated ARCNET bitrate, e.g. 2.5M, 10M or max (default %(default)s)",
+    )
+    p.add_argument(
+        "--ack",
+        default="adaptive",
+        choices=("adaptive", "always", "never"),
+        help="pass acknowledgement policy",
+    )
+    p.add_argument(
+        "--programs",
+        metavar="DIR",
+        help="directory of user programs (default: the modules package)",
+    )
+    p.add_argument("--no-programs", action="store_true", help="start the nodes with the OS only")
+    p.add_argument("--respawn", action="store_true", help="restart nodes that die, like a supervisor")
+    add_ring_options(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tokenring.launcher import Launcher, install_signal_handlers, plans_from_protocol
+    from tokenring.protocol import load_protocol
+    from tokenring.ring import parse_bitrate
+
+    protocol = load_protocol(args.protocol)
+    parse_bitrate(args.bitrate)  # refuse a bad value before anything starts
+    if args.duration is not None and args.duration <= 0:
+        raise UsageError("--duration must be positive")
+    selection = [s.strip() for s in args.nodes.split(",") if s.strip()] if args.nodes else None
+    programs = None if args.no_programs else (args.programs or default_programs_dir())
+    if programs is not None and not Path(programs).is_dir():
+        raise UsageError(f"--programs {programs}: no such directory")
+    plans = plans_from_protocol(protocol, selection, programs)
+    launcher = Launcher(
+        plans,
+        ring=args.ring,
+        bitrate=args.bitrate,
+        ack_mode=args.ack,
+        connect=args.connect or [],
+        listen=args.listen or [],
+        zenoh_config=args.zenoh_config,
+        protocol_path=args.protocol,
+        log_level=args.log_level,
+        respawn=args.respawn,
+    )
+    install_signal_handlers(launcher)
+    launcher.start()
+    code = launcher.run(args.duration)
+    launcher.say("stopped (interrupted)" if code == 130 else f"stopped (exit code {code})")
+    return code
