@@ -122,12 +122,13 @@ class _Offsets:
 class DataRegistration:
     """A data channel registered with get_data (token -> user) or store_data (user -> token)."""
 
-    __slots__ = ("buffer", "channel", "end", "kind", "locked", "start")
+    __slots__ = ("buffer", "channel", "end", "kind", "locked", "owner", "start")
 
-    def __init__(self, channel: Channel, kind: str, buffer: ChannelBuffer) -> None:
+    def __init__(self, channel: Channel, kind: str, buffer: ChannelBuffer, owner: str = "program") -> None:
         self.channel = channel
         self.kind = kind  # "get" or "store"
         self.buffer = buffer
+        self.owner = owner  # "program" registrations go when the program stops; "os" ones stay
         self.start = channel.address
         self.end = channel.end
         self.locked = True  # the seed: every channel starts locked

@@ -66,6 +66,18 @@ class NodePlan:
 
 
 @dataclass
+class ServicePlan:
+    """A helper process the ring needs (e.g. the world simulator): started before the nodes,
+    stopped after them, its output prefixed with ``name``. ``argv`` follows ``python -m``;
+    ``{endpoint}``, ``{ring}`` and ``{connect}`` in it are filled in by the launcher."""
+
+    name: str
+    argv: list[str]
+    ready_key: str | None = None  # a liveliness key the launcher waits for before the nodes start
+    ready_timeout: float = 15.0
+
+
+@dataclass
 class Child:
     plan: NodePlan
     process: subprocess.Popen
@@ -92,8 +104,11 @@ class Launcher:
         respawn: bool = False,
         output: IO[str] | None = None,
         extra_node_args: Sequence[str] = (),
+        services: Sequence[ServicePlan] = (),
     ) -> None:
         self.plans = list(plans)
+        self.services = list(services)
+        self.service_children: dict[str, subprocess.Popen] = {}
         self.ring = keys.check_ring_name(ring)
         self.bitrate = bitrate
         self.ack_mode = ack_mode
@@ -117,7 +132,8 @@ class Launcher:
         self._reader: threading.Thread | None = None
         self._print_lock = threading.Lock()
         self._queryable: Any = None
-        width = max((len(p.name) for p in self.plans), default=4)
+        self.shutdown_reason: str | None = None
+        width = max((len(p.name) for p in [*self.plans, *self.services]), default=4)
         self._width = max(width, 4)
 
     # -- output ---------------------------------------------------------------------------------
@@ -201,22 +217,47 @@ class Launcher:
             cmd += ["--program", plan.program]
         return cmd + self.extra_node_args + plan.extra_args
 
-    def spawn(self, plan: NodePlan) -> Child:
+    def _popen(self, argv: list[str], name: str) -> subprocess.Popen:
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         process = subprocess.Popen(
-            self.command_for(plan),
+            argv,
             stdin=subprocess.DEVNULL,
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             text=True,
             bufsize=1,
             env=env,
-            preexec_fn=_set_pdeathsig,
+            preexec_fn=_set_pdeathsig,  # only prctl in the child: async-signal-safe
         )
         assert process.stdout is not None
         with self._selector_lock:
-            self._selector.register(process.stdout, selectors.EVENT_READ, plan.name)
-        child = Child(plan, process, time.monotonic())
+            self._selector.register(process.stdout, selectors.EVENT_READ, name)
+        return process
+
+    def start_service(self, service: ServicePlan) -> subprocess.Popen:
+        """Start a service process and wait until its ``ready_key`` liveliness token appears."""
+        fill = {
+            "endpoint": self.endpoint or "",
+            "ring": self.ring,
+            "connect": (self.node_connect() or [""])[0],
+        }
+        argv = [sys.executable, "-m", *(a.format(**fill) for a in service.argv)]
+        process = self._popen(argv, service.name)
+        self.service_children[service.name] = process
+        if service.ready_key and self.session is not None:
+            deadline = time.monotonic() + service.ready_timeout
+            while time.monotonic() < deadline:
+                if any(r.ok for r in self.session.liveliness().get(service.ready_key, timeout=0.5)):
+                    break
+                if process.poll() is not None:
+                    raise UsageError(f"{service.name} {describe_exit(process.poll())} while starting")
+                time.sleep(0.05)
+            else:
+                raise TransportError(f"{service.name} did not come up within {service.ready_timeout:.0f} s")
+        return process
+
+    def spawn(self, plan: NodePlan) -> Child:
+        child = Child(plan, self._popen(self.command_for(plan), plan.name), time.monotonic())
         previous = self.children.get(plan.node_id)
         if previous is not None:
             child.restarts = previous.restarts + 1
@@ -236,10 +277,12 @@ class Launcher:
             f"({', '.join(f'{p.name}={p.node_id}' for p in self.plans)}) on {where}, "
             f"bitrate {self.bitrate}"
         )
-        for plan in self.plans:
-            self.spawn(plan)
         self._reader = threading.Thread(target=self._read_outputs, name="launcher-output", daemon=True)
         self._reader.start()
+        for service in self.services:
+            self.start_service(service)
+        for plan in self.plans:
+            self.spawn(plan)
 
     def status(self) -> dict[str, Any]:
         return {
@@ -256,14 +299,26 @@ class Launcher:
                 }
                 for c in self.children.values()
             ],
+            "services": [
+                {"name": name, "pid": p.pid, "running": p.poll() is None}
+                for name, p in self.service_children.items()
+            ],
         }
 
     def _on_query(self, query: zenoh.Query) -> None:
         verb = str(query.key_expr).rsplit("/", 1)[-1]
         if verb == "status":
             result = {"ok": True, "result": self.status()}
+        elif verb == "shutdown":
+            payload = query.payload
+            request = msgpack.unpackb(payload.to_bytes()) if payload is not None else {}
+            reason = (request or {}).get("reason", "asked to")
+            self.say(f"ring shutdown requested: {reason}")
+            self.shutdown_reason = str(reason)
+            self.request_stop()
+            result = {"ok": True, "result": {"stopping": True}}
         else:
-            result = {"ok": False, "error": f"the launcher has no verb {verb!r} (has: status)"}
+            result = {"ok": False, "error": f"the launcher has no verb {verb!r} (has: status, shutdown)"}
         query.reply(query.key_expr, msgpack.packb(result))
 
     def check_children(self) -> None:
@@ -323,11 +378,21 @@ class Launcher:
                 child.process.kill()
                 child.process.wait(1.0)
             child.reported = True
+        for name, process in self.service_children.items():
+            if process.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    process.send_signal(signal.SIGTERM)
+                try:
+                    process.wait(STOP_TIMEOUT_S)
+                except subprocess.TimeoutExpired:
+                    self.say(f"{name} did not stop in {STOP_TIMEOUT_S} s: killing it")
+                    process.kill()
+                    process.wait(1.0)
         if self._reader is not None:
             self._reader.join(timeout=1.0)
-        for child in self.children.values():
-            if child.process.stdout is not None:
-                child.process.stdout.close()
+        for process in [c.process for c in self.children.values()] + list(self.service_children.values()):
+            if process.stdout is not None:
+                process.stdout.close()
         if self._queryable is not None:
             with contextlib.suppress(zenoh.ZError):
                 self._queryable.undeclare()

@@ -183,6 +183,10 @@ class NodeOS:
         self._visit_waiters = 0
         self._visit_cond = threading.Condition()
 
+        # asks whoever supervises the ring to stop it cleanly (the charger's deep-discharge cut);
+        # the node process sets it, in-process rings may leave it None
+        self.request_ring_shutdown: Callable[[str], bool] | None = None
+
         # hooks filled by later layers (system commands, fault injection)
         self.system_handler: Callable[[bytearray], bool] | None = None
         self.rx_fault: Callable[[bytes, bytes | None], bool] | None = None
@@ -670,8 +674,11 @@ class NodeOS:
                 self._inbox = Inbox(ch, self._cmd, self.membership.live, self.stats)
             self._rebuild_active()
 
-    def get_data(self, channel: str) -> ChannelBuffer:
-        """Copy ``channel`` out of the token at every visit (once unlocked); returns the buffer."""
+    def get_data(self, channel: str, owner: str = "program") -> ChannelBuffer:
+        """Copy ``channel`` out of the token at every visit (once unlocked); returns the buffer.
+
+        ``owner="os"`` marks a registration of an OS service (the PC link) that outlives the
+        user program; the program's own registrations are dropped when it stops."""
         ch = self.channel(channel)
         if isinstance(ch, CommandChannel):
             if self.spec is not None and ch.node == self.spec.name:
@@ -679,7 +686,7 @@ class NodeOS:
                 assert self._inbox is not None
                 return self._inbox.buffer
             raise ChannelError(f"{ch.name} is another module's inbox: use send_command")
-        return self._register(ch, "get")
+        return self._register(ch, "get", owner)
 
     def store_data(self, channel: str) -> ChannelBuffer:
         """Copy the returned buffer into ``channel`` at every visit (once unlocked)."""
@@ -688,15 +695,17 @@ class NodeOS:
             raise ChannelError(f"{ch.name} is a command channel: use send_command")
         if self.spec is not None and ch.node != self.spec.name:
             raise ChannelError(f"{ch.name} belongs to {ch.node}; only its owner may store into it")
-        return self._register(ch, "store")
+        return self._register(ch, "store", "program")
 
-    def _register(self, ch: Channel, kind: str) -> ChannelBuffer:
+    def _register(self, ch: Channel, kind: str, owner: str) -> ChannelBuffer:
         with self._regs_lock:
             reg = self._regs.get(ch.name)
             if reg is None or reg.kind != kind:
-                reg = DataRegistration(ch, kind, ChannelBuffer(ch))
+                reg = DataRegistration(ch, kind, ChannelBuffer(ch), owner)
                 self._regs[ch.name] = reg
                 self._rebuild_active()
+            elif owner == "program":
+                reg.owner = "program"  # shared with an OS service: the program now holds it too
             return reg.buffer
 
     def lock_data(self, channel: str) -> None:
@@ -734,9 +743,9 @@ class NodeOS:
                 self._regs.pop(ch.name, None)
             self._rebuild_active()
 
-    def subscribe(self, channel: str) -> ChannelBuffer:
+    def subscribe(self, channel: str, owner: str = "program") -> ChannelBuffer:
         """get_data + unlock_data in one call."""
-        buffer = self.get_data(channel)
+        buffer = self.get_data(channel, owner)
         self.unlock_data(channel)
         return buffer
 
@@ -916,7 +925,7 @@ class NodeOS:
         if not stopped:
             log.warning("user program %s did not stop within %.1f s", type(program).__name__, timeout)
         with self._regs_lock:
-            self._regs.clear()
+            self._regs = {k: r for k, r in self._regs.items() if r.owner != "program"}
             self._inbox = None
             for outbox in self._outboxes.values():
                 if outbox.state == Outbox.WAITING:

@@ -94,7 +94,25 @@ class NodeProcess:
             result = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
         query.reply(query.key_expr, msgpack.packb(result, default=_jsonable))
 
+    def _request_ring_shutdown(self, reason: str) -> bool:
+        """Ask the launcher to stop the whole ring cleanly; True if one answered."""
+        replies = []
+        try:
+            for reply in self.session.get(
+                keys.control(self.ring, "launcher", "shutdown"),
+                payload=msgpack.packb({"reason": reason, "by": self.os.name}),
+                timeout=2.0,
+            ):
+                if reply.ok is not None:
+                    replies.append(reply)
+        except zenoh.ZError as exc:
+            log.error("ring shutdown request failed: %s", exc)
+        if not replies:
+            log.error("ring shutdown requested (%s) but no launcher answered", reason)
+        return bool(replies)
+
     def start(self) -> None:
+        self.os.request_ring_shutdown = self._request_ring_shutdown
         self._queryable = self.session.declare_queryable(
             keys.control(self.ring, self.os.node_id, "*"), self._on_query
         )

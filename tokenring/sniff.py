@@ -84,7 +84,7 @@ def format_line(record: dict[str, Any]) -> str:
         return f"<{record['length']} bytes to {record['key_did']}: {record.get('problem')}>"
     h = record["header"]
     parts = [
-        f"#{h['counter']:3d}",
+        f"#{h['counter']:3d}{' (repeat)' if record.get('retransmission') else ''}",
         f"{h['sid']:3d}->{h['did']:<3d}",
         f"epoch {h['epoch']}/{h['epoch_origin']}",
         f"crc {record['crc']:04X}{'' if record['crc_ok'] else ' BAD'}",
@@ -118,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
                 raise UsageError(str(exc)) from None
     key = keys.token(ring, args.to if args.to is not None else "*")
     seen = 0
+    last_crc: dict[int | None, int] = {}
     deadline = None if args.duration is None else time.monotonic() + args.duration
     with tap_session(args) as session:
         subscriber = session.declare_subscriber(key, zenoh.handlers.FifoChannel(8192))
@@ -130,13 +131,12 @@ def run(args: argparse.Namespace) -> int:
                     time.sleep(0.002)
                     continue
                 frame = sample.payload.to_bytes()
-                record = decode_frame(
-                    frame,
-                    keys.id_from_key(str(sample.key_expr)),
-                    protocol,
-                    channels,
-                    args.header_only,
-                )
+                did = keys.id_from_key(str(sample.key_expr))
+                record = decode_frame(frame, did, protocol, channels, args.header_only)
+                # a pass repeated because its acknowledgement was late: same bytes, same receiver
+                record["retransmission"] = "crc" in record and last_crc.get(did) == record["crc"]
+                if "crc" in record:
+                    last_crc[did] = record["crc"]
                 if args.json:
                     sys.stdout.write(json.dumps(record) + "\n")
                 else:
