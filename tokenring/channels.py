@@ -295,8 +295,11 @@ class Outbox:
         return False
 
     def cancel(self) -> None:
-        self.state = Outbox.DONE
-        self.done.set()
+        """Withdraw a command not yet written; one already in the token still completes its
+        round (the sender's OS must clear the inbox it occupies)."""
+        if self.state == Outbox.WAITING:
+            self.state = Outbox.DONE
+            self.done.set()
 
 
 def encode_command(

@@ -854,6 +854,7 @@ class NodeOS:
     def deliver(self, target: str, command: str | int, *, timeout: float = 5.0, **args: Any) -> bool:
         """Send until acknowledged (resending after each unacknowledged round) or timeout."""
         deadline = time.monotonic() + timeout
+        self.wait_channel_free(target, timeout)
         while not self.stopping:
             outbox = self.send_command(target, command, **args)
             while not outbox.done.wait(0.05):
@@ -866,6 +867,13 @@ class NodeOS:
                 return False
             time.sleep(min(0.002, max(0.0, deadline - time.monotonic())))
         return False
+
+    def wait_channel_free(self, target: str, timeout: float) -> bool:
+        """Wait until no earlier command of ours to ``target`` is still travelling."""
+        outbox = self._outboxes.get(self.channel(target).name)
+        if outbox is None or outbox.state != Outbox.IN_TOKEN:
+            return True
+        return outbox.done.wait(timeout)
 
     def wait_visit(self, timeout: float | None = None) -> bool:
         """Block until the token's next visit; False on timeout or stop."""

@@ -23,6 +23,7 @@ from tokenring import keys
 from tokenring.errors import TokenRingError, UsageError
 from tokenring.hardware import open_hardware
 from tokenring.node import NodeOS
+from tokenring.pclink import PcLinkServer
 from tokenring.program import load_program_file
 from tokenring.protocol import Protocol, load_protocol
 from tokenring.ring import parse_bitrate
@@ -63,6 +64,7 @@ class NodeProcess:
         }
         self._queryable: Any = None
         self.hardware: Any = None
+        self.pclink: PcLinkServer | None = None
 
     def _program_report(self, _: dict[str, Any]) -> dict[str, Any]:
         program = self.os.program
@@ -117,6 +119,9 @@ class NodeProcess:
             keys.control(self.ring, self.os.node_id, "*"), self._on_query
         )
         self.os.start()
+        if self.os.node_id == self.os.preferred_master:  # main holds the PC's serial line
+            self.pclink = PcLinkServer(self.os, self.session, self.ring)
+            self.pclink.start()
 
     def run_program(self, path: str | Path | None) -> None:
         if path is None:
@@ -133,6 +138,8 @@ class NodeProcess:
         self.stop_event.wait(duration)
 
     def shutdown(self) -> None:
+        if self.pclink is not None:
+            self.pclink.close()
         self.os.leave(grace=1.0)
         if self._queryable is not None:
             with contextlib.suppress(zenoh.ZError):

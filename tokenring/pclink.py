@@ -1,0 +1,194 @@
+"""The PC link: main's "serial line" through which PC-side tools talk to the ring.
+
+In the seed the PC spoke to main over RS-232 and main relayed everything over the ring. Here
+main's node process answers Zenoh queries on ``tokenring/<ring>/pc/<verb>`` (msgpack in and out)
+and relays through its own node OS — so everything the tools do still goes through the token:
+
+============  ===========================================================================
+verb          request → result
+============  ===========================================================================
+``command``   ``{target, command, args, timeout, retry}`` → ``{transmitted, acknowledged,
+              attempts}``: main sends a command into ``target``'s inbox (resending until
+              acknowledged when ``retry``)
+``read``      ``{channel}`` → ``{data, visits}``: main's copy of a data channel (main starts
+              copying it on the first request)
+``request``   ``{verb, payload}`` → whatever main's user program returns from
+              ``on_pc_request(verb, payload)`` (explore start/stop, action files, ...)
+``status``    ``{}`` → main's node snapshot
+============  ===========================================================================
+
+Later layers add verbs with :meth:`PcLinkServer.register` (system commands, downloads).
+Only one request is served at a time, like a serial line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import msgpack
+import zenoh
+
+from tokenring import keys
+from tokenring.errors import ChannelError, TokenRingError, TransportError, UsageError
+
+if TYPE_CHECKING:
+    from tokenring.node import NodeOS
+
+log = logging.getLogger("tokenring.pclink")
+Handler = Callable[[dict[str, Any]], Any]
+
+
+class PcLinkServer:
+    """main's end of the serial line."""
+
+    def __init__(self, os: NodeOS, session: zenoh.Session, ring: str) -> None:
+        self.os = os
+        self.session = session
+        self.ring = ring
+        self._serial = threading.Lock()
+        self.handlers: dict[str, Handler] = {
+            "command": self._command,
+            "read": self._read,
+            "request": self._request,
+            "status": lambda _: self.os.snapshot(),
+        }
+        self._queryable: Any = None
+
+    def register(self, verb: str, handler: Handler) -> None:
+        """Add a verb (e.g. the system-command layer's ``scan`` or ``download``)."""
+        self.handlers[verb] = handler
+
+    def start(self) -> None:
+        self._queryable = self.session.declare_queryable(keys.pc_link(self.ring, "*"), self._on_query)
+
+    def close(self) -> None:
+        if self._queryable is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self._queryable.undeclare()
+            self._queryable = None
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        verb = str(query.key_expr).rsplit("/", 1)[-1]
+        handler = self.handlers.get(verb)
+        try:
+            if handler is None:
+                raise UsageError(
+                    f"the PC link has no verb {verb!r} (has: {', '.join(sorted(self.handlers))})"
+                )
+            payload = query.payload
+            request = msgpack.unpackb(payload.to_bytes()) if payload is not None else {}
+            with self._serial:
+                result = {"ok": True, "result": handler(request or {})}
+        except TokenRingError as exc:
+            result = {"ok": False, "error": str(exc)}
+        except Exception as exc:  # the serial line must survive a bad request
+            log.exception("PC link verb %s failed", verb)
+            result = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
+        query.reply(query.key_expr, msgpack.packb(result, default=str))
+
+    # -- verbs ----------------------------------------------------------------------------------
+    def _command(self, request: dict[str, Any]) -> dict[str, Any]:
+        target = str(request.get("target", ""))
+        name = request.get("command")
+        args = dict(request.get("args") or {})
+        timeout = float(request.get("timeout", 5.0))
+        retry = bool(request.get("retry", True))
+        if not target or name is None:
+            raise UsageError("a PC link command needs a target and a command")
+        try:
+            channel = self.os.channel(target)
+            channel.command(name)  # type: ignore[attr-defined]
+        except (ChannelError, AttributeError) as exc:
+            raise UsageError(str(exc)) from None
+        deadline = time.monotonic() + timeout
+        self.os.wait_channel_free(target, timeout)
+        attempts = 0
+        transmitted = acknowledged = False
+        while not acknowledged and time.monotonic() < deadline:
+            attempts += 1
+            outbox = self.os.send_command(target, name, **args)
+            if not outbox.done.wait(max(0.0, deadline - time.monotonic())):
+                outbox.cancel()
+                break
+            transmitted, acknowledged = outbox.transmitted, outbox.acknowledged
+            if not retry:
+                break
+        return {"transmitted": transmitted, "acknowledged": acknowledged, "attempts": attempts}
+
+    def _read(self, request: dict[str, Any]) -> dict[str, Any]:
+        name = str(request.get("channel", ""))
+        try:
+            buffer = self.os.subscribe(name, owner="os")
+        except ChannelError as exc:
+            raise UsageError(str(exc)) from None
+        if buffer.visits == 0:
+            deadline = time.monotonic() + float(request.get("timeout", 2.0))
+            while buffer.visits == 0 and time.monotonic() < deadline:
+                self.os.wait_visit(0.1)
+            if buffer.visits == 0:
+                raise TransportError(f"no token visit reached main within the timeout to copy {name}")
+        return {"data": buffer.read(), "visits": buffer.visits}
+
+    def _request(self, request: dict[str, Any]) -> Any:
+        program = self.os.program
+        handler = getattr(program, "on_pc_request", None)
+        if handler is None:
+            raise UsageError(
+                f"main's program ({type(program).__name__ if program else 'none'}) takes no PC requests"
+            )
+        return handler(str(request.get("verb", "")), request.get("payload") or {})
+
+
+class PcLink:
+    """The PC side of the serial line: what ``tokenring drive``, ``explore``, ``load`` use."""
+
+    def __init__(self, session: zenoh.Session, ring: str = keys.DEFAULT_RING, timeout: float = 5.0) -> None:
+        self.session = session
+        self.ring = keys.check_ring_name(ring)
+        self.timeout = timeout
+
+    def call(self, verb: str, request: dict[str, Any] | None = None, timeout: float | None = None) -> Any:
+        """One request/answer on the serial line; errors from main become :class:`UsageError`."""
+        wait = (timeout if timeout is not None else self.timeout) + 2.0
+        try:
+            replies = list(
+                self.session.get(
+                    keys.pc_link(self.ring, verb),
+                    payload=msgpack.packb(request or {}),
+                    timeout=wait,
+                )
+            )
+        except zenoh.ZError as exc:
+            raise TransportError(f"PC link {verb}: {exc}") from exc
+        answers = [r.ok for r in replies if r.ok is not None]
+        if not answers:
+            raise TransportError(
+                f"main did not answer on the PC link of ring {self.ring!r} (is the ring up?)"
+            )
+        reply = msgpack.unpackb(answers[0].payload.to_bytes())
+        if not reply.get("ok"):
+            raise UsageError(reply.get("error", f"PC link {verb} failed"))
+        return reply.get("result")
+
+    def command(
+        self, target: str, name: str, timeout: float = 5.0, retry: bool = True, **args: Any
+    ) -> dict[str, Any]:
+        """Have main send a command into ``target``'s inbox; returns transmitted/acknowledged."""
+        request = {"target": target, "command": name, "args": args, "timeout": timeout, "retry": retry}
+        return self.call("command", request, timeout)
+
+    def read(self, channel: str, timeout: float = 2.0) -> dict[str, Any]:
+        """main's latest copy of a data channel, decoded with protocol.yaml."""
+        return self.call("read", {"channel": channel, "timeout": timeout}, timeout)["data"]
+
+    def request(self, verb: str, timeout: float | None = None, **payload: Any) -> Any:
+        """A request to main's user program (``on_pc_request``)."""
+        return self.call("request", {"verb": verb, "payload": payload}, timeout)
+
+    def status(self) -> dict[str, Any]:
+        return self.call("status")
