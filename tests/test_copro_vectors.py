@@ -1,0 +1,172 @@
+"""copro's side hypotheses and vector generation on synthetic sonar and pose sequences."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from sidesonar import BEHAVIOUR_NONE, SeedClassifier, side_readings
+
+from modules.common.vectorgen import (
+    CORNER,
+    DEGRESSIVE,
+    LINEAR,
+    NONE,
+    OBSTACLE,
+    PROGRESSIVE,
+    WALL,
+    PoseHistory,
+    SeedEdgeFollower,
+    SideHypothesis,
+    SweepInput,
+    VectorPostProcessor,
+    WallTracker,
+    classify_side,
+    default_layout,
+    observe_side,
+)
+
+B = {"NONE": BEHAVIOUR_NONE, "LINEAR": LINEAR, "PROGRESSIVE": PROGRESSIVE, "DEGRESSIVE": DEGRESSIVE}
+C = {"NONE": NONE, "WALL": WALL, "CORNER": CORNER, "OBSTACLE": OBSTACLE}
+
+# the whole truth table of observe_side (front, rear) -> contact, as SPEC §3 copro states it
+TRUTH_TABLE = [
+    ("LINEAR", "LINEAR", "WALL"),
+    ("DEGRESSIVE", "LINEAR", "CORNER"),
+    ("LINEAR", "DEGRESSIVE", "CORNER"),
+    ("PROGRESSIVE", "LINEAR", "OBSTACLE"),
+    ("LINEAR", "PROGRESSIVE", "OBSTACLE"),
+    ("NONE", "NONE", "NONE"),
+    ("NONE", "LINEAR", "NONE"),
+    ("LINEAR", "NONE", "NONE"),
+    ("DEGRESSIVE", "DEGRESSIVE", "NONE"),
+    ("PROGRESSIVE", "PROGRESSIVE", "NONE"),
+    ("PROGRESSIVE", "DEGRESSIVE", "NONE"),
+    ("DEGRESSIVE", "PROGRESSIVE", "NONE"),
+    ("NONE", "DEGRESSIVE", "NONE"),
+    ("PROGRESSIVE", "NONE", "NONE"),
+]
+
+
+@pytest.mark.parametrize(("front", "rear", "expected"), TRUTH_TABLE)
+def test_observe_side_truth_table(front, rear, expected):
+    assert classify_side(B[front], B[rear]) == C[expected]
+
+
+def test_observe_side_counts_confidence_while_the_hypothesis_stays_and_takes_the_nearer_area():
+    h = SideHypothesis()
+    for expected in (1, 2, 3):
+        h = observe_side(LINEAR, LINEAR, 3, 2, h)
+        assert (h.contact, h.confidence, h.area) == (WALL, expected, 2)
+    h = observe_side(DEGRESSIVE, LINEAR, 1, 4, h)
+    assert (h.contact, h.confidence, h.area) == (CORNER, 1, 1)
+    for _ in range(150):
+        h = observe_side(DEGRESSIVE, LINEAR, 1, 4, h)
+    assert h.confidence == 100
+
+
+LAYOUT = default_layout()
+SWEEP_MS = 120
+SPEED_MM_S = 100.0
+WALL_Y = 400.0
+
+
+def drive(generator_cls, walls, start_x, end_x, y=0.0, sigma_cm=0.0, seed=1, use_contact=True):
+    """Drive along +X at 10 cm/s past ``walls``, feeding one side's generator each sweep."""
+    rng = np.random.default_rng(seed)
+    vectors = []
+    sensors = LAYOUT.left
+    gen = generator_cls(sensors, vectors.append)
+    front_cls, rear_cls = SeedClassifier(), SeedClassifier()
+    hypothesis = SideHypothesis()
+    x, t = start_x, 0
+    step = SPEED_MM_S * SWEEP_MS / 1000.0
+    while x <= end_x:
+        pose = (x, y, 0.0)
+        front, rear = side_readings(pose, sensors, walls, rng=rng, sigma_cm=sigma_cm)
+        hypothesis = observe_side(front_cls.feed(front), rear_cls.feed(rear), 0, 0, hypothesis)
+        gen.feed(SweepInput(t, pose, front, rear, hypothesis.contact if use_contact else NONE, True))
+        x += step
+        t += SWEEP_MS
+    gen.feed(SweepInput(t, (x, y, 0.0), 255, 255, NONE, False))  # STOP_SCAN
+    return vectors
+
+
+def beam_bias(distance_mm: float) -> float:
+    """How far past a wall's end a 30° beam still sees it: d·tan 15°."""
+    return distance_mm * math.tan(math.radians(15.0))
+
+
+def test_seed_edge_following_on_a_straight_wall_gives_one_vector_at_its_known_bias():
+    walls = [(0.0, WALL_Y, 2000.0, WALL_Y)]
+    vectors = drive(SeedEdgeFollower, walls, -600.0, 2600.0)
+    assert len(vectors) == 1
+    x1, y1, x2, y2 = vectors[0]
+    d = WALL_Y - LAYOUT.left.front_xy[1]
+    # the rear sensor starts the vector while the beam's edge still reaches the wall's start,
+    # the front sensor ends it while its beam's edge still reaches the wall's end
+    assert abs(x1 - (0.0 - beam_bias(d))) < 50.0, vectors
+    assert abs(x2 - (2000.0 + beam_bias(d))) < 50.0, vectors
+    assert abs(y1 - WALL_Y) < 50.0 and abs(y2 - WALL_Y) < 50.0
+
+
+def test_ours_on_a_straight_wall_gives_one_vector_within_5_cm_even_with_sonar_noise():
+    walls = [(0.0, WALL_Y, 2000.0, WALL_Y)]
+    d = WALL_Y - LAYOUT.left.front_xy[1]
+    for sigma in (0.0, 1.0):
+        vectors = drive(WallTracker, walls, -600.0, 2600.0, sigma_cm=sigma, use_contact=False)
+        assert len(vectors) == 1, (sigma, vectors)
+        x1, y1, x2, y2 = vectors[0]
+        assert abs(x1 - (0.0 - beam_bias(d))) < 50.0, vectors
+        assert abs(x2 - (2000.0 + beam_bias(d))) < 50.0, vectors
+        assert abs(y1 - WALL_Y) < 20.0 and abs(y2 - WALL_Y) < 20.0, vectors
+
+
+def test_seed_method_breaks_up_under_noise_where_ours_does_not():
+    walls = [(0.0, WALL_Y, 2000.0, WALL_Y)]
+    seed_vectors = drive(SeedEdgeFollower, walls, -600.0, 2600.0, sigma_cm=1.0)
+    ours = drive(WallTracker, walls, -600.0, 2600.0, sigma_cm=1.0, use_contact=False)
+    assert len(seed_vectors) > len(ours) == 1
+
+
+def test_two_walls_at_a_step_give_two_vectors():
+    walls = [(0.0, WALL_Y, 1000.0, WALL_Y), (1000.0, WALL_Y + 300, 2000.0, WALL_Y + 300)]
+    vectors = drive(WallTracker, walls, -300.0, 2300.0, use_contact=False)
+    assert len(vectors) == 2
+    assert abs(vectors[0][1] - WALL_Y) < 20 and abs(vectors[1][1] - WALL_Y - 300) < 20
+
+
+def test_post_processor_merges_collinear_pieces_and_closes_a_corner():
+    sent = []
+    post = VectorPostProcessor(sent.append)
+    post.add((0.0, 400.0, 900.0, 402.0))
+    post.add((1100.0, 401.0, 2000.0, 399.0))  # same wall after a 20 cm gap
+    assert sent == [] and post.merged == 1
+    post.add((2300.0, 700.0, 2300.0, 1800.0))  # the next wall, perpendicular, 30 cm short of the corner
+    assert len(sent) == 1 and post.corners_closed == 1
+    first = sent[0]
+    assert first[0] == pytest.approx(0.0, abs=5) and first[2] == pytest.approx(2300.0, abs=5)
+    assert first[3] == pytest.approx(400.0, abs=5)
+    post.flush()
+    assert sent[1][:2] == pytest.approx(first[2:])
+    assert sent[1][3] == 1800.0
+
+
+def test_post_processor_does_not_close_far_or_backward_corners():
+    sent = []
+    post = VectorPostProcessor(sent.append)
+    post.add((0.0, 0.0, 1000.0, 0.0))
+    post.add((3000.0, 500.0, 3000.0, 1500.0))  # intersection 2 m past the end: not a corner
+    post.flush()
+    assert sent == [(0.0, 0.0, 1000.0, 0.0), (3000.0, 500.0, 3000.0, 1500.0)]
+
+
+def test_pose_history_interpolates_position_and_heading_across_the_wrap():
+    h = PoseHistory()
+    h.add(0, (0.0, 0.0, math.pi - 0.1))
+    h.add(100, (100.0, 50.0, -math.pi + 0.1))
+    x, y, th = h.at(50)
+    assert (x, y) == (50.0, 25.0)
+    assert abs(abs(th) - math.pi) < 1e-9
+    assert h.at(500) == (100.0, 50.0, -math.pi + 0.1)
