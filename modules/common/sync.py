@@ -1,0 +1,378 @@
+"""Sensor synchronisation as in the Darmstadt program (seed 000, §5.3, §5.5, §6.3).
+
+Raw samples from sensors that deliver at different rates go into a double ("shadow") buffer:
+writers append to the active half under a lock held only for the append, so they are never
+blocked by a synchronisation in progress. A :class:`Trigger` decides when to synchronise (after
+N samples of one sensor, or every K token rounds); the buffer halves swap and one synchroniser
+per sensor turns the swapped half into one synchronised record:
+
+==========  ======================================================================  ==========
+sensor      synchronised as                                                         seed
+==========  ======================================================================  ==========
+odometry    sum of the step increments since the last sync (from cumulative counts)  odometry
+compass     newest heading, or circular mean — each carried to the sync time         gyroscope
+sonar       newest distance of every sensor, plus every wall fitted in the period    walls
+battery     newest voltages                                                          (ours)
+truth       newest ground-truth pose (the seed's LOPS: reference only, never fused)  LOPS
+==========  ======================================================================  ==========
+
+Every sample carries the time stamp *of the sensor* (ms of simulated time), not of its arrival:
+the odometry track (dead-reckoned pose per step-counter sample) lets the compass and sonar
+synchronisers carry their samples to the exact sync time. :class:`SampleTiming` counts missed
+samples (gaps in a sensor's sequence number, or in its stamps) and late ones (stamped before the
+previous sync but arriving after it).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from bisect import bisect_left
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+from modules.common.walls import wrap
+
+#: sensors the synchronisation knows, in the order their synchronisers run
+SENSORS = ("odometry", "compass", "sonar", "battery", "truth")
+
+NO_CONTACT_CM = 255
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One raw sample as a sensor delivered it: ``stamp_ms`` is the sensor's own time stamp."""
+
+    sensor: str
+    stamp_ms: int
+    values: dict[str, Any]
+    seq: int | None = None
+
+
+# =============================================================================================
+# the shadow buffer and the trigger
+
+
+class ShadowBuffer:
+    """Two raw-data buffers: writers fill the active one, a sync swaps and reads the other.
+
+    ``write`` holds the lock only for one list append (never during a synchronisation), so a
+    writer is never blocked for longer than another writer's append or the swap's flip.
+    Every sample is filed under the *generation* of the buffer it went into; a log records it,
+    so an offline replay can hand each synchronisation exactly the samples it had online.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._halves: list[dict[str, list[Sample]]] = [{}, {}]
+        self._active = 0
+        self._generation = 0
+
+    @property
+    def generation(self) -> int:
+        """The generation the next written sample belongs to."""
+        return self._generation
+
+    def write(self, sample: Sample) -> int:
+        """File ``sample`` in the active half; returns the generation it belongs to."""
+        with self._lock:
+            self._halves[self._active].setdefault(sample.sensor, []).append(sample)
+            return self._generation
+
+    def count(self, sensor: str) -> int:
+        """How many samples of ``sensor`` the active half holds."""
+        with self._lock:
+            return len(self._halves[self._active].get(sensor, ()))
+
+    def swap(self) -> tuple[int, dict[str, list[Sample]]]:
+        """Flip the halves; returns the generation and the samples of the half just closed."""
+        with self._lock:
+            closed = self._halves[self._active]
+            self._active ^= 1
+            self._halves[self._active] = {}
+            generation = self._generation
+            self._generation += 1
+        return generation, closed
+
+
+class Trigger:
+    """When to synchronise: after ``count`` samples of ``sensor``, or every ``rounds`` token rounds."""
+
+    def __init__(self, sensor: str | None = "odometry", count: int = 1, rounds: int | None = None) -> None:
+        if (sensor is None) == (rounds is None):
+            raise ValueError("a trigger needs exactly one of sensor or rounds")
+        self.sensor = sensor
+        self.count = count
+        self.rounds = rounds
+        self._last_counter: int | None = None
+
+    def due(self, buffer: ShadowBuffer, counter: int | None = None) -> bool:
+        """True when the synchronisation should run now (``counter``: the token's round counter)."""
+        if self.sensor is not None:
+            return buffer.count(self.sensor) >= self.count
+        if counter is None:
+            return False
+        if self._last_counter is None:
+            self._last_counter = counter
+            return False
+        if (counter - self._last_counter) % 256 >= self.rounds:
+            self._last_counter = counter
+            return True
+        return False
+
+
+# =============================================================================================
+# timing: missed and late samples
+
+
+class SampleTiming:
+    """Cycle times, missed and late samples of one sensor (the seed's time module)."""
+
+    def __init__(self, sensor: str, period_ms: float | None = None, seq_modulo: int = 1 << 16) -> None:
+        self.sensor = sensor
+        self.period_ms = period_ms
+        self.seq_modulo = seq_modulo
+        self.samples = 0
+        self.missed = 0
+        self.late = 0
+        self.last_stamp: int | None = None
+        self.last_seq: int | None = None
+
+    def observe(self, sample: Sample, last_sync_ms: int | None) -> None:
+        """Account for one sample, in the order samples were synchronised."""
+        self.samples += 1
+        if last_sync_ms is not None and sample.stamp_ms < last_sync_ms:
+            self.late += 1
+        if sample.seq is not None and self.last_seq is not None:
+            gap = (sample.seq - self.last_seq) % self.seq_modulo
+            if gap > 1:
+                self.missed += gap - 1
+        elif sample.seq is None and self.period_ms and self.last_stamp is not None:
+            gap_ms = sample.stamp_ms - self.last_stamp
+            if gap_ms > 1.5 * self.period_ms:
+                self.missed += round(gap_ms / self.period_ms) - 1
+        if sample.seq is not None:
+            self.last_seq = sample.seq
+        self.last_stamp = sample.stamp_ms
+
+    def as_dict(self) -> dict[str, int]:
+        return {"samples": self.samples, "missed": self.missed, "late": self.late}
+
+
+# =============================================================================================
+# the odometry track: dead reckoning per step-counter sample, in the odometry frame
+
+
+@dataclass(frozen=True)
+class OdometryParams:
+    """How half-steps become motion (the seed robot's motor, SPEC §3 motor)."""
+
+    mm_per_step: float = 0.5419
+    steps_per_degree: float = 6.5  # the glide factor μ: differential half-steps per degree turned
+    model: str = "arc"  # "straight" (chord = mean track distance) or "arc" (exact chord of the arc)
+
+
+def step_motion(
+    dl: float,
+    dr: float,
+    params: OdometryParams,
+    step_scale: float = 1.0,
+    steps_per_degree: float | None = None,
+) -> tuple[float, float]:
+    """Distance ``s`` (mm, along the chord) and rotation ``ω`` (rad) of one step increment.
+
+    ``ω = (Δr − Δl)/2 / μ`` in degrees; ``s`` is ``(Δl + Δr)/2 · mm_per_step`` for the
+    straight model, and that times ``2·sin(ω/2)/ω`` (the chord of the arc) for the arc model.
+    """
+    mu = params.steps_per_degree if steps_per_degree is None else steps_per_degree
+    omega = math.radians((dr - dl) / 2.0 / mu)
+    s = (dl + dr) / 2.0 * params.mm_per_step * step_scale
+    if params.model == "arc" and abs(omega) > 1e-9:
+        s *= 2.0 * math.sin(omega / 2.0) / omega
+    return s, omega
+
+
+def advance(pose: tuple[float, float, float], s: float, omega: float) -> tuple[float, float, float]:
+    """The seed's odometry state model: move ``s`` along ``ψ + ω/2``, then turn ``ω``."""
+    x, y, psi = pose
+    mid = psi + omega / 2.0
+    return x + s * math.cos(mid), y + s * math.sin(mid), psi + omega
+
+
+class OdometryTrack:
+    """Dead-reckoned poses at the step counters' own time stamps, for the last few seconds.
+
+    The frame is the odometry frame (continuous, never corrected); other synchronisers use it to
+    carry samples to the sync time and to place sonar points relative to each other.
+    """
+
+    def __init__(self, params: OdometryParams, keep_ms: int = 20_000) -> None:
+        self.params = params
+        self.keep_ms = keep_ms
+        self.stamps: deque[int] = deque()
+        self.poses: deque[tuple[float, float, float]] = deque()
+
+    def append(self, stamp_ms: int, pose: tuple[float, float, float]) -> None:
+        if self.stamps and stamp_ms < self.stamps[-1]:
+            stamp_ms = self.stamps[-1]  # a late counter sample: keep the track monotonic
+        self.stamps.append(stamp_ms)
+        self.poses.append(pose)
+        while len(self.stamps) > 2 and self.stamps[-1] - self.stamps[1] > self.keep_ms:
+            self.stamps.popleft()
+            self.poses.popleft()
+
+    def pose_at(self, stamp_ms: float) -> tuple[float, float, float] | None:
+        """The odometry-frame pose at ``stamp_ms`` (linear between samples, held at the ends)."""
+        if not self.stamps:
+            return None
+        stamps = self.stamps
+        if stamp_ms <= stamps[0]:
+            return self.poses[0]
+        if stamp_ms >= stamps[-1]:
+            return self.poses[-1]
+        i = bisect_left(stamps, stamp_ms)
+        t0, t1 = stamps[i - 1], stamps[i]
+        p0, p1 = self.poses[i - 1], self.poses[i]
+        f = (stamp_ms - t0) / (t1 - t0) if t1 > t0 else 1.0
+        return (p0[0] + f * (p1[0] - p0[0]), p0[1] + f * (p1[1] - p0[1]), p0[2] + f * (p1[2] - p0[2]))
+
+
+# =============================================================================================
+# the per-sensor synchronisers
+
+
+class OdometrySync:
+    """Sum of the step increments since the last sync, from cumulative half-step counters."""
+
+    sensor = "odometry"
+
+    def __init__(self, track: OdometryTrack) -> None:
+        self.track = track
+        self.last: tuple[int, int] | None = None
+        self.pose = (0.0, 0.0, 0.0)  # odometry frame
+
+    def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any]:
+        dl_total = dr_total = 0
+        for sample in samples:
+            left, right = int(sample.values["steps_left"]), int(sample.values["steps_right"])
+            if self.last is None:
+                self.last = (left, right)
+                self.track.append(sample.stamp_ms, self.pose)
+                continue
+            dl = _wrap_i32(left - self.last[0])
+            dr = _wrap_i32(right - self.last[1])
+            self.last = (left, right)
+            dl_total += dl
+            dr_total += dr
+            s, omega = step_motion(dl, dr, self.track.params)
+            self.pose = advance(self.pose, s, omega)
+            self.track.append(sample.stamp_ms, self.pose)
+        stamp = samples[-1].stamp_ms if samples else sync_ms
+        return {"dl": dl_total, "dr": dr_total, "count": len(samples), "stamp_ms": stamp}
+
+
+class CompassSync:
+    """Newest heading or circular mean, each sample carried to the sync time with the odometry.
+
+    Wire headings are the navigation convention (0 = north, clockwise, 1/100 degree); the result
+    is radians, counter-clockwise from +X, with north at ``north_deg`` (CCW from +X).
+    """
+
+    sensor = "compass"
+    USABLE_STATES = (1,)  # compass_state OK; UNCALIBRATED, DISTURBED, CALIBRATING are skipped
+
+    def __init__(self, track: OdometryTrack, mode: str = "newest", north_deg: float = 90.0) -> None:
+        self.track = track
+        self.mode = mode
+        self.north = math.radians(north_deg)
+        self.skipped = 0
+
+    def heading(self, sample: Sample) -> float:
+        """The sample's heading in the internal convention (rad, CCW from +X)."""
+        return wrap(self.north - math.radians(sample.values["heading_cdeg"] / 100.0))
+
+    def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any] | None:
+        usable = [s for s in samples if s.values.get("state", 1) in self.USABLE_STATES]
+        self.skipped += len(samples) - len(usable)
+        if not usable:
+            return None
+        chosen = usable[-1:] if self.mode == "newest" else usable
+        at_sync = self.track.pose_at(sync_ms)
+        carried = []
+        for sample in chosen:
+            heading = self.heading(sample)
+            at_sample = self.track.pose_at(sample.stamp_ms)
+            if at_sync is not None and at_sample is not None:
+                heading += at_sync[2] - at_sample[2]
+            carried.append(heading)
+        mean = math.atan2(sum(math.sin(h) for h in carried), sum(math.cos(h) for h in carried))
+        return {"heading": wrap(mean), "count": len(usable), "stamp_ms": usable[-1].stamp_ms}
+
+
+class SonarSync:
+    """Newest distance of every sonar plus every wall the :class:`WallDetector` fitted."""
+
+    sensor = "sonar"
+
+    def __init__(self, track: OdometryTrack, detector: Any | None) -> None:
+        self.track = track
+        self.detector = detector
+        self.newest: list[int | None] | None = None
+
+    def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any] | None:
+        if not samples and self.detector is None:
+            return None
+        for sample in samples:
+            self.newest = [None if d == NO_CONTACT_CM else int(d) * 10 for d in sample.values["distances"]]
+            if self.detector is not None:
+                pose = self.track.pose_at(sample.stamp_ms)
+                if pose is not None:
+                    self.detector.add(sample.stamp_ms, pose, self.newest)
+        walls: list[dict[str, Any]] = []
+        if self.detector is not None and samples:
+            at_sync = self.track.pose_at(sync_ms)
+            if at_sync is not None:
+                walls = self.detector.detect(at_sync)
+        if not samples:
+            return None
+        return {
+            "distances_mm": list(self.newest or []),
+            "walls": walls,
+            "count": len(samples),
+            "stamp_ms": samples[-1].stamp_ms,
+        }
+
+
+class NewestSync:
+    """The newest sample's values (battery, and the ground truth in the seed's LOPS role)."""
+
+    def __init__(self, sensor: str) -> None:
+        self.sensor = sensor
+
+    def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any] | None:
+        if not samples:
+            return None
+        newest = samples[-1]
+        return {**newest.values, "count": len(samples), "stamp_ms": newest.stamp_ms}
+
+
+@dataclass
+class SyncResult:
+    """One synchronisation: its generation, time (sensor time, ms) and one record per sensor."""
+
+    generation: int
+    stamp_ms: int
+    data: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+def sync_stamp(samples: dict[str, list[Sample]], trigger_sensor: str | None, fallback: int) -> int:
+    """The time of a synchronisation: the newest stamp of the trigger sensor (else of anything)."""
+    if trigger_sensor and samples.get(trigger_sensor):
+        return max(s.stamp_ms for s in samples[trigger_sensor])
+    stamps = [s.stamp_ms for group in samples.values() for s in group]
+    return max(stamps) if stamps else fallback
+
+
+def _wrap_i32(value: int) -> int:
+    return (value + (1 << 31)) % (1 << 32) - (1 << 31)

@@ -1,0 +1,361 @@
+"""Walls for the localisation: known walls (wall file, world, map) and the seed's sonar wall detector.
+
+Lines are in Hessian normal form ``x·cos α + y·sin α = d`` with ``d ≥ 0`` (seed 000, §6.2.4).
+The detector fits lines in the *odometry frame* (continuous dead reckoning, never corrected) so
+that a correction of the filter in the middle of a fit cannot bend it, and reports each line in
+the robot's frame at the synchronisation time together with its covariance; the filter then
+associates it with a known wall (Darmstadt mode: the wall file; exploration mode: the map).
+
+Two kinds of lines, as in the seed:
+
+- **side** — one side-looking sensor's points collected while driving past a wall, fitted by
+  orthogonal regression (the seed's ``y = m·x + b`` fails on walls parallel to the Y axis);
+  accepted while the std of the point distances stays below a bound, then grown with older
+  points while it still does;
+- **pair** — two sensors measuring at the same time give one line per sample pair (the seed's
+  formula); the mean of the last n is accepted while the std of α and d stay below bounds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tokenring.errors import UsageError
+
+TWO_PI = 2.0 * math.pi
+
+
+def wrap(angle: float) -> float:
+    """``angle`` in [-π, π)."""
+    return (angle + math.pi) % TWO_PI - math.pi
+
+
+def hessian(x1: float, y1: float, x2: float, y2: float) -> tuple[float, float]:
+    """Hessian normal form (α, d ≥ 0) of the line through two points."""
+    alpha = math.atan2(x2 - x1, -(y2 - y1))  # normal = direction rotated by -90°
+    d = x1 * math.cos(alpha) + y1 * math.sin(alpha)
+    if d < 0:
+        alpha, d = alpha + math.pi, -d
+    return wrap(alpha), d
+
+
+def line_in_frame(alpha: float, d: float, pose: tuple[float, float, float]) -> tuple[float, float]:
+    """A line given in the outer frame, expressed in the frame of ``pose`` (x, y, ψ); d ≥ 0."""
+    x, y, psi = pose
+    a = alpha - psi
+    dd = d - x * math.cos(alpha) - y * math.sin(alpha)
+    if dd < 0:
+        a, dd = a + math.pi, -dd
+    return wrap(a), dd
+
+
+def to_frame(point: tuple[float, float], pose: tuple[float, float, float]) -> tuple[float, float]:
+    """A point of the outer frame in the frame of ``pose``."""
+    dx, dy = point[0] - pose[0], point[1] - pose[1]
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return c * dx + s * dy, -s * dx + c * dy
+
+
+def from_frame(point: tuple[float, float], pose: tuple[float, float, float]) -> tuple[float, float]:
+    """A point given in the frame of ``pose``, in the outer frame."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return pose[0] + c * point[0] - s * point[1], pose[1] + s * point[0] + c * point[1]
+
+
+# =============================================================================================
+# known walls
+
+
+@dataclass(frozen=True)
+class KnownWall:
+    """A wall the robot knows: a segment (mm) and its Hessian form; ``box`` limits visibility."""
+
+    x1: float
+    y1: float
+    x2: float
+    y2: float
+    alpha: float
+    d: float
+    index: int = 0
+    box: tuple[float, float, float, float] | None = None  # x0, x1, y0, y1 (seed table B.3)
+
+    @classmethod
+    def segment(cls, x1: float, y1: float, x2: float, y2: float, index: int = 0) -> KnownWall:
+        alpha, d = hessian(x1, y1, x2, y2)
+        return cls(float(x1), float(y1), float(x2), float(y2), alpha, d, index)
+
+    @property
+    def length(self) -> float:
+        return math.hypot(self.x2 - self.x1, self.y2 - self.y1)
+
+    def visible_from(self, x: float, y: float) -> bool:
+        if self.box is None:
+            return True
+        x0, x1, y0, y1 = self.box
+        return x0 <= x <= x1 and y0 <= y <= y1
+
+    def overlap(self, p1: tuple[float, float], p2: tuple[float, float], margin: float) -> bool:
+        """Whether the projection of segment p1–p2 onto this wall overlaps it (± ``margin`` mm)."""
+        length = self.length
+        if length <= 0:
+            return False
+        ux, uy = (self.x2 - self.x1) / length, (self.y2 - self.y1) / length
+        t1 = (p1[0] - self.x1) * ux + (p1[1] - self.y1) * uy
+        t2 = (p2[0] - self.x1) * ux + (p2[1] - self.y1) * uy
+        lo, hi = min(t1, t2), max(t1, t2)
+        return hi >= -margin and lo <= length + margin
+
+
+def load_wall_file(path: str | Path) -> list[KnownWall]:
+    """Read a wall file: the seed's 10-field rows (table B.3) or ``x1 y1 x2 y2`` rows, in mm.
+
+    Seed rows: centre x, centre y, direction (deg), length, visibility x0 x1 y0 y1, d, α (deg).
+    ``#`` starts a comment. Errors name the file and line (exit code 2 on the command line).
+    """
+    file = Path(path)
+    try:
+        text = file.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise UsageError(f"{file}: no such wall file") from None
+    except OSError as exc:
+        raise UsageError(f"{file}: cannot read the wall file: {exc.strerror}") from None
+    walls: list[KnownWall] = []
+    for number, raw in enumerate(text.splitlines(), 1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        fields = line.split()
+        try:
+            values = [float(v) for v in fields]
+        except ValueError:
+            raise UsageError(f"{file}:{number}: wall rows are numbers, got {line!r}") from None
+        if len(values) == 4:
+            walls.append(KnownWall.segment(*values, index=len(walls)))
+        elif len(values) == 10:
+            cx, cy, direction, length, x0, x1, y0, y1, _d, _alpha = values
+            if length <= 0:
+                raise UsageError(f"{file}:{number}: wall length must be positive, got {length:g}")
+            ux, uy = math.cos(math.radians(direction)), math.sin(math.radians(direction))
+            wall = KnownWall.segment(
+                cx - ux * length / 2, cy - uy * length / 2, cx + ux * length / 2, cy + uy * length / 2
+            )
+            walls.append(
+                KnownWall(
+                    wall.x1, wall.y1, wall.x2, wall.y2, wall.alpha, wall.d, len(walls), (x0, x1, y0, y1)
+                )
+            )
+        else:
+            raise UsageError(
+                f"{file}:{number}: a wall row has 10 fields (seed table B.3) or 4 (x1 y1 x2 y2), "
+                f"got {len(values)}"
+            )
+    if not walls:
+        raise UsageError(f"{file}: no walls in the wall file")
+    return walls
+
+
+def segments_to_walls(segments: Any) -> list[KnownWall]:
+    """Known walls from ``(x1, y1, x2, y2)`` segments in mm (a world's walls, the map's vectors)."""
+    return [KnownWall.segment(*map(float, seg[:4]), index=i) for i, seg in enumerate(segments)]
+
+
+# =============================================================================================
+# the wall detector
+
+
+@dataclass(frozen=True)
+class SonarMount:
+    """Where a sonar sits on the robot and where it looks (robot frame, mm and rad)."""
+
+    x: float
+    y: float
+    angle: float
+
+
+@dataclass(frozen=True)
+class DetectorParams:
+    """The seed's [WALLS] options (table B.1), in mm and degrees."""
+
+    history: int = 60
+    max_distance_mm: float = 1500.0
+    side_sensors: tuple[int, ...] = ()
+    pairs: tuple[tuple[int, int], ...] = ()
+    min_points_side: int = 12
+    min_span_side_mm: float = 150.0
+    max_sigma_side_mm: float = 12.0
+    min_points_pairs: int = 6
+    max_sigma_d_pairs_mm: float = 15.0
+    max_sigma_alpha_pairs_deg: float = 6.0
+    noise_floor_mm: float = 5.0
+
+
+class WallDetector:
+    """Collects sonar points in the odometry frame and fits wall lines (side regression, pairs)."""
+
+    def __init__(self, mounts: list[SonarMount], params: DetectorParams) -> None:
+        self.mounts = mounts
+        self.params = params
+        self.points: dict[int, deque[tuple[float, float]]] = {
+            i: deque(maxlen=params.history) for i in params.side_sensors
+        }
+        self.pair_lines: dict[
+            tuple[int, int], deque[tuple[float, float, tuple[float, float], tuple[float, float]]]
+        ] = {pair: deque(maxlen=params.history) for pair in params.pairs}
+        self.fitted = 0
+
+    def point(self, index: int, distance: float, pose: tuple[float, float, float]) -> tuple[float, float]:
+        mount = self.mounts[index]
+        local = (mount.x + distance * math.cos(mount.angle), mount.y + distance * math.sin(mount.angle))
+        return from_frame(local, pose)
+
+    def add(self, stamp_ms: int, pose: tuple[float, float, float], distances: list[int | None]) -> None:
+        """One sonar sample (distances in mm, None = no contact) taken at odometry-frame ``pose``."""
+        limit = self.params.max_distance_mm
+        usable = {
+            i: d for i, d in enumerate(distances) if d is not None and 0 < d <= limit and i < len(self.mounts)
+        }
+        for i, history in self.points.items():
+            if i in usable:
+                history.append(self.point(i, usable[i], pose))
+            else:
+                history.clear()  # the wall ended (or never was): a fit must not bridge a gap
+        for (i, j), history in self.pair_lines.items():
+            if i in usable and j in usable:
+                p, q = self.point(i, usable[i], pose), self.point(j, usable[j], pose)
+                alpha, d = hessian(*p, *q)
+                history.append((alpha, d, p, q))
+            else:
+                history.clear()
+
+    def detect(self, pose: tuple[float, float, float]) -> list[dict[str, Any]]:
+        """Walls fitted from the points collected so far, in the frame of ``pose`` (odometry frame).
+
+        A sensor's points are used once: after a wall is reported they are dropped, so the filter
+        never sees the same points twice (repeated measurements would make it overconfident).
+        """
+        walls = []
+        for i, history in self.points.items():
+            wall = self._fit_side(list(history), pose)
+            if wall is not None:
+                wall["sensors"] = [i]
+                walls.append(wall)
+                history.clear()
+        for pair, history in self.pair_lines.items():
+            wall = self._fit_pairs(list(history), pose)
+            if wall is not None:
+                wall["sensors"] = list(pair)
+                walls.append(wall)
+                history.clear()
+        self.fitted += len(walls)
+        return walls
+
+    def _fit_side(self, points: list[tuple[float, float]], pose: tuple[float, float, float]) -> dict | None:
+        p = self.params
+        n = p.min_points_side
+        if len(points) < n:
+            return None
+        best = None
+        while n <= len(points):
+            fit = _orthogonal_fit(points[-n:])
+            if fit is None or fit["sigma"] > p.max_sigma_side_mm:
+                break
+            if fit["span"] >= p.min_span_side_mm:
+                best = fit
+            n += 1
+        if best is None:
+            return None
+        return _report("side", best, pose, max(best["sigma"], p.noise_floor_mm))
+
+    def _fit_pairs(self, lines: list[tuple], pose: tuple[float, float, float]) -> dict | None:
+        p = self.params
+        n = p.min_points_pairs
+        if len(lines) < n:
+            return None
+        best = None
+        while n <= len(lines):
+            recent = lines[-n:]
+            ref = recent[-1][0]
+            alphas = [ref + wrap(a - ref) for a, *_ in recent]
+            ds = [d for _, d, *_ in recent]
+            mean_a, mean_d = sum(alphas) / n, sum(ds) / n
+            sd_a = math.sqrt(sum((a - mean_a) ** 2 for a in alphas) / (n - 1))
+            sd_d = math.sqrt(sum((d - mean_d) ** 2 for d in ds) / (n - 1))
+            if sd_d > p.max_sigma_d_pairs_mm or math.degrees(sd_a) > p.max_sigma_alpha_pairs_deg:
+                break
+            points = [pt for *_, a, b in recent for pt in (a, b)]
+            best = {"alpha": wrap(mean_a), "d": mean_d, "sd_a": sd_a, "sd_d": sd_d, "n": n, "points": points}
+            n += 1
+        if best is None:
+            return None
+        alpha, d = line_in_frame(best["alpha"], best["d"], pose)
+        floor_a = math.radians(0.5)
+        var_a = max(best["sd_a"], floor_a) ** 2 / best["n"]
+        var_d = max(best["sd_d"], p.noise_floor_mm) ** 2 / best["n"]
+        p1, p2 = _extent(best["points"], best["alpha"], best["d"], pose)
+        return {
+            "kind": "pair",
+            "alpha": alpha,
+            "d": d,
+            "cov": [var_a, 0.0, var_d],
+            "n": best["n"],
+            "p1": p1,
+            "p2": p2,
+        }
+
+
+def _orthogonal_fit(points: list[tuple[float, float]]) -> dict | None:
+    """Total least squares line through points: Hessian form, residual std, span, centroid."""
+    n = len(points)
+    cx = sum(x for x, _ in points) / n
+    cy = sum(y for _, y in points) / n
+    sxx = sum((x - cx) ** 2 for x, _ in points)
+    syy = sum((y - cy) ** 2 for _, y in points)
+    sxy = sum((x - cx) * (y - cy) for x, y in points)
+    direction = 0.5 * math.atan2(2 * sxy, sxx - syy)  # of the largest spread
+    ux, uy = math.cos(direction), math.sin(direction)
+    ts = [(x - cx) * ux + (y - cy) * uy for x, y in points]
+    residuals = [-(x - cx) * uy + (y - cy) * ux for x, y in points]
+    span = max(ts) - min(ts)
+    if span <= 0:
+        return None
+    sigma = math.sqrt(sum(r * r for r in residuals) / max(n - 2, 1))
+    alpha = direction + math.pi / 2
+    d = cx * math.cos(alpha) + cy * math.sin(alpha)
+    if d < 0:
+        alpha, d = alpha + math.pi, -d
+    return {
+        "alpha": wrap(alpha),
+        "d": d,
+        "sigma": sigma,
+        "span": span,
+        "n": n,
+        "centroid": (cx, cy),
+        "stt": sum(t * t for t in ts),
+        "points": points,
+    }
+
+
+def _report(kind: str, fit: dict, pose: tuple[float, float, float], sigma: float) -> dict[str, Any]:
+    """A fitted line in the frame of ``pose`` with its covariance (var α, cov αd, var d)."""
+    alpha, d = line_in_frame(fit["alpha"], fit["d"], pose)
+    cx, cy = to_frame(fit["centroid"], pose)
+    var_a = sigma**2 / fit["stt"]
+    tangential = -math.sin(alpha) * cx + math.cos(alpha) * cy  # the centroid's position along the line
+    cov = [var_a, var_a * tangential, var_a * tangential**2 + sigma**2 / fit["n"]]
+    p1, p2 = _extent(fit["points"], fit["alpha"], fit["d"], pose)
+    return {"kind": kind, "alpha": alpha, "d": d, "cov": cov, "n": fit["n"], "p1": p1, "p2": p2}
+
+
+def _extent(points: list, alpha: float, d: float, pose: tuple[float, float, float]) -> tuple[list, list]:
+    """The two extreme points projected onto the line, in the frame of ``pose``."""
+    ux, uy = -math.sin(alpha), math.cos(alpha)
+    ts = [x * ux + y * uy for x, y in points]
+    foot = (d * math.cos(alpha), d * math.sin(alpha))
+    ends = []
+    for t in (min(ts), max(ts)):
+        ends.append(list(to_frame((foot[0] + t * ux, foot[1] + t * uy), pose)))
+    return ends[0], ends[1]
