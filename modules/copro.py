@@ -1,7 +1,276 @@
-"""The copro module's user program (placeholder until its real program lands)."""
+"""ROBCOPRO, the coprocessor (seed §4.3.4): side hypotheses and vector generation.
 
-from modules.common.placeholder import PlaceholderProgram
+Every sonar sweep: ``observe_side`` for both sides (WALL / OBSTACLE / CORNER / NONE with
+confidence and distance area, published on ``copro.data``). Only on forward moves, with
+scanning on (START_SCAN / STOP_SCAN) and after more than 1 cm driven, vectors are generated
+and sent to map — by the seed's edge following (SET_METHOD 0) or by ours (SET_METHOD 1, the
+default): robust straight runs of global points, collinear merge and corner closing (held-back
+vectors go out on FLUSH).
+
+The pose: the filtered pose of :class:`modules.common.localizer.Localizer` when that module
+exists (hosted here, stepped every token visit), else dead reckoning from ``motor.data``; both
+are published in the ``pose_*`` fields (source 2 = EKF, 1 = dead reckoning).
+"""
+
+from __future__ import annotations
+
+import logging
+import os as _os
+import queue
+import threading
+from typing import Any
+
+from modules.common.units import pose_to_wire, wire_pose
+from modules.common.vectorgen import (
+    NO_CONTACT_CM,
+    PoseHistory,
+    SeedEdgeFollower,
+    SideHypothesis,
+    SweepInput,
+    Vector,
+    VectorPostProcessor,
+    WallTracker,
+    default_layout,
+    observe_side,
+)
+from modules.common.vectormap import vector_to_wire
+from tokenring.program import UserProgram
+
+log = logging.getLogger("tokenring.copro")
+
+SEED, OURS = 0, 1
+POSE_NONE, POSE_DEAD_RECKONING, POSE_EKF = 0, 1, 2
+MIN_DRIVEN_MM = 10  # the seed: vectors only after more than 1 cm driven
 
 
-class Program(PlaceholderProgram):
+def open_localizer(os: Any) -> Any | None:
+    """The EKF localizer if that module is installed (issue 7), else None (dead reckoning)."""
+    try:
+        from modules.common.localizer import Localizer  # type: ignore[import-not-found]
+    except ImportError:
+        return None
+    config = _os.environ.get("TOKENRING_LOCALIZER_CONFIG")
+    try:
+        localizer = Localizer(os, config)
+        localizer.setup()
+    except Exception as exc:  # the map still works on dead reckoning
+        log.error("localizer unavailable, using dead reckoning: %s", exc)
+        return None
+    return localizer
+
+
+def localizer_pose(localizer: Any) -> tuple[tuple[float, float, float], int, int] | None:
+    """(pose, validity bits, source) from the localizer's ``pose()``, whatever shape it returns."""
+    got = localizer.pose()
+    if got is None:
+        return None
+    if isinstance(got, dict):
+        x, y, th = got["x_mm"], got["y_mm"], got.get("heading_rad", got.get("heading"))
+        valid, source = got.get("valid", 7), got.get("source", POSE_EKF)
+    elif isinstance(got, tuple | list):
+        x, y, th, *rest = got
+        valid = rest[0] if rest else 7
+        source = rest[1] if len(rest) > 1 else POSE_EKF
+    else:
+        x, y = got.x_mm, got.y_mm
+        th = getattr(got, "heading_rad", getattr(got, "heading", 0.0))
+        valid, source = getattr(got, "valid", 7), getattr(got, "source", POSE_EKF)
+    if isinstance(valid, tuple | list):
+        valid = sum(1 << i for i, v in enumerate(valid[:3]) if v)
+    if isinstance(source, str):
+        source = POSE_EKF if source.lower() in ("ekf", "filter", "fused") else POSE_DEAD_RECKONING
+    return (float(x), float(y), float(th)), int(valid), int(source)
+
+
+class Program(UserProgram):
     module = "copro"
+
+    def setup(self) -> None:
+        os = self.os
+        enums = os.protocol.enums
+        self.forward = enums["direction"]["FORWARD"]
+        self.data = os.publish()
+        self.sonar = os.subscribe("sonar.data")
+        self.motor = os.subscribe("motor.data")
+        os.set_own_input_id()
+        self.layout = default_layout()
+        self.method = int(_os.environ.get("TOKENRING_COPRO_METHOD", OURS))
+        self.scanning = False
+        self.hypotheses = {"left": SideHypothesis(), "right": SideHypothesis()}
+        self.history = PoseHistory()
+        self.outgoing: queue.Queue[Vector | None] = queue.Queue()
+        self.stats = {"vectors_sent": 0, "vectors_refused": 0, "sweeps": 0, "sweeps_missed": 0}
+        self.last_sweep: int | None = None
+        self.pose_source = POSE_NONE
+        self._make_generators()
+        self.localizer = open_localizer(os)
+        self.sender = threading.Thread(target=self._send_vectors, name="copro-vectors", daemon=True)
+        self.sender.start()
+
+    def _make_generators(self) -> None:
+        self.post = {side: VectorPostProcessor(self.outgoing.put) for side in ("left", "right")}
+        self.generators: dict[str, Any] = {}
+        for side in ("left", "right"):
+            _, _, sensors = self.layout.side(side)
+            if self.method == SEED:
+                self.generators[side] = SeedEdgeFollower(sensors, self.outgoing.put)
+            else:
+                self.generators[side] = WallTracker(sensors, self.post[side].add)
+
+    # -- the loop ---------------------------------------------------------------------------
+    def run(self) -> None:
+        while self.running:
+            self.os.wait_visit(0.2)
+            self._handle_commands()
+            pose = self._update_pose()
+            sonar = self.sonar.read()
+            if self.sonar.visits and sonar["sweep"] != self.last_sweep:
+                if self.last_sweep is not None and (sonar["sweep"] - self.last_sweep) & 0xFFFF > 1:
+                    self.stats["sweeps_missed"] += ((sonar["sweep"] - self.last_sweep) & 0xFFFF) - 1
+                self.last_sweep = sonar["sweep"]
+                self.stats["sweeps"] += 1
+                self.process_sweep(sonar, self.motor.read(), pose)
+            self._publish()
+
+    def _handle_commands(self) -> None:
+        while True:
+            command = self.os.receive_command(timeout=0)
+            if command is None:
+                return
+            self.handle_command(command.name, command.args)
+
+    def handle_command(self, name: str, args: dict[str, Any]) -> None:
+        if name == "START_SCAN":
+            self.scanning = True
+        elif name == "STOP_SCAN":
+            self.scanning = False
+            self._end_scan()
+        elif name == "SET_METHOD":
+            self._end_scan()
+            self.flush()
+            self.method = SEED if int(args.get("method", OURS)) == SEED else OURS
+            self._make_generators()
+        elif name == "FLUSH":
+            self._end_scan()
+            self.flush()
+        elif name == "ERROR":
+            self.stats["vectors_refused"] += 1
+            log.warning("map refused a vector: %s", args)
+
+    def _end_scan(self) -> None:
+        idle = SweepInput(0, (0.0, 0.0, 0.0), NO_CONTACT_CM, NO_CONTACT_CM, 0, False)
+        for generator in self.generators.values():
+            generator.feed(idle)
+
+    def flush(self) -> None:
+        for post in self.post.values():
+            post.flush()
+
+    def _update_pose(self) -> tuple[float, float, float] | None:
+        """Record dead reckoning; return the best pose now (EKF if running)."""
+        motor = self.motor.read()
+        if self.motor.visits:
+            self.history.add(motor["stamp_ms"], wire_pose(motor["x_mm"], motor["y_mm"], motor["angle_cdeg"]))
+        if self.localizer is not None:
+            try:
+                self.localizer.step()
+                got = localizer_pose(self.localizer)
+            except Exception as exc:
+                log.error("localizer failed, back to dead reckoning: %s", exc)
+                self.localizer = None
+                got = None
+            if got is not None:
+                pose, valid, source = got
+                self.pose_valid, self.pose_source, self.pose_stamp = valid, source, motor["stamp_ms"]
+                self.best_pose = pose
+                return pose
+        pose = self.history.latest()
+        if pose is not None:
+            self.pose_valid, self.pose_source, self.pose_stamp = 7, POSE_DEAD_RECKONING, motor["stamp_ms"]
+            self.best_pose = pose
+        return pose
+
+    def process_sweep(self, sonar: dict[str, Any], motor: dict[str, Any], pose: Any) -> None:
+        """One sweep: hypotheses for both sides, then vector generation where it applies."""
+        active = (
+            self.scanning
+            and motor["direction"] == self.forward
+            and motor["distance_mm"] > MIN_DRIVEN_MM
+            and pose is not None
+        )
+        if self.method == OURS and self.localizer is None:
+            interpolated = self.history.at(sonar["stamp_ms"])
+            pose = interpolated if interpolated is not None else pose
+        for side in ("left", "right"):
+            front, rear, _ = self.layout.side(side)
+            h = observe_side(
+                sonar["behaviours"][front],
+                sonar["behaviours"][rear],
+                sonar["areas"][front],
+                sonar["areas"][rear],
+                self.hypotheses[side],
+            )
+            self.hypotheses[side] = h
+            sweep = SweepInput(
+                sonar["stamp_ms"],
+                pose or (0.0, 0.0, 0.0),
+                sonar["distances"][front],
+                sonar["distances"][rear],
+                h.contact,
+                bool(active),
+            )
+            self.generators[side].feed(sweep)
+
+    def _publish(self) -> None:
+        left, right = self.hypotheses["left"], self.hypotheses["right"]
+        fields: dict[str, Any] = {
+            "left_contact": left.contact,
+            "left_confidence": left.confidence,
+            "left_area": left.area,
+            "right_contact": right.contact,
+            "right_confidence": right.confidence,
+            "right_area": right.area,
+            "scanning": int(self.scanning),
+            "vectors_sent": self.stats["vectors_sent"] & 0xFFFF,
+            "pose_source": self.pose_source,
+        }
+        if self.pose_source != POSE_NONE:
+            x, y, th = self.best_pose
+            wire = pose_to_wire(x, y, th)
+            fields.update(
+                pose_x_mm=max(-(2**31), min(2**31 - 1, wire["x_mm"])),
+                pose_y_mm=max(-(2**31), min(2**31 - 1, wire["y_mm"])),
+                pose_angle_cdeg=wire["angle_cdeg"],
+                pose_valid=self.pose_valid & 0xFF,
+                pose_stamp_ms=self.pose_stamp & 0xFFFFFFFF,
+            )
+        self.data.write(**fields)
+
+    def _send_vectors(self) -> None:
+        while self.running:
+            try:
+                vector = self.outgoing.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            if vector is None:
+                break
+            if self.os.deliver("map", "VECTOR", timeout=5.0, **vector_to_wire(*vector)):
+                self.stats["vectors_sent"] += 1
+            else:
+                log.warning("map did not take a vector within 5 s: %s", vector)
+
+    def teardown(self) -> None:
+        self.outgoing.put(None)
+
+    def report(self) -> dict[str, Any]:
+        post = list(self.post.values())
+        return {
+            "method": "seed" if self.method == SEED else "ours",
+            "scanning": self.scanning,
+            "pose_source": self.pose_source,
+            "corners_closed": sum(p.corners_closed for p in post),
+            "merged": sum(p.merged for p in post),
+            "pending": sum(p.pending is not None for p in post),
+            "queued": self.outgoing.qsize(),
+            **self.stats,
+        }

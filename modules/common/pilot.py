@@ -1,0 +1,361 @@
+"""The pilot (seed §4.3.6): executes the navigator's moves, watches sensors and abort conditions.
+
+A move is a motor command (forward/reverse in mm, turn in degrees) with an optional special
+command — vector generation on copro around it — and abort conditions (a distance reached, the
+wall lost, a corner seen). The pilot always aborts on ALERT (a relevant sonar under 4 cm) and
+then **locks**: it refuses every direction except the opposite of the one that caused the ALERT
+until the navigator commands that one.
+
+Which sonars are relevant to ALERT: the three front ones for forward moves, the rear one for
+reverse moves, all of them for turns on the spot. An ALERT already present when an *escape*
+move (the direction the lock allows) starts does not abort that move — it is what it escapes.
+
+The pilot does no I/O itself: it is stepped with a :class:`Sensors` snapshot and sends through
+a callable, so it is unit-tested with synthetic data and driven by main's program on the ring.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from modules.common.vectorgen import NO_CONTACT_CM, SonarLayout
+from tokenring.protocol import default_protocol
+
+_E = default_protocol().enums
+STOPPED = _E["direction"]["STOPPED"]
+FORWARD = _E["direction"]["FORWARD"]
+REVERSE = _E["direction"]["REVERSE"]
+TURN_LEFT = _E["direction"]["TURN_LEFT"]
+TURN_RIGHT = _E["direction"]["TURN_RIGHT"]
+DIRECTION_NAMES = {v: k for k, v in _E["direction"].items()}
+OPPOSITE = {FORWARD: REVERSE, REVERSE: FORWARD, TURN_LEFT: TURN_RIGHT, TURN_RIGHT: TURN_LEFT}
+MOTOR_COMMAND = {
+    FORWARD: ("MOVE_FORWARD", "distance_mm"),
+    REVERSE: ("MOVE_REVERSE", "distance_mm"),
+    TURN_LEFT: ("TURN_LEFT", "angle_deg"),
+    TURN_RIGHT: ("TURN_RIGHT", "angle_deg"),
+}
+REASON = _E["abort_reason"]
+REASON_NAMES = {v: k for k, v in REASON.items()}
+AREA = _E["distance_area"]
+MOTOR_STATE = _E["motor_state"]
+MOVE_STATUS = _E["move_status"]
+CONTACT = _E["contact"]
+
+#: the seed's ALERT area: under 4 cm
+ALERT_CM = 4
+
+
+@dataclass(frozen=True)
+class Abort:
+    """An abort condition: ``kind`` over a sensor group, with a threshold in cm.
+
+    kinds: ``front_within`` (a front sonar reads ≤ cm), ``rear_within``, ``left_within``,
+    ``right_within`` (the side's front sonar ≤ cm), ``left_beyond`` / ``right_beyond`` (the
+    side's front sonar reads more than cm or nothing), ``corner_left`` / ``corner_right``
+    (copro reports CORNER on that side)."""
+
+    kind: str
+    cm: int = 0
+    reason: str = "CLOSE"
+
+
+@dataclass(frozen=True)
+class Move:
+    direction: int
+    amount: int  # mm for straight moves, degrees for turns
+    speed_pct: int = 100
+    scan: bool = False
+    abort: tuple[Abort, ...] = ()
+    label: str = ""
+
+
+@dataclass
+class Sensors:
+    """What the pilot and navigator see at one step (decoded from the token)."""
+
+    distances: list[int] = field(default_factory=lambda: [NO_CONTACT_CM] * 8)
+    sweep: int = 0
+    left_contact: int = 0
+    right_contact: int = 0
+    motor_state: int = 0
+    motor_direction: int = 0
+    move_seq: int = 0
+    distance_mm: int = 0
+    stamp_ms: int = 0
+    pose: tuple[float, float, float] | None = None
+    heading_cdeg: int | None = None  # compass, navigation convention (north, clockwise)
+
+
+@dataclass
+class Outcome:
+    """How a move sequence ended: DONE, or the abort reason and the move it happened in."""
+
+    reason: int
+    move: Move | None = None
+    index: int = 0
+    driven_mm: int = 0
+    samples: list[tuple[int, list[int]]] = field(default_factory=list)  # (distance_mm, distances)
+    trigger: str = ""
+
+    @property
+    def done(self) -> bool:
+        return self.reason == REASON["DONE"]
+
+    @property
+    def reason_name(self) -> str:
+        return REASON_NAMES.get(self.reason, str(self.reason))
+
+
+@dataclass
+class PilotSettings:
+    settle_visits: int = 3  # visits a stop may take before the pilot trusts the motor's idle state
+    stop_timeout_ms: int = 3000  # simulated time to wait for the motor after STOP
+    move_margin_s: float = 8.0  # simulated slack on top of a move's nominal duration
+    mm_per_s_at_full: float = 100.0  # start-stop maximum: 10 cm/s = 100 %
+    turn_mm_per_deg: float = 6.5 * 0.5419  # track travel per degree of turn (glide factor 6.5)
+
+
+Send = Callable[..., Any]  # send(target, command, **args)
+
+
+class Pilot:
+    """Executes move sequences; one :meth:`step` per token visit."""
+
+    IDLE, STARTING, MOVING, STOPPING = "idle", "starting", "moving", "stopping"
+
+    def __init__(self, layout: SonarLayout, send: Send, settings: PilotSettings | None = None) -> None:
+        self.layout = layout
+        self.send = send
+        self.settings = settings or PilotSettings()
+        self.state = self.IDLE
+        self.alert_lock = STOPPED
+        self.moves: list[Move] = []
+        self.index = 0
+        self.outcome: Outcome | None = None
+        self.reached: list[dict[str, int]] = []
+        self._seq_before = 0
+        self._started_ms = 0
+        self._stop_ms: int | None = None
+        self._pending_reason: tuple[int, str] | None = None
+        self._exempt: set[int] = set()
+        self._samples: list[tuple[int, list[int]]] = []
+        self._last_sweep: int | None = None
+        self._scanning = False
+        self._visits = 0
+
+    # -- the navigator's side ---------------------------------------------------------------
+    @property
+    def busy(self) -> bool:
+        return self.state != self.IDLE
+
+    def start(self, moves: list[Move], sensors: Sensors) -> bool:
+        """Take a sequence; False (and an ALERT outcome) if the ALERT lock refuses its first move."""
+        self.moves, self.index, self.outcome = list(moves), 0, None
+        if not self.moves:
+            self.outcome = Outcome(REASON["DONE"])
+            return True
+        first = self.moves[0]
+        if self.alert_lock != STOPPED and first.direction != self.alert_lock:
+            self.outcome = Outcome(REASON["ALERT"], first, 0, trigger="locked")
+            return False
+        self._begin(sensors)
+        return True
+
+    def abort(self, reason: str = "USER") -> None:
+        """Stop what is going on (the user's STOP_EXPLORE)."""
+        if self.state in (self.STARTING, self.MOVING):
+            self._stop(REASON[reason], "user")
+        elif self.state == self.IDLE:
+            self.outcome = Outcome(REASON[reason])
+
+    def note_position_reached(self, status: int, move_seq: int) -> None:
+        """motor's POSITION_REACHED, handed over by main's command loop."""
+        self.reached.append({"status": status, "move_seq": move_seq})
+
+    # -- internals ------------------------------------------------------------------------------
+    def _begin(self, sensors: Sensors) -> None:
+        move = self.moves[self.index]
+        escape = self.alert_lock != STOPPED and move.direction == self.alert_lock
+        self._exempt = self._alerting(move.direction, sensors) if escape else set()
+        if escape:
+            self.alert_lock = STOPPED  # the navigator commanded the opposite direction
+        if self._alerting(move.direction, sensors) - self._exempt:
+            self._finish(REASON["ALERT"], "alert at start", lock=move.direction)
+            return
+        if move.scan and not self._scanning:
+            self.send("copro", "START_SCAN")
+            self._scanning = True
+        name, arg = MOTOR_COMMAND[move.direction]
+        self.reached.clear()
+        self._seq_before = sensors.move_seq
+        self._started_ms = sensors.stamp_ms
+        self._samples = []
+        self._last_sweep = sensors.sweep
+        self._visits = 0
+        self.send("motor", name, **{arg: int(move.amount), "speed_pct": int(move.speed_pct)})
+        self.state = self.STARTING
+
+    def _alerting(self, direction: int, sensors: Sensors) -> set[int]:
+        if direction == FORWARD:
+            group = self.layout.front
+        elif direction == REVERSE:
+            group = self.layout.rear
+        else:
+            group = tuple(range(len(sensors.distances)))
+        return {i for i in group if sensors.distances[i] < ALERT_CM}
+
+    def _expected_ms(self, move: Move) -> float:
+        s = self.settings
+        speed = s.mm_per_s_at_full * max(move.speed_pct, 1) / 100.0
+        travel = move.amount if move.direction in (FORWARD, REVERSE) else move.amount * s.turn_mm_per_deg
+        return (travel / speed * 1.5 + s.move_margin_s) * 1000.0
+
+    def step(self, sensors: Sensors) -> Outcome | None:
+        """Advance; returns the outcome once the sequence ended (DONE or aborted), else None."""
+        if self.state == self.IDLE:
+            out, self.outcome = self.outcome, None
+            return out
+        self._visits += 1
+        move = self.moves[self.index]
+        if self.state in (self.STARTING, self.MOVING):
+            if sensors.sweep != self._last_sweep:
+                self._last_sweep = sensors.sweep
+                self._samples.append((sensors.distance_mm, list(sensors.distances)))
+            if self.state == self.STARTING and (
+                sensors.move_seq != self._seq_before or sensors.motor_state == MOTOR_STATE["MOVING"]
+            ):
+                self.state = self.MOVING
+            alert = self._alerting(move.direction, sensors) - self._exempt
+            if alert:
+                self._stop(REASON["ALERT"], f"alert on sonar {sorted(alert)}", lock=move.direction)
+                return None
+            for condition in move.abort:
+                if self._triggered(condition, sensors):
+                    self._stop(REASON[condition.reason], condition.kind)
+                    return None
+            if sensors.motor_state in (MOTOR_STATE["STALLED"], MOTOR_STATE["COLLISION"]):
+                kind = "STALL" if sensors.motor_state == MOTOR_STATE["STALLED"] else "COLLISION"
+                self._stop(REASON[kind], "motor")
+                return None
+            if self._move_finished(sensors):
+                status = self.reached[-1]["status"] if self.reached else MOVE_STATUS["DONE"]
+                if status in (MOVE_STATUS["STALLED"], MOVE_STATUS["COLLISION"]):
+                    reason = "STALL" if status == MOVE_STATUS["STALLED"] else "COLLISION"
+                    self._finish(REASON[reason], "motor", driven=sensors.distance_mm)
+                    return self._take()
+                self._next(sensors)
+                return self._take() if self.state == self.IDLE else None
+            if sensors.stamp_ms - self._started_ms > self._expected_ms(move):
+                self._stop(REASON["TIMEOUT"], "move took too long")
+            return None
+        # STOPPING: wait for the motor to stand still
+        if self._stop_ms is None:
+            self._stop_ms = sensors.stamp_ms
+        stopped = self.reached or (
+            self._visits >= self.settings.settle_visits and sensors.motor_state != MOTOR_STATE["MOVING"]
+        )
+        if stopped or sensors.stamp_ms - self._stop_ms > self.settings.stop_timeout_ms:
+            assert self._pending_reason is not None
+            reason, trigger = self._pending_reason
+            self._finish(reason, trigger, driven=sensors.distance_mm)
+            return self._take()
+        return None
+
+    def _take(self) -> Outcome | None:
+        out, self.outcome = self.outcome, None
+        return out
+
+    def _move_finished(self, sensors: Sensors) -> bool:
+        if any(r["move_seq"] != self._seq_before for r in self.reached):
+            return True
+        return (
+            self.state == self.MOVING
+            and sensors.move_seq != self._seq_before
+            and sensors.motor_state == MOTOR_STATE["IDLE"]
+            and self._visits >= self.settings.settle_visits
+        )
+
+    def _next(self, sensors: Sensors) -> None:
+        move = self.moves[self.index]
+        driven = sensors.distance_mm
+        if move.scan and not (self.index + 1 < len(self.moves) and self.moves[self.index + 1].scan):
+            self.send("copro", "STOP_SCAN")
+            self._scanning = False
+        self.index += 1
+        if self.index >= len(self.moves):
+            self._finish(REASON["DONE"], "", driven=driven)
+        else:
+            self._begin(sensors)
+
+    def _stop(self, reason: int, trigger: str, lock: int = STOPPED) -> None:
+        self.send("motor", "STOP")
+        if lock != STOPPED:
+            self.alert_lock = OPPOSITE[lock]
+        self._pending_reason = (reason, trigger)
+        self._stop_ms = None
+        self.reached.clear()
+        self._visits = 0
+        self.state = self.STOPPING
+
+    def _finish(self, reason: int, trigger: str, lock: int = STOPPED, driven: int = 0) -> None:
+        if lock != STOPPED:
+            self.alert_lock = OPPOSITE[lock]
+        if self._scanning:
+            self.send("copro", "STOP_SCAN")
+            self._scanning = False
+        move = self.moves[min(self.index, len(self.moves) - 1)] if self.moves else None
+        self.outcome = Outcome(reason, move, self.index, driven, self._samples, trigger)
+        self.state = self.IDLE
+
+    def _triggered(self, condition: Abort, sensors: Sensors) -> bool:
+        d = sensors.distances
+        lay = self.layout
+        kind, cm = condition.kind, condition.cm
+        if kind == "front_within":
+            return any(d[i] <= cm for i in lay.front)
+        if kind == "rear_within":
+            return any(d[i] <= cm for i in lay.rear)
+        if kind == "left_within":
+            return d[lay.left_front] <= cm
+        if kind == "right_within":
+            return d[lay.right_front] <= cm
+        if kind == "left_beyond":
+            return d[lay.left_front] > cm
+        if kind == "right_beyond":
+            return d[lay.right_front] > cm
+        if kind == "corner_left":
+            return sensors.left_contact == CONTACT["CORNER"]
+        if kind == "corner_right":
+            return sensors.right_contact == CONTACT["CORNER"]
+        raise ValueError(f"unknown abort condition {kind!r}")
+
+
+def side_slope(
+    samples: list[tuple[int, list[int]]], sensor: int, max_cm: int = 120
+) -> tuple[float, float] | None:
+    """Least-squares (slope, last value in mm) of one sonar's readings over distance driven.
+
+    The slope (mm of reading per mm driven) is the tangent of the angle between the robot's
+    course and the wall; None without enough valid readings."""
+    pts = [(dist, r[sensor] * 10.0) for dist, r in samples if r[sensor] <= max_cm]
+    if len(pts) < 5:
+        return None
+    xs = [p[0] for p in pts]
+    if max(xs) - min(xs) < 150:
+        return None
+    n = len(pts)
+    mx = sum(xs) / n
+    my = sum(p[1] for p in pts) / n
+    sxx = sum((x - mx) ** 2 for x in xs)
+    sxy = sum((x - mx) * (p[1] - my) for x, p in zip(xs, pts, strict=True))
+    slope = sxy / sxx
+    return slope, my + slope * (xs[-1] - mx)
+
+
+def angle_of_slope(slope: float) -> float:
+    """The course's angle to the wall in degrees (positive: moving away from it)."""
+    return math.degrees(math.atan(slope))

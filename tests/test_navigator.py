@@ -1,0 +1,253 @@
+"""Pilot and navigator logic on synthetic sensor data: moves, aborts, the ALERT direction lock."""
+
+from __future__ import annotations
+
+from modules.common.navigator import NAV, Calibrate, ExploreAvoid, ExploreLeftWall
+from modules.common.pilot import (
+    FORWARD,
+    MOTOR_STATE,
+    MOVE_STATUS,
+    REASON,
+    REVERSE,
+    STOPPED,
+    TURN_LEFT,
+    TURN_RIGHT,
+    Abort,
+    Move,
+    Pilot,
+    Sensors,
+    side_slope,
+)
+from modules.common.vectorgen import default_layout
+
+LAYOUT = default_layout()
+FAR = 255
+
+
+class Bench:
+    """A pilot with a scripted motor: records what the pilot sends, plays the motor's answers."""
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[str, str, dict]] = []
+        self.pilot = Pilot(LAYOUT, self.send)
+        self.sensors = Sensors(distances=[FAR] * 8)
+
+    def send(self, target: str, name: str, **args) -> None:
+        self.sent.append((target, name, args))
+
+    def names(self) -> list[str]:
+        return [f"{t}:{n}" for t, n, _ in self.sent]
+
+    def motor_runs(self, seq: int) -> None:
+        self.sensors.move_seq = seq
+        self.sensors.motor_state = MOTOR_STATE["MOVING"]
+
+    def tick(self, sweeps: int = 1, **changes):
+        for name, value in changes.items():
+            setattr(self.sensors, name, value)
+        out = None
+        for _ in range(sweeps):
+            self.sensors.sweep += 1
+            self.sensors.stamp_ms += 120
+            out = self.pilot.step(self.sensors) or out
+        return out
+
+
+def test_a_sequence_runs_move_by_move_with_vector_generation_around_the_scanned_move():
+    b = Bench()
+    moves = [Move(FORWARD, 500, 80, scan=True), Move(TURN_LEFT, 90, 50)]
+    assert b.pilot.start(moves, b.sensors)
+    assert b.names() == ["copro:START_SCAN", "motor:MOVE_FORWARD"]
+    assert b.sent[1][2] == {"distance_mm": 500, "speed_pct": 80}
+    b.motor_runs(1)
+    assert b.tick(3, distance_mm=200) is None
+    b.pilot.note_position_reached(MOVE_STATUS["DONE"], 1)
+    b.sensors.motor_state = MOTOR_STATE["IDLE"]
+    assert b.tick() is None  # the turn starts
+    assert b.names()[-2:] == ["copro:STOP_SCAN", "motor:TURN_LEFT"]
+    b.motor_runs(2)
+    b.pilot.note_position_reached(MOVE_STATUS["DONE"], 2)
+    out = b.tick()
+    assert out is not None and out.done and out.index == 2
+    assert not b.pilot.busy
+
+
+def test_abort_condition_stops_the_motor_and_reports_the_reason():
+    b = Bench()
+    b.pilot.start([Move(FORWARD, 3000, scan=True, abort=(Abort("front_within", 25, "CLOSE"),))], b.sensors)
+    b.motor_runs(1)
+    b.tick(2)
+    front = [FAR] * 8
+    front[LAYOUT.front[1]] = 24
+    assert b.tick(distances=front) is None
+    assert b.names()[-1] == "motor:STOP"
+    b.sensors.motor_state = MOTOR_STATE["IDLE"]
+    out = b.tick(3)
+    assert out.reason == REASON["CLOSE"] and out.trigger == "front_within"
+    assert "copro:STOP_SCAN" in b.names()
+    assert b.pilot.alert_lock == STOPPED
+
+
+def test_alert_aborts_and_locks_every_direction_but_the_opposite_until_the_navigator_commands_it():
+    b = Bench()
+    b.pilot.start([Move(FORWARD, 3000)], b.sensors)
+    b.motor_runs(1)
+    alert = [FAR] * 8
+    alert[LAYOUT.front[0]] = 3  # the front-left sonar under 4 cm
+    b.tick(distances=alert)
+    assert b.names()[-1] == "motor:STOP"
+    b.sensors.motor_state = MOTOR_STATE["IDLE"]
+    out = b.tick(3)
+    assert out.reason == REASON["ALERT"]
+    assert b.pilot.alert_lock == REVERSE
+
+    sent_before = len(b.sent)
+    for direction in (FORWARD, TURN_LEFT, TURN_RIGHT):  # refused, nothing reaches the motor
+        assert not b.pilot.start([Move(direction, 100)], b.sensors)
+        out = b.tick()
+        assert out.reason == REASON["ALERT"] and out.trigger == "locked"
+        assert b.pilot.alert_lock == REVERSE
+    assert len(b.sent) == sent_before
+
+    # the escape move is accepted although the front sonar still reads ALERT, and lifts the lock
+    assert b.pilot.start([Move(REVERSE, 60)], b.sensors)
+    assert b.names()[-1] == "motor:MOVE_REVERSE"
+    assert b.pilot.alert_lock == STOPPED
+    b.motor_runs(2)
+    b.tick(2)
+    b.pilot.note_position_reached(MOVE_STATUS["DONE"], 2)
+    assert b.tick().done
+
+    # afterwards forward is allowed again (nothing in ALERT any more)
+    b.sensors.distances = [FAR] * 8
+    assert b.pilot.start([Move(FORWARD, 100)], b.sensors)
+    assert b.names()[-1] == "motor:MOVE_FORWARD"
+
+
+def test_alert_during_a_turn_locks_the_other_turn_and_rear_alert_only_matters_backwards():
+    b = Bench()
+    b.pilot.start([Move(TURN_LEFT, 90)], b.sensors)
+    b.motor_runs(1)
+    alert = [FAR] * 8
+    alert[LAYOUT.right_rear] = 2
+    b.tick(distances=alert)
+    b.sensors.motor_state = MOTOR_STATE["IDLE"]
+    assert b.tick(3).reason == REASON["ALERT"]
+    assert b.pilot.alert_lock == TURN_RIGHT
+
+    c = Bench()
+    rear = [FAR] * 8
+    rear[LAYOUT.rear[0]] = 2
+    c.sensors.distances = rear
+    assert c.pilot.start([Move(FORWARD, 100)], c.sensors)  # a rear ALERT does not stop forward
+    c.motor_runs(1)
+    assert c.tick(2) is None and c.names()[-1] == "motor:MOVE_FORWARD"
+
+
+def test_motor_stall_and_timeout_end_a_move():
+    b = Bench()
+    b.pilot.start([Move(FORWARD, 100, 100)], b.sensors)
+    b.motor_runs(1)
+    b.tick(motor_state=MOTOR_STATE["STALLED"])
+    assert b.names()[-1] == "motor:STOP"
+    b.sensors.motor_state = MOTOR_STATE["IDLE"]
+    assert b.tick(3).reason == REASON["STALL"]
+
+    c = Bench()
+    c.pilot.start([Move(FORWARD, 100, 100)], c.sensors)  # 1 s nominal
+    c.motor_runs(1)
+    out = None
+    for _ in range(200):
+        out = c.tick() or out
+        if c.names()[-1] == "motor:STOP":
+            c.sensors.motor_state = MOTOR_STATE["IDLE"]
+    assert out is not None and out.reason == REASON["TIMEOUT"]
+
+
+def test_side_slope_recovers_the_angle_to_the_wall():
+    samples = [(d, [FAR] * 7 + [30 + d // 100]) for d in range(0, 600, 12)]  # +1 cm per 10 cm
+    slope, last = side_slope(samples, 7)
+    assert abs(slope - 0.1) < 0.01 and abs(last - 358) < 10
+
+
+def sensors_with(**readings) -> Sensors:
+    d = [FAR] * 8
+    for name, cm in readings.items():
+        d[getattr(LAYOUT, name) if not name.startswith("front") else LAYOUT.front[1]] = cm
+    return Sensors(distances=d, pose=(0.0, 0.0, 0.0))
+
+
+def test_explore1_follows_the_seed_pseudo_code():
+    nav = ExploreAvoid(LAYOUT)
+    s = sensors_with(left_front=40, left_rear=40, right_front=200, right_rear=200)
+    drive = nav.plan(None, s, STOPPED)
+    assert drive[0].direction == FORWARD and drive[0].scan and drive[0].abort[0].kind == "front_within"
+    assert nav.state == NAV["TURN"]
+    from modules.common.pilot import Outcome
+
+    turn = nav.plan(Outcome(REASON["CLOSE"], drive[0]), s, STOPPED)
+    assert turn[0].direction == TURN_RIGHT and turn[0].amount == 90  # more room on the right
+    assert nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED)[0].direction == FORWARD
+    back = nav.plan(Outcome(REASON["ALERT"], drive[0]), s, REVERSE)
+    assert back[0].direction == REVERSE  # ALERT in DRIVE_FORWARD: drive back a little
+    turn_back = nav.plan(Outcome(REASON["ALERT"], turn[0]), s, TURN_LEFT)
+    assert turn_back[0].direction == TURN_LEFT and turn_back[0].amount < 90
+
+
+def test_explore2_follows_the_left_wall_and_turns_at_corners():
+    from modules.common.pilot import Outcome
+
+    nav = ExploreLeftWall(LAYOUT)
+    s = sensors_with(left_front=30, left_rear=30)
+    seg = nav.plan(None, s, STOPPED)
+    assert [m.label for m in seg] == ["follow"] and seg[0].scan
+    # drifting away from the wall by 1 cm per 10 cm: the next segment starts with a left turn
+    samples = [(d, [FAR] * 7 + [30 + d // 100]) for d in range(0, 600, 12)]
+    samples = [(d, _with(LAYOUT.left_front, r[7])) for d, r in samples]
+    nxt = nav.plan(Outcome(REASON["DONE"], seg[0], driven_mm=600, samples=samples), s, STOPPED)
+    assert nxt[0].direction == TURN_LEFT and 5 <= nxt[0].amount <= 12, nxt
+    # the front blocked: inner corner, turn right about 90°
+    inner = nav.plan(Outcome(REASON["CLOSE"], seg[0], trigger="front_within"), s, STOPPED)
+    assert inner[0].direction == TURN_RIGHT and 85 <= inner[0].amount <= 95
+    # the wall lost: outer corner, drive on, turn left, pick the wall up again
+    outer = nav.plan(Outcome(REASON["CORNER"], seg[0], trigger="left_beyond"), sensors_with(), STOPPED)
+    assert [m.label for m in outer] == ["clear", "outer"] and outer[1].direction == TURN_LEFT
+    re = nav.plan(Outcome(REASON["DONE"], outer[1]), sensors_with(), STOPPED)
+    assert re[0].label == "reacquire"
+    back = nav.plan(Outcome(REASON["NONE"], re[0], trigger="left_within"), s, STOPPED)
+    assert back[-1].label == "follow"
+    # ALERT: only the escape the lock allows
+    esc = nav.plan(Outcome(REASON["ALERT"], seg[0]), s, REVERSE)
+    assert esc[0].direction == REVERSE and nav.state == NAV["BACK_OFF"]
+
+
+def _with(index: int, cm: int) -> list[int]:
+    d = [FAR] * 8
+    d[index] = cm
+    return d
+
+
+def test_explore2_ends_after_one_lap():
+    from modules.common.pilot import Outcome
+
+    nav = ExploreLeftWall(LAYOUT)
+    s = sensors_with(left_front=30, left_rear=30)
+    seg = nav.plan(None, s, STOPPED)
+    s.pose = (3000.0, 0.0, 0.0)
+    for _ in range(10):
+        seg = nav.plan(Outcome(REASON["DONE"], seg[-1], driven_mm=600), s, STOPPED)
+    s.pose = (100.0, 50.0, 0.0)
+    assert nav.plan(Outcome(REASON["DONE"], seg[-1], driven_mm=600), s, STOPPED) is None
+    assert nav.state == NAV["DONE"]
+
+
+def test_calibration_turns_360_and_asks_for_the_glide_factor_correction():
+    from modules.common.pilot import Outcome
+
+    nav = Calibrate(LAYOUT)
+    s = Sensors(heading_cdeg=1000)
+    turn = nav.plan(None, s, STOPPED)
+    assert turn[0].direction == TURN_LEFT and turn[0].amount == 360
+    s.heading_cdeg = 35500  # overturned by 15° (counter-clockwise lowers the clockwise heading)
+    assert nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED) is None
+    assert nav.commands == [("motor", "RECALC_GLIDE_FACTOR", {"target_deg": 360, "error_cdeg": 1500})]
