@@ -2,8 +2,9 @@
 
 Programs never see the world directly: the node process opens a hardware client for its module
 (``open_hardware``) and hands it to the program as ``self.hw``. Clients talk to the world
-simulator over ``tokenring/<ring>/hw/<module>/...`` (see :mod:`tokenring.keys`), never over
-the ring. A module without hardware gets ``None``.
+simulator over ``tokenring/<ring>/hw/<module>/...`` (see :mod:`tokenring.world.service` for the
+key space and :mod:`tokenring.hw` for the clients), never over the ring. A module without
+hardware gets ``None``.
 """
 
 from __future__ import annotations
@@ -12,8 +13,10 @@ from typing import Any
 
 import zenoh
 
+from tokenring.hw import CLIENTS
+
 #: module name -> factory(session, ring) returning that module's hardware client
-FACTORIES: dict[str, Any] = {}
+FACTORIES: dict[str, Any] = dict(CLIENTS)
 
 
 def open_hardware(module: str, session: zenoh.Session, ring: str) -> Any | None:

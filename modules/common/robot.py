@@ -1,0 +1,69 @@
+"""The robot's body: what the modules know about their hardware (and the simulator builds).
+
+Robot frame: x forward, y to the left, angles in radians counter-clockwise from forward; the
+robot's reference point is the middle between the tracks (it turns on the spot about it).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+# -- drive (seed §3.3.1 and §4.3.3) --------------------------------------------------------------
+WHEEL_CIRCUMFERENCE_MM = 216.77  # drive wheel with the 69 mm track
+HALF_STEPS_PER_TURN = 400  # half-step mode, 0.9° per half-step
+STEP_MM = WHEEL_CIRCUMFERENCE_MM / HALF_STEPS_PER_TURN  # 0.5419 mm per half-step
+MAX_SPEED_MM_S = 100.0  # 100 % = 10 cm/s, the start-stop limit (no ramps)
+MAX_STEP_RATE_HZ = MAX_SPEED_MM_S / STEP_MM  # 184.5 half-steps per second at 100 %
+DEFAULT_GLIDE_FACTOR = 6.5  # half-steps per degree of turn on tiles
+DEFAULT_MOTOR_CURRENT_MA = 1000  # per motor, set through the 8-bit DAC (20 mA per count)
+ROBOT_RADIUS_MM = 190.0  # the collision circle the simulator uses
+
+# -- compass (seed §3.3.3) -------------------------------------------------------------------------
+#: the two KMZ51 bridges' sensitive axes: bridge 0 along the robot's forward axis, bridge 1 to its
+#: left. With the horizontal field at heading psi (from north, clockwise) the bridges see
+#: H cos(psi) and H sin(psi).
+COMPASS_AXES = (0.0, math.pi / 2)
+
+# -- sonar (seed §4.3.2) ---------------------------------------------------------------------------
+SONAR_COUNT = 8
+SONAR_BEAM_RAD = math.radians(30.0)  # full width at half sensitivity
+SONAR_RANGE_MM = 1500.0  # useful range
+SONAR_NO_CONTACT = 255  # the seed's "no contact" byte
+SONAR_SAMPLES = 510  # one envelope: 510 samples ...
+SONAR_SAMPLE_US = 20.0  # ... every 20 µs (three-fold oversampling of the 60 µs per cm)
+SPEED_OF_SOUND_M_S = 330.0
+SONAR_SLOT_MS = 15.0  # one pair's measurement slot: eight make the 120 ms sweep (8.3 Hz)
+
+
+@dataclass(frozen=True)
+class SonarMount:
+    """Where a transmitter/receiver pair sits on the robot and where it looks."""
+
+    index: int
+    name: str
+    x: float  # mm, robot frame
+    y: float
+    angle: float  # radians CCW from forward
+
+
+#: the eight pairs in sweep order: three to the front (+45°, 0°, -45°), two on each side, one rear
+SONAR_MOUNTS = (
+    SonarMount(0, "front-left", 140.0, 90.0, math.radians(45)),
+    SonarMount(1, "front", 150.0, 0.0, 0.0),
+    SonarMount(2, "front-right", 140.0, -90.0, math.radians(-45)),
+    SonarMount(3, "right-front", 80.0, -120.0, math.radians(-90)),
+    SonarMount(4, "right-rear", -80.0, -120.0, math.radians(-90)),
+    SonarMount(5, "rear", -150.0, 0.0, math.pi),
+    SonarMount(6, "left-rear", -80.0, 120.0, math.radians(90)),
+    SonarMount(7, "left-front", 80.0, 120.0, math.radians(90)),
+)
+SONAR_BY_NAME = {m.name: m.index for m in SONAR_MOUNTS}
+FRONT_LEFT, FRONT, FRONT_RIGHT, RIGHT_FRONT, RIGHT_REAR, REAR, LEFT_REAR, LEFT_FRONT = range(8)
+
+
+def sonar_world_pose(x: float, y: float, theta: float, index: int) -> tuple[float, float, float]:
+    """Where sonar pair ``index`` sits and looks in world coordinates, for a robot at (x, y, theta)."""
+    m = SONAR_MOUNTS[index]
+    c, s = math.cos(theta), math.sin(theta)
+    return (x + c * m.x - s * m.y, y + s * m.x + c * m.y, theta + m.angle)

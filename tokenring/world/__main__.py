@@ -1,0 +1,88 @@
+"""``python -m tokenring.world``: run the world simulator for one ring until SIGTERM/SIGINT.
+
+``tokenring up`` starts it as a service before the nodes (``--world``, ``--speed``, ``--seed``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+from typing import Any
+
+from tokenring import keys
+from tokenring.errors import TokenRingError, UsageError
+from tokenring.world.loader import DEFAULT_WORLD, load_world
+from tokenring.world.service import WorldService
+from tokenring.world.sim import Simulator
+from tokenring.zconfig import make_config, open_session
+
+
+def parse_speed(text: str) -> float:
+    """A speed-up factor: a positive number (``20``, ``0.5``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise UsageError(f"--speed {text!r} is not a number") from None
+    if not 0 < value <= 1000:
+        raise UsageError(f"--speed {text} must be within 0..1000 (1 = real time)")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m tokenring.world", description="The world simulator of one ring."
+    )
+    p.add_argument(
+        "--world", default=DEFAULT_WORLD, help="bundled room name or world file (default %(default)s)"
+    )
+    p.add_argument("--speed", default="1", help="simulated seconds per real second (default %(default)s)")
+    p.add_argument("--seed", type=int, default=1, help="random seed (default %(default)s)")
+    p.add_argument("--ring", default=keys.DEFAULT_RING)
+    p.add_argument("-e", "--connect", action="append", default=[], metavar="ENDPOINT")
+    p.add_argument("-l", "--listen", action="append", default=[], metavar="ENDPOINT")
+    p.add_argument("--zenoh-config", metavar="FILE")
+    p.add_argument("--duration", type=float, help="stop after this many real seconds")
+    p.add_argument("--log-level", default="info", choices=("debug", "info", "warning", "error"))
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=getattr(logging, args.log_level.upper()), format="%(levelname)-5s %(message)s")
+    stop = threading.Event()
+
+    def on_signal(_signum: int, _frame: Any) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    try:
+        world = load_world(args.world)
+        speed = parse_speed(args.speed)
+        ring = keys.check_ring_name(args.ring)
+        config = make_config(
+            connect=[c for c in args.connect if c], listen=args.listen, config_file=args.zenoh_config
+        )
+        with open_session(config) as session:
+            service = WorldService(Simulator(world, seed=args.seed, speed=speed), session, ring)
+            service.start()
+            print(
+                f"world {world.name!r} ({len(world.walls)} walls, {len(world.circles)} obstacles), "
+                f"speed {speed:g}x, seed {args.seed}; truth on {keys.world(ring, 'truth')}",
+                flush=True,
+            )
+            try:
+                stop.wait(args.duration)
+            finally:
+                service.close()
+    except TokenRingError as exc:
+        print(f"world: error: {exc}", file=sys.stderr, flush=True)
+        return exc.exit_code
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

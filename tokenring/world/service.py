@@ -1,0 +1,154 @@
+"""The world simulator on Zenoh: the hardware queryables, ground truth, and the ready token.
+
+Keys (all under ``tokenring/<ring>/``; requests and answers are msgpack, answers are
+``{"ok": true, "result": ...}`` or ``{"ok": false, "error": "..."}``):
+
+==============================  =================================================================
+key                             request → result
+==============================  =================================================================
+``hw/clock``                    ``{}`` → ``{sim_ms, speed, seed, world}``: the simulation clock
+``hw/motor/steps``              ``{left, right, rate_hz, move, current_ma}`` half-steps both motors
+                                made since the last batch (signed, + = that track forward) →
+                                ``{moved_mm, turned_rad, blocked, stalled, power, stamp_ms}``
+``hw/sonar/ping``               ``{sensors: [i...], ping_samples, slot_ms}`` → ``{envelopes:
+                                [510 bytes...], stamps_ms: [...], sample_us: 20}``
+``hw/compass/measure``          ``{settings: [{flip: ±1, comp_ut: [c0, c1]}...], samples}`` →
+                                ``{adc: [[bridge 0 counts], [bridge 1 counts]] per setting,
+                                stamp_ms, sample_ms}`` (12-bit, mid-scale 2048)
+``hw/charger/adc``              ``{}`` → ``{electronics, motors, current}`` 10-bit counts,
+                                ``full_scale``, ``relay``, ``stamp_ms``
+``hw/charger/relay``            ``{on: bool, reason}`` → ``{relay}``; off cuts all hardware
+``world/truth``                 published ~10× per simulated second (at most 50 Hz real):
+                                ground truth, see :meth:`Simulator.truth`; logs and scoring only
+``world/state``                 queryable: the same truth, now
+``world/info``                  queryable: the room (:meth:`World.to_dict`), seed and speed
+``world/control/pose``          ``{x_mm, y_mm, theta_rad}`` put the robot there (tests, tools)
+``world/control/batteries``     ``{electronics, motors}`` set states of charge (tests, tools)
+``world/alive``                 liveliness token: the simulator is up (the launcher waits for it)
+==============================  =================================================================
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import threading
+import time
+from typing import Any
+
+import msgpack
+import zenoh
+
+from tokenring import keys
+from tokenring.world.sim import HardwareRequestError, Simulator
+
+log = logging.getLogger("tokenring.world")
+TRUTH_PERIOD_SIM_S = 0.1
+TRUTH_MIN_REAL_S = 0.02
+
+
+def hw_key(ring: str, what: str) -> str:
+    """``tokenring/<ring>/hw/<what>``."""
+    return f"{keys.PREFIX}/{ring}/hw/{what}"
+
+
+def ready_key(ring: str) -> str:
+    """The liveliness key the world holds while it serves (the launcher's ``ready_key``)."""
+    return keys.world(ring, "alive")
+
+
+class WorldService:
+    """Serves one :class:`Simulator` on a Zenoh session."""
+
+    def __init__(self, sim: Simulator, session: zenoh.Session, ring: str) -> None:
+        self.sim = sim
+        self.session = session
+        self.ring = ring
+        self.stop = threading.Event()
+        self._declared: list[Any] = []
+        self._publisher: Any = None
+        self._thread: threading.Thread | None = None
+        self.requests = 0
+
+    def start(self) -> None:
+        prefix = hw_key(self.ring, "")
+        self._declared.append(
+            self.session.declare_queryable(
+                hw_key(self.ring, "**"), lambda q: self._answer(q, prefix, self._hardware)
+            )
+        )
+        world_prefix = keys.world(self.ring, "")
+        self._declared.append(
+            self.session.declare_queryable(
+                keys.world(self.ring, "**"), lambda q: self._answer(q, world_prefix, self._world)
+            )
+        )
+        self._publisher = self.session.declare_publisher(keys.world(self.ring, "truth"))
+        self._thread = threading.Thread(target=self._publish_truth, name="world-truth", daemon=True)
+        self._thread.start()
+        self._declared.append(self.session.liveliness().declare_token(ready_key(self.ring)))
+
+    def close(self) -> None:
+        self.stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=1.0)
+        for item in reversed(self._declared):
+            with contextlib.suppress(zenoh.ZError):
+                item.undeclare()
+        if self._publisher is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self._publisher.undeclare()
+        self._declared.clear()
+
+    def _hardware(self, what: str, request: dict[str, Any]) -> Any:
+        self.requests += 1
+        return self.sim.handle(what, request)
+
+    def _world(self, what: str, request: dict[str, Any]) -> Any:
+        if what in ("state", "truth"):
+            return self.sim.truth()
+        if what == "info":
+            return {**self.sim.world.to_dict(), "seed": self.sim.seed, "speed": self.sim.clock.speed}
+        if what == "control/pose":
+            return self.sim.set_pose(request)
+        if what == "control/batteries":
+            return self.sim.set_batteries(request)
+        raise HardwareRequestError(
+            f"no world verb {what!r} (have: state, info, control/pose, control/batteries)"
+        )
+
+    def _answer(self, query: zenoh.Query, prefix: str, handler: Any) -> None:
+        what = str(query.key_expr)[len(prefix) :]
+        try:
+            payload = query.payload
+            request = msgpack.unpackb(payload.to_bytes()) if payload is not None else {}
+            if not isinstance(request, dict):
+                raise HardwareRequestError("a request must be a msgpack map")
+            result = {"ok": True, "result": handler(what, request)}
+        except HardwareRequestError as exc:
+            result = {"ok": False, "error": str(exc)}
+        except Exception as exc:  # the world must survive any request
+            log.exception("request %s failed", what)
+            result = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
+        query.reply(query.key_expr, msgpack.packb(result, default=_plain))
+
+    def _publish_truth(self) -> None:
+        period = max(TRUTH_MIN_REAL_S, self.sim.clock.to_real(TRUTH_PERIOD_SIM_S))
+        next_at = time.monotonic()
+        while not self.stop.is_set():
+            try:
+                self._publisher.put(msgpack.packb(self.sim.truth(), default=_plain))
+            except zenoh.ZError:
+                if self.stop.is_set():
+                    return
+                raise
+            next_at += period
+            self.stop.wait(max(0.0, next_at - time.monotonic()))
+
+
+def _plain(value: Any) -> Any:
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if hasattr(value, "item"):
+        return value.item()
+    return str(value)
