@@ -20,7 +20,7 @@ import queue
 import threading
 from typing import Any
 
-from modules.common.units import pose_to_wire, wire_pose
+from modules.common.units import pose_from_wire, pose_to_wire
 from modules.common.vectorgen import (
     NO_CONTACT_CM,
     PoseHistory,
@@ -170,7 +170,9 @@ class Program(UserProgram):
         """Record dead reckoning; return the best pose now (EKF if running)."""
         motor = self.motor.read()
         if self.motor.visits:
-            self.history.add(motor["stamp_ms"], wire_pose(motor["x_mm"], motor["y_mm"], motor["angle_cdeg"]))
+            self.history.add(
+                motor["stamp_ms"], pose_from_wire(motor["x_mm"], motor["y_mm"], motor["angle_cdeg"])
+            )
         if self.localizer is not None:
             try:
                 self.localizer.step()

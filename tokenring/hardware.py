@@ -17,6 +17,7 @@ from tokenring.hw import CLIENTS
 
 #: module name -> factory(session, ring) returning that module's hardware client
 FACTORIES: dict[str, Any] = dict(CLIENTS)
+FACTORIES["lcd"] = lambda session, ring: __import__("tokenring.lcdhw").lcdhw.open_lcd(session, ring)
 
 
 def open_hardware(module: str, session: zenoh.Session, ring: str) -> Any | None:

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -121,37 +121,26 @@ class SonarLayout:
         return self.right_front, self.right_rear, self.right
 
 
-def default_layout(
-    half_width_mm: float = 125.0, side_offset_mm: float = 60.0, order: Sequence[str] | None = None
-) -> SonarLayout:
-    """The default ring of eight sonars, clockwise from the front-left 45° one.
+def default_layout() -> SonarLayout:
+    """The robot's eight sonars as :mod:`modules.common.robot` mounts them."""
+    from modules.common import robot
 
-    ``order`` names the sensor at each index (``front_left``, ``front``, ``front_right``,
-    ``right_front``, ``right_rear``, ``rear``, ``left_rear``, ``left_front``)."""
-    names = list(
-        order
-        or (
-            "front_left",
-            "front",
-            "front_right",
-            "right_front",
-            "right_rear",
-            "rear",
-            "left_rear",
-            "left_front",
-        )
-    )
-    index = {name: i for i, name in enumerate(names)}
-    w, o = half_width_mm, side_offset_mm
+    mounts = robot.SONAR_MOUNTS
+
+    def side(front: int, rear: int) -> SideSensors:
+        f, r = mounts[front], mounts[rear]
+        return SideSensors((f.x, f.y), (r.x, r.y), f.angle)
+
     return SonarLayout(
-        front=(index["front_left"], index["front"], index["front_right"]),
-        rear=(index["rear"],),
-        left_front=index["left_front"],
-        left_rear=index["left_rear"],
-        right_front=index["right_front"],
-        right_rear=index["right_rear"],
-        left=SideSensors((o, w), (-o, w), math.pi / 2),
-        right=SideSensors((o, -w), (-o, -w), -math.pi / 2),
+        front=(robot.FRONT_LEFT, robot.FRONT, robot.FRONT_RIGHT),
+        rear=(robot.REAR,),
+        left_front=robot.LEFT_FRONT,
+        left_rear=robot.LEFT_REAR,
+        right_front=robot.RIGHT_FRONT,
+        right_rear=robot.RIGHT_REAR,
+        left=side(robot.LEFT_FRONT, robot.LEFT_REAR),
+        right=side(robot.RIGHT_FRONT, robot.RIGHT_REAR),
+        max_range_mm=robot.SONAR_RANGE_MM,
     )
 
 
