@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from tokenring.errors import UsageError
+
+if TYPE_CHECKING:
+    from tokenring.launcher import ServicePlan
 
 
 def default_programs_dir() -> Path:
@@ -44,6 +48,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--no-programs", action="store_true", help="start the nodes with the OS only")
     p.add_argument("--respawn", action="store_true", help="restart nodes that die, like a supervisor")
+    world = p.add_argument_group("simulated world")
+    world.add_argument(
+        "--world",
+        default="office",
+        metavar="NAME|FILE",
+        help="bundled room (empty, office, square, slanted) or world file (default %(default)s)",
+    )
+    world.add_argument("--speed", default="1", metavar="K", help="simulation speed-up factor (default 1)")
+    world.add_argument("--seed", type=int, default=1, help="the world's random seed (default %(default)s)")
+    world.add_argument("--no-world", action="store_true", help="start no world simulator (no hardware)")
     add_ring_options(p)
 
 
@@ -61,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
     if programs is not None and not Path(programs).is_dir():
         raise UsageError(f"--programs {programs}: no such directory")
     plans = plans_from_protocol(protocol, selection, programs)
+    services = [] if args.no_world else [world_service(args)]
     launcher = Launcher(
         plans,
         ring=args.ring,
@@ -72,9 +87,27 @@ def run(args: argparse.Namespace) -> int:
         protocol_path=args.protocol,
         log_level=args.log_level,
         respawn=args.respawn,
+        services=services,
     )
     install_signal_handlers(launcher)
     launcher.start()
     code = launcher.run(args.duration)
     launcher.say("stopped (interrupted)" if code == 130 else f"stopped (exit code {code})")
     return code
+
+
+def world_service(args: argparse.Namespace) -> ServicePlan:
+    """The world simulator as a launcher service; the world file is checked here, before anything starts."""
+    from tokenring.launcher import ServicePlan
+    from tokenring.world.__main__ import parse_speed
+    from tokenring.world.loader import load_world, resolve_world
+    from tokenring.world.service import ready_key
+
+    load_world(args.world)
+    parse_speed(args.speed)
+    argv = ["tokenring.world", "--ring", "{ring}", "--connect", "{connect}", "--world"]
+    argv += [str(resolve_world(args.world).resolve()), "--speed", str(args.speed), "--seed", str(args.seed)]
+    argv += ["--log-level", args.log_level]
+    if args.zenoh_config:
+        argv += ["--zenoh-config", args.zenoh_config]
+    return ServicePlan("world", argv, ready_key=ready_key(args.ring))
