@@ -10,8 +10,14 @@ key                                      what travels on it
 ``tokenring/<ring>/ctl/<ID>/<verb>``     queryables of node ``ID``: ``stats``, ``fault``, ...
 ``tokenring/<ring>/ctl/launcher/<verb>`` queryables of the launcher (``status``)
 ``tokenring/<ring>/pc/<verb>``           the PC link ("serial line") to main
-``tokenring/<ring>/hw/<module>/<what>``  the simulated hardware of one module
-``tokenring/<ring>/world/<what>``        world simulator: ground truth (logs/scoring only)
+``tokenring/<ring>/hw/<module>/<what>``  the simulated hardware of one module: ``hw/clock``,
+                                         ``hw/motor/steps``, ``hw/sonar/ping``,
+                                         ``hw/compass/measure``, ``hw/charger/adc``,
+                                         ``hw/charger/relay`` (see tokenring.world.service)
+``tokenring/<ring>/world/<what>``        world simulator: ``world/truth`` (msgpack ground truth:
+                                         pose mm/rad, batteries, time; logs/scoring only),
+                                         ``world/state``, ``world/info``, ``world/control/*``,
+                                         ``world/alive`` (liveliness: the world is up)
 ``tokenring/<ring>/lcd/<what>``          the LCD's screen and keypad (hardware, not the ring)
 =======================================  ========================================================
 """
