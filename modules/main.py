@@ -1,7 +1,287 @@
-"""The main module's user program (placeholder until its real program lands)."""
+"""ROBMAIN, the main computer (seed §4.3.6): navigator and pilot, cooperative, two pairs.
 
-from modules.common.placeholder import PlaceholderProgram
+Pair 1 runs Explore 1 (avoid, turn 90° toward the side with more room), pair 2 Explore 2
+(left-wall following); the calibration run uses pair 1's pilot. Navigator and pilot alternate
+once per token visit: while the pilot has a sequence it is stepped with the sensors decoded from
+the token; when it finished (done or aborted) the navigator plans the next sequence.
+
+Started and stopped by commands (EXPLORE mode, STOP_EXPLORE, CALIBRATE, CLEAR_MAP — from the
+LCD keypad) or over the PC link (``on_pc_request``: ``explore``, ``stop``, ``calibrate``,
+``clear_map``, ``get_map``, ``state``). ``main.data`` carries the navigator state, the mode,
+the pilot's last abort reason, the ALERT lock and the number of planned steps.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import time
+from typing import Any
+
+from modules.common.mapclient import MapCollector
+from modules.common.navigator import NAV, Calibrate, ExploreAvoid, ExploreLeftWall, Navigator
+from modules.common.pilot import REASON, REASON_NAMES, STOPPED, Outcome, Pilot, PilotSettings, Sensors
+from modules.common.units import pose_from_wire
+from modules.common.vectorgen import default_layout
+from tokenring.errors import UsageError
+from tokenring.program import UserProgram
+
+log = logging.getLogger("tokenring.main")
+NAV_NAMES = {v: k for k, v in NAV.items()}
 
 
-class Program(PlaceholderProgram):
+class Program(UserProgram):
     module = "main"
+
+    def setup(self) -> None:
+        os = self.os
+        self.out = os.publish()
+        os.set_own_input_id()
+        self.sonar = os.subscribe("sonar.data")
+        self.motor = os.subscribe("motor.data")
+        self.copro = os.subscribe("copro.data")
+        self.compass = os.subscribe("compass.data")
+        self.layout = default_layout()
+        # two navigator/pilot pairs so that two strategies can be compared (the seed's design)
+        self.pilots = {1: Pilot(self.layout, self._send), 2: Pilot(self.layout, self._send, PilotSettings())}
+        self.navigator: Navigator | None = None
+        self.pilot: Pilot | None = None
+        self.pair = 0
+        self.last_outcome: Outcome | None = None
+        self.abort_reason = REASON["NONE"]
+        self.requests: queue.Queue[tuple[str, dict[str, Any], queue.Queue[Any]]] = queue.Queue()
+        self.collector = MapCollector()
+        self.history: list[dict[str, Any]] = []
+        self.finished: dict[str, Any] | None = None
+        self.started = time.monotonic()
+        self.sensors = Sensors()
+        self._publish()
+
+    # -- sending ------------------------------------------------------------------------------------
+    def _send(self, target: str, command: str, **args: Any) -> None:
+        """The pilot's and navigator's commands: delivered (resent until acknowledged)."""
+        if not self.os.deliver(target, command, timeout=3.0, **args):
+            log.warning("%s did not take %s %s", target, command, args)
+
+    # -- the loop -------------------------------------------------------------------------------------
+    def run(self) -> None:
+        while self.running:
+            self.os.wait_visit(0.2)
+            self._take_commands()
+            self._take_requests()
+            self.sensors = self._read_sensors()
+            self._cooperate()
+            self._publish()
+
+    def _take_commands(self) -> None:
+        while (command := self.os.receive_command(timeout=0)) is not None:
+            self.handle_command(command.name, command.args)
+
+    def handle_command(self, name: str, args: dict[str, Any]) -> None:
+        if self.collector.feed(name, args):
+            return
+        if name == "POSITION_REACHED":
+            if self.pilot is not None:
+                self.pilot.note_position_reached(args["status"], args["move_seq"])
+        elif name == "EXPLORE":
+            self.start_explore(int(args.get("mode", 2)))
+        elif name == "STOP_EXPLORE":
+            self.stop_explore("stopped")
+        elif name == "CALIBRATE":
+            self.start(Calibrate(self.layout), 1)
+        elif name == "CLEAR_MAP":
+            self._send("map", "CLEAR_MAP")
+        elif name == "ERROR":
+            log.warning("error reported to main: %s", args)
+
+    def _read_sensors(self) -> Sensors:
+        sonar, motor, copro, compass = (
+            self.sonar.read(),
+            self.motor.read(),
+            self.copro.read(),
+            self.compass.read(),
+        )
+        pose = None
+        if copro["pose_source"]:
+            pose = pose_from_wire(copro["pose_x_mm"], copro["pose_y_mm"], copro["pose_angle_cdeg"])
+        elif self.motor.visits:
+            pose = pose_from_wire(motor["x_mm"], motor["y_mm"], motor["angle_cdeg"])
+        heading = compass["heading_cdeg"] if self.compass.visits and compass["state"] in (1, 2) else None
+        return Sensors(
+            distances=list(sonar["distances"]) if self.sonar.visits else [255] * 8,
+            sweep=sonar["sweep"],
+            left_contact=copro["left_contact"],
+            right_contact=copro["right_contact"],
+            motor_state=motor["state"],
+            motor_direction=motor["direction"],
+            move_seq=motor["move_seq"],
+            distance_mm=motor["distance_mm"],
+            stamp_ms=motor["stamp_ms"]
+            if self.motor.visits
+            else int((time.monotonic() - self.started) * 1000),
+            pose=pose,
+            heading_cdeg=heading,
+        )
+
+    def _cooperate(self) -> None:
+        """One turn of the seed's cooperative multitasking: pilot step, then navigator if free."""
+        nav, pilot = self.navigator, self.pilot
+        if nav is None or pilot is None:
+            return
+        outcome = pilot.step(self.sensors)
+        if outcome is not None:
+            self.last_outcome = outcome
+            self.abort_reason = outcome.reason
+        if pilot.busy:
+            return
+        moves = nav.plan(self.last_outcome, self.sensors, pilot.alert_lock)
+        for target, command, args in nav.commands:
+            self._send(target, command, **args)
+        nav.commands.clear()
+        self.last_outcome = None
+        if moves is None:
+            self.stop_explore(nav.note or "done", aborted=False)
+            return
+        pilot.start(moves, self.sensors)
+
+    # -- exploration control ---------------------------------------------------------------------
+    def start_explore(self, mode: int) -> None:
+        if mode == 1:
+            self.start(ExploreAvoid(self.layout), 1)
+        elif mode == 2:
+            self.start(ExploreLeftWall(self.layout), 2)
+        else:
+            log.warning("EXPLORE mode %d unknown (1 = avoid, 2 = left wall)", mode)
+
+    def start(self, navigator: Navigator, pair: int) -> None:
+        if self.pilot is not None and self.pilot.busy:
+            self.pilot.abort("USER")
+            self._drain_pilot()
+        self.navigator, self.pair, self.pilot = navigator, pair, self.pilots[pair]
+        self.last_outcome = None
+        self.finished = None
+        log.info("navigator %s started (pair %d)", type(navigator).__name__, pair)
+
+    def stop_explore(self, why: str, aborted: bool = True) -> None:
+        nav, pilot = self.navigator, self.pilot
+        if nav is None:
+            return
+        if pilot is not None and pilot.busy:
+            pilot.abort("USER")
+            self._drain_pilot()
+        self._send("copro", "FLUSH")  # vectors held back for merging go to the map now
+        self.finished = {
+            "navigator": type(nav).__name__,
+            "why": why,
+            "steps": nav.steps,
+            "state": NAV_NAMES.get(nav.state, nav.state),
+        }
+        if isinstance(nav, Calibrate):
+            self.finished["calibration"] = nav.result
+        self.history.append(self.finished)
+        self.abort_reason = REASON["USER"] if aborted else REASON["DONE"]
+        self.navigator = None
+        log.info("navigator stopped: %s", why)
+
+    def _drain_pilot(self, timeout: float = 5.0) -> None:
+        """Step the pilot until its abort finished (the motor stands still)."""
+        assert self.pilot is not None
+        deadline = time.monotonic() + timeout
+        while self.pilot.busy and time.monotonic() < deadline and not self.os.stopping:
+            self.os.wait_visit(0.2)
+            self._take_commands()
+            self.pilot.step(self._read_sensors())
+
+    # -- PC link ------------------------------------------------------------------------------------
+    def on_pc_request(self, verb: str, payload: dict[str, Any]) -> Any:
+        """Called on the PC link's thread: hand the request to the program's loop and wait."""
+        if verb == "state":
+            return self.state()
+        if verb not in ("explore", "stop", "calibrate", "clear_map", "get_map"):
+            raise UsageError(f"main takes explore, stop, calibrate, clear_map, get_map, state — not {verb!r}")
+        answer: queue.Queue[Any] = queue.Queue()
+        self.requests.put((verb, payload, answer))
+        timeout = float(payload.get("timeout", 60.0))
+        try:
+            result = answer.get(timeout=timeout)
+        except queue.Empty:
+            raise UsageError(f"main did not finish {verb!r} within {timeout:.0f} s") from None
+        if isinstance(result, Exception):
+            raise result
+        return result
+
+    def _take_requests(self) -> None:
+        while True:
+            try:
+                verb, payload, answer = self.requests.get_nowait()
+            except queue.Empty:
+                return
+            try:
+                answer.put(self._serve(verb, payload))
+            except Exception as exc:
+                answer.put(exc)
+
+    def _serve(self, verb: str, payload: dict[str, Any]) -> Any:
+        if verb == "explore":
+            mode = int(payload.get("mode", 2))
+            if mode not in (1, 2):
+                raise UsageError(f"explore mode must be 1 or 2, not {mode}")
+            self.start_explore(mode)
+            return self.state()
+        if verb == "stop":
+            self.stop_explore("stopped from the PC")
+            return self.state()
+        if verb == "calibrate":
+            self.start(Calibrate(self.layout), 1)
+            return self.state()
+        if verb == "clear_map":
+            self._send("map", "CLEAR_MAP")
+            return {"cleared": True}
+        return {"vectors": self._get_map(float(payload.get("timeout", 30.0)))}
+
+    def _get_map(self, timeout: float) -> list[list[int]]:
+        """GET_MAP to the map module; the answer arrives through this loop's inbox."""
+        self._send("copro", "FLUSH")  # vectors copro still holds back belong in the answer
+        self.collector.begin()
+        self._send("map", "GET_MAP")
+        deadline = time.monotonic() + timeout
+        last = -1
+        while not self.collector.done.is_set():
+            self.os.wait_visit(0.2)
+            self._take_commands()
+            received, _ = self.collector.progress()
+            if received != last:
+                last, deadline = received, time.monotonic() + timeout
+            if time.monotonic() > deadline or self.os.stopping:
+                raise UsageError(f"the map module did not answer GET_MAP within {timeout:.0f} s")
+        vectors = self.collector.wait(0) or []
+        return [list(v) for v in vectors]
+
+    # -- outputs ------------------------------------------------------------------------------------
+    def state(self) -> dict[str, Any]:
+        nav = self.navigator
+        pilot = self.pilot
+        return {
+            "navigator": NAV_NAMES.get(nav.state if nav else NAV["IDLE"]),
+            "mode": nav.mode if nav else 0,
+            "running": nav is not None,
+            "steps": nav.steps if nav else 0,
+            "abort_reason": REASON_NAMES.get(self.abort_reason),
+            "alert_lock": pilot.alert_lock if pilot else STOPPED,
+            "finished": self.finished,
+            "pose": list(self.sensors.pose) if self.sensors.pose else None,
+        }
+
+    def _publish(self) -> None:
+        nav, pilot = self.navigator, self.pilot
+        self.out.write(
+            navigator=nav.state if nav else NAV["IDLE"],
+            explore_mode=nav.mode if nav else 0,
+            abort_reason=self.abort_reason,
+            alert_lock=pilot.alert_lock if pilot else STOPPED,
+            steps_done=(nav.steps if nav else 0) & 0xFFFF,
+            stamp_ms=int((time.monotonic() - self.started) * 1000) & 0xFFFFFFFF,
+        )
+
+    def report(self) -> dict[str, Any]:
+        return {**self.state(), "history": self.history}
