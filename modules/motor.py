@@ -1,7 +1,271 @@
-"""The motor module's user program (placeholder until its real program lands)."""
+"""The motor module (seed §4.3.3): runs the drive commands on the two stepper motors.
 
-from modules.common.placeholder import PlaceholderProgram
+Commands (protocol.yaml, ``motor``): MOVE_FORWARD / MOVE_REVERSE (mm, speed %), TURN_LEFT /
+TURN_RIGHT (degrees, speed %), STOP, SET_GLOBAL_POSITION (x, y, angle), RECALC_GLIDE_FACTOR
+(target angle, error), SET_WHEEL_SPEEDS (left %, right %, ms). A finished move sends
+POSITION_REACHED (status DONE, or COLLISION when the bumper hit, STALLED, ABORTED when a new
+motion command or STOP replaced it) with ``move_seq`` = the sequence number of the command that
+started it, to the module that sent that command. SET_GLOBAL_POSITION and RECALC_GLIDE_FACTOR
+do not interrupt a move (the seed aborted on them, which made corrections while driving
+impossible). Bad arguments (speed 0 or above 100 %, an implausible glide correction) are
+refused with ERROR BAD_ARGUMENT to the sender: nothing moves.
+
+Steps are issued on the simulation clock in small batches through the hardware client; the
+dead-reckoned pose is computed from the steps issued (no encoders) and starts where the robot
+was put down. The data channel carries the pose, direction, speed, distance driven since the last
+move command, the cumulative left/right half-step counters and the time stamp of that sample.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import deque
+from dataclasses import dataclass
+
+from modules.common.odometry import (
+    DeadReckoning,
+    recalc_glide_factor,
+    step_rate_hz,
+    steps_for_angle,
+    steps_for_distance,
+)
+from modules.common.robot import DEFAULT_MOTOR_CURRENT_MA, MAX_SPEED_MM_S, STEP_MM
+from modules.common.units import cdeg_to_rad, pose_to_wire
+from tokenring.errors import ChannelError
+from tokenring.program import UserProgram
+
+log = logging.getLogger("tokenring.motor")
+
+STOPPED, FORWARD, REVERSE, TURN_LEFT, TURN_RIGHT = range(5)  # enum direction
+IDLE, MOVING, STALLED_STATE, COLLISION_STATE = range(4)  # enum motor_state
+DONE, ABORTED, STALLED, COLLISION = range(4)  # enum move_status
+BAD_ARGUMENT = 2  # enum error_code
+TICK_SIM_S = 0.02  # a batch of steps every 20 simulated ms ...
+TICK_MIN_REAL_S = 0.004  # ... but not more often than every 4 real ms
+IDLE_PUBLISH_SIM_S = 0.05  # the counters' sample rate while standing
 
 
-class Program(PlaceholderProgram):
+@dataclass
+class Move:
+    """A move in progress: signed step rates and totals per track."""
+
+    seq: int
+    commander: int
+    direction: int
+    speed_pct: int
+    total: tuple[int, int]  # |steps| per track
+    sign: tuple[int, int]
+    rate_hz: tuple[float, float]
+    start_ms: float
+    issued: tuple[int, int] = (0, 0)
+
+
+class Program(UserProgram):
     module = "motor"
+
+    def setup(self) -> None:
+        self.out = self.os.publish()
+        self.os.set_own_input_id()
+        self.clock = self.hw.clock
+        x, y, theta = self.hw.start_pose()
+        self.odometry = DeadReckoning(x, y, theta)
+        self.move: Move | None = None
+        self.move_seq = 0
+        self.state = IDLE
+        self.direction = STOPPED
+        self.speed_pct = 0
+        self.distance_mm = 0.0
+        self.steps = [0, 0]
+        self.current_ma = DEFAULT_MOTOR_CURRENT_MA
+        self.notices: deque[tuple[str, str, dict]] = deque()
+        self.stamp_ms = self.clock.now_ms()
+        self.moves = {"done": 0, "aborted": 0, "stalled": 0, "collision": 0}
+        self.refused = 0
+        self.last_move_ms = (0.0, 0.0)
+        self.tick_real = max(TICK_MIN_REAL_S, self.clock.to_real(TICK_SIM_S))
+        self._publish()
+
+    # -- the loop -------------------------------------------------------------------------------
+    def run(self) -> None:
+        idle_real = max(TICK_MIN_REAL_S, self.clock.to_real(IDLE_PUBLISH_SIM_S))
+        while self.running:
+            command = self.os.receive_command(timeout=self.tick_real if self.move else idle_real)
+            if command is not None:
+                self._handle(command)
+            if self.move is not None:
+                self._step()
+            else:
+                self.stamp_ms = self.clock.now_ms()
+            self._publish()
+            self._flush_notices()
+
+    def _publish(self) -> None:
+        self.out.write(
+            **pose_to_wire(self.odometry.x, self.odometry.y, self.odometry.theta),
+            direction=self.direction,
+            speed_pct=self.speed_pct,
+            distance_mm=round(self.distance_mm),
+            steps_left=self.steps[0],
+            steps_right=self.steps[1],
+            stamp_ms=int(self.stamp_ms) & 0xFFFFFFFF,
+            move_seq=self.move_seq,
+            state=self.state,
+            glide_cfactor=min(0xFFFF, round(self.odometry.glide * 100)),
+        )
+
+    # -- commands -------------------------------------------------------------------------------
+    def _handle(self, cmd) -> None:
+        name, args = cmd.name, cmd.args
+        if name in ("MOVE_FORWARD", "MOVE_REVERSE", "TURN_LEFT", "TURN_RIGHT", "SET_WHEEL_SPEEDS", "STOP"):
+            problem = self._check(name, args)
+            if problem:
+                self._refuse(cmd, problem)
+                return
+            if self.move is not None:
+                self._finish(ABORTED)
+            if name != "STOP":
+                self._start(cmd)
+            else:
+                self.state, self.direction, self.speed_pct = IDLE, STOPPED, 0
+        elif name == "SET_GLOBAL_POSITION":
+            self.odometry.set(
+                float(args["x_mm"]), float(args["y_mm"]), cdeg_to_rad(int(args["angle_cdeg"]) % 36000)
+            )
+        elif name == "RECALC_GLIDE_FACTOR":
+            try:
+                self.odometry.glide = recalc_glide_factor(
+                    self.odometry.glide, float(args["target_deg"]), float(args["error_cdeg"]) / 100.0
+                )
+                log.info("glide factor now %.3f half-steps per degree", self.odometry.glide)
+            except ValueError as exc:
+                self._refuse(cmd, str(exc))
+        else:
+            log.info("motor: ignoring %s from node %d", name, cmd.sender)
+
+    def _check(self, name: str, args: dict) -> str:
+        if (
+            name in ("MOVE_FORWARD", "MOVE_REVERSE", "TURN_LEFT", "TURN_RIGHT")
+            and not 1 <= args["speed_pct"] <= 100
+        ):
+            return f"speed {args['speed_pct']} % is outside 1..100 % (start-stop mode, no ramps)"
+        if name == "SET_WHEEL_SPEEDS" and not (
+            -100 <= args["left_pct"] <= 100 and -100 <= args["right_pct"] <= 100
+        ):
+            return "wheel speeds must be within -100..100 %"
+        return ""
+
+    def _refuse(self, cmd, problem: str) -> None:
+        self.refused += 1
+        log.warning("motor: refused %s %s from node %d: %s", cmd.name, cmd.args, cmd.sender, problem)
+        sender = self.os.protocol.by_id.get(cmd.sender)
+        if sender is not None:
+            self.notices.append((sender.name, "ERROR", {"error": BAD_ARGUMENT, "about": cmd.code}))
+
+    def _start(self, cmd) -> None:
+        name, args = cmd.name, cmd.args
+        now = self.clock.now_ms()
+        if name == "SET_WHEEL_SPEEDS":
+            left, right = int(args["left_pct"]), int(args["right_pct"])
+            seconds = args["duration_ms"] / 1000.0
+            rates = (step_rate_hz(abs(left)), step_rate_hz(abs(right)))
+            totals = (math.floor(rates[0] * seconds), math.floor(rates[1] * seconds))
+            signs = (1 if left >= 0 else -1, 1 if right >= 0 else -1)
+            if left + right != 0:
+                direction = FORWARD if left + right > 0 else REVERSE
+            else:
+                direction = TURN_LEFT if right > left else TURN_RIGHT if left > right else STOPPED
+            speed = max(abs(left), abs(right))
+        else:
+            speed = int(args["speed_pct"])
+            if name in ("MOVE_FORWARD", "MOVE_REVERSE"):
+                n = steps_for_distance(args["distance_mm"])
+                signs = (1, 1) if name == "MOVE_FORWARD" else (-1, -1)
+                direction = FORWARD if name == "MOVE_FORWARD" else REVERSE
+            else:
+                n = steps_for_angle(args["angle_deg"], self.odometry.glide)
+                signs = (-1, 1) if name == "TURN_LEFT" else (1, -1)
+                direction = TURN_LEFT if name == "TURN_LEFT" else TURN_RIGHT
+            totals = (n, n)
+            rates = (step_rate_hz(speed), step_rate_hz(speed))
+        self.move_seq = cmd.seq
+        self.distance_mm = 0.0
+        self.move = Move(cmd.seq, cmd.sender, direction, speed, totals, signs, rates, now)
+        self.state, self.direction, self.speed_pct = MOVING, direction, speed
+        if totals == (0, 0):
+            self._finish(DONE)
+
+    # -- stepping -------------------------------------------------------------------------------
+    def _step(self) -> None:
+        move = self.move
+        assert move is not None
+        now = self.clock.now_ms()
+        elapsed = (now - move.start_ms) / 1000.0
+        due = tuple(min(t, math.floor(elapsed * r)) for t, r in zip(move.total, move.rate_hz, strict=True))
+        new = (due[0] - move.issued[0], due[1] - move.issued[1])
+        if new != (0, 0):
+            left, right = new[0] * move.sign[0], new[1] * move.sign[1]
+            result = self.hw.steps(left, right, max(move.rate_hz), move.seq, self.current_ma)
+            move.issued = due
+            self.steps[0] += left
+            self.steps[1] += right
+            self.odometry.apply(left, right)
+            self.distance_mm += (abs(left) + abs(right)) / 2 * STEP_MM
+            self.stamp_ms = min(
+                now,
+                move.start_ms
+                + 1000.0 * max(t / r for t, r in zip(move.total, move.rate_hz, strict=True) if r > 0),
+            )
+            if not result["power"]:
+                self._finish(ABORTED)
+                return
+            if result["blocked"]:
+                self._finish(COLLISION)
+                return
+            if result["stalled"]:
+                self._finish(STALLED)
+                return
+        else:
+            self.stamp_ms = now
+        if move.issued == move.total:
+            self._finish(DONE)
+
+    def _finish(self, status: int) -> None:
+        move = self.move
+        assert move is not None
+        self.move = None
+        self.last_move_ms = (move.start_ms, self.stamp_ms)
+        self.state = {DONE: IDLE, ABORTED: IDLE, STALLED: STALLED_STATE, COLLISION: COLLISION_STATE}[status]
+        self.direction, self.speed_pct = STOPPED, 0
+        self.moves[("done", "aborted", "stalled", "collision")[status]] += 1
+        commander = self.os.protocol.by_id.get(move.commander)
+        if commander is not None and commander.name != self.os.name:
+            self.notices.append(
+                (commander.name, "POSITION_REACHED", {"status": status, "move_seq": move.seq})
+            )
+
+    def _flush_notices(self) -> None:
+        """Send queued replies one at a time per target (one inbox slot each; the seed: no retry)."""
+        waiting = []
+        while self.notices:
+            target, name, args = self.notices.popleft()
+            if any(t == target for t, _, _ in waiting):
+                waiting.append((target, name, args))
+                continue
+            try:
+                self.os.send_command(target, name, **args)
+            except ChannelError:
+                waiting.append((target, name, args))
+        self.notices.extend(waiting)
+
+    def report(self) -> dict:
+        return {
+            "pose": [self.odometry.x, self.odometry.y, self.odometry.theta],
+            "glide_factor": self.odometry.glide,
+            "state": self.state,
+            "moves": dict(self.moves),
+            "refused": self.refused,
+            "steps": list(self.steps),
+            "last_move_ms": list(self.last_move_ms),
+            "max_speed_mm_s": MAX_SPEED_MM_S,
+        }

@@ -40,9 +40,27 @@ class HardwareClient:
         self._clock: SimClock | None = None
         self._clock_lock = threading.Lock()
         self.requests = 0
+        self.simulator: Any = None
+
+    @classmethod
+    def local(cls, simulator: Any) -> HardwareClient:
+        """A client wired straight to an in-process :class:`~tokenring.world.sim.Simulator`
+        (fast tests): same requests, same answers, no Zenoh."""
+        client = cls(None, "local")  # type: ignore[arg-type]
+        client.simulator = simulator
+        client._clock = simulator.clock
+        return client
 
     def request(self, what: str, payload: dict[str, Any] | None = None, timeout: float | None = None) -> Any:
         """One hardware request (``what`` below ``hw/``); raises :class:`HardwareError`."""
+        if self.simulator is not None:
+            from tokenring.world.sim import HardwareRequestError
+
+            self.requests += 1
+            try:
+                return msgpack.unpackb(msgpack.packb(self.simulator.handle(what, payload or {})))
+            except HardwareRequestError as exc:
+                raise HardwareError(f"hw/{what}: {exc}") from None
         key = hw_key(self.ring, what)
         try:
             replies = self.session.get(
@@ -92,6 +110,11 @@ class MotorHardware(HardwareClient):
     """The two stepper motors' power stage: batches of half-steps out, what happened back."""
 
     module = "motor"
+
+    def start_pose(self) -> tuple[float, float, float]:
+        """Where the robot was put down at power-on: (x mm, y mm, theta rad CCW)."""
+        start = self.request("motor/start")
+        return float(start["x_mm"]), float(start["y_mm"]), float(start["theta_rad"])
 
     def steps(self, left: int, right: int, rate_hz: float, move: int, current_ma: int) -> dict[str, Any]:
         """Report half-steps made since the last batch (signed per track, + = forward)."""

@@ -10,6 +10,8 @@ key                             request → result
 ``hw/motor/steps``              ``{left, right, rate_hz, move, current_ma}`` half-steps both motors
                                 made since the last batch (signed, + = that track forward) →
                                 ``{moved_mm, turned_rad, blocked, stalled, power, stamp_ms}``
+``hw/motor/start``              ``{}`` → ``{x_mm, y_mm, theta_rad}``: where the robot was put down at
+                                power-on (the world's start pose; the motor's dead reckoning starts there)
 ``hw/sonar/ping``               ``{sensors: [i...], ping_samples, slot_ms}`` → ``{envelopes:
                                 [510 bytes...], stamps_ms: [...], sample_us: 20}``
 ``hw/compass/measure``          ``{settings: [{flip: ±1, comp_ut: [c0, c1]}...], samples}`` →
@@ -19,7 +21,13 @@ key                             request → result
                                 ``full_scale``, ``relay``, ``stamp_ms``
 ``hw/charger/relay``            ``{on: bool, reason}`` → ``{relay}``; off cuts all hardware
 ``world/truth``                 published ~10× per simulated second (at most 50 Hz real):
-                                ground truth, see :meth:`Simulator.truth`; logs and scoring only
+                                ground truth for logs and scoring only — ``stamp_ms`` (simulated
+                                ms, int), ``t_ms`` (float), ``x_mm``, ``y_mm``, ``theta_rad`` (CCW
+                                from +X; also as ``x``, ``y``, ``theta``), ``heading_rad`` (from
+                                north, clockwise), ``moving``, ``collisions``, ``stalls``, ``steps``
+                                [left, right] received, ``glide_factor`` (this turn's true one),
+                                ``relay``, ``electronics`` and ``motors`` ``{v, soc, a}``,
+                                ``deep_discharge``, ``world``
 ``world/state``                 queryable: the same truth, now
 ``world/info``                  queryable: the room (:meth:`World.to_dict`), seed and speed
 ``world/control/pose``          ``{x_mm, y_mm, theta_rad}`` put the robot there (tests, tools)

@@ -160,6 +160,12 @@ class Simulator:
             )
             return reply
 
+    def motor_start(self, _: dict[str, Any] | None = None) -> dict[str, Any]:
+        """``hw/motor/start``: where the operator placed the robot at power-on (the world file's start
+        pose, the robot's marked start spot) — the only pose a module is ever given."""
+        start = self.world.start
+        return {"x_mm": start.x, "y_mm": start.y, "theta_rad": start.theta}
+
     def sonar_ping(self, request: dict[str, Any]) -> dict[str, Any]:
         """``hw/sonar/ping``: ping the listed pairs one after another, ``slot_ms`` apart."""
         sensors = request.get("sensors", [0])
@@ -254,6 +260,7 @@ class Simulator:
     HANDLERS: ClassVar[dict[str, str]] = {
         "clock": "clock_info",
         "motor/steps": "motor_steps",
+        "motor/start": "motor_start",
         "sonar/ping": "sonar_ping",
         "compass/measure": "compass_measure",
         "charger/adc": "charger_adc",
@@ -274,10 +281,14 @@ class Simulator:
             now = self.advance()
             pose = self.robot.pose
             return {
+                "stamp_ms": int(now),
                 "t_ms": now,
                 "x_mm": pose.x,
                 "y_mm": pose.y,
                 "theta_rad": pose.theta,
+                "x": pose.x,
+                "y": pose.y,
+                "theta": pose.theta,
                 "heading_rad": self.world.heading(pose.theta),
                 "moving": self.motors_running(now),
                 "collisions": self.robot.collisions,
