@@ -47,7 +47,7 @@ class EkfParams:
     # random walks of the optional states
     glide_walk_per_deg: float = 0.004
     compass_offset_walk_deg_per_s: float = 0.05
-    step_scale_walk_per_m: float = 0.0005
+    step_scale_walk_per_m: float = 0.003
     # initial uncertainty
     initial_sigma_mm: float = 20.0
     initial_sigma_deg: float = 2.0
@@ -209,7 +209,7 @@ class PoseEKF:
             Q[i, i] += math.radians(p.compass_offset_walk_deg_per_s) ** 2 * max(dt_s, 0.0)
         if "step_scale" in self.index:
             i = self.index["step_scale"]
-            Q[i, i] += p.step_scale_walk_per_m**2 * abs(s) / 1000.0
+            Q[i, i] += p.step_scale_walk_per_m**2 * abs(s) / 1000.0  # per √m: per-move length noise
         return new, A, Q
 
     def predict(self, dl: float, dr: float, dt_s: float = 0.0) -> None:

@@ -110,51 +110,22 @@ class KnownWall:
         return hi >= -margin and lo <= length + margin
 
 
-def load_wall_file(path: str | Path) -> list[KnownWall]:
-    """Read a wall file: the seed's 10-field rows (table B.3) or ``x1 y1 x2 y2`` rows, in mm.
+def load_known_walls(name_or_path: str | Path) -> list[KnownWall]:
+    """The known walls of a room: a bundled world name, a YAML world file or the seed's wall file.
 
-    Seed rows: centre x, centre y, direction (deg), length, visibility x0 x1 y0 y1, d, α (deg).
-    ``#`` starts a comment. Errors name the file and line (exit code 2 on the command line).
+    Reads through :func:`tokenring.world.load_world`, so every format the simulator accepts works
+    here too; the seed wall file's visibility boxes (table B.3) are kept. Errors name the file
+    and line (exit code 2 on the command line).
     """
-    file = Path(path)
-    try:
-        text = file.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise UsageError(f"{file}: no such wall file") from None
-    except OSError as exc:
-        raise UsageError(f"{file}: cannot read the wall file: {exc.strerror}") from None
-    walls: list[KnownWall] = []
-    for number, raw in enumerate(text.splitlines(), 1):
-        line = raw.split("#", 1)[0].strip()
-        if not line:
-            continue
-        fields = line.split()
-        try:
-            values = [float(v) for v in fields]
-        except ValueError:
-            raise UsageError(f"{file}:{number}: wall rows are numbers, got {line!r}") from None
-        if len(values) == 4:
-            walls.append(KnownWall.segment(*values, index=len(walls)))
-        elif len(values) == 10:
-            cx, cy, direction, length, x0, x1, y0, y1, _d, _alpha = values
-            if length <= 0:
-                raise UsageError(f"{file}:{number}: wall length must be positive, got {length:g}")
-            ux, uy = math.cos(math.radians(direction)), math.sin(math.radians(direction))
-            wall = KnownWall.segment(
-                cx - ux * length / 2, cy - uy * length / 2, cx + ux * length / 2, cy + uy * length / 2
-            )
-            walls.append(
-                KnownWall(
-                    wall.x1, wall.y1, wall.x2, wall.y2, wall.alpha, wall.d, len(walls), (x0, x1, y0, y1)
-                )
-            )
-        else:
-            raise UsageError(
-                f"{file}:{number}: a wall row has 10 fields (seed table B.3) or 4 (x1 y1 x2 y2), "
-                f"got {len(values)}"
-            )
-    if not walls:
-        raise UsageError(f"{file}: no walls in the wall file")
+    from tokenring.world import load_world
+
+    world = load_world(name_or_path)
+    if not world.walls:
+        raise UsageError(f"{name_or_path}: the room has no walls to localise against")
+    walls = []
+    for i, w in enumerate(world.walls):
+        wall = KnownWall.segment(w.x1, w.y1, w.x2, w.y2, index=i)
+        walls.append(KnownWall(wall.x1, wall.y1, wall.x2, wall.y2, wall.alpha, wall.d, i, w.visible))
     return walls
 
 
@@ -191,6 +162,9 @@ class DetectorParams:
     max_sigma_d_pairs_mm: float = 15.0
     max_sigma_alpha_pairs_deg: float = 6.0
     noise_floor_mm: float = 5.0
+    max_turn_deg: float = 0.5  # more rotation than this between two sonar samples: not driving past
+    min_sigma_d_mm: float = 6.0  # the least uncertainty a fitted line may claim (beam, mounting)
+    min_sigma_alpha_deg: float = 0.7
 
 
 class WallDetector:
@@ -206,6 +180,7 @@ class WallDetector:
             tuple[int, int], deque[tuple[float, float, tuple[float, float], tuple[float, float]]]
         ] = {pair: deque(maxlen=params.history) for pair in params.pairs}
         self.fitted = 0
+        self.last_heading: float | None = None
 
     def point(self, index: int, distance: float, pose: tuple[float, float, float]) -> tuple[float, float]:
         mount = self.mounts[index]
@@ -215,6 +190,15 @@ class WallDetector:
     def add(self, stamp_ms: int, pose: tuple[float, float, float], distances: list[int | None]) -> None:
         """One sonar sample (distances in mm, None = no contact) taken at odometry-frame ``pose``."""
         limit = self.params.max_distance_mm
+        turning = (
+            self.last_heading is not None
+            and abs(math.degrees(wrap(pose[2] - self.last_heading))) > self.params.max_turn_deg
+        )
+        self.last_heading = pose[2]
+        if turning:  # a wall is fitted while driving past it, never while turning on the spot
+            for history in (*self.points.values(), *self.pair_lines.values()):
+                history.clear()
+            return
         usable = {
             i: d for i, d in enumerate(distances) if d is not None and 0 < d <= limit and i < len(self.mounts)
         }
@@ -268,7 +252,7 @@ class WallDetector:
             n += 1
         if best is None:
             return None
-        return _report("side", best, pose, max(best["sigma"], p.noise_floor_mm))
+        return _report("side", best, pose, max(best["sigma"], p.noise_floor_mm), p)
 
     def _fit_pairs(self, lines: list[tuple], pose: tuple[float, float, float]) -> dict | None:
         p = self.params
@@ -292,9 +276,8 @@ class WallDetector:
         if best is None:
             return None
         alpha, d = line_in_frame(best["alpha"], best["d"], pose)
-        floor_a = math.radians(0.5)
-        var_a = max(best["sd_a"], floor_a) ** 2 / best["n"]
-        var_d = max(best["sd_d"], p.noise_floor_mm) ** 2 / best["n"]
+        var_a = max(best["sd_a"] ** 2 / best["n"], math.radians(p.min_sigma_alpha_deg) ** 2)
+        var_d = max(max(best["sd_d"], p.noise_floor_mm) ** 2 / best["n"], p.min_sigma_d_mm**2)
         p1, p2 = _extent(best["points"], best["alpha"], best["d"], pose)
         return {
             "kind": "pair",
@@ -339,13 +322,16 @@ def _orthogonal_fit(points: list[tuple[float, float]]) -> dict | None:
     }
 
 
-def _report(kind: str, fit: dict, pose: tuple[float, float, float], sigma: float) -> dict[str, Any]:
+def _report(
+    kind: str, fit: dict, pose: tuple[float, float, float], sigma: float, p: DetectorParams
+) -> dict[str, Any]:
     """A fitted line in the frame of ``pose`` with its covariance (var α, cov αd, var d)."""
     alpha, d = line_in_frame(fit["alpha"], fit["d"], pose)
     cx, cy = to_frame(fit["centroid"], pose)
-    var_a = sigma**2 / fit["stt"]
+    var_a = max(sigma**2 / fit["stt"], math.radians(p.min_sigma_alpha_deg) ** 2)
     tangential = -math.sin(alpha) * cx + math.cos(alpha) * cy  # the centroid's position along the line
-    cov = [var_a, var_a * tangential, var_a * tangential**2 + sigma**2 / fit["n"]]
+    var_d = max(sigma**2 / fit["n"], p.min_sigma_d_mm**2)
+    cov = [var_a, var_a * tangential, var_a * tangential**2 + var_d]
     p1, p2 = _extent(fit["points"], fit["alpha"], fit["d"], pose)
     return {"kind": kind, "alpha": alpha, "d": d, "cov": cov, "n": fit["n"], "p1": p1, "p2": p2}
 

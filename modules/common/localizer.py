@@ -1,0 +1,692 @@
+"""The Darmstadt program on the ring: synchronisation, EKF, position store and logs.
+
+Two layers:
+
+- :class:`LocalizationCore` — no ring: raw samples in (:meth:`~LocalizationCore.feed`),
+  synchronised data, filter, positions and log records out. ``tokenring replay`` runs exactly
+  this code on a recorded log, so offline results equal the online ones bit for bit.
+- :class:`Localizer` — the on-ring component a module program hosts (copro in this robot):
+
+  .. code-block:: python
+
+     class Program(UserProgram):
+         def setup(self):
+             self.loc = Localizer(self.os)          # config/localization.yaml by default
+             self.loc.setup()                       # subscribes motor/compass/sonar/charger.data
+             self.data = self.os.publish()
+         def run(self):
+             while self.running:
+                 self.os.wait_visit(0.05)
+                 self.loc.step()                    # new samples -> shadow buffer -> sync + EKF
+                 self.data.write(**self.loc.copro_fields())   # pose_* fields of copro.data
+         def teardown(self):
+             self.loc.close()                       # closes the logs
+
+  :meth:`Localizer.pose` returns :class:`LocalizedPose`: ``x_mm``, ``y_mm``, ``heading`` (rad,
+  counter-clockwise from +X), validity flags per coordinate and the source (``ekf``,
+  ``odometry`` or ``none``). In exploration mode the host hands over the map's walls with
+  :meth:`Localizer.add_map_wall`; :meth:`Localizer.set_pose` re-initialises the pose (what
+  ``SET_GLOBAL_POSITION`` does to the motor).
+
+Samples are stamped by the sensors (``stamp_ms`` of each data channel); a new sample is seen when
+a channel's stamp (or sequence number) changes between two token visits. The ground truth, when
+a world simulator runs, arrives over Zenoh (``world/truth``) from a second thread — a concurrent
+writer of the shadow buffer — and is logged as the seed's LOPS reference, never fused.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from modules.common.ekf import EkfParams, PoseEKF
+from modules.common.locconfig import load_config
+from modules.common.sync import (
+    SENSORS,
+    CompassSync,
+    NewestSync,
+    OdometryParams,
+    OdometrySync,
+    OdometryTrack,
+    Sample,
+    SampleTiming,
+    ShadowBuffer,
+    SonarSync,
+    SyncResult,
+    Trigger,
+    advance,
+    step_motion,
+    sync_stamp,
+)
+from modules.common.walls import (
+    DetectorParams,
+    KnownWall,
+    SonarMount,
+    WallDetector,
+    from_frame,
+    load_known_walls,
+    wrap,
+)
+from tokenring.logs import SENSOR_SOURCE, DataLog, ErrorLog
+
+SOURCE_CODES = {"none": 0, "odometry": 1, "ekf": 2}
+#: data channels read for each sensor, and the field that numbers their samples
+CHANNELS = {
+    "odometry": "motor.data",
+    "compass": "compass.data",
+    "sonar": "sonar.data",
+    "battery": "charger.data",
+}
+SEQ_FIELDS = {"compass": "sample", "sonar": "sweep"}
+VALUE_FIELDS = {
+    "odometry": ("steps_left", "steps_right", "x_mm", "y_mm", "angle_cdeg", "state"),
+    "compass": ("heading_cdeg", "state"),
+    "sonar": ("distances",),
+    "battery": ("electronics_mv", "motors_mv", "remaining_min", "state"),
+}
+
+
+@dataclass(frozen=True)
+class LocalizedPose:
+    """The pose the Localizer offers: mm, radians counter-clockwise, validity per coordinate."""
+
+    x_mm: float
+    y_mm: float
+    heading: float
+    valid_x: bool
+    valid_y: bool
+    valid_heading: bool
+    source: str
+    stamp_ms: int
+
+    @property
+    def valid_bits(self) -> int:
+        """The ``pose_valid`` byte of copro.data: bit 0 x, bit 1 y, bit 2 heading."""
+        return int(self.valid_x) | int(self.valid_y) << 1 | int(self.valid_heading) << 2
+
+
+def sonar_mounts(config: dict[str, Any]) -> list[SonarMount]:
+    """The sonar geometry: modules/common/robot.py, or the config's list of [x, y, angle_deg]."""
+    spec = config["robot"]["sonars"]
+    if spec == "robot":
+        from modules.common.robot import SONAR_MOUNTS
+
+        return [SonarMount(m.x, m.y, m.angle) for m in SONAR_MOUNTS]
+    return [SonarMount(float(x), float(y), math.radians(a)) for x, y, a in spec]
+
+
+def odometry_params(config: dict[str, Any]) -> OdometryParams:
+    robot = config["robot"]
+    return OdometryParams(robot["mm_per_step"], robot["steps_per_degree"], config["filter"]["odometry_model"])
+
+
+def ekf_params(config: dict[str, Any]) -> EkfParams:
+    f = config["filter"]
+    noise, initial = f["noise"], f["initial"]
+    return EkfParams(
+        odometry=odometry_params(config),
+        estimate=tuple(f["estimate"]),
+        distance_noise_rel=noise["distance_rel"],
+        rotation_noise_rel=noise["rotation_rel"],
+        rotation_noise_rad_per_mm=noise["rotation_rad_per_mm"],
+        glide_walk_per_deg=noise["glide_walk_per_deg"],
+        compass_offset_walk_deg_per_s=noise["compass_offset_walk_deg_per_s"],
+        step_scale_walk_per_m=noise["step_scale_walk_per_m"],
+        initial_sigma_mm=initial["sigma_mm"],
+        initial_sigma_deg=initial["sigma_deg"],
+        initial_glide_sigma=initial["glide_sigma"],
+        initial_compass_offset_sigma_deg=initial["compass_offset_sigma_deg"],
+        initial_step_scale_sigma=initial["step_scale_sigma"],
+        compass_sigma_deg=f["compass"]["sigma_deg"],
+        gate_probability=f["gate_probability"],
+        valid_sigma_mm=f["valid_sigma_mm"],
+        valid_sigma_deg=f["valid_sigma_deg"],
+    )
+
+
+def detector_params(config: dict[str, Any]) -> DetectorParams:
+    w = config["walls"]
+    return DetectorParams(
+        history=w["history"],
+        max_distance_mm=w["max_distance_mm"],
+        side_sensors=tuple(w["side_sensors"]),
+        pairs=tuple(tuple(p) for p in w["pairs"]),
+        min_points_side=w["min_points_side"],
+        min_span_side_mm=w["min_span_side_mm"],
+        max_sigma_side_mm=w["max_sigma_side_mm"],
+        min_points_pairs=w["min_points_pairs"],
+        max_sigma_d_pairs_mm=w["max_sigma_d_pairs_mm"],
+        max_sigma_alpha_pairs_deg=w["max_sigma_alpha_pairs_deg"],
+        noise_floor_mm=w["noise_floor_mm"],
+        max_turn_deg=w["max_turn_deg"],
+        min_sigma_d_mm=w["min_sigma_d_mm"],
+        min_sigma_alpha_deg=w["min_sigma_alpha_deg"],
+    )
+
+
+def start_pose_of(config: dict[str, Any]) -> tuple[float, float, float] | None:
+    """The initial pose the config names (None: wait for the motor's first pose)."""
+    spec = config["filter"]["initial_pose"]
+    if isinstance(spec, dict):
+        return float(spec["x_mm"]), float(spec["y_mm"]), math.radians(spec["heading_deg"])
+    if spec == "world":
+        from tokenring.world import load_world
+
+        start = load_world(config["walls"]["file"]).start
+        return float(start.x), float(start.y), float(start.theta)
+    return None
+
+
+class LocalizationCore:
+    """Samples in; synchronised data, EKF, positions and log records out. No ring, no clock.
+
+    Everything it computes depends only on the samples fed, the order they were fed in, the
+    buffer generation each went into and the events (pose set, map walls) — all of which the
+    data log records, so :mod:`tokenring.replay` can run it again to the same bits.
+    """
+
+    def __init__(
+        self,
+        config: dict[str, Any],
+        *,
+        data_log: DataLog | None = None,
+        error_log: ErrorLog | None = None,
+        known_walls: list[KnownWall] | None = None,
+        start_pose: tuple[float, float, float] | None = None,
+    ) -> None:
+        self.config = config
+        self.data_log = data_log
+        self.error_log = error_log
+        self.sensors = {name: config["sensors"][name] for name in SENSORS if config["sensors"][name]["use"]}
+        trig = config["sync"]["trigger"]
+        self.trigger = (
+            Trigger(sensor=None, rounds=trig["rounds"])
+            if trig["rounds"] > 0
+            else Trigger(trig["sensor"], trig["count"])
+        )
+        self.buffer = ShadowBuffer()
+        self.odometry = odometry_params(config)
+        self.track = OdometryTrack(self.odometry)
+        walls_mode = config["walls"]["mode"]
+        self.detector = (
+            WallDetector(sonar_mounts(config), detector_params(config))
+            if walls_mode != "off" and "sonar" in self.sensors
+            else None
+        )
+        self.synchronisers: dict[str, Any] = {
+            "odometry": OdometrySync(self.track),
+            "compass": CompassSync(
+                self.track, config["filter"]["compass"]["mode"], config["filter"]["compass"]["north_deg"]
+            ),
+            "sonar": SonarSync(self.track, self.detector),
+            "battery": NewestSync("battery"),
+            "truth": NewestSync("truth"),
+        }
+        self.timing = {
+            name: SampleTiming(name, float(config["sensors"][name]["period_ms"]) or None) for name in SENSORS
+        }
+        if walls_mode == "darmstadt":
+            self.known_walls = (
+                known_walls if known_walls is not None else load_known_walls(config["walls"]["file"])
+            )
+        else:
+            self.known_walls = list(known_walls or [])
+        self.ekf_params = ekf_params(config)
+        self.ekf: PoseEKF | None = None
+        self.dead_reckoning: tuple[float, float, float] | None = None
+        if start_pose is None:
+            start_pose = start_pose_of(config)
+        if start_pose is not None:
+            self._initialise(start_pose)
+        self.positions: dict[str, dict[str, Any]] = {}
+        self.last_sync_ms: int | None = None
+        self.syncs = 0
+        self.walls_unassociated = 0
+        self.walls_associated = 0
+        self._feed_lock = threading.Lock()
+        self._fed = 0
+        self._events: list[tuple[int, str, dict[str, Any]]] = []
+        self._events_lock = threading.Lock()
+        self.message("I", 0, f"localisation started: sensors {', '.join(self.sensors)}; walls {walls_mode}")
+
+    # ---------------------------------------------------------------------------------------
+    # input
+
+    def feed(self, sample: Sample) -> int:
+        """File a raw sample in the shadow buffer (any thread); logs it; returns its generation."""
+        if sample.sensor not in self.sensors:
+            return self.buffer.generation
+        with self._feed_lock:
+            number = self._fed
+            self._fed += 1
+            generation = self.buffer.write(sample)
+            if self.data_log is not None and self.sensors[sample.sensor]["log_raw"]:
+                payload: dict[str, Any] = {"gen": generation, "n": number, "v": sample.values}
+                if sample.seq is not None:
+                    payload["seq"] = sample.seq
+                self.data_log.write(sample.stamp_ms, SENSOR_SOURCE[sample.sensor], "R", payload)
+        return generation
+
+    def event(self, kind: str, **payload: Any) -> None:
+        """Queue an event (``set_pose``, ``map_wall``) for the next synchronisation; logged."""
+        self.queue_event(self.buffer.generation, kind, payload)
+
+    def queue_event(self, generation: int, kind: str, payload: dict[str, Any]) -> None:
+        """File an event for the synchronisation of ``generation`` (replay gives the logged one)."""
+        with self._events_lock:
+            self._events.append((generation, kind, payload))
+        if self.data_log is not None:
+            stamp = self.last_sync_ms or 0
+            source, letter = ("W", "W") if kind == "map_wall" else ("S", "E")
+            self.data_log.write(stamp, source, letter, {"gen": generation, "event": kind, **payload})
+
+    def message(self, cls: str, stamp_ms: int, text: str) -> None:
+        if self.error_log is not None:
+            self.error_log.message(cls, stamp_ms, text)
+
+    # ---------------------------------------------------------------------------------------
+    # synchronisation
+
+    def maybe_sync(self, counter: int | None = None) -> SyncResult | None:
+        """Synchronise if the trigger says so (``counter``: the token's round counter)."""
+        if not self.config["sync"]["enabled"] or not self.trigger.due(self.buffer, counter):
+            return None
+        return self.synchronise()
+
+    def synchronise(self) -> SyncResult:
+        """Swap the shadow buffer and process the half just closed."""
+        generation, half = self.buffer.swap()
+        return self.synchronise_half(generation, half)
+
+    def synchronise_half(self, generation: int, half: dict[str, list[Sample]]) -> SyncResult:
+        """Run every synchroniser on one buffer half, then the filter (replay calls this too)."""
+        trigger_sensor = self.trigger.sensor
+        stamp = sync_stamp(half, trigger_sensor, self.last_sync_ms or 0)
+        data: dict[str, dict[str, Any]] = {}
+        lost: list[str] = []
+        for name in SENSORS:
+            if name not in self.sensors:
+                continue
+            samples = half.get(name, [])
+            timing = self.timing[name]
+            missed, late = timing.missed, timing.late
+            for sample in samples:
+                timing.observe(sample, self.last_sync_ms)
+            if timing.missed > missed:
+                lost.append(f"{name}: {timing.missed - missed} samples missed")
+            if timing.late > late:
+                self.message(
+                    "W", stamp, f"{name}: {timing.late - late} late samples (stamped before the last sync)"
+                )
+            result = self.synchronisers[name].synchronise(samples, stamp)
+            if name == "odometry" and samples and "x_mm" in samples[-1].values:
+                v = samples[-1].values
+                result["motor"] = [v["x_mm"], v["y_mm"], v["angle_cdeg"]]
+            if result is not None:
+                data[name] = result
+        if lost:
+            self.message("E", stamp, "; ".join(lost))
+        if self.data_log is not None:
+            for name, record in data.items():
+                if self.sensors[name]["log_sync"]:
+                    self.data_log.write(stamp, SENSOR_SOURCE[name], "C", {"gen": generation, **record})
+        counts = {name: len(half.get(name, [])) for name in self.sensors}
+        self.process_synchronised(generation, stamp, data, counts)
+        return SyncResult(generation, stamp, data)
+
+    # ---------------------------------------------------------------------------------------
+    # filter and positions
+
+    def _initialise(self, pose: tuple[float, float, float]) -> None:
+        self.dead_reckoning = pose
+        if self.config["filter"]["enabled"]:
+            self.ekf = PoseEKF(self.ekf_params, pose)
+
+    def _apply_events(self, generation: int, stamp: int) -> None:
+        with self._events_lock:
+            due = [e for e in self._events if e[0] <= generation]
+            self._events = [e for e in self._events if e[0] > generation]
+        for _, kind, payload in due:
+            if kind == "set_pose":
+                pose = (payload["x"], payload["y"], payload["psi"])
+                self.dead_reckoning = pose
+                if self.ekf is None and self.config["filter"]["enabled"]:
+                    self.ekf = PoseEKF(self.ekf_params, pose)
+                elif self.ekf is not None:
+                    self.ekf.set_pose(pose, payload.get("sigma_mm", 10.0), payload.get("sigma_deg", 1.0))
+                self.message(
+                    "I", stamp, f"pose set to {pose[0]:.0f} {pose[1]:.0f} {math.degrees(pose[2]):.1f}°"
+                )
+            elif kind == "map_wall":
+                self.known_walls.append(
+                    KnownWall.segment(
+                        payload["x1"], payload["y1"], payload["x2"], payload["y2"], len(self.known_walls)
+                    )
+                )
+
+    def process_synchronised(
+        self,
+        generation: int,
+        stamp: int,
+        data: dict[str, dict[str, Any]],
+        counts: dict[str, int] | None = None,
+    ) -> None:
+        """The filter step on one synchronised record (online, and replay from synchronised data)."""
+        self._apply_events(generation, stamp)
+        dt_s = (stamp - self.last_sync_ms) / 1000.0 if self.last_sync_ms is not None else 0.0
+        odo = data.get("odometry")
+        if self.dead_reckoning is None and odo is not None and "motor" in odo:
+            x, y, cdeg = odo["motor"]
+            self._initialise((float(x), float(y), wrap(-math.radians(cdeg / 100.0))))
+        use = {name: s["filter"] for name, s in self.sensors.items()}
+        if odo is not None and self.dead_reckoning is not None:
+            s, omega = step_motion(odo["dl"], odo["dr"], self.odometry)
+            x, y, psi = advance(self.dead_reckoning, s, omega)
+            self.dead_reckoning = (x, y, wrap(psi))
+        wall_results: list[list[int]] = []
+        if self.ekf is not None:
+            if odo is not None and use.get("odometry"):
+                self.ekf.predict(odo["dl"], odo["dr"], dt_s)
+            compass = data.get("compass")
+            if (
+                compass is not None
+                and use.get("compass")
+                and not self.ekf.correct_heading(compass["heading"])
+            ):
+                self.message("W", stamp, f"compass rejected by the gate (NIS {self.ekf.last_nis:.1f})")
+            sonar = data.get("sonar")
+            if sonar is not None and use.get("sonar"):
+                for wall in sonar.get("walls", []):
+                    wall_results.append(self._correct_wall(wall, stamp))
+        self._store_positions(stamp, data, wall_results)
+        self.last_sync_ms = stamp
+        self.syncs += 1
+        if self.data_log is not None:
+            period = round(dt_s * 1000)
+            self.data_log.write(
+                stamp, "S", "S", {"gen": generation, "period_ms": period, "counts": counts or {}}
+            )
+
+    def _correct_wall(self, wall: dict[str, Any], stamp: int) -> list[int]:
+        """Associate one fitted wall with a known wall and correct; returns [wall index, accepted]."""
+        ekf = self.ekf
+        assert ekf is not None
+        assoc = self.config["walls"]["association"]
+        pose = ekf.pose
+        p1, p2 = from_frame(tuple(wall["p1"]), pose), from_frame(tuple(wall["p2"]), pose)
+        cov = np.array([[wall["cov"][0], wall["cov"][1]], [wall["cov"][1], wall["cov"][2]]])
+        best: tuple[float, KnownWall] | None = None
+        for known in self.known_walls:
+            if not known.visible_from(pose[0], pose[1]) or not known.overlap(p1, p2, assoc["margin_mm"]):
+                continue
+            predicted, _ = ekf.line_model(known)
+            if abs(wall["d"] - predicted[1]) > assoc["max_d_mm"]:
+                continue
+            if abs(math.degrees(wrap(wall["alpha"] - predicted[0]))) > assoc["max_alpha_deg"]:
+                continue
+            nis = ekf.line_nis(wall["alpha"], wall["d"], cov, known)
+            if best is None or nis < best[0]:
+                best = (nis, known)
+        if best is None:
+            self.walls_unassociated += 1
+            return [-1, 0]
+        self.walls_associated += 1
+        accepted = ekf.correct_line(wall["alpha"], wall["d"], cov, best[1], kind=f"wall_{wall['kind']}")
+        if not accepted:
+            self.message(
+                "W",
+                stamp,
+                f"{wall['kind']} wall (sonar {wall['sensors']}) rejected by the gate for wall {best[1].index}",
+            )
+        return [best[1].index, int(accepted)]
+
+    def _store_positions(self, stamp: int, data: dict[str, dict[str, Any]], walls: list[list[int]]) -> None:
+        log = self.data_log
+        store: dict[str, dict[str, Any]] = {}
+        if self.dead_reckoning is not None:
+            x, y, psi = self.dead_reckoning
+            store["O"] = {"x": x, "y": y, "psi": psi, "valid": [True, True, True]}
+        if "compass" in data:
+            store["G"] = {
+                "x": 0.0,
+                "y": 0.0,
+                "psi": data["compass"]["heading"],
+                "valid": [False, False, True],
+            }
+        truth = data.get("truth")
+        if truth is not None:
+            store["L"] = {
+                "x": truth["x"],
+                "y": truth["y"],
+                "psi": truth["theta"],
+                "valid": [True, True, True],
+            }
+        if self.ekf is not None:
+            x, y, psi = self.ekf.pose
+            sx, sy, spsi = self.ekf.sigmas()
+            store["K"] = {
+                "x": x,
+                "y": y,
+                "psi": psi,
+                "valid": list(self.ekf.validity()),
+                "sigma": [sx, sy, spsi],
+                "glide": self.ekf.glide,
+                "compass_offset": self.ekf.compass_offset,
+                "step_scale": self.ekf.step_scale,
+                "walls": walls,
+            }
+        letters = {"O": "odometry", "G": "compass", "L": "truth", "K": None}
+        for letter, position in store.items():
+            position["stamp_ms"] = stamp
+            self.positions[letter] = position
+            sensor = letters[letter]
+            if log is not None and (sensor is None or self.sensors.get(sensor, {}).get("log_position")):
+                log.write(stamp, letter, "P", {k: v for k, v in position.items() if k != "stamp_ms"})
+
+    # ---------------------------------------------------------------------------------------
+    # results
+
+    def pose(self) -> LocalizedPose:
+        """The best pose: the filter's if it runs, else dead reckoning, else none."""
+        stamp = self.last_sync_ms or 0
+        if self.ekf is not None:
+            x, y, psi = self.ekf.pose
+            vx, vy, vpsi = self.ekf.validity()
+            return LocalizedPose(x, y, psi, vx, vy, vpsi, "ekf", stamp)
+        if self.dead_reckoning is not None:
+            x, y, psi = self.dead_reckoning
+            return LocalizedPose(x, y, psi, True, True, True, "odometry", stamp)
+        return LocalizedPose(0.0, 0.0, 0.0, False, False, False, "none", stamp)
+
+    def report(self) -> dict[str, Any]:
+        """Counters for tools and tests (plain values)."""
+        out: dict[str, Any] = {
+            "syncs": self.syncs,
+            "last_sync_ms": self.last_sync_ms,
+            "timing": {name: self.timing[name].as_dict() for name in self.sensors},
+            "walls_associated": self.walls_associated,
+            "walls_unassociated": self.walls_unassociated,
+            "walls_fitted": self.detector.fitted if self.detector else 0,
+            "compass_skipped": self.synchronisers["compass"].skipped,
+        }
+        if self.ekf is not None:
+            out["gates"] = self.ekf.gates.as_dict()
+            out["glide"] = self.ekf.glide
+            out["step_scale"] = self.ekf.step_scale
+            out["compass_offset_deg"] = math.degrees(self.ekf.compass_offset)
+        pose = self.pose()
+        out["pose"] = {
+            "x_mm": pose.x_mm,
+            "y_mm": pose.y_mm,
+            "heading_deg": math.degrees(pose.heading),
+            "valid": [pose.valid_x, pose.valid_y, pose.valid_heading],
+            "source": pose.source,
+        }
+        return out
+
+    def close(self) -> None:
+        self.message("I", self.last_sync_ms or 0, f"localisation stopped after {self.syncs} synchronisations")
+        for log in (self.data_log, self.error_log):
+            if log is not None:
+                log.close()
+
+
+def open_logs(
+    config: dict[str, Any], directory: str | Path | None = None, meta: dict[str, Any] | None = None
+):
+    """The data and error logs named by the config (``{start}`` = the start time); or (None, None)."""
+    logs = config["logs"]
+    if not logs["enabled"]:
+        return None, None
+    start = time.strftime("%Y%m%d-%H%M%S")
+    base = Path(directory if directory is not None else logs["directory"])
+    data = DataLog(base / logs["data"].format(start=start), start, config, meta)
+    errors = ErrorLog(base / logs["errors"].format(start=start), start, debug=logs["debug"])
+    return data, errors
+
+
+# =============================================================================================
+# the on-ring component
+
+
+class Localizer:
+    """The synchronisation + EKF as a component of a module program (see the module docstring)."""
+
+    def __init__(
+        self,
+        os: Any,
+        config: str | Path | dict | None = None,
+        *,
+        log_dir: str | Path | None = None,
+        truth: bool = True,
+    ) -> None:
+        if config is None:
+            from modules.common.locconfig import default_config_path
+
+            path = default_config_path()
+            config = path if path.exists() else None
+        self.os = os
+        self.config = load_config(config)
+        self.log_dir = log_dir
+        self.want_truth = truth
+        self.core: LocalizationCore | None = None
+        self.buffers: dict[str, Any] = {}
+        self.last_seen: dict[str, tuple[Any, ...]] = {}
+        self._truth_sub: Any = None
+
+    def setup(self) -> None:
+        """Open the logs, build the core and register the data channels the config uses."""
+        ring = getattr(getattr(self.os, "transport", None), "ring", None)
+        data_log, error_log = open_logs(
+            self.config, self.log_dir, {"node": getattr(self.os, "name", "?"), "ring": ring}
+        )
+        self.core = LocalizationCore(self.config, data_log=data_log, error_log=error_log)
+        for sensor, channel in CHANNELS.items():
+            if sensor in self.core.sensors:
+                self.buffers[sensor] = self.os.subscribe(channel)
+        if self.want_truth and "truth" in self.core.sensors:
+            self._subscribe_truth()
+
+    def _subscribe_truth(self) -> None:
+        transport = getattr(self.os, "transport", None)
+        session, ring = getattr(transport, "session", None), getattr(transport, "ring", None)
+        if session is None or ring is None:
+            return
+        from tokenring import keys
+
+        self._truth_sub = session.declare_subscriber(keys.world(ring, "truth"), self._on_truth)
+
+    def _on_truth(self, sample: Any) -> None:
+        try:
+            import msgpack
+
+            msg = msgpack.unpackb(bytes(sample.payload.to_bytes()), raw=False)
+            self.feed_truth(int(msg["stamp_ms"]), float(msg["x"]), float(msg["y"]), float(msg["theta"]))
+        except Exception:  # a malformed truth message must not kill the subscriber thread
+            return
+
+    def feed_truth(self, stamp_ms: int, x: float, y: float, theta: float) -> None:
+        """Ground truth (mm, rad CCW) for the logs — the seed's LOPS role; never fused."""
+        if self.core is not None:
+            self.core.feed(Sample("truth", stamp_ms, {"x": x, "y": y, "theta": theta}))
+
+    def step(self) -> SyncResult | None:
+        """Take new samples from the token's data channels, then synchronise if triggered."""
+        core = self.core
+        if core is None:
+            raise RuntimeError("Localizer.setup() was not called")
+        for sensor, buffer in self.buffers.items():
+            if buffer.visits == 0:
+                continue  # nothing copied out of the token yet
+            values = buffer.read()
+            seq_field = SEQ_FIELDS.get(sensor)
+            seq = values.get(seq_field) if seq_field else None
+            key = (values["stamp_ms"], seq)
+            if self.last_seen.get(sensor) == key:
+                continue
+            self.last_seen[sensor] = key
+            picked = {f: values[f] for f in VALUE_FIELDS[sensor] if f in values}
+            core.feed(Sample(sensor, int(values["stamp_ms"]), picked, seq))
+        return core.maybe_sync(self.os.counter)
+
+    def pose(self) -> LocalizedPose:
+        """The fused pose (EKF), else dead reckoning; see :class:`LocalizedPose`."""
+        if self.core is None:
+            return LocalizedPose(0.0, 0.0, 0.0, False, False, False, "none", 0)
+        return self.core.pose()
+
+    def copro_fields(self) -> dict[str, int]:
+        """The ``pose_*`` fields of copro.data (wire units: mm, 1/100 degree clockwise)."""
+        from modules.common.units import rad_ccw_to_cdeg_cw
+
+        pose = self.pose()
+        clamp = 2**31 - 1
+        return {
+            "pose_x_mm": max(-clamp, min(clamp, round(pose.x_mm))),
+            "pose_y_mm": max(-clamp, min(clamp, round(pose.y_mm))),
+            "pose_angle_cdeg": rad_ccw_to_cdeg_cw(pose.heading),
+            "pose_valid": pose.valid_bits,
+            "pose_source": SOURCE_CODES[pose.source],
+            "pose_stamp_ms": pose.stamp_ms & 0xFFFFFFFF,
+        }
+
+    def set_pose(
+        self, x_mm: float, y_mm: float, heading: float, sigma_mm: float = 10.0, sigma_deg: float = 1.0
+    ) -> None:
+        """Re-initialise the pose at the next synchronisation (like SET_GLOBAL_POSITION)."""
+        if self.core is not None:
+            self.core.event(
+                "set_pose",
+                x=float(x_mm),
+                y=float(y_mm),
+                psi=float(heading),
+                sigma_mm=sigma_mm,
+                sigma_deg=sigma_deg,
+            )
+
+    def add_map_wall(self, x1: float, y1: float, x2: float, y2: float) -> None:
+        """Exploration mode: a wall of the robot's own map (mm) becomes a known wall."""
+        if self.core is not None:
+            self.core.event("map_wall", x1=float(x1), y1=float(y1), x2=float(x2), y2=float(y2))
+
+    def report(self) -> dict[str, Any]:
+        return self.core.report() if self.core is not None else {}
+
+    @property
+    def log_path(self) -> Path | None:
+        return self.core.data_log.path if self.core is not None and self.core.data_log is not None else None
+
+    def close(self) -> None:
+        if self._truth_sub is not None:
+            with contextlib.suppress(Exception):
+                self._truth_sub.undeclare()
+            self._truth_sub = None
+        if self.core is not None:
+            self.core.close()

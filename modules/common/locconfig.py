@@ -1,0 +1,296 @@
+"""The localisation's configuration: one commented YAML file, validated with clear errors.
+
+The seed's options (000, §5.1 and table B.1) in YAML: which sensors are used and what of each is
+logged, the trigger sensor and count (or every K token rounds), sync on/off, filter on/off, which
+data the filter uses, the odometry model, the wall file. ``config/localization.yaml`` in the
+repository is the commented default; every key may be left out (the default applies), an unknown
+key or a bad value is an error naming the file, line and key (exit code 2 on the command line).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from tokenring.errors import UsageError
+
+SENSOR_NAMES = ("odometry", "compass", "sonar", "battery", "truth")
+
+# fmt: off
+DEFAULTS: dict[str, Any] = {
+    "sensors": {
+        "odometry": {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": True, "period_ms": 100},
+        "compass":  {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": True, "period_ms": 0},
+        "sonar":    {"use": True, "log_raw": True, "log_sync": True, "log_position": False, "filter": True, "period_ms": 0},
+        "battery":  {"use": True, "log_raw": True, "log_sync": True, "log_position": False, "filter": False, "period_ms": 0},
+        "truth":    {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": False, "period_ms": 0},
+    },
+    "sync": {"enabled": True, "trigger": {"sensor": "odometry", "count": 1, "rounds": 0}},
+    "filter": {
+        "enabled": True,
+        "odometry_model": "arc",
+        "estimate": ["glide", "compass_offset", "step_scale"],
+        "initial_pose": "world",
+        "compass": {"mode": "newest", "sigma_deg": 1.5, "north_deg": 90.0},
+        "noise": {
+            "distance_rel": 0.01,
+            "rotation_rel": 0.08,
+            "rotation_rad_per_mm": 0.0002,
+            "glide_walk_per_deg": 0.004,
+            "compass_offset_walk_deg_per_s": 0.05,
+            "step_scale_walk_per_m": 0.003,
+        },
+        "initial": {"sigma_mm": 20.0, "sigma_deg": 2.0, "glide_sigma": 0.3, "compass_offset_sigma_deg": 3.0, "step_scale_sigma": 0.02},
+        "gate_probability": 0.997,
+        "valid_sigma_mm": 150.0,
+        "valid_sigma_deg": 5.0,
+    },
+    "walls": {
+        "mode": "darmstadt",
+        "file": "square",
+        "history": 60,
+        "max_distance_mm": 1400.0,
+        "side_sensors": [3, 4, 6, 7],
+        "pairs": [[3, 4], [7, 6]],
+        "min_points_side": 12,
+        "min_span_side_mm": 150.0,
+        "max_sigma_side_mm": 12.0,
+        "min_points_pairs": 6,
+        "max_sigma_d_pairs_mm": 15.0,
+        "max_sigma_alpha_pairs_deg": 6.0,
+        "noise_floor_mm": 5.0,
+        "max_turn_deg": 0.5,
+        "min_sigma_d_mm": 6.0,
+        "min_sigma_alpha_deg": 0.7,
+        "association": {"max_d_mm": 400.0, "max_alpha_deg": 20.0, "margin_mm": 150.0},
+    },
+    "robot": {"mm_per_step": 0.5419, "steps_per_degree": 6.5, "sonars": "robot"},
+    "logs": {"enabled": True, "directory": "logs", "data": "localization-{start}.trlog", "errors": "localization-{start}.trerr", "debug": False},
+}
+# fmt: on
+
+ESTIMATES = ("glide", "compass_offset", "step_scale")
+
+
+class ConfigError(UsageError):
+    """A bad localisation configuration; the message names file, line and key."""
+
+
+def default_config_path() -> Path:
+    """``config/localization.yaml`` of the repository (the commented defaults)."""
+    return Path(__file__).resolve().parents[2] / "config" / "localization.yaml"
+
+
+def load_config(source: str | Path | dict | None = None) -> dict[str, Any]:
+    """A validated configuration: ``None`` gives the defaults, else a file path or a dict."""
+    if source is None:
+        return copy.deepcopy(DEFAULTS)
+    if isinstance(source, dict):
+        return validate(source, "<config>", {})
+    path = Path(source)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such configuration file") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
+    return parse_config(text, str(path))
+
+
+def parse_config(text: str, source: str) -> dict[str, Any]:
+    """Parse and validate YAML text; errors carry ``source:line``."""
+    try:
+        node = yaml.compose(text)
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{source}:{mark.line + 1}" if mark is not None else source
+        raise ConfigError(f"{where}: not valid YAML: {getattr(exc, 'problem', exc)}") from None
+    if data is None:
+        data = {}
+    lines: dict[tuple[str, ...], int] = {}
+    _collect_lines(node, (), lines)
+    return validate(data, source, lines)
+
+
+def _collect_lines(node: Any, path: tuple[str, ...], out: dict[tuple[str, ...], int]) -> None:
+    if isinstance(node, yaml.MappingNode):
+        for key, value in node.value:
+            sub = (*path, str(key.value))
+            out[sub] = key.start_mark.line + 1
+            _collect_lines(value, sub, out)
+
+
+def validate(data: Any, source: str, lines: dict[tuple[str, ...], int]) -> dict[str, Any]:
+    """Merge ``data`` over the defaults, checking every key and value."""
+    checker = _Checker(source, lines)
+    config = checker.merge(DEFAULTS, data, ())
+    checker.semantics(config)
+    return config
+
+
+class _Checker:
+    def __init__(self, source: str, lines: dict[tuple[str, ...], int]) -> None:
+        self.source = source
+        self.lines = lines
+
+    def fail(self, path: tuple[str, ...], problem: str) -> ConfigError:
+        line = None
+        for cut in range(len(path), 0, -1):
+            line = self.lines.get(path[:cut])
+            if line is not None:
+                break
+        where = f"{self.source}:{line}" if line is not None else self.source
+        key = ".".join(path) if path else "(top level)"
+        return ConfigError(f"{where}: {key}: {problem}")
+
+    def merge(self, default: Any, value: Any, path: tuple[str, ...]) -> Any:
+        if isinstance(default, dict):
+            if not isinstance(value, dict):
+                raise self.fail(path, f"expected a mapping with keys {', '.join(default)}")
+            out = copy.deepcopy(default)
+            for key, sub in value.items():
+                if key not in default:
+                    raise self.fail((*path, str(key)), f"unknown key (known here: {', '.join(default)})")
+                out[key] = self.merge(default[key], sub, (*path, key))
+            return out
+        return self.leaf(default, value, path)
+
+    def leaf(self, default: Any, value: Any, path: tuple[str, ...]) -> Any:
+        if isinstance(default, bool):
+            if not isinstance(value, bool):
+                raise self.fail(path, f"expected true or false, got {value!r}")
+            return value
+        if isinstance(default, int):
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise self.fail(path, f"expected a whole number, got {value!r}")
+            if value < 0:
+                raise self.fail(path, f"must not be negative, got {value}")
+            return value
+        if isinstance(default, float):
+            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+                raise self.fail(path, f"expected a number, got {value!r}")
+            if value < 0:
+                raise self.fail(path, f"must not be negative, got {value}")
+            return float(value)
+        if isinstance(default, str):
+            return self.text_or_special(value, path)
+        if isinstance(default, list):
+            if not isinstance(value, list):
+                raise self.fail(path, f"expected a list, got {value!r}")
+            return value
+        raise self.fail(path, "unsupported value")  # pragma: no cover - DEFAULTS is fixed
+
+    def text_or_special(self, value: Any, path: tuple[str, ...]) -> Any:
+        if path == ("filter", "initial_pose") and isinstance(value, dict):
+            return value
+        if path == ("robot", "sonars") and isinstance(value, list):
+            return value
+        if not isinstance(value, str) or not value:
+            raise self.fail(path, f"expected text, got {value!r}")
+        return value
+
+    def semantics(self, c: dict[str, Any]) -> None:
+        def choice(path: tuple[str, ...], allowed: tuple[str, ...]) -> None:
+            value = _get(c, path)
+            if value not in allowed:
+                raise self.fail(path, f"must be one of {', '.join(allowed)}, got {value!r}")
+
+        trigger = c["sync"]["trigger"]
+        if trigger["rounds"] == 0:
+            choice(("sync", "trigger", "sensor"), SENSOR_NAMES)
+            if trigger["count"] < 1:
+                raise self.fail(("sync", "trigger", "count"), "must be at least 1")
+            if not c["sensors"][trigger["sensor"]]["use"]:
+                raise self.fail(
+                    ("sync", "trigger", "sensor"),
+                    f"{trigger['sensor']} is not used (sensors.{trigger['sensor']}.use)",
+                )
+        choice(("filter", "odometry_model"), ("arc", "straight"))
+        choice(("filter", "compass", "mode"), ("newest", "mean"))
+        choice(("walls", "mode"), ("darmstadt", "exploration", "off"))
+        for name in c["filter"]["estimate"]:
+            if name not in ESTIMATES:
+                raise self.fail(
+                    ("filter", "estimate"), f"unknown state {name!r} (known: {', '.join(ESTIMATES)})"
+                )
+        pose = c["filter"]["initial_pose"]
+        if isinstance(pose, dict):
+            keys = {"x_mm", "y_mm", "heading_deg"}
+            if set(pose) != keys or not all(
+                isinstance(v, int | float) and not isinstance(v, bool) for v in pose.values()
+            ):
+                raise self.fail(
+                    ("filter", "initial_pose"), "expected world, motor or {x_mm, y_mm, heading_deg} numbers"
+                )
+        elif pose not in ("world", "motor"):
+            raise self.fail(
+                ("filter", "initial_pose"),
+                f"expected world, motor or {{x_mm, y_mm, heading_deg}}, got {pose!r}",
+            )
+        if c["sensors"]["truth"]["filter"]:
+            raise self.fail(
+                ("sensors", "truth", "filter"),
+                "the ground truth is a reference only, never fed to the filter",
+            )
+        p = c["filter"]["gate_probability"]
+        if not 0.5 <= p < 1.0:
+            raise self.fail(("filter", "gate_probability"), f"must be in [0.5, 1), got {p}")
+        for key in ("mm_per_step", "steps_per_degree"):
+            if c["robot"][key] <= 0:
+                raise self.fail(("robot", key), "must be positive")
+        sonars = c["robot"]["sonars"]
+        if isinstance(sonars, str):
+            if sonars != "robot":
+                raise self.fail(
+                    ("robot", "sonars"),
+                    "expected robot (modules/common/robot.py) or a list of [x_mm, y_mm, angle_deg]",
+                )
+            count = 8
+        else:
+            for i, m in enumerate(sonars):
+                if not (isinstance(m, list) and len(m) == 3 and all(isinstance(v, int | float) for v in m)):
+                    raise self.fail(
+                        ("robot", "sonars"), f"entry {i}: expected [x_mm, y_mm, angle_deg], got {m!r}"
+                    )
+            count = len(sonars)
+        walls = c["walls"]
+        for i in walls["side_sensors"]:
+            if not isinstance(i, int) or not 0 <= i < count:
+                raise self.fail(("walls", "side_sensors"), f"sonar index {i!r} is not in 0..{count - 1}")
+        for pair in walls["pairs"]:
+            if not (
+                isinstance(pair, list)
+                and len(pair) == 2
+                and all(isinstance(i, int) and 0 <= i < count for i in pair)
+            ):
+                raise self.fail(
+                    ("walls", "pairs"), f"expected pairs of sonar indices 0..{count - 1}, got {pair!r}"
+                )
+        for key in ("min_points_side", "min_points_pairs"):
+            if walls[key] < 3:
+                raise self.fail(("walls", key), "needs at least 3 points to fit a line")
+        if walls["mode"] == "darmstadt" and not walls["file"]:
+            raise self.fail(("walls", "file"), "Darmstadt mode needs a wall file (a world name or path)")
+        for key in ("data", "errors"):
+            name = c["logs"][key]
+            try:
+                name.format(start="x")
+            except (KeyError, IndexError, ValueError):
+                raise self.fail(("logs", key), f"only {{start}} may be substituted in {name!r}") from None
+
+
+def _get(config: dict[str, Any], path: tuple[str, ...]) -> Any:
+    value: Any = config
+    for key in path:
+        value = value[key]
+    return value
+
+
+def dump_defaults() -> str:
+    """The defaults as YAML (what ``config/localization.yaml`` spells out with comments)."""
+    return yaml.safe_dump(DEFAULTS, sort_keys=False)

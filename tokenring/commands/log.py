@@ -1,0 +1,78 @@
+"""``tokenring log``: the seed's log helpers — convert (text, CSV), sort, info."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring.cliutil import add_json_option
+
+    p = sub.add_parser(
+        "log",
+        help="convert, sort or summarise a localisation data or error log",
+        description="Data and error logs are msgpack streams (crash-safe, compact). 'convert' writes the "
+        "seed's line-per-entry text (--to text) or, for a data log, data.csv and sonar.csv with one line "
+        "per synchronisation (--to csv, the seed's logfileconverter); 'sort' orders a log by time stamp "
+        "into a new file (the seed's logfilesorter); 'info' counts records per source and kind.",
+    )
+    verbs = p.add_subparsers(dest="log_verb", metavar="VERB", required=True)
+    convert = verbs.add_parser("convert", help="to the seed's text format or CSV")
+    convert.add_argument("log", help="a data (.trlog) or error (.trerr) log")
+    convert.add_argument("--to", choices=("text", "csv"), default="text", help="output format (default text)")
+    convert.add_argument(
+        "--out", metavar="PATH", help="text: a file (default: standard output); csv: a directory (required)"
+    )
+    order = verbs.add_parser("sort", help="sort by time stamp into a new log")
+    order.add_argument("log")
+    order.add_argument("--out", required=True, metavar="FILE", help="the sorted log (must be a new file)")
+    info = verbs.add_parser("info", help="header, time range, counts per source and kind, torn tail")
+    info.add_argument("log")
+    add_json_option(info)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tokenring.errors import UsageError
+    from tokenring.logs import convert_csv, convert_text, read_log, sort_log, summary
+
+    if args.log_verb == "sort":
+        count = sort_log(args.log, args.out)
+        print(f"{args.out}: {count} records sorted by time stamp")
+        return 0
+    log = read_log(args.log)
+    if log.truncated:
+        print(f"{args.log}: the last record is torn (the writer was killed); read up to it", file=sys.stderr)
+    if args.log_verb == "info":
+        info = summary(log)
+        if args.json:
+            from tokenring.cliutil import print_json
+
+            print_json(info)
+        else:
+            print(f"{info['file']}: {info['kind']} log started {info['start']}, {info['records']} records")
+            print(
+                f"time {info['first_ms']} .. {info['last_ms']} ms"
+                + (" (torn tail)" if info["truncated"] else "")
+            )
+            for key, count in info["counts"].items():
+                print(f"  {key:4} {count}")
+        return 0
+    if args.to == "text":
+        text = convert_text(log)
+        if args.out:
+            Path(args.out).write_text(text, encoding="utf-8")
+            print(f"{args.out}: {len(log.records)} entries")
+        else:
+            sys.stdout.write(text)
+        return 0
+    if not args.out:
+        raise UsageError("--to csv writes data.csv and sonar.csv: give the directory with --out")
+    data, sonar = convert_csv(log)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "data.csv").write_text(data, encoding="utf-8")
+    (out / "sonar.csv").write_text(sonar, encoding="utf-8")
+    print(f"{out}/data.csv: {data.count(chr(10)) - 1} synchronisations; {out}/sonar.csv")
+    return 0

@@ -1,0 +1,390 @@
+"""Data and error logs of the localisation (seed 000, §6.8.1, §6.8.3, appendix B.2), as msgpack streams.
+
+A **data log** starts with a header map (``tokenring_log: data``, the start time and the whole
+configuration), followed by one msgpack array per record::
+
+    [stamp_ms, source, kind, payload]
+
+``stamp_ms`` is the sensor's own time (ms of simulated time); ``source`` and ``kind`` are the
+seed's letters (table B.6) plus ours:
+
+=======  ============================  =====  =====================================
+source   meaning                       kind   meaning
+=======  ============================  =====  =====================================
+S        system                        R      raw data
+O        odometry (motor steps)        C      synchronised data
+G        compass (the gyro's slot)     P      position
+W        sonar and wall detection      S      synchronisation finished
+B        battery (ours)                T      program start time
+L        ground truth (LOPS's role)    W      wall data (known walls, map walls)
+K        Kalman filter                 E      event (ours: pose set, walls loaded)
+=======  ============================  =====  =====================================
+
+An **error log** has a header map (``tokenring_log: errors``) and records ``[stamp_ms, class,
+text]`` with the seed's classes I (information), W (warning: no data lost), E (error: data
+lost), F (fatal), D (debug).
+
+Crash safety: every record is one ``write()`` on an unbuffered descriptor, so a killed process
+leaves every record written before the kill; a reader stops cleanly at a torn last record and
+says so. ``convert_*`` produce the seed's line-per-entry text and CSV (the seed's
+logfileconverter, one line per synchronisation); :func:`sort_log` is the seed's logfilesorter.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import threading
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import msgpack
+
+from tokenring.errors import UsageError
+
+FORMAT_VERSION = 1
+SOURCES = {
+    "S": "system",
+    "O": "odometry",
+    "G": "compass",
+    "W": "sonar",
+    "B": "battery",
+    "L": "truth",
+    "K": "filter",
+    "C": "correlator",
+}
+KINDS = {
+    "R": "raw",
+    "C": "synchronised",
+    "P": "position",
+    "S": "sync finished",
+    "T": "start time",
+    "W": "wall data",
+    "E": "event",
+}
+ERROR_CLASSES = {"I": "information", "W": "warning", "E": "error", "F": "fatal", "D": "debug"}
+SENSOR_SOURCE = {"odometry": "O", "compass": "G", "sonar": "W", "battery": "B", "truth": "L"}
+SOURCE_SENSOR = {v: k for k, v in SENSOR_SOURCE.items()}
+
+
+class LogError(UsageError):
+    """A log file that cannot be read as asked; the message names the file."""
+
+
+class _Stream:
+    """An append-only msgpack stream: one unbuffered write per record, thread-safe."""
+
+    def __init__(self, path: str | Path, header: dict[str, Any]) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+        self._lock = threading.Lock()
+        self._packer = msgpack.Packer(use_bin_type=True)
+        self.records = 0
+        self._write(header)
+
+    def _write(self, obj: Any) -> None:
+        data = self._packer.pack(obj)
+        with self._lock:
+            if self._fd < 0:
+                return
+            view = memoryview(data)
+            while view:
+                written = os.write(self._fd, view)
+                view = view[written:]
+            self.records += 1
+
+    def close(self) -> None:
+        with self._lock:
+            if self._fd >= 0:
+                os.close(self._fd)
+                self._fd = -1
+
+    def __enter__(self) -> _Stream:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class DataLog(_Stream):
+    """The data log: raw, synchronised and position records per source."""
+
+    def __init__(
+        self, path: str | Path, start: str, config: dict[str, Any], meta: dict[str, Any] | None = None
+    ):
+        header = {
+            "tokenring_log": "data",
+            "version": FORMAT_VERSION,
+            "start": start,
+            "config": config,
+            "meta": meta or {},
+        }
+        super().__init__(path, header)
+
+    def write(self, stamp_ms: int, source: str, kind: str, payload: Any) -> None:
+        self._write([int(stamp_ms), source, kind, payload])
+
+
+class ErrorLog(_Stream):
+    """The error log: class, time stamp, text."""
+
+    def __init__(self, path: str | Path, start: str, debug: bool = False) -> None:
+        super().__init__(path, {"tokenring_log": "errors", "version": FORMAT_VERSION, "start": start})
+        self.debug = debug
+
+    def message(self, cls: str, stamp_ms: int, text: str) -> None:
+        if cls not in ERROR_CLASSES:
+            raise ValueError(f"error class {cls!r} is not one of {''.join(ERROR_CLASSES)}")
+        if cls == "D" and not self.debug:
+            return
+        self._write([int(stamp_ms), cls, text])
+
+
+# =============================================================================================
+# reading
+
+
+@dataclass
+class LogFile:
+    """A log read back: header, records, and whether the last record was torn (a crash)."""
+
+    path: Path
+    header: dict[str, Any]
+    records: list[list[Any]] = field(default_factory=list)
+    truncated: bool = False
+
+    @property
+    def kind(self) -> str:
+        return str(self.header.get("tokenring_log"))
+
+
+def iter_log(path: str | Path) -> tuple[dict[str, Any], Iterator[list[Any]], list[bool]]:
+    """The header and an iterator over the records; the list gets ``True`` if the tail was torn."""
+    file = Path(path)
+    try:
+        handle = file.open("rb")
+    except FileNotFoundError:
+        raise LogError(f"{file}: no such log file") from None
+    except OSError as exc:
+        raise LogError(f"{file}: cannot read: {exc.strerror}") from None
+    unpacker = msgpack.Unpacker(handle, raw=False, strict_map_key=False)
+    try:
+        header = next(unpacker)
+    except (StopIteration, msgpack.OutOfData):
+        handle.close()
+        raise LogError(f"{file}: empty or torn before its header; not a tokenring log") from None
+    except (msgpack.ExtraData, msgpack.FormatError, msgpack.StackError, ValueError):
+        handle.close()
+        raise LogError(f"{file}: not a tokenring log (no msgpack header)") from None
+    if not isinstance(header, dict) or header.get("tokenring_log") not in ("data", "errors"):
+        handle.close()
+        raise LogError(f"{file}: not a tokenring log (its first entry is not a log header)")
+    truncated = [False]
+
+    def records() -> Iterator[list[Any]]:
+        consumed = unpacker.tell()
+        try:
+            while True:
+                try:
+                    record = next(unpacker)
+                except StopIteration:
+                    # msgpack drops a torn tail silently: compare the last whole record's end with the size
+                    if consumed < file.stat().st_size:
+                        truncated[0] = True
+                    return
+                except (msgpack.OutOfData, ValueError, msgpack.FormatError, msgpack.StackError):
+                    truncated[0] = True
+                    return
+                if not isinstance(record, list):
+                    truncated[0] = True
+                    return
+                consumed = unpacker.tell()
+                yield record
+        finally:
+            handle.close()
+
+    return header, records(), truncated
+
+
+def read_log(path: str | Path, expect: str | None = None) -> LogFile:
+    """Read a whole log; ``expect`` (``data``/``errors``) refuses the other kind."""
+    header, records, truncated = iter_log(path)
+    if expect is not None and header.get("tokenring_log") != expect:
+        raise LogError(f"{path}: this is a {header.get('tokenring_log')} log, not a {expect} log")
+    out = LogFile(Path(path), header, list(records))
+    out.truncated = truncated[0]
+    return out
+
+
+# =============================================================================================
+# converting and sorting
+
+
+def _num(value: Any, width: int = 8, digits: int = 0) -> str:
+    if value is None:
+        return f"{0:>{width}}"
+    if isinstance(value, bool):
+        return "1" if value else "0"
+    if digits:
+        return f"{float(value):>{width}.{digits}f}"
+    return f"{round(float(value)):>{width}d}" if math.isfinite(float(value)) else f"{'nan':>{width}}"
+
+
+def _position_text(p: dict[str, Any]) -> str:
+    valid = p.get("valid", [True, True, True])
+    return f"{_num(p.get('x'))} {_num(p.get('y'))} {_num(p.get('psi'), 8, 5)} " + " ".join(
+        "1" if v else "0" for v in valid
+    )
+
+
+def record_text(record: list[Any]) -> str:
+    """One data-log record in the seed's line format (tables B.6/B.7): ``S K   stamp data``."""
+    stamp, source, kind, payload = record
+    head = f"{source} {kind} {stamp:>8d}"
+    body = _record_body(source, kind, payload)
+    return f"{head} {body}".rstrip()
+
+
+def _record_body(source: str, kind: str, p: Any) -> str:
+    if kind == "P" or (source == "S" and kind == "S" and isinstance(p, dict) and "x" in p):
+        return _position_text(p)
+    if not isinstance(p, dict):
+        return str(p)
+    v = p.get("v", p)
+    if source == "O" and kind == "R":
+        return f"{_num(v['steps_left'])} {_num(v['steps_right'])}"
+    if source == "O" and kind == "C":
+        return f"{_num(p['dl'])} {_num(p['dr'])} {p['count']}"
+    if source == "G" and kind == "R":
+        return f"{_num(v['heading_cdeg'], 6)} {v.get('state', 1)}"
+    if source == "G" and kind == "C":
+        return f"{_num(p['heading'], 15, 12)} {p['count']}"
+    if source == "W" and kind == "R":
+        return " ".join(_num(d * 10 if d != 255 else 0, 5) for d in v["distances"])
+    if source == "W" and kind == "C":
+        parts = [_num(d, 5) for d in p["distances_mm"]]
+        for w in p.get("walls", []):
+            parts.append(f"1 {w['alpha']:.5f} {w['d']:.1f} {w.get('assoc', -1):>2}")
+        return " ".join(parts) + f" {p['count']}"
+    if source == "L" and kind in "RC":
+        return f"{_num(v['x'])} {_num(v['y'])} {_num(v['theta'], 8, 5)}" + (
+            f" {p['count']}" if kind == "C" else ""
+        )
+    if source == "S" and kind == "T":
+        return str(p.get("start", ""))
+    if source == "S" and kind == "S":
+        counts = p.get("counts", {})
+        return f"{p.get('gen', 0):>6} {p.get('period_ms', 0):>5} " + " ".join(
+            f"{SENSOR_SOURCE.get(k, k)}{n}" for k, n in counts.items()
+        )
+    flat = " ".join(f"{k}={val}" for k, val in p.items() if k not in ("gen", "n"))
+    return flat
+
+
+def convert_text(log: LogFile) -> str:
+    """The whole log in the seed's text format (the data log's or the error log's)."""
+    out = io.StringIO()
+    if log.kind == "errors":
+        for stamp, cls, text in log.records:
+            out.write(f"{cls} {stamp:>8d} {text}\n")
+        return out.getvalue()
+    out.write(f"S T {0:>8d} {log.header.get('start', '')}\n")
+    for record in log.records:
+        out.write(record_text(record) + "\n")
+    return out.getvalue()
+
+
+DATA_COLUMNS = [
+    "stamp_ms", "period_ms", "steps_left", "steps_right", "compass_rad",
+    "truth_x", "truth_y", "truth_psi", "truth_valid",
+    "odo_x", "odo_y", "odo_psi",
+    "x", "y", "psi", "x_valid", "y_valid", "psi_valid",
+]  # fmt: skip
+
+
+def convert_csv(log: LogFile) -> tuple[str, str]:
+    """The seed's logfileconverter: ``data.csv`` (one line per sync) and ``sonar.csv``."""
+    if log.kind != "data":
+        raise LogError(f"{log.path}: CSV conversion needs a data log")
+    data, sonar = io.StringIO(), io.StringIO()
+    dw, sw = csv.writer(data, lineterminator="\n"), csv.writer(sonar, lineterminator="\n")
+    dw.writerow(DATA_COLUMNS)
+    sonar_header_written = False
+    row: dict[str, Any] = {}
+    distances: list[Any] = []
+    last_stamp: int | None = None
+    for stamp, source, kind, p in log.records:
+        if kind == "C" and source == "O":
+            row.update(steps_left=p["dl"], steps_right=p["dr"])
+        elif kind == "C" and source == "G":
+            row["compass_rad"] = p["heading"]
+        elif kind == "C" and source == "W":
+            distances = p["distances_mm"]
+        elif kind == "P" and source == "L":
+            row.update(truth_x=p["x"], truth_y=p["y"], truth_psi=p["psi"], truth_valid=1)
+        elif kind == "P" and source == "O":
+            row.update(odo_x=p["x"], odo_y=p["y"], odo_psi=p["psi"])
+        elif kind == "P" and source == "K":
+            valid = p.get("valid", [1, 1, 1])
+            row.update(
+                x=p["x"],
+                y=p["y"],
+                psi=p["psi"],
+                x_valid=int(valid[0]),
+                y_valid=int(valid[1]),
+                psi_valid=int(valid[2]),
+            )
+        elif source == "S" and kind == "S":
+            row["stamp_ms"] = stamp
+            row["period_ms"] = stamp - last_stamp if last_stamp is not None else 0
+            last_stamp = stamp
+            dw.writerow([row.get(c, "") for c in DATA_COLUMNS])
+            if not sonar_header_written and distances:
+                sw.writerow(["stamp_ms", *[f"sonar{i}_mm" for i in range(len(distances))]])
+                sonar_header_written = True
+            sw.writerow([stamp, *["" if d is None else d for d in distances]])
+            row = {}
+    return data.getvalue(), sonar.getvalue()
+
+
+def sort_log(source: str | Path, target: str | Path) -> int:
+    """Write ``source`` sorted by time stamp (stable) to ``target``; returns the record count."""
+    if Path(source).resolve() == Path(target).resolve():
+        raise LogError(f"{target}: the sorted log must go to a new file (the seed's logfilesorter)")
+    log = read_log(source)
+    key = (lambda r: r[0]) if log.kind in ("data", "errors") else None
+    records = sorted(log.records, key=key)
+    stream = _Stream(target, log.header)
+    try:
+        for record in records:
+            stream._write(record)
+    finally:
+        stream.close()
+    return len(records)
+
+
+def summary(log: LogFile) -> dict[str, Any]:
+    """Counts per source and kind, time range, and whether the log was torn."""
+    counts: dict[str, int] = {}
+    first = last = None
+    for record in log.records:
+        stamp = record[0]
+        key = f"{record[1]} {record[2]}" if log.kind == "data" else str(record[1])
+        counts[key] = counts.get(key, 0) + 1
+        first = stamp if first is None else min(first, stamp)
+        last = stamp if last is None else max(last, stamp)
+    return {
+        "file": str(log.path),
+        "kind": log.kind,
+        "start": log.header.get("start"),
+        "records": len(log.records),
+        "first_ms": first,
+        "last_ms": last,
+        "truncated": log.truncated,
+        "counts": dict(sorted(counts.items())),
+    }

@@ -1,0 +1,162 @@
+"""Offline mode (seed 000, §5.6): run the synchronisation and the filter again on a recorded log.
+
+From **raw** data, every raw record goes back into the buffer generation it was filed in online,
+and every synchronisation the log records runs again on exactly that half — so the same
+configuration gives the same positions, bit for bit. ``retrigger`` instead feeds the raw samples
+in their original order through a (possibly different) trigger. From **synchronised** data the
+logged synchronised records go straight to the filter (other filter settings on the same run).
+Events (a pose set, walls added to the map) are re-applied at the synchronisation they preceded.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from modules.common.localizer import LocalizationCore
+from modules.common.locconfig import load_config
+from modules.common.sync import Sample
+from tokenring.logs import SOURCE_SENSOR, DataLog, ErrorLog, LogError, LogFile, read_log
+
+EVENT_KINDS = {("S", "E"), ("W", "W")}
+
+
+@dataclass
+class ReplayResult:
+    """What a replay did: syncs run, positions written, and the comparison with the input log."""
+
+    output: Path
+    syncs: int
+    positions: int
+    compared: int
+    identical: bool
+    first_difference: str | None
+    report: dict[str, Any]
+
+
+def replay(
+    source: str | Path,
+    output: str | Path,
+    config: str | Path | dict | None = None,
+    *,
+    mode: str = "raw",
+    errors: str | Path | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> ReplayResult:
+    """Replay ``source`` into a new data log ``output``; ``mode`` is raw, sync or retrigger."""
+    if mode not in ("raw", "sync", "retrigger"):
+        raise LogError(f"replay mode {mode!r} is not one of raw, sync, retrigger")
+    log = read_log(source, expect="data")
+    settings = load_config(config if config is not None else log.header.get("config") or None)
+    if Path(output).resolve() == Path(source).resolve():
+        raise LogError(f"{output}: the replay must write a new log, not overwrite its input")
+    start = time.strftime("%Y%m%d-%H%M%S")
+    meta = {"replay_of": str(source), "mode": mode, "original_start": log.header.get("start")}
+    data_log = DataLog(output, start, settings, meta)
+    error_log = ErrorLog(errors, start, debug=settings["logs"]["debug"]) if errors else None
+    core = LocalizationCore(settings, data_log=data_log, error_log=error_log)
+    try:
+        if mode == "sync":
+            _from_synchronised(core, log, progress)
+        elif mode == "retrigger":
+            if settings["sync"]["trigger"]["rounds"] > 0:
+                raise LogError("retrigger needs a sensor trigger: token rounds are not in the log")
+            _retrigger(core, log, progress)
+        else:
+            _from_raw(core, log, progress)
+        report = core.report()
+    finally:
+        core.close()
+    return _compare(log, read_log(output), Path(output), core.syncs, report)
+
+
+def _raw_sample(record: list[Any]) -> tuple[int, int, Sample] | None:
+    stamp, source, kind, payload = record
+    sensor = SOURCE_SENSOR.get(source)
+    if kind != "R" or sensor is None:
+        return None
+    return payload["gen"], payload["n"], Sample(sensor, int(stamp), payload["v"], payload.get("seq"))
+
+
+def _from_raw(core: LocalizationCore, log: LogFile, progress: Callable[[int, int], None] | None) -> None:
+    halves: dict[int, list[tuple[int, Sample]]] = {}
+    for record in log.records:
+        raw = _raw_sample(record)
+        if raw is not None:
+            generation, number, sample = raw
+            halves.setdefault(generation, []).append((number, sample))
+    total = len(log.records)
+    for i, (stamp, source, kind, payload) in enumerate(log.records):
+        if kind == "R" and source in SOURCE_SENSOR:
+            if core.data_log is not None and core.sensors.get(SOURCE_SENSOR[source], {}).get("log_raw"):
+                core.data_log.write(stamp, source, kind, payload)
+        elif (source, kind) in EVENT_KINDS:
+            _requeue(core, payload)
+        elif source == "S" and kind == "S":
+            generation = payload["gen"]
+            half: dict[str, list[Sample]] = {}
+            for _, sample in sorted(halves.pop(generation, []), key=lambda item: item[0]):
+                if sample.sensor in core.sensors:
+                    half.setdefault(sample.sensor, []).append(sample)
+            core.synchronise_half(generation, half)
+        if progress is not None and i % 2000 == 0:
+            progress(i, total)
+
+
+def _retrigger(core: LocalizationCore, log: LogFile, progress: Callable[[int, int], None] | None) -> None:
+    raws = sorted((r for r in map(_raw_sample, log.records) if r is not None), key=lambda item: item[1])
+    for i, (_, _, sample) in enumerate(raws):
+        core.feed(sample)
+        core.maybe_sync()
+        if progress is not None and i % 2000 == 0:
+            progress(i, len(raws))
+
+
+def _from_synchronised(
+    core: LocalizationCore, log: LogFile, progress: Callable[[int, int], None] | None
+) -> None:
+    pending: dict[str, dict[str, Any]] = {}
+    total = len(log.records)
+    for i, (stamp, source, kind, payload) in enumerate(log.records):
+        if kind == "C" and source in SOURCE_SENSOR:
+            record = {k: v for k, v in payload.items() if k != "gen"}
+            pending[SOURCE_SENSOR[source]] = record
+            if core.data_log is not None:
+                core.data_log.write(stamp, source, kind, payload)
+        elif (source, kind) in EVENT_KINDS:
+            _requeue(core, payload)
+        elif source == "S" and kind == "S":
+            data = {name: rec for name, rec in pending.items() if name in core.sensors}
+            core.process_synchronised(payload["gen"], stamp, data, payload.get("counts"))
+            pending = {}
+        if progress is not None and i % 2000 == 0:
+            progress(i, total)
+
+
+def _requeue(core: LocalizationCore, payload: dict[str, Any]) -> None:
+    event = {k: v for k, v in payload.items() if k not in ("gen", "event")}
+    core.queue_event(payload["gen"], payload["event"], event)
+
+
+def _compare(
+    original: LogFile, replayed: LogFile, output: Path, syncs: int, report: dict[str, Any]
+) -> ReplayResult:
+    """Compare the filter's and dead reckoning's positions of the two logs, record by record."""
+
+    def positions(log: LogFile) -> list[tuple[int, str, Any]]:
+        return [(r[0], r[1], r[3]) for r in log.records if r[2] == "P" and r[1] in ("K", "O")]
+
+    before, after = positions(original), positions(replayed)
+    difference = None
+    for a, b in zip(before, after, strict=False):
+        if a != b:
+            difference = f"at {a[0]} ms ({a[1]} P): online {a[2]} != replay {b[2]}"
+            break
+    if difference is None and len(before) != len(after):
+        difference = f"online log has {len(before)} positions, the replay {len(after)}"
+    return ReplayResult(
+        output, syncs, len(after), min(len(before), len(after)), difference is None, difference, report
+    )
