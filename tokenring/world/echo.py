@@ -36,29 +36,34 @@ NOISE_CORRELATION = 0.95  # first-order low-pass of the receiver noise
 RANGE_JITTER_MM = 10.0  # σ 1 cm of the echo's start (air, surface texture)
 
 
-def echo_shape(distance_mm: float, gain: float, ping_samples: int, onset_jitter: float = 0.0) -> np.ndarray:
-    """The noise-free envelope of one echo (float counts over the 510 samples)."""
-    n = np.arange(SONAR_SAMPLES, dtype=float)
-    onset = distance_mm / MM_PER_SAMPLE + onset_jitter
-    peak = AMPLITUDE_25CM * (250.0 / max(distance_mm, 10.0)) ** AMPLITUDE_EXPONENT * gain
-    tau = TAU_25CM * math.sqrt(max(distance_mm, 10.0) / 250.0)
-    t = n - onset
-    rising = (
-        peak * (1.0 - np.exp(-np.clip(t, 0.0, ping_samples) / tau)) / (1.0 - math.exp(-ping_samples / tau))
-    )
+def echo_shapes(
+    distances_mm: np.ndarray, gains: np.ndarray, ping_samples: int, onset_jitter: float = 0.0
+) -> np.ndarray:
+    """Noise-free envelopes of echoes from surfaces at ``distances_mm`` with relative ``gains``:
+    one row of 510 float counts per echo."""
+    distance = np.maximum(np.asarray(distances_mm, dtype=float), 10.0)[:, None]
+    gain = np.asarray(gains, dtype=float)[:, None]
+    t = np.arange(SONAR_SAMPLES, dtype=float)[None, :] - (distance / MM_PER_SAMPLE + onset_jitter)
+    peak = AMPLITUDE_25CM * (250.0 / distance) ** AMPLITUDE_EXPONENT * gain
+    tau = TAU_25CM * np.sqrt(distance / 250.0)
+    rising = peak * (1.0 - np.exp(-np.clip(t, 0.0, ping_samples) / tau)) / (1.0 - np.exp(-ping_samples / tau))
     decaying = peak * np.exp(-np.clip(t - ping_samples, 0.0, None) / DECAY)
     return np.where(t < 0, 0.0, np.where(t < ping_samples, rising, decaying))
 
 
+def echo_shape(distance_mm: float, gain: float, ping_samples: int, onset_jitter: float = 0.0) -> np.ndarray:
+    """The noise-free envelope of one echo (float counts over the 510 samples)."""
+    return echo_shapes(np.array([distance_mm]), np.array([gain]), ping_samples, onset_jitter)[0]
+
+
+_NOISE_KERNEL = NOISE_CORRELATION ** np.arange(100)
+_NOISE_GAIN = 1.0 / math.sqrt(float(np.sum(_NOISE_KERNEL**2)))
+
+
 def receiver_noise(rng: np.random.Generator, sigma: float = NOISE) -> np.ndarray:
-    """Low-pass Gaussian noise with standard deviation ``sigma`` over the 510 samples."""
-    white = rng.normal(0.0, sigma * math.sqrt(1 - NOISE_CORRELATION**2), SONAR_SAMPLES)
-    out = np.empty(SONAR_SAMPLES)
-    state = rng.normal(0.0, sigma)
-    for i, w in enumerate(white):
-        state = NOISE_CORRELATION * state + w
-        out[i] = state
-    return out
+    """Low-pass Gaussian noise (first-order, ``NOISE_CORRELATION``) with standard deviation ``sigma``."""
+    white = rng.normal(0.0, sigma * _NOISE_GAIN, SONAR_SAMPLES + len(_NOISE_KERNEL) - 1)
+    return np.convolve(white, _NOISE_KERNEL, mode="valid")
 
 
 def to_adc(envelope: np.ndarray) -> np.ndarray:
@@ -81,9 +86,9 @@ def envelope(
     hits = cast_rays(world, x, y, direction + offsets, max_range=SONAR_SAMPLES * MM_PER_SAMPLE)
     gain = np.exp(-0.5 * (offsets / BEAM_SIGMA) ** 2) * np.cos(hits.incidence) ** INCIDENCE_POWER
     onset_jitter = (rng.normal(0.0, jitter_mm) if rng is not None and jitter_mm else 0.0) / MM_PER_SAMPLE
+    audible = np.isfinite(hits.distance) & (gain > 0.02)
     signal = np.zeros(SONAR_SAMPLES)
-    for distance, g in zip(hits.distance, gain, strict=True):
-        if math.isfinite(distance) and g > 0.02:
-            signal = np.maximum(signal, echo_shape(float(distance), float(g), ping_samples, onset_jitter))
+    if audible.any():
+        signal = echo_shapes(hits.distance[audible], gain[audible], ping_samples, onset_jitter).max(axis=0)
     base = BASELINE + (receiver_noise(rng, noise) if rng is not None and noise else 0.0)
     return to_adc(signal + base)
