@@ -32,6 +32,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_ring_options(p, listen=False)
 
 
+def open_link(session: Any, ring: str, wait: float = 3.0) -> Any:
+    """A PC link to main, once main answers (a fresh session needs a moment to find it)."""
+    from tokenring.errors import TransportError
+    from tokenring.pclink import PcLink
+
+    link = PcLink(session, ring)
+    deadline = time.monotonic() + wait
+    while True:
+        try:
+            link.call("status", timeout=1.0)
+            return link
+        except TransportError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.2)
+
+
 def request(link: Any, action: str) -> dict[str, Any]:
     """Send one exploration request over a :class:`~tokenring.pclink.PcLink`."""
     if action in ("1", "2"):
@@ -45,14 +62,13 @@ def request(link: Any, action: str) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     from tokenring.cliutil import print_json, tap_session
-    from tokenring.pclink import PcLink
 
     if args.action not in ACTIONS:
         raise UsageError(f"explore: {args.action!r} is not one of {', '.join(ACTIONS)}")
     if args.timeout <= 0:
         raise UsageError("--timeout must be positive")
     with tap_session(args) as session:
-        link = PcLink(session, args.ring)
+        link = open_link(session, args.ring)
         state = request(link, args.action)
         if args.wait and args.action in ("1", "2", "calibrate"):
             deadline = time.monotonic() + args.timeout

@@ -58,13 +58,18 @@ def render(frame: bytes) -> str:
     return "\n".join([border, *(f"|{row}|" for row in rows), border])
 
 
-def fetch_screen(session: Any, ring: str, timeout: float = 2.0) -> bytes:
+def fetch_screen(session: Any, ring: str, timeout: float = 3.0) -> bytes:
+    """The current screen; retried while a freshly opened session has not found the LCD yet."""
     from tokenring import keys
 
-    for reply in session.get(keys.lcd(ring, "screen"), timeout=timeout):
-        if reply.ok is not None:
-            return reply.ok.payload.to_bytes()
-    raise TransportError(f"no LCD answered on ring {ring!r} (is the lcd node up?)")
+    deadline = time.monotonic() + timeout
+    while True:
+        for reply in session.get(keys.lcd(ring, "screen"), timeout=1.0):
+            if reply.ok is not None:
+                return reply.ok.payload.to_bytes()
+        if time.monotonic() > deadline:
+            raise TransportError(f"no LCD answered on ring {ring!r} (is the lcd node up?)")
+        time.sleep(0.1)
 
 
 def save_png(frame: bytes, path: str | Path, scale: int = 4) -> None:
