@@ -1,0 +1,237 @@
+"""``tokenring map --out FILE``: fetch the robot's vector map (GET_MAP through main) and write it.
+
+The format follows the file's extension: ``.json`` (vectors in mm, plus the score when the true
+walls are known), ``.dxf`` (ezdxf; layers MAP and TRUTH) or ``.png`` (matplotlib; the vectors
+bold, the true walls faint, a 1 m scale bar). Ground truth comes from ``--world`` or, when the
+ring runs a world simulator, from its ``world/info``; it is for comparison only. ``--from
+MAP.json`` converts a saved map instead of asking the ring.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tokenring.errors import UsageError
+
+FORMATS = (".json", ".dxf", ".png")
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring.cliutil import add_ring_options
+
+    p = sub.add_parser(
+        "map",
+        help="fetch the robot's vector map and write it as DXF, PNG or JSON",
+        description="Ask main for the map (GET_MAP to the map module) and write it; the format "
+        "follows the extension of --out (.json, .dxf, .png).",
+    )
+    p.add_argument("--out", required=True, metavar="FILE", help="where to write the map (.json, .dxf, .png)")
+    p.add_argument("--world", metavar="NAME|FILE", help="the true room, drawn faintly for comparison")
+    p.add_argument("--from", dest="source", metavar="MAP", help="convert a saved map (.json or .dxf)")
+    p.add_argument("--timeout", type=float, default=60.0, help="seconds to wait for the map (default 60)")
+    add_ring_options(p, listen=False)
+
+
+def check_out(path: str) -> str:
+    suffix = Path(path).suffix.lower()
+    if suffix not in FORMATS:
+        raise UsageError(f"--out {path}: unknown format {suffix or '(none)'}; use .json, .dxf or .png")
+    return suffix
+
+
+def fetch_map(session: Any, ring: str, timeout: float = 60.0) -> np.ndarray:
+    """The ring's map in mm, via main's PC link."""
+    from tokenring.commands.explore import open_link
+
+    link = open_link(session, ring)
+    got = link.request("get_map", timeout=timeout)
+    return np.asarray(got["vectors"], dtype=float).reshape(-1, 4) * 10.0
+
+
+def live_world(session: Any, ring: str) -> dict[str, Any] | None:
+    """The running simulator's room (``world/info``), or None without a simulator."""
+    from tokenring import keys
+    from tokenring.cliutil import query
+
+    for _, reply in query(session, keys.world(ring, "info"), timeout=1.0):
+        if reply.get("ok"):
+            return reply["result"]
+    return None
+
+
+def truth_from_info(info: dict[str, Any]) -> tuple[str, np.ndarray]:
+    walls = [list(w) for w in info.get("walls", [])]
+    for x, y, r in info.get("circles", []):
+        a = np.linspace(0, 2 * np.pi, 33)
+        xs, ys = x + r * np.cos(a), y + r * np.sin(a)
+        walls += np.column_stack([xs[:-1], ys[:-1], xs[1:], ys[1:]]).tolist()
+    return str(info.get("name", "world")), np.asarray(walls, dtype=float).reshape(-1, 4)
+
+
+def load_truth(world: str) -> tuple[str, np.ndarray]:
+    """A world's name and true walls (mm); UsageError naming the world if it cannot be read."""
+    from tokenring.world import WorldError, load_world
+
+    try:
+        room = load_world(world)
+    except WorldError as exc:
+        raise UsageError(f"--world {world}: {exc}") from None
+    return room.name, room.outline()
+
+
+def load_map_file(path: str) -> np.ndarray:
+    """Vectors (mm) from a map written by ``tokenring map`` (.json) or any DXF's LINE entities."""
+    file = Path(path)
+    if not file.is_file():
+        raise UsageError(f"{path}: no such map file")
+    if file.suffix.lower() == ".dxf":
+        import ezdxf
+
+        try:
+            doc = ezdxf.readfile(file)
+        except (OSError, ezdxf.DXFError) as exc:
+            raise UsageError(f"{path}: not a readable DXF file: {exc}") from None
+        lines = [e for e in doc.modelspace().query("LINE") if e.dxf.layer != "TRUTH"]
+        return np.asarray(
+            [[e.dxf.start.x, e.dxf.start.y, e.dxf.end.x, e.dxf.end.y] for e in lines], dtype=float
+        ).reshape(-1, 4)
+    try:
+        doc = json.loads(file.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise UsageError(f"{path}:{exc.lineno}: not valid JSON: {exc.msg}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UsageError(f"{path}: cannot read: {exc}") from None
+    vectors = doc.get("vectors") if isinstance(doc, dict) else None
+    if not isinstance(vectors, list):
+        raise UsageError(f"{path}: a map file has a 'vectors' list of [x1, y1, x2, y2] in mm")
+    for i, v in enumerate(vectors):
+        if not (isinstance(v, list) and len(v) == 4 and all(isinstance(c, int | float) for c in v)):
+            raise UsageError(f"{path}: vectors[{i}] is not [x1, y1, x2, y2] (numbers, mm)")
+    return np.asarray(vectors, dtype=float).reshape(-1, 4)
+
+
+def write_map(
+    vectors: np.ndarray,
+    path: str,
+    truth: np.ndarray | None = None,
+    world: str | None = None,
+    title: str = "",
+) -> dict[str, Any] | None:
+    """Write ``vectors`` (mm) in the format of ``path``'s extension; returns the score if known."""
+    from modules.common.mapscore import score_map
+
+    suffix = check_out(path)
+    score = score_map(vectors, truth) if truth is not None else None
+    try:
+        if suffix == ".json":
+            doc = {"units": "mm", "world": world, "vectors": np.round(vectors, 1).tolist(), "score": score}
+            Path(path).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+        elif suffix == ".dxf":
+            write_dxf(vectors, path, truth)
+        else:
+            write_png(vectors, path, truth, title or (world or "map"), score)
+    except OSError as exc:
+        raise UsageError(f"--out {path}: cannot write: {exc.strerror or exc}") from None
+    return score
+
+
+def write_dxf(vectors: np.ndarray, path: str, truth: np.ndarray | None) -> None:
+    import ezdxf
+
+    doc = ezdxf.new("R2010", units=ezdxf.units.MM)
+    doc.layers.add("MAP", color=1)
+    msp = doc.modelspace()
+    for x1, y1, x2, y2 in vectors:
+        msp.add_line((x1, y1), (x2, y2), dxfattribs={"layer": "MAP"})
+    if truth is not None:
+        doc.layers.add("TRUTH", color=8)
+        for x1, y1, x2, y2 in truth:
+            msp.add_line((x1, y1), (x2, y2), dxfattribs={"layer": "TRUTH"})
+    doc.saveas(path)
+
+
+def write_png(
+    vectors: np.ndarray, path: str, truth: np.ndarray | None, title: str, score: dict[str, Any] | None
+) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 7), dpi=110)
+    if truth is not None and len(truth):
+        for x1, y1, x2, y2 in truth:
+            ax.plot(
+                [x1 / 1000, x2 / 1000],
+                [y1 / 1000, y2 / 1000],
+                color="0.75",
+                lw=4,
+                solid_capstyle="round",
+                zorder=1,
+            )
+    for x1, y1, x2, y2 in vectors:
+        ax.plot([x1 / 1000, x2 / 1000], [y1 / 1000, y2 / 1000], color="tab:red", lw=1.8, zorder=2)
+    if len(vectors):
+        ends = np.vstack([vectors[:, :2], vectors[:, 2:]]) / 1000
+        ax.plot(ends[:, 0], ends[:, 1], "o", color="tab:red", ms=2.5, zorder=3)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.grid(True, color="0.92", lw=0.6)
+    everything = [a for a in (vectors, truth) if a is not None and len(a)]
+    if everything:
+        pts = np.vstack([np.vstack([a[:, :2], a[:, 2:]]) for a in everything]) / 1000
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        pad = max(0.3, 0.05 * float((hi - lo).max()))
+        ax.set_xlim(lo[0] - pad, hi[0] + pad)
+        ax.set_ylim(lo[1] - pad - 0.3, hi[1] + pad)
+        x0, y0 = lo[0], lo[1] - pad - 0.15
+        ax.plot([x0, x0 + 1.0], [y0, y0], color="black", lw=3)  # the 1 m scale bar
+        ax.text(x0 + 0.5, y0 + 0.05, "1 m", ha="center", va="bottom", fontsize=9)
+    heading = f"{title}: {len(vectors)} vectors"
+    if score is not None:
+        heading += (
+            f"\ncoverage {score['coverage']:.0%}, precision {score['precision']:.0%}, "
+            f"orientation error {score['orientation_error_deg'] or 0:.1f}°, "
+            f"corners {score['corners_closed']}/{score['corners_total']}"
+        )
+    ax.set_title(heading, fontsize=10)
+    if truth is not None:
+        ax.plot([], [], color="0.75", lw=4, label="true walls")
+    ax.plot([], [], color="tab:red", lw=1.8, label="mapped vectors")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tokenring.cliutil import tap_session
+
+    check_out(args.out)
+    if args.timeout <= 0:
+        raise UsageError("--timeout must be positive")
+    world_name, truth = load_truth(args.world) if args.world else (None, None)
+    if args.source:
+        vectors = load_map_file(args.source)
+    else:
+        with tap_session(args) as session:
+            print("fetching the map (GET_MAP through main) ...", flush=True)
+            vectors = fetch_map(session, args.ring, args.timeout)
+            if truth is None:
+                info = live_world(session, args.ring)
+                if info is not None:
+                    world_name, truth = truth_from_info(info)
+    score = write_map(vectors, args.out, truth, world_name)
+    line = f"wrote {len(vectors)} vectors to {args.out}"
+    if score is not None:
+        line += (
+            f" (coverage {score['coverage']:.0%}, precision {score['precision']:.0%} against {world_name})"
+        )
+    print(line)
+    return 0
