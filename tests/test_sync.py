@@ -184,3 +184,17 @@ def test_sync_stamp_prefers_the_trigger_sensor() -> None:
     assert sync_stamp(half, "odometry", 0) == 200
     assert sync_stamp(half, None, 0) == 250
     assert sync_stamp({}, "odometry", 77) == 77
+
+
+def test_trigger_with_a_minimum_period_of_sensor_time() -> None:
+    buffer = ShadowBuffer()
+    trigger = Trigger("odometry", count=1, min_period_ms=100)
+    buffer.write(odo(20, 0, 0))
+    assert trigger.due(buffer)  # the first sync runs at once
+    buffer.swap()
+    trigger.last_sync_ms = 20
+    buffer.write(odo(40, 0, 0))
+    buffer.write(odo(100, 0, 0))
+    assert not trigger.due(buffer)
+    buffer.write(odo(120, 0, 0))
+    assert trigger.due(buffer)

@@ -209,7 +209,7 @@ class LocalizationCore:
         self.trigger = (
             Trigger(sensor=None, rounds=trig["rounds"])
             if trig["rounds"] > 0
-            else Trigger(trig["sensor"], trig["count"])
+            else Trigger(trig["sensor"], trig["count"], min_period_ms=trig["min_period_ms"])
         )
         self.buffer = ShadowBuffer()
         self.odometry = odometry_params(config)
@@ -250,6 +250,7 @@ class LocalizationCore:
         self.syncs = 0
         self.walls_unassociated = 0
         self.walls_associated = 0
+        self._last_loss_message = -1000
         self._feed_lock = threading.Lock()
         self._fed = 0
         self._events: list[tuple[int, str, dict[str, Any]]] = []
@@ -331,7 +332,8 @@ class LocalizationCore:
                 result["motor"] = [v["x_mm"], v["y_mm"], v["angle_cdeg"]]
             if result is not None:
                 data[name] = result
-        if lost:
+        if lost and stamp - self._last_loss_message >= 1000:  # at most one report per simulated second
+            self._last_loss_message = stamp
             self.message("E", stamp, "; ".join(lost))
         if self.data_log is not None:
             for name, record in data.items():
@@ -339,6 +341,7 @@ class LocalizationCore:
                     self.data_log.write(stamp, SENSOR_SOURCE[name], "C", {"gen": generation, **record})
         counts = {name: len(half.get(name, [])) for name in self.sensors}
         self.process_synchronised(generation, stamp, data, counts)
+        self.trigger.last_sync_ms = stamp
         return SyncResult(generation, stamp, data)
 
     # ---------------------------------------------------------------------------------------

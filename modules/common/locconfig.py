@@ -23,13 +23,13 @@ SENSOR_NAMES = ("odometry", "compass", "sonar", "battery", "truth")
 # fmt: off
 DEFAULTS: dict[str, Any] = {
     "sensors": {
-        "odometry": {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": True, "period_ms": 100},
+        "odometry": {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": True, "period_ms": 0},
         "compass":  {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": True, "period_ms": 0},
         "sonar":    {"use": True, "log_raw": True, "log_sync": True, "log_position": False, "filter": True, "period_ms": 0},
         "battery":  {"use": True, "log_raw": True, "log_sync": True, "log_position": False, "filter": False, "period_ms": 0},
         "truth":    {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": False, "period_ms": 0},
     },
-    "sync": {"enabled": True, "trigger": {"sensor": "odometry", "count": 1, "rounds": 0}},
+    "sync": {"enabled": True, "trigger": {"sensor": "odometry", "count": 1, "min_period_ms": 100, "rounds": 0}},
     "filter": {
         "enabled": True,
         "odometry_model": "arc",

@@ -85,6 +85,12 @@ class ShadowBuffer:
         with self._lock:
             return len(self._halves[self._active].get(sensor, ()))
 
+    def newest_stamp(self, sensor: str) -> int | None:
+        """The stamp of the newest ``sensor`` sample in the active half (None: none yet)."""
+        with self._lock:
+            samples = self._halves[self._active].get(sensor)
+            return samples[-1].stamp_ms if samples else None
+
     def swap(self) -> tuple[int, dict[str, list[Sample]]]:
         """Flip the halves; returns the generation and the samples of the half just closed."""
         with self._lock:
@@ -97,20 +103,38 @@ class ShadowBuffer:
 
 
 class Trigger:
-    """When to synchronise: after ``count`` samples of ``sensor``, or every ``rounds`` token rounds."""
+    """When to synchronise: after ``count`` samples of ``sensor``, or every ``rounds`` token rounds.
 
-    def __init__(self, sensor: str | None = "odometry", count: int = 1, rounds: int | None = None) -> None:
+    ``min_period_ms`` (ours) also asks that the trigger sensor's newest sample be at least that
+    much sensor time after the previous synchronisation: a steady cycle (the seed's 100 ms)
+    whatever rate the sensor publishes at or the token happens to deliver.
+    """
+
+    def __init__(
+        self,
+        sensor: str | None = "odometry",
+        count: int = 1,
+        rounds: int | None = None,
+        min_period_ms: int = 0,
+    ) -> None:
         if (sensor is None) == (rounds is None):
             raise ValueError("a trigger needs exactly one of sensor or rounds")
         self.sensor = sensor
         self.count = count
         self.rounds = rounds
+        self.min_period_ms = min_period_ms
+        self.last_sync_ms: int | None = None
         self._last_counter: int | None = None
 
     def due(self, buffer: ShadowBuffer, counter: int | None = None) -> bool:
         """True when the synchronisation should run now (``counter``: the token's round counter)."""
         if self.sensor is not None:
-            return buffer.count(self.sensor) >= self.count
+            if buffer.count(self.sensor) < self.count:
+                return False
+            if self.min_period_ms and self.last_sync_ms is not None:
+                newest = buffer.newest_stamp(self.sensor)
+                return newest is not None and newest - self.last_sync_ms >= self.min_period_ms
+            return True
         if counter is None:
             return False
         if self._last_counter is None:

@@ -1,0 +1,343 @@
+"""Action files (seed 000, §6.7 and table B.4): reproducible test drives that main executes.
+
+One command per line, fields separated by blanks, ``#`` starts a comment::
+
+    e                      motors on (our motors are always powered: accepted, does nothing)
+    s <mm>                 drive straight (negative: backwards)
+    r <deg>                turn on the spot, counter-clockwise positive
+    v <left> <right> <ms>  track speeds in mm/s for a time (100 mm/s = 100 %)
+    c <radius> <speed> <ms>  drive a circle of radius mm (positive: to the left) at speed mm/s
+
+Every action is queued (the seed's queueing actions); ``v`` and ``c`` therefore need the time.
+Errors name the file and line. :class:`ActionPlan` turns the actions into steps one at a time;
+turns are closed-loop when a fused heading is available: ``r`` aims at the heading the previous
+actions meant plus the angle, and up to three correcting turns follow while the fused heading is
+off by more than the tolerance (the turn itself is open-loop: the floor's slip makes it ±10 %).
+:class:`ActionNavigator` is the plan as one of main's navigators (its pilot drives the moves).
+
+How main hosts it (``on_pc_request``)::
+
+    if verb == "actions":
+        actions = parse_actions(payload["text"], payload.get("name", "<actions>"))
+        self.start(ActionNavigator(self.layout, actions, speed_pct=payload.get("speed_pct", 50)), 1)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tokenring.errors import UsageError
+
+MAX_SPEED_MM_S = 100.0  # 100 % = 10 cm/s, the start-stop limit
+MAX_WHEELS_MS = 60_000  # one SET_WHEEL_SPEEDS lasts at most this long (duration_ms is u16)
+TRACK_HALF_WIDTH_MM = 6.5 * 0.5419 * 180.0 / math.pi  # track travel per radian of turn, glide 6.5
+
+ARITY = {"e": 0, "s": 1, "r": 1, "v": 3, "c": 3}
+USAGE = {
+    "e": "e",
+    "s": "s <mm>",
+    "r": "r <degrees>",
+    "v": "v <left mm/s> <right mm/s> <ms>",
+    "c": "c <radius mm> <speed mm/s> <ms>",
+}
+
+
+@dataclass(frozen=True)
+class Action:
+    """One line of an action file."""
+
+    kind: str
+    args: tuple[float, ...]
+    line: int
+    text: str
+
+
+def parse_actions(text: str, source: str = "<actions>") -> list[Action]:
+    """Parse an action file's text; raises :class:`UsageError` naming ``source:line``."""
+    actions: list[Action] = []
+    for number, raw in enumerate(text.splitlines(), 1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        fields = line.split()
+        kind = fields[0]
+        where = f"{source}:{number}"
+        if kind not in ARITY:
+            raise UsageError(f"{where}: unknown action {kind!r} (known: e, s, r, v, c, # comment)")
+        if len(fields) - 1 != ARITY[kind]:
+            hint = (
+                " (this runner queues every action: give the time)"
+                if kind in "vc" and len(fields) == 3
+                else ""
+            )
+            raise UsageError(f"{where}: {kind!r} takes {ARITY[kind]} values: {USAGE[kind]}{hint}")
+        try:
+            args = tuple(float(v) for v in fields[1:])
+        except ValueError:
+            raise UsageError(f"{where}: {USAGE[kind]}: values must be numbers, got {line!r}") from None
+        if not all(math.isfinite(a) for a in args):
+            raise UsageError(f"{where}: values must be finite numbers")
+        _check(kind, args, where)
+        actions.append(Action(kind, args, number, line))
+    return actions
+
+
+def load_actions(path: str | Path) -> list[Action]:
+    """Read and parse an action file."""
+    file = Path(path)
+    try:
+        text = file.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise UsageError(f"{file}: no such action file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UsageError(f"{file}: cannot read the action file: {exc}") from None
+    return parse_actions(text, str(file))
+
+
+def _check(kind: str, args: tuple[float, ...], where: str) -> None:
+    if kind == "s" and not 1 <= abs(args[0]) <= 65535:
+        raise UsageError(f"{where}: a straight move is 1..65535 mm (either sign), got {args[0]:g}")
+    if kind == "r" and not 0 < abs(args[0]) <= 3600:
+        raise UsageError(f"{where}: a turn is up to 3600 degrees (either sign, not 0), got {args[0]:g}")
+    if kind in "vc" and args[2] <= 0:
+        raise UsageError(f"{where}: the time must be positive, got {args[2]:g} ms")
+    if kind == "v":
+        left, right = args[0], args[1]
+        if max(abs(left), abs(right)) > MAX_SPEED_MM_S:
+            raise UsageError(
+                f"{where}: track speeds are at most {MAX_SPEED_MM_S:g} mm/s (start-stop, no ramps)"
+            )
+        if left == 0 and right == 0:
+            raise UsageError(f"{where}: both track speeds are 0: nothing would move")
+    if kind == "c":
+        radius, speed = args[0], args[1]
+        if radius == 0:
+            raise UsageError(f"{where}: a circle's radius cannot be 0 (use r to turn on the spot)")
+        left, right = circle_speeds(radius, speed)
+        if max(abs(left), abs(right)) > MAX_SPEED_MM_S:
+            raise UsageError(
+                f"{where}: radius {radius:g} mm at {speed:g} mm/s needs a track at "
+                f"{max(abs(left), abs(right)):.0f} mm/s; at most {MAX_SPEED_MM_S:g}"
+            )
+        if round(left) == 0 and round(right) == 0:
+            raise UsageError(f"{where}: speed 0: nothing would move")
+
+
+def circle_speeds(radius_mm: float, speed_mm_s: float) -> tuple[float, float]:
+    """Left and right track speeds (mm/s) for a circle of ``radius_mm`` (+ left) at ``speed_mm_s``."""
+    b = TRACK_HALF_WIDTH_MM
+    return speed_mm_s * (1.0 - b / radius_mm), speed_mm_s * (1.0 + b / radius_mm)
+
+
+# =============================================================================================
+# the plan: one step at a time
+
+
+@dataclass(frozen=True)
+class Drive:
+    """A move for the pilot / motor: ``direction`` forward, reverse, left, right; mm or degrees."""
+
+    direction: str
+    amount: int
+    speed_pct: int
+    label: str = ""
+
+
+@dataclass(frozen=True)
+class Wheels:
+    """SET_WHEEL_SPEEDS: both tracks in % (100 % = 100 mm/s) for ``duration_ms``."""
+
+    left_pct: int
+    right_pct: int
+    duration_ms: int
+    label: str = ""
+
+
+WAIT = "wait"  # nothing to start now: ask again at the next step
+
+
+class ActionPlan:
+    """The actions as a sequence of steps; ``next()`` is called whenever the previous step ended."""
+
+    def __init__(
+        self,
+        actions: list[Action],
+        speed_pct: int = 50,
+        turn_tolerance_deg: float = 0.6,
+        max_corrections: int = 3,
+        settle_ms: int = 400,
+    ) -> None:
+        if not 1 <= speed_pct <= 100:
+            raise UsageError(f"action speed must be 1..100 %, got {speed_pct}")
+        self.actions = actions
+        self.speed_pct = speed_pct
+        self.tolerance = math.radians(turn_tolerance_deg)
+        self.max_corrections = max_corrections
+        self.settle_ms = settle_ms
+        self.index = 0
+        self.target: float | None = None  # the heading the actions so far meant (rad, CCW)
+        self.checking = False
+        self.corrections = 0
+        self.settle_until: int | None = None
+        self.wheels_until: int | None = None
+        self.pending_wheels: list[Wheels] = []
+        self.done_actions = 0
+        self.corrections_total = 0
+        self.current: Action | None = None
+
+    @property
+    def finished(self) -> bool:
+        return (
+            self.index >= len(self.actions)
+            and not self.checking
+            and not self.pending_wheels
+            and self.wheels_until is None
+        )
+
+    def next(
+        self, heading: float | None, now_ms: int, motor_idle: bool = True
+    ) -> Drive | Wheels | str | None:
+        """The next step: a :class:`Drive`, :class:`Wheels`, :data:`WAIT`, or None when done.
+
+        ``heading``: the fused heading (rad, CCW; None: no closed loop); ``now_ms``: simulated
+        time (the motor's stamp); ``motor_idle``: the motor stands still."""
+        if self.wheels_until is not None:
+            if now_ms < self.wheels_until or not motor_idle:
+                return WAIT
+            self.wheels_until = None
+        if self.pending_wheels:
+            step = self.pending_wheels.pop(0)
+            self.wheels_until = now_ms + step.duration_ms
+            return step
+        if self.checking:
+            step = self._check_turn(heading, now_ms)
+            if step is not None:
+                return step
+        while self.index < len(self.actions):
+            action = self.actions[self.index]
+            self.index += 1
+            self.current = action
+            self.done_actions += 1
+            step = self._start(action, heading, now_ms)
+            if step is not None:
+                return step
+        return None
+
+    def _check_turn(self, heading: float | None, now_ms: int) -> Drive | str | None:
+        if heading is None or self.target is None:
+            self.checking = False
+            return None
+        if self.settle_until is None:
+            self.settle_until = now_ms + self.settle_ms
+        if now_ms < self.settle_until:
+            return WAIT
+        self.settle_until = None
+        error = math.degrees(math.remainder(self.target - heading, 2 * math.pi))
+        degrees = round(abs(error))
+        if (
+            abs(math.radians(error)) <= self.tolerance
+            or degrees == 0
+            or self.corrections >= self.max_corrections
+        ):
+            self.checking = False
+            return None
+        self.corrections += 1
+        self.corrections_total += 1
+        return Drive(
+            "left" if error > 0 else "right", degrees, self.speed_pct, label=f"correct {error:+.1f}°"
+        )
+
+    def _start(self, action: Action, heading: float | None, now_ms: int) -> Drive | Wheels | None:
+        label = f"line {action.line}: {action.text}"
+        if action.kind == "e":
+            return None
+        if action.kind == "s":
+            mm = action.args[0]
+            return Drive("forward" if mm > 0 else "reverse", round(abs(mm)), self.speed_pct, label)
+        if action.kind == "r":
+            degrees = action.args[0]
+            if heading is not None:
+                base = self.target if self.target is not None else heading
+                self.target = base + math.radians(degrees)
+                self.checking, self.corrections, self.settle_until = True, 0, None
+            return Drive("left" if degrees > 0 else "right", round(abs(degrees)), self.speed_pct, label)
+        if action.kind == "v":
+            left, right, ms = action.args
+        else:
+            left, right = circle_speeds(action.args[0], action.args[1])
+            ms = action.args[2]
+        self.target = None  # a free drive: the heading it ends in is whatever it is
+        total = round(ms)
+        pieces = []
+        while total > 0:
+            part = min(total, MAX_WHEELS_MS)
+            pieces.append(Wheels(round(left), round(right), part, label))
+            total -= part
+        first, self.pending_wheels = pieces[0], pieces[1:]
+        self.wheels_until = now_ms + first.duration_ms
+        return first
+
+    def progress(self) -> dict[str, Any]:
+        return {
+            "actions": len(self.actions),
+            "done": self.done_actions,
+            "line": self.current.line if self.current else 0,
+            "corrections": self.corrections_total,
+            "finished": self.finished,
+        }
+
+
+# =============================================================================================
+# main's side: the plan as a navigator
+
+
+def _navigator_base() -> type:
+    from modules.common.navigator import Navigator
+
+    return Navigator
+
+
+class ActionNavigator(_navigator_base()):  # type: ignore[misc]
+    """The action plan as one of main's navigators: the pilot drives, the copro pose closes turns."""
+
+    mode = 0
+
+    def __init__(
+        self, layout: Any, actions: list[Action], speed_pct: int = 50, closed_loop: bool = True
+    ) -> None:
+        from modules.common.navigator import NAV
+
+        super().__init__(layout)
+        self.plan_steps = ActionPlan(actions, speed_pct)
+        self.closed_loop = closed_loop
+        self.state = NAV["ACTIONS"]
+        self._nav = NAV
+
+    def plan(self, last: Any, sensors: Any, alert_lock: int) -> list[Any] | None:
+        from modules.common.pilot import FORWARD, MOTOR_STATE, REASON, REVERSE, TURN_LEFT, TURN_RIGHT, Move
+
+        if last is not None and last.reason not in (REASON["DONE"],):
+            self.note = f"action file aborted: {last.reason_name} ({last.trigger})"
+            self.state = self._nav["DONE"]
+            return None
+        heading = sensors.pose[2] if self.closed_loop and sensors.pose is not None else None
+        idle = sensors.motor_state == MOTOR_STATE["IDLE"]
+        step = self.plan_steps.next(heading, sensors.stamp_ms, idle)
+        if step is None:
+            self.note = "action file done"
+            self.state = self._nav["DONE"]
+            return None
+        if step == WAIT:
+            return []
+        self.steps += 1
+        if isinstance(step, Wheels):
+            args = {"left_pct": step.left_pct, "right_pct": step.right_pct, "duration_ms": step.duration_ms}
+            self.commands.append(("motor", "SET_WHEEL_SPEEDS", args))
+            return []
+        direction = {"forward": FORWARD, "reverse": REVERSE, "left": TURN_LEFT, "right": TURN_RIGHT}[
+            step.direction
+        ]
+        return [Move(direction, step.amount, step.speed_pct, label=step.label)]
