@@ -7,7 +7,7 @@ the token; when it finished (done or aborted) the navigator plans the next seque
 
 Started and stopped by commands (EXPLORE mode, STOP_EXPLORE, CALIBRATE, CLEAR_MAP — from the
 LCD keypad) or over the PC link (``on_pc_request``: ``explore``, ``stop``, ``calibrate``,
-``clear_map``, ``get_map``, ``state``). ``main.data`` carries the navigator state, the mode,
+``clear_map``, ``get_map``, ``actions`` (an action file's text), ``state``). ``main.data`` carries the navigator state, the mode,
 the pilot's last abort reason, the ALERT lock and the number of planned steps.
 """
 
@@ -197,8 +197,10 @@ class Program(UserProgram):
         """Called on the PC link's thread: hand the request to the program's loop and wait."""
         if verb == "state":
             return self.state()
-        if verb not in ("explore", "stop", "calibrate", "clear_map", "get_map"):
-            raise UsageError(f"main takes explore, stop, calibrate, clear_map, get_map, state — not {verb!r}")
+        if verb not in ("explore", "stop", "calibrate", "clear_map", "get_map", "actions"):
+            raise UsageError(
+                f"main takes explore, stop, calibrate, clear_map, get_map, actions, state — not {verb!r}"
+            )
         answer: queue.Queue[Any] = queue.Queue()
         self.requests.put((verb, payload, answer))
         timeout = float(payload.get("timeout", 60.0))
@@ -233,6 +235,13 @@ class Program(UserProgram):
             return self.state()
         if verb == "calibrate":
             self.start(Calibrate(self.layout), 1)
+            return self.state()
+        if verb == "actions":  # an action file (seed 000 §6.7), run by pair 1's pilot
+            from modules.common.actions import ActionNavigator, parse_actions
+
+            actions = parse_actions(str(payload.get("text", "")), str(payload.get("name", "<actions>")))
+            speed = int(payload.get("speed_pct", 50))
+            self.start(ActionNavigator(self.layout, actions, speed_pct=speed), 1)
             return self.state()
         if verb == "clear_map":
             self._send("map", "CLEAR_MAP")
