@@ -1,7 +1,203 @@
-"""The compass module's user program (placeholder until its real program lands)."""
+"""The compass module (seed §3.3.3): heading from two KMZ51 bridges, navigation convention.
 
-from modules.common.placeholder import PlaceholderProgram
+Every 100 simulated ms: one flip measurement (20 samples with the flip coil set, 20 reset, so
+mains fields and the bridges' offsets cancel), the bridge within ±45° of its zero crossing gives
+the angle by arccos, a short circular mean filters it (not while the robot turns). The motors'
+static field is cancelled in the sensor by the compensation coils once CALIBRATE has learned it;
+their running field (while motor.data says the robot moves) is subtracted in software.
+
+CALIBRATE: the compass turns the robot once round in eight 45° steps (it commands the motor
+itself and waits for each POSITION_REACHED), measuring at rest at each stop; a circle fit
+through the eight readings gives the static field (centre) and the Earth's field (radius); the
+readings taken while turning lie on a circle round static + running field, which gives the
+running field. State: UNCALIBRATED, CALIBRATING, OK, DISTURBED (the field
+strength is off by more than 25 % from the calibrated one: an anomaly, iron nearby).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from modules.common.compass import (
+    circular_mean,
+    fit_circle,
+    flip_measurement,
+    heading_from_bridges,
+)
+from modules.common.units import heading_to_cdeg
+from tokenring.program import UserProgram
+
+log = logging.getLogger("tokenring.compass")
+
+UNCALIBRATED, OK, DISTURBED, CALIBRATING = range(4)  # enum compass_state
+STOPPED = 0  # enum direction
+TURN_LEFT, TURN_RIGHT = 3, 4
+SAMPLE_PERIOD_SIM_S = 0.1
+MIN_PERIOD_REAL_S = 0.005
+SAMPLES = 20  # one 50 Hz period at 1 kHz
+FILTER_LENGTH = 3
+CALIBRATION_STOPS = 8
+CALIBRATION_SPEED_PCT = 50
+DISTURBED_RATIO = 0.25
 
 
-class Program(PlaceholderProgram):
+class Program(UserProgram):
     module = "compass"
+
+    def setup(self) -> None:
+        self.out = self.os.publish()
+        self.os.set_own_input_id()
+        self.motor = self.os.subscribe("motor.data")
+        self.clock = self.hw.clock
+        self.compensation = (0.0, 0.0)
+        self.running_field = np.zeros(2)
+        self.reference_ut: float | None = None
+        self.state = UNCALIBRATED
+        self.recent: list[float] = []
+        self.heading = 0.0
+        self.bridge = 0
+        self.magnitude = 0.0
+        self.samples = 0
+        self.stamp_ms = 0.0
+        self.calibration: dict = {}
+        self.period_real = max(MIN_PERIOD_REAL_S, self.clock.to_real(SAMPLE_PERIOD_SIM_S))
+
+    # -- measuring ------------------------------------------------------------------------------
+    def motors_moving(self) -> int:
+        """The motor's current direction (0 = standing) as the ring last carried it."""
+        return int(self.motor["direction"]) if self.motor.visits else STOPPED
+
+    def read_field(self, compensation: tuple[float, float] | None = None) -> tuple[np.ndarray, float]:
+        """One flip measurement: the field both bridges see after compensation (µT), and its time."""
+        comp = self.compensation if compensation is None else compensation
+        adc, stamp = self.hw.measure([(1, comp), (-1, comp)], SAMPLES)
+        field, _offsets = flip_measurement(adc[0], adc[1], comp)
+        return field, stamp
+
+    def sample(self) -> None:
+        field, stamp = self.read_field()
+        direction = self.motors_moving()
+        if direction != STOPPED and self.state != CALIBRATING:
+            field = field - self.running_field
+        heading, bridge = heading_from_bridges(float(field[0]), float(field[1]))
+        if direction in (TURN_LEFT, TURN_RIGHT):
+            self.recent = [heading]
+        else:
+            self.recent = [*self.recent[-(FILTER_LENGTH - 1) :], heading]
+        self.heading = circular_mean(self.recent)
+        self.bridge = bridge
+        self.magnitude = float(np.hypot(*field))
+        if self.reference_ut and self.state in (OK, DISTURBED):
+            off = abs(self.magnitude - self.reference_ut) / self.reference_ut
+            self.state = DISTURBED if off > DISTURBED_RATIO else OK
+        self.samples = (self.samples + 1) & 0xFFFF
+        self.stamp_ms = stamp
+        self.publish()
+
+    def publish(self) -> None:
+        self.out.write(
+            heading_cdeg=heading_to_cdeg(self.heading),
+            state=self.state,
+            bridge=self.bridge,
+            field_nt=min(0xFFFF, round(self.magnitude * 10)),
+            sample=self.samples,
+            stamp_ms=int(self.stamp_ms) & 0xFFFFFFFF,
+        )
+
+    # -- the loop -------------------------------------------------------------------------------
+    def run(self) -> None:
+        next_ms = self.clock.now_ms()
+        while self.running:
+            self.sample()
+            next_ms = max(next_ms + SAMPLE_PERIOD_SIM_S * 1000, self.clock.now_ms())
+            while self.running:
+                remaining = max(
+                    self.period_real / 2, self.clock.to_real((next_ms - self.clock.now_ms()) / 1000)
+                )
+                command = self.os.receive_command(timeout=remaining)
+                if command is None:
+                    break
+                if command.name == "CALIBRATE":
+                    self.calibrate()
+                else:
+                    log.info("compass: ignoring %s from node %d", command.name, command.sender)
+
+    # -- calibration ----------------------------------------------------------------------------
+    def calibrate(self) -> None:
+        """Turn once round in eight steps; learn the motors' static and running fields."""
+        self._before = (self.state, self.compensation)
+        self.state = CALIBRATING
+        self.compensation = (0.0, 0.0)
+        self.publish()
+        stops: list[np.ndarray] = []
+        turning: list[np.ndarray] = []
+        for _ in range(CALIBRATION_STOPS):
+            readings = [self.read_field()[0] for _ in range(3)]
+            stops.append(np.mean(readings, axis=0))
+            if not self.os.deliver(
+                "motor",
+                "TURN_LEFT",
+                angle_deg=360 // CALIBRATION_STOPS,
+                speed_pct=CALIBRATION_SPEED_PCT,
+                timeout=5.0,
+            ):
+                return self._calibration_failed("the motor did not take the turn command")
+            if not self._turn_and_listen(turning):
+                return self._calibration_failed("the motor did not report the turn done")
+        cx, cy, radius = fit_circle(np.array(stops))
+        static = np.array([cx, cy])
+        if len(turning) >= 8:  # the readings while turning lie on a circle round static + running
+            rx, ry, _ = fit_circle(np.array(turning))
+            running = np.array([rx, ry]) - static
+        else:
+            running = np.mean(turning, axis=0) - static if turning else np.zeros(2)
+        self.compensation = (-cx, -cy)
+        self.running_field = running
+        self.reference_ut = radius
+        self.state = OK
+        self.recent = []
+        self.calibration = {
+            "static_ut": static.tolist(),
+            "running_ut": running.tolist(),
+            "earth_ut": radius,
+            "stops": len(stops),
+            "turning_samples": len(turning),
+        }
+        log.info(
+            "compass calibrated: static field %s µT, running field %s µT, |H| %.1f µT",
+            np.round(static, 2).tolist(),
+            np.round(running, 2).tolist(),
+            radius,
+        )
+        self.publish()
+        return None
+
+    def _turn_and_listen(self, turning: list[np.ndarray]) -> bool:
+        deadline_ms = self.clock.now_ms() + 60_000  # 45° at 50 % takes ~6 simulated seconds
+        while self.running and self.clock.now_ms() < deadline_ms:
+            field, _ = self.read_field()
+            if self.motors_moving() != STOPPED:
+                turning.append(field)
+            command = self.os.receive_command(timeout=self.period_real)
+            if command is not None and command.name == "POSITION_REACHED":
+                return command.args["status"] == 0
+        return False
+
+    def _calibration_failed(self, why: str) -> None:
+        log.warning("compass calibration failed: %s", why)
+        self.state, self.compensation = self._before
+        self.publish()
+
+    def report(self) -> dict:
+        return {
+            "heading_deg": math.degrees(self.heading),
+            "state": self.state,
+            "bridge": self.bridge,
+            "field_ut": self.magnitude,
+            "samples": self.samples,
+            "calibration": dict(self.calibration),
+            "compensation_ut": list(self.compensation),
+        }

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from collections import deque
 from dataclasses import dataclass
 
@@ -44,6 +45,7 @@ BAD_ARGUMENT = 2  # enum error_code
 TICK_SIM_S = 0.02  # a batch of steps every 20 simulated ms ...
 TICK_MIN_REAL_S = 0.004  # ... but not more often than every 4 real ms
 IDLE_PUBLISH_SIM_S = 0.05  # the counters' sample rate while standing
+NOTICE_PATIENCE_S = 5.0  # real seconds a reply is offered to a target that does not take it
 
 
 @dataclass
@@ -79,6 +81,8 @@ class Program(UserProgram):
         self.steps = [0, 0]
         self.current_ma = DEFAULT_MOTOR_CURRENT_MA
         self.notices: deque[tuple[str, str, dict]] = deque()
+        self.notice_deadlines: dict[int, float] = {}
+        self.in_flight: dict[str, tuple] = {}
         self.stamp_ms = self.clock.now_ms()
         self.moves = {"done": 0, "aborted": 0, "stalled": 0, "collision": 0}
         self.refused = 0
@@ -234,6 +238,7 @@ class Program(UserProgram):
         move = self.move
         assert move is not None
         self.move = None
+        self.hw.steps(0, 0, max(move.rate_hz) or 1.0, move.seq, self.current_ma, energised=False)
         self.last_move_ms = (move.start_ms, self.stamp_ms)
         self.state = {DONE: IDLE, ABORTED: IDLE, STALLED: STALLED_STATE, COLLISION: COLLISION_STATE}[status]
         self.direction, self.speed_pct = STOPPED, 0
@@ -245,17 +250,32 @@ class Program(UserProgram):
             )
 
     def _flush_notices(self) -> None:
-        """Send queued replies one at a time per target (one inbox slot each; the seed: no retry)."""
+        """Send queued replies, one in flight per target (one inbox slot each). A reply the target
+        did not take (its inbox was locked) is sent again, for up to ``NOTICE_PATIENCE_S``: the
+        seed sent POSITION_REACHED once and lost it whenever the commander was not listening."""
+        now = time.monotonic()
+        for target in list(self.in_flight):
+            outbox, entry, deadline = self.in_flight[target]
+            if not outbox.done.is_set():
+                continue
+            del self.in_flight[target]
+            if not outbox.acknowledged and now < deadline:
+                self.notices.appendleft(entry)
+                self.notice_deadlines[id(entry)] = deadline
         waiting = []
         while self.notices:
-            target, name, args = self.notices.popleft()
-            if any(t == target for t, _, _ in waiting):
-                waiting.append((target, name, args))
+            entry = self.notices.popleft()
+            target, name, args = entry
+            deadline = self.notice_deadlines.pop(id(entry), now + NOTICE_PATIENCE_S)
+            if target in self.in_flight:
+                waiting.append(entry)
+                self.notice_deadlines[id(entry)] = deadline
                 continue
             try:
-                self.os.send_command(target, name, **args)
+                self.in_flight[target] = (self.os.send_command(target, name, **args), entry, deadline)
             except ChannelError:
-                waiting.append((target, name, args))
+                waiting.append(entry)
+                self.notice_deadlines[id(entry)] = deadline
         self.notices.extend(waiting)
 
     def report(self) -> dict:

@@ -116,8 +116,11 @@ class MotorHardware(HardwareClient):
         start = self.request("motor/start")
         return float(start["x_mm"]), float(start["y_mm"]), float(start["theta_rad"])
 
-    def steps(self, left: int, right: int, rate_hz: float, move: int, current_ma: int) -> dict[str, Any]:
-        """Report half-steps made since the last batch (signed per track, + = forward)."""
+    def steps(
+        self, left: int, right: int, rate_hz: float, move: int, current_ma: int, energised: bool = True
+    ) -> dict[str, Any]:
+        """Report half-steps made since the last batch (signed per track, + = forward);
+        ``energised=False`` switches the motor driver off after them."""
         return self.request(
             "motor/steps",
             {
@@ -126,6 +129,7 @@ class MotorHardware(HardwareClient):
                 "rate_hz": float(rate_hz),
                 "move": int(move),
                 "current_ma": int(current_ma),
+                "energised": bool(energised),
             },
         )
 

@@ -7,8 +7,10 @@ Keys (all under ``tokenring/<ring>/``; requests and answers are msgpack, answers
 key                             request → result
 ==============================  =================================================================
 ``hw/clock``                    ``{}`` → ``{sim_ms, speed, seed, world}``: the simulation clock
-``hw/motor/steps``              ``{left, right, rate_hz, move, current_ma}`` half-steps both motors
-                                made since the last batch (signed, + = that track forward) →
+``hw/motor/steps``              ``{left, right, rate_hz, move, current_ma, energised}`` half-steps
+                                both motors made since the last batch (signed, + = that track
+                                forward); ``energised`` false switches the driver off (end of a
+                                move: no current, no running field) →
                                 ``{moved_mm, turned_rad, blocked, stalled, power, stamp_ms}``
 ``hw/motor/start``              ``{}`` → ``{x_mm, y_mm, theta_rad}``: where the robot was put down at
                                 power-on (the world's start pose; the motor's dead reckoning starts there)

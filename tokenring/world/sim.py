@@ -34,7 +34,6 @@ ADC_COUNTS = 1023  # the charger's 10-bit ADC
 ELECTRONICS_FULL_SCALE_V = 15.0  # voltage dividers in front of the ADC
 MOTORS_FULL_SCALE_V = 45.0
 CURRENT_FULL_SCALE_A = 5.0
-RUNNING_AFTER_MS = 20.0  # the coils stay energised this long after a batch of steps
 
 
 class HardwareRequestError(ValueError):
@@ -87,7 +86,7 @@ class Simulator:
         self.relay_on = True
         self.relay_reason = ""
         self.motor_pack_a = 0.0
-        self.running_until_ms = -1.0
+        self.energised = False
         self.last_ms = self.clock.now_ms()
         self.steps_total = [0, 0]
         self.lock = threading.RLock()
@@ -101,7 +100,8 @@ class Simulator:
             self.last_ms = max(self.last_ms, now)
             self.electronics.current_a = ELECTRONICS_CURRENT_A if self.powered else 0.0
             self.electronics.drain(self.electronics.current_a, dt)
-            self.motors.current_a = self.motor_pack_a if now < self.running_until_ms else 0.0
+            self.motors.current_a = self.motor_pack_a if self.energised else 0.0
+            self.motors.drain(self.motors.current_a, dt)
         return now
 
     @property
@@ -109,8 +109,9 @@ class Simulator:
         """The relays hold and the electronics battery is not flat."""
         return self.relay_on and self.electronics.soc > 0.0
 
-    def motors_running(self, now_ms: float) -> bool:
-        return now_ms < self.running_until_ms
+    def motors_running(self, _now_ms: float | None = None) -> bool:
+        """The motor driver is on: the coils carry current (and make their running field)."""
+        return self.energised
 
     # -- hardware requests ----------------------------------------------------------------------
     def clock_info(self, _: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -128,6 +129,7 @@ class Simulator:
         rate = _float(request, "rate_hz", 1.0)
         move = _int(request, "move", 0)
         current_ma = _int(request, "current_ma", DEFAULT_MOTOR_CURRENT_MA, 0, 5100)
+        energised = bool(request.get("energised", True))
         if rate <= 0:
             raise HardwareRequestError(f"rate_hz must be positive, not {rate}")
         with self.lock:
@@ -141,17 +143,15 @@ class Simulator:
                 "power": True,
             }
             if not self.powered or self.motors.soc <= 0.0:
+                self.energised = False
                 reply["power"] = False
                 return reply
             self.steps_total[0] += left
             self.steps_total[1] += right
-            duration_ms = max(abs(left), abs(right)) / rate * 1000.0
             result = self.robot.apply_steps(left, right, rate, move)
-            if duration_ms > 0:
-                self.motor_pack_a = MOTOR_PACK_A_PER_MOTOR_A * current_ma / 1000.0
-                self.motors.drain(self.motor_pack_a, duration_ms / 1000.0)
-                self.running_until_ms = now + RUNNING_AFTER_MS
-                self.motors.current_a = self.motor_pack_a
+            self.energised = energised
+            self.motor_pack_a = MOTOR_PACK_A_PER_MOTOR_A * current_ma / 1000.0
+            self.motors.current_a = self.motor_pack_a if energised else 0.0
             reply.update(
                 moved_mm=result.distance,
                 turned_rad=result.rotation,
@@ -290,7 +290,7 @@ class Simulator:
                 "y": pose.y,
                 "theta": pose.theta,
                 "heading_rad": self.world.heading(pose.theta),
-                "moving": self.motors_running(now),
+                "moving": self.energised,
                 "collisions": self.robot.collisions,
                 "stalls": self.robot.stalls,
                 "steps": list(self.steps_total),
