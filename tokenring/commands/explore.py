@@ -96,3 +96,86 @@ def describe(state: dict[str, Any]) -> str:
         f"navigator {state.get('navigator')} (mode {state.get('mode')}), step {state.get('steps')}, "
         f"last abort {state.get('abort_reason')}{where}"
     )
+
+
+class Mission:
+    """``tokenring up --explore N --map-out FILE``: explore, then write the map, then stop the ring.
+
+    Runs beside the launcher: waits for main, starts the exploration, follows it until it
+    finishes or the run's ``duration`` is nearly over (keeping time to fetch the map), stops it
+    (copro flushes its held-back vectors), fetches the map through main and writes it (scored
+    against the simulator's true walls), then asks the launcher to stop."""
+
+    def __init__(self, launcher: Any, mode: int | None, map_out: str | None, duration: float | None) -> None:
+        import threading
+
+        self.launcher = launcher
+        self.mode = mode
+        self.map_out = map_out
+        self.duration = duration
+        self.error: str | None = None
+        self.score: dict[str, Any] | None = None
+        self.thread = threading.Thread(target=self._run, name="mission", daemon=True)
+
+    def start(self) -> None:
+        self.started = time.monotonic()
+        self.thread.start()
+
+    def say(self, text: str) -> None:
+        self.launcher.say(text, name="explore")
+
+    def _stopping(self) -> bool:
+        return self.launcher._stop.is_set()
+
+    def _run(self) -> None:
+        try:
+            self._mission()
+        except Exception as exc:  # reported as the run's failure, the ring still stops cleanly
+            self.error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, UsageError) else str(exc)
+            self.say(f"failed: {self.error}")
+        finally:
+            self.launcher.request_stop()
+
+    def _mission(self) -> None:
+        link = open_link(self.launcher.session, self.launcher.ring, wait=60.0)
+        end = None
+        if self.duration is not None:
+            fetch_time = min(15.0, max(3.0, 0.15 * self.duration))
+            end = self.started + self.duration - fetch_time
+        if self.mode is not None:
+            state = request(link, str(self.mode))
+            self.say(f"Explore {self.mode} started: {describe(state)}")
+            last_report = 0.0
+            while not self._stopping() and (end is None or time.monotonic() < end):
+                time.sleep(0.5)
+                state = link.request("state")
+                if not state.get("running"):
+                    self.say(f"exploration finished: {(state.get('finished') or {}).get('why')}")
+                    break
+                if time.monotonic() - last_report > 10.0:
+                    self.say(describe(state))
+                    last_report = time.monotonic()
+            if self._stopping():
+                return
+            if state.get("running"):
+                link.request("stop")
+                self.say("exploration stopped (time is up)")
+        if self.map_out and not self._stopping():
+            from tokenring.commands.map import live_world, truth_from_info, write_map
+
+            got = link.request("get_map", timeout=60.0)
+            import numpy as np
+
+            vectors = np.asarray(got["vectors"], dtype=float).reshape(-1, 4) * 10.0
+            info = live_world(self.launcher.session, self.launcher.ring)
+            world, truth = truth_from_info(info) if info is not None else (None, None)
+            self.score = write_map(vectors, self.map_out, truth, world)
+            line = f"wrote {len(vectors)} vectors to {self.map_out}"
+            if self.score is not None:
+                s = self.score
+                line += (
+                    f": coverage {s['coverage']:.0%}, precision {s['precision']:.0%}, "
+                    f"orientation error {s['orientation_error_deg'] or 0:.1f}°, "
+                    f"corners {s['corners_closed']}/{s['corners_total']} ({world})"
+                )
+            self.say(line)

@@ -58,6 +58,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     world.add_argument("--speed", default="1", metavar="K", help="simulation speed-up factor (default 1)")
     world.add_argument("--seed", type=int, default=1, help="the world's random seed (default %(default)s)")
     world.add_argument("--no-world", action="store_true", help="start no world simulator (no hardware)")
+    mission = p.add_argument_group("exploration")
+    mission.add_argument(
+        "--explore", type=int, choices=(1, 2), help="start Explore 1 (avoid) or 2 (left wall)"
+    )
+    mission.add_argument("--map-out", metavar="FILE", help="at the end write the map (.png, .dxf or .json)")
     add_ring_options(p)
 
 
@@ -89,9 +94,24 @@ def run(args: argparse.Namespace) -> int:
         respawn=args.respawn,
         services=services,
     )
+    mission = None
+    if args.explore or args.map_out:
+        from tokenring.commands.explore import Mission
+        from tokenring.commands.map import check_out
+
+        if args.map_out:
+            check_out(args.map_out)
+        mission = Mission(launcher, args.explore, args.map_out, args.duration)
     install_signal_handlers(launcher)
     launcher.start()
-    code = launcher.run(args.duration)
+    if mission is not None:
+        mission.start()  # it follows the exploration, writes the map and stops the launcher
+    limit = args.duration
+    if mission is not None and limit is not None:
+        limit += 30.0  # the mission stops the ring itself; this only caps a stuck map fetch
+    code = launcher.run(limit)
+    if mission is not None and mission.error and code == 0:
+        code = 1
     launcher.say("stopped (interrupted)" if code == 130 else f"stopped (exit code {code})")
     return code
 
