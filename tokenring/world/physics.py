@@ -62,7 +62,8 @@ def cast_rays(world: World, x: float, y: float, angles: np.ndarray, max_range: f
             t = -b - np.sqrt(disc)
         valid = (disc >= 0) & (t > 1e-9)
         t = np.where(valid, t, np.inf)
-        hx, hy = x + t * dx - cx, y + t * dy - cy
+        finite = np.where(valid, t, 0.0)
+        hx, hy = x + finite * dx - cx, y + finite * dy - cy
         cos_inc = np.abs(hx * dx + hy * dy) / r
         closer = t < best
         best = np.where(closer, t, best)

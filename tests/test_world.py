@@ -1,0 +1,192 @@
+"""The world simulator: kinematics with the SPEC §5 slip model, stalls, collisions, ray casting,
+determinism, the clock, and the simulator process serving the hardware keys over Zenoh."""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import replace
+
+import msgpack
+import numpy as np
+import pytest
+from ringutil import tap, wait_until
+
+from modules.common.robot import MAX_STEP_RATE_HZ, STEP_MM
+from tokenring import keys
+from tokenring.hw import HardwareError, MotorHardware, SonarHardware
+from tokenring.world import Floor, Pose, Wall, World, load_world
+from tokenring.world.clock import SimClock
+from tokenring.world.physics import TrackedRobot, cast_rays
+from tokenring.world.service import ready_key
+from tokenring.world.sim import HardwareRequestError, Simulator
+
+
+def steps(sim: Simulator, left: int, right: int, move: int, rate: float = MAX_STEP_RATE_HZ) -> dict:
+    return sim.motor_steps({"left": left, "right": right, "rate_hz": rate, "move": move})
+
+
+def test_straight_steps_follow_the_slip_model_per_move():
+    world = load_world("empty")
+    ratios = []
+    for move in range(1, 41):
+        robot = TrackedRobot(world, np.random.default_rng(move))
+        result = robot.apply_steps(1000, 1000, MAX_STEP_RATE_HZ, move)
+        ratios.append(result.distance / (1000 * STEP_MM))
+    assert np.mean(ratios) == pytest.approx(1.01, abs=0.002)  # +1 % systematic
+    assert np.std(ratios) == pytest.approx(0.005, rel=0.35)  # 0.5 % random per move
+
+
+def test_turns_draw_their_glide_factor_within_10_percent_and_keep_it_during_the_move():
+    robot = TrackedRobot(load_world("empty"), np.random.default_rng(4))
+    glides = []
+    for move in range(1, 60):
+        a = robot.apply_steps(-300, 300, MAX_STEP_RATE_HZ, move)
+        b = robot.apply_steps(-285, 285, MAX_STEP_RATE_HZ, move)  # same move: same floor contact
+        glide = 585 / math.degrees(a.rotation + b.rotation)
+        assert math.degrees(a.rotation) / 300 == pytest.approx(math.degrees(b.rotation) / 285)
+        glides.append(glide)
+    assert min(glides) >= 6.5 * 0.9 and max(glides) <= 6.5 * 1.1
+    assert max(glides) - min(glides) > 0.8  # really drawn, not fixed
+
+
+def test_stall_above_the_start_stop_limit_counts_steps_but_does_not_move():
+    sim = Simulator(load_world("empty"), seed=1)
+    reply = steps(sim, 200, 200, 1, rate=MAX_STEP_RATE_HZ * 1.2)
+    truth = sim.truth()
+    assert reply["stalled"] and reply["moved_mm"] == 0 and truth["stalls"] == 1
+    assert truth["x_mm"] == 1000 and truth["steps"] == [200, 200]
+
+
+def test_collision_stops_at_the_wall_and_backing_off_works():
+    sim = Simulator(load_world("empty"), seed=1)  # start (1000, 1500) facing +X, wall at x = 4000
+    reply = steps(sim, 10000, 10000, 1)
+    radius = sim.world.robot_radius
+    assert reply["blocked"] and sim.truth()["x_mm"] == pytest.approx(4000 - radius, abs=0.2)
+    assert sim.truth()["collisions"] == 1
+    back = steps(sim, -200, -200, 2)
+    assert not back["blocked"] and back["moved_mm"] < 0
+    turn = steps(sim, -585, 585, 3)  # turning on the spot never collides (round robot)
+    assert not turn["blocked"] and turn["turned_rad"] > 0
+
+
+def test_ray_casting_hits_walls_and_circles_with_incidence():
+    world = World(
+        "t",
+        (Wall(1000, -500, 1000, 500),),
+        Pose(0, 0, 0),
+        circles=(replace(load_world("slanted").circles[0], x=0.0, y=800.0, r=200.0),),
+    )
+    hits = cast_rays(world, 0, 0, np.array([0.0, math.radians(20), math.pi / 2, math.pi]))
+    assert hits.distance[0] == pytest.approx(1000) and hits.incidence[0] == pytest.approx(0)
+    assert hits.distance[1] == pytest.approx(1000 / math.cos(math.radians(20)))
+    assert hits.incidence[1] == pytest.approx(math.radians(20))
+    assert hits.distance[2] == pytest.approx(600) and hits.incidence[2] == pytest.approx(0, abs=1e-6)
+    assert math.isinf(hits.distance[3])
+
+
+class SteppingClock(SimClock):
+    """Simulated time that advances 10 ms per reading, whatever the real clock does."""
+
+    def __init__(self) -> None:
+        super().__init__(1.0)
+        self.t = 0.0
+
+    def now_ms(self) -> float:
+        self.t += 10.0
+        return self.t
+
+
+def test_the_simulator_is_deterministic_given_its_seed():
+    def run(seed: int) -> tuple:
+        sim = Simulator(load_world("office"), seed=seed, clock=SteppingClock())
+        steps(sim, 500, 500, 1)
+        steps(sim, -300, 300, 2)
+        ping = sim.sonar_ping({"sensors": list(range(8))})["envelopes"]
+        compass = sim.compass_measure({"settings": [{"flip": 1, "comp_ut": [0, 0]}], "samples": 5})["adc"]
+        truth = sim.truth()
+        return truth["x_mm"], truth["y_mm"], truth["theta_rad"], ping, compass
+
+    assert run(7) == run(7)
+    assert run(7)[:3] != run(8)[:3]
+
+
+def test_hardware_requests_are_checked():
+    sim = Simulator(load_world("empty"))
+    with pytest.raises(HardwareRequestError, match="sensors must be a list"):
+        sim.handle("sonar/ping", {"sensors": [9]})
+    with pytest.raises(HardwareRequestError, match="no hardware at hw/motor/fly"):
+        sim.handle("motor/fly", {})
+    with pytest.raises(HardwareRequestError, match="inside a wall"):
+        sim.set_pose({"x_mm": 10.0, "y_mm": 10.0})
+    with pytest.raises(HardwareRequestError, match="rate_hz must be positive"):
+        sim.handle("motor/steps", {"left": 1, "right": 1, "rate_hz": 0})
+
+
+def test_sim_clock_runs_k_times_faster_and_copies_agree():
+    clock = SimClock(speed=50.0)
+    t0, r0 = clock.now_ms(), time.monotonic()
+    time.sleep(0.05)
+    assert (clock.now_ms() - t0) / ((time.monotonic() - r0) * 1000) == pytest.approx(50, rel=0.05)
+    sent = time.monotonic()
+    copy = SimClock.synced(clock.now_ms(), clock.speed, sent, time.monotonic())
+    assert abs(copy.now_ms() - clock.now_ms()) < 5  # within a few simulated ms
+    assert clock.to_real(1.0) == pytest.approx(0.02)
+    with pytest.raises(ValueError):
+        SimClock(speed=0)
+
+
+def test_floor_parameters_come_from_the_world():
+    world = replace(
+        load_world("empty"), floor=Floor(glide_factor=8.0, glide_spread=0.0, step_scale=1.0, step_noise=0.0)
+    )
+    sim = Simulator(world, seed=1)
+    assert steps(sim, 1000, 1000, 1)["moved_mm"] == pytest.approx(1000 * STEP_MM)
+    assert math.degrees(steps(sim, -800, 800, 2)["turned_rad"]) == pytest.approx(100)
+
+
+def test_world_process_serves_hardware_truth_and_info_over_zenoh(procs, ring_name, endpoint, tmp_path):
+    world = procs.start(
+        [sys.executable, "-m", "tokenring.world", "--ring", ring_name, "--listen", endpoint, "--world", "square",
+         "--speed", "20", "--seed", "3"]
+    )  # fmt: skip
+    with tap(endpoint) as session:
+        wait_until(
+            lambda: any(r.ok for r in session.liveliness().get(ready_key(ring_name), timeout=0.5)),
+            15,
+            "world up",
+        )
+        truths: list[dict] = []
+        sub = session.declare_subscriber(
+            keys.world(ring_name, "truth"), lambda s: truths.append(msgpack.unpackb(s.payload.to_bytes()))
+        )
+        motor = MotorHardware(session, ring_name)
+        assert motor.start_pose() == (1000.0, 1000.0, 0.0)
+        assert motor.clock.speed == 20.0
+        reply = motor.steps(1845, 1845, MAX_STEP_RATE_HZ, 1, 1000, energised=False)
+        assert reply["moved_mm"] == pytest.approx(1010, abs=20) and reply["power"]
+        envelopes, stamps = SonarHardware(session, ring_name).ping([0, 1, 2])
+        assert [len(e) for e in envelopes] == [510] * 3 and stamps[1] - stamps[0] == 15.0
+        with pytest.raises(HardwareError, match="sensors must be a list"):
+            SonarHardware(session, ring_name).ping([12])
+        wait_until(lambda: len(truths) >= 3, 10, "truth messages")
+        last = truths[-1]
+        assert last["x_mm"] == pytest.approx(1000 + reply["moved_mm"]) and last["world"] == "square"
+        assert {"stamp_ms", "theta_rad", "heading_rad", "electronics", "motors"} <= set(last)
+        assert abs(last["stamp_ms"] - motor.clock.now_ms()) < 20 * 200  # same clock (published at 10 Hz sim)
+        info = next(iter(session.get(keys.world(ring_name, "info"), timeout=2))).ok
+        info = msgpack.unpackb(info.payload.to_bytes())["result"]
+        assert info["name"] == "square" and len(info["walls"]) == 8 and info["speed"] == 20.0
+        sub.undeclare()
+    world.terminate()
+    assert world.wait(5) == 0
+
+
+def test_world_process_refuses_a_bad_world_file(procs, tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("walls:\n  - [0, 0, 1000, 0]\n  - [5, 5, 5, 5]\nstart: {x: 500, y: 500}\n")
+    proc = procs.start([sys.executable, "-m", "tokenring.world", "--world", str(bad)])
+    out, _ = proc.communicate(timeout=15)
+    assert proc.returncode == 2
+    assert f"{bad}:3: wall 2 has zero length" in out
