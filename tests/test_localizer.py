@@ -1,0 +1,188 @@
+"""The Localizer: filter quality on a simulated drive, exploration mode, outliers, and on a ring."""
+
+from __future__ import annotations
+
+import math
+import threading
+from pathlib import Path
+
+import pytest
+from locsim import drive, square_moves
+from memring import MemoryRing, wait_for
+
+from modules.common.localizer import LocalizationCore, Localizer
+from modules.common.locconfig import load_config
+from modules.common.sync import Sample
+from modules.common.units import cdeg_cw_to_rad_ccw
+from modules.common.walls import segments_to_walls
+from tokenring.logs import read_log
+from tokenring.replay import replay
+from tokenring.world import load_world
+
+
+def run_core(core: LocalizationCore, moves, seed: int, tamper=None) -> dict:
+    truth = None
+    for sample in drive(moves, seed=seed, heading=lambda: core.ekf.pose[2] if core.ekf else None):
+        if tamper is not None:
+            sample = tamper(sample)
+        truth = sample.values if sample.sensor == "truth" else truth
+        core.feed(sample)
+        core.maybe_sync()
+    return truth
+
+
+def errors(position: dict, truth: dict) -> tuple[float, float]:
+    distance = math.hypot(position["x"] - truth["x"], position["y"] - truth["y"])
+    heading = math.degrees(math.remainder(position["psi"] - truth["theta"], 2 * math.pi))
+    return distance, heading
+
+
+def test_one_lap_of_the_square_filter_beats_dead_reckoning() -> None:
+    core = LocalizationCore(load_config())
+    truth = run_core(core, square_moves(1, 3000), seed=3)
+    filter_error, filter_heading = errors(core.positions["K"], truth)
+    dead_error, _ = errors(core.positions["O"], truth)
+    assert filter_error < 30.0, (filter_error, dead_error)
+    assert filter_error < dead_error / 5
+    assert abs(filter_heading) < 2.0
+    assert core.positions["K"]["valid"] == [True, True, True]
+    report = core.report()
+    assert report["gates"]["accepted"]["compass"] > 1000
+    assert report["walls_associated"] > 20
+    assert report["glide"] == pytest.approx(6.5, abs=0.5)
+
+
+def test_exploration_mode_uses_walls_handed_over_from_the_map() -> None:
+    config = load_config({"walls": {"mode": "exploration"}})
+    core = LocalizationCore(config)
+    assert core.known_walls == []
+    moves = square_moves(1, 3000)[:4]
+    seen = {"fed": False}
+
+    def hand_over(sample: Sample) -> Sample:
+        if not seen["fed"] and sample.stamp_ms > 20_000:  # the map has the room's walls by now
+            for x1, y1, x2, y2 in load_world("square").segments():
+                core.event("map_wall", x1=x1, y1=y1, x2=x2, y2=y2)
+            seen["fed"] = True
+        return sample
+
+    truth = run_core(core, moves, seed=4, tamper=hand_over)
+    assert len(core.known_walls) == 8
+    assert core.walls_associated > 5
+    assert errors(core.positions["K"], truth)[0] < 40.0
+
+
+def test_an_injected_compass_anomaly_is_rejected_and_counted() -> None:
+    core = LocalizationCore(load_config())
+
+    def anomaly(sample: Sample) -> Sample:
+        if sample.sensor == "compass" and 30_000 <= sample.stamp_ms < 30_300:  # 40° off for 0.3 s
+            values = {**sample.values, "heading_cdeg": (sample.values["heading_cdeg"] + 4000) % 36000}
+            return Sample("compass", sample.stamp_ms, values, sample.seq)
+        return sample
+
+    truth = run_core(core, square_moves(1, 3000)[:2], seed=2, tamper=anomaly)
+    assert core.report()["gates"]["rejected"]["compass"] >= 3
+    assert abs(errors(core.positions["K"], truth)[1]) < 2.0
+
+
+def test_known_walls_from_segments() -> None:
+    walls = segments_to_walls([[0, 0, 5000, 0], [5000, 0, 5000, 5000]])
+    assert [round(math.degrees(w.alpha)) for w in walls] == [90, 0]
+    assert walls[1].d == pytest.approx(5000.0)
+
+
+@pytest.fixture
+def ring():
+    r = MemoryRing(bitrate=None)
+    r.wait_rounds(10)
+    yield r
+    r.close()
+
+
+def test_localizer_on_the_ring_publishes_the_fused_pose_and_replays_identically(ring, tmp_path: Path) -> None:
+    """Sensors publish through the token, copro hosts the Localizer, the log replays to the bit."""
+    config = load_config({"sensors": {"battery": {"use": False}}})
+    copro = ring.by_name("copro")
+    loc = Localizer(copro, config, log_dir=tmp_path)
+    loc.setup()
+    copro_out = copro.publish()
+    channels = {name: ring.by_name(name).publish() for name in ("motor", "compass", "sonar")}
+    moves = [("s", 600.0), ("r", 90.0), ("s", 300.0)]
+    stop = threading.Event()
+    last_truth: dict = {}
+    published: dict[str, int] = {}
+
+    def sensors() -> None:
+        """Write each sample into its module's channel and let the token carry it before the next."""
+        wire = {"odometry": "motor", "compass": "compass", "sonar": "sonar"}
+        for sample in drive(moves, seed=7, heading=lambda: loc.pose().heading):
+            if stop.is_set():
+                return
+            if sample.sensor == "truth":
+                last_truth.update(sample.values)
+                loc.feed_truth(
+                    sample.stamp_ms, sample.values["x"], sample.values["y"], sample.values["theta"]
+                )
+                continue
+            node = wire[sample.sensor]
+            values = {
+                k: v
+                for k, v in sample.values.items()
+                if k in ("steps_left", "steps_right", "heading_cdeg", "state", "distances")
+            }
+            if sample.sensor == "compass":
+                values["sample"] = sample.seq
+            if sample.sensor == "sonar":
+                values["sweep"] = sample.seq
+            channels[node].write(stamp_ms=sample.stamp_ms, **values)
+            # the next sample only once the host took this one out of the token (else it is missed)
+            wait_for(lambda s=sample: loc.last_seen.get(s.sensor) == (s.stamp_ms, s.seq), 2, "the host")
+            published[sample.sensor] = published.get(sample.sensor, 0) + 1
+
+    def host() -> None:
+        while not stop.is_set():
+            copro.wait_visit(0.2)
+            loc.step()
+            copro_out.write(**loc.copro_fields())
+
+    threads = [threading.Thread(target=sensors), threading.Thread(target=host)]
+    for t in threads:
+        t.start()
+    try:
+        threads[0].join(timeout=60)
+        assert not threads[0].is_alive(), "the sensor thread did not finish"
+        wait_for(lambda: loc.report()["syncs"] > 100, 5, "synchronisations")
+    finally:
+        stop.set()
+        for t in threads:
+            t.join(timeout=5)
+    report = loc.report()
+    pose = loc.pose()
+    assert pose.source == "ekf" and pose.valid_bits == 0b111
+    assert math.hypot(pose.x_mm - last_truth["x"], pose.y_mm - last_truth["y"]) < 40.0
+    assert abs(math.degrees(math.remainder(pose.heading - last_truth["theta"], 2 * math.pi))) < 2.0
+    for sensor, count in published.items():
+        # (+1: the channel's all-zero state before the module's first write reads as a sample at 0 ms)
+        assert count <= report["timing"][sensor]["samples"] <= count + 1, (sensor, report["timing"])
+        assert report["timing"][sensor]["missed"] == 0
+    # what other modules read from copro.data: the same pose in wire units
+    ring.wait_rounds(3)
+    fields = ring.by_name("main").subscribe("copro.data")
+    ring.wait_rounds(3)
+    on_wire = fields.read()
+    assert on_wire["pose_source"] == 2 and on_wire["pose_valid"] == 7
+    assert on_wire["pose_x_mm"] == pytest.approx(pose.x_mm, abs=30)
+    assert (
+        math.degrees(
+            abs(math.remainder(cdeg_cw_to_rad_ccw(on_wire["pose_angle_cdeg"]) - pose.heading, 2 * math.pi))
+        )
+        < 1.0
+    )
+    log_path = loc.log_path
+    loc.close()
+    log = read_log(log_path)
+    assert {r[1] for r in log.records if r[2] == "R"} >= {"O", "G", "W", "L"}
+    result = replay(log_path, tmp_path / "replayed.trlog")
+    assert result.identical, result.first_difference
+    assert result.compared > 100
