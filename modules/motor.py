@@ -22,10 +22,10 @@ import logging
 import math
 import time
 from collections import deque
-from dataclasses import dataclass
 
 from modules.common.odometry import (
     DeadReckoning,
+    Move,
     recalc_glide_factor,
     step_rate_hz,
     steps_for_angle,
@@ -46,21 +46,6 @@ TICK_SIM_S = 0.02  # a batch of steps every 20 simulated ms ...
 TICK_MIN_REAL_S = 0.004  # ... but not more often than every 4 real ms
 IDLE_PUBLISH_SIM_S = 0.05  # the counters' sample rate while standing
 NOTICE_PATIENCE_S = 5.0  # real seconds a reply is offered to a target that does not take it
-
-
-@dataclass
-class Move:
-    """A move in progress: signed step rates and totals per track."""
-
-    seq: int
-    commander: int
-    direction: int
-    speed_pct: int
-    total: tuple[int, int]  # |steps| per track
-    sign: tuple[int, int]
-    rate_hz: tuple[float, float]
-    start_ms: float
-    issued: tuple[int, int] = (0, 0)
 
 
 class Program(UserProgram):

@@ -6,15 +6,17 @@ from __future__ import annotations
 from dataclasses import replace
 
 import pytest
+from hwprograms import program
 from memring import MemoryRing, wait_for
 
-from modules.charger import Program as ChargerProgram
 from modules.common import battery as algo
-from modules.motor import Program as MotorProgram
 from tokenring.hw import ChargerHardware, MotorHardware
 from tokenring.world import Batteries, load_world
 from tokenring.world.battery import MOTOR_PACK_A_PER_MOTOR_A, Battery
 from tokenring.world.sim import Simulator
+
+ChargerProgram = program("charger")
+MotorProgram = program("motor")
 
 
 def test_adc_and_state_of_charge_arithmetic():

@@ -7,16 +7,18 @@ import math
 
 import numpy as np
 import pytest
+from hwprograms import program
 from memring import MemoryRing, wait_for
 
 from modules.common.compass import angle_difference, fit_circle, flip_measurement, heading_from_bridges
 from modules.common.units import cdeg_to_heading
-from modules.compass import Program as CompassProgram
-from modules.motor import Program as MotorProgram
 from tokenring.hw import CompassHardware, MotorHardware
 from tokenring.world import load_world
 from tokenring.world.magnetics import CompassBridges
 from tokenring.world.sim import Simulator
+
+CompassProgram = program("compass")
+MotorProgram = program("motor")
 
 
 def measure(bridges: CompassBridges, theta: float, comp=(0.0, 0.0), running=False, t=0.0) -> np.ndarray:

@@ -6,17 +6,20 @@ from __future__ import annotations
 import math
 
 import pytest
+from hwprograms import program
 from memring import MemoryRing, wait_for
 
 from modules.common.odometry import DeadReckoning, recalc_glide_factor, steps_for_angle, steps_for_distance
 from modules.common.robot import STEP_MM
 from modules.common.units import cdeg_to_rad, pose_from_wire
-from modules.motor import Program as MotorProgram
 from tokenring.hw import MotorHardware
 from tokenring.world import load_world
 from tokenring.world.sim import Simulator
 
 DONE, ABORTED, STALLED, COLLISION = range(4)
+
+
+MotorProgram = program("motor")
 
 
 def test_glide_factor_formula_with_the_seeds_numbers():

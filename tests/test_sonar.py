@@ -8,17 +8,20 @@ import statistics
 
 import numpy as np
 import pytest
+from hwprograms import program
 from memring import MemoryRing, wait_for
 
 from modules.common import sonar as algo
 from modules.common.robot import FRONT, LEFT_FRONT, SONAR_MOUNTS
-from modules.sonar import Program as SonarProgram
 from tokenring.hw import SonarHardware
 from tokenring.world import echo, load_world
 from tokenring.world.model import Pose, Wall, World
 from tokenring.world.sim import Simulator
 
 NAMES = algo.BEHAVIOUR_NAMES
+
+
+SonarProgram = program("sonar")
 
 
 def wall_ahead(distance_mm: float, tilt_deg: float = 0.0) -> World:

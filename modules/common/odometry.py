@@ -69,3 +69,18 @@ class DeadReckoning:
 
     def set(self, x: float, y: float, theta: float) -> None:
         self.x, self.y, self.theta = x, y, wrap_angle(theta)
+
+
+@dataclass
+class Move:
+    """A move in progress: signed step rates and totals per track."""
+
+    seq: int
+    commander: int
+    direction: int
+    speed_pct: int
+    total: tuple[int, int]  # |steps| per track
+    sign: tuple[int, int]
+    rate_hz: tuple[float, float]
+    start_ms: float
+    issued: tuple[int, int] = (0, 0)

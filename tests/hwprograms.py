@@ -1,0 +1,15 @@
+"""The hardware modules' programs loaded exactly as a node loads them (``load_program_file``),
+so in-process tests catch what only breaks outside a normal import."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from tokenring.program import load_program_file
+
+MODULES = Path(__file__).resolve().parent.parent / "modules"
+
+
+def program(name: str) -> type:
+    """``modules/<name>.py``'s Program class, compiled like ``tokenring node --program`` does."""
+    return load_program_file(MODULES / f"{name}.py")[0]
