@@ -199,7 +199,11 @@ def test_explore2_follows_the_left_wall_and_turns_at_corners():
 
     nav = ExploreLeftWall(LAYOUT)
     s = sensors_with(left_front=30, left_rear=30)
-    seg = nav.plan(None, s, STOPPED)
+    find = nav.plan(None, s, STOPPED)  # first a wall ahead (an island on the left does not count)
+    assert [m.label for m in find] == ["find"] and [a.kind for a in find[0].abort] == ["front_within"]
+    turn = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="front_within"), s, STOPPED)
+    assert turn[0].direction == TURN_RIGHT and turn[0].amount == 90  # the wall is now on the left
+    seg = nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED)
     assert [m.label for m in seg] == ["follow"] and seg[0].scan
     # drifting away from the wall by 1 cm per 10 cm: the next segment starts with a left turn
     samples = [(d, [FAR] * 7 + [30 + d // 100]) for d in range(0, 600, 12)]
@@ -231,6 +235,7 @@ def test_explore2_ends_after_one_lap():
     from modules.common.pilot import Outcome
 
     nav = ExploreLeftWall(LAYOUT)
+    nav.phase = "follow"
     s = sensors_with(left_front=30, left_rear=30)
     seg = nav.plan(None, s, STOPPED)
     s.pose = (3000.0, 0.0, 0.0)

@@ -211,25 +211,26 @@ class ExploreLeftWall(Navigator):
             self.note = "lap closed"
             return None
 
-        if self.phase == "find":
+        if self.phase == "find":  # drive until a wall blocks the way, then put it on the left
             self.state = NAV["ENTRY"]
-            if self._left_wall_seen(sensors):
+            if (
+                last is not None
+                and last.move is not None
+                and last.move.label == "find"
+                and (last.trigger == "front_within" or last.done)
+            ):
                 self.phase = "follow"
-            elif last is not None and last.move is not None and last.move.label == "find":
-                if last.trigger == "front_within" or last.done:
-                    self.phase = "follow"
-                    self.state = NAV["TURN"]
-                    return self._turn(-90, "inner")
-            else:
-                return [
-                    Move(
-                        FORWARD,
-                        s.find_mm,
-                        s.speed_pct,
-                        abort=(self._front_stop(), Abort("left_within", s.wall_cm + 5, "NONE")),
-                        label="find",
-                    )
-                ]
+                self.state = NAV["TURN"]
+                return self._turn(-90, "inner")
+            return [
+                Move(
+                    FORWARD,
+                    s.find_mm,
+                    s.speed_pct,
+                    abort=(self._front_stop(),),  # a wall ahead, not an island passing by
+                    label="find",
+                )
+            ]
 
         if self.phase == "outer":
             self.phase = "reacquire"

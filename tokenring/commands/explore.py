@@ -138,6 +138,15 @@ class Mission:
 
     def _mission(self) -> None:
         link = open_link(self.launcher.session, self.launcher.ring, wait=60.0)
+        deadline = time.monotonic() + 30.0
+        while True:  # main's node answers before its program runs
+            try:
+                link.request("state")
+                break
+            except UsageError:
+                if time.monotonic() > deadline or self._stopping():
+                    raise
+                time.sleep(0.2)
         end = None
         if self.duration is not None:
             fetch_time = min(15.0, max(3.0, 0.15 * self.duration))
