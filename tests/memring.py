@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Callable, Iterable
 
@@ -19,6 +20,11 @@ def wait_for(condition: Callable[[], object], timeout: float = 5.0, what: str = 
             return value
         time.sleep(0.002)
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+# node processes hand the GIL over every 0.5 ms (tokenring.nodeproc); eight in-process nodes
+# need the same, or one node waits 5 ms per switch behind the others
+sys.setswitchinterval(0.0005)
 
 
 class MemoryRing:
@@ -39,6 +45,11 @@ class MemoryRing:
         node.start()
         self.nodes[node_id] = node
         return node
+
+    def freeze(self, node_id: int, frozen: bool = True) -> None:
+        """Like SIGSTOP/SIGCONT: deliveries, sends and the node's watchdog all stand still."""
+        self.nodes[node_id].paused = frozen
+        self.hub.freeze(node_id, frozen)
 
     def by_name(self, name: str) -> NodeOS:
         return self.nodes[self.protocol.node(name).id]

@@ -109,8 +109,6 @@ def test_ring_of_eight_forms_counts_rounds_shares_data_and_delivers_commands(
         wait_until(lambda: len(later.take()) >= 40, 10, "more frames")
         later.close()
         assert not any(any(f[sonar_inbox.address : sonar_inbox.end]) for f in later.take())
-        totals = stats(session, ring_name)
-        assert sum(n["stats"]["tokens_regenerated"] for n in totals.values()) == 1
     assert launcher.wait(30) == 0
     assert wait_gone(pids, 2) == []
 

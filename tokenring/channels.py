@@ -273,12 +273,15 @@ class Outbox:
     def visit(self, work: bytearray) -> bool:
         """Returns True when this outbox is finished (the handler drops it)."""
         off, a = self._off, self.start
+        mine = work[a + off.sender] == self.own_id and work[a + off.state] != off.FREE
         if self.state == Outbox.IN_TOKEN:
-            ours = work[a + off.sender] == self.own_id and work[a + off.seq] == self.seq
-            if ours and work[a + off.state] != off.FREE:
-                self.transmitted = True
-                self.acknowledged = work[a + off.state] == off.ACKNOWLEDGED
-                work[a : self.end] = bytes(self.end - a)  # cleared in every case
+            if mine:
+                if work[a + off.seq] == self.seq:
+                    self.transmitted = True
+                    self.acknowledged = work[a + off.state] == off.ACKNOWLEDGED
+                # back at the sender the inbox is cleared in every case — also of an older
+                # command of ours that a token regenerated from an old copy brought back
+                work[a : self.end] = bytes(self.end - a)
             if self.acknowledged:
                 self.stats.commands_acknowledged += 1
             else:
@@ -286,7 +289,7 @@ class Outbox:
             self.state = Outbox.DONE
             self.done.set()
             return True
-        if work[a + off.state] == off.FREE:
+        if work[a + off.state] == off.FREE or mine:  # an old command of ours is ours to replace
             work[a : self.end] = self.image
             self.state = Outbox.IN_TOKEN
             self.stats.commands_sent += 1

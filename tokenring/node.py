@@ -171,6 +171,7 @@ class NodeOS:
         self._leaving_nodes: set[int] = set()
         self._started_at = 0.0
         self._paced = 0.0  # seconds the last pass slept to emulate wire time
+        self._stall_wake = 0.0  # when the watchdog last woke far too late
 
         # user channels
         self._regs: dict[str, DataRegistration] = {}
@@ -190,10 +191,13 @@ class NodeOS:
         # hooks filled by later layers (system commands, fault injection)
         self.system_handler: Callable[[bytearray], bool] | None = None
         self.rx_fault: Callable[[bytes, bytes | None], bool] | None = None
-        self.tx_fault: Callable[[int, bytes, bytes], bool] | None = None
+        self.tx_fault: Callable[[int, bytearray], bool] | None = None
+        self.msg_fault: Callable[[bytes], bool] | None = None
 
         self._joined = False
         self._leaving = False
+        self._departed = False  # left with the `leave` fault; `join` brings it back
+        self.paused = False  # set by the soft `hang` fault: the watchdog stands still too
         self._stopping = threading.Event()
         # the watchdog sleeps on a raw lock (a C-level binary semaphore): waking it from the
         # token path costs ~0.1 us where threading.Event.set costs tens of microseconds cold
@@ -230,13 +234,34 @@ class NodeOS:
         )
 
     def leave(self, grace: float | None = None) -> None:
-        """Leave cleanly, like a handover: announce it (the others route around this node but
-        still accept its frames), forward whatever token still arrives until it stops coming,
-        then withdraw the liveliness token and close."""
-        if not self._joined or self._leaving:
-            self.close()
+        """Leave cleanly and close: a handover, then the transport goes."""
+        if self._joined and not self._leaving:
+            self.stop_program()
+            self._handover(grace)
+        self.close()
+
+    def depart(self, grace: float | None = None) -> None:
+        """Leave the ring but keep the process and its program (the ``leave`` fault)."""
+        if self._joined and not self._leaving:
+            self._handover(grace)
+            self._departed = True
+            self._leaving = False
+
+    def join(self) -> None:
+        """Come back after :meth:`depart`: announce liveliness again; the ring inserts us."""
+        if not self._departed:
             return
-        self.stop_program()
+        self._departed = False
+        self._last_seen = perf_counter()
+        self._last_visit = 0.0
+        self._accepted_crc = -1
+        self.transport.announce()
+        self._announce_rejoin()
+        log.info("node %s (id %d) rejoined", self.name, self.node_id)
+
+    def _handover(self, grace: float | None) -> None:
+        """Announce the departure (the others route around this node but still accept its
+        frames), forward whatever token still arrives until it stops coming, then withdraw."""
         self._leaving = True
         announced = perf_counter()
         try:
@@ -256,7 +281,6 @@ class NodeOS:
             self.transport.withdraw()
         except TokenRingError as exc:
             log.warning("leaving: %s", exc)
-        self.close()
 
     def close(self) -> None:
         """Stop everything at once (no goodbye); safe to call twice."""
@@ -284,6 +308,8 @@ class NodeOS:
         stats = self.stats
         stats.frames_received += 1
         if self.rx_fault is not None and self.rx_fault(frame):
+            return
+        if self._departed:
             return
         size = self._token_size
         if len(frame) != self._frame_size:
@@ -320,7 +346,7 @@ class NodeOS:
             self._adopt_epoch(epoch, origin, t_in)
         self._accepted_crc, self._accepted_sid = crc, sid
         if sid in self._excluded:
-            self._include(sid)
+            self._include(sid, tell=True)
         with self._token_lock:
             work = self._work
             work[:] = frame
@@ -397,12 +423,13 @@ class NodeOS:
                 time.sleep(delay)  # emulated wire time; a lone node also waits 1 ms per pass
                 self._paced += delay
                 now = perf_counter()
+        if did != self._last_sent_did or not self._ack_pending:
+            self._retries = 0  # unanswered passes to the same successor keep counting
         self._last_sent_did = did
         self._last_sent_crc = crc
         self._last_sent_time = now
         self._has_sent = True
-        self._ack_pending = want_ack
-        self._retries = 0
+        self._ack_pending = want_ack or (self._ack_pending and self._retries > 0)
         self._transmit(did)
         if want_ack:
             self._wake()
@@ -455,6 +482,10 @@ class NodeOS:
             log.debug("message to %d: %s", did, exc)
 
     def _on_message(self, payload: bytes) -> None:
+        if self.msg_fault is not None and self.msg_fault(payload):
+            return
+        if self._departed:
+            return
         kind = payload[:1]
         if kind in (b"A", b"S"):
             if len(payload) != R.ACK_MESSAGE.size:
@@ -462,15 +493,20 @@ class NodeOS:
             _, sender, crc, epoch, origin = R.ACK_MESSAGE.unpack(payload)
             now = perf_counter()
             if sender in self._excluded:
-                self._include(sender)
+                self._include(sender, tell=True)  # it answers: it is alive after all
             if kind == b"S" and R.epoch_order(epoch, origin, self._epoch, self._origin) > 0:
-                self._adopt_epoch(epoch, origin, now)  # our token is the stale one
+                # our token is the stale one (e.g. a partition healed): learn the newer epoch and
+                # tell everyone, so the old token dies everywhere and this side rejoins
+                self._adopt_epoch(epoch, origin, now)
+                self.stats.stale_tokens += 1
+                self._announce_rejoin()
             with self._token_lock:
                 if sender == self._last_sent_did and crc == self._last_sent_crc:
                     if self._ack_pending:
                         self.timing.ack_latency.add(now - self._last_sent_time)
                         self.stats.passes_acked += 1
                     self._ack_pending = False
+                    self._retries = 0
                     self._confirmed_did = sender
                     self._confirmed_at = now
             return
@@ -487,6 +523,8 @@ class NodeOS:
                 self._successor_changed()
         elif kind == R.EVENT_REJOIN and node_id != self.node_id:
             self._include(node_id)
+        elif kind == R.EVENT_REGENERATED and by != self.node_id:
+            self._last_seen = max(self._last_seen, perf_counter())  # a fresh token is on its way
         elif kind == R.EVENT_LEAVING and node_id != self.node_id:
             # route around it at once, but keep accepting its frames until it withdraws
             self._leaving_nodes.add(node_id)
@@ -502,17 +540,27 @@ class NodeOS:
             log.debug("rejoin: %s", exc)
 
     def _backoff(self, node_id: int) -> float:
-        previous = self._exclusion_backoff.get(node_id, 0.5)
-        value = min(8.0, previous * 2)
+        """How long an excluded node stays skipped before it is probed again: 0.2 s, doubling
+        up to 5 s while it keeps failing (a healed partition merges at the next probe)."""
+        previous = self._exclusion_backoff.get(node_id, 0.1)
+        value = min(5.0, previous * 2)
         self._exclusion_backoff[node_id] = value
         return value
 
-    def _include(self, node_id: int) -> None:
+    def _include(self, node_id: int, tell: bool = False) -> None:
+        """Take an excluded node back; ``tell`` broadcasts it (we saw it alive ourselves)."""
         if node_id in self._leaving_nodes:
             return  # it still answers while it hands over, but it is on its way out
         self._exclusion_backoff.pop(node_id, None)
         if self.membership.include(node_id):
             self._successor_changed()
+            if tell:
+                try:
+                    self.transport.broadcast(
+                        R.RING_EVENT.pack(R.EVENT_REJOIN, node_id, self.node_id, self._epoch, self._origin)
+                    )
+                except TokenRingError as exc:
+                    log.debug("rejoin event: %s", exc)
 
     def _on_membership(self, node_id: int, alive: bool) -> None:
         if node_id == self.node_id:
@@ -561,11 +609,25 @@ class NodeOS:
 
     def _watch(self) -> None:
         refresh_at = 0.0
+        last_tick = perf_counter()
+        planned = 0.0
         while not self._stopping.is_set():
+            if self.paused or self._departed:
+                self._wake_lock.acquire(timeout=0.05)
+                continue
             now = perf_counter()
-            if now >= refresh_at:
+            if now - last_tick > max(0.2, 4 * self.timing.current.recon):
+                # this process was frozen (SIGSTOP, a long pause): whatever we hold is old; ask
+                # to rejoin and give the ring one reconfiguration time before regenerating
+                log.warning("woke up after %.1f s frozen; asking to rejoin", now - last_tick)
+                with self._token_lock:
+                    self._ack_pending = False
+                    self._last_seen = now
+                self._announce_rejoin()
+            last_tick = now
+            if now >= refresh_at or self.timing.due():
                 self._ack_interval = self.timing.refresh(len(self.membership.active)).ack_interval
-                refresh_at = now + 0.5
+                refresh_at = now + (0.1 if now - self._started_at < 3.0 else 0.5)
                 for node_id in self.membership.expire_exclusions(time.monotonic()):
                     log.info("retrying excluded node %d", node_id)
                     self._successor_changed()
@@ -578,13 +640,20 @@ class NodeOS:
                         self._pass_timed_out(now)
                     else:
                         deadlines.append(due)
-            if self._joined and not self._leaving:
+            if planned and now - planned > timeouts.slot:
+                # woke far too late (a loaded machine stalled us): every deadline may have
+                # passed at once, so restart the rank stagger from now; higher ranks go first
+                self._stall_wake = now
+            if self._joined and not self._leaving and not self._departed:
                 due = self._regeneration_deadline(timeouts)
                 if now >= due:
                     self._regenerate(now)
                 else:
                     deadlines.append(due)
-            wait = max(0.0, min(deadlines) - perf_counter())
+            # never sleep past half a reconfiguration time: a node that oversleeps finds every
+            # deadline expired at once and would regenerate regardless of its rank
+            wait = max(0.0, min(min(deadlines) - perf_counter(), timeouts.recon / 2))
+            planned = perf_counter() + wait
             self._wake_lock.acquire(timeout=wait)
 
     def _regeneration_deadline(self, timeouts: R.Timeouts) -> float:
@@ -592,7 +661,8 @@ class NodeOS:
         if booting and self.preferred_master == self.node_id:
             # main starts the ring: wait briefly for a token that may already circulate
             return self._started_at + max(0.15, 4 * timeouts.hop * len(self.membership.active))
-        deadline = self._last_seen + timeouts.recon + self.membership.rank() * timeouts.slot
+        lost_since = max(self._last_seen + timeouts.recon, self._stall_wake)
+        deadline = lost_since + self.membership.rank() * timeouts.slot
         if booting and self.preferred_master in self._live:
             deadline += 1.0  # main is up and will start the token: give it time
         return deadline
@@ -638,6 +708,15 @@ class NodeOS:
                     self.membership.rank(),
                 )
             self._bump_epoch(now)
+            if not first:
+                try:
+                    self.transport.broadcast(
+                        R.RING_EVENT.pack(
+                            R.EVENT_REGENERATED, self.node_id, self.node_id, self._epoch, self._origin
+                        )
+                    )
+                except TokenRingError as exc:
+                    log.debug("regeneration event: %s", exc)
             if first:  # the seed: main initialises the token with zeros
                 work = self._work
                 work[:] = bytes(self._frame_size)
@@ -783,7 +862,6 @@ class NodeOS:
             if (
                 outbox.state == Outbox.DONE
                 and work[a + off.sender] == self.node_id
-                and work[a + off.seq] == outbox.seq
                 and work[a + off.state] != off.FREE
             ):
                 work[a : outbox.end] = bytes(outbox.end - a)

@@ -6,10 +6,11 @@ Timeouts (all derived, never guessed; see README "Timing"):
   per byte plus the 15.6 µs token pass, scaled by ``2.5 Mbit/s / bitrate`` (2.286 ms at the
   default 2.5 Mbit/s, 0 at ``max``).
 * **ack timeout** — ARCNET's 74.7 µs response timeout scaled by bitrate, but never below
-  4 x the 99th percentile of the measured ack latency nor below 2 ms (Python and the OS
+  4 x the 99th percentile of the measured ack latency nor below 5 ms (Python and the OS
   scheduler cannot promise less on a loaded 2-core machine).
-* **reconfiguration timeout** — ARCNET's 840 ms scaled by bitrate, but never below 8 x the
-  99th-percentile round time, 3 hop times per live node, nor 30 ms. The highest live ID
+* **reconfiguration timeout** — ARCNET's 840 ms scaled by bitrate, but never below 10 x the
+  median round time (the median, so that a disturbance does not inflate its own timeout),
+  3 hop times per live node, nor 50 ms. The highest live ID
   regenerates a lost token after it; every next lower rank waits one more ``slot``.
 """
 
@@ -30,9 +31,10 @@ ARCNET_ITT_S = 15.6e-6
 ARCNET_RESPONSE_TIMEOUT_S = 74.7e-6
 ARCNET_RECON_TIMEOUT_S = 0.840
 
-ACK_FLOOR_S = 0.002
-RECON_FLOOR_S = 0.030
+ACK_FLOOR_S = 0.005
+RECON_FLOOR_S = 0.050
 ACK_RETRIES = 2
+MIN_ROUND_SAMPLES = 16  # rounds measured before the timeouts follow the measurements
 
 # header byte ``epoch``: bits 0-6 the ring epoch (mod 128), bit 7 "acknowledge this pass"
 EPOCH_MASK = 0x7F
@@ -45,6 +47,7 @@ RING_EVENT = struct.Struct("<cBBBB")
 EVENT_EXCLUDED = b"X"
 EVENT_REJOIN = b"J"
 EVENT_LEAVING = b"L"
+EVENT_REGENERATED = b"R"  # ARCNET's reconfiguration burst: everyone restarts its lost-token timer
 
 
 def parse_bitrate(text: str | float | int | None) -> float | None:
@@ -167,6 +170,7 @@ class Timing:
         self.send = RollingStats(4096)  # seconds the transport took to send a frame
         self._lock = threading.Lock()
         self.round_median = 0.0
+        self.samples_used = 0
         self.current = self._derive(live=2)
 
     def _derive(self, live: int) -> Timeouts:
@@ -176,13 +180,13 @@ class Timing:
         ack = max(ACK_FLOOR_S, 4 * ack_p99, ARCNET_RESPONSE_TIMEOUT_S * self.scale)
         recon = max(
             RECON_FLOOR_S,
-            8 * round_p99,
+            10 * self.round_median,  # the median: a disturbance must not inflate its own timeout
             3 * self.hop * live,
             ARCNET_RECON_TIMEOUT_S * self.scale,
             (ACK_RETRIES + 1) * ack * 2,
         )
-        if not len(self.rounds):
-            recon = max(recon, 0.2)  # nothing measured yet: be patient at start-up
+        if len(self.rounds) < MIN_ROUND_SAMPLES:
+            recon = max(recon, 0.2)  # not enough measured yet: be patient at start-up
         return Timeouts(
             hop=self.hop,
             ack=ack,
@@ -194,8 +198,13 @@ class Timing:
     def refresh(self, live: int) -> Timeouts:
         """Recompute from the latest measurements (called by the watchdog, not per visit)."""
         with self._lock:
+            self.samples_used = len(self.rounds)
             self.current = self._derive(live)
             return self.current
+
+    def due(self) -> bool:
+        """True when the first trustworthy measurements have just arrived."""
+        return self.samples_used < MIN_ROUND_SAMPLES <= len(self.rounds)
 
 
 class Membership:

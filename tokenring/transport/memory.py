@@ -24,6 +24,10 @@ class MemoryHub:
         self._nodes: dict[int, MemoryTransport] = {}
         self._live: set[int] = set()
         self.frames_delivered = 0
+        self.wire: list[tuple[int, int, bytes]] = []  # (sender, receiver, frame) when tapping
+        self.tapping = False
+        self._groups: list[set[int]] | None = None
+        self._drop_frames = 0
 
     def attach(self, transport: MemoryTransport) -> set[int]:
         with self._lock:
@@ -50,19 +54,46 @@ class MemoryHub:
         for node in targets:
             node._deliver(("member", node_id, live))
 
-    def send(self, did: int, item: tuple) -> None:
+    def _separated(self, a: int, b: int) -> bool:
+        if self._groups is None:
+            return False
+        return not any(a in group and b in group for group in self._groups)
+
+    def send(self, sender: int, did: int, item: tuple) -> None:
         with self._lock:
             node = self._nodes.get(did)
+            if self._separated(sender, did):
+                return
+            if item[0] == "frame":
+                if self.tapping:
+                    self.wire.append((sender, did, item[1]))
+                if self._drop_frames:
+                    self._drop_frames -= 1
+                    return
         if node is not None:
             if item[0] == "frame":
                 self.frames_delivered += 1
             node._deliver(item)
 
-    def broadcast(self, item: tuple) -> None:
+    def broadcast(self, sender: int, item: tuple) -> None:
         with self._lock:
-            targets = list(self._nodes.values())
+            targets = [n for i, n in self._nodes.items() if not self._separated(sender, i)]
         for node in targets:
             node._deliver(item)
+
+    def partition(self, *groups: set[int]) -> None:
+        """Frames and messages no longer cross between the groups (liveliness still does)."""
+        with self._lock:
+            self._groups = [set(g) for g in groups]
+
+    def heal(self) -> None:
+        with self._lock:
+            self._groups = None
+
+    def drop_frames(self, count: int = 1) -> None:
+        """Lose the next ``count`` frames on the wire."""
+        with self._lock:
+            self._drop_frames += count
 
     def crash(self, node_id: int) -> None:
         """The node vanishes at once: it receives nothing more and its liveliness drops."""
@@ -132,16 +163,19 @@ class MemoryTransport(Transport):
         return members
 
     def _send_frame(self, did: int, frame: bytes | bytearray) -> None:
+        self._thawed.wait()  # a stopped process sends nothing: every thread blocks, like SIGSTOP
         if not self._dead:
-            self.hub.send(did, ("frame", bytes(frame)))
+            self.hub.send(self.node_id, did, ("frame", bytes(frame)))
 
     def _send_message(self, did: int, payload: bytes) -> None:
+        self._thawed.wait()
         if not self._dead:
-            self.hub.send(did, ("message", payload))
+            self.hub.send(self.node_id, did, ("message", payload))
 
     def _broadcast(self, payload: bytes) -> None:
+        self._thawed.wait()
         if not self._dead:
-            self.hub.broadcast(("message", payload))
+            self.hub.broadcast(self.node_id, ("message", payload))
 
     def _announce(self) -> None:
         self.hub.set_live(self.node_id, True)
