@@ -15,41 +15,45 @@ are published in the ``pose_*`` fields (source 2 = EKF, 1 = dead reckoning).
 from __future__ import annotations
 
 import logging
+import math
 import os as _os
 import queue
 import threading
 from typing import Any
 
 from modules.common.units import pose_from_wire, pose_to_wire
-from modules.common.vectorgen import (
-    NO_CONTACT_CM,
-    PoseHistory,
-    SeedEdgeFollower,
-    SideHypothesis,
-    SweepInput,
-    Vector,
-    VectorPostProcessor,
-    WallTracker,
-    default_layout,
-    observe_side,
-)
+from modules.common.vectorgen import OUR_METHOD, SEED_METHOD, PoseHistory, Vector, Vectorizer, default_layout
 from modules.common.vectormap import vector_to_wire
 from tokenring.program import UserProgram
 
 log = logging.getLogger("tokenring.copro")
 
-SEED, OURS = 0, 1
+SEED, OURS = SEED_METHOD, OUR_METHOD
 POSE_NONE, POSE_DEAD_RECKONING, POSE_EKF = 0, 1, 2
 MIN_DRIVEN_MM = 10  # the seed: vectors only after more than 1 cm driven
 
 
+#: the localizer's settings while exploring an unknown room: start where the motor was put down,
+#: correct against the walls of the robot's own map (handed over as they are found), no log files
+EXPLORATION_CONFIG: dict[str, Any] = {
+    "filter": {"initial_pose": "motor"},
+    "walls": {"mode": "exploration"},
+    "logs": {"enabled": False},
+}
+
+
 def open_localizer(os: Any) -> Any | None:
-    """The EKF localizer if that module is installed (issue 7), else None (dead reckoning)."""
+    """The EKF localizer (modules.common.localizer), configured for exploration; None without it.
+
+    ``$TOKENRING_LOCALIZER_CONFIG`` names another configuration file; ``$TOKENRING_LOCALIZER=off``
+    maps on dead reckoning alone (the benchmark compares both)."""
+    if _os.environ.get("TOKENRING_LOCALIZER", "").lower() in ("off", "0", "no"):
+        return None
     try:
-        from modules.common.localizer import Localizer  # type: ignore[import-not-found]
+        from modules.common.localizer import Localizer
     except ImportError:
         return None
-    config = _os.environ.get("TOKENRING_LOCALIZER_CONFIG")
+    config: Any = _os.environ.get("TOKENRING_LOCALIZER_CONFIG") or EXPLORATION_CONFIG
     try:
         localizer = Localizer(os, config)
         localizer.setup()
@@ -59,8 +63,8 @@ def open_localizer(os: Any) -> Any | None:
     return localizer
 
 
-def localizer_pose(localizer: Any) -> tuple[tuple[float, float, float], int, int] | None:
-    """(pose, validity bits, source) from the localizer's ``pose()``, whatever shape it returns."""
+def localizer_pose(localizer: Any) -> tuple[tuple[float, float, float], int, int, int | None] | None:
+    """(pose, validity bits, source, stamp) from the localizer's ``pose()``, whatever its shape."""
     got = localizer.pose()
     if got is None:
         return None
@@ -74,12 +78,16 @@ def localizer_pose(localizer: Any) -> tuple[tuple[float, float, float], int, int
     else:
         x, y = got.x_mm, got.y_mm
         th = getattr(got, "heading_rad", getattr(got, "heading", 0.0))
-        valid, source = getattr(got, "valid", 7), getattr(got, "source", POSE_EKF)
+        valid = getattr(got, "valid_bits", getattr(got, "valid", 7))
+        source = getattr(got, "source", POSE_EKF)
+        if source == "none":
+            return None
     if isinstance(valid, tuple | list):
         valid = sum(1 << i for i, v in enumerate(valid[:3]) if v)
     if isinstance(source, str):
         source = POSE_EKF if source.lower() in ("ekf", "filter", "fused") else POSE_DEAD_RECKONING
-    return (float(x), float(y), float(th)), int(valid), int(source)
+    stamp = got.get("stamp_ms") if isinstance(got, dict) else getattr(got, "stamp_ms", None)
+    return (float(x), float(y), float(th)), int(valid), int(source), stamp
 
 
 class Program(UserProgram):
@@ -96,7 +104,6 @@ class Program(UserProgram):
         self.layout = default_layout()
         self.method = int(_os.environ.get("TOKENRING_COPRO_METHOD", OURS))
         self.scanning = False
-        self.hypotheses = {"left": SideHypothesis(), "right": SideHypothesis()}
         self.history = PoseHistory()
         self.outgoing: queue.Queue[Vector | None] = queue.Queue()
         self.stats = {"vectors_sent": 0, "vectors_refused": 0, "sweeps": 0, "sweeps_missed": 0}
@@ -108,14 +115,13 @@ class Program(UserProgram):
         self.sender.start()
 
     def _make_generators(self) -> None:
-        self.post = {side: VectorPostProcessor(self.outgoing.put) for side in ("left", "right")}
-        self.generators: dict[str, Any] = {}
-        for side in ("left", "right"):
-            _, _, sensors = self.layout.side(side)
-            if self.method == SEED:
-                self.generators[side] = SeedEdgeFollower(sensors, self.outgoing.put)
-            else:
-                self.generators[side] = WallTracker(sensors, self.post[side].add)
+        self.vectorizer = Vectorizer(self.layout, self.method, self._emit)
+
+    def _emit(self, vector: Vector) -> None:
+        """A finished vector: to the map, and to the localizer as a wall of the robot's own map."""
+        self.outgoing.put(vector)
+        if getattr(self, "localizer", None) is not None:
+            self.localizer.add_map_wall(*vector)
 
     # -- the loop ---------------------------------------------------------------------------
     def run(self) -> None:
@@ -158,13 +164,10 @@ class Program(UserProgram):
             log.warning("map refused a vector: %s", args)
 
     def _end_scan(self) -> None:
-        idle = SweepInput(0, (0.0, 0.0, 0.0), NO_CONTACT_CM, NO_CONTACT_CM, 0, False)
-        for generator in self.generators.values():
-            generator.feed(idle)
+        self.vectorizer.end_scan()
 
     def flush(self) -> None:
-        for post in self.post.values():
-            post.flush()
+        self.vectorizer.flush()
 
     def _update_pose(self) -> tuple[float, float, float] | None:
         """Record dead reckoning; return the best pose now (EKF if running)."""
@@ -182,8 +185,9 @@ class Program(UserProgram):
                 self.localizer = None
                 got = None
             if got is not None:
-                pose, valid, source = got
-                self.pose_valid, self.pose_source, self.pose_stamp = valid, source, motor["stamp_ms"]
+                pose, valid, source, stamp = got
+                self.pose_valid, self.pose_source = valid, source
+                self.pose_stamp = stamp if stamp is not None else motor["stamp_ms"]
                 self.best_pose = pose
                 return pose
         pose = self.history.latest()
@@ -200,31 +204,31 @@ class Program(UserProgram):
             and motor["distance_mm"] > MIN_DRIVEN_MM
             and pose is not None
         )
-        if self.method == OURS and self.localizer is None:
-            interpolated = self.history.at(sonar["stamp_ms"])
-            pose = interpolated if interpolated is not None else pose
-        for side in ("left", "right"):
-            front, rear, _ = self.layout.side(side)
-            h = observe_side(
-                sonar["behaviours"][front],
-                sonar["behaviours"][rear],
-                sonar["areas"][front],
-                sonar["areas"][rear],
-                self.hypotheses[side],
-            )
-            self.hypotheses[side] = h
-            sweep = SweepInput(
-                sonar["stamp_ms"],
-                pose or (0.0, 0.0, 0.0),
-                sonar["distances"][front],
-                sonar["distances"][rear],
-                h.contact,
-                bool(active),
-            )
-            self.generators[side].feed(sweep)
+        if self.method == OURS:
+            pose = self._pose_at(sonar["stamp_ms"], pose)
+        self.vectorizer.sweep(sonar, pose, bool(active))
+
+    def _pose_at(self, stamp_ms: int, pose: Any) -> Any:
+        """The best pose at a sweep's time stamp: dead reckoning interpolated there; with the
+        filter, its pose moved on by the dead-reckoned motion since the filter's own stamp."""
+        at_sweep = self.history.at(stamp_ms)
+        if at_sweep is None or pose is None:
+            return pose
+        if self.pose_source != POSE_EKF:
+            return at_sweep
+        at_filter = self.history.at(self.pose_stamp)
+        if at_filter is None:
+            return pose
+        # the dead-reckoned motion from the filter's stamp to the sweep, in the robot's frame then
+        dx, dy = at_sweep[0] - at_filter[0], at_sweep[1] - at_filter[1]
+        c, s = math.cos(at_filter[2]), math.sin(at_filter[2])
+        fwd, left = c * dx + s * dy, -s * dx + c * dy
+        x, y, th = pose
+        c, s = math.cos(th), math.sin(th)
+        return (x + c * fwd - s * left, y + s * fwd + c * left, th + (at_sweep[2] - at_filter[2]))
 
     def _publish(self) -> None:
-        left, right = self.hypotheses["left"], self.hypotheses["right"]
+        left, right = self.vectorizer.hypotheses["left"], self.vectorizer.hypotheses["right"]
         fields: dict[str, Any] = {
             "left_contact": left.contact,
             "left_confidence": left.confidence,
@@ -265,14 +269,13 @@ class Program(UserProgram):
         self.outgoing.put(None)
 
     def report(self) -> dict[str, Any]:
-        post = list(self.post.values())
         return {
             "method": "seed" if self.method == SEED else "ours",
             "scanning": self.scanning,
             "pose_source": self.pose_source,
-            "corners_closed": sum(p.corners_closed for p in post),
-            "merged": sum(p.merged for p in post),
-            "pending": sum(p.pending is not None for p in post),
+            "corners_closed": self.vectorizer.corners_closed,
+            "merged": self.vectorizer.merged,
+            "pending": sum(p.pending is not None for p in self.vectorizer.post.values()),
             "queued": self.outgoing.qsize(),
             **self.stats,
         }

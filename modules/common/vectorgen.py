@@ -477,3 +477,67 @@ class PoseHistory:
                 dth = (p1[2] - p0[2] + math.pi) % (2 * math.pi) - math.pi
                 return (p0[0] + f * (p1[0] - p0[0]), p0[1] + f * (p1[1] - p0[1]), p0[2] + f * dth)
         return self.samples[-1][1]
+
+
+# ---------------------------------------------------------------------------------------------
+# both sides, one method: what copro runs per sweep (and the mapping benchmark replays)
+
+SEED_METHOD, OUR_METHOD = 0, 1
+
+
+class Vectorizer:
+    """Both sides' hypotheses and vector generation by the seed's method or ours."""
+
+    def __init__(self, layout: SonarLayout, method: int, send: Callable[[Vector], None]) -> None:
+        self.layout = layout
+        self.method = method
+        self.hypotheses = {"left": SideHypothesis(), "right": SideHypothesis()}
+        self.post = {side: VectorPostProcessor(send) for side in ("left", "right")}
+        self.generators: dict[str, SeedEdgeFollower | WallTracker] = {}
+        for side in ("left", "right"):
+            _, _, sensors = layout.side(side)
+            if method == SEED_METHOD:
+                self.generators[side] = SeedEdgeFollower(sensors, send)
+            else:
+                self.generators[side] = WallTracker(sensors, self.post[side].add)
+
+    def sweep(self, sonar: dict, pose: Pose | None, active: bool) -> None:
+        """One sonar sweep (``sonar.data`` decoded): hypotheses, then vectors where they apply."""
+        for side in ("left", "right"):
+            front, rear, _ = self.layout.side(side)
+            h = observe_side(
+                sonar["behaviours"][front],
+                sonar["behaviours"][rear],
+                sonar["areas"][front],
+                sonar["areas"][rear],
+                self.hypotheses[side],
+            )
+            self.hypotheses[side] = h
+            self.generators[side].feed(
+                SweepInput(
+                    sonar["stamp_ms"],
+                    pose or (0.0, 0.0, 0.0),
+                    sonar["distances"][front],
+                    sonar["distances"][rear],
+                    h.contact,
+                    bool(active and pose is not None),
+                )
+            )
+
+    def end_scan(self) -> None:
+        idle = SweepInput(0, (0.0, 0.0, 0.0), NO_CONTACT_CM, NO_CONTACT_CM, NONE, False)
+        for generator in self.generators.values():
+            generator.feed(idle)
+
+    def flush(self) -> None:
+        self.end_scan()
+        for post in self.post.values():
+            post.flush()
+
+    @property
+    def corners_closed(self) -> int:
+        return sum(p.corners_closed for p in self.post.values())
+
+    @property
+    def merged(self) -> int:
+        return sum(p.merged for p in self.post.values())
