@@ -256,3 +256,14 @@ def test_calibration_turns_360_and_asks_for_the_glide_factor_correction():
     s.heading_cdeg = 35500  # overturned by 15° (counter-clockwise lowers the clockwise heading)
     assert nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED) is None
     assert nav.commands == [("motor", "RECALC_GLIDE_FACTOR", {"target_deg": 360, "error_cdeg": 1500})]
+
+
+def test_a_move_is_not_finished_before_the_motor_was_seen_running_it():
+    b = Bench()
+    b.pilot.start([Move(FORWARD, 500)], b.sensors)
+    b.sensors.move_seq = 1  # the motor took the command but has not stepped yet
+    assert b.tick(5) is None and b.pilot.busy
+    b.motor_runs(1)
+    assert b.tick(2) is None
+    out = b.tick(4, motor_state=MOTOR_STATE["IDLE"])  # stands again, POSITION_REACHED lost
+    assert out is not None and out.done

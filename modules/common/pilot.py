@@ -145,6 +145,7 @@ class Pilot:
         self._samples: list[tuple[int, list[int]]] = []
         self._last_sweep: int | None = None
         self._scanning = False
+        self._seen_moving = False
         self._visits = 0
 
     # -- the navigator's side ---------------------------------------------------------------
@@ -196,6 +197,7 @@ class Pilot:
         self._samples = []
         self._last_sweep = sensors.sweep
         self._visits = 0
+        self._seen_moving = False
         self.send("motor", name, **{arg: int(move.amount), "speed_pct": int(move.speed_pct)})
         self.state = self.STARTING
 
@@ -229,6 +231,8 @@ class Pilot:
                 sensors.move_seq != self._seq_before or sensors.motor_state == MOTOR_STATE["MOVING"]
             ):
                 self.state = self.MOVING
+            if sensors.motor_state == MOTOR_STATE["MOVING"] and sensors.move_seq != self._seq_before:
+                self._seen_moving = True
             alert = self._alerting(move.direction, sensors) - self._exempt
             if alert:
                 self._stop(REASON["ALERT"], f"alert on sonar {sorted(alert)}", lock=move.direction)
@@ -272,8 +276,9 @@ class Pilot:
     def _move_finished(self, sensors: Sensors) -> bool:
         if any(r["move_seq"] != self._seq_before for r in self.reached):
             return True
+        # without POSITION_REACHED: our move was seen running and the motor stands again
         return (
-            self.state == self.MOVING
+            self._seen_moving
             and sensors.move_seq != self._seq_before
             and sensors.motor_state == MOTOR_STATE["IDLE"]
             and self._visits >= self.settings.settle_visits

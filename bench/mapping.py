@@ -1,0 +1,203 @@
+"""Mapping quality: the seed's vector generation against ours, on dead reckoning and on the filtered pose.
+
+``python -m bench.mapping [--rooms empty,office,square,slanted] [--speed 20] [--duration 90]``
+launches the whole ring once per room (world simulator, Explore 2, ``--bitrate max``) while a
+tap records what copro sees at each token visit (``sonar.data``, ``motor.data`` and copro's own
+pose and scanning flag). The recording is then replayed through copro's :class:`Vectorizer` four
+ways — seed or ours, dead reckoning (``motor.data``) or the filtered pose (copro's ``pose_*``,
+from the EKF it hosts) — so all four maps come from the very same drive, and each is scored
+against the room's true walls (coverage, precision, orientation error, corners closed). The live
+map (ours, as copro ran it) is scored too. PNGs of every map go to ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOMS = ("empty", "office", "square", "slanted")
+
+
+class Recorder:
+    """Decodes every frame addressed to copro: the data copro's program reads at that visit."""
+
+    def __init__(self, session: Any, ring: str) -> None:
+        from tokenring import keys
+        from tokenring.protocol import default_protocol
+
+        protocol = default_protocol()
+        self.sonar = protocol.channel("sonar.data")
+        self.motor = protocol.channel("motor.data")
+        self.copro = protocol.channel("copro.data")
+        self.size = protocol.token_size
+        self.records: list[tuple[dict, dict, dict]] = []
+        self.last_sweep: int | None = None
+        self.motor_log: list[dict] = []
+        self.lock = threading.Lock()
+        self.sub = session.declare_subscriber(keys.token(ring, protocol.node("copro").id), self._on)
+
+    def _on(self, sample: Any) -> None:
+        frame = sample.payload.to_bytes()
+        if len(frame) != self.size + 2:
+            return
+        token = frame[: self.size]
+        sonar = self.sonar.decode(token)
+        motor = self.motor.decode(token)
+        with self.lock:
+            self.motor_log.append(motor)
+            if sonar["sweep"] != self.last_sweep and sonar["stamp_ms"]:
+                self.last_sweep = sonar["sweep"]
+                self.records.append((sonar, motor, self.copro.decode(token)))
+
+    def close(self) -> None:
+        self.sub.undeclare()
+
+
+def replay(
+    records: list[tuple[dict, dict, dict]], motor_log: list[dict], method: int, pose_source: str
+) -> np.ndarray:
+    """The vectors copro's :class:`Vectorizer` makes from a recording (mm)."""
+    from modules.common.units import pose_from_wire
+    from modules.common.vectorgen import OUR_METHOD, PoseHistory, Vectorizer, default_layout
+    from tokenring.protocol import default_protocol
+
+    forward = default_protocol().enums["direction"]["FORWARD"]
+    vectors: list[tuple[float, float, float, float]] = []
+    vectorizer = Vectorizer(default_layout(), method, vectors.append)
+    history = PoseHistory(4096)
+    log_index = 0
+    for sonar, motor, copro in records:
+        while log_index < len(motor_log) and motor_log[log_index]["stamp_ms"] <= motor["stamp_ms"]:
+            m = motor_log[log_index]
+            history.add(m["stamp_ms"], pose_from_wire(m["x_mm"], m["y_mm"], m["angle_cdeg"]))
+            log_index += 1
+        dr = pose_from_wire(motor["x_mm"], motor["y_mm"], motor["angle_cdeg"])
+        if pose_source == "filter":
+            if copro["pose_source"] != 2:
+                continue
+            pose = pose_from_wire(copro["pose_x_mm"], copro["pose_y_mm"], copro["pose_angle_cdeg"])
+            if method == OUR_METHOD:
+                pose = carried(pose, history, copro["pose_stamp_ms"], sonar["stamp_ms"])
+        else:
+            pose = history.at(sonar["stamp_ms"]) if method == OUR_METHOD else dr
+        active = bool(copro["scanning"]) and motor["direction"] == forward and motor["distance_mm"] > 10
+        vectorizer.sweep(sonar, pose, active)
+    vectorizer.flush()
+    return np.asarray(vectors, dtype=float).reshape(-1, 4)
+
+
+def carried(
+    pose: tuple[float, float, float], history: Any, from_ms: int, to_ms: int
+) -> tuple[float, float, float]:
+    """``pose`` (at ``from_ms``) moved on by the dead-reckoned motion until ``to_ms``."""
+    import math
+
+    a, b = history.at(from_ms), history.at(to_ms)
+    if a is None or b is None:
+        return pose
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    c, s = math.cos(a[2]), math.sin(a[2])
+    fwd, left = c * dx + s * dy, -s * dx + c * dy
+    x, y, th = pose
+    c, s = math.cos(th), math.sin(th)
+    return (x + c * fwd - s * left, y + s * fwd + c * left, th + b[2] - a[2])
+
+
+def run_room(room: str, args: argparse.Namespace, out: Path, port: int) -> dict[str, Any]:
+    from tokenring.zconfig import make_config, open_session
+
+    ring = f"bench{room}{port}"
+    endpoint = f"tcp/127.0.0.1:{port}"
+    live = out / f"{room}-live.json"
+    cmd = [
+        sys.executable, "-m", "tokenring", "up", "--ring", ring, "--listen", endpoint,
+        "--world", room, "--speed", str(args.speed), "--seed", str(args.seed), "--bitrate", args.bitrate,
+        "--explore", "2", "--duration", str(args.duration), "--map-out", str(live), "--log-level", "warning",
+    ]  # fmt: skip
+    if args.programs:
+        cmd += ["--programs", args.programs]
+    started = time.monotonic()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    with open_session(make_config(connect=[endpoint])) as session:
+        recorder = None
+        while proc.poll() is None:
+            if recorder is None:
+                time.sleep(1.0)
+                recorder = Recorder(session, ring)
+            line = proc.stdout.readline() if proc.stdout else ""
+            if "explore |" in line:
+                print(f"  [{time.monotonic() - started:5.0f} s] {line.split('|', 1)[1].strip()}", flush=True)
+        if recorder is not None:
+            recorder.close()
+    code = proc.wait()
+    return {
+        "code": code,
+        "records": recorder.records if recorder else [],
+        "motor_log": recorder.motor_log if recorder else [],
+        "live": live,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    from modules.common.mapscore import score_map
+    from modules.common.vectorgen import OUR_METHOD, SEED_METHOD
+    from tokenring.cliutil import free_port
+    from tokenring.commands.map import load_map_file, load_truth, write_map
+
+    parser = argparse.ArgumentParser(prog="python -m bench.mapping", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--rooms", default=",".join(ROOMS), help="comma-separated bundled rooms")
+    parser.add_argument("--speed", type=float, default=20.0, help="simulation speed-up (default 20)")
+    parser.add_argument("--duration", type=float, default=90.0, help="seconds per room (default 90)")
+    parser.add_argument("--bitrate", default="max", help="ring bitrate (default max)")
+    parser.add_argument("--seed", type=int, default=1, help="the world's noise seed")
+    parser.add_argument("--programs", help="module programs directory (default: modules/)")
+    parser.add_argument("--out", default="bench-mapping", help="directory for the maps (PNG, JSON)")
+    parser.add_argument("--json", metavar="FILE", help="also write the table as JSON")
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows: list[dict[str, Any]] = []
+    for room in [r.strip() for r in args.rooms.split(",") if r.strip()]:
+        print(f"{room}: exploring for {args.duration:.0f} s at {args.speed:g}x ...", flush=True)
+        result = run_room(room, args, out, free_port())
+        world, truth = load_truth(room)
+        print(f"  {len(result['records'])} sweeps recorded, ring exit code {result['code']}", flush=True)
+        variants = [("seed", SEED_METHOD, "dead reckoning"), ("ours", OUR_METHOD, "dead reckoning"),
+                    ("seed", SEED_METHOD, "filter"), ("ours", OUR_METHOD, "filter")]  # fmt: skip
+        for name, method, source in variants:
+            vectors = replay(
+                result["records"], result["motor_log"], method, "filter" if source == "filter" else "dr"
+            )
+            tag = f"{room}-{name}-{'ekf' if source == 'filter' else 'dr'}"
+            write_map(vectors, str(out / f"{tag}.png"), truth, world, title=f"{room}, {name}, {source}")
+            rows.append({"room": room, "method": name, "pose": source, **score_map(vectors, truth)})
+        if result["live"].exists():
+            vectors = load_map_file(str(result["live"]))
+            rows.append(
+                {"room": room, "method": "ours (live)", "pose": "as run", **score_map(vectors, truth)}
+            )
+    print()
+    header = f"{'room':8} {'method':11} {'pose':15} {'vectors':>7} {'coverage':>9} {'precision':>9} {'orient.':>8} {'corners':>8}"
+    print(header)
+    print("-" * len(header))
+    for r in rows:
+        orient = f"{r['orientation_error_deg']:.1f}°" if r["orientation_error_deg"] is not None else "-"
+        print(
+            f"{r['room']:8} {r['method']:11} {r['pose']:15} {r['vectors']:7d} {r['coverage']:9.1%} "
+            f"{r['precision']:9.1%} {orient:>8} {r['corners_closed']:>4}/{r['corners_total']:<3}"
+        )
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
