@@ -29,6 +29,7 @@ import zenoh
 
 from tokenring import keys
 from tokenring.errors import TransportError, UsageError
+from tokenring.ring import EVENT_RING_STOPPING, RING_EVENT
 from tokenring.zconfig import make_config, open_session
 
 #: exit code of a node process killed on purpose by the ``crash`` fault
@@ -365,6 +366,10 @@ class Launcher:
         """Stop every child: SIGTERM (clean leave), then SIGKILL whatever is left after 1.5 s."""
         self._stop.set()
         running = [c for c in self.children.values() if c.process.poll() is None]
+        if running and self.session is not None:
+            with contextlib.suppress(zenoh.ZError):  # nobody needs a handover: all are leaving
+                self.session.put(keys.ring_event(self.ring), RING_EVENT.pack(EVENT_RING_STOPPING, 0, 0, 0, 0))
+            time.sleep(0.02)
         for child in running:
             with contextlib.suppress(ProcessLookupError):
                 child.process.send_signal(signal.SIGTERM)

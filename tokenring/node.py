@@ -199,6 +199,8 @@ class NodeOS:
         self._departed = False  # left with the `leave` fault; `join` brings it back
         self.paused = False  # set by the soft `hang` fault: the watchdog stands still too
         self._stopping = threading.Event()
+        self._halt = threading.Event()  # the current program is being stopped
+        self.ring_stopping = False  # the whole ring is shutting down: no handover needed
         # the watchdog sleeps on a raw lock (a C-level binary semaphore): waking it from the
         # token path costs ~0.1 us where threading.Event.set costs tens of microseconds cold
         self._wake_lock = threading.Lock()
@@ -234,10 +236,12 @@ class NodeOS:
         )
 
     def leave(self, grace: float | None = None) -> None:
-        """Leave cleanly and close: a handover, then the transport goes."""
+        """Leave cleanly and close: a handover, then the transport goes (no handover when the
+        whole ring is shutting down: nobody is left to hand over to)."""
         if self._joined and not self._leaving:
-            self.stop_program()
-            self._handover(grace)
+            self.stop_program(timeout=0.3 if self.ring_stopping else 1.0)
+            if not self.ring_stopping:
+                self._handover(grace)
         self.close()
 
     def depart(self, grace: float | None = None) -> None:
@@ -298,7 +302,9 @@ class NodeOS:
 
     @property
     def stopping(self) -> bool:
-        return self._stopping.is_set()
+        """The node is closing, or the running program was asked to stop: blocking API calls
+        (receive_command, deliver, wait_visit) return at once."""
+        return self._stopping.is_set() or self._halt.is_set()
 
     # =========================================================================================
     # the token handler
@@ -513,7 +519,12 @@ class NodeOS:
         if len(payload) != R.RING_EVENT.size:
             return
         kind, node_id, by, epoch, origin = R.RING_EVENT.unpack(payload)
-        if by != self.node_id and R.epoch_order(epoch, origin, self._epoch, self._origin) > 0:
+        learns_epoch = kind in (R.EVENT_EXCLUDED, R.EVENT_REJOIN, R.EVENT_REGENERATED)
+        if (
+            learns_epoch
+            and by != self.node_id
+            and R.epoch_order(epoch, origin, self._epoch, self._origin) > 0
+        ):
             self._adopt_epoch(epoch, origin, perf_counter())
         if kind == R.EVENT_EXCLUDED and by != self.node_id:
             if node_id == self.node_id:
@@ -523,6 +534,8 @@ class NodeOS:
                 self._successor_changed()
         elif kind == R.EVENT_REJOIN and node_id != self.node_id:
             self._include(node_id)
+        elif kind == R.EVENT_RING_STOPPING:
+            self.ring_stopping = True
         elif kind == R.EVENT_REGENERATED and by != self.node_id:
             self._last_seen = max(self._last_seen, perf_counter())  # a fresh token is on its way
         elif kind == R.EVENT_LEAVING and node_id != self.node_id:
@@ -975,6 +988,7 @@ class NodeOS:
     def start_program(self, program_class: type, *args: Any) -> None:
         """Instantiate and run a user program in its own thread (``setup`` then ``run``)."""
         self.stop_program()
+        self._halt.clear()
         self.program_error = None
         program = program_class(self, *args)
         self._program = program
@@ -1003,6 +1017,7 @@ class NodeOS:
         if program is None:
             return True
         program.stop_requested.set()
+        self._halt.set()
         with self._visit_cond:
             self._visit_cond.notify_all()
         if thread is not None and thread is not threading.current_thread():
@@ -1019,6 +1034,7 @@ class NodeOS:
             self._rebuild_active()
         self._program = None
         self._program_thread = None
+        self._halt.clear()  # only the stopping program's blocking calls were to return early
         return stopped
 
     @property

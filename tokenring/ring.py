@@ -47,7 +47,8 @@ RING_EVENT = struct.Struct("<cBBBB")
 EVENT_EXCLUDED = b"X"
 EVENT_REJOIN = b"J"
 EVENT_LEAVING = b"L"
-EVENT_REGENERATED = b"R"  # ARCNET's reconfiguration burst: everyone restarts its lost-token timer
+EVENT_REGENERATED = b"R"
+EVENT_RING_STOPPING = b"Q"  # the launcher stops the whole ring: leave without a handover  # ARCNET's reconfiguration burst: everyone restarts its lost-token timer
 
 
 def parse_bitrate(text: str | float | int | None) -> float | None:
