@@ -106,7 +106,7 @@ class Program(UserProgram):
             pose = pose_from_wire(copro["pose_x_mm"], copro["pose_y_mm"], copro["pose_angle_cdeg"])
         elif self.motor.visits:
             pose = pose_from_wire(motor["x_mm"], motor["y_mm"], motor["angle_cdeg"])
-        heading = compass["heading_cdeg"] if self.compass.visits and compass["state"] in (1, 2) else None
+        heading = compass["heading_cdeg"] if self.compass.visits and compass["state"] != 3 else None
         return Sensors(
             distances=list(sonar["distances"]) if self.sonar.visits else [255] * 8,
             sweep=sonar["sweep"],
@@ -121,6 +121,7 @@ class Program(UserProgram):
             else int((time.monotonic() - self.started) * 1000),
             pose=pose,
             heading_cdeg=heading,
+            pose_filtered=copro["pose_source"] == 2,
         )
 
     def _cooperate(self) -> None:

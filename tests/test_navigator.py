@@ -200,8 +200,9 @@ def test_explore2_follows_the_left_wall_and_turns_at_corners():
     nav = ExploreLeftWall(LAYOUT)
     s = sensors_with(left_front=30, left_rear=30)
     find = nav.plan(None, s, STOPPED)  # first a wall ahead (an island on the left does not count)
-    assert [m.label for m in find] == ["find"] and [a.kind for a in find[0].abort] == ["front_within"]
-    turn = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="front_within"), s, STOPPED)
+    assert [m.label for m in find] == ["find"]
+    assert [(a.kind, a.cm) for a in find[0].abort] == [("ahead_within", 25), ("front_within", 12)]
+    turn = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
     assert turn[0].direction == TURN_RIGHT and turn[0].amount == 90  # the wall is now on the left
     seg = nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED)
     assert [m.label for m in seg] == ["follow"] and seg[0].scan
@@ -211,7 +212,7 @@ def test_explore2_follows_the_left_wall_and_turns_at_corners():
     nxt = nav.plan(Outcome(REASON["DONE"], seg[0], driven_mm=600, samples=samples), s, STOPPED)
     assert nxt[0].direction == TURN_LEFT and 5 <= nxt[0].amount <= 12, nxt
     # the front blocked: inner corner, turn right about 90°
-    inner = nav.plan(Outcome(REASON["CLOSE"], seg[0], trigger="front_within"), s, STOPPED)
+    inner = nav.plan(Outcome(REASON["CLOSE"], seg[0], trigger="ahead_within"), s, STOPPED)
     assert inner[0].direction == TURN_RIGHT and 85 <= inner[0].amount <= 95
     # the wall lost: outer corner, drive on, turn left, pick the wall up again
     outer = nav.plan(Outcome(REASON["CORNER"], seg[0], trigger="left_beyond"), sensors_with(), STOPPED)
@@ -267,3 +268,20 @@ def test_a_move_is_not_finished_before_the_motor_was_seen_running_it():
     assert b.tick(2) is None
     out = b.tick(4, motor_state=MOTOR_STATE["IDLE"])  # stands again, POSITION_REACHED lost
     assert out is not None and out.done
+
+
+def test_explore2_corrects_a_turn_the_floor_let_slip_by_the_compass():
+    from modules.common.pilot import Outcome
+
+    nav = ExploreLeftWall(LAYOUT)
+    s = sensors_with(left_front=30, left_rear=30)
+    s.heading_cdeg = 9000  # east, navigation convention
+    find = nav.plan(None, s, STOPPED)
+    turn = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
+    assert turn[0].direction == TURN_RIGHT and turn[0].amount == 90
+    s.heading_cdeg = 17200  # turned right by 82° only (clockwise heading grew by 82°)
+    fix = nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED)
+    assert fix[0].direction == TURN_RIGHT and fix[0].amount == 8
+    s.heading_cdeg = 17900  # within 2.5°: on with the wall
+    seg = nav.plan(Outcome(REASON["DONE"], fix[0]), s, STOPPED)
+    assert seg[-1].label == "follow"

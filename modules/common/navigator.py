@@ -150,8 +150,13 @@ class ExploreLeftWall(Navigator):
         self.corrections: list[float] = []
 
     # -- the moves ----------------------------------------------------------------------------
-    def _front_stop(self) -> Abort:
-        return Abort("front_within", self.s.front_stop_cm, "CLOSE")
+    def _front_stop(self) -> tuple[Abort, ...]:
+        """A wall straight ahead ends a move; the diagonal sonars only stop it when very close
+        (they see the followed wall, and islands passing by)."""
+        return (
+            Abort("ahead_within", self.s.front_stop_cm, "CLOSE"),
+            Abort("front_within", CLOSE_CM, "CLOSE"),
+        )
 
     def _segment(self) -> Move:
         s = self.s
@@ -160,16 +165,53 @@ class ExploreLeftWall(Navigator):
             s.segment_mm,
             s.speed_pct,
             scan=True,
-            abort=(self._front_stop(), Abort("left_beyond", s.wall_cm + s.lost_margin_cm, "CORNER")),
+            abort=(*self._front_stop(), Abort("left_beyond", s.wall_cm + s.lost_margin_cm, "CORNER")),
             label="follow",
         )
 
-    def _turn(self, degrees: float, label: str) -> list[Move]:
-        """A turn on the spot by ``degrees`` (positive: left); nothing if under 2°."""
+    def _turn(self, degrees: float, label: str, sensors: Sensors | None = None) -> list[Move]:
+        """A turn on the spot by ``degrees`` (positive: left); nothing if under 2°.
+
+        Ours: with a heading to check against (the filter's, else the compass), the goal is kept
+        and :meth:`_turn_fix` corrects what the floor's slip (±10 %) left over."""
         if abs(degrees) < 2.0:
             return []
+        heading = self._heading(sensors) if sensors is not None else None
+        self.turn_goal = None if heading is None else (heading[0], heading[1] + math.radians(degrees))
+        self.turn_fixes = 0
         direction = TURN_LEFT if degrees > 0 else TURN_RIGHT
         return [Move(direction, round(abs(degrees)), self.s.speed_pct, label=label)]
+
+    @staticmethod
+    def _heading(sensors: Sensors) -> tuple[str, float] | None:
+        """(source, heading rad CCW) — the filtered pose's, else the compass's (offset cancels out)."""
+        if sensors.pose_filtered and sensors.pose is not None:
+            return "filter", sensors.pose[2]
+        if sensors.heading_cdeg is not None:
+            return "compass", -math.radians(sensors.heading_cdeg / 100.0)
+        return None
+
+    def _turn_fix(self, last: Outcome | None, sensors: Sensors) -> list[Move] | None:
+        """A correcting turn after a turn that missed its goal by more than 2.5° (twice at most)."""
+        goal = getattr(self, "turn_goal", None)
+        if (
+            goal is None
+            or last is None
+            or last.move is None
+            or last.move.direction not in (TURN_LEFT, TURN_RIGHT)
+        ):
+            return None
+        heading = self._heading(sensors)
+        if heading is None or heading[0] != goal[0] or self.turn_fixes >= 2 or not last.done:
+            self.turn_goal = None
+            return None
+        error = math.degrees(math.remainder(goal[1] - heading[1], 2 * math.pi))
+        if abs(error) <= 2.5:
+            self.turn_goal = None
+            return None
+        self.turn_fixes += 1
+        direction = TURN_LEFT if error > 0 else TURN_RIGHT
+        return [Move(direction, max(1, round(abs(error))), self.s.speed_pct, label=last.move.label)]
 
     def _correction(self, last: Outcome | None, with_distance: bool) -> float:
         """Degrees to turn left so the next segment runs parallel at the wanted distance."""
@@ -205,7 +247,10 @@ class ExploreLeftWall(Navigator):
         if last is not None and last.reason in (REASON["STALL"], REASON["COLLISION"]):
             self.state = NAV["BACK_OFF"]
             self.phase = "follow"
-            return [Move(REVERSE, 80, s.speed_pct, label="back off"), *self._turn(-30, "away")]
+            return [Move(REVERSE, 80, s.speed_pct, label="back off"), *self._turn(-30, "away", sensors)]
+        fix = self._turn_fix(last, sensors)
+        if fix is not None:
+            return fix
         if self._lap_done(sensors):
             self.state = NAV["DONE"]
             self.note = "lap closed"
@@ -217,17 +262,17 @@ class ExploreLeftWall(Navigator):
                 last is not None
                 and last.move is not None
                 and last.move.label == "find"
-                and (last.trigger == "front_within" or last.done)
+                and (last.trigger in ("ahead_within", "front_within") or last.done)
             ):
                 self.phase = "follow"
                 self.state = NAV["TURN"]
-                return self._turn(-90, "inner")
+                return self._turn(-90, "inner", sensors)
             return [
                 Move(
                     FORWARD,
                     s.find_mm,
                     s.speed_pct,
-                    abort=(self._front_stop(),),  # a wall ahead, not an island passing by
+                    abort=self._front_stop(),  # a wall ahead, not an island passing by
                     label="find",
                 )
             ]
@@ -236,8 +281,8 @@ class ExploreLeftWall(Navigator):
             self.phase = "reacquire"
             self.state = NAV["TURN"]
             return [
-                Move(FORWARD, s.clear_mm, s.speed_pct, abort=(self._front_stop(),), label="clear"),
-                *self._turn(90, "outer"),
+                Move(FORWARD, s.clear_mm, s.speed_pct, abort=self._front_stop(), label="clear"),
+                *self._turn(90, "outer", sensors),
             ]
 
         if self.phase == "reacquire":
@@ -245,17 +290,17 @@ class ExploreLeftWall(Navigator):
                 if last.trigger == "left_within" or self._left_wall_seen(sensors):
                     self.phase = "follow"
                     self.outer_tries = 0
-                elif last.trigger == "front_within":
+                elif last.trigger in ("ahead_within", "front_within"):
                     self.phase = "follow"
                     self.state = NAV["TURN"]
-                    return self._turn(-90, "inner")
+                    return self._turn(-90, "inner", sensors)
                 else:  # no wall: the end of a thin wall or a pillar — go round it
                     self.outer_tries += 1
                     if self.outer_tries >= 3:
                         self.phase, self.outer_tries = "find", 0
                         return self.plan(None, sensors, alert_lock)
                     self.state = NAV["TURN"]
-                    return self._turn(90, "outer")
+                    return self._turn(90, "outer", sensors)
             else:
                 self.state = NAV["FOLLOW_WALL"]
                 return [
@@ -275,9 +320,9 @@ class ExploreLeftWall(Navigator):
         if self.lap_start is None and sensors.pose is not None:
             self.lap_start = sensors.pose[:2]
         followed = last is not None and last.move is not None and last.move.label == "follow"
-        if followed and last.trigger == "front_within":
+        if followed and last.trigger in ("ahead_within", "front_within"):
             self.state = NAV["TURN"]
-            return self._turn(-90 + self._correction(last, with_distance=False), "inner")
+            return self._turn(-90 + self._correction(last, with_distance=False), "inner", sensors)
         if followed and last.trigger == "left_beyond":
             self.phase = "outer"
             return self.plan(None, sensors, alert_lock)
@@ -285,7 +330,7 @@ class ExploreLeftWall(Navigator):
         if not self._left_wall_seen(sensors) and not followed:
             self.phase = "reacquire"
             return self.plan(None, sensors, alert_lock)
-        return [*self._turn(self._correction(last, with_distance=True), "align"), self._segment()]
+        return [*self._turn(self._correction(last, with_distance=True), "align", sensors), self._segment()]
 
     def _lap_done(self, sensors: Sensors) -> bool:
         if self.lap_start is None or sensors.pose is None or self.follow_mm < self.s.lap_min_mm:

@@ -53,7 +53,8 @@ ALERT_CM = 4
 class Abort:
     """An abort condition: ``kind`` over a sensor group, with a threshold in cm.
 
-    kinds: ``front_within`` (a front sonar reads ≤ cm), ``rear_within``, ``left_within``,
+    kinds: ``front_within`` (a front sonar reads ≤ cm), ``ahead_within`` (the straight-ahead
+    one), ``rear_within``, ``left_within``,
     ``right_within`` (the side's front sonar ≤ cm), ``left_beyond`` / ``right_beyond`` (the
     side's front sonar reads more than cm or nothing), ``corner_left`` / ``corner_right``
     (copro reports CORNER on that side)."""
@@ -88,6 +89,7 @@ class Sensors:
     stamp_ms: int = 0
     pose: tuple[float, float, float] | None = None
     heading_cdeg: int | None = None  # compass, navigation convention (north, clockwise)
+    pose_filtered: bool = False  # ``pose`` is the EKF's (its heading fuses the compass)
 
 
 @dataclass
@@ -231,8 +233,13 @@ class Pilot:
                 sensors.move_seq != self._seq_before or sensors.motor_state == MOTOR_STATE["MOVING"]
             ):
                 self.state = self.MOVING
-            if sensors.motor_state == MOTOR_STATE["MOVING"] and sensors.move_seq != self._seq_before:
+            if (
+                not self._seen_moving
+                and sensors.motor_state == MOTOR_STATE["MOVING"]
+                and sensors.move_seq != self._seq_before
+            ):
                 self._seen_moving = True
+                self._started_ms = sensors.stamp_ms  # the move's time runs from here (sensor time)
             alert = self._alerting(move.direction, sensors) - self._exempt
             if alert:
                 self._stop(REASON["ALERT"], f"alert on sonar {sorted(alert)}", lock=move.direction)
@@ -253,7 +260,7 @@ class Pilot:
                     return self._take()
                 self._next(sensors)
                 return self._take() if self.state == self.IDLE else None
-            if sensors.stamp_ms - self._started_ms > self._expected_ms(move):
+            if self._seen_moving and sensors.stamp_ms - self._started_ms > self._expected_ms(move):
                 self._stop(REASON["TIMEOUT"], "move took too long")
             return None
         # STOPPING: wait for the motor to stand still
@@ -322,6 +329,8 @@ class Pilot:
         kind, cm = condition.kind, condition.cm
         if kind == "front_within":
             return any(d[i] <= cm for i in lay.front)
+        if kind == "ahead_within":  # the straight-ahead sonar only
+            return d[lay.front[len(lay.front) // 2]] <= cm
         if kind == "rear_within":
             return any(d[i] <= cm for i in lay.rear)
         if kind == "left_within":
