@@ -70,7 +70,11 @@ class Program(UserProgram):
             self._take_commands()
             self._take_requests()
             self.sensors = self._read_sensors()
-            self._cooperate()
+            try:
+                self._cooperate()
+            except Exception as exc:  # a strategy's bug stops the exploration, not main
+                log.exception("navigator/pilot failed")
+                self.stop_explore(f"failed: {type(exc).__name__}: {exc}")
             self._publish()
 
     def _take_commands(self) -> None:

@@ -219,6 +219,8 @@ def test_explore2_follows_the_left_wall_and_turns_at_corners():
     assert [m.label for m in outer] == ["clear", "outer"] and outer[1].direction == TURN_LEFT
     re = nav.plan(Outcome(REASON["DONE"], outer[1]), sensors_with(), STOPPED)
     assert re[0].label == "reacquire"
+    for move in (*find, *turn, *seg, *nxt, *inner, *outer, *re):
+        assert all(isinstance(a, Abort) for a in move.abort), move
     back = nav.plan(Outcome(REASON["NONE"], re[0], trigger="left_within"), s, STOPPED)
     assert back[-1].label == "follow"
     # ALERT: only the escape the lock allows

@@ -309,7 +309,7 @@ class ExploreLeftWall(Navigator):
                         s.reacquire_mm,
                         s.speed_pct,
                         abort=(
-                            self._front_stop(),
+                            *self._front_stop(),
                             Abort("left_within", s.wall_cm + s.lost_margin_cm - 5, "NONE"),
                         ),
                         label="reacquire",
