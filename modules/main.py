@@ -48,6 +48,7 @@ class Program(UserProgram):
         self.pilot: Pilot | None = None
         self.pair = 0
         self.last_outcome: Outcome | None = None
+        self.last_outcome_logged = "start"
         self.abort_reason = REASON["NONE"]
         self.requests: queue.Queue[tuple[str, dict[str, Any], queue.Queue[Any]]] = queue.Queue()
         self.collector = MapCollector()
@@ -137,6 +138,9 @@ class Program(UserProgram):
         if outcome is not None:
             self.last_outcome = outcome
             self.abort_reason = outcome.reason
+            self.last_outcome_logged = (
+                f"{outcome.reason_name}{'/' + outcome.trigger if outcome.trigger else ''}"
+            )
         if pilot.busy:
             return
         moves = nav.plan(self.last_outcome, self.sensors, pilot.alert_lock)
@@ -144,9 +148,16 @@ class Program(UserProgram):
             self._send(target, command, **args)
         nav.commands.clear()
         self.last_outcome = None
+        ended = self.last_outcome_logged
         if moves is None:
             self.stop_explore(nav.note or "done", aborted=False)
             return
+        log.info(
+            "%s after %s: %s",
+            NAV_NAMES.get(nav.state, nav.state),
+            ended,
+            ", ".join(f"{m.label or m.direction} {m.amount}" for m in moves),
+        )
         pilot.start(moves, self.sensors)
 
     # -- exploration control ---------------------------------------------------------------------

@@ -201,7 +201,7 @@ def test_explore2_follows_the_left_wall_and_turns_at_corners():
     s = sensors_with(left_front=30, left_rear=30)
     find = nav.plan(None, s, STOPPED)  # first a wall ahead (an island on the left does not count)
     assert [m.label for m in find] == ["find"]
-    assert [(a.kind, a.cm) for a in find[0].abort] == [("ahead_within", 25), ("front_within", 12)]
+    assert [(a.kind, a.cm) for a in find[0].abort] == [("ahead_within", 25), ("front_within", 8)]
     turn = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
     assert turn[0].direction == TURN_RIGHT and turn[0].amount == 90  # the wall is now on the left
     seg = nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED)

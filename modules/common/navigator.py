@@ -41,6 +41,7 @@ from tokenring.protocol import default_protocol
 
 NAV = default_protocol().enums["navigator"]
 CLOSE_CM = 12  # the CLOSE area's upper edge
+DIAGONAL_STOP_CM = 8  # the ±45° sonars stop a wall-following move only this close (passing a pillar)
 
 
 class Navigator:
@@ -155,7 +156,7 @@ class ExploreLeftWall(Navigator):
         (they see the followed wall, and islands passing by)."""
         return (
             Abort("ahead_within", self.s.front_stop_cm, "CLOSE"),
-            Abort("front_within", CLOSE_CM, "CLOSE"),
+            Abort("front_within", DIAGONAL_STOP_CM, "CLOSE"),
         )
 
     def _segment(self) -> Move:
