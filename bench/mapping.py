@@ -118,9 +118,9 @@ def run_room(room: str, args: argparse.Namespace, out: Path, port: int) -> dict[
     endpoint = f"tcp/127.0.0.1:{port}"
     live = out / f"{room}-live.json"
     cmd = [
-        sys.executable, "-m", "tokenring", "up", "--ring", ring, "--listen", endpoint,
+        sys.executable, "-m", "tokenring", "--log-level", "warning", "up", "--ring", ring, "--listen", endpoint,
         "--world", room, "--speed", str(args.speed), "--seed", str(args.seed), "--bitrate", args.bitrate,
-        "--explore", "2", "--duration", str(args.duration), "--map-out", str(live), "--log-level", "warning",
+        "--explore", "2", "--duration", str(args.duration), "--map-out", str(live),
     ]  # fmt: skip
     if args.programs:
         cmd += ["--programs", args.programs]
