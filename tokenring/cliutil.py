@@ -6,6 +6,7 @@ import argparse
 import json
 import socket
 import sys
+import time
 from typing import Any
 
 import msgpack
@@ -61,6 +62,33 @@ def tap_session(args: argparse.Namespace) -> zenoh.Session:
         config_file=getattr(args, "zenoh_config", None),
     )
     return open_session(config)
+
+
+def discover(session: zenoh.Session, ring: str, timeout: float = 5.0, settle: float = 0.5) -> set[int]:
+    """IDs of the ring's live nodes as seen from a fresh tool session.
+
+    Peers do not route for each other: a new session reaches a node only once gossip has
+    connected it to that node, which takes a moment. Wait until the set of liveliness tokens
+    seen is non-empty and has not changed for ``settle`` seconds (or ``timeout`` ends)."""
+    deadline = time.monotonic() + timeout
+    seen: set[int] = set()
+    stable_since = time.monotonic()
+    while time.monotonic() < deadline:
+        found = set()
+        try:
+            for reply in session.liveliness().get(keys.node(ring, "*"), timeout=1.0):
+                if reply.ok is not None:
+                    node_id = keys.id_from_key(str(reply.ok.key_expr))
+                    if node_id is not None:
+                        found.add(node_id)
+        except zenoh.ZError as exc:
+            raise TransportError(f"liveliness query failed: {exc}") from exc
+        if found != seen:
+            seen, stable_since = found, time.monotonic()
+        elif seen and time.monotonic() - stable_since >= settle:
+            break
+        time.sleep(0.1)
+    return seen
 
 
 def query(

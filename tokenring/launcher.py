@@ -318,9 +318,34 @@ class Launcher:
             self.shutdown_reason = str(reason)
             self.request_stop()
             result = {"ok": True, "result": {"stopping": True}}
+        elif verb == "signal":
+            result = self._signal(query)
         else:
-            result = {"ok": False, "error": f"the launcher has no verb {verb!r} (has: status, shutdown)"}
+            result = {
+                "ok": False,
+                "error": f"the launcher has no verb {verb!r} (has: status, shutdown, signal)",
+            }
         query.reply(query.key_expr, msgpack.packb(result))
+
+    def _signal(self, query: zenoh.Query) -> dict[str, Any]:
+        """Send a signal (CONT, STOP, TERM, KILL) to one of our nodes: how a SIGSTOPped node
+        is resumed, since it can no longer answer anything itself."""
+        payload = query.payload
+        request = msgpack.unpackb(payload.to_bytes()) if payload is not None else {}
+        name = str(request.get("signal", "")).upper().removeprefix("SIG")
+        allowed = {
+            "CONT": signal.SIGCONT,
+            "STOP": signal.SIGSTOP,
+            "TERM": signal.SIGTERM,
+            "KILL": signal.SIGKILL,
+        }
+        child = self.children.get(int(request.get("id", -1)))
+        if name not in allowed:
+            return {"ok": False, "error": f"signal must be one of {', '.join(allowed)}"}
+        if child is None or child.process.poll() is not None:
+            return {"ok": False, "error": f"node {request.get('id')} is not a running node of this launcher"}
+        os.kill(child.process.pid, allowed[name])
+        return {"ok": True, "result": {"id": child.plan.node_id, "pid": child.process.pid, "signal": name}}
 
     def check_children(self) -> None:
         """Report nodes that died; restart them if ``--respawn``."""

@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import random
+import socket
 import threading
 import time
 import traceback
@@ -1060,6 +1062,8 @@ class NodeOS:
         return {
             "id": self.node_id,
             "name": self.name,
+            "pid": os.getpid(),
+            "host": socket.gethostname(),
             "epoch": [self._epoch, self._origin],
             "counter": self.counter,
             "master": self._master,

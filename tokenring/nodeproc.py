@@ -21,6 +21,7 @@ import zenoh
 
 from tokenring import keys
 from tokenring.errors import TokenRingError, UsageError
+from tokenring.faults import FaultInjector
 from tokenring.hardware import open_hardware
 from tokenring.node import NodeOS
 from tokenring.pclink import PcLinkServer
@@ -61,7 +62,9 @@ class NodeProcess:
             "visits": lambda _: self.os.stats.visits,
             "leave": self._request_leave,
             "program": self._program_report,
+            "fault": lambda request: self.faults.handle(request),
         }
+        self.faults = FaultInjector(self.os)
         self._queryable: Any = None
         self.hardware: Any = None
         self.pclink: PcLinkServer | None = None

@@ -20,6 +20,7 @@ import numpy as np
 import yaml
 
 from tokenring.errors import ChannelError, ProtocolError
+from tokenring.yamlfile import strict_loader
 
 SCALAR_TYPES: dict[str, str] = {
     "u8": "<u1",
@@ -258,31 +259,6 @@ class Protocol:
 # loading
 
 
-def _strict_loader(source: str) -> type[yaml.SafeLoader]:
-    """A SafeLoader that refuses duplicate keys (PyYAML silently keeps the last one)."""
-
-    class StrictLoader(yaml.SafeLoader):
-        pass
-
-    def construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode) -> dict:
-        seen: dict[Any, int] = {}
-        for key_node, _ in node.value:
-            key = loader.construct_object(key_node)
-            line = key_node.start_mark.line + 1
-            if key in seen:
-                raise ProtocolError(
-                    source, f"line {line}", f"duplicate key {key!r} (first at line {seen[key]})"
-                )
-            seen[key] = line
-        return loader.construct_mapping(node)
-
-    StrictLoader.add_constructor(
-        yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
-        construct_mapping,  # type: ignore[arg-type]
-    )
-    return StrictLoader
-
-
 def default_protocol_path() -> Path:
     """``$TOKENRING_PROTOCOL``, else the repository's ``protocol.yaml``, else the packaged copy."""
     env = os.environ.get("TOKENRING_PROTOCOL")
@@ -317,7 +293,7 @@ def default_protocol() -> Protocol:
 def parse_protocol(text: str, source: str = "<protocol>") -> Protocol:
     """Compile protocol text (YAML); raises :class:`ProtocolError`."""
     try:
-        doc = yaml.load(text, Loader=_strict_loader(source))
+        doc = yaml.load(text, Loader=strict_loader(ProtocolError, source))
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else ""

@@ -17,9 +17,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from tokenring import keys
-    from tokenring.cliutil import format_table, print_json, query, tap_session
+    from tokenring.cliutil import discover, format_table, print_json, query, tap_session
 
     with tap_session(args) as session:
+        discover(session, args.ring, timeout=args.timeout + 3.0)
         replies = query(session, keys.control(args.ring, "*", "stats"), timeout=args.timeout)
     nodes = sorted((r["result"] for _, r in replies if r.get("ok")), key=lambda n: n["id"])
     if args.json:

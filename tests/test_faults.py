@@ -1,0 +1,249 @@
+"""Fault injection at run time on real node processes: every kind heals to exactly one token."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import time
+import uuid
+from pathlib import Path
+
+import pytest
+from conftest import REPO, TOKENRING, Processes, pid_alive
+from ringutil import control, launcher_pids, stats, tap, wait_ring, wait_until
+
+from tokenring.chaos import WireCapture
+from tokenring.cliutil import free_port
+from tokenring.protocol import default_protocol
+from tokenring.wire import first_full_round, passes, settled
+
+IDS = [n.id for n in default_protocol().nodes.values()]
+PROBE = str(REPO / "tokenring" / "chaosprobe.py")
+
+
+class Ring:
+    """One 8-node ring for the whole module (probe workload, respawn), reset between tests."""
+
+    def __init__(self, tmp: Path) -> None:
+        self.procs = Processes()
+        self.name = f"f{uuid.uuid4().hex[:8]}"
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
+        programs = tmp / "programs"
+        programs.mkdir()
+        for node in default_protocol().nodes.values():
+            (programs / f"{node.name}.py").write_text(Path(PROBE).read_text())
+        self.launcher = self.procs.tokenring(
+            "up",
+            "--ring",
+            self.name,
+            "--listen",
+            self.endpoint,
+            "--bitrate",
+            "10M",
+            "--respawn",
+            "--programs",
+            str(programs),
+        )
+        self.session = tap(self.endpoint)
+        wait_ring(self.session, self.name, IDS, timeout=40)
+        self.capture = WireCapture(self.session, self.name)
+
+    def fault(self, *args: str, check: bool = True) -> subprocess.CompletedProcess:
+        result = subprocess.run(
+            [*TOKENRING, "fault", *args, "--ring", self.name, "-e", self.endpoint, "--timeout", "3"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            cwd=REPO,
+        )
+        if check:
+            assert result.returncode == 0, result.stderr
+        return result
+
+    def one_token_through(self, members: list[int], timeout: float = 15.0) -> float:
+        """Wait until the last second of the wire shows exactly one token going round ``members``."""
+
+        def ok() -> bool:
+            now = time.perf_counter()
+            seq, _ = passes([f for f in self.capture.snapshot() if f[0] >= now - 1.0])
+            return settled(seq) and first_full_round(seq[len(seq) // 2 :], members) is not None
+
+        wait_until(ok, timeout, f"exactly one token through {members}", interval=0.25)
+        return time.perf_counter()
+
+    def node_stats(self, node_id: int) -> dict:
+        return wait_until(
+            lambda: stats(self.session, self.name, node_id).get(node_id), 10, f"stats of {node_id}"
+        )["stats"]
+
+    def reset(self) -> None:
+        self.fault("all", "clear", check=False)
+        wait_ring(self.session, self.name, IDS, timeout=30)
+        self.one_token_through(IDS)
+
+    def close(self) -> None:
+        self.capture.close()
+        pids = launcher_pids(self.session, self.name)
+        self.session.close()
+        self.launcher.send_signal(signal.SIGTERM)
+        self.launcher.wait(10)
+        self.procs.watch(pids)
+        leaked = self.procs.cleanup()
+        assert not leaked, leaked
+
+
+@pytest.fixture(scope="module")
+def ring(tmp_path_factory):
+    r = Ring(tmp_path_factory.mktemp("faults"))
+    yield r
+    r.close()
+
+
+@pytest.fixture(autouse=True)
+def healthy(ring):
+    yield
+    ring.reset()
+
+
+def test_bad_input_is_refused_with_exit_2_and_nothing_injected(ring):
+    cases = [
+        (["radar", "crash"], "unknown node 'radar'"),
+        (["sonar", "explode"], "invalid choice: 'explode'"),
+        (["sonar", "drop", "1.5"], "outside 0..1"),
+        (["sonar", "corrupt", "often"], "is not a number"),
+        (["sonar", "delay"], "delay needs a value"),
+        (["all", "partition", "main,motor|motor,sonar"], "in both groups"),
+        (["all", "partition", "main,motor,sonar"], "expected two groups"),
+        (["sonar", "crash", "now"], "crash takes no value"),
+    ]
+    for args, message in cases:
+        result = ring.fault(*args, check=False)
+        assert result.returncode == 2, (args, result.stderr)
+        assert message in result.stderr, (args, result.stderr)
+        assert "Traceback" not in result.stderr
+    listing = json.loads(ring.fault("--list", "--json").stdout)
+    assert all(not n["faults"] for n in listing["nodes"]), listing
+    assert len(listing["nodes"]) == 8
+
+
+def test_crash_is_reported_the_ring_closes_and_respawn_brings_the_node_back(ring):
+    old_pid = stats(ring.session, ring.name, 30)[30]["pid"]
+    ring.fault("sonar", "crash")
+    wait_until(lambda: not pid_alive(old_pid), 5, "sonar's process to exit")
+    wait_until(
+        lambda: stats(ring.session, ring.name, 30).get(30, {}).get("pid") not in (None, old_pid),
+        30,
+        "the respawned sonar",
+    )
+    ring.one_token_through(IDS, timeout=20)
+    status = control(ring.session, ring.name, "launcher", "status")
+    sonar = next(n for n in status["nodes"] if n["id"] == 30)
+    assert sonar["restarts"] == 1 and sonar["running"]
+
+
+def test_hang_is_skipped_and_the_node_rejoins_after_resume(ring):
+    ring.fault("compass", "hang")
+    ring.one_token_through([i for i in IDS if i != 40])  # SIGSTOPped: skipped by the pass ack
+    assert stats(ring.session, ring.name, 30)[30]["successor"] == 50
+    ring.fault("compass", "resume")
+    ring.one_token_through(IDS, timeout=20)
+
+
+def test_soft_hang_and_resume(ring):
+    ring.fault("lcd", "hang", "--soft")
+    ring.one_token_through([i for i in IDS if i != 70])
+    ring.fault("lcd", "resume")
+    ring.one_token_through(IDS, timeout=20)
+
+
+def test_delay_slows_the_round_and_clear_restores_it(ring):
+    before = stats(ring.session, ring.name, 10)[10]["round_ms"]["median"]
+    ring.fault("motor", "delay", "20", "--jitter", "2")
+    wait_until(
+        lambda: stats(ring.session, ring.name, 10)[10]["round_ms"]["median"] > before + 10,
+        15,
+        "rounds to take 20 ms longer",
+    )
+    ring.one_token_through(IDS)
+
+
+def test_drop_corrupt_and_duplicate_are_survived_with_one_token(ring):
+    before = {i: ring.node_stats(i) for i in (20, 30, 40)}
+    ring.fault("motor", "drop", "0.3")
+    ring.fault("sonar", "corrupt", "0.3")
+    ring.fault("compass", "duplicate")
+    time.sleep(3)
+    ring.one_token_through(IDS, timeout=20)
+    for kind in ("motor", "sonar", "compass"):
+        ring.fault(kind, "clear")
+    after = {i: ring.node_stats(i) for i in (20, 30, 40, 50)}
+    assert after[40]["rejected_crc"] > before[40]["rejected_crc"]  # sonar's corrupt frames went to compass
+    assert after[50]["duplicate_passes"] > 0  # compass's doubled passes were recognised by copro
+    ring.one_token_through(IDS)
+
+
+def test_a_lost_token_is_regenerated(ring):
+    before = sum(ring.node_stats(i)["tokens_regenerated"] for i in IDS)
+    ring.fault("main", "lose")
+    wait_until(
+        lambda: sum(ring.node_stats(i)["tokens_regenerated"] for i in IDS) > before, 10, "a regeneration"
+    )
+    ring.one_token_through(IDS)
+
+
+def test_leave_and_join_at_run_time(ring):
+    ring.fault("copro", "leave")
+    ring.one_token_through([i for i in IDS if i != 50])
+    ring.fault("copro", "join")
+    ring.one_token_through(IDS)
+
+
+def test_partition_forms_two_rings_and_heal_merges_them(ring):
+    ring.fault("all", "partition", "main,motor,sonar,compass|copro,map,lcd,charger")
+    wait_until(
+        lambda: stats(ring.session, ring.name, 40)[40]["successor"] == 10, 10, "compass to close its side"
+    )
+    listing = json.loads(ring.fault("--list", "--json").stdout)
+    assert all("partition" in n["faults"] for n in listing["nodes"])
+    ring.fault("all", "heal")
+    ring.one_token_through(IDS, timeout=20)
+
+
+def test_chaos_cli_runs_a_scenario_and_judges_it(tmp_path):
+    scenario = tmp_path / "short.yaml"
+    scenario.write_text(
+        "ring: {nodes: [main, motor, sonar, compass], bitrate: 10M, workload: probe}\n"
+        "settle: 1.5\n"
+        "faults:\n"
+        "  - {at: 0.5, node: sonar, kind: hang}\n"
+        "  - {at: 2.0, node: sonar, kind: resume}\n"
+        "  - {at: 3.5, node: motor, kind: lose}\n"
+    )
+    out = tmp_path / "report.json"
+    result = subprocess.run(
+        [*TOKENRING, "chaos", str(scenario), "--json", str(out), "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=REPO,
+    )
+    report = json.loads(out.read_text())
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert report["ok"] and report["invariants"]["exactly_one_token_at_end"]
+    assert [f["kind"] for f in report["faults"]] == ["hang", "resume", "lose"]
+    assert all(f["recovered_ms"] is not None for f in report["faults"])
+    assert "recover ms" in result.stdout
+
+
+def test_chaos_scenario_typos_are_named_with_file_and_line(tmp_path):
+    scenario = tmp_path / "typo.yaml"
+    scenario.write_text(
+        "faults:\n  - {at: 1, node: sonar, kind: crash}\n  - {at: 2, node: sonar, knd: resume}\n"
+    )
+    result = subprocess.run(
+        [*TOKENRING, "chaos", str(scenario)], capture_output=True, text=True, timeout=30, cwd=REPO
+    )
+    assert result.returncode == 2
+    assert f"{scenario}:3: faults.1.knd: unknown key" in result.stderr
+    assert "Traceback" not in result.stderr

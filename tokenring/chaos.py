@@ -1,0 +1,491 @@
+"""``tokenring chaos SCENARIO.yaml``: a timed list of faults against a ring, judged from the wire.
+
+A scenario (strict YAML, see ``scenarios/``)::
+
+    ring:                 # how to launch the ring (ignored with --ring: use a running one)
+      nodes: all          # or a list of names/IDs
+      bitrate: max
+      ack: adaptive
+      respawn: false
+      workload: probe     # probe (numbered commands between all nodes) | modules | none
+    settle: 2.0           # seconds after the last fault before the end state is judged
+    faults:
+      - {at: 1.0, node: sonar, kind: crash}
+      - {at: 3.0, node: compass, kind: hang}
+      - {at: 3.5, node: compass, kind: resume}
+      - {at: 5.0, node: all, kind: partition, value: "main,motor,sonar,compass|copro,map,lcd,charger"}
+      - {at: 6.0, node: all, kind: heal}
+
+For every fault the report gives the time to recover (the token circulating again through every
+node that should be in the ring, in one chain and one epoch — for a partition, through each
+side), tokens regenerated, duplicates eliminated (stale tokens and repeated passes dropped),
+frames rejected by CRC and commands lost or executed twice; at the end, whether exactly one
+token circulates. Exit code 1 if any fault did not recover or an invariant broke.
+"""
+
+from __future__ import annotations
+
+import io
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from tokenring import keys
+from tokenring.cliutil import free_port, query
+from tokenring.errors import TokenRingError, UsageError
+from tokenring.faults import KINDS, NEEDS_VALUE, FaultClient, parse_partition, validate
+from tokenring.launcher import Launcher, NodePlan
+from tokenring.protocol import Protocol, default_protocol
+from tokenring.wire import first_full_round, passes, settled
+from tokenring.yamlfile import read_yaml
+from tokenring.zconfig import make_config, open_session
+
+RING_KEYS = {"nodes", "bitrate", "ack", "respawn", "workload"}
+FAULT_KEYS = {"at", "node", "kind", "value", "jitter", "count", "soft"}
+STAT_KEYS = (
+    "tokens_regenerated",
+    "stale_tokens",
+    "duplicate_passes",
+    "rejected_crc",
+    "pass_retries",
+    "reconfigurations",
+)
+
+
+@dataclass
+class FaultStep:
+    at: float
+    node: str
+    kind: str
+    request: dict[str, Any]
+    line: int
+
+
+@dataclass
+class Scenario:
+    source: str
+    nodes: list[int]
+    bitrate: str = "max"
+    ack: str = "adaptive"
+    respawn: bool = False
+    workload: str = "probe"
+    settle: float = 2.0
+    faults: list[FaultStep] = field(default_factory=list)
+
+    @property
+    def duration(self) -> float:
+        return (self.faults[-1].at if self.faults else 0.0) + self.settle
+
+
+def load_scenario(path: str | Path, protocol: Protocol | None = None) -> Scenario:
+    """Read and check a scenario; every mistake names the file, line and entry (exit code 2)."""
+    protocol = protocol or default_protocol()
+    data, lines = read_yaml(path)
+    source = str(path)
+
+    def fail(entry: str, problem: str) -> UsageError:
+        line = lines.get(entry)
+        return UsageError(f"{source}:{line}: {entry}: {problem}" if line else f"{source}: {entry}: {problem}")
+
+    if not isinstance(data, dict):
+        raise UsageError(f"{source}: a scenario is a mapping with 'faults' (and optionally 'ring', 'settle')")
+    unknown = set(data) - {"ring", "settle", "faults"}
+    if unknown:
+        raise fail(sorted(unknown)[0], "unknown key (allowed: ring, settle, faults)")
+    ring = data.get("ring") or {}
+    if not isinstance(ring, dict):
+        raise fail("ring", "expected a mapping")
+    unknown = set(ring) - RING_KEYS
+    if unknown:
+        key = sorted(unknown)[0]
+        raise fail(f"ring.{key}", f"unknown key (allowed: {', '.join(sorted(RING_KEYS))})")
+
+    def resolve(item: Any, entry: str) -> int:
+        try:
+            return protocol.node(int(item) if str(item).isdigit() else str(item)).id
+        except Exception:
+            known = ", ".join(protocol.nodes)
+            raise fail(entry, f"unknown node {item!r} (known: {known})") from None
+
+    node_list = ring.get("nodes", "all")
+    if node_list == "all":
+        nodes = [n.id for n in protocol.nodes.values()]
+    elif isinstance(node_list, list) and node_list:
+        nodes = sorted({resolve(item, "ring.nodes") for item in node_list})
+    else:
+        raise fail("ring.nodes", "expected 'all' or a list of node names/IDs")
+    scenario = Scenario(source, nodes)
+    scenario.bitrate = str(ring.get("bitrate", "max"))
+    from tokenring.ring import parse_bitrate
+
+    try:
+        parse_bitrate(scenario.bitrate)
+    except UsageError as exc:
+        raise fail("ring.bitrate", str(exc)) from None
+    scenario.ack = str(ring.get("ack", "adaptive"))
+    if scenario.ack not in ("adaptive", "always", "never"):
+        raise fail("ring.ack", f"{scenario.ack!r} is not adaptive, always or never")
+    scenario.respawn = bool(ring.get("respawn", False))
+    scenario.workload = str(ring.get("workload", "probe"))
+    if scenario.workload not in ("probe", "modules", "none"):
+        raise fail("ring.workload", f"{scenario.workload!r} is not probe, modules or none")
+    settle = data.get("settle", 2.0)
+    if not isinstance(settle, int | float) or isinstance(settle, bool) or not 0.2 <= settle <= 600:
+        raise fail("settle", f"{settle!r} must be a number of seconds 0.2..600")
+    scenario.settle = float(settle)
+    faults = data.get("faults")
+    if not isinstance(faults, list) or not faults:
+        raise fail("faults", "expected a non-empty list of faults")
+    last = 0.0
+    by_name = {n.name: n.id for n in protocol.nodes.values()}
+    for index, raw in enumerate(faults):
+        entry = f"faults.{index}"
+        if not isinstance(raw, dict):
+            raise fail(entry, "expected a mapping like {at: 1.0, node: sonar, kind: crash}")
+        unknown = set(raw) - FAULT_KEYS
+        if unknown:
+            key = sorted(unknown)[0]
+            raise fail(f"{entry}.{key}", f"unknown key (allowed: {', '.join(sorted(FAULT_KEYS))})")
+        at = raw.get("at")
+        if not isinstance(at, int | float) or isinstance(at, bool) or at < 0:
+            raise fail(f"{entry}.at", f"{at!r} must be a time in seconds from the start")
+        if at < last:
+            raise fail(f"{entry}.at", f"{at} comes before the previous fault at {last}")
+        last = float(at)
+        kind = raw.get("kind")
+        if kind not in KINDS or kind == "list":
+            raise fail(
+                f"{entry}.kind",
+                f"unknown fault kind {kind!r} (kinds: {', '.join(k for k in KINDS if k != 'list')})",
+            )
+        node = str(raw.get("node", ""))
+        if node != "all":
+            resolve(node, f"{entry}.node")
+        if kind in NEEDS_VALUE and raw.get("value") is None:
+            raise fail(entry, f"{kind} needs a value ({NEEDS_VALUE[kind]})")
+        request: dict[str, Any] = {"kind": kind}
+        try:
+            if kind == "delay":
+                request.update(ms=raw["value"], jitter_ms=raw.get("jitter", 0.0))
+            elif kind in ("drop", "corrupt"):
+                request["p"] = raw["value"]
+            elif kind == "partition":
+                request["groups"] = parse_partition(
+                    str(raw["value"]), lambda item, where=f"{entry}.value": resolve(item, where)
+                )
+            elif kind == "lose":
+                request["count"] = raw.get("count", 1)
+            elif kind == "hang":
+                request["soft"] = bool(raw.get("soft", False))
+            request = validate(request)
+        except UsageError as exc:
+            raise fail(entry, str(exc)) from None
+        if node != "all" and node not in by_name and not node.isdigit():
+            raise fail(f"{entry}.node", f"unknown node {node!r}")
+        scenario.faults.append(FaultStep(float(at), node, kind, request, lines.get(entry, 0)))
+    return scenario
+
+
+class WireCapture:
+    """Every frame on ``token/*`` with its arrival time (``perf_counter``)."""
+
+    def __init__(self, session: zenoh.Session, ring: str) -> None:
+        self.frames: list[tuple[float, bytes]] = []
+        self._lock = threading.Lock()
+        self._sub = session.declare_subscriber(keys.token(ring, "*"), self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        frame = sample.payload.to_bytes()
+        with self._lock:
+            self.frames.append((time.perf_counter(), frame))
+
+    def snapshot(self) -> list[tuple[float, bytes]]:
+        with self._lock:
+            return list(self.frames)
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+@dataclass
+class Membership:
+    """Who should be circulating after each fault, followed through the scenario."""
+
+    present: set[int]
+    groups: list[list[int]] | None = None
+
+    def apply(self, step: FaultStep, targets: list[int], respawn: bool) -> None:
+        kind = step.kind
+        if (kind in ("crash",) and not respawn) or kind in ("hang", "leave"):
+            self.present -= set(targets)
+        elif kind in ("resume", "join"):
+            self.present |= set(targets)
+        elif kind == "partition":
+            self.groups = step.request["groups"]
+        elif kind in ("heal", "clear"):
+            self.groups = None
+            if kind == "clear":
+                self.present |= set(targets)
+
+    def expected(self) -> list[set[int]]:
+        if self.groups:
+            return [set(g) & self.present for g in self.groups if set(g) & self.present]
+        return [set(self.present)]
+
+
+def recovery_time(
+    frames: list[tuple[float, bytes]], rings: list[set[int]], start: float, end: float
+) -> float | None:
+    """Seconds from ``start`` until every expected ring has shown a full round (None if never)."""
+    window = [f for f in frames if start <= f[0] < end]
+    done = []
+    for members in rings:
+        if len(rings) > 1:
+            sub = [(t, fr) for t, fr in window if fr[0] in members and fr[1] in members]
+            seq, _ = passes(sub, drop_stale=False)
+        else:
+            seq, _ = passes(window)
+        at = first_full_round(seq, members, after=start)
+        if at is None:
+            return None
+        done.append(at)
+    return max(done) - start
+
+
+def collect_stats(session: zenoh.Session, ring: str) -> dict[int, dict[str, int]]:
+    out = {}
+    for _, reply in query(session, keys.control(ring, "*", "stats"), timeout=1.5):
+        if reply.get("ok"):
+            result = reply["result"]
+            out[result["id"]] = {k: result["stats"].get(k, 0) for k in STAT_KEYS}
+    return out
+
+
+def stat_delta(before: dict[int, dict[str, int]], after: dict[int, dict[str, int]], key: str) -> int:
+    return sum(
+        after[i][key] - before.get(i, {}).get(key, 0)
+        for i in after
+        if after[i][key] >= before.get(i, {}).get(key, 0)
+    )
+
+
+def collect_probes(session: zenoh.Session, ring: str, nodes: list[int]) -> dict[int, dict[str, Any]]:
+    out = {}
+    for node_id in nodes:
+        replies = query(session, keys.control(ring, node_id, "program"), timeout=1.5)
+        if replies and replies[0][1].get("ok"):
+            report = replies[0][1]["result"].get("report") or {}
+            if "acked" in report:
+                out[node_id] = report
+    return out
+
+
+def command_losses(probes: dict[int, dict[str, Any]], protocol: Protocol) -> tuple[int, int]:
+    """(lost, duplicated): acknowledged numbers never taken by the target; numbers taken twice."""
+    lost = 0
+    duplicated = sum(p.get("duplicates", 0) for p in probes.values())
+    by_name = {n.name: n.id for n in protocol.nodes.values()}
+    for sender, report in probes.items():
+        target = by_name.get(report.get("target") or "")
+        if target not in probes:
+            continue  # the target died: its memory of what it took is gone with it
+        taken = set(probes[target]["taken"].get(str(sender), []))
+        acked = report["acked"]
+        if not acked:
+            continue
+        window = [n for n in acked if n >= min(taken)] if taken else acked
+        lost += sum(1 for n in window if n not in taken)
+    return lost, duplicated
+
+
+def run_scenario(
+    scenario: Scenario,
+    *,
+    ring: str | None = None,
+    endpoint: str | None = None,
+    progress: Any = None,
+    protocol: Protocol | None = None,
+) -> dict[str, Any]:
+    """Run a scenario against a launched ring (or an existing one) and judge it."""
+    protocol = protocol or default_protocol()
+    say = progress or (lambda text: None)
+    launcher = None
+    if ring is None:
+        port = free_port()
+        ring = f"chaos{port}"
+        endpoint = f"tcp/127.0.0.1:{port}"
+        program = str(Path(__file__).with_name("chaosprobe.py")) if scenario.workload == "probe" else None
+        plans = []
+        for node_id in scenario.nodes:
+            spec = protocol.by_id[node_id]
+            path = program
+            if scenario.workload == "modules":
+                from tokenring.commands.up import default_programs_dir
+
+                candidate = default_programs_dir() / f"{spec.name}.py"
+                path = str(candidate) if candidate.exists() else None
+            plans.append(NodePlan(node_id, spec.name, path))
+        launcher = Launcher(
+            plans,
+            ring=ring,
+            bitrate=scenario.bitrate,
+            ack_mode=scenario.ack,
+            listen=[endpoint],
+            log_level="warning",
+            respawn=scenario.respawn,
+            output=io.StringIO(),
+        )
+        say(
+            f"launching {len(plans)} nodes on ring {ring} ({endpoint}), bitrate {scenario.bitrate}, ack {scenario.ack}"
+        )
+        launcher.start()
+    connect = [endpoint] if endpoint else [keys.default_endpoint()]
+    try:
+        with open_session(make_config(connect=connect)) as session:
+            return _run(session, ring, scenario, protocol, say, launcher)
+    finally:
+        if launcher is not None:
+            launcher.stop()
+
+
+def _run(session, ring, scenario, protocol, say, launcher) -> dict[str, Any]:
+    deadline = time.monotonic() + 30
+    live: dict[int, dict] = {}
+    while time.monotonic() < deadline:
+        live = collect_stats(session, ring)
+        if set(scenario.nodes) <= set(live) and all(live[i]["tokens_regenerated"] >= 0 for i in live):
+            break
+        time.sleep(0.2)
+    else:
+        raise TokenRingError(f"ring {ring} did not form in 30 s (answering: {sorted(live)})")
+    present = set(live) if launcher is None else set(scenario.nodes)
+    capture = WireCapture(session, ring)
+    time.sleep(1.0)  # a calm second to start from
+    client = FaultClient(session, ring)
+    membership = Membership(set(present))
+    t0 = time.perf_counter()
+    steps: list[dict[str, Any]] = []
+    for step in scenario.faults:
+        wait = t0 + step.at - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+        targets = (
+            sorted(present)
+            if step.node == "all"
+            else [protocol.node(int(step.node) if step.node.isdigit() else step.node).id]
+        )
+        before = collect_stats(session, ring)
+        probes = collect_probes(session, ring, sorted(present)) if scenario.workload == "probe" else {}
+        injected = time.perf_counter()
+        errors = []
+        for node_id in targets:
+            try:
+                client.inject(node_id, step.request)
+            except TokenRingError as exc:
+                errors.append(f"{node_id}: {exc}")
+        membership.apply(step, targets, scenario.respawn)
+        say(
+            f"{injected - t0:6.2f} s  {step.kind:9s} on {step.node}"
+            + (f"  ({'; '.join(errors)})" if errors else "")
+        )
+        steps.append(
+            {
+                "at": step.at,
+                "node": step.node,
+                "kind": step.kind,
+                "targets": targets,
+                "injected": injected,
+                "expected": [sorted(r) for r in membership.expected()],
+                "before": before,
+                "probes_before": probes,
+                "errors": errors,
+            }
+        )
+    time.sleep(max(0.0, t0 + scenario.duration - time.perf_counter()))
+    end_stats = collect_stats(session, ring)
+    end_probes = (
+        collect_probes(session, ring, sorted(membership.present)) if scenario.workload == "probe" else {}
+    )
+    frames = capture.snapshot()
+    capture.close()
+    finished = time.perf_counter()
+    report_steps = []
+    for index, step in enumerate(steps):
+        start = step["injected"]
+        end = steps[index + 1]["injected"] if index + 1 < len(steps) else finished
+        after = steps[index + 1]["before"] if index + 1 < len(steps) else end_stats
+        rings = [set(r) for r in step["expected"]]
+        recovered = recovery_time(frames, rings, start, end) if rings else None
+        probes_after = steps[index + 1]["probes_before"] if index + 1 < len(steps) else end_probes
+        lost, duplicated = command_losses(probes_after, protocol) if probes_after else (0, 0)
+        report_steps.append(
+            {
+                "at": step["at"],
+                "node": step["node"],
+                "kind": step["kind"],
+                "recovered_ms": None if recovered is None else recovered * 1e3,
+                "expected_rings": step["expected"],
+                "tokens_regenerated": stat_delta(step["before"], after, "tokens_regenerated"),
+                "duplicates_eliminated": stat_delta(step["before"], after, "stale_tokens")
+                + stat_delta(step["before"], after, "duplicate_passes"),
+                "crc_rejects": stat_delta(step["before"], after, "rejected_crc"),
+                "pass_retries": stat_delta(step["before"], after, "pass_retries"),
+                "commands_lost": lost,
+                "commands_duplicated": duplicated,
+                "errors": step["errors"],
+            }
+        )
+    final = [f for f in frames if f[0] >= finished - min(1.0, scenario.settle)]
+    seq, _ = passes(final)
+    rings = membership.expected()
+    one_token = (
+        settled(seq) and len(rings) == 1 and first_full_round(seq[len(seq) // 2 :], rings[0]) is not None
+    )
+    lost, duplicated = command_losses(end_probes, protocol) if end_probes else (0, 0)
+    invariants = {
+        "exactly_one_token_at_end": one_token,
+        "every_fault_recovered": all(s["recovered_ms"] is not None for s in report_steps),
+        "no_command_executed_twice": duplicated == 0,
+        "no_acknowledged_command_lost": lost == 0,
+        "no_injection_failed": not any(s["errors"] for s in report_steps),
+    }
+    return {
+        "ring": ring,
+        "scenario": scenario.source,
+        "frames_captured": len(frames),
+        "faults": report_steps,
+        "end": {"passes_judged": len(seq), "commands_lost": lost, "commands_duplicated": duplicated},
+        "invariants": invariants,
+        "ok": all(invariants.values()),
+    }
+
+
+def format_report(report: dict[str, Any]) -> str:
+    from tokenring.cliutil import format_table
+
+    rows = []
+    for s in report["faults"]:
+        rows.append(
+            [
+                f"{s['at']:.2f}",
+                s["node"],
+                s["kind"],
+                "-" if s["recovered_ms"] is None else f"{s['recovered_ms']:.1f}",
+                s["tokens_regenerated"],
+                s["duplicates_eliminated"],
+                s["crc_rejects"],
+                s["commands_lost"],
+                s["commands_duplicated"],
+            ]
+        )
+    table = format_table(
+        rows, ["at s", "node", "fault", "recover ms", "regen", "dup elim", "crc rej", "cmd lost", "cmd dup"]
+    )
+    verdict = "\n".join(
+        f"  {'ok  ' if ok else 'FAIL'} {name.replace('_', ' ')}" for name, ok in report["invariants"].items()
+    )
+    return f"{table}\n\ninvariants:\n{verdict}\n"

@@ -1,0 +1,131 @@
+"""``tokenring fault``: inject a fault into one node (or ``all``) of a running ring."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from typing import Any
+
+import zenoh
+
+from tokenring import keys
+from tokenring.cliutil import add_ring_options, discover, format_table, print_json, query, tap_session
+from tokenring.errors import UsageError
+from tokenring.faults import KINDS, NEEDS_VALUE, FaultClient, parse_partition, parse_probability, validate
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "fault",
+        help="inject a fault into a node of a running ring (crash, hang, delay, drop, ...)",
+        description="Inject a fault into one node of a running ring, through its control key "
+        "tokenring/<ring>/ctl/<ID>/fault. Kinds: " + ", ".join(KINDS) + ". "
+        "Examples: 'fault sonar crash', 'fault motor delay 5 --jitter 2', 'fault lcd drop 0.1', "
+        "'fault all partition main,motor|sonar,compass', 'fault all heal', 'fault --list'.",
+    )
+    p.add_argument("node", nargs="?", help="node name or ID, or 'all'")
+    p.add_argument("kind", nargs="?", choices=KINDS, metavar="KIND", help="fault kind: " + ", ".join(KINDS))
+    p.add_argument("value", nargs="?", help="delay: ms; drop/corrupt: probability 0..1; partition: A,B|C,D")
+    p.add_argument("--jitter", type=float, default=0.0, metavar="MS", help="delay jitter (± ms)")
+    p.add_argument("--count", type=int, default=1, metavar="N", help="lose: how many tokens")
+    p.add_argument("--soft", action="store_true", help="hang: freeze the node OS only (across hosts)")
+    p.add_argument("--list", action="store_true", help="show the active faults of every node")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for answers")
+    add_ring_options(p, listen=False)
+
+
+def live_nodes(session: zenoh.Session, ring: str, timeout: float) -> dict[int, str]:
+    """ID → name of every node answering on the ring (after discovering them)."""
+    expected = discover(session, ring, timeout=timeout + 3.0)
+    found: dict[int, str] = {}
+    deadline = time.monotonic() + timeout + 3.0
+    while time.monotonic() < deadline:
+        for _, reply in query(session, keys.control(ring, "*", "stats"), timeout=timeout):
+            if reply.get("ok"):
+                found[reply["result"]["id"]] = reply["result"]["name"]
+        if found and expected <= set(found):
+            break
+    return found
+
+
+def resolver(nodes: dict[int, str]):
+    def resolve(item: str) -> int:
+        for node_id, name in nodes.items():
+            if item == name or item == str(node_id):
+                return node_id
+        known = ", ".join(f"{n}={i}" for i, n in sorted(nodes.items()))
+        raise UsageError(f"unknown node {item!r} (live: {known or 'none'})")
+
+    return resolve
+
+
+def build_request(args: argparse.Namespace, resolve) -> dict[str, Any]:
+    kind = args.kind
+    if kind in NEEDS_VALUE and args.value is None:
+        raise UsageError(f"{kind} needs a value: {kind} {NEEDS_VALUE[kind]}")
+    if kind not in NEEDS_VALUE and args.value is not None:
+        raise UsageError(f"{kind} takes no value (got {args.value!r})")
+    request: dict[str, Any] = {"kind": kind}
+    if kind == "delay":
+        try:
+            request["ms"] = float(args.value)
+        except ValueError:
+            raise UsageError(f"delay {args.value!r}: expected milliseconds") from None
+        request["jitter_ms"] = args.jitter
+    elif kind in ("drop", "corrupt"):
+        request["p"] = parse_probability(args.value, kind)
+    elif kind == "partition":
+        request["groups"] = parse_partition(args.value, resolve)
+    elif kind == "lose":
+        request["count"] = args.count
+    elif kind == "hang":
+        request["soft"] = args.soft
+    return validate(request)
+
+
+def run(args: argparse.Namespace) -> int:
+    ring = keys.check_ring_name(args.ring)
+    if not args.list and (args.node is None or args.kind is None):
+        raise UsageError("give a node and a fault kind (e.g. 'fault sonar crash'), or --list")
+    with tap_session(args) as session:
+        nodes = live_nodes(session, ring, args.timeout)
+        if not nodes:
+            raise UsageError(f"no node of ring {ring!r} answered (is it running, and is --ring right?)")
+        resolve = resolver(nodes)
+        if args.list:
+            return show_list(session, ring, nodes, args)
+        targets = sorted(nodes) if args.node == "all" else [resolve(args.node)]
+        request = build_request(args, resolve)
+        client = FaultClient(session, ring, args.timeout)
+        results = [client.inject(node_id, request) for node_id in targets]
+    if args.json:
+        print_json({"ring": ring, "request": request, "results": results})
+    else:
+        for result in results:
+            faults = ", ".join(sorted(result.get("faults", {}))) or "none"
+            print(f"{result.get('node')} ({result.get('id')}): {request['kind']} -> active faults: {faults}")
+    return 0
+
+
+def show_list(session: zenoh.Session, ring: str, nodes: dict[int, str], args: argparse.Namespace) -> int:
+    rows = []
+    listing = []
+    for node_id, name in sorted(nodes.items()):
+        answer = query(session, keys.control(ring, node_id, "fault"), {"kind": "list"}, timeout=args.timeout)
+        if not answer or not answer[0][1].get("ok"):
+            listing.append({"id": node_id, "node": name, "faults": None})
+            rows.append([node_id, name, "(no answer: hung?)", ""])
+            continue
+        result = answer[0][1]["result"]
+        listing.append(result)
+        for kind, spec in sorted(result["faults"].items()) or [("-", {})]:
+            options = ", ".join(f"{k}={v}" for k, v in spec.items() if k not in ("kind", "since"))
+            since = time.strftime("%H:%M:%S", time.localtime(spec["since"])) if "since" in spec else ""
+            rows.append([node_id, name, kind + (f" ({options})" if options else ""), since])
+    if args.json:
+        print_json({"ring": ring, "nodes": listing})
+    else:
+        sys.stdout.write(format_table(rows, ["id", "node", "fault", "since"]) + "\n")
+    return 0
