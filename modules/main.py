@@ -127,6 +127,7 @@ class Program(UserProgram):
             pose=pose,
             heading_cdeg=heading,
             pose_filtered=copro["pose_source"] == 2,
+            ready=bool(self.sonar.visits and sonar["sweep"] and self.motor.visits and motor["stamp_ms"]),
         )
 
     def _cooperate(self) -> None:
@@ -141,7 +142,7 @@ class Program(UserProgram):
             self.last_outcome_logged = (
                 f"{outcome.reason_name}{'/' + outcome.trigger if outcome.trigger else ''}"
             )
-        if pilot.busy:
+        if pilot.busy or not self.sensors.ready:  # no plan before sonar and motor have spoken
             return
         moves = nav.plan(self.last_outcome, self.sensors, pilot.alert_lock)
         for target, command, args in nav.commands:

@@ -90,6 +90,7 @@ class Sensors:
     pose: tuple[float, float, float] | None = None
     heading_cdeg: int | None = None  # compass, navigation convention (north, clockwise)
     pose_filtered: bool = False  # ``pose`` is the EKF's (its heading fuses the compass)
+    ready: bool = True  # sonar and motor have published: nothing is planned on empty channels
 
 
 @dataclass
