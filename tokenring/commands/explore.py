@@ -136,6 +136,26 @@ class Mission:
         finally:
             self.launcher.request_stop()
 
+    def _calibrate_compass(self, link: Any, end: float | None) -> None:
+        """The compass's CALIBRATE turn first, so that the filter can trust its heading."""
+        try:
+            if not link.command("compass", "CALIBRATE", timeout=10.0).get("acknowledged"):
+                return
+        except UsageError:
+            return  # no compass on this ring
+        deadline = time.monotonic() + 60.0
+        if end is not None:
+            deadline = min(deadline, self.started + 0.5 * (end - self.started))
+        seen_calibrating = False
+        while time.monotonic() < deadline and not self._stopping():
+            state = link.read("compass.data")["state"]
+            seen_calibrating = seen_calibrating or state == 3
+            if state == 1 and seen_calibrating:
+                self.say("compass calibrated")
+                return
+            time.sleep(0.5)
+        self.say("the compass did not finish calibrating: exploring anyway")
+
     def _mission(self) -> None:
         link = open_link(self.launcher.session, self.launcher.ring, wait=60.0)
         deadline = time.monotonic() + 30.0
@@ -152,6 +172,7 @@ class Mission:
             fetch_time = min(15.0, max(3.0, 0.15 * self.duration))
             end = self.started + self.duration - fetch_time
         if self.mode is not None:
+            self._calibrate_compass(link, end)
             state = request(link, str(self.mode))
             self.say(f"Explore {self.mode} started: {describe(state)}")
             last_report = 0.0

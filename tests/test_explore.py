@@ -1,0 +1,28 @@
+"""The robot at work: tokenring up explores a bundled room with Explore 2 and writes the map."""
+
+from __future__ import annotations
+
+import json
+
+from modules.common.mapscore import score_map
+from tokenring.world import load_world
+
+
+def test_up_explores_with_explore_2_and_writes_the_scored_map(procs, ring_name, endpoint, tmp_path):
+    out = tmp_path / "map.json"
+    launcher = procs.tokenring(
+        "up", "--ring", ring_name, "--listen", endpoint, "--world", "empty", "--speed", "20",
+        "--bitrate", "max", "--explore", "2", "--duration", "45", "--map-out", str(out),
+    )  # fmt: skip
+    output, _ = launcher.communicate(timeout=120)
+    assert launcher.returncode == 0, output[-3000:]
+    assert "Explore 2 started" in output
+    assert f"vectors to {out}" in output
+    doc = json.loads(out.read_text())
+    assert doc["units"] == "mm" and doc["world"] == "empty"
+    assert len(doc["vectors"]) >= 1, output[-3000:]
+    walls = load_world("empty").outline()
+    score = score_map(doc["vectors"], walls)
+    assert score == doc["score"]
+    # the robot found walls: some of what it mapped lies on them
+    assert score["precision"] > 0.2, (score, output[-3000:])
