@@ -93,15 +93,18 @@ def test_trigger_every_k_rounds_wraps_the_u8_counter() -> None:
 
 def test_odometry_sums_increments_and_wraps_int32() -> None:
     track = OdometryTrack(OdometryParams(model="straight"))
-    sync = OdometrySync(track)
+    sync = OdometrySync(track, baseline=None)  # the pose belongs to the first sample's counters
     first = sync.synchronise([odo(100, 1000, 1000), odo(200, 1100, 1100)], 200)
     assert (first["dl"], first["dr"], first["count"]) == (100, 100, 2)
+    # by default the start pose belongs to counters (0, 0): steps before the first sample count
+    late_start = OdometrySync(OdometryTrack(OdometryParams()))
+    assert late_start.synchronise([odo(100, 1000, 1000)], 100)["dl"] == 1000
     second = sync.synchronise([odo(300, 1150, 1160)], 300)
     assert (second["dl"], second["dr"]) == (50, 60)
     empty = sync.synchronise([], 400)
     assert (empty["dl"], empty["dr"], empty["count"], empty["stamp_ms"]) == (0, 0, 0, 400)
     near = 2**31 - 10
-    sync = OdometrySync(OdometryTrack(OdometryParams()))
+    sync = OdometrySync(OdometryTrack(OdometryParams()), baseline=None)
     sync.synchronise([odo(0, near, -near)], 0)
     wrapped = sync.synchronise([odo(1, near + 20 - 2**32, -near - 20 + 2**32)], 1)
     assert (wrapped["dl"], wrapped["dr"]) == (20, -20)

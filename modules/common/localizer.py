@@ -221,7 +221,9 @@ class LocalizationCore:
             else None
         )
         self.synchronisers: dict[str, Any] = {
-            "odometry": OdometrySync(self.track),
+            "odometry": OdometrySync(
+                self.track, None if config["filter"]["initial_pose"] == "motor" else (0, 0)
+            ),
             "compass": CompassSync(
                 self.track, config["filter"]["compass"]["mode"], config["filter"]["compass"]["north_deg"]
             ),

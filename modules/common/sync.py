@@ -271,9 +271,11 @@ class OdometrySync:
 
     sensor = "odometry"
 
-    def __init__(self, track: OdometryTrack) -> None:
+    def __init__(self, track: OdometryTrack, baseline: tuple[int, int] | None = (0, 0)) -> None:
+        # the counters the start pose belongs to: (0, 0) when the robot was put down at a known pose
+        # as the motor started (its counters start at 0); None: the first sample's (pose from the motor)
         self.track = track
-        self.last: tuple[int, int] | None = None
+        self.last: tuple[int, int] | None = baseline
         self.pose = (0.0, 0.0, 0.0)  # odometry frame
 
     def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any]:
@@ -284,6 +286,8 @@ class OdometrySync:
                 self.last = (left, right)
                 self.track.append(sample.stamp_ms, self.pose)
                 continue
+            if not self.track.stamps:
+                self.track.append(sample.stamp_ms, self.pose)
             dl = _wrap_i32(left - self.last[0])
             dr = _wrap_i32(right - self.last[1])
             self.last = (left, right)
