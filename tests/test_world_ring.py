@@ -10,7 +10,6 @@ import statistics
 import sys
 from pathlib import Path
 
-import msgpack
 import pytest
 from ringutil import launcher_pids, tap, wait_ring, wait_until
 
@@ -42,14 +41,14 @@ class Program(UserProgram):
     def report(self):
         return {"got": self.got}
 '''
-# a 3 m x 2 m room; the robot starts 600 mm from the lower wall facing +X; a floor where the
+# a 2.7 m x 2 m room; the robot starts 600 mm from the lower wall facing +X; a floor where the
 # true glide factor is 7.8 (the motor starts with 6.5) with little spread
 ROOM = """
 name: hall
 start: {x: 1000, y: 600, angle_deg: 0}
 floor: {glide_factor: 7.8, glide_spread: 0.02}
 walls:
-  - polygon: [[0, 0], [3000, 0], [3000, 2000], [0, 2000]]
+  - polygon: [[0, 0], [2700, 0], [2700, 2000], [0, 2000]]
 """
 
 
@@ -62,18 +61,11 @@ def programs(tmp_path: Path, modules: list[str]) -> Path:
     return directory
 
 
-class Truth:
-    def __init__(self, session, ring):
-        self.last: dict | None = None
-        self.sub = session.declare_subscriber(keys.world(ring, "truth"), self._on)
+def world_state(session, ring: str) -> dict:
+    """The world's ground truth right now (world/state), after every hardware request so far."""
+    from tokenring.cliutil import query_one
 
-    def _on(self, sample):
-        self.last = msgpack.unpackb(sample.payload.to_bytes())
-
-    def fresh(self, after_ms: float) -> dict:
-        return wait_until(
-            lambda: self.last if self.last and self.last["t_ms"] > after_ms else None, 10, "truth"
-        )
+    return query_one(session, keys.world(ring, "state"))
 
 
 def read(link: PcLink, channel: str) -> dict:
@@ -123,16 +115,15 @@ def test_commands_move_the_robot_dead_reckoning_glide_factor_and_sonar(procs, ri
         wait_ring(session, ring_name, [10, 20, 30, 40, 80], timeout=30)
         procs.watch(launcher_pids(session, ring_name))
         link = PcLink(session, ring_name)
-        truth = Truth(session, ring_name)
         start = wait_until(
             lambda: link.read("motor.data")["stamp_ms"] > 0 and link.read("motor.data"), 10, "motor"
         )
         assert (start["x_mm"], start["y_mm"], start["angle_cdeg"]) == (1000, 600, 0)
 
         # 1 m straight: the motor believes 1845 half-steps x 0.5419 mm; the floor adds 1 % +- 0.5 %
-        t0 = truth.fresh(0)
+        t0 = world_state(session, ring_name)
         done = run_move(link, "MOVE_FORWARD", distance_mm=1000, speed_pct=100)
-        t1 = truth.fresh(t0["t_ms"] + 100)
+        t1 = world_state(session, ring_name)
         assert done["steps_left"] - start["steps_left"] == 1845 == done["steps_right"] - start["steps_right"]
         believed = done["x_mm"] - start["x_mm"]
         driven = t1["x_mm"] - t0["x_mm"]
@@ -140,10 +131,10 @@ def test_commands_move_the_robot_dead_reckoning_glide_factor_and_sonar(procs, ri
         assert 1.01 - 0.015 <= driven / believed <= 1.01 + 0.015
         assert abs(t1["y_mm"] - 600) < 1e-6 and abs(t1["theta_rad"]) < 1e-9
 
-        # sonar against the known walls, from the true pose: front to x = 3000, right-front to y = 0
-        sweeps = sonar_sweeps(link, 6)
+        # sonar against the known walls, from the true pose: front to x = 2700, right-front to y = 0
+        sweeps = sonar_sweeps(link, 12)
         x, y = t1["x_mm"], t1["y_mm"]
-        expected_front = (3000 - x - SONAR_MOUNTS[FRONT].x) / 10
+        expected_front = (2700 - x - SONAR_MOUNTS[FRONT].x) / 10
         expected_right = (y + SONAR_MOUNTS[RIGHT_FRONT].y) / 10
         assert abs(statistics.median(s["distances"][FRONT] for s in sweeps) - expected_front) <= 2
         assert abs(statistics.median(s["distances"][RIGHT_FRONT] for s in sweeps) - expected_right) <= 2
@@ -152,7 +143,7 @@ def test_commands_move_the_robot_dead_reckoning_glide_factor_and_sonar(procs, ri
 
         # a 90° turn on a floor with glide factor 7.8 turns only 75°; the robot believes 90°
         done = run_move(link, "TURN_LEFT", angle_deg=90, speed_pct=100)
-        t2 = truth.fresh(t1["t_ms"] + 100)
+        t2 = world_state(session, ring_name)
         turned = math.degrees(t2["theta_rad"] - t1["theta_rad"])
         assert done["angle_cdeg"] == 27000  # 90° counter-clockwise on the wire (clockwise angles)
         assert turned == pytest.approx(90 * 6.5 / 7.8, rel=0.03)
@@ -164,7 +155,7 @@ def test_commands_move_the_robot_dead_reckoning_glide_factor_and_sonar(procs, ri
         wait_until(lambda: link.read("motor.data")["glide_cfactor"] != 650, 5, "new glide factor")
         assert link.read("motor.data")["glide_cfactor"] == pytest.approx(650 * 90 / turned, abs=2)
         run_move(link, "TURN_RIGHT", angle_deg=90, speed_pct=100)
-        t3 = truth.fresh(t2["t_ms"] + 100)
+        t3 = world_state(session, ring_name)
         error_after = math.degrees(t2["theta_rad"] - t3["theta_rad"]) - 90
         assert abs(error_after) < abs(error_before) / 3 and abs(error_after) < 4
 
@@ -182,7 +173,6 @@ def test_commands_move_the_robot_dead_reckoning_glide_factor_and_sonar(procs, ri
         assert link.read("motor.data")["steps_left"] == before["steps_left"]
         got = report()["got"]
         assert ["POSITION_REACHED", {"status": 0, "move_seq": before["move_seq"]}] in got
-        truth.sub.undeclare()
     launcher.terminate()
     assert launcher.wait(15) == 0
 
