@@ -309,6 +309,7 @@ def run_scenario(
     endpoint: str | None = None,
     progress: Any = None,
     protocol: Protocol | None = None,
+    log_file: str | None = None,
 ) -> dict[str, Any]:
     """Run a scenario against a launched ring (or an existing one) and judge it."""
     protocol = protocol or default_protocol()
@@ -335,9 +336,9 @@ def run_scenario(
             bitrate=scenario.bitrate,
             ack_mode=scenario.ack,
             listen=[endpoint],
-            log_level="warning",
             respawn=scenario.respawn,
-            output=io.StringIO(),
+            output=open(log_file, "w") if log_file else io.StringIO(),  # noqa: SIM115 - the launcher owns it
+            log_level="info" if log_file else "warning",
         )
         say(
             f"launching {len(plans)} nodes on ring {ring} ({endpoint}), bitrate {scenario.bitrate}, ack {scenario.ack}"
@@ -405,7 +406,10 @@ def _run(session, ring, scenario, protocol, say, launcher) -> dict[str, Any]:
                 "errors": errors,
             }
         )
-    time.sleep(max(0.0, t0 + scenario.duration - time.perf_counter()))
+    # settle after the last fault has actually landed (a slow step, e.g. a resume, delays it)
+    time.sleep(
+        max(0.0, max(t0 + scenario.duration, steps[-1]["injected"] + scenario.settle) - time.perf_counter())
+    )
     end_stats = collect_stats(session, ring)
     end_probes = (
         collect_probes(session, ring, sorted(membership.present)) if scenario.workload == "probe" else {}

@@ -94,13 +94,17 @@ def discover(session: zenoh.Session, ring: str, timeout: float = 5.0, settle: fl
 def query(
     session: zenoh.Session, key: str, request: Any = None, timeout: float = 2.0
 ) -> list[tuple[str, Any]]:
-    """Query a control key; returns (key, decoded reply) for every answer."""
+    """Query a control key; returns (key, decoded reply) for every answer.
+
+    A key with a wildcard asks every matching node (and waits for all, up to ``timeout``); a
+    plain key asks the best matching one only, so a hung node elsewhere cannot delay it."""
     payload = msgpack.packb(request) if request is not None else None
     out: list[tuple[str, Any]] = []
+    wildcard = "*" in key
     try:
         options: dict[str, Any] = {
             "timeout": timeout,
-            "target": zenoh.QueryTarget.ALL,
+            "target": zenoh.QueryTarget.ALL if wildcard else zenoh.QueryTarget.BEST_MATCHING,
             "consolidation": zenoh.ConsolidationMode.NONE,
         }
         if payload is not None:

@@ -432,7 +432,11 @@ class NodeOS:
                 self._paced += delay
                 now = perf_counter()
         if did != self._last_sent_did or not self._ack_pending:
-            self._retries = 0  # unanswered passes to the same successor keep counting
+            self._retries = 0
+        elif self._retries:
+            # the previous pass to this successor is still unanswered after a retry: a new
+            # token must not restart the count, or a hung successor eats token after token
+            self._retries += 1
         self._last_sent_did = did
         self._last_sent_crc = crc
         self._last_sent_time = now
@@ -495,6 +499,12 @@ class NodeOS:
         if self._departed:
             return
         kind = payload[:1]
+        if kind == b"P":  # an excluded node is pinged: answering brings it back
+            if len(payload) == R.ACK_MESSAGE.size:
+                self._send_message(
+                    payload[1], R.ACK_MESSAGE.pack(b"A", self.node_id, 0, self._epoch, self._origin)
+                )
+            return
         if kind in (b"A", b"S"):
             if len(payload) != R.ACK_MESSAGE.size:
                 return
@@ -643,9 +653,12 @@ class NodeOS:
             if now >= refresh_at or self.timing.due():
                 self._ack_interval = self.timing.refresh(len(self.membership.active)).ack_interval
                 refresh_at = now + (0.1 if now - self._started_at < 3.0 else 0.5)
-                for node_id in self.membership.expire_exclusions(time.monotonic()):
-                    log.info("retrying excluded node %d", node_id)
-                    self._successor_changed()
+                for node_id in self.membership.probes_due(time.monotonic(), self._exclusion_backoff):
+                    # a ping, not the token: a node that is still hung costs the ring nothing
+                    self._send_message(
+                        node_id, R.ACK_MESSAGE.pack(b"P", self.node_id, 0, self._epoch, self._origin)
+                    )
+                    self._backoff(node_id)
             timeouts = self.timing.current
             deadlines = [refresh_at]
             with self._token_lock:

@@ -7,7 +7,7 @@ Timeouts (all derived, never guessed; see README "Timing"):
   default 2.5 Mbit/s, 0 at ``max``).
 * **ack timeout** — ARCNET's 74.7 µs response timeout scaled by bitrate, but never below
   4 x the 99th percentile of the measured ack latency nor below 5 ms (Python and the OS
-  scheduler cannot promise less on a loaded 2-core machine).
+  scheduler cannot promise less on a loaded 2-core machine), and never above 50 ms.
 * **reconfiguration timeout** — ARCNET's 840 ms scaled by bitrate, but never below 10 x the
   median round time (the median, so that a disturbance does not inflate its own timeout),
   3 hop times per live node, nor 50 ms. The highest live ID
@@ -32,6 +32,7 @@ ARCNET_RESPONSE_TIMEOUT_S = 74.7e-6
 ARCNET_RECON_TIMEOUT_S = 0.840
 
 ACK_FLOOR_S = 0.005
+ACK_CAP_S = 0.050
 RECON_FLOOR_S = 0.050
 ACK_RETRIES = 2
 MIN_ROUND_SAMPLES = 16  # rounds measured before the timeouts follow the measurements
@@ -40,7 +41,8 @@ MIN_ROUND_SAMPLES = 16  # rounds measured before the timeouts follow the measure
 EPOCH_MASK = 0x7F
 ACK_REQUESTED = 0x80
 
-# small messages on the ack key: b"A" ack, b"S" stale-token notice; a pass is named by its CRC
+# small messages on the ack key: b"A" ack, b"S" stale-token notice, b"P" ping of an excluded
+# node (answered with an ack); a pass is named by its CRC
 ACK_MESSAGE = struct.Struct("<cBHBB")  # kind, from, frame CRC, epoch, origin
 # ring events: kind, node, by, epoch, origin
 RING_EVENT = struct.Struct("<cBBBB")
@@ -178,7 +180,9 @@ class Timing:
         round_p99 = self.rounds.percentile(99, default=0.0)
         self.round_median = self.rounds.percentile(50, default=0.0)
         ack_p99 = self.ack_latency.percentile(99, default=0.0)
-        ack = max(ACK_FLOOR_S, 4 * ack_p99, ARCNET_RESPONSE_TIMEOUT_S * self.scale)
+        # capped: three unanswered passes must skip a hung node well before the
+        # reconfiguration timeout would regenerate the token instead
+        ack = min(max(ACK_FLOOR_S, 4 * ack_p99, ARCNET_RESPONSE_TIMEOUT_S * self.scale), ACK_CAP_S)
         recon = max(
             RECON_FLOOR_S,
             10 * self.round_median,  # the median: a disturbance must not inflate its own timeout
@@ -254,14 +258,13 @@ class Membership:
                 return False
             return self._recompute()
 
-    def expire_exclusions(self, now: float) -> list[int]:
-        """Exclusions whose retry time has come: they are probed again by the next pass."""
+    def probes_due(self, now: float, backoff: dict[int, float]) -> list[int]:
+        """Excluded nodes to ping now (they stay excluded until one answers); the next ping
+        of each waits ``backoff[node]`` seconds."""
         with self._lock:
             due = [i for i, t in self.excluded.items() if t <= now and i in self.live]
             for node_id in due:
-                del self.excluded[node_id]
-            if due:
-                self._recompute()
+                self.excluded[node_id] = now + backoff.get(node_id, 1.0)
             return due
 
     def rank(self) -> int:

@@ -30,6 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--json", metavar="FILE", help="write the full report as JSON ('-' for stdout)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument("--logs", metavar="FILE", help="write the launched nodes' log lines to FILE")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -40,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"chaos | {text}", file=sys.stderr, flush=True)
 
-    report = run_scenario(scenario, ring=ring, endpoint=args.connect, progress=progress)
+    report = run_scenario(scenario, ring=ring, endpoint=args.connect, progress=progress, log_file=args.logs)
     if args.json == "-":
         print(json.dumps(report, indent=2, default=str))
     else:

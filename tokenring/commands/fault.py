@@ -13,6 +13,7 @@ from tokenring import keys
 from tokenring.cliutil import add_ring_options, discover, format_table, print_json, query, tap_session
 from tokenring.errors import UsageError
 from tokenring.faults import KINDS, NEEDS_VALUE, FaultClient, parse_partition, parse_probability, validate
+from tokenring.protocol import default_protocol
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -37,16 +38,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def live_nodes(session: zenoh.Session, ring: str, timeout: float) -> dict[int, str]:
-    """ID → name of every node answering on the ring (after discovering them)."""
+    """ID → name of every live node of the ring — also a hung one that answers nothing but
+    still holds its liveliness token (it must stay reachable for ``resume``)."""
     expected = discover(session, ring, timeout=timeout + 3.0)
     found: dict[int, str] = {}
-    deadline = time.monotonic() + timeout + 3.0
+    deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        for _, reply in query(session, keys.control(ring, "*", "stats"), timeout=timeout):
+        for _, reply in query(session, keys.control(ring, "*", "stats"), timeout=min(1.0, timeout)):
             if reply.get("ok"):
                 found[reply["result"]["id"]] = reply["result"]["name"]
         if found and expected <= set(found):
             break
+    protocol = default_protocol()
+    for node_id in expected - set(found):
+        spec = protocol.by_id.get(node_id)
+        found[node_id] = spec.name if spec else f"node{node_id}"
     return found
 
 
@@ -93,6 +99,11 @@ def run(args: argparse.Namespace) -> int:
         nodes = live_nodes(session, ring, args.timeout)
         if not nodes:
             raise UsageError(f"no node of ring {ring!r} answered (is it running, and is --ring right?)")
+        if args.kind == "resume":
+            # a SIGSTOPped node answers nothing and a fresh session cannot even see it: take
+            # every node protocol.yaml knows (the launcher resolves the process)
+            for spec in default_protocol().nodes.values():
+                nodes.setdefault(spec.id, spec.name)
         resolve = resolver(nodes)
         if args.list:
             return show_list(session, ring, nodes, args)

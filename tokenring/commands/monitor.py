@@ -1,0 +1,163 @@
+"""``tokenring monitor``: a live terminal view of a running ring.
+
+Membership and the successor chain, the round-trip time, per-node counters like the Linux
+arcnet driver's (reconfigurations, successor changes, unacknowledged passes, CRC rejects,
+inbox-full refusals, regenerations, stale tokens dropped), the faults active on each node, and
+an event log where fault periods, membership changes and reconfigurations are marked.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from typing import Any
+
+from tokenring import keys
+from tokenring.cliutil import add_ring_options, discover, format_table, query, tap_session
+
+COUNTERS = (
+    ("reconfigurations", "reconf"),
+    ("successor_changes", "succ chg"),
+    ("unacked_passes", "unacked"),
+    ("rejected_crc", "crc rej"),
+    ("inbox_full", "inbox full"),
+    ("tokens_regenerated", "regen"),
+    ("stale_tokens", "stale"),
+)
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("monitor", help="live terminal view of a running ring", description=__doc__)
+    p.add_argument("--interval", type=float, default=0.5, help="seconds between refreshes")
+    p.add_argument("--once", action="store_true", help="print one snapshot and exit")
+    p.add_argument("--count", type=int, help="stop after this many refreshes")
+    p.add_argument("--json", action="store_true", help="one JSON object per refresh")
+    add_ring_options(p, listen=False)
+
+
+def snapshot(session: Any, ring: str) -> dict[str, Any]:
+    nodes = {}
+    for _, reply in query(session, keys.control(ring, "*", "stats"), timeout=1.0):
+        if reply.get("ok"):
+            nodes[reply["result"]["id"]] = reply["result"]
+    faults = {}
+    for _, reply in query(session, keys.control(ring, "*", "fault"), {"kind": "list"}, timeout=1.0):
+        if reply.get("ok"):
+            faults[reply["result"]["id"]] = reply["result"]["faults"]
+    return {"t": time.time(), "nodes": nodes, "faults": faults}
+
+
+def diff_events(previous: dict[str, Any] | None, current: dict[str, Any]) -> list[str]:
+    """What changed between two snapshots, as event lines (fault periods, membership, counters)."""
+    if previous is None:
+        return []
+    events = []
+    before, after = previous["nodes"], current["nodes"]
+    names = {i: n["name"] for i, n in {**before, **after}.items()}
+    for node_id in sorted(set(before) - set(after)):
+        events.append(f"{names[node_id]} ({node_id}) stopped answering")
+    for node_id in sorted(set(after) - set(before)):
+        events.append(f"{names[node_id]} ({node_id}) joined")
+    for node_id in sorted(set(before) & set(after)):
+        old, new = before[node_id], after[node_id]
+        if old["successor"] != new["successor"]:
+            events.append(f"{names[node_id]}: successor {old['successor']} -> {new['successor']}")
+        for key, label in COUNTERS:
+            grown = new["stats"].get(key, 0) - old["stats"].get(key, 0)
+            if grown > 0 and key not in ("successor_changes",):
+                events.append(f"{names[node_id]}: {label} +{grown}")
+    old_faults, new_faults = previous["faults"], current["faults"]
+    for node_id in sorted(set(old_faults) | set(new_faults)):
+        old_set, new_set = set(old_faults.get(node_id) or {}), set(new_faults.get(node_id) or {})
+        for kind in sorted(new_set - old_set):
+            events.append(f"FAULT START {names.get(node_id, node_id)}: {kind}")
+        for kind in sorted(old_set - new_set):
+            events.append(f"FAULT END   {names.get(node_id, node_id)}: {kind}")
+    return events
+
+
+def render(ring: str, snap: dict[str, Any], events: list[tuple[float, str]]) -> str:
+    nodes = snap["nodes"]
+    lines = [
+        f"tokenring monitor - ring {ring!r} - {time.strftime('%H:%M:%S')} - {len(nodes)} nodes answering"
+    ]
+    if nodes:
+        master = min(nodes.values(), key=lambda n: n["id"])
+        round_ms = master["round_ms"]
+        lines.append(
+            f"round trip at {master['name']}: median {round_ms['median']:.3f} ms, p99 {round_ms['p99']:.3f} ms;"
+            f" epoch {master['epoch'][0]}/{master['epoch'][1]}, counter {master['counter']}"
+        )
+        chain, seen, current = [], set(), master["id"]
+        while current in nodes and current not in seen:
+            seen.add(current)
+            chain.append(f"{nodes[current]['name']}({current})")
+            current = nodes[current]["successor"]
+        chain.append(f"{nodes[current]['name']}({current})" if current in nodes else f"?({current})")
+        lines.append("ring: " + " -> ".join(chain))
+    rows = []
+    for node_id, n in sorted(nodes.items()):
+        faults = snap["faults"].get(node_id)
+        rows.append(
+            [
+                node_id,
+                n["name"],
+                n["successor"],
+                n["counter"],
+                f"{n['round_ms']['median']:.2f}",
+                f"{n['handler_us']['median']:.0f}",
+                *[n["stats"].get(key, 0) for key, _ in COUNTERS],
+                ",".join(sorted(faults)) if faults else "-",
+            ]
+        )
+    headers = [
+        "id",
+        "name",
+        "next",
+        "counter",
+        "round ms",
+        "handler us",
+        *[label for _, label in COUNTERS],
+        "faults",
+    ]
+    lines.append(format_table(rows, headers))
+    lines.append("")
+    lines.append("events:")
+    for t, text in events[-12:]:
+        stamp = time.strftime("%H:%M:%S", time.localtime(t)) + f".{int(t * 1000) % 1000:03d}"
+        marker = ">>" if text.startswith("FAULT") else "  "
+        lines.append(f" {marker} {stamp}  {text}")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    ring = keys.check_ring_name(args.ring)
+    events: list[tuple[float, str]] = []
+    previous = None
+    refreshes = 0
+    interactive = sys.stdout.isatty() and not args.once and not args.json
+    with tap_session(args) as session:
+        discover(session, ring, timeout=5.0)
+        try:
+            while True:
+                snap = snapshot(session, ring)
+                events += [(snap["t"], e) for e in diff_events(previous, snap)]
+                previous = snap
+                refreshes += 1
+                if args.json:
+                    print(
+                        json.dumps({**snap, "events": [e for t, e in events if t == snap["t"]]}, default=str),
+                        flush=True,
+                    )
+                else:
+                    text = render(ring, snap, events)
+                    sys.stdout.write(("\x1b[H\x1b[2J" if interactive else "") + text + "\n")
+                    sys.stdout.flush()
+                if args.once or (args.count and refreshes >= args.count):
+                    break
+                time.sleep(args.interval)
+        except KeyboardInterrupt:
+            return 130
+    return 0 if previous and previous["nodes"] else 1
