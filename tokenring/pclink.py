@@ -147,29 +147,44 @@ class PcLinkServer:
 class PcLink:
     """The PC side of the serial line: what ``tokenring drive``, ``explore``, ``load`` use."""
 
-    def __init__(self, session: zenoh.Session, ring: str = keys.DEFAULT_RING, timeout: float = 5.0) -> None:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        ring: str = keys.DEFAULT_RING,
+        timeout: float = 5.0,
+        connect_timeout: float = 5.0,
+    ) -> None:
         self.session = session
         self.ring = keys.check_ring_name(ring)
         self.timeout = timeout
+        self.connect_timeout = connect_timeout
+        self._connected = False
 
     def call(self, verb: str, request: dict[str, Any] | None = None, timeout: float | None = None) -> Any:
-        """One request/answer on the serial line; errors from main become :class:`UsageError`."""
+        """One request/answer on the serial line; errors from main become :class:`UsageError`.
+
+        A fresh session reaches main only once gossip has connected the two, so a first call
+        that nobody answers is repeated for up to ``connect_timeout`` seconds."""
         wait = (timeout if timeout is not None else self.timeout) + 2.0
-        try:
-            replies = list(
-                self.session.get(
-                    keys.pc_link(self.ring, verb),
-                    payload=msgpack.packb(request or {}),
-                    timeout=wait,
+        deadline = time.monotonic() + self.connect_timeout
+        while True:
+            try:
+                replies = list(
+                    self.session.get(
+                        keys.pc_link(self.ring, verb), payload=msgpack.packb(request or {}), timeout=wait
+                    )
                 )
-            )
-        except zenoh.ZError as exc:
-            raise TransportError(f"PC link {verb}: {exc}") from exc
-        answers = [r.ok for r in replies if r.ok is not None]
+            except zenoh.ZError as exc:
+                raise TransportError(f"PC link {verb}: {exc}") from exc
+            answers = [r.ok for r in replies if r.ok is not None]
+            if answers or self._connected or time.monotonic() >= deadline:
+                break
+            time.sleep(0.1)
         if not answers:
             raise TransportError(
                 f"main did not answer on the PC link of ring {self.ring!r} (is the ring up?)"
             )
+        self._connected = True
         reply = msgpack.unpackb(answers[0].payload.to_bytes())
         if not reply.get("ok"):
             raise UsageError(reply.get("error", f"PC link {verb} failed"))

@@ -9,6 +9,7 @@ The node OS calls ``setup()`` then ``run()`` in the program's own thread; ``run`
 from __future__ import annotations
 
 import hashlib
+import sys
 import threading
 import types
 from pathlib import Path
@@ -66,6 +67,9 @@ def load_program(source: bytes | str, filename: str = "<program>") -> type[UserP
     module_name = f"tokenring_program_{Path(filename).stem}"
     module = types.ModuleType(module_name)
     module.__file__ = filename
+    # registered like an imported module, so that dataclasses, pickling and typing.get_type_hints
+    # in a program (which look the module up by name) work as they would in any import
+    sys.modules[module_name] = module
     try:
         code = compile(text, filename, "exec")
     except SyntaxError as exc:
