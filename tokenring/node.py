@@ -1063,9 +1063,9 @@ class NodeOS:
         """Counters, membership and timing for ``stats`` queries, the monitor and benchmarks."""
         timing = self.timing
         t = timing.current
-        rounds = timing.rounds.values()
-        handler = timing.handler.values()
-        send = timing.send.values()
+        rounds = timing.rounds.recent(512)  # recent: a status must follow what happens now
+        handler = timing.handler.recent(512)
+        send = timing.send.recent(512)
 
         def pct(values: Any, q: float) -> float:
             import numpy as np
