@@ -91,15 +91,12 @@ def run_experiment(
                 link.command("compass", "CALIBRATE", timeout=10.0)
                 wait_for_compass(link, timeout / 4)
                 say(f"seed {seed}: compass calibrated")
+                time.sleep(2.0)  # the filter takes the calibrated compass in
+            align(link, speed_pct, timeout / 4)  # face +X, as the robot stood in the seed's hall
             outcome["drive_start_ms"] = world_now(launcher.session, ring)
-            state = link.request(
-                "actions", text=square_actions(laps, side_mm), name="square.act", speed_pct=speed_pct
-            )
-            say(f"seed {seed}: action file started at {outcome['drive_start_ms'] / 1000:.1f} s simulated")
+            say(f"seed {seed}: action file starts at {outcome['drive_start_ms'] / 1000:.1f} s simulated")
             started = time.monotonic()
-            while state.get("running") and time.monotonic() - started < timeout:
-                time.sleep(1.0)
-                state = link.request("state")
+            state = run_actions(link, square_actions(laps, side_mm), "square.act", speed_pct, timeout)
             outcome["finished"] = state.get("finished")
             outcome["seconds"] = time.monotonic() - started
             time.sleep(1.0)  # a last synchronisation or two at rest
@@ -124,6 +121,28 @@ def run_experiment(
     summary["finished"] = outcome.get("finished")
     summary["drive_seconds"] = outcome.get("seconds")
     return summary
+
+
+def run_actions(link: Any, text: str, name: str, speed_pct: int, timeout: float) -> dict[str, Any]:
+    """Hand main an action file and wait until its navigator is done."""
+    state = link.request("actions", text=text, name=name, speed_pct=speed_pct)
+    deadline = time.monotonic() + timeout
+    while state.get("running") and time.monotonic() < deadline:
+        time.sleep(0.5)
+        state = link.request("state")
+    return state
+
+
+def align(link: Any, speed_pct: int, timeout: float) -> None:
+    """Turn the robot to face +X by the fused heading (the compass calibration turn left it off)."""
+    import math
+
+    from modules.common.units import cdeg_cw_to_rad_ccw
+
+    copro = link.read("copro.data")
+    heading = math.degrees(cdeg_cw_to_rad_ccw(copro["pose_angle_cdeg"]))
+    if round(abs(heading)) >= 1:
+        run_actions(link, f"r {-round(heading)}\n", "align.act", speed_pct, timeout)
 
 
 def world_now(session: Any, ring: str) -> int | None:

@@ -37,6 +37,7 @@ def drive(
     truth_period_ms: int = 100,
     heading: Callable[[], float | None] | None = None,
     turn_tolerance_deg: float = 0.5,
+    sonar_sigma_mm: float = 20.0,
 ) -> Iterator[Sample]:
     """Samples in time order for ``moves`` (``s`` mm / ``r`` degrees CCW), sensor-stamped.
 
@@ -73,7 +74,7 @@ def drive(
                 for index in range(len(SONAR_MOUNTS)):
                     sx, sy, sa = sonar_world_pose(pose.x, pose.y, pose.theta, index)
                     d = float(np.min(cast_rays(room, sx, sy, sa + rays, SONAR_RANGE_MM).distance))
-                    d += rng.normal(0.0, 10.0)
+                    d += rng.normal(0.0, sonar_sigma_mm)
                     distances.append(min(254, max(1, round(d / 10))) if math.isfinite(d) else 255)
                 yield Sample("sonar", t, {"distances": distances}, seq=state["sweep"] % 65536)
                 state["sweep"] += 1

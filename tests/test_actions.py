@@ -17,7 +17,7 @@ from modules.common.actions import (
     load_actions,
     parse_actions,
 )
-from modules.common.pilot import FORWARD, REASON, TURN_LEFT, Outcome, Sensors
+from modules.common.pilot import FORWARD, REASON, REVERSE, TURN_LEFT, TURN_RIGHT, Outcome, Sensors
 from modules.common.vectorgen import default_layout
 from tokenring.errors import UsageError
 
@@ -128,8 +128,37 @@ def test_navigator_drives_the_pilot_and_stops_on_an_abort() -> None:
     sensors.stamp_ms = 1000
     (move,) = nav.plan(Outcome(REASON["DONE"]), sensors, 0)
     assert move.direction == FORWARD
-    assert nav.plan(Outcome(REASON["CLOSE"], trigger="front_within"), sensors, 0) is None
-    assert "aborted: CLOSE" in nav.note
+    assert nav.plan(Outcome(REASON["COLLISION"], trigger="motor"), sensors, 0) is None
+    assert "aborted: COLLISION" in nav.note
+
+
+def test_navigator_resumes_after_a_spurious_alert() -> None:
+    """A stray 0 cm echo stops the pilot with ALERT: escape as the lock allows, then finish the drive."""
+    nav = ActionNavigator(default_layout(), parse_actions("s 1000\nr 90\n"), speed_pct=50)
+    sensors = Sensors(pose=(1000.0, 1000.0, 0.0), stamp_ms=0, motor_state=0)
+    (drive,) = nav.plan(None, sensors, 0)
+    assert drive.amount == 1000
+    alert = Outcome(REASON["ALERT"], drive, driven_mm=400, trigger="alert on sonar [1]")
+    (escape,) = nav.plan(alert, sensors, REVERSE)  # the lock allows only the opposite direction
+    assert (escape.direction, escape.amount) == (REVERSE, 60)
+    (rest,) = nav.plan(Outcome(REASON["DONE"]), sensors, 0)
+    assert (rest.direction, rest.amount) == (FORWARD, 660)  # 1000 - 400 + the 60 backed off
+    (turn,) = nav.plan(Outcome(REASON["DONE"]), sensors, 0)
+    assert (turn.direction, turn.amount) == (TURN_LEFT, 90)
+    # the turn is cut short at 32°: a 15° escape to the right, then the closed loop turns the rest
+    alert = Outcome(REASON["ALERT"], turn, driven_mm=round(32 * nav.TURN_MM_PER_DEG))
+    (escape,) = nav.plan(alert, sensors, TURN_RIGHT)
+    assert (escape.direction, escape.amount) == (TURN_RIGHT, 15)
+    sensors.pose = (2000.0, 1000.0, math.radians(17.0))
+    assert nav.plan(Outcome(REASON["DONE"]), sensors, 0) == []  # settle
+    sensors.stamp_ms = 1000
+    (rest,) = nav.plan(Outcome(REASON["DONE"]), sensors, 0)
+    assert (rest.direction, rest.amount) == (TURN_LEFT, 73)
+    assert nav.retries == 2
+    for _ in range(nav.MAX_RETRIES - 2):
+        nav.plan(Outcome(REASON["TIMEOUT"], rest), sensors, 0)
+    assert nav.plan(Outcome(REASON["TIMEOUT"], rest), sensors, 0) is None
+    assert "aborted: TIMEOUT" in nav.note
 
 
 def test_navigator_sends_wheel_speeds_through_main() -> None:

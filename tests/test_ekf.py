@@ -61,6 +61,7 @@ def test_cross_check_against_filterpy(model: str) -> None:
         theirs.F = numeric_jacobian(f, theirs.x)
         theirs.Q = Q
         theirs.x = f(theirs.x)
+        theirs.x[2] = wrap(theirs.x[2])  # both keep the heading in [-π, π)
         theirs.P = theirs.F @ theirs.P @ theirs.F.T + theirs.Q
         np.testing.assert_allclose(ours.x, theirs.x, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(ours.P, theirs.P, rtol=1e-5, atol=1e-9)
@@ -75,6 +76,7 @@ def test_cross_check_against_filterpy(model: str) -> None:
                 R=np.array([[0.02**2]]),
                 residual=lambda a, b: np.array([wrap(a[0] - b[0])]),
             )
+            theirs.x[2] = wrap(theirs.x[2])
         if step % 5 == 0:
             z, _ = ours.line_model(wall)
             z = z + np.array([0.01, 15.0])

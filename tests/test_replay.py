@@ -54,7 +54,7 @@ def test_replay_from_synchronised_data_is_bit_identical(online_log, tmp_path) ->
 
 def test_replay_with_other_settings_differs_and_retrigger_runs(online_log, tmp_path) -> None:
     path, core = online_log
-    config = load_config({"filter": {"odometry_model": "straight", "estimate": []}})
+    config = load_config({"filter": {"compass": {"sigma_deg": 3.0}, "estimate": ["glide", "step_scale"]}})
     other = replay(path, tmp_path / "straight.trlog", config, mode="sync")
     assert not other.identical
     truth = core.positions["L"]

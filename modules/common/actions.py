@@ -187,12 +187,16 @@ class ActionPlan:
         self.done_actions = 0
         self.corrections_total = 0
         self.current: Action | None = None
+        self.active: Drive | None = None  # the drive handed out last
+        self.resume: list[Drive] = []  # the rest of an interrupted drive, before anything else
+        self.interruptions = 0
 
     @property
     def finished(self) -> bool:
         return (
             self.index >= len(self.actions)
             and not self.checking
+            and not self.resume
             and not self.pending_wheels
             and self.wheels_until is None
         )
@@ -212,10 +216,12 @@ class ActionPlan:
             step = self.pending_wheels.pop(0)
             self.wheels_until = now_ms + step.duration_ms
             return step
+        if self.resume:
+            return self._hand_out(self.resume.pop(0))
         if self.checking:
             step = self._check_turn(heading, now_ms)
             if step is not None:
-                return step
+                return step if step == WAIT else self._hand_out(step)
         while self.index < len(self.actions):
             action = self.actions[self.index]
             self.index += 1
@@ -223,8 +229,35 @@ class ActionPlan:
             self.done_actions += 1
             step = self._start(action, heading, now_ms)
             if step is not None:
-                return step
+                return self._hand_out(step) if isinstance(step, Drive) else step
         return None
+
+    def _hand_out(self, step: Drive) -> Drive:
+        self.active = step
+        return step
+
+    def interrupted(self, done: int, escape: Drive | None = None) -> None:
+        """The last drive ended early after ``done`` mm or degrees (a transient abort): finish it
+        after ``escape`` (the small move the pilot's ALERT lock allows), which is undone as well."""
+        step = self.active
+        self.interruptions += 1
+        if step is None:
+            return
+        opposite = {"forward": "reverse", "reverse": "forward", "left": "right", "right": "left"}
+        straight = step.direction in ("forward", "reverse")
+        rest = step.amount - max(0, done)
+        if escape is not None:
+            if (escape.direction in ("forward", "reverse")) == straight:
+                rest += escape.amount if escape.direction == opposite[step.direction] else -escape.amount
+            else:  # an escape of the other kind (a turn out of a straight move): undo it first
+                self.resume.append(
+                    Drive(opposite[escape.direction], escape.amount, step.speed_pct, "undo escape")
+                )
+        if not straight and self.target is not None:
+            self.checking, self.corrections, self.settle_until = True, 0, None  # the loop turns the rest
+            return
+        if rest >= 1:
+            self.resume.append(Drive(step.direction, int(rest), step.speed_pct, f"{step.label} (rest)"))
 
     def _check_turn(self, heading: float | None, now_ms: int) -> Drive | str | None:
         if heading is None or self.target is None:
@@ -301,9 +334,17 @@ def _navigator_base() -> type:
 
 
 class ActionNavigator(_navigator_base()):  # type: ignore[misc]
-    """The action plan as one of main's navigators: the pilot drives, the copro pose closes turns."""
+    """The action plan as one of main's navigators: the pilot drives, the copro pose closes turns.
+
+    A transient abort (a spurious ALERT echo, CLOSE, a timeout) does not end the file: the pilot's
+    ALERT lock is honoured with the small escape move it allows, then the interrupted drive is
+    finished (turns by the closed loop); after :attr:`MAX_RETRIES` such aborts, or on a
+    collision or stall, the file is given up.
+    """
 
     mode = 0
+    MAX_RETRIES = 5
+    TURN_MM_PER_DEG = TRACK_HALF_WIDTH_MM * math.pi / 180.0  # track travel per degree turned
 
     def __init__(
         self, layout: Any, actions: list[Action], speed_pct: int = 50, closed_loop: bool = True
@@ -315,14 +356,29 @@ class ActionNavigator(_navigator_base()):  # type: ignore[misc]
         self.closed_loop = closed_loop
         self.state = NAV["ACTIONS"]
         self._nav = NAV
+        self.retries = 0
 
     def plan(self, last: Any, sensors: Any, alert_lock: int) -> list[Any] | None:
         from modules.common.pilot import FORWARD, MOTOR_STATE, REASON, REVERSE, TURN_LEFT, TURN_RIGHT, Move
 
-        if last is not None and last.reason not in (REASON["DONE"],):
-            self.note = f"action file aborted: {last.reason_name} ({last.trigger})"
-            self.state = self._nav["DONE"]
-            return None
+        names = {FORWARD: "forward", REVERSE: "reverse", TURN_LEFT: "left", TURN_RIGHT: "right"}
+        codes = {name: code for code, name in names.items()}
+        if last is not None and last.reason != REASON["DONE"]:
+            transient = last.reason in (REASON["ALERT"], REASON["CLOSE"], REASON["TIMEOUT"])
+            if not transient or self.retries >= self.MAX_RETRIES:
+                self.note = f"action file aborted: {last.reason_name} ({last.trigger})"
+                self.state = self._nav["DONE"]
+                return None
+            self.retries += 1
+            escape = self.escape(alert_lock) if last.reason == REASON["ALERT"] else []
+            active = self.plan_steps.active
+            turning = active is not None and active.direction in ("left", "right")
+            done = round(last.driven_mm / self.TURN_MM_PER_DEG) if turning else last.driven_mm
+            speed = active.speed_pct if active is not None else self.plan_steps.speed_pct
+            undo = Drive(names[escape[0].direction], int(escape[0].amount), speed) if escape else None
+            self.plan_steps.interrupted(done, undo)
+            if escape:
+                return escape
         heading = sensors.pose[2] if self.closed_loop and sensors.pose is not None else None
         idle = sensors.motor_state == MOTOR_STATE["IDLE"]
         step = self.plan_steps.next(heading, sensors.stamp_ms, idle)
@@ -337,7 +393,4 @@ class ActionNavigator(_navigator_base()):  # type: ignore[misc]
             args = {"left_pct": step.left_pct, "right_pct": step.right_pct, "duration_ms": step.duration_ms}
             self.commands.append(("motor", "SET_WHEEL_SPEEDS", args))
             return []
-        direction = {"forward": FORWARD, "reverse": REVERSE, "left": TURN_LEFT, "right": TURN_RIGHT}[
-            step.direction
-        ]
-        return [Move(direction, step.amount, step.speed_pct, label=step.label)]
+        return [Move(codes[step.direction], step.amount, step.speed_pct, label=step.label)]

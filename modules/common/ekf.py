@@ -42,12 +42,15 @@ class EkfParams:
     estimate: tuple[str, ...] = ("glide", "compass_offset")
     # odometry noise: distance error ∝ distance, rotation error ∝ rotation (+ a little per mm)
     distance_noise_rel: float = 0.01
-    rotation_noise_rel: float = 0.08
+    rotation_noise_rel: float = 0.02
     rotation_noise_rad_per_mm: float = 0.0002
+    # the floor draws its slip once per move (SPEC §5): new variance at the start of each move
+    glide_per_move_rel: float = 0.06
+    step_scale_per_move: float = 0.005
     # random walks of the optional states
-    glide_walk_per_deg: float = 0.004
+    glide_walk_per_deg: float = 0.001
     compass_offset_walk_deg_per_s: float = 0.05
-    step_scale_walk_per_m: float = 0.003
+    step_scale_walk_per_m: float = 0.0005
     # initial uncertainty
     initial_sigma_mm: float = 20.0
     initial_sigma_deg: float = 2.0
@@ -114,6 +117,7 @@ class PoseEKF:
         self.gate_1 = chi2_quantile(params.gate_probability, 1)
         self.gate_2 = chi2_quantile(params.gate_probability, 2)
         self.last_nis: float | None = None
+        self.last_kind: str | None = None  # the motion of the last increment (a new one starts a move)
 
     # ---------------------------------------------------------------------------------------
     # state access
@@ -159,7 +163,13 @@ class PoseEKF:
     # prediction
 
     def motion(self, dl: float, dr: float, dt_s: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The predicted state, its Jacobian A and the process noise W·Q·Wᵀ for an increment."""
+        """The predicted state, its Jacobian A and the process noise for an increment.
+
+        The noise is W·Q·Wᵀ for the increment's own (s, ω) noise, the random walks of the optional
+        states, and — when this increment starts a new move — A·D·Aᵀ for the new draw D of the
+        floor's slip (glide factor for a turn, step length for a straight move): the slip of one
+        move is one error, correlated over all its increments, not independent per increment.
+        """
         p = self.params
         odo = p.odometry
         x = self.x
@@ -209,12 +219,21 @@ class PoseEKF:
             Q[i, i] += math.radians(p.compass_offset_walk_deg_per_s) ** 2 * max(dt_s, 0.0)
         if "step_scale" in self.index:
             i = self.index["step_scale"]
-            Q[i, i] += p.step_scale_walk_per_m**2 * abs(s) / 1000.0  # per √m: per-move length noise
+            Q[i, i] += p.step_scale_walk_per_m**2 * abs(s) / 1000.0
+        kind = motion_kind(dl, dr)
+        if kind is not None and kind != self.last_kind:
+            D = np.zeros((n, n))
+            if "glide" in self.index and kind in ("turn", "arc"):
+                D[self.index["glide"], self.index["glide"]] = (p.glide_per_move_rel * mu) ** 2
+            if "step_scale" in self.index and kind in ("straight", "arc"):
+                D[self.index["step_scale"], self.index["step_scale"]] = p.step_scale_per_move**2
+            Q = Q + A @ D @ A.T
         return new, A, Q
 
     def predict(self, dl: float, dr: float, dt_s: float = 0.0) -> None:
         """Advance by ``dl``, ``dr`` half-steps of the left and right motor over ``dt_s`` seconds."""
         new, A, Q = self.motion(dl, dr, dt_s)
+        self.last_kind = motion_kind(dl, dr)
         self.x = new
         self.x[2] = wrap(self.x[2])
         self.P = A @ self.P @ A.T + Q
@@ -293,6 +312,17 @@ class PoseEKF:
         """Correction with a line measured in the robot frame, associated with ``wall``."""
         hx, H = self.line_model(wall)
         return self.update(kind, np.array([alpha_r, d_r]), hx, H, cov, angles=(0,))
+
+
+def motion_kind(dl: float, dr: float) -> str | None:
+    """None (standing), ``straight`` (both tracks alike), ``turn`` (on the spot) or ``arc``."""
+    if dl == 0 and dr == 0:
+        return None
+    if dl == dr:
+        return "straight"
+    if dl == -dr:
+        return "turn"
+    return "arc"
 
 
 def _chord_factor(omega: float) -> tuple[float, float]:

@@ -136,6 +136,8 @@ def ekf_params(config: dict[str, Any]) -> EkfParams:
         distance_noise_rel=noise["distance_rel"],
         rotation_noise_rel=noise["rotation_rel"],
         rotation_noise_rad_per_mm=noise["rotation_rad_per_mm"],
+        glide_per_move_rel=noise["glide_per_move_rel"],
+        step_scale_per_move=noise["step_scale_per_move"],
         glide_walk_per_deg=noise["glide_walk_per_deg"],
         compass_offset_walk_deg_per_s=noise["compass_offset_walk_deg_per_s"],
         step_scale_walk_per_m=noise["step_scale_walk_per_m"],
@@ -252,6 +254,7 @@ class LocalizationCore:
         self.syncs = 0
         self.walls_unassociated = 0
         self.walls_associated = 0
+        self.compass_skipped_turning = 0
         self._last_loss_message = -1000
         self._feed_lock = threading.Lock()
         self._fed = 0
@@ -391,8 +394,10 @@ class LocalizationCore:
             x, y, cdeg = odo["motor"]
             self._initialise((float(x), float(y), wrap(-math.radians(cdeg / 100.0))))
         use = {name: s["filter"] for name, s in self.sensors.items()}
-        if odo is not None and self.dead_reckoning is not None:
+        omega = 0.0
+        if odo is not None:
             s, omega = step_motion(odo["dl"], odo["dr"], self.odometry)
+        if odo is not None and self.dead_reckoning is not None:
             x, y, psi = advance(self.dead_reckoning, s, omega)
             self.dead_reckoning = (x, y, wrap(psi))
         wall_results: list[list[int]] = []
@@ -400,12 +405,12 @@ class LocalizationCore:
             if odo is not None and use.get("odometry"):
                 self.ekf.predict(odo["dl"], odo["dr"], dt_s)
             compass = data.get("compass")
-            if (
-                compass is not None
-                and use.get("compass")
-                and not self.ekf.correct_heading(compass["heading"])
-            ):
-                self.message("W", stamp, f"compass rejected by the gate (NIS {self.ekf.last_nis:.1f})")
+            turn_rate = abs(math.degrees(omega)) / dt_s if odo is not None and dt_s > 0 else 0.0
+            if compass is not None and use.get("compass"):
+                if turn_rate > self.config["filter"]["compass"]["max_turn_rate_deg_s"]:
+                    self.compass_skipped_turning += 1  # the reading lags and the motors disturb it
+                elif not self.ekf.correct_heading(compass["heading"]):
+                    self.message("W", stamp, f"compass rejected by the gate (NIS {self.ekf.last_nis:.1f})")
             sonar = data.get("sonar")
             if sonar is not None and use.get("sonar"):
                 for wall in sonar.get("walls", []):
@@ -429,7 +434,9 @@ class LocalizationCore:
         cov = np.array([[wall["cov"][0], wall["cov"][1]], [wall["cov"][1], wall["cov"][2]]])
         best: tuple[float, KnownWall] | None = None
         for known in self.known_walls:
-            if not known.visible_from(pose[0], pose[1]) or not known.overlap(p1, p2, assoc["margin_mm"]):
+            if known.length < assoc["min_wall_length_mm"] or not known.visible_from(pose[0], pose[1]):
+                continue
+            if not known.contains(p1, p2, assoc["margin_mm"]):
                 continue
             predicted, _ = ekf.line_model(known)
             if abs(wall["d"] - predicted[1]) > assoc["max_d_mm"]:
@@ -520,6 +527,7 @@ class LocalizationCore:
             "walls_unassociated": self.walls_unassociated,
             "walls_fitted": self.detector.fitted if self.detector else 0,
             "compass_skipped": self.synchronisers["compass"].skipped,
+            "compass_skipped_turning": self.compass_skipped_turning,
         }
         if self.ekf is not None:
             out["gates"] = self.ekf.gates.as_dict()

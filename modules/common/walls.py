@@ -98,6 +98,19 @@ class KnownWall:
         x0, x1, y0, y1 = self.box
         return x0 <= x <= x1 and y0 <= y <= y1
 
+    def contains(self, p1: tuple[float, float], p2: tuple[float, float], margin: float) -> bool:
+        """Whether segment p1–p2 projects onto this wall entirely (± ``margin`` mm at the ends).
+
+        A fitted line that runs past a wall's end was fitted partly on something else (a corner,
+        the wall behind a post): associating it would pull the pose the wrong way."""
+        length = self.length
+        if length <= 0:
+            return False
+        ux, uy = (self.x2 - self.x1) / length, (self.y2 - self.y1) / length
+        t1 = (p1[0] - self.x1) * ux + (p1[1] - self.y1) * uy
+        t2 = (p2[0] - self.x1) * ux + (p2[1] - self.y1) * uy
+        return min(t1, t2) >= -margin and max(t1, t2) <= length + margin
+
     def overlap(self, p1: tuple[float, float], p2: tuple[float, float], margin: float) -> bool:
         """Whether the projection of segment p1–p2 onto this wall overlaps it (± ``margin`` mm)."""
         length = self.length
