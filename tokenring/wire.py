@@ -67,8 +67,21 @@ def passes(
 
 
 def chain_breaks(seq: Sequence[Pass]) -> list[int]:
-    """Indices where a pass was not sent by the previous pass's receiver (a second token)."""
-    return [i for i in range(1, len(seq)) if seq[i].sid != seq[i - 1].did]
+    """Indices where a node received a round counter that does not move forward: the same
+    round twice or an older one (a second token), within one epoch.
+
+    Judged per receiver: all frames to one node come from its predecessor over one link, so
+    their order on the wire is reliable even where frames of different links interleave."""
+    last: dict[int, tuple[int, int, int]] = {}  # did -> (epoch, origin, counter)
+    breaks = []
+    for index, p in enumerate(seq):
+        previous = last.get(p.did)
+        if previous is not None and previous[:2] == (p.epoch, p.origin):
+            step = (p.counter - previous[2]) & 0xFF
+            if step == 0 or step >= 128:
+                breaks.append(index)
+        last[p.did] = (p.epoch, p.origin, p.counter)
+    return breaks
 
 
 def epochs(seq: Sequence[Pass]) -> list[tuple[int, int]]:
@@ -82,7 +95,7 @@ def epochs(seq: Sequence[Pass]) -> list[tuple[int, int]]:
 
 
 def single_token(seq: Sequence[Pass]) -> bool:
-    """Exactly one token: an unbroken chain in one epoch (needs at least a few passes)."""
+    """Exactly one token: one epoch, and every node's round counter only moves forward."""
     return len(seq) >= 2 and not chain_breaks(seq) and len({(p.epoch, p.origin) for p in seq}) == 1
 
 
@@ -93,26 +106,38 @@ def settled(seq: Sequence[Pass], fraction: float = 0.5) -> bool:
     return single_token(tail)
 
 
+def _round_time(seq: Sequence[Pass]) -> float:
+    gaps = []
+    last: dict[int, float] = {}
+    for p in seq:
+        if p.did in last:
+            gaps.append(p.t - last[p.did])
+        last[p.did] = p.t
+    gaps.sort()
+    return gaps[len(gaps) // 2] if gaps else 0.001
+
+
 def first_full_round(seq: Sequence[Pass], members: Iterable[int], after: float = 0.0) -> float | None:
-    """Time at which the first complete round through exactly ``members`` (in ID order, one
-    unbroken chain, one epoch) ends, counting only passes sent at or after ``after``."""
+    """Time at which the first complete round through exactly ``members`` ends: one round
+    counter (in one epoch) that every member received from its predecessor in the member ring
+    (ID order), all sent at or after ``after``. Rounds are told apart across the counter's
+    wrap-around by time."""
     ring = sorted(set(members))
     if not ring:
         return None
-    successor = {a: ring[(i + 1) % len(ring)] for i, a in enumerate(ring)}
-    run: list[Pass] = []
+    predecessor = {b: a for a, b in zip([ring[-1], *ring[:-1]], ring, strict=True)}
+    horizon = 64 * max(_round_time(seq), 1e-4)
+    rounds: dict[tuple[int, int, int], list[tuple[float, dict[int, float]]]] = {}
+    best: float | None = None
     for p in seq:
-        if p.t < after:
+        if p.t < after or p.did not in predecessor or predecessor[p.did] != p.sid:
             continue
-        ok = (
-            p.sid in successor
-            and successor[p.sid] == p.did
-            and (not run or (p.sid == run[-1].did and (p.epoch, p.origin) == (run[-1].epoch, run[-1].origin)))
-        )
-        if not ok:
-            run = []
-            continue
-        run.append(p)
-        if len(run) >= len(ring):
-            return p.t
-    return None
+        clusters = rounds.setdefault((p.epoch, p.origin, p.counter), [])
+        if not clusters or p.t - clusters[-1][0] > horizon:
+            clusters.append((p.t, {}))
+        got = clusters[-1][1]
+        got.setdefault(p.did, p.t)
+        if len(got) == len(ring):
+            end = max(got.values())
+            best = end if best is None else min(best, end)
+    return best
