@@ -91,6 +91,14 @@ class Processes:
         return leaked
 
 
+@pytest.fixture(autouse=True, scope="session")
+def program_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Node processes keep downloaded programs in a per-run directory, not in ~/.local/state."""
+    store = tmp_path_factory.mktemp("store")
+    os.environ["TOKENRING_STORE"] = str(store)
+    return store
+
+
 @pytest.fixture
 def procs() -> Iterator[Processes]:
     tracker = Processes()

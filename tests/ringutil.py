@@ -58,6 +58,10 @@ def wait_ring(
         if set(found) >= set(ids) and all(
             set(ids) <= set(found[i]["active"]) and found[i]["stats"]["visits"] >= visits for i in ids
         ):
+            # under `tokenring up` the programs arrive over the ring first
+            launcher = query(session, keys.control(ring, "launcher", "status"), timeout=0.5)
+            if launcher and launcher[0][1].get("ok") and launcher[0][1]["result"].get("booting"):
+                return None
             return found
         return None
 

@@ -134,6 +134,7 @@ class Launcher:
         self._print_lock = threading.Lock()
         self._queryable: Any = None
         self.shutdown_reason: str | None = None
+        self.booting = False  # programs are being downloaded over the ring (``up``)
         width = max((len(p.name) for p in [*self.plans, *self.services]), default=4)
         self._width = max(width, 4)
 
@@ -258,8 +259,11 @@ class Launcher:
         return process
 
     def spawn(self, plan: NodePlan) -> Child:
-        child = Child(plan, self._popen(self.command_for(plan), plan.name), time.monotonic())
         previous = self.children.get(plan.node_id)
+        command = self.command_for(plan)
+        if previous is not None and not plan.program:
+            command.append("--autostart")  # a respawned bare node runs the program in its store
+        child = Child(plan, self._popen(command, plan.name), time.monotonic())
         if previous is not None:
             child.restarts = previous.restarts + 1
         self.children[plan.node_id] = child
@@ -289,6 +293,7 @@ class Launcher:
         return {
             "ring": self.ring,
             "endpoint": self.endpoint,
+            "booting": self.booting,
             "nodes": [
                 {
                     "id": c.plan.node_id,

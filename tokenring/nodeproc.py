@@ -28,6 +28,14 @@ from tokenring.pclink import PcLinkServer
 from tokenring.program import load_program_file
 from tokenring.protocol import Protocol, load_protocol
 from tokenring.ring import parse_bitrate
+from tokenring.system import (
+    DEFAULT_CAPACITY,
+    PcSystemVerbs,
+    ProgramStore,
+    SystemLayer,
+    default_store_root,
+    file_stamp,
+)
 from tokenring.transport.zenoh import ZenohTransport
 from tokenring.zconfig import make_config, open_session
 
@@ -49,6 +57,8 @@ class NodeProcess:
         session: zenoh.Session,
         bitrate: float | None = 2.5e6,
         ack_mode: str = "adaptive",
+        store: Path | None = None,
+        capacity: int = DEFAULT_CAPACITY,
     ) -> None:
         self.protocol = protocol
         self.ring = ring
@@ -65,6 +75,14 @@ class NodeProcess:
             "fault": lambda request: self.faults.handle(request),
         }
         self.faults = FaultInjector(self.os)
+        # the OS's system commands; the node's program and time stamp live in its store
+        self.system = SystemLayer(
+            self.os,
+            store=ProgramStore(store / ring / self.os.name if store else None, self.os.name),
+            capacity=capacity,
+            starter=self.start_program_class,
+        )
+        self.control["system"] = self.system.control
         self._queryable: Any = None
         self.hardware: Any = None
         self.pclink: PcLinkServer | None = None
@@ -121,18 +139,25 @@ class NodeProcess:
         self._queryable = self.session.declare_queryable(
             keys.control(self.ring, self.os.node_id, "*"), self._on_query
         )
+        self.system.install()
         self.os.start()
         if self.os.node_id == self.os.preferred_master:  # main holds the PC's serial line
             self.pclink = PcLinkServer(self.os, self.session, self.ring)
+            PcSystemVerbs(self.system).register(self.pclink)
             self.pclink.start()
 
     def run_program(self, path: str | Path | None) -> None:
         if path is None:
             return
-        program_class, _ = load_program_file(path)
+        program_class, source = load_program_file(path)
         wanted = getattr(program_class, "module", "")
         if wanted and wanted != self.os.name:
             raise UsageError(f"{path} is the program of {wanted!r}, not of node {self.os.name!r}")
+        self.start_program_class(program_class)
+        self.system.adopt(source, file_stamp(Path(path)), str(path), program_class)
+
+    def start_program_class(self, program_class: type) -> None:
+        """Start a user program with this module's hardware client (opened on first use)."""
         if self.hardware is None:
             self.hardware = open_hardware(self.os.name, self.session, self.ring)
         self.os.start_program(program_class, self.hardware)
@@ -144,6 +169,7 @@ class NodeProcess:
         if self.pclink is not None:
             self.pclink.close()
         self.os.leave(grace=1.0)
+        self.system.close()
         if self._queryable is not None:
             with contextlib.suppress(zenoh.ZError):
                 self._queryable.undeclare()
@@ -160,7 +186,22 @@ def _jsonable(value: Any) -> Any:
 def add_node_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--id", type=int, required=True, help="node ID 1..255")
     parser.add_argument("--name", help="node name (default: from protocol.yaml, else nodeID)")
-    parser.add_argument("--program", help="user program file to run on this node")
+    parser.add_argument("--program", help="user program file to run on this node (no download)")
+    parser.add_argument(
+        "--store",
+        metavar="DIR",
+        help="program store root (battery-backed RAM; default $TOKENRING_STORE or ~/.local/state/tokenring); "
+        "the node keeps its program under DIR/<ring>/<name>/",
+    )
+    parser.add_argument("--no-store", action="store_true", help="keep downloaded programs in memory only")
+    parser.add_argument(
+        "--capacity",
+        type=int,
+        default=DEFAULT_CAPACITY,
+        metavar="BYTES",
+        help="largest program this node accepts (default %(default)s, the 8051's code space)",
+    )
+    parser.add_argument("--autostart", action="store_true", help="start the stored program at boot")
     parser.add_argument("--duration", type=float, help="leave after this many seconds")
 
 
@@ -175,6 +216,8 @@ def run_node(args: argparse.Namespace) -> int:
         raise UsageError(f"ID {args.id} is {spec.name!r} in protocol.yaml, not {args.name!r}")
     ring = keys.check_ring_name(args.ring)
     bitrate = parse_bitrate(args.bitrate)
+    if args.capacity < 1:
+        raise UsageError(f"--capacity {args.capacity}: a node must accept at least one byte")
     config = make_config(
         mode=args.mode,
         connect=args.connect or [],
@@ -197,11 +240,15 @@ def run_node(args: argparse.Namespace) -> int:
             session=session,
             bitrate=bitrate,
             ack_mode=args.ack,
+            store=None if args.no_store else Path(args.store) if args.store else default_store_root(),
+            capacity=args.capacity,
         )
         node.stop_event = stop
         node.start()
         try:
             node.run_program(args.program)
+            if args.autostart and not args.program:
+                node.system.start_installed()
             node.wait(args.duration)
         finally:
             node.shutdown()

@@ -1154,7 +1154,11 @@ class PcSystemVerbs:
             raise UsageError(f"no download job {request.get('job')!r}")
         if request.get("cancel") and not tx.done.is_set():
             tx.cancelled = True
-        return tx.progress()
+        progress = tx.progress()
+        if tx.failed_step is not None and tx.failed_step < len(tx.steps):
+            code = tx.steps[tx.failed_step].code
+            progress["failed_command"] = self.layer.os.protocol.system_command_name(code)
+        return progress
 
     def start(self, request: dict[str, Any]) -> dict[str, Any]:
         """The whole system (ARCNET_START_SYSTEM) or one node's program (ARCNET_START_PROGRAM)."""

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from tokenring.errors import UsageError
 
 if TYPE_CHECKING:
-    from tokenring.launcher import ServicePlan
+    from tokenring.launcher import Launcher, ServicePlan
 
 
 def default_programs_dir() -> Path:
@@ -47,6 +47,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="directory of user programs (default: the modules package)",
     )
     p.add_argument("--no-programs", action="store_true", help="start the nodes with the OS only")
+    p.add_argument(
+        "--no-download",
+        action="store_true",
+        help="give each node its program file at start instead of booting bare and loading over the ring",
+    )
+    p.add_argument(
+        "--store",
+        metavar="DIR",
+        help="root of the nodes' program stores (default $TOKENRING_STORE or ~/.local/state/tokenring)",
+    )
     p.add_argument("--respawn", action="store_true", help="restart nodes that die, like a supervisor")
     world = p.add_argument_group("simulated world")
     world.add_argument(
@@ -79,7 +89,12 @@ def run(args: argparse.Namespace) -> int:
     programs = None if args.no_programs else (args.programs or default_programs_dir())
     if programs is not None and not Path(programs).is_dir():
         raise UsageError(f"--programs {programs}: no such directory")
-    plans = plans_from_protocol(protocol, selection, programs)
+    main_id = protocol.nodes["main"].id if "main" in protocol.nodes else None
+    download = programs is not None and not args.no_download
+    plans = plans_from_protocol(protocol, selection, None if download else programs)
+    if download and main_id not in {p.node_id for p in plans}:
+        download = False  # no main, no PC link: the programs start from their files
+        plans = plans_from_protocol(protocol, selection, programs)
     services = [] if args.no_world else [world_service(args)]
     launcher = Launcher(
         plans,
@@ -93,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
         log_level=args.log_level,
         respawn=args.respawn,
         services=services,
+        extra_node_args=["--store", args.store] if args.store else [],
     )
     mission = None
     if args.explore or args.map_out:
@@ -104,6 +120,9 @@ def run(args: argparse.Namespace) -> int:
         mission = Mission(launcher, args.explore, args.map_out, args.duration)
     install_signal_handlers(launcher)
     launcher.start()
+    boot_ok = True
+    if download:
+        boot_ok = boot_load(launcher, Path(programs), {p.node_id for p in plans})
     if mission is not None:
         mission.start()  # it follows the exploration, writes the map and stops the launcher
     limit = args.duration
@@ -112,8 +131,39 @@ def run(args: argparse.Namespace) -> int:
     code = launcher.run(limit)
     if mission is not None and mission.error and code == 0:
         code = 1
+    if not boot_ok and code == 0:
+        code = 1
     launcher.say("stopped (interrupted)" if code == 130 else f"stopped (exit code {code})")
     return code
+
+
+def boot_load(launcher: Launcher, programs: Path, ids: set[int], wait: float = 30.0) -> bool:
+    """The seed's boot: the nodes run their OS only; scan them, load every program that is newer
+    than the node's (``load -i``: a restarted ring finds them in its stores and sends nothing)
+    through main's PC link, then ARCNET_START_SYSTEM. False if a node failed (named in the output)."""
+    from tokenring.commands.explore import open_link
+    from tokenring.errors import TokenRingError
+    from tokenring.loader import Loader, run_load
+
+    launcher.booting = True
+    try:
+        assert launcher.session is not None
+        link = open_link(launcher.session, launcher.ring, wait=wait)
+        loader = Loader(
+            link,
+            progress=False,
+            say=lambda text: launcher.say(text, name="load"),
+            cancelled=launcher._stop.is_set,
+        )
+        result = run_load(
+            loader, mode="incremental", programs_dir=programs, start=True, expect=ids, wait=wait
+        )
+        return not result["failed"]
+    except TokenRingError as exc:
+        launcher.say(f"loading the programs failed: {exc}", name="load")
+        return False
+    finally:
+        launcher.booting = False
 
 
 def world_service(args: argparse.Namespace) -> ServicePlan:

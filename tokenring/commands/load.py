@@ -1,0 +1,106 @@
+"""``tokenring load``: the seed's LOAD.EXE — scan the ring, download programs, start/stop them.
+
+    tokenring load                      # just the scan: name, ID, time stamp of every node
+    tokenring load -i                   # only programs newer than the node's time stamp
+    tokenring load -a                   # every program
+    tokenring load -s modules/motor.py  # one program (its node from ``module`` or the file name)
+    tokenring load --stop [NODE]        # ARCNET_STOP_SYSTEM, or ARCNET_STOP_PROGRAM of one node
+    tokenring load --start [NODE]       # ARCNET_START_SYSTEM, or ARCNET_START_PROGRAM of one node
+    tokenring load -u map.dxf           # upload the map (.dxf, .png or .json by the extension)
+
+Order within one call: scan, stop, downloads, start, map upload. A node whose program was running
+is restarted with its new program (without ``--start``, nodes that were stopped stay stopped).
+Exit 0 when everything worked, 1 when a node failed (named with the reason), 2 on bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from tokenring.errors import UsageError
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring.cliutil import add_json_option, add_ring_options
+
+    p = sub.add_parser(
+        "load",
+        help="download programs over the ring (LOAD.EXE): -i, -a, -s FILE, --start, --stop, -u MAP",
+        description="Scan the ring through main's PC link (name, ID, time stamp of every node), "
+        "download programs through the token with a progress bar, start or stop them, upload the map.",
+    )
+    what = p.add_mutually_exclusive_group()
+    what.add_argument("-i", "--incremental", action="store_true", help="programs newer than the node's")
+    what.add_argument("-a", "--all", action="store_true", help="every program, whatever its age")
+    what.add_argument("-s", "--single", metavar="FILE", help="one program file")
+    p.add_argument(
+        "--start", nargs="?", const=True, default=False, metavar="NODE", help="start all programs, or NODE's"
+    )
+    p.add_argument(
+        "--stop", nargs="?", const=True, default=False, metavar="NODE", help="stop all programs, or NODE's"
+    )
+    p.add_argument("-u", "--upload", metavar="FILE", help="upload the map into FILE (.dxf, .png, .json)")
+    p.add_argument(
+        "--programs", metavar="DIR", help="program directory for -i/-a (default: the modules package)"
+    )
+    p.add_argument("--no-compress", action="store_true", help="send programs as they are (not zlib)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--timeout", type=float, default=60.0, help="seconds to wait for the map (-u)")
+    add_json_option(p)
+    add_ring_options(p, listen=False)
+
+
+def _node_arg(value: bool | str, option: str) -> bool | str:
+    if value is True or value is False:
+        return value
+    from tokenring.protocol import default_protocol
+
+    try:
+        default_protocol().node(int(value) if value.isdigit() else value)
+    except Exception as exc:
+        raise UsageError(f"{option} {value}: {exc}") from None
+    return value
+
+
+def run(args: argparse.Namespace) -> int:
+    from tokenring.cliutil import print_json, tap_session
+    from tokenring.commands.explore import open_link
+    from tokenring.commands.map import check_out
+    from tokenring.commands.up import default_programs_dir
+    from tokenring.loader import Loader, run_load
+
+    mode = "incremental" if args.incremental else "all" if args.all else "single" if args.single else None
+    programs = Path(args.programs) if args.programs else default_programs_dir()
+    if mode in ("incremental", "all") and not programs.is_dir():
+        raise UsageError(f"--programs {programs}: no such directory")
+    file = Path(args.single) if args.single else None
+    if file is not None:
+        from tokenring.loader import check_program_file
+
+        check_program_file(file)  # a bad file is refused before anything is sent
+    start, stop = _node_arg(args.start, "--start"), _node_arg(args.stop, "--stop")
+    if args.upload:
+        check_out(args.upload)
+    with tap_session(args) as session:
+        link = open_link(session, args.ring, wait=5.0)
+        loader = Loader(
+            link,
+            progress=False if args.no_progress or args.json else None,
+            compress=not args.no_compress,
+            say=(lambda text: None) if args.json else None,
+        )
+        result = run_load(loader, mode=mode, programs_dir=programs, file=file, start=start, stop=stop)
+        if args.upload:
+            from tokenring.commands.map import fetch_map, live_world, truth_from_info, write_map
+
+            vectors = fetch_map(session, args.ring, args.timeout)
+            info = live_world(session, args.ring)
+            world, truth = truth_from_info(info) if info else (None, None)
+            write_map(vectors, args.upload, truth, world)
+            result["upload"] = {"file": args.upload, "vectors": len(vectors)}
+            loader.say(f"map: {len(vectors)} vectors written to {args.upload}")
+    if args.json:
+        result["outcomes"] = [o.as_dict() for o in result["outcomes"]]
+        print_json(result)
+    return 1 if result["failed"] else 0
