@@ -260,7 +260,7 @@ def main(argv: list[str] | None = None) -> int:
             f" | filter {row['filter_mm']:5.1f} mm ({row['filter_heading_deg']:+.2f}°, RMSE {row['filter_rmse_mm']:.1f} mm)"
             f" | ratio 1/{1 / row['ratio']:.0f} | drive alone: dead reckoning {row['dead_reckoning_drive_mm'] or 0:.0f} mm"
             f" | sync {row['sync_median_ms']:.0f}/{row['sync_p99_ms']:.0f} ms"
-            f" | {row['real_seconds']:.0f} s",
+            f" | {row['real_seconds']:.0f} s | {(row['finished'] or {}).get('why', 'not finished')}",
             flush=True,
         )
     if rows:
