@@ -72,6 +72,14 @@ def test_exploration_mode_uses_walls_handed_over_from_the_map() -> None:
     assert errors(core.positions["K"], truth)[0] < 40.0
 
 
+def test_darmstadt_mode_keeps_the_wall_file_and_ignores_map_walls() -> None:
+    core = LocalizationCore(load_config())
+    walls = list(core.known_walls)
+    core.event("map_wall", x1=0.0, y1=500.0, x2=3000.0, y2=500.0)
+    core.synchronise()
+    assert core.known_walls == walls
+
+
 def test_an_injected_compass_anomaly_is_rejected_and_counted() -> None:
     core = LocalizationCore(load_config())
 

@@ -372,7 +372,8 @@ class LocalizationCore:
                 self.message(
                     "I", stamp, f"pose set to {pose[0]:.0f} {pose[1]:.0f} {math.degrees(pose[2]):.1f}°"
                 )
-            elif kind == "map_wall":
+            elif kind == "map_wall" and self.config["walls"]["mode"] == "exploration":
+                # (in Darmstadt mode the wall file is the truth; the robot's own map is not mixed in)
                 self.known_walls.append(
                     KnownWall.segment(
                         payload["x1"], payload["y1"], payload["x2"], payload["y2"], len(self.known_walls)
@@ -451,6 +452,11 @@ class LocalizationCore:
             return [-1, 0]
         self.walls_associated += 1
         accepted = ekf.correct_line(wall["alpha"], wall["d"], cov, best[1], kind=f"wall_{wall['kind']}")
+        self.message(
+            "D",
+            stamp,
+            f"{wall['kind']} wall (sonar {wall['sensors']}) -> wall {best[1].index}: NIS {best[0]:.1f}",
+        )
         if not accepted:
             self.message(
                 "W",
@@ -635,6 +641,13 @@ class Localizer:
         core = self.core
         if core is None:
             raise RuntimeError("Localizer.setup() was not called")
+        try:
+            return self._step(core)
+        except Exception as exc:  # the seed's class F: logged where the run can be read back
+            core.message("F", core.last_sync_ms or 0, f"localisation failed: {type(exc).__name__}: {exc}")
+            raise
+
+    def _step(self, core: LocalizationCore) -> SyncResult | None:
         for sensor, buffer in self.buffers.items():
             if buffer.visits == 0:
                 continue  # nothing copied out of the token yet
