@@ -212,6 +212,7 @@ class Loader:
                 last_line = time.monotonic()
             time.sleep(self.poll_s)
         outcome.seconds = time.monotonic() - t0
+        outcome.extra["rounds"] = state.get("rounds", 0)
         if self.progress:
             self._bar(label, state, outcome, outcome.seconds, final=True)
         if state["error"] is None:
