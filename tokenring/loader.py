@@ -8,6 +8,7 @@ collected). A program's time stamp is its file's modification time in ms.
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from collections.abc import Callable
@@ -172,6 +173,12 @@ class Loader:
                 items.append(PlanItem(node, path, source, stamp, "download", "newer"))
             elif stamp > node["stamp_ms"]:
                 items.append(PlanItem(node, path, source, stamp, "restamp", "newer time stamp, same content"))
+            elif digest != node["sha256"]:
+                items.append(
+                    PlanItem(
+                        node, path, source, stamp, "skip", "the node's program is newer (-a or -s sends it)"
+                    )
+                )
             else:
                 items.append(PlanItem(node, path, source, stamp, "skip", "up to date"))
         return items
@@ -199,18 +206,25 @@ class Loader:
         label = f"{node['name']} ({node['id']})"
         state: dict[str, Any] = {}
         last_line = 0.0
-        while True:
-            try:
-                state = self.link.call("job", {"job": job["job"], "cancel": self.cancelled()}, timeout=5.0)
-            except TransportError as exc:
-                outcome.error = f"lost the PC link during the download: {exc}"
-                return outcome
-            if state["done"]:
-                break
-            if self.progress and time.monotonic() - last_line > 0.1:
-                self._bar(label, state, outcome, time.monotonic() - t0)
-                last_line = time.monotonic()
-            time.sleep(self.poll_s)
+        try:
+            while True:
+                try:
+                    state = self.link.call(
+                        "job", {"job": job["job"], "cancel": self.cancelled()}, timeout=5.0
+                    )
+                except TransportError as exc:
+                    outcome.error = f"lost the PC link during the download: {exc}"
+                    return outcome
+                if state["done"]:
+                    break
+                if self.progress and time.monotonic() - last_line > 0.1:
+                    self._bar(label, state, outcome, time.monotonic() - t0)
+                    last_line = time.monotonic()
+                time.sleep(self.poll_s)
+        except KeyboardInterrupt:  # Ctrl-C: main drops the transfer (the node keeps its program)
+            with contextlib.suppress(TransportError, UsageError):
+                self.link.call("job", {"job": job["job"], "cancel": True}, timeout=2.0)
+            raise
         outcome.seconds = time.monotonic() - t0
         outcome.extra["rounds"] = state.get("rounds", 0)
         if self.progress:
@@ -310,15 +324,14 @@ def run_load(
     items = loader.plan(nodes, mode, programs_dir, file) if mode else []
     sending = [i for i in items if i.action != "skip"]
     if mode:
-        skipped = [i for i in items if i.action == "skip"]
+        current = [i.node["name"] for i in items if i.action == "skip" and i.reason == "up to date"]
         loader.say(
             f"{len(sending)} program(s) to send"
-            + (
-                f", {len(skipped)} up to date ({', '.join(i.node['name'] for i in skipped)})"
-                if skipped
-                else ""
-            )
+            + (f", {len(current)} up to date ({', '.join(current)})" if current else "")
         )
+        for item in items:
+            if item.action == "skip" and item.reason != "up to date":
+                loader.say(f"{item.node['name']} ({item.node['id']}): not sent: {item.reason}")
     t0 = time.monotonic()
     for item in sending:
         if loader.cancelled():
