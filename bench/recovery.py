@@ -39,14 +39,27 @@ IDS = [10, 20, 30, 40, 50, 60, 70, 80]
 AIMS_MS = {"crash": 50.0, "hang": 150.0, "loss": 100.0}
 
 
-def regenerations(session: Any, ring: str) -> tuple[int, int]:
-    """(tokens regenerated, duplicates eliminated) summed over the ring."""
-    regen = dup = 0
+def counters(session: Any, ring: str) -> dict[tuple[int, int], tuple[int, int]]:
+    """Per node process (ID, pid): (tokens regenerated, duplicates eliminated)."""
+    out = {}
     for _, reply in query(session, keys.control(ring, "*", "stats"), timeout=1.0):
         if reply.get("ok"):
-            stats = reply["result"]["stats"]
-            regen += stats["tokens_regenerated"]
-            dup += stats["stale_tokens"] + stats["duplicate_passes"]
+            result = reply["result"]
+            stats = result["stats"]
+            out[(result["id"], result["pid"])] = (
+                stats["tokens_regenerated"],
+                stats["stale_tokens"] + stats["duplicate_passes"],
+            )
+    return out
+
+
+def delta(before: dict, after: dict) -> tuple[int, int]:
+    """Growth per node process; a respawned node starts from zero."""
+    regen = dup = 0
+    for key, (r, d) in after.items():
+        r0, d0 = before.get(key, (0, 0))
+        regen += r - r0
+        dup += d - d0
     return regen, dup
 
 
@@ -66,7 +79,7 @@ def trial(
     kind: str, client: FaultClient, capture: WireCapture, session: Any, ring: str, rng: random.Random
 ) -> dict[str, Any]:
     victim = rng.choice(IDS[1:-1])  # a middle node: neither main (round master) nor the highest
-    before = regenerations(session, ring)
+    before = counters(session, ring)
     if kind == "heal":
         client_groups = [IDS[:4], IDS[4:]]
         for node_id in IDS:
@@ -90,7 +103,16 @@ def trial(
     while time.monotonic() < deadline and took is None:
         time.sleep(0.2)
         took = recovery_time(capture.snapshot(), [set(expected)], start, time.perf_counter())
-    after = regenerations(session, ring)
+    after = counters(session, ring)
+    diagnosis = None
+    if took is None:  # what the wire shows instead, for the report
+        now = time.perf_counter()
+        seq, _ = passes([f for f in capture.snapshot() if f[0] >= now - 0.5])
+        diagnosis = {
+            "receivers_last_500ms": sorted({p.did for p in seq}),
+            "epochs": sorted({(p.epoch, p.origin) for p in seq}),
+            "passes": len(seq),
+        }
     if kind == "hang":
         client.resume(victim)
     ok = wait_whole(capture, IDS)
@@ -98,9 +120,10 @@ def trial(
         "kind": kind,
         "victim": victim if kind != "heal" else None,
         "recovered_ms": None if took is None else took * 1e3,
-        "tokens_regenerated": after[0] - before[0],
-        "duplicates_eliminated": after[1] - before[1],
+        "tokens_regenerated": delta(before, after)[0],
+        "duplicates_eliminated": delta(before, after)[1],
         "whole_again": ok,
+        "diagnosis": diagnosis,
     }
 
 
@@ -150,7 +173,10 @@ def run(trials: int, kinds: list[str], ack: str, quiet: bool = False) -> dict[st
                         if result["recovered_ms"] is None
                         else f"{result['recovered_ms']:.1f} ms"
                     )
-                    sys.stderr.write(f"[{index + 1}/{total}] {kind:5s} {took}\n")
+                    extra = f" {result['diagnosis']}" if result["diagnosis"] else ""
+                    sys.stderr.write(
+                        f"[{index + 1}/{total}] {kind:5s} node {result['victim']}: {took}{extra}\n"
+                    )
                 capture.frames.clear()
                 time.sleep(0.3)
             capture.close()

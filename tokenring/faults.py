@@ -143,13 +143,13 @@ class FaultInjector:
         kind = spec["kind"]
         with self._lock:
             if kind == "crash":
-                threading.Timer(0.05, self._exit, args=(CRASH_EXIT_CODE,)).start()
+                threading.Timer(0.01, self._exit, args=(CRASH_EXIT_CODE,)).start()  # after the reply
             elif kind == "hang":
                 if spec["soft"]:
                     self._thawed.clear()
                     self.os.paused = True
                 else:
-                    threading.Timer(0.05, os.kill, args=(os.getpid(), signal.SIGSTOP)).start()
+                    threading.Timer(0.01, os.kill, args=(os.getpid(), signal.SIGSTOP)).start()
                 self.active["hang"] = {"since": time.time(), **spec}
             elif kind == "resume":
                 self._resume()

@@ -127,6 +127,8 @@ class Launcher:
         self.children: dict[int, Child] = {}
         self.deaths: list[tuple[str, int, int | None]] = []
         self._stop = threading.Event()
+        self._children_lock = threading.RLock()
+        self._supervisor: threading.Thread | None = None
         self._stop_signal: int | None = None
         self._selector = selectors.DefaultSelector()
         self._selector_lock = threading.Lock()
@@ -288,6 +290,15 @@ class Launcher:
             self.start_service(service)
         for plan in self.plans:
             self.spawn(plan)
+        # supervision (death reports, --respawn) runs beside whoever owns the launcher: `up`'s
+        # run() loop as well as in-process users such as chaos and the benchmarks
+        self._supervisor = threading.Thread(target=self._supervise, name="launcher-supervisor", daemon=True)
+        self._supervisor.start()
+
+    def _supervise(self) -> None:
+        while not self._stop.wait(0.05):
+            with self._children_lock:
+                self.check_children()
 
     def status(self) -> dict[str, Any]:
         return {
@@ -326,6 +337,8 @@ class Launcher:
         elif verb == "signal":
             result = self._signal(query)
         else:
+            if "*" in str(query.key_expr):
+                return  # a question to every node (ctl/*/stats): not one for the launcher
             result = {
                 "ok": False,
                 "error": f"the launcher has no verb {verb!r} (has: status, shutdown, signal)",
@@ -375,7 +388,6 @@ class Launcher:
         """Supervise until the duration ends or a stop is requested; returns the exit code."""
         deadline = None if duration is None else time.monotonic() + duration
         while not self._stop.is_set():
-            self.check_children()
             if deadline is not None and time.monotonic() >= deadline:
                 break
             if (
@@ -395,6 +407,10 @@ class Launcher:
     def stop(self) -> None:
         """Stop every child: SIGTERM (clean leave), then SIGKILL whatever is left after 1.5 s."""
         self._stop.set()
+        if self._supervisor is not None and self._supervisor is not threading.current_thread():
+            self._supervisor.join(timeout=1.0)
+        with self._children_lock:
+            self.check_children()  # report what died before the stop
         running = [c for c in self.children.values() if c.process.poll() is None]
         if running and self.session is not None:
             with contextlib.suppress(zenoh.ZError):  # nobody needs a handover: all are leaving

@@ -188,8 +188,8 @@ class Timing:
             10 * self.round_median,  # the median: a disturbance must not inflate its own timeout
             3 * self.hop * live,
             ARCNET_RECON_TIMEOUT_S * self.scale,
-            (ACK_RETRIES + 1) * ack * 2,
-        )
+        )  # ring-wide quantities only: every node must derive (nearly) the same value, or the
+        # highest-rank-first rule breaks (a node's own ack latency must not enter here)
         if len(self.rounds) < MIN_ROUND_SAMPLES:
             recon = max(recon, 0.2)  # not enough measured yet: be patient at start-up
         return Timeouts(
