@@ -26,7 +26,7 @@ def test_action_file_drive_with_the_localizer_on_copro(procs, ring_name, endpoin
     config.write_text(yaml.safe_dump({"logs": {"directory": str(logs)}}))
     launcher = procs.tokenring(
         "up", "--ring", ring_name, "--listen", endpoint, "--world", "square", "--speed", "10",
-        "--bitrate", "max", "--duration", "240",
+        "--bitrate", "max", "--duration", "400",
         env={"TOKENRING_LOCALIZER_CONFIG": str(config)},
     )  # fmt: skip
     try:
@@ -40,7 +40,7 @@ def test_action_file_drive_with_the_localizer_on_copro(procs, ring_name, endpoin
                 except UsageError:
                     return False
 
-            wait_until(main_answers, 60, "main's program")
+            wait_until(main_answers, 120, "main's program")
             link.command("compass", "CALIBRATE", timeout=10.0)
             wait_for_compass(link, 90.0)
             time.sleep(1.0)
