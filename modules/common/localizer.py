@@ -591,9 +591,12 @@ class Localizer:
 
             path = default_config_path()
             config = path if path.exists() else None
+        import os as _os
+
         self.os = os
         self.config = load_config(config)
-        self.log_dir = log_dir
+        # $TOKENRING_LOG_DIR overrides the config's logs.directory (tests, benches, `tokenring up`)
+        self.log_dir = log_dir if log_dir is not None else _os.environ.get("TOKENRING_LOG_DIR") or None
         self.want_truth = truth
         self.core: LocalizationCore | None = None
         self.buffers: dict[str, Any] = {}
