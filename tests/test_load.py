@@ -15,10 +15,12 @@ import sys
 from pathlib import Path
 
 import ezdxf
+from conftest import wait_gone
 from ringutil import control, launcher_pids, stats, tap, wait_ring, wait_until
 
 from tokenring import keys
 from tokenring.cliutil import query_one
+from tokenring.errors import UsageError
 from tokenring.pclink import PcLink
 from tokenring.system import file_stamp
 
@@ -276,3 +278,24 @@ def test_token_loss_and_a_crash_mid_transfer_leave_nothing_half_installed(
     launcher.send_signal(signal.SIGTERM)
     assert launcher.wait(15) == 0
     assert os.path.isdir(tmp_path / "store" / ring_name / "motor")
+
+
+def test_sigint_during_the_boot_download_stops_everything(procs, ring_name, endpoint):
+    launcher = procs.tokenring("up", "--ring", ring_name, "--listen", endpoint, "--no-world")  # 2.5 Mbit/s
+    with tap(endpoint) as session:
+
+        def loading() -> bool:
+            try:
+                booting = query_one(session, keys.control(ring_name, "launcher", "status"))["booting"]
+                return booting and system(session, ring_name, 10)["stats"]["commands_issued"] > 50
+            except UsageError:  # not up yet
+                return False
+
+        wait_until(loading, 30, "the boot download under way")
+        pids = launcher_pids(session, ring_name)
+        procs.watch(pids)
+    launcher.send_signal(signal.SIGINT)
+    out, _ = launcher.communicate(timeout=10)
+    assert launcher.returncode == 130, out
+    assert "cancelled" in out and "started:" not in out, out
+    assert wait_gone(pids, 3) == []

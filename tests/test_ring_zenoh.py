@@ -178,7 +178,7 @@ def test_corrupt_short_foreign_and_misaddressed_frames_are_dropped_and_counted(p
 
 def test_up_for_ten_seconds_with_sniff_json_exits_zero_and_leaves_nothing(procs, ring_name, endpoint):
     started = time.monotonic()
-    launcher = up(procs, ring_name, endpoint, "--duration", "10")
+    launcher = up(procs, ring_name, endpoint, "--duration", "10", "--no-download")
     with tap(endpoint) as session:
         wait_ring(session, ring_name, ALL_IDS)
         pids = launcher_pids(session, ring_name)
@@ -209,7 +209,7 @@ def test_up_for_ten_seconds_with_sniff_json_exits_zero_and_leaves_nothing(procs,
 
 
 def test_sigint_stops_everything_within_two_seconds(procs, ring_name, endpoint):
-    launcher = up(procs, ring_name, endpoint)
+    launcher = up(procs, ring_name, endpoint, "--no-download")  # test_load: SIGINT during the download
     with tap(endpoint) as session:
         wait_ring(session, ring_name, ALL_IDS)
         pids = launcher_pids(session, ring_name)

@@ -354,6 +354,10 @@ def run_load(
                 )
             )
     result["seconds"] = time.monotonic() - t0
+    if loader.cancelled():
+        loader.say("cancelled")
+        result["cancelled"] = True
+        return result
     if start:
         target = None if start is True else start
         result["started"] = loader.start(target)
