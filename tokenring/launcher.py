@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import os
+import queue
 import selectors
 import signal
 import subprocess
@@ -106,8 +107,10 @@ class Launcher:
         output: IO[str] | None = None,
         extra_node_args: Sequence[str] = (),
         services: Sequence[ServicePlan] = (),
+        router: bool = False,
     ) -> None:
         self.plans = list(plans)
+        self.router = router  # this launcher is its host's Zenoh router; its nodes are clients
         self.services = list(services)
         self.service_children: dict[str, subprocess.Popen] = {}
         self.ring = keys.check_ring_name(ring)
@@ -133,7 +136,10 @@ class Launcher:
         self._selector = selectors.DefaultSelector()
         self._selector_lock = threading.Lock()
         self._reader: threading.Thread | None = None
-        self._print_lock = threading.Lock()
+        self._lines: queue.Queue[str | None] = queue.Queue(maxsize=20000)
+        self._dropped = 0
+        self._writer = threading.Thread(target=self._write_outputs, name="launcher-writer", daemon=True)
+        self._writer.start()
         self._queryable: Any = None
         self.shutdown_reason: str | None = None
         self.booting = False  # programs are being downloaded over the ring (``up``)
@@ -142,8 +148,37 @@ class Launcher:
 
     # -- output ---------------------------------------------------------------------------------
     def say(self, text: str, name: str = "up") -> None:
-        with self._print_lock:
-            self.output.write(f"{name:>{self._width}} | {text}\n")
+        """Queue one prefixed line for the output. Never blocks: if whoever reads our output
+        stalls (a paused pager, an unread pipe), lines are dropped and counted — a stalled
+        log must not stall the nodes writing it, and so the ring."""
+        try:
+            self._lines.put_nowait(f"{name:>{self._width}} | {text}\n")
+        except queue.Full:
+            self._dropped += 1
+
+    def _write_outputs(self) -> None:
+        while True:
+            line = self._lines.get()
+            if line is None:
+                return
+            try:
+                if self._dropped:
+                    dropped, self._dropped = self._dropped, 0
+                    self.output.write(
+                        f"{'up':>{self._width}} | ({dropped} log lines dropped: output too slow)\n"
+                    )
+                self.output.write(line)
+                if self._lines.empty():
+                    self.output.flush()
+            except (OSError, ValueError):
+                pass  # the output went away; the ring goes on
+
+    def flush_output(self, timeout: float = 1.0) -> None:
+        """Wait until the queued lines are written (for a clean end of the run)."""
+        deadline = time.monotonic() + timeout
+        while not self._lines.empty() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        with contextlib.suppress(OSError, ValueError):
             self.output.flush()
 
     def _read_outputs(self) -> None:
@@ -167,6 +202,17 @@ class Launcher:
 
     # -- session --------------------------------------------------------------------------------
     def _open_session(self) -> None:
+        if self.router:
+            if not self.listen:
+                raise UsageError(
+                    "--router needs --listen ENDPOINT (where this host's nodes and other routers reach it)"
+                )
+            config = make_config(
+                mode="router", listen=self.listen, connect=self.connect, config_file=self.zenoh_config
+            )
+            self.session = open_session(config)
+            self.endpoint = self.listen[0]
+            return
         if self.listen:
             config = make_config(listen=self.listen, connect=self.connect, config_file=self.zenoh_config)
             self.session = open_session(config)
@@ -195,6 +241,8 @@ class Launcher:
         return [self.endpoint] if self.endpoint else list(self.connect or [keys.default_endpoint()])
 
     def node_listen(self) -> list[str]:
+        if self.router:
+            return []  # clients of this host's router listen nowhere
         host = "127.0.0.1"
         if self.endpoint:
             host = self.endpoint.split("/", 1)[1].rsplit(":", 1)[0]
@@ -217,6 +265,8 @@ class Launcher:
             cmd += ["--connect", endpoint]
         for endpoint in self.node_listen():
             cmd += ["--listen", endpoint]
+        if self.router:
+            cmd += ["--mode", "client"]
         if plan.program:
             cmd += ["--program", plan.program]
         return cmd + self.extra_node_args + plan.extra_args
@@ -444,6 +494,7 @@ class Launcher:
         for process in [c.process for c in self.children.values()] + list(self.service_children.values()):
             if process.stdout is not None:
                 process.stdout.close()
+        self.flush_output()
         if self._queryable is not None:
             with contextlib.suppress(zenoh.ZError):
                 self._queryable.undeclare()

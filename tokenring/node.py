@@ -628,8 +628,10 @@ class NodeOS:
         self._forward(now)
 
     def _successor_changed(self) -> None:
+        # no Zenoh declaration here: this runs under the token lock, and a declaration goes to
+        # every peer with blocking congestion control — behind a cut link it can block for
+        # seconds. Publishers are declared when a node becomes live (_on_membership).
         self.stats.successor_changes += 1
-        self.transport.prepare(self.membership.successor)
 
     def _update_master(self) -> None:
         self._master = self.membership.master(self.preferred_master)

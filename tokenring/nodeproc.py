@@ -73,6 +73,7 @@ class NodeProcess:
             "leave": self._request_leave,
             "program": self._program_report,
             "fault": lambda request: self.faults.handle(request),
+            "peers": lambda _: self._peers(),
         }
         self.faults = FaultInjector(self.os)
         # the OS's system commands; the node's program and time stamp live in its store
@@ -86,6 +87,16 @@ class NodeProcess:
         self._queryable: Any = None
         self.hardware: Any = None
         self.pclink: PcLinkServer | None = None
+
+    def _peers(self) -> dict[str, Any]:
+        """The Zenoh links of this node (diagnostics: who it reaches directly)."""
+        info = self.session.info
+        return {
+            "zid": str(info.zid()),
+            "peers": [str(z) for z in info.peers_zid()],
+            "routers": [str(z) for z in info.routers_zid()],
+            "links": [f"{link.src} -> {link.dst}" for link in info.links()],
+        }
 
     def _program_report(self, _: dict[str, Any]) -> dict[str, Any]:
         program = self.os.program

@@ -58,6 +58,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="root of the nodes' program stores (default $TOKENRING_STORE or ~/.local/state/tokenring)",
     )
     p.add_argument("--respawn", action="store_true", help="restart nodes that die, like a supervisor")
+    p.add_argument(
+        "--router",
+        action="store_true",
+        help="this launcher is its host's Zenoh router (needs --listen); its nodes are clients of it. "
+        "For rings across hosts: only router-to-router links cross between hosts",
+    )
     world = p.add_argument_group("simulated world")
     world.add_argument(
         "--world",
@@ -107,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
         protocol_path=args.protocol,
         log_level=args.log_level,
         respawn=args.respawn,
+        router=args.router,
         services=services,
         extra_node_args=["--store", args.store] if args.store else [],
     )
@@ -134,6 +141,7 @@ def run(args: argparse.Namespace) -> int:
     if not boot_ok and code == 0:
         code = 1
     launcher.say("stopped (interrupted)" if code == 130 else f"stopped (exit code {code})")
+    launcher.flush_output()
     return code
 
 

@@ -1,0 +1,168 @@
+"""Across hosts: half of the ring in another network namespace, joined through --connect/--listen.
+
+Two namespaces stand for two hosts on one veth cable. The ring must span both, split into two
+working rings when the cable is cut silently (iptables DROP: no error reaches anybody, so the
+pass acknowledgement must find it, long before Zenoh's 10 s lease), and become one ring with
+one token again when the cable is back. Needs root and iproute2 (both here and in CI).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import uuid
+
+import pytest
+from conftest import REPO, wait_gone
+from ringutil import wait_until
+
+pytestmark = pytest.mark.skipif(
+    os.geteuid() != 0 or shutil.which("ip") is None, reason="network namespaces need root and iproute2"
+)
+
+
+def sh(*args: str, check: bool = True) -> subprocess.CompletedProcess:
+    return subprocess.run(list(args), capture_output=True, text=True, timeout=30, check=check)
+
+
+class Hosts:
+    """Two namespaces joined by a veth pair, torn down completely afterwards."""
+
+    def __init__(self) -> None:
+        tag = uuid.uuid4().hex[:6]
+        self.a, self.b = f"tra{tag}", f"trb{tag}"
+        self.va, self.vb = f"va{tag}", f"vb{tag}"
+        net = random.randrange(1, 250)
+        self.ip_a, self.ip_b = f"10.211.{net}.1", f"10.211.{net}.2"
+        sh("ip", "netns", "add", self.a)
+        sh("ip", "netns", "add", self.b)
+        sh("ip", "link", "add", self.va, "type", "veth", "peer", "name", self.vb)
+        sh("ip", "link", "set", self.va, "netns", self.a)
+        sh("ip", "link", "set", self.vb, "netns", self.b)
+        for ns, dev, ip in ((self.a, self.va, self.ip_a), (self.b, self.vb, self.ip_b)):
+            sh("ip", "netns", "exec", ns, "ip", "addr", "add", f"{ip}/24", "dev", dev)
+            sh("ip", "netns", "exec", ns, "ip", "link", "set", dev, "up")
+            sh("ip", "netns", "exec", ns, "ip", "link", "set", "lo", "up")
+        self.iptables = shutil.which("iptables") is not None
+
+    def run(self, ns: str, *args: str) -> list[str]:
+        return ["ip", "netns", "exec", ns, *args]
+
+    def cut(self) -> None:
+        if self.iptables:  # silent: packets on the cable vanish, nobody gets an error
+            for ns, dev in ((self.a, self.va), (self.b, self.vb)):
+                sh("ip", "netns", "exec", ns, "iptables", "-I", "INPUT", "-i", dev, "-j", "DROP")
+                sh("ip", "netns", "exec", ns, "iptables", "-I", "OUTPUT", "-o", dev, "-j", "DROP")
+        else:
+            sh("ip", "netns", "exec", self.a, "ip", "link", "set", self.va, "down")
+
+    def mend(self) -> None:
+        if self.iptables:
+            for ns in (self.a, self.b):
+                sh("ip", "netns", "exec", ns, "iptables", "-F")
+        else:
+            sh("ip", "netns", "exec", self.a, "ip", "link", "set", self.va, "up")
+
+    def close(self) -> None:
+        sh("ip", "netns", "del", self.a, check=False)
+        sh("ip", "netns", "del", self.b, check=False)
+
+
+def status(hosts: Hosts, ns: str, ring: str, endpoint: str) -> dict[int, dict]:
+    result = subprocess.run(
+        hosts.run(
+            ns,
+            sys.executable,
+            "-m",
+            "tokenring",
+            "status",
+            "--ring",
+            ring,
+            "-e",
+            endpoint,
+            "--json",
+            "--timeout",
+            "1.5",
+        ),
+        capture_output=True,
+        text=True,
+        timeout=30,
+        cwd=REPO,
+    )
+    if result.returncode != 0 or not result.stdout.strip():
+        return {}
+    return {n["id"]: n for n in json.loads(result.stdout)["nodes"]}
+
+
+def one_ring(nodes: dict[int, dict], members: list[int]) -> bool:
+    """Every member answers, the successors chain through exactly ``members`` in ID order, and
+    all share one epoch (one token)."""
+    if not set(members) <= set(nodes):
+        return False
+    ring = sorted(members)
+    chained = all(nodes[a]["successor"] == ring[(i + 1) % len(ring)] for i, a in enumerate(ring))
+    return chained and len({tuple(nodes[i]["epoch"]) for i in members}) == 1
+
+
+def test_a_ring_across_two_hosts_splits_on_a_cut_and_heals_into_one(procs, tmp_path):
+    hosts = Hosts()
+    ring = f"x{uuid.uuid4().hex[:8]}"
+    port_a, port_b = random.randrange(20000, 30000), random.randrange(30000, 40000)
+    ep_a, ep_b = f"tcp/{hosts.ip_a}:{port_a}", f"tcp/{hosts.ip_b}:{port_b}"
+    # each host's launcher is that host's Zenoh router and its nodes are clients of it: only the
+    # router-to-router link crosses the cable (the deployment the README recommends across hosts)
+    common = ["--ring", ring, "--bitrate", "10M", "--no-programs", "--no-world", "--router"]
+    launchers = []
+    up = [sys.executable, "-m", "tokenring", "up", *common]
+    try:
+        # output to files: an unread pipe would fill up and stall the launcher's writer
+        with (tmp_path / "host-a.log").open("w") as log_a, (tmp_path / "host-b.log").open("w") as log_b:
+            launchers.append(
+                procs.start(
+                    hosts.run(hosts.a, *up, "--nodes", "main,motor,sonar,compass", "--listen", ep_a),
+                    stdout=log_a,
+                )
+            )
+            launchers.append(
+                procs.start(
+                    hosts.run(
+                        hosts.b, *up, "--nodes", "copro,map,lcd,charger", "--listen", ep_b, "--connect", ep_a
+                    ),
+                    stdout=log_b,
+                )
+            )
+        everyone = [10, 20, 30, 40, 50, 60, 70, 80]
+        wait_until(
+            lambda: one_ring(status(hosts, hosts.a, ring, ep_a), everyone), 40, "one ring across both hosts"
+        )
+        hosts.cut()
+        cut_at = time.monotonic()
+        wait_until(
+            lambda: one_ring(status(hosts, hosts.a, ring, ep_a), [10, 20, 30, 40]), 20, "host A's own ring"
+        )
+        wait_until(
+            lambda: one_ring(status(hosts, hosts.b, ring, ep_b), [50, 60, 70, 80]), 20, "host B's own ring"
+        )
+        assert time.monotonic() - cut_at < 10, "the split must be found well before Zenoh's 10 s lease"
+        hosts.mend()
+        wait_until(
+            lambda: one_ring(status(hosts, hosts.a, ring, ep_a), everyone), 30, "one ring again after the cut"
+        )
+        assert one_ring(status(hosts, hosts.b, ring, ep_b), everyone)
+    finally:
+        pids = [p.pid for p in launchers]
+        for launcher in launchers:
+            launcher.send_signal(signal.SIGTERM)
+        for launcher in launchers:
+            try:
+                launcher.wait(10)
+            except subprocess.TimeoutExpired:
+                launcher.kill()
+        assert wait_gone(pids, 3) == []
+        hosts.close()
