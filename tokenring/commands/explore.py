@@ -106,11 +106,19 @@ class Mission:
     (copro flushes its held-back vectors), fetches the map through main and writes it (scored
     against the simulator's true walls), then asks the launcher to stop."""
 
-    def __init__(self, launcher: Any, mode: int | None, map_out: str | None, duration: float | None) -> None:
+    def __init__(
+        self,
+        launcher: Any,
+        mode: int | None,
+        map_out: str | None,
+        duration: float | None,
+        actions: tuple[str, str, int] | None = None,
+    ) -> None:
         import threading
 
         self.launcher = launcher
         self.mode = mode
+        self.actions = actions  # (file name, text, speed %) for `up --actions`
         self.map_out = map_out
         self.duration = duration
         self.error: str | None = None
@@ -171,6 +179,18 @@ class Mission:
         if self.duration is not None:
             fetch_time = min(15.0, max(3.0, 0.15 * self.duration))
             end = self.started + self.duration - fetch_time
+        if self.actions is not None:
+            name, text, speed = self.actions
+            self._calibrate_compass(link, end)
+            state = link.request("actions", text=text, name=name, speed_pct=speed)
+            self.say(f"driving {name}")
+            while state.get("running") and not self._stopping() and (end is None or time.monotonic() < end):
+                time.sleep(0.5)
+                state = link.request("state")
+            finished = (state.get("finished") or {}).get("why") if not state.get("running") else "time is up"
+            self.say(f"{name} finished: {finished}")
+            if state.get("running") and not self._stopping():
+                link.request("stop")
         if self.mode is not None:
             self._calibrate_compass(link, end)
             state = request(link, str(self.mode))

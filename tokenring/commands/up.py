@@ -79,6 +79,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--explore", type=int, choices=(1, 2), help="start Explore 1 (avoid) or 2 (left wall)"
     )
     mission.add_argument("--map-out", metavar="FILE", help="at the end write the map (.png, .dxf or .json)")
+    mission.add_argument(
+        "--actions",
+        metavar="FILE",
+        help="have main drive an action file (seed §6.7: e, s MM, r DEG, v L R MS, c R SPEED MS, #) "
+        "after the compass calibration, then stop the ring",
+    )
+    mission.add_argument(
+        "--action-speed", type=int, default=50, metavar="PCT", help="speed of the action file's moves"
+    )
     add_ring_options(p)
 
 
@@ -118,13 +127,25 @@ def run(args: argparse.Namespace) -> int:
         extra_node_args=["--store", args.store] if args.store else [],
     )
     mission = None
-    if args.explore or args.map_out:
+    if args.explore and args.actions:
+        raise UsageError("--explore and --actions both drive the robot: give one of them")
+    if args.explore or args.map_out or args.actions:
         from tokenring.commands.explore import Mission
         from tokenring.commands.map import check_out
 
         if args.map_out:
             check_out(args.map_out)
-        mission = Mission(launcher, args.explore, args.map_out, args.duration)
+        actions = None
+        if args.actions:
+            from modules.common.actions import load_actions
+
+            load_actions(args.actions)  # a bad file is refused (file:line) before anything starts
+            actions = (
+                Path(args.actions).name,
+                Path(args.actions).read_text(encoding="utf-8"),
+                args.action_speed,
+            )
+        mission = Mission(launcher, args.explore, args.map_out, args.duration, actions=actions)
     install_signal_handlers(launcher)
     launcher.start()
     boot_ok = True
