@@ -7,7 +7,7 @@ The handler (``_on_frame``) runs once per token visit, on the transport's receiv
 2. system commands (a hook filled by :mod:`tokenring.system`); while one is active the user
    channels pause everywhere;
 3. the registered, unlocked user channels (data copies, inbox, outgoing commands);
-4. main (the round master) increments the counter; the token goes to the successor at once.
+4. where the ring wraps (main) the counter is incremented; the token goes to the successor at once.
 
 Everything slower — timeouts, retries, regeneration, statistics — happens on a watchdog thread
 off that path. User programs run in their own thread and talk to the handler only through
@@ -119,8 +119,7 @@ class NodeOS:
         self.membership = R.Membership(node_id)
         if master_id is None and "main" in protocol.nodes:
             master_id = protocol.nodes["main"].id
-        self.preferred_master = master_id
-        self._master = node_id
+        self.preferred_master = master_id  # starts the token at boot (the seed: main)
 
         header = protocol.header
         self._o_sid = header.sid
@@ -221,7 +220,6 @@ class NodeOS:
         for member in members:
             self.membership.set_live(member, True)
             self.transport.prepare(member)
-        self._update_master()
         self.transport.prepare(self.membership.successor)
         now = perf_counter()
         self._started_at = now
@@ -385,7 +383,12 @@ class NodeOS:
                     self._activate_outboxes()
                 if t_in < self._recovery_until and self._outboxes:
                     self._sweep_own_commands(work)
-            if self._master == self.node_id:
+            # a round starts where the ring wraps: the node that gets the token from a higher ID
+            # counts it (main, the lowest ID, in the robot's ring; a lone node at every pass).
+            # This needs no shared view of who is in the ring, so even while views differ
+            # (a partition healing) exactly one node per round counts, and no two rounds
+            # carry identical bytes that a receiver would take for a retransmission.
+            if sid >= self.node_id:
                 work[self._o_counter] = (counter + 1) & 0xFF
                 stats.rounds += 1
             self._paced = 0.0
@@ -533,7 +536,10 @@ class NodeOS:
         if len(payload) != R.RING_EVENT.size:
             return
         kind, node_id, by, epoch, origin = R.RING_EVENT.unpack(payload)
-        learns_epoch = kind in (R.EVENT_EXCLUDED, R.EVENT_REJOIN, R.EVENT_REGENERATED)
+        # only events about tokens teach epochs: a rejoin is about membership, and after a
+        # partition heals both sides' tokens must simply meet (the older dies where it meets
+        # a node that has seen the newer) instead of each side killing the other's by event
+        learns_epoch = kind in (R.EVENT_EXCLUDED, R.EVENT_REGENERATED)
         if (
             learns_epoch
             and by != self.node_id
@@ -567,10 +573,10 @@ class NodeOS:
             log.debug("rejoin: %s", exc)
 
     def _backoff(self, node_id: int) -> float:
-        """How long until an excluded node is pinged (again): 0.05 s, doubling up to 0.25 s.
-        A ping is a few bytes, so a healed partition can merge within a quarter second."""
+        """How long until an excluded node is pinged (again): 0.05 s, then every 0.1 s. A ping
+        is a few bytes, so a healed partition merges within a tenth of a second or two."""
         previous = self._exclusion_backoff.get(node_id, 0.025)
-        value = min(0.25, previous * 2)
+        value = min(0.1, previous * 2)
         self._exclusion_backoff[node_id] = value
         return value
 
@@ -598,7 +604,6 @@ class NodeOS:
             self.transport.prepare(node_id)
         else:
             self._senders.pop(node_id, None)
-        self._update_master()
         if changed:
             self._successor_changed()
         if not alive:
@@ -632,9 +637,6 @@ class NodeOS:
         # every peer with blocking congestion control — behind a cut link it can block for
         # seconds. Publishers are declared when a node becomes live (_on_membership).
         self.stats.successor_changes += 1
-
-    def _update_master(self) -> None:
-        self._master = self.membership.master(self.preferred_master)
 
     def _watch(self) -> None:
         refresh_at = 0.0
@@ -1083,7 +1085,7 @@ class NodeOS:
             "host": socket.gethostname(),
             "epoch": [self._epoch, self._origin],
             "counter": self.counter,
-            "master": self._master,
+            "master": min(self.membership.active),
             "successor": self.membership.successor,
             "live": sorted(self.membership.live),
             "active": list(self.membership.active),

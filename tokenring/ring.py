@@ -231,6 +231,7 @@ class Membership:
         changed = successor != self.successor
         self.active = active
         self.successor = successor
+
         self.changes += 1
         return changed
 
@@ -271,10 +272,3 @@ class Membership:
         """0 for the highest active ID, 1 for the next lower, ..."""
         active = self.active
         return len(active) - 1 - active.index(self.own_id) if self.own_id in active else len(active)
-
-    def master(self, preferred: int | None) -> int:
-        """The round master (counts rounds): ``preferred`` if active, else the lowest active ID."""
-        active = self.active
-        if preferred is not None and preferred in active:
-            return preferred
-        return active[0]
