@@ -83,6 +83,16 @@ def parse_bitrate(text: str | float | int | None) -> float | None:
     return value
 
 
+def format_bitrate(bitrate: float | None) -> str:
+    """``2.5M``, ``500k``, ``max``: the form ``parse_bitrate`` reads back."""
+    if bitrate is None:
+        return "max"
+    for scale, unit in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
+        if bitrate >= scale:
+            return f"{bitrate / scale:g}{unit}"
+    return f"{bitrate:g}"
+
+
 def hop_time(bitrate: float | None) -> float:
     """Emulated wire time of one token pass at ``bitrate`` (0 at max)."""
     if bitrate is None:

@@ -71,7 +71,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="NAME|FILE",
         help="bundled room (empty, office, square, slanted) or world file (default %(default)s)",
     )
-    world.add_argument("--speed", default="1", metavar="K", help="simulation speed-up factor (default 1)")
+    world.add_argument(
+        "--speed",
+        default="1",
+        metavar="K",
+        help="simulation speed-up factor (default 1); the emulated wire runs K times faster too",
+    )
     world.add_argument("--seed", type=int, default=1, help="the world's random seed (default %(default)s)")
     world.add_argument("--no-world", action="store_true", help="start no world simulator (no hardware)")
     mission = p.add_argument_group("exploration")
@@ -94,10 +99,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from tokenring.launcher import Launcher, install_signal_handlers, plans_from_protocol
     from tokenring.protocol import load_protocol
-    from tokenring.ring import parse_bitrate
+    from tokenring.ring import format_bitrate, parse_bitrate
 
     protocol = load_protocol(args.protocol)
-    parse_bitrate(args.bitrate)  # refuse a bad value before anything starts
+    bitrate = parse_bitrate(args.bitrate)  # refuse a bad value before anything starts
+    try:
+        speed = float(args.speed)
+    except ValueError:
+        raise UsageError(f"--speed {args.speed!r}: expected a number such as 1, 5 or 20") from None
+    if not 0 < speed <= 1000:
+        raise UsageError(f"--speed {speed} must be in 0..1000")
+    # everything emulated runs K times faster with --speed K, the wire included: a round of
+    # the ring must stay as short in simulated time as it is on the real robot
+    wire = args.bitrate if bitrate is None or args.no_world else format_bitrate(bitrate * speed)
     if args.duration is not None and args.duration <= 0:
         raise UsageError("--duration must be positive")
     selection = [s.strip() for s in args.nodes.split(",") if s.strip()] if args.nodes else None
@@ -114,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
     launcher = Launcher(
         plans,
         ring=args.ring,
-        bitrate=args.bitrate,
+        bitrate=wire,
         ack_mode=args.ack,
         connect=args.connect or [],
         listen=args.listen or [],
