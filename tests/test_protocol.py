@@ -169,3 +169,12 @@ def test_cli_refuses_a_broken_protocol_with_exit_code_2(tmp_path):
     assert result.returncode == 2
     assert "nodes.sonar.data" in result.stderr and "past the token's last byte" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_system_window_layouts_are_checked_against_the_32_byte_window():
+    err = broken(lambda d: d["system"]["window"]["ARCNET_ERROR"]["request"].__setitem__("text", "str[31]"))
+    assert "system.window.ARCNET_ERROR.request.text" in str(err) and "overflows the 32-byte channel" in str(
+        err
+    )
+    err = broken(lambda d: d["system"]["window"].__setitem__("ARCNET_REBOOT", {"request": {"x": "u8"}}))
+    assert "system.window.ARCNET_REBOOT" in str(err) and "not a system command" in str(err)

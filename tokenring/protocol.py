@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import re
+import struct
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import cache
@@ -200,6 +201,7 @@ class Protocol:
     user_area_size: int
     all_nodes: int
     system_commands: Mapping[str, int]
+    system_window: Mapping[str, Mapping[str, tuple[Field, ...]]]
     command_header: tuple[Field, ...]
     command_states: Mapping[str, int]
     common_commands: Mapping[str, Command]
@@ -257,6 +259,38 @@ class Protocol:
 
 # --------------------------------------------------------------------------------------------
 # loading
+
+
+_STRUCT_CODES = {
+    "u1": "B",
+    "i1": "b",
+    "u2": "H",
+    "i2": "h",
+    "u4": "I",
+    "i4": "i",
+    "u8": "Q",
+    "i8": "q",
+    "f4": "f",
+    "f8": "d",
+}
+
+
+def fields_struct(fields: Iterable[Field]) -> struct.Struct:
+    """The :mod:`struct` equivalent of packed fields (``u8[N]`` and ``str[N]`` become bytes)."""
+    codes = []
+    offset = 0
+    for f in fields:
+        if f.offset != offset:
+            raise ProtocolError("<protocol>", f.name, "fields of a struct must be packed without gaps")
+        base = f.dtype.base if f.dtype.shape else f.dtype
+        count = int(np.prod(f.dtype.shape)) if f.dtype.shape else 1
+        if f.is_text or (base.kind == "u" and base.itemsize == 1 and f.dtype.shape):
+            codes.append(f"{f.size}s")
+        else:
+            key = f"{base.kind}{base.itemsize}"
+            codes.append((str(count) if count > 1 else "") + _STRUCT_CODES[key])
+        offset += f.size
+    return struct.Struct("<" + "".join(codes))
 
 
 def default_protocol_path() -> Path:
@@ -429,9 +463,10 @@ class _Compiler:
             raise self.fail("token.system_data", "must lie inside token.user_area")
 
         system = self.mapping(self.get(doc, "system", "(top level)"), "system")
-        self.only_keys(system, {"all_nodes", "commands"}, "system")
+        self.only_keys(system, {"all_nodes", "commands", "window"}, "system")
         all_nodes = self.integer(self.get(system, "all_nodes", "system"), "system.all_nodes", 0, 255)
         system_commands = self.codes(self.get(system, "commands", "system"), "system.commands")
+        system_window = self.window(system.get("window") or {}, system_commands, sys_size, enums)
 
         cc = self.mapping(self.get(doc, "command_channel", "(top level)"), "command_channel")
         self.only_keys(cc, {"header"}, "command_channel")
@@ -476,6 +511,7 @@ class _Compiler:
             user_area_size=user_size,
             all_nodes=all_nodes,
             system_commands=system_commands,
+            system_window=system_window,
             command_header=tuple(cmd_header),
             command_states=dict(states),
             common_commands=common_commands,
@@ -510,6 +546,23 @@ class _Compiler:
                 raise self.fail(f"{entry}.{name}", f"code {code} is already used by {seen[code]!r}")
             seen[code] = name
         return dict(raw)
+
+    def window(
+        self, raw: Any, commands: Mapping[str, int], size: int, enums: Mapping[str, Any]
+    ) -> dict[str, dict[str, tuple[Field, ...]]]:
+        """The request/answer layout of each system command inside the system data window."""
+        raw = self.mapping(raw, "system.window")
+        out: dict[str, dict[str, tuple[Field, ...]]] = {}
+        for name, spec in raw.items():
+            where = f"system.window.{name}"
+            if name not in commands:
+                raise self.fail(where, f"{name!r} is not a system command (known: {', '.join(commands)})")
+            spec = self.mapping(spec, where)
+            self.only_keys(spec, {"request", "answer"}, where)
+            out[str(name)] = {
+                part: tuple(self.fields(spec[part], f"{where}.{part}", 0, size, enums)) for part in spec
+            }
+        return out
 
     def header(self, raw: Any, enums: Mapping[str, Any]) -> tuple[Header, int]:
         raw = self.mapping(raw, "token.header")

@@ -13,8 +13,9 @@ issuer reads the answer and writes the next command of the same transaction (the
 saved) or restores the window and clears the command. After every transaction it leaves one
 round free, so another node's command (an ``ARCNET_ERROR``) is not starved by a long download.
 
-Wire format inside the window (all little-endian; ``A`` marks what the target writes back,
-whose first byte is always a :class:`Status` for single-target commands):
+Wire format inside the window — defined in protocol.yaml (``system.window``) and compiled into
+:class:`WindowLayouts`; summarised here (all little-endian; ``A`` marks what the target writes
+back, whose first byte is always a :class:`Status` for single-target commands):
 
 =========================  =====================================================================
 command (target)           window
@@ -73,8 +74,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from tokenring.errors import ProgramError, UsageError
+from tokenring.errors import ProgramError, ProtocolError, UsageError
 from tokenring.program import load_program
+from tokenring.protocol import Field, Protocol, default_protocol, fields_struct
 from tokenring.ring import EPOCH_MASK
 
 if TYPE_CHECKING:
@@ -92,13 +94,41 @@ POLL_TIMEOUT_S = 15.0  # how long a target may answer PENDING (verify, install, 
 START_GRACE_S = 0.3  # a program that raises within this time of its start fails the start
 ERROR_PARTS = 8  # an ARCNET_ERROR text is cut to this many 30-byte parts
 
-CONFIG = struct.Struct("<BBQI8s10s")
-BEGIN = struct.Struct("<IIBB")
-STAMP = struct.Struct("<Q8s")
-NONCE = struct.Struct("<I")
-ERROR = struct.Struct("<BB30s")
-STATUS = struct.Struct("<BBB29s")
-INDEX = struct.Struct("<H")
+
+@dataclass(frozen=True)
+class WindowLayouts:
+    """What the system commands carry in the 32-byte window, compiled from protocol.yaml's
+    ``system.window`` (nothing here hard-codes an offset)."""
+
+    CONFIG: struct.Struct  # ARCNET_GET_CONFIG answer
+    BEGIN: struct.Struct  # ARCNET_DOWNLOAD_BEGIN request
+    STAMP: struct.Struct  # ARCNET_SEND_CONFIG request
+    NONCE: struct.Struct  # ARCNET_START_PROGRAM / STOP_PROGRAM request
+    ERROR: struct.Struct  # ARCNET_ERROR request
+    STATUS: struct.Struct  # ARCNET_GET_STATUS answer
+    INDEX: struct.Struct  # the chunk index in front of an ARCNET_DOWNLOAD_DATA chunk
+
+    @classmethod
+    def of(cls, protocol: Protocol) -> WindowLayouts:
+        window = protocol.system_window
+
+        def layout(name: str, part: str) -> tuple[Field, ...]:
+            try:
+                return window[name][part]
+            except KeyError:
+                raise ProtocolError(
+                    protocol.source, f"system.window.{name}.{part}", "missing (the system layer needs it)"
+                ) from None
+
+        return cls(
+            CONFIG=fields_struct(layout("ARCNET_GET_CONFIG", "answer")),
+            BEGIN=fields_struct(layout("ARCNET_DOWNLOAD_BEGIN", "request")),
+            STAMP=fields_struct(layout("ARCNET_SEND_CONFIG", "request")),
+            NONCE=fields_struct(layout("ARCNET_START_PROGRAM", "request")),
+            ERROR=fields_struct(layout("ARCNET_ERROR", "request")),
+            STATUS=fields_struct(layout("ARCNET_GET_STATUS", "answer")),
+            INDEX=fields_struct(layout("ARCNET_DOWNLOAD_DATA", "request")[:1]),
+        )
 
 
 class Status(enum.IntEnum):
@@ -381,7 +411,8 @@ class SystemLayer:
         self.w0 = protocol.system_data_offset
         self.wsize = protocol.system_data_size
         self.w1 = self.w0 + self.wsize
-        self.chunk_size = self.wsize - INDEX.size
+        self.layouts = WindowLayouts.of(protocol)
+        self.chunk_size = self.wsize - self.layouts.INDEX.size
         codes = protocol.system_commands
         self.codes = dict(codes)
         self.SCAN = codes["ARCNET_SCAN"]
@@ -649,7 +680,7 @@ class SystemLayer:
         """ARCNET_GET_CONFIG of each node (one transaction, one round each)."""
         steps = [Step(i, self.GET_CONFIG, keep=True) for i in ids]
         tx = self.execute(steps, "get config", timeout)
-        return {ids[i]: decode_config(answer, ids[i]) for i, answer in tx.answers.items()}
+        return {ids[i]: decode_config(answer, ids[i], self.layouts) for i, answer in tx.answers.items()}
 
     def download_steps(
         self, target: int, source: bytes, stamp_ms: int, *, compress: bool = True, start: bool = False
@@ -664,24 +695,25 @@ class SystemLayer:
         if chunks > 0xFFFF:
             raise UsageError(f"a program of {len(source)} bytes needs {chunks} chunks, more than 65535")
         digest = hashlib.sha256(source).digest()
-        steps = [Step(target, self.BEGIN, BEGIN.pack(len(source), len(blob), encoding, size))]
+        steps = [Step(target, self.BEGIN, self.layouts.BEGIN.pack(len(source), len(blob), encoding, size))]
         steps += [
-            Step(target, self.DATA, INDEX.pack(i) + blob[i * size : (i + 1) * size]) for i in range(chunks)
+            Step(target, self.DATA, self.layouts.INDEX.pack(i) + blob[i * size : (i + 1) * size])
+            for i in range(chunks)
         ]
         steps.append(Step(target, self.TERMINATED, digest, poll=True))
-        steps.append(Step(target, self.SEND_CONFIG, STAMP.pack(stamp_ms, digest[:8]), poll=True))
+        steps.append(Step(target, self.SEND_CONFIG, self.layouts.STAMP.pack(stamp_ms, digest[:8]), poll=True))
         if start:
             steps.append(self.start_step(target))
         return steps
 
     def start_step(self, target: int) -> Step:
-        return Step(target, self.START_PROGRAM, NONCE.pack(random.getrandbits(32)), poll=True)
+        return Step(target, self.START_PROGRAM, self.layouts.NONCE.pack(random.getrandbits(32)), poll=True)
 
     def stop_step(self, target: int) -> Step:
-        return Step(target, self.STOP_PROGRAM, NONCE.pack(random.getrandbits(32)), poll=True)
+        return Step(target, self.STOP_PROGRAM, self.layouts.NONCE.pack(random.getrandbits(32)), poll=True)
 
     def restamp_step(self, target: int, digest: bytes, stamp_ms: int) -> Step:
-        return Step(target, self.SEND_CONFIG, STAMP.pack(stamp_ms, digest[:8]), poll=True)
+        return Step(target, self.SEND_CONFIG, self.layouts.STAMP.pack(stamp_ms, digest[:8]), poll=True)
 
     def broadcast(self, code: int, what: str, timeout: float = 5.0) -> list[int]:
         """START_SYSTEM / STOP_SYSTEM: the IDs of the nodes that took it."""
@@ -691,7 +723,7 @@ class SystemLayer:
 
     def status_of(self, target: int, timeout: float = 5.0) -> dict[str, Any]:
         tx = self.execute([Step(target, self.GET_STATUS, keep=True)], "get status", timeout)
-        _, state, current, error = STATUS.unpack(tx.answers[0])
+        _, state, current, error = self.layouts.STATUS.unpack(tx.answers[0])
         return {"state": State(state).name, "runs_installed": bool(current), "error": _text(error) or None}
 
     # =========================================================================================
@@ -718,18 +750,18 @@ class SystemLayer:
             stamp, size, digest = 0, 0, bytes(8)
         else:
             stamp, size, digest = installed.stamp_ms, installed.size, installed.digest[:8]
-        work[self.w0 : self.w1] = CONFIG.pack(
+        work[self.w0 : self.w1] = self.layouts.CONFIG.pack(
             Status.OK, self.program_state(), stamp, size, digest, _short(self.os.name, 10)
         )
 
     def _take_get_status(self, work: bytearray) -> None:
         error = self.os.program_error or ""
-        work[self.w0 : self.w1] = STATUS.pack(
+        work[self.w0 : self.w1] = self.layouts.STATUS.pack(
             Status.OK, self.program_state(), self._runs_installed(), _short(error, 29)
         )
 
     def _take_begin(self, work: bytearray) -> None:
-        size, transfer, encoding, chunk = BEGIN.unpack_from(work, self.w0)
+        size, transfer, encoding, chunk = self.layouts.BEGIN.unpack_from(work, self.w0)
         self._job = None
         self._download = None
         if size > self.capacity:
@@ -798,10 +830,10 @@ class SystemLayer:
         self._new_job(work, key, self._verify, dl, bytes(work[self.w0 : self.w1]))
 
     def _take_send_config(self, work: bytearray) -> None:
-        key = bytes([self.SEND_CONFIG]) + bytes(work[self.w0 : self.w0 + STAMP.size])
+        key = bytes([self.SEND_CONFIG]) + bytes(work[self.w0 : self.w0 + self.layouts.STAMP.size])
         if self._job_answer(work, key):
             return
-        stamp, digest8 = STAMP.unpack_from(work, self.w0)
+        stamp, digest8 = self.layouts.STAMP.unpack_from(work, self.w0)
         verified, installed = self._verified, self.installed
         if verified is not None and verified.digest[:8] == digest8:
             self._new_job(work, key, self._install, verified, stamp)
@@ -811,12 +843,12 @@ class SystemLayer:
             self._answer(work, Status.NO_PROGRAM, "no verified download with this hash")
 
     def _take_start_program(self, work: bytearray) -> None:
-        key = bytes([self.START_PROGRAM]) + bytes(work[self.w0 : self.w0 + NONCE.size])
+        key = bytes([self.START_PROGRAM]) + bytes(work[self.w0 : self.w0 + self.layouts.NONCE.size])
         if not self._job_answer(work, key):
             self._new_job(work, key, self._start)
 
     def _take_stop_program(self, work: bytearray) -> None:
-        key = bytes([self.STOP_PROGRAM]) + bytes(work[self.w0 : self.w0 + NONCE.size])
+        key = bytes([self.STOP_PROGRAM]) + bytes(work[self.w0 : self.w0 + self.layouts.NONCE.size])
         if not self._job_answer(work, key):
             self._new_job(work, key, self._stop)
 
@@ -831,7 +863,7 @@ class SystemLayer:
             self._work.put((self._stop, (None,)))
 
     def _take_error(self, work: bytearray) -> None:
-        part, about, text = ERROR.unpack_from(work, self.w0)
+        part, about, text = self.layouts.ERROR.unpack_from(work, self.w0)
         issuer = work[self._o_issuer]
         parts = self._error_parts.setdefault(issuer, {})
         parts[part & 0x7F] = text.rstrip(b"\0")
@@ -983,7 +1015,11 @@ class SystemLayer:
         parts = [raw[i : i + 30] for i in range(0, len(raw), 30)]
         master = self.os.preferred_master or self.me
         steps = [
-            Step(master, self.ERROR, ERROR.pack(i | (0x80 if i == len(parts) - 1 else 0), about, part))
+            Step(
+                master,
+                self.ERROR,
+                self.layouts.ERROR.pack(i | (0x80 if i == len(parts) - 1 else 0), about, part),
+            )
             for i, part in enumerate(parts)
         ]
         self.stats.errors_sent += 1
@@ -1067,9 +1103,10 @@ class SystemLayer:
         return self.report()
 
 
-def decode_config(answer: bytes, node_id: int) -> dict[str, Any]:
+def decode_config(answer: bytes, node_id: int, layouts: WindowLayouts | None = None) -> dict[str, Any]:
     """A GET_CONFIG answer as a dict (``state`` by name, ``sha256`` as 16 hex digits)."""
-    _, state, stamp, size, digest, name = CONFIG.unpack(answer)
+    layouts = layouts or WindowLayouts.of(default_protocol())
+    _, state, stamp, size, digest, name = layouts.CONFIG.unpack(answer)
     return {
         "id": node_id,
         "name": _text(name),
