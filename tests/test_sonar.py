@@ -12,7 +12,15 @@ from hwprograms import program
 from memring import MemoryRing, wait_for
 
 from modules.common import sonar as algo
-from modules.common.robot import FRONT, LEFT_FRONT, SONAR_MOUNTS
+from modules.common.robot import (
+    FRONT,
+    FRONT_RIGHT,
+    LEFT_FRONT,
+    RIGHT_FRONT,
+    RIGHT_REAR,
+    SONAR_MOUNTS,
+    sonar_world_pose,
+)
 from tokenring.hw import SonarHardware
 from tokenring.world import echo, load_world
 from tokenring.world.model import Pose, Wall, World
@@ -40,6 +48,36 @@ def test_threshold_reads_28_cm_and_the_tangent_25_on_an_echo_25_cm_away():
     assert statistics.median(threshold) == 28  # seed §4.3.2: 1.7 ms instead of 1.5 ms
     assert all(27 <= t <= 29 for t in threshold)
     assert all(abs(t - 25) <= 1 for t in tangent)
+
+
+def test_a_weak_echo_peaking_at_the_threshold_reads_its_start_not_zero():
+    """The square hall's post seen obliquely by the front-right pair from the right leg: the echo
+    peaks just above the threshold, the tangent there is nearly flat and used to land at 0 cm (a
+    false ALERT that stopped the Darmstadt laps); the true echo starts at about 40 cm."""
+    world = load_world("square")
+    sx, sy, direction = sonar_world_pose(4050, 2100, math.pi / 2, FRONT_RIGHT)
+    readings = []
+    for seed in range(10):
+        env = echo.envelope(world, sx, sy, direction, np.random.default_rng(seed))
+        smooth = np.convolve(env.astype(float), np.ones(algo.SMOOTH) / algo.SMOOTH, mode="same")
+        n = int(np.flatnonzero(env > algo.DEFAULT_THRESHOLD)[0])
+        seed_slope = (smooth[n] - smooth[n - algo.SPAN]) / algo.SPAN
+        if seed_slope > 0 and n - smooth[n] / seed_slope < 0:  # the seed's tangent: before the ping
+            readings.append(algo.contact_tangent(env))
+    assert readings, "the bad case no longer occurs in the simulator"
+    assert all(37 <= cm <= 44 for cm in readings), readings
+
+
+def test_no_false_alert_along_the_square_halls_right_leg():
+    world = load_world("square")
+    for y in range(1800, 3201, 50):
+        for pair in (FRONT_RIGHT, RIGHT_FRONT, RIGHT_REAR):
+            sx, sy, direction = sonar_world_pose(4050, y, math.pi / 2, pair)
+            for seed in range(3):
+                cm = algo.contact_tangent(
+                    echo.envelope(world, sx, sy, direction, np.random.default_rng(seed))
+                )
+                assert cm >= 30, (y, pair, seed, cm)  # nothing is nearer than the post's 33 cm
 
 
 def test_the_threshold_error_grows_with_distance_the_tangent_stays_close():

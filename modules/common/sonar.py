@@ -21,6 +21,8 @@ SAMPLES_PER_CM = 3  # the seed's "divide by 3"
 MAX_CONTACT_CM = 254  # 255 means no contact
 SMOOTH = 5  # running mean over 5 samples before the tangent
 SPAN = 2  # the tangent's two samples are this far apart
+QUIET_MARGIN = 4.0  # counts above the envelope's floor that still count as "no echo yet"
+QUIET_SLACK = 9  # samples (3 cm) the seed's tangent may land before the last quiet sample
 
 # -- contact ----------------------------------------------------------------------------------------
 
@@ -43,7 +45,12 @@ def contact_tangent(samples: Sequence[int] | np.ndarray, threshold: int = DEFAUL
     just before it, intersected with the time axis, ÷3 -> cm (rounded); 255 if no sample is above.
 
     The seed took two consecutive raw samples; on a noisy edge their difference is mostly noise, so
-    the envelope is first smoothed (running mean of 5) and the two samples are 2 apart."""
+    the envelope is first smoothed (running mean of 5) and the two samples are 2 apart. A weak echo
+    (an oblique post at the beam's edge) can peak just above the threshold: the slope there is
+    nearly flat and the tangent lands far before the echo, down to 0 cm — a false ALERT. The echo
+    cannot have begun while the envelope still sat at its noise floor, so when the tangent lands
+    more than 3 cm before the last quiet sample, that sample is the contact (on the square hall's
+    post it reads within 2 cm of the echo's start, where the tangent read 0-30 cm short)."""
     raw = np.asarray(samples, dtype=float)
     n = _first_above(raw, threshold)
     if n is None:
@@ -52,7 +59,19 @@ def contact_tangent(samples: Sequence[int] | np.ndarray, threshold: int = DEFAUL
     k = max(n, SPAN)
     slope = (smooth[k] - smooth[k - SPAN]) / SPAN
     start = float(n) if slope <= 0 else max(0.0, min(float(n), k - smooth[k] / slope))
+    quiet = _last_quiet(smooth, n)
+    if quiet is not None and start < quiet - QUIET_SLACK:
+        start = float(quiet)
     return min(round(start / SAMPLES_PER_CM), MAX_CONTACT_CM)
+
+
+def _last_quiet(smooth: np.ndarray, n: int) -> int | None:
+    """The last sample before ``n`` at which the smoothed envelope was still at its noise floor."""
+    lead = smooth[SMOOTH // 2 : n + 1]  # the running mean's first samples are padded with zeros
+    if len(lead) == 0:
+        return None
+    quiet = np.flatnonzero(lead <= float(np.min(lead)) + QUIET_MARGIN)
+    return int(quiet[-1]) + SMOOTH // 2
 
 
 # -- distance areas ---------------------------------------------------------------------------------
