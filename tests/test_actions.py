@@ -125,7 +125,7 @@ def test_navigator_drives_the_pilot_and_stops_on_an_abort() -> None:
     assert (turn.direction, turn.amount) == (TURN_LEFT, 90)
     sensors.pose = (4000.0, 1000.0, math.radians(90.2))
     assert nav.plan(Outcome(REASON["DONE"]), sensors, 0) == []  # settling
-    sensors.stamp_ms = 1000
+    sensors.stamp_ms = nav.plan_steps.settle_ms
     (move,) = nav.plan(Outcome(REASON["DONE"]), sensors, 0)
     assert move.direction == FORWARD
     assert nav.plan(Outcome(REASON["COLLISION"], trigger="motor"), sensors, 0) is None
@@ -151,7 +151,7 @@ def test_navigator_resumes_after_a_spurious_alert() -> None:
     assert (escape.direction, escape.amount) == (TURN_RIGHT, 15)
     sensors.pose = (2000.0, 1000.0, math.radians(17.0))
     assert nav.plan(Outcome(REASON["DONE"]), sensors, 0) == []  # settle
-    sensors.stamp_ms = 1000
+    sensors.stamp_ms = nav.plan_steps.settle_ms
     (rest,) = nav.plan(Outcome(REASON["DONE"]), sensors, 0)
     assert (rest.direction, rest.amount) == (TURN_LEFT, 73)
     assert nav.retries == 2

@@ -12,6 +12,7 @@ import logging
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,8 @@ from tokenring.faults import FaultInjector
 from tokenring.hardware import open_hardware
 from tokenring.node import NodeOS
 from tokenring.pclink import PcLinkServer
+from tokenring.profile import PROFILES
+from tokenring.profile import install as install_profile
 from tokenring.program import load_program_file
 from tokenring.protocol import Protocol, load_protocol
 from tokenring.ring import parse_bitrate
@@ -36,7 +39,7 @@ from tokenring.system import (
     default_store_root,
     file_stamp,
 )
-from tokenring.transport.zenoh import ZenohTransport
+from tokenring.transport.factory import TRANSPORTS, make_transport
 from tokenring.zconfig import make_config, open_session
 
 log = logging.getLogger("tokenring.nodeproc")
@@ -59,12 +62,17 @@ class NodeProcess:
         ack_mode: str = "adaptive",
         store: Path | None = None,
         capacity: int = DEFAULT_CAPACITY,
+        transport: str = "zenoh",
+        registry: str | None = None,
+        profile: str | None = None,
     ) -> None:
         self.protocol = protocol
         self.ring = ring
         self.session = session
-        self.transport = ZenohTransport(session, ring, node_id, protocol.frame_size)
+        # the token path's transport; the control plane below stays on the Zenoh session
+        self.transport = make_transport(transport, session, ring, node_id, protocol.frame_size, registry)
         self.os = NodeOS(protocol, node_id, self.transport, name=name, bitrate=bitrate, ack_mode=ack_mode)
+        install_profile(self.os, profile, bitrate, time.perf_counter())
         self.stop_event = threading.Event()
         self.control: dict[str, ControlHandler] = {
             "stats": lambda _: self.os.snapshot(),
@@ -214,6 +222,16 @@ def add_node_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--autostart", action="store_true", help="start the stored program at boot")
     parser.add_argument("--duration", type=float, help="leave after this many seconds")
+    parser.add_argument(
+        "--transport",
+        default="zenoh",
+        choices=TRANSPORTS,
+        help="what carries the token (default %(default)s; udp/zmq need --registry, for comparisons)",
+    )
+    parser.add_argument("--registry", metavar="HOST:PORT", help="membership registry of the udp/zmq transports")
+    parser.add_argument(
+        "--profile", choices=sorted(PROFILES), help="emulate a hardware's timing on top of the wire (arcnet: the seed robot)"
+    )
 
 
 def run_node(args: argparse.Namespace) -> int:
@@ -253,6 +271,9 @@ def run_node(args: argparse.Namespace) -> int:
             ack_mode=args.ack,
             store=None if args.no_store else Path(args.store) if args.store else default_store_root(),
             capacity=args.capacity,
+            transport=args.transport,
+            registry=args.registry,
+            profile=args.profile,
         )
         node.stop_event = stop
         node.start()

@@ -32,6 +32,10 @@ from typing import Any
 from tokenring.errors import UsageError
 
 MAX_SPEED_MM_S = 100.0  # 100 % = 10 cm/s, the start-stop limit
+#: after a turn, wait this long at rest before judging it by the fused heading: the compass skips
+#: readings while turning and its short mean lags, so the filter holds the turn's odometry (±10 %
+#: slip) until a reading or two at rest came in (400 ms judged a 12° miss as on target)
+SETTLE_MS = 1200
 MAX_WHEELS_MS = 60_000  # one SET_WHEEL_SPEEDS lasts at most this long (duration_ms is u16)
 TRACK_HALF_WIDTH_MM = 6.5 * 0.5419 * 180.0 / math.pi  # track travel per radian of turn, glide 6.5
 
@@ -168,7 +172,7 @@ class ActionPlan:
         speed_pct: int = 50,
         turn_tolerance_deg: float = 0.6,
         max_corrections: int = 3,
-        settle_ms: int = 400,
+        settle_ms: int = SETTLE_MS,
     ) -> None:
         if not 1 <= speed_pct <= 100:
             raise UsageError(f"action speed must be 1..100 %, got {speed_pct}")
