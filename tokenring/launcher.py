@@ -108,8 +108,13 @@ class Launcher:
         extra_node_args: Sequence[str] = (),
         services: Sequence[ServicePlan] = (),
         router: bool = False,
+        transport: str = "zenoh",
+        profile: str | None = None,
     ) -> None:
         self.plans = list(plans)
+        self.transport = transport  # udp/zmq: the token path over sockets, membership from our registry
+        self.profile = profile  # tokenring.profile: emulated hardware timing on every node
+        self.registry: Any = None
         self.router = router  # this launcher is its host's Zenoh router; its nodes are clients
         self.services = list(services)
         self.service_children: dict[str, subprocess.Popen] = {}
@@ -269,6 +274,10 @@ class Launcher:
             cmd += ["--mode", "client"]
         if plan.program:
             cmd += ["--program", plan.program]
+        if self.registry is not None:
+            cmd += ["--transport", self.transport, "--registry", self.registry.address]
+        if self.profile:
+            cmd += ["--profile", self.profile]
         return cmd + self.extra_node_args + plan.extra_args
 
     def _popen(self, argv: list[str], name: str) -> subprocess.Popen:
@@ -338,6 +347,10 @@ class Launcher:
         self._reader.start()
         for service in self.services:
             self.start_service(service)
+        if self.transport != "zenoh":
+            from tokenring.transport.registry import MembershipRegistry
+
+            self.registry = MembershipRegistry().start()
         for plan in self.plans:
             self.spawn(plan)
         # supervision (death reports, --respawn) runs beside whoever owns the launcher: `up`'s
@@ -495,6 +508,9 @@ class Launcher:
             if process.stdout is not None:
                 process.stdout.close()
         self.flush_output()
+        if self.registry is not None:
+            self.registry.close()
+            self.registry = None
         if self._queryable is not None:
             with contextlib.suppress(zenoh.ZError):
                 self._queryable.undeclare()

@@ -194,6 +194,8 @@ class NodeOS:
         self.rx_fault: Callable[[bytes, bytes | None], bool] | None = None
         self.tx_fault: Callable[[int, bytearray], bool] | None = None
         self.msg_fault: Callable[[bytes], bool] | None = None
+        # --profile: seconds a pass may take after the token arrived (wire + emulated hardware)
+        self.pacer: Callable[[float], float] | None = None
 
         self._joined = False
         self._leaving = False
@@ -427,7 +429,9 @@ class NodeOS:
         crc = crc16_arc(memoryview(work)[:size])
         work[size] = crc & 0xFF
         work[size + 1] = crc >> 8
-        hop = self._hop if did != self.node_id else max(self._hop, 0.001)
+        hop = self._hop if self.pacer is None else self.pacer(t_in)  # --profile: tokenring.profile
+        if did == self.node_id:
+            hop = max(hop, 0.001)
         if hop:
             delay = t_in + hop - perf_counter()
             if delay > 0:
