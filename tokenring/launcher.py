@@ -25,10 +25,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-import msgpack
 import zenoh
 
 from tokenring import keys
+from tokenring.control import answer_query
 from tokenring.errors import TransportError, UsageError
 from tokenring.ring import EVENT_RING_STOPPING, RING_EVENT
 from tokenring.zconfig import make_config, open_session
@@ -386,33 +386,20 @@ class Launcher:
         }
 
     def _on_query(self, query: zenoh.Query) -> None:
-        verb = str(query.key_expr).rsplit("/", 1)[-1]
-        if verb == "status":
-            result = {"ok": True, "result": self.status()}
-        elif verb == "shutdown":
-            payload = query.payload
-            request = msgpack.unpackb(payload.to_bytes()) if payload is not None else {}
-            reason = (request or {}).get("reason", "asked to")
-            self.say(f"ring shutdown requested: {reason}")
-            self.shutdown_reason = str(reason)
-            self.request_stop()
-            result = {"ok": True, "result": {"stopping": True}}
-        elif verb == "signal":
-            result = self._signal(query)
-        else:
-            if "*" in str(query.key_expr):
-                return  # a question to every node (ctl/*/stats): not one for the launcher
-            result = {
-                "ok": False,
-                "error": f"the launcher has no verb {verb!r} (has: status, shutdown, signal)",
-            }
-        query.reply(query.key_expr, msgpack.packb(result))
+        handlers = {"status": lambda _: self.status(), "shutdown": self._shutdown, "signal": self._signal}
+        answer_query(query, handlers, "the launcher")
 
-    def _signal(self, query: zenoh.Query) -> dict[str, Any]:
+    def _shutdown(self, request: dict[str, Any]) -> dict[str, Any]:
+        """Stop the whole ring cleanly (the charger's deep-discharge cut asks for it)."""
+        reason = str(request.get("reason", "asked to"))
+        self.say(f"ring shutdown requested: {reason}")
+        self.shutdown_reason = reason
+        self.request_stop()
+        return {"stopping": True}
+
+    def _signal(self, request: dict[str, Any]) -> dict[str, Any]:
         """Send a signal (CONT, STOP, TERM, KILL) to one of our nodes: how a SIGSTOPped node
         is resumed, since it can no longer answer anything itself."""
-        payload = query.payload
-        request = msgpack.unpackb(payload.to_bytes()) if payload is not None else {}
         name = str(request.get("signal", "")).upper().removeprefix("SIG")
         allowed = {
             "CONT": signal.SIGCONT,
@@ -420,13 +407,13 @@ class Launcher:
             "TERM": signal.SIGTERM,
             "KILL": signal.SIGKILL,
         }
-        child = self.children.get(int(request.get("id", -1)))
         if name not in allowed:
-            return {"ok": False, "error": f"signal must be one of {', '.join(allowed)}"}
+            raise UsageError(f"signal must be one of {', '.join(allowed)}")
+        child = self.children.get(int(request.get("id", -1)))
         if child is None or child.process.poll() is not None:
-            return {"ok": False, "error": f"node {request.get('id')} is not a running node of this launcher"}
+            raise UsageError(f"node {request.get('id')} is not a running node of this launcher")
         os.kill(child.process.pid, allowed[name])
-        return {"ok": True, "result": {"id": child.plan.node_id, "pid": child.process.pid, "signal": name}}
+        return {"id": child.plan.node_id, "pid": child.process.pid, "signal": name}
 
     def check_children(self) -> None:
         """Report nodes that died; restart them if ``--respawn``."""

@@ -21,7 +21,8 @@ import msgpack
 import zenoh
 
 from tokenring import keys
-from tokenring.errors import TokenRingError, UsageError
+from tokenring.control import answer_query
+from tokenring.errors import UsageError
 from tokenring.faults import FaultInjector
 from tokenring.hardware import open_hardware
 from tokenring.node import NodeOS
@@ -119,22 +120,7 @@ class NodeProcess:
         return {"ok": True}
 
     def _on_query(self, query: zenoh.Query) -> None:
-        verb = str(query.key_expr).rsplit("/", 1)[-1]
-        handler = self.control.get(verb)
-        try:
-            if handler is None:
-                raise UsageError(
-                    f"node {self.os.name} has no control verb {verb!r} (has: {', '.join(sorted(self.control))})"
-                )
-            payload = query.payload
-            request = msgpack.unpackb(payload.to_bytes()) if payload is not None else {}
-            result = {"ok": True, "result": handler(request or {})}
-        except TokenRingError as exc:
-            result = {"ok": False, "error": str(exc)}
-        except Exception as exc:  # a control request must never take the node down
-            log.exception("control verb %s failed", verb)
-            result = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
-        query.reply(query.key_expr, msgpack.packb(result, default=_jsonable))
+        answer_query(query, self.control, f"node {self.os.name}")
 
     def _request_ring_shutdown(self, reason: str) -> bool:
         """Ask the launcher to stop the whole ring cleanly; True if one answered."""
@@ -192,14 +178,6 @@ class NodeProcess:
         if self._queryable is not None:
             with contextlib.suppress(zenoh.ZError):
                 self._queryable.undeclare()
-
-
-def _jsonable(value: Any) -> Any:
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    if isinstance(value, set | tuple):
-        return list(value)
-    return str(value)
 
 
 def add_node_arguments(parser: argparse.ArgumentParser) -> None:

@@ -34,7 +34,8 @@ import msgpack
 import zenoh
 
 from tokenring import keys
-from tokenring.errors import ChannelError, TokenRingError, TransportError, UsageError
+from tokenring.control import answer_query
+from tokenring.errors import ChannelError, TransportError, UsageError
 
 if TYPE_CHECKING:
     from tokenring.node import NodeOS
@@ -73,23 +74,7 @@ class PcLinkServer:
             self._queryable = None
 
     def _on_query(self, query: zenoh.Query) -> None:
-        verb = str(query.key_expr).rsplit("/", 1)[-1]
-        handler = self.handlers.get(verb)
-        try:
-            if handler is None:
-                raise UsageError(
-                    f"the PC link has no verb {verb!r} (has: {', '.join(sorted(self.handlers))})"
-                )
-            payload = query.payload
-            request = msgpack.unpackb(payload.to_bytes()) if payload is not None else {}
-            with self._serial:
-                result = {"ok": True, "result": handler(request or {})}
-        except TokenRingError as exc:
-            result = {"ok": False, "error": str(exc)}
-        except Exception as exc:  # the serial line must survive a bad request
-            log.exception("PC link verb %s failed", verb)
-            result = {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
-        query.reply(query.key_expr, msgpack.packb(result, default=str))
+        answer_query(query, self.handlers, "the PC link", lock=self._serial)
 
     # -- verbs ----------------------------------------------------------------------------------
     def _command(self, request: dict[str, Any]) -> dict[str, Any]:
