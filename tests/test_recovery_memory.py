@@ -167,3 +167,31 @@ def test_leave_and_join_at_run_time(ring):
     wait_for(lambda: ring.nodes[50].membership.successor == 60, 3, "60 to be inserted again")
     ring.wait_rounds(10, node_id=10)
     assert_one_token_through(ring, IDS)
+
+
+def test_data_channels_survive_the_loss_of_tokens_and_other_nodes():
+    ring = MemoryRing(IDS, bitrate=None, ack_mode="never")  # every dropped pass is a lost token
+    try:
+        ring.wait_rounds(30)
+        out = ring.nodes[30].publish()  # sonar
+        out.write(distances=[40, 41, 42, 43, 44, 45, 46, 47], sweep=9)
+        # motor reads before sonar writes in ring order: right after a regeneration it sees
+        # only what the regenerated copy carries
+        reader = ring.nodes[20].subscribe("sonar.data")
+        ring.wait_rounds(5)
+        seen: list[list[int]] = []
+        for _ in range(3):
+            ring.hub.drop_frames(1)
+            wait_for(lambda: ring.regenerated() > 1, 3, "a regeneration")
+            for _ in range(10):
+                ring.nodes[20].wait_visit(1.0)
+                seen.append(reader["distances"])
+        ring.hub.crash(40)  # another node dies: sonar's data stays in the token
+        ring.nodes.pop(40).close()
+        ring.wait_rounds(20, node_id=10)
+        seen.append(reader["distances"])
+        assert all(d == [40, 41, 42, 43, 44, 45, 46, 47] for d in seen), (
+            "sonar's data vanished from the token"
+        )
+    finally:
+        ring.close()
