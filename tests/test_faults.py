@@ -247,3 +247,43 @@ def test_chaos_scenario_typos_are_named_with_file_and_line(tmp_path):
     assert result.returncode == 2
     assert f"{scenario}:3: faults.1.knd: unknown key" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_monitor_shows_the_chain_counters_and_active_faults(ring):
+    ring.fault("map", "delay", "1")
+    result = subprocess.run(
+        [*TOKENRING, "monitor", "--once", "--ring", ring.name, "-e", ring.endpoint],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=REPO,
+    )
+    assert result.returncode == 0, result.stderr
+    out = result.stdout
+    assert "ring: main(10) -> motor(20) -> sonar(30) -> compass(40)" in out
+    assert "charger(80) -> main(10)" in out
+    assert "reconf" in out and "crc rej" in out and "unacked" in out
+    map_row = next(line for line in out.splitlines() if line.split()[:2] == ["60", "map"])
+    assert map_row.rstrip().endswith("delay")
+    snapshots = subprocess.run(
+        [
+            *TOKENRING,
+            "monitor",
+            "--json",
+            "--count",
+            "2",
+            "--interval",
+            "0.2",
+            "--ring",
+            ring.name,
+            "-e",
+            ring.endpoint,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=REPO,
+    )
+    lines = [json.loads(line) for line in snapshots.stdout.splitlines()]
+    assert len(lines) == 2 and len(lines[-1]["nodes"]) == 8
+    assert "delay" in lines[-1]["faults"]["60"]
