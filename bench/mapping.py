@@ -43,6 +43,15 @@ class Recorder:
         self.motor_log: list[dict] = []
         self.lock = threading.Lock()
         self.sub = session.declare_subscriber(keys.token(ring, protocol.node("copro").id), self._on)
+        self.truth: list[tuple[int, float, float, float]] = []
+        self.truth_sub = session.declare_subscriber(keys.world(ring, "truth"), self._on_truth)
+
+    def _on_truth(self, sample: Any) -> None:
+        import msgpack
+
+        msg = msgpack.unpackb(bytes(sample.payload.to_bytes()), raw=False)
+        with self.lock:
+            self.truth.append((int(msg["stamp_ms"]), float(msg["x"]), float(msg["y"]), float(msg["theta"])))
 
     def _on(self, sample: Any) -> None:
         frame = sample.payload.to_bytes()
@@ -59,12 +68,18 @@ class Recorder:
 
     def close(self) -> None:
         self.sub.undeclare()
+        self.truth_sub.undeclare()
 
 
 def replay(
-    records: list[tuple[dict, dict, dict]], motor_log: list[dict], method: int, pose_source: str
+    records: list[tuple[dict, dict, dict]],
+    motor_log: list[dict],
+    method: int,
+    pose_source: str,
+    poses: list[tuple[float, float, float]] | None = None,
 ) -> np.ndarray:
-    """The vectors copro's :class:`Vectorizer` makes from a recording (mm)."""
+    """The vectors copro's :class:`Vectorizer` makes from a recording (mm); ``poses`` collects
+    the pose each sweep was mapped with."""
     from modules.common.units import pose_from_wire
     from modules.common.vectorgen import OUR_METHOD, PoseHistory, Vectorizer, default_layout
     from tokenring.protocol import default_protocol
@@ -90,6 +105,8 @@ def replay(
             pose = history.at(sonar["stamp_ms"]) if method == OUR_METHOD else dr
         active = bool(copro["scanning"]) and motor["direction"] == forward and motor["distance_mm"] > 10
         vectorizer.sweep(sonar, pose, active)
+        if poses is not None and pose is not None:
+            poses.append(pose)
     vectorizer.flush()
     return np.asarray(vectors, dtype=float).reshape(-1, 4)
 
@@ -118,13 +135,14 @@ def run_room(room: str, args: argparse.Namespace, out: Path, port: int) -> dict[
     endpoint = f"tcp/127.0.0.1:{port}"
     live = out / f"{room}-live.json"
     cmd = [
-        sys.executable, "-m", "tokenring", "--log-level", "warning", "up", "--ring", ring, "--listen", endpoint,
+        sys.executable, "-m", "tokenring", "--log-level", args.ring_log_level, "up", "--ring", ring, "--listen", endpoint,
         "--world", room, "--speed", str(args.speed), "--seed", str(args.seed), "--bitrate", args.bitrate,
         "--explore", "2", "--duration", str(args.duration), "--map-out", str(live),
     ]  # fmt: skip
     if args.programs:
         cmd += ["--programs", args.programs]
     started = time.monotonic()
+    ring_log = (out / f"{room}-ring.log").open("w", encoding="utf-8")
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     with open_session(make_config(connect=[endpoint])) as session:
         recorder = None
@@ -133,15 +151,42 @@ def run_room(room: str, args: argparse.Namespace, out: Path, port: int) -> dict[
                 time.sleep(1.0)
                 recorder = Recorder(session, ring)
             line = proc.stdout.readline() if proc.stdout else ""
+            ring_log.write(line)
             if "explore |" in line:
                 print(f"  [{time.monotonic() - started:5.0f} s] {line.split('|', 1)[1].strip()}", flush=True)
         if recorder is not None:
             recorder.close()
     code = proc.wait()
+    ring_log.close()
     return {
         "code": code,
         "records": recorder.records if recorder else [],
         "motor_log": recorder.motor_log if recorder else [],
+        "truth": recorder.truth if recorder else [],
+        "live": live,
+    }
+
+
+def save_recording(path: Path, result: dict[str, Any]) -> None:
+    """The drive as recorded (sweeps and motor samples), for ``--replay``."""
+    import msgpack
+
+    keep = ("records", "motor_log", "truth")
+    path.write_bytes(msgpack.packb({key: result[key] for key in keep}))
+
+
+def load_recording(path: Path, live: Path) -> dict[str, Any]:
+    import msgpack
+
+    from tokenring.errors import UsageError
+
+    if not path.exists():
+        raise UsageError(f"{path}: no recorded drive (run without --replay first)")
+    data = msgpack.unpackb(path.read_bytes(), raw=False, strict_map_key=False)
+    return {
+        "code": 0,
+        "records": [tuple(r) for r in data["records"]],
+        "motor_log": data["motor_log"],
         "live": live,
     }
 
@@ -161,23 +206,50 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--programs", help="module programs directory (default: modules/)")
     parser.add_argument("--out", default="bench-mapping", help="directory for the maps (PNG, JSON)")
     parser.add_argument("--json", metavar="FILE", help="also write the table as JSON")
+    parser.add_argument(
+        "--ring-log-level",
+        default="warning",
+        choices=("debug", "info", "warning", "error"),
+        help="the ring's log level; its output goes to <out>/<room>-ring.log (info shows main's moves)",
+    )
+    parser.add_argument(
+        "--replay",
+        action="store_true",
+        help="no ring: replay the drives recorded in --out by an earlier run (<room>-drive.msgpack)",
+    )
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
     for room in [r.strip() for r in args.rooms.split(",") if r.strip()]:
-        print(f"{room}: exploring for {args.duration:.0f} s at {args.speed:g}x ...", flush=True)
-        result = run_room(room, args, out, free_port())
+        recording = out / f"{room}-drive.msgpack"
+        if args.replay:
+            result = load_recording(recording, out / f"{room}-live.json")
+        else:
+            print(f"{room}: exploring for {args.duration:.0f} s at {args.speed:g}x ...", flush=True)
+            result = run_room(room, args, out, free_port())
+            save_recording(recording, result)
         world, truth = load_truth(room)
         print(f"  {len(result['records'])} sweeps recorded, ring exit code {result['code']}", flush=True)
         variants = [("seed", SEED_METHOD, "dead reckoning"), ("ours", OUR_METHOD, "dead reckoning"),
                     ("seed", SEED_METHOD, "filter"), ("ours", OUR_METHOD, "filter")]  # fmt: skip
         for name, method, source in variants:
+            poses: list[tuple[float, float, float]] = []
             vectors = replay(
-                result["records"], result["motor_log"], method, "filter" if source == "filter" else "dr"
+                result["records"],
+                result["motor_log"],
+                method,
+                "filter" if source == "filter" else "dr",
+                poses,
             )
             tag = f"{room}-{name}-{'ekf' if source == 'filter' else 'dr'}"
-            write_map(vectors, str(out / f"{tag}.png"), truth, world, title=f"{room}, {name}, {source}")
+            paths = {
+                "true": np.asarray(result.get("truth", []), dtype=float).reshape(-1, 4)[:, 1:3],
+                source: np.asarray(poses, dtype=float).reshape(-1, 3)[:, :2],
+            }
+            write_map(
+                vectors, str(out / f"{tag}.png"), truth, world, title=f"{room}, {name}, {source}", paths=paths
+            )
             rows.append({"room": room, "method": name, "pose": source, **score_map(vectors, truth)})
         if result["live"].exists():
             vectors = load_map_file(str(result["live"]))

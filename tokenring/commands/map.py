@@ -121,8 +121,10 @@ def write_map(
     truth: np.ndarray | None = None,
     world: str | None = None,
     title: str = "",
+    paths: dict[str, np.ndarray] | None = None,
 ) -> dict[str, Any] | None:
-    """Write ``vectors`` (mm) in the format of ``path``'s extension; returns the score if known."""
+    """Write ``vectors`` (mm) in the format of ``path``'s extension; returns the score if known.
+    ``paths``: robot paths (name -> N×2 mm) drawn thinly in a PNG (the true one, the mapping pose)."""
     from modules.common.mapscore import score_map
 
     suffix = check_out(path)
@@ -134,7 +136,7 @@ def write_map(
         elif suffix == ".dxf":
             write_dxf(vectors, path, truth)
         else:
-            write_png(vectors, path, truth, title or (world or "map"), score)
+            write_png(vectors, path, truth, title or (world or "map"), score, paths)
     except OSError as exc:
         raise UsageError(f"--out {path}: cannot write: {exc.strerror or exc}") from None
     return score
@@ -156,7 +158,12 @@ def write_dxf(vectors: np.ndarray, path: str, truth: np.ndarray | None) -> None:
 
 
 def write_png(
-    vectors: np.ndarray, path: str, truth: np.ndarray | None, title: str, score: dict[str, Any] | None
+    vectors: np.ndarray,
+    path: str,
+    truth: np.ndarray | None,
+    title: str,
+    score: dict[str, Any] | None,
+    paths: dict[str, np.ndarray] | None = None,
 ) -> None:
     import matplotlib
 
@@ -174,6 +181,9 @@ def write_png(
                 solid_capstyle="round",
                 zorder=1,
             )
+    for (name, xy), color in zip((paths or {}).items(), ("0.3", "tab:blue", "tab:green"), strict=False):
+        if len(xy):
+            ax.plot(xy[:, 0] / 1000, xy[:, 1] / 1000, color=color, lw=0.6, zorder=1.5, label=f"path: {name}")
     for x1, y1, x2, y2 in vectors:
         ax.plot([x1 / 1000, x2 / 1000], [y1 / 1000, y2 / 1000], color="tab:red", lw=1.8, zorder=2)
     if len(vectors):
