@@ -213,6 +213,11 @@ class SimCompass:
             fade = math.exp(-((pose.x - a.x) ** 2 + (pose.y - a.y) ** 2) / (2 * a.radius**2))
             bx, by = bx + a.bx * fade, by + a.by * fade
         heading = (math.atan2(by, bx) - pose.theta) % (2 * math.pi)  # from north, clockwise
+        if self.state in (1, 2):  # OK or DISTURBED: the module's rule on the field's strength
+            from modules.compass import DISTURBED_RATIO
+
+            off = abs(math.hypot(bx, by) / w.earth_field_ut - 1.0)
+            self.state = 2 if off > DISTURBED_RATIO else 1
         heading += math.radians(self.rng.normal(0.0, COMPASS_SIGMA_DEG))
         self.recent = [heading] if turning else [*self.recent[-(COMPASS_MEAN - 1) :], heading]
         self.sample = (self.sample + 1) & 0xFFFF
@@ -434,7 +439,10 @@ class ClosedLoop:
                 next_motor += MOTOR_TICK_MS
             self.sonar.tick(self.now, pose)
             turning = self.motor.direction in (TURN_LEFT, TURN_RIGHT)
-            self.compass.state = 3 if self.calibration_turns > 0 else 1
+            if self.calibration_turns > 0:
+                self.compass.state = 3
+            elif self.compass.state == 3:
+                self.compass.state = 1
             self.compass.tick(self.now, pose, turning)
             if self.now >= self.next_truth:
                 self.truth.append((self.now, pose.x, pose.y, pose.theta))
@@ -499,11 +507,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--minutes", type=float, default=30.0, help="simulated minutes at most")
     parser.add_argument("--seed-method", action="store_true", help="the seed's vector generation")
     parser.add_argument("--dead-reckoning", action="store_true", help="no Localizer")
+    parser.add_argument("--walls", choices=("exploration", "off"), help="the Localizer's walls mode")
     parser.add_argument("--out", metavar="DIR", help="write the map PNG here")
     parser.add_argument("--moves", action="store_true", help="print the navigator's moves")
     args = parser.parse_args(argv)
+    config = None
+    if args.walls:
+        from modules.copro import EXPLORATION_CONFIG
+
+        config = {**EXPLORATION_CONFIG, "walls": {**EXPLORATION_CONFIG["walls"], "mode": args.walls}}
     loop = ClosedLoop(
-        args.world, args.seed, method=0 if args.seed_method else None, localizer=not args.dead_reckoning
+        args.world,
+        args.seed,
+        method=0 if args.seed_method else None,
+        localizer=not args.dead_reckoning,
+        localizer_config=config,
     )
     run = loop.run(args.minutes)
     world, truth = load_truth(args.world)

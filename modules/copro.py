@@ -34,10 +34,17 @@ MIN_DRIVEN_MM = 10  # the seed: vectors only after more than 1 cm driven
 
 
 #: the localizer's settings while exploring an unknown room: start where the motor was put down,
-#: correct against the walls of the robot's own map (handed over as they are found), no log files
+#: correct against the long walls of the robot's own map (handed over as they are found), no log
+#: files. Without known walls a compass offset is unobservable (it only soaked up the errors of
+#: early map walls and kept them), and on straight moves the tracks cannot turn the robot: the
+#: heading then holds through a magnetic anomaly instead of following the compass into it.
 EXPLORATION_CONFIG: dict[str, Any] = {
-    "filter": {"initial_pose": "motor"},
-    "walls": {"mode": "exploration"},
+    "filter": {
+        "initial_pose": "motor",
+        "estimate": ["glide", "step_scale"],
+        "noise": {"rotation_rad_per_mm": 0.00002},
+    },
+    "walls": {"mode": "exploration", "association": {"min_wall_length_mm": 1000.0}},
     "logs": {"enabled": False},
 }
 

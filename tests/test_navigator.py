@@ -215,11 +215,15 @@ def test_explore2_follows_the_left_wall_and_turns_at_corners():
     inner = nav.plan(Outcome(REASON["CLOSE"], seg[0], trigger="ahead_within"), s, STOPPED)
     assert inner[0].direction == TURN_RIGHT and 85 <= inner[0].amount <= 95
     # the wall lost: outer corner, drive on, turn left, pick the wall up again
-    outer = nav.plan(Outcome(REASON["CORNER"], seg[0], trigger="left_beyond"), sensors_with(), STOPPED)
-    assert [m.label for m in outer] == ["clear", "outer"] and outer[1].direction == TURN_LEFT
-    re = nav.plan(Outcome(REASON["DONE"], outer[1]), sensors_with(), STOPPED)
+    lost = next(a for a in seg[0].abort if a.kind == "left_beyond")
+    assert lost.sweeps == 2  # one dropout of the side sonar is no corner
+    clear = nav.plan(Outcome(REASON["CORNER"], seg[0], trigger="left_beyond"), sensors_with(), STOPPED)
+    assert [m.label for m in clear] == ["clear"]
+    outer = nav.plan(Outcome(REASON["DONE"], clear[0]), sensors_with(), STOPPED)
+    assert [m.label for m in outer] == ["outer"] and outer[0].direction == TURN_LEFT
+    re = nav.plan(Outcome(REASON["DONE"], outer[0]), sensors_with(), STOPPED)
     assert re[0].label == "reacquire"
-    for move in (*find, *turn, *seg, *nxt, *inner, *outer, *re):
+    for move in (*find, *turn, *seg, *nxt, *inner, *clear, *outer, *re):
         assert all(isinstance(a, Abort) for a in move.abort), move
     back = nav.plan(Outcome(REASON["NONE"], re[0], trigger="left_within"), s, STOPPED)
     assert back[-1].label == "follow"
@@ -282,8 +286,15 @@ def test_explore2_corrects_a_turn_the_floor_let_slip_by_the_compass():
     turn = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
     assert turn[0].direction == TURN_RIGHT and turn[0].amount == 90
     s.heading_cdeg = 17200  # turned right by 82° only (clockwise heading grew by 82°)
-    fix = nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED)
+    assert nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED) == []  # the filter settles first
+    s.stamp_ms = nav.s.settle_ms - 1
+    assert nav.plan(Outcome(REASON["DONE"]), s, STOPPED) == []
+    s.stamp_ms = nav.s.settle_ms
+    fix = nav.plan(Outcome(REASON["DONE"]), s, STOPPED)
     assert fix[0].direction == TURN_RIGHT and fix[0].amount == 8
-    s.heading_cdeg = 17900  # within 2.5°: on with the wall
-    seg = nav.plan(Outcome(REASON["DONE"], fix[0]), s, STOPPED)
+    assert [round(e, 6) for e in nav.turn_errors] == [-8.0]
+    s.heading_cdeg = 17900  # within 1.5° after settling again: on with the wall
+    assert nav.plan(Outcome(REASON["DONE"], fix[0]), s, STOPPED) == []
+    s.stamp_ms += nav.s.settle_ms
+    seg = nav.plan(Outcome(REASON["DONE"]), s, STOPPED)
     assert seg[-1].label == "follow"

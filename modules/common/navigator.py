@@ -124,19 +124,42 @@ class WallSettings:
     wall_cm: int = 30  # the distance to keep from the left wall (side sonar reading)
     front_stop_cm: int = 25  # an obstacle this near ahead ends a segment: inner corner
     lost_margin_cm: int = 25  # the left sonar reading this much over wall_cm: the wall ended
+    lost_sweeps: int = 2  # ... on this many sweeps in a row (one dropout is no corner)
     segment_mm: int = 600
     find_mm: int = 5000
     reacquire_mm: int = 900
-    clear_mm: int = 420  # drive on past an outer corner before turning left
-    max_correction_deg: float = 20.0
+    clear_mm: int = 400  # drive on past an outer corner before turning left
+    max_correction_deg: float = 15.0
     speed_pct: int = 100
     lap_min_mm: int = 5000  # driven along walls before a lap can end
     lap_radius_mm: float = 450.0
     max_laps: int = 1
+    settle_ms: int = 1200  # at rest after a turn before it is judged by the fused heading
+    check_min_deg: float = 10.0  # turns at least this big are checked (smaller ones slip < 1°)
+    turn_tolerance_deg: float = 1.5
+    max_fixes: int = 2
+
+
+@dataclass
+class TurnCheck:
+    """A turn waiting to be judged: the heading it aims at (source, rad CCW)."""
+
+    source: str
+    goal: float
+    fixes: int = 0
+    settle_until: int | None = None
 
 
 class ExploreLeftWall(Navigator):
-    """Explore 2: keep the wall on the left."""
+    """Explore 2: keep the wall on the left.
+
+    Phases: ``find`` (drive until a wall blocks the way, turn right: it is on the left now),
+    ``follow`` (segments along the wall, each begun with a correction from the last one's side
+    readings; the front blocked: inner corner, turn right; the wall lost: ``outer``), ``outer``
+    (drive on past the wall's end, turn left), ``reacquire`` (drive until the left sonar finds the
+    wall again; none: turn left again — the end of a thin wall or a pillar). Every turn of 10° or
+    more is judged by the fused heading after ``settle_ms`` at rest and corrected (the floor's
+    slip makes a turn ±10 %; the filter needs the compass at rest to know)."""
 
     mode = 2
 
@@ -149,6 +172,9 @@ class ExploreLeftWall(Navigator):
         self.laps = 0
         self.outer_tries = 0
         self.corrections: list[float] = []
+        self.check: TurnCheck | None = None
+        self.last_follow: Outcome | None = None
+        self.turn_errors: list[float] = []  # degrees each checked turn missed by (before fixes)
 
     # -- the moves ----------------------------------------------------------------------------
     def _front_stop(self) -> tuple[Abort, ...]:
@@ -159,6 +185,9 @@ class ExploreLeftWall(Navigator):
             Abort("front_within", DIAGONAL_STOP_CM, "CLOSE"),
         )
 
+    def _lost_limit(self) -> int:
+        return self.s.wall_cm + self.s.lost_margin_cm
+
     def _segment(self) -> Move:
         s = self.s
         return Move(
@@ -166,20 +195,21 @@ class ExploreLeftWall(Navigator):
             s.segment_mm,
             s.speed_pct,
             scan=True,
-            abort=(*self._front_stop(), Abort("left_beyond", s.wall_cm + s.lost_margin_cm, "CORNER")),
+            abort=(*self._front_stop(), Abort("left_beyond", self._lost_limit(), "CORNER", s.lost_sweeps)),
             label="follow",
         )
 
-    def _turn(self, degrees: float, label: str, sensors: Sensors | None = None) -> list[Move]:
-        """A turn on the spot by ``degrees`` (positive: left); nothing if under 2°.
+    def _forward(self, mm: int, label: str, *extra: Abort) -> Move:
+        return Move(FORWARD, mm, self.s.speed_pct, abort=(*self._front_stop(), *extra), label=label)
 
-        Ours: with a heading to check against (the filter's, else the compass), the goal is kept
-        and :meth:`_turn_fix` corrects what the floor's slip (±10 %) left over."""
+    def _turn(self, degrees: float, label: str, sensors: Sensors | None = None) -> list[Move]:
+        """A turn on the spot by ``degrees`` (positive: left); nothing if under 2°. Turns of
+        ``check_min_deg`` or more are judged afterwards by the fused heading (:meth:`_judge`)."""
         if abs(degrees) < 2.0:
             return []
         heading = self._heading(sensors) if sensors is not None else None
-        self.turn_goal = None if heading is None else (heading[0], heading[1] + math.radians(degrees))
-        self.turn_fixes = 0
+        if heading is not None and abs(degrees) >= self.s.check_min_deg:
+            self.check = TurnCheck(heading[0], heading[1] + math.radians(degrees))
         direction = TURN_LEFT if degrees > 0 else TURN_RIGHT
         return [Move(direction, round(abs(degrees)), self.s.speed_pct, label=label)]
 
@@ -192,33 +222,41 @@ class ExploreLeftWall(Navigator):
             return "compass", -math.radians(sensors.heading_cdeg / 100.0)
         return None
 
-    def _turn_fix(self, last: Outcome | None, sensors: Sensors) -> list[Move] | None:
-        """A correcting turn after a turn that missed its goal by more than 2.5° (twice at most)."""
-        goal = getattr(self, "turn_goal", None)
-        if (
-            goal is None
-            or last is None
-            or last.move is None
-            or last.move.direction not in (TURN_LEFT, TURN_RIGHT)
-        ):
-            return None
+    def _judge(self, last: Outcome | None, sensors: Sensors) -> list[Move] | None:
+        """While a turn is being judged: [] to wait at rest, a fixing turn, or None when done."""
+        check = self.check
+        assert check is not None
+        if check.settle_until is None:
+            check.settle_until = sensors.stamp_ms + self.s.settle_ms
+        if sensors.stamp_ms < check.settle_until:
+            return []
         heading = self._heading(sensors)
-        if heading is None or heading[0] != goal[0] or self.turn_fixes >= 2 or not last.done:
-            self.turn_goal = None
+        self.check = None
+        if heading is None or heading[0] != check.source:
             return None
-        error = math.degrees(math.remainder(goal[1] - heading[1], 2 * math.pi))
-        if abs(error) <= 2.5:
-            self.turn_goal = None
+        error = math.degrees(math.remainder(check.goal - heading[1], 2 * math.pi))
+        if check.fixes == 0:
+            self.turn_errors.append(error)
+        if abs(error) <= self.s.turn_tolerance_deg or check.fixes >= self.s.max_fixes:
             return None
-        self.turn_fixes += 1
-        direction = TURN_LEFT if error > 0 else TURN_RIGHT
-        return [Move(direction, max(1, round(abs(error))), self.s.speed_pct, label=last.move.label)]
+        self.check = TurnCheck(check.source, check.goal, check.fixes + 1)
+        label = last.move.label if last is not None and last.move is not None else "fix"
+        return [
+            Move(
+                TURN_LEFT if error > 0 else TURN_RIGHT,
+                max(1, round(abs(error))),
+                self.s.speed_pct,
+                label=label,
+            )
+        ]
 
-    def _correction(self, last: Outcome | None, with_distance: bool) -> float:
-        """Degrees to turn left so the next segment runs parallel at the wanted distance."""
-        if last is None or last.move is None or last.move.label != "follow":
+    def _correction(self, with_distance: bool) -> float:
+        """Degrees to turn left so the next segment runs parallel at the wanted distance, from
+        the left sonar's readings over the last follow segment."""
+        last = self.last_follow
+        if last is None:
             return 0.0
-        fit = side_slope(last.samples, self.layout.left_front, self.s.wall_cm + self.s.lost_margin_cm)
+        fit = side_slope(last.samples, self.layout.left_front, self._lost_limit())
         if fit is None:
             return 0.0
         slope, reading_mm = fit
@@ -230,108 +268,106 @@ class ExploreLeftWall(Navigator):
         self.corrections.append(angle)
         return angle
 
-    def _left_wall_seen(self, sensors: Sensors) -> bool:
-        limit = self.s.wall_cm + self.s.lost_margin_cm
-        d = sensors.distances
-        return d[self.layout.left_front] <= limit and d[self.layout.left_rear] <= limit
+    def _left_front_sees(self, sensors: Sensors) -> bool:
+        return sensors.distances[self.layout.left_front] <= self._lost_limit()
 
     # -- the strategy -------------------------------------------------------------------------
     def plan(self, last: Outcome | None, sensors: Sensors, alert_lock: int) -> list[Move] | None:
         self.steps += 1
         s = self.s
-        if last is not None and last.move is not None and last.move.label == "follow":
+        label = last.move.label if last is not None and last.move is not None else ""
+        if label == "follow":
             self.follow_mm += max(0, last.driven_mm)
+            self.last_follow = last
         if last is not None and last.reason == REASON["ALERT"]:
             self.state = NAV["BACK_OFF"]
             self.note = "alert"
+            self.check = None
             return self.escape(alert_lock if alert_lock != STOPPED else REVERSE)
         if last is not None and last.reason in (REASON["STALL"], REASON["COLLISION"]):
             self.state = NAV["BACK_OFF"]
-            self.phase = "follow"
+            self.phase, self.last_follow = "follow", None
             return [Move(REVERSE, 80, s.speed_pct, label="back off"), *self._turn(-30, "away", sensors)]
-        fix = self._turn_fix(last, sensors)
-        if fix is not None:
-            return fix
+        if self.check is not None:
+            judged = self._judge(last, sensors)
+            if judged is not None:
+                self.state = NAV["TURN"]
+                return judged
+            label = "turned"
         if self._lap_done(sensors):
             self.state = NAV["DONE"]
             self.note = "lap closed"
             return None
+        blocked = last is not None and last.trigger in ("ahead_within", "front_within")
 
         if self.phase == "find":  # drive until a wall blocks the way, then put it on the left
             self.state = NAV["ENTRY"]
-            if (
-                last is not None
-                and last.move is not None
-                and last.move.label == "find"
-                and (last.trigger in ("ahead_within", "front_within") or last.done)
-            ):
+            if label == "find" and (blocked or last.done):
                 self.phase = "follow"
                 self.state = NAV["TURN"]
-                return self._turn(-90, "inner", sensors)
-            return [
-                Move(
-                    FORWARD,
-                    s.find_mm,
-                    s.speed_pct,
-                    abort=self._front_stop(),  # a wall ahead, not an island passing by
-                    label="find",
-                )
-            ]
+                return self._turn(-90, "inner", sensors) or [self._segment()]
+            return [self._forward(s.find_mm, "find")]
 
-        if self.phase == "outer":
-            self.phase = "reacquire"
-            self.state = NAV["TURN"]
-            return [
-                Move(FORWARD, s.clear_mm, s.speed_pct, abort=self._front_stop(), label="clear"),
-                *self._turn(90, "outer", sensors),
-            ]
+        if self.phase == "outer":  # the wall ended: drive past its end, then turn left
+            if label == "clear":
+                if blocked:  # something ahead already: an inner corner after all
+                    self.phase = "follow"
+                    return self._inner(sensors)
+                self.phase = "reacquire"
+                self.state = NAV["TURN"]
+                return self._turn(90, "outer", sensors) or [self._reacquire()]
+            self.state = NAV["FOLLOW_WALL"]
+            return [self._forward(s.clear_mm, "clear")]
 
-        if self.phase == "reacquire":
-            if last is not None and last.move is not None and last.move.label == "reacquire":
-                if last.trigger == "left_within" or self._left_wall_seen(sensors):
+        if self.phase == "reacquire":  # drive until the left sonar finds the wall again
+            if label == "reacquire":
+                if last.trigger == "left_within":
+                    self.phase, self.outer_tries = "follow", 0
+                    self.state = NAV["FOLLOW_WALL"]
+                    return [self._segment()]
+                if blocked:
                     self.phase = "follow"
-                    self.outer_tries = 0
-                elif last.trigger in ("ahead_within", "front_within"):
-                    self.phase = "follow"
-                    self.state = NAV["TURN"]
-                    return self._turn(-90, "inner", sensors)
-                else:  # no wall: the end of a thin wall or a pillar — go round it
-                    self.outer_tries += 1
-                    if self.outer_tries >= 3:
-                        self.phase, self.outer_tries = "find", 0
-                        return self.plan(None, sensors, alert_lock)
-                    self.state = NAV["TURN"]
-                    return self._turn(90, "outer", sensors)
-            else:
-                self.state = NAV["FOLLOW_WALL"]
-                return [
-                    Move(
-                        FORWARD,
-                        s.reacquire_mm,
-                        s.speed_pct,
-                        abort=(
-                            *self._front_stop(),
-                            Abort("left_within", s.wall_cm + s.lost_margin_cm - 5, "NONE"),
-                        ),
-                        label="reacquire",
-                    )
-                ]
+                    return self._inner(sensors)
+                self.outer_tries += 1  # no wall: the end of a thin wall or a pillar — go round it
+                if self.outer_tries >= 3:
+                    self.phase, self.outer_tries = "find", 0
+                    return [self._forward(s.find_mm, "find")]
+                self.state = NAV["TURN"]
+                return self._turn(90, "outer", sensors) or [self._reacquire()]
+            self.state = NAV["FOLLOW_WALL"]
+            return [self._reacquire()]
 
         # phase follow
         if self.lap_start is None and sensors.pose is not None:
             self.lap_start = sensors.pose[:2]
-        followed = last is not None and last.move is not None and last.move.label == "follow"
-        if followed and last.trigger in ("ahead_within", "front_within"):
-            self.state = NAV["TURN"]
-            return self._turn(-90 + self._correction(last, with_distance=False), "inner", sensors)
-        if followed and last.trigger == "left_beyond":
-            self.phase = "outer"
-            return self.plan(None, sensors, alert_lock)
+        if label == "follow" and blocked:
+            return self._inner(sensors)
+        if label == "follow" and last.trigger == "left_beyond":
+            self.phase, self.last_follow = "outer", None
+            self.state = NAV["FOLLOW_WALL"]
+            return [self._forward(s.clear_mm, "clear")]
         self.state = NAV["FOLLOW_WALL"]
-        if not self._left_wall_seen(sensors) and not followed:
-            self.phase = "reacquire"
-            return self.plan(None, sensors, alert_lock)
-        return [*self._turn(self._correction(last, with_distance=True), "align", sensors), self._segment()]
+        if not self._left_front_sees(sensors):
+            self.phase, self.last_follow = "reacquire", None
+            return [self._reacquire()]
+        if label == "follow":
+            turn = self._turn(self._correction(with_distance=True), "align", sensors)
+            if self.check is not None:  # a big correction: judged before the segment
+                return turn
+            return [*turn, self._segment()]
+        return [self._segment()]
+
+    def _inner(self, sensors: Sensors) -> list[Move]:
+        """The way ahead is blocked: turn right so the wall ahead is on the left."""
+        self.state = NAV["TURN"]
+        angle = -90.0 + self._correction(with_distance=False)
+        self.last_follow = None
+        return self._turn(angle, "inner", sensors)
+
+    def _reacquire(self) -> Move:
+        return self._forward(
+            self.s.reacquire_mm, "reacquire", Abort("left_within", self._lost_limit() - 5, "NONE")
+        )
 
     def _lap_done(self, sensors: Sensors) -> bool:
         if self.lap_start is None or sensors.pose is None or self.follow_mm < self.s.lap_min_mm:

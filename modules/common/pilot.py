@@ -57,11 +57,13 @@ class Abort:
     one), ``rear_within``, ``left_within``,
     ``right_within`` (the side's front sonar ≤ cm), ``left_beyond`` / ``right_beyond`` (the
     side's front sonar reads more than cm or nothing), ``corner_left`` / ``corner_right``
-    (copro reports CORNER on that side)."""
+    (copro reports CORNER on that side). ``sweeps``: the condition must hold on this many
+    consecutive sonar sweeps (a single dropout of a side sonar is no corner)."""
 
     kind: str
     cm: int = 0
     reason: str = "CLOSE"
+    sweeps: int = 1
 
 
 @dataclass(frozen=True)
@@ -145,6 +147,8 @@ class Pilot:
         self._stop_ms: int | None = None
         self._pending_reason: tuple[int, str] | None = None
         self._exempt: set[int] = set()
+        self._abort_sweep = 0
+        self._abort_counts: dict[int, int] = {}
         self._samples: list[tuple[int, list[int]]] = []
         self._last_sweep: int | None = None
         self._scanning = False
@@ -199,6 +203,8 @@ class Pilot:
         self._started_ms = sensors.stamp_ms
         self._samples = []
         self._last_sweep = sensors.sweep
+        self._abort_sweep = sensors.sweep
+        self._abort_counts = {}
         self._visits = 0
         self._seen_moving = False
         self.send("motor", name, **{arg: int(move.amount), "speed_pct": int(move.speed_pct)})
@@ -245,8 +251,15 @@ class Pilot:
             if alert:
                 self._stop(REASON["ALERT"], f"alert on sonar {sorted(alert)}", lock=move.direction)
                 return None
-            for condition in move.abort:
-                if self._triggered(condition, sensors):
+            new_sweep = sensors.sweep != self._abort_sweep
+            self._abort_sweep = sensors.sweep
+            for k, condition in enumerate(move.abort):
+                if not self._triggered(condition, sensors):
+                    self._abort_counts[k] = 0
+                    continue
+                if new_sweep or not self._abort_counts.get(k):
+                    self._abort_counts[k] = self._abort_counts.get(k, 0) + 1
+                if self._abort_counts[k] >= condition.sweeps:
                     self._stop(REASON[condition.reason], condition.kind)
                     return None
             if sensors.motor_state in (MOTOR_STATE["STALLED"], MOTOR_STATE["COLLISION"]):
