@@ -1,7 +1,12 @@
-"""``python -m bench``: for now the round-trip benchmark of ``tokenring bench``."""
+"""``python -m bench``: the benchmark suite (see :mod:`bench.suite`)."""
 
 import sys
 
-from tokenring.cli import main
+from bench.suite import main
+from tokenring.errors import TokenRingError
 
-sys.exit(main(["bench", *sys.argv[1:]]))
+try:
+    sys.exit(main())
+except TokenRingError as exc:  # bad options: a message, exit code 2, no traceback
+    sys.stderr.write(f"python -m bench: {exc}\n")
+    sys.exit(2)

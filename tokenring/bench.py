@@ -15,6 +15,7 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,9 @@ from tokenring.launcher import Launcher, NodePlan
 from tokenring.zconfig import make_config, open_session
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+#: from this ring size on, ``--topology auto`` makes the nodes clients of a Zenoh router: a full
+#: mesh of N peers keeps N(N-1)/2 links (bench/RESULTS.md measures both)
+ROUTER_FROM = 32
 
 
 def generated_ids(n: int) -> list[int]:
@@ -87,22 +91,20 @@ def progress(text: str, quiet: bool = False) -> None:
 # ---------------------------------------------------------------------------------------------
 
 
-def run_bare(n: int, rounds: int, warmup: int, timeout: float = 120.0) -> list[float]:
-    """Round times (s) of a bare Zenoh ring of ``n`` processes."""
+def run_bare(
+    n: int, rounds: int, warmup: int, timeout: float = 120.0, *, router: bool = False
+) -> list[float]:
+    """Round times (s) of a bare Zenoh ring of ``n`` processes: a full mesh of peers, or with
+    ``router`` every process a client of a Zenoh router opened here (as the launcher does)."""
     port = free_port()
     ring = f"b{os.getpid()}x{port}"
     base = [sys.executable, "-m", "tokenring.bench_bare", "--count", str(n), "--port", str(port)]
-    base += [
-        "--rounds",
-        str(rounds),
-        "--warmup",
-        str(warmup),
-        "--ring",
-        ring,
-        "--timeout",
-        str(timeout),
-    ]
+    base += ["--rounds", str(rounds), "--warmup", str(warmup), "--ring", ring, "--timeout", str(timeout)]
+    base += ["--mode", "client" if router else "peer"]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
+    router_session = (
+        open_session(make_config(mode="router", listen=[f"tcp/127.0.0.1:{port}"])) if router else None
+    )
     first = subprocess.Popen([*base, "--index", "0"], stdout=subprocess.PIPE, text=True, env=env)
     others = [
         subprocess.Popen([*base, "--index", str(i)], stdout=subprocess.DEVNULL, env=env) for i in range(1, n)
@@ -122,6 +124,8 @@ def run_bare(n: int, rounds: int, warmup: int, timeout: float = 120.0) -> list[f
         if first.poll() is None:
             first.kill()
             first.wait(2)
+        if router_session is not None:
+            router_session.close()
     lines = [line for line in out.splitlines() if line.startswith("{")]
     if not lines:
         raise TokenRingError(f"the bare ring of {n} produced no result")
@@ -139,6 +143,8 @@ class RingRun:
     handler_us: dict[str, float]
     wall_s: float
     stats: dict[str, Any] = field(default_factory=dict)
+    launcher_cpu_s: float = 0.0  # the launcher process: the Zenoh router, the registry
+    form_s: float = 0.0  # from the first process started to the ring circulating through all
 
 
 def run_ring(
@@ -152,12 +158,28 @@ def run_ring(
     programs: dict[int, str] | None = None,
     ids: list[int] | None = None,
     extra_node_args: list[str] | None = None,
+    router: bool = False,
+    transport: str = "zenoh",
+    profile: str | None = None,
+    plans: list[NodePlan] | None = None,
+    services: list[Any] | None = None,
+    master: int | None = None,
+    ring: str | None = None,
+    on_ready: Callable[[Any, str], None] | None = None,
 ) -> RingRun:
-    """Round times (s) of the real ring of ``n`` node processes, with RSS and CPU per node."""
-    ids = ids or generated_ids(n)
+    """Round times (s) of the real ring of ``n`` node processes, with RSS and CPU per node.
+
+    ``router``: the launcher's session is a Zenoh router and the nodes its clients (else a full
+    mesh of peers); ``transport``: what carries the token (zenoh, udp, zmq); ``profile``: an
+    emulated hardware timing; ``plans``/``services``: named nodes with programs and helper
+    processes (the robot), instead of ``n`` generated IDs.
+    """
+    if plans is None:
+        ids = ids or generated_ids(n)
+        plans = [NodePlan(i, f"node{i}", (programs or {}).get(i)) for i in ids]
+    ids = [p.node_id for p in plans]
     port = free_port()
-    ring = f"r{os.getpid()}x{port}"
-    plans = [NodePlan(i, f"node{i}", (programs or {}).get(i)) for i in ids]
+    ring = ring or f"r{os.getpid()}x{port}"
     launcher = Launcher(
         plans,
         ring=ring,
@@ -167,24 +189,33 @@ def run_ring(
         log_level="warning",
         output=io.StringIO(),
         extra_node_args=extra_node_args or [],
+        router=router,
+        transport=transport,
+        profile=profile,
+        services=services or [],
     )
     from tokenring.protocol import default_protocol
 
-    main_id = default_protocol().nodes["main"].id if "main" in default_protocol().nodes else None
-    master = main_id if main_id in ids else min(ids)
+    if master is None:
+        main_id = default_protocol().nodes["main"].id if "main" in default_protocol().nodes else None
+        master = main_id if main_id in ids else min(ids)
+    t_start = time.monotonic()
     launcher.start()
     try:
-        config = make_config(connect=[f"tcp/127.0.0.1:{port}"])
+        config = make_config(mode="client" if router else "peer", connect=[f"tcp/127.0.0.1:{port}"])
         with open_session(config) as session:
             key = keys.control(ring, master, "stats")
             deadline = time.monotonic() + timeout
             stats: dict[str, Any] = {}
+            formed = 0.0
             while time.monotonic() < deadline:
                 replies = query(session, key, timeout=1.0)
                 if replies and replies[0][1].get("ok"):
                     stats = replies[0][1]["result"]
-                    if len(stats["active"]) == len(ids) and stats["stats"]["visits"] >= warmup:
-                        break
+                    if len(stats["active"]) == len(ids):
+                        formed = formed or time.monotonic()
+                        if stats["stats"]["visits"] >= warmup:
+                            break
                 dead = [c for c in launcher.children.values() if c.process.poll() is not None]
                 if dead:
                     raise TokenRingError(f"node {dead[0].plan.name} died while the ring formed")
@@ -195,6 +226,7 @@ def run_ring(
                     f"(active {len(stats.get('active', []))}, visits {stats.get('stats', {}).get('visits', 0)})"
                 )
             cpu0 = {c.process.pid: proc_cpu_s(c.process.pid) for c in launcher.children.values()}
+            own_cpu = time.process_time()
             t0 = time.monotonic()
             start_visits = stats["stats"]["visits"]
             visits_key = keys.control(ring, master, "visits")
@@ -206,11 +238,23 @@ def run_ring(
             else:
                 raise TokenRingError(f"ring of {n}: measurement did not finish in {timeout:.0f} s")
             wall = time.monotonic() - t0
+            if on_ready is not None:  # e.g. collect what programs measured, while the ring runs
+                on_ready(session, ring)
+            launcher_cpu = time.process_time() - own_cpu
             cpu = [proc_cpu_s(c.process.pid) - cpu0[c.process.pid] for c in launcher.children.values()]
             rss = [proc_rss_mb(c.process.pid) for c in launcher.children.values()]
             stats = query(session, key, timeout=2.0)[0][1]["result"]
             round_list = query(session, keys.control(ring, master, "rounds"), timeout=2.0)[0][1]["result"]
-            return RingRun(round_list[-rounds:], rss, cpu, stats["handler_us"], wall, stats)
+            return RingRun(
+                round_list[-rounds:],
+                rss,
+                cpu,
+                stats["handler_us"],
+                wall,
+                stats,
+                launcher_cpu_s=launcher_cpu,
+                form_s=formed - t_start if formed else float("nan"),
+            )
     finally:
         launcher.stop()
 
@@ -234,6 +278,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--timeout", type=float, default=120.0, help="seconds allowed per run")
     p.add_argument("--json", metavar="FILE", help="write the results as JSON ('-' for stdout)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument(
+        "--topology",
+        default="auto",
+        choices=("auto", "peer", "router"),
+        help=f"Zenoh peers in a full mesh, or clients of a router (auto: router from {ROUTER_FROM} nodes on)",
+    )
+    p.add_argument(
+        "--transport",
+        default="zenoh",
+        choices=("zenoh", "udp", "zmq"),
+        help="what carries the ring's token (the baseline stays a bare Zenoh ring)",
+    )
+    p.add_argument("--profile", help="emulated hardware timing (arcnet: the seed robot; needs a bitrate)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -244,7 +301,17 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--repeat must be at least 1")
     from tokenring.ring import parse_bitrate
 
-    parse_bitrate(args.bitrate)
+    bitrate = parse_bitrate(args.bitrate)
+    if args.profile:
+        from tokenring.profile import get_profile
+
+        get_profile(args.profile)
+        if bitrate is None:
+            raise UsageError(
+                f"--profile {args.profile} emulates hardware timing: give a bitrate such as 2.5M, not max"
+            )
+    router = args.topology == "router" or (args.topology == "auto" and args.nodes >= ROUTER_FROM)
+    topology = "router" if router else "peer"
     bare: list[float] = []
     ring: list[float] = []
     rss: list[float] = []
@@ -256,15 +323,16 @@ def run(args: argparse.Namespace) -> int:
     for _ in range(args.repeat):
         step += 1
         progress(
-            f"[{step}/{total}] bare Zenoh ring, {args.nodes} processes, {args.rounds} rounds ...",
+            f"[{step}/{total}] bare Zenoh ring, {args.nodes} processes ({topology}s), {args.rounds} rounds ...",
             args.quiet,
         )
-        part = run_bare(args.nodes, args.rounds, args.warmup, args.timeout)
+        part = run_bare(args.nodes, args.rounds, args.warmup, args.timeout, router=router)
         bare += part
         progress(f"        median {summarize(part)['median']:.3f} ms", args.quiet)
         step += 1
         progress(
-            f"[{step}/{total}] tokenring ring, {args.nodes} nodes, bitrate {args.bitrate}, ack {args.ack} ...",
+            f"[{step}/{total}] tokenring ring, {args.nodes} nodes over {args.transport} ({topology}s), "
+            f"bitrate {args.bitrate}, ack {args.ack} ...",
             args.quiet,
         )
         result = run_ring(
@@ -275,6 +343,9 @@ def run(args: argparse.Namespace) -> int:
             ack_mode=args.ack,
             timeout=args.timeout,
             ids=ids,
+            router=router,
+            transport=args.transport,
+            profile=args.profile,
         )
         ring += result.rounds_s
         rss += result.rss_mb
@@ -288,6 +359,9 @@ def run(args: argparse.Namespace) -> int:
         "rounds": args.rounds * args.repeat,
         "bitrate": args.bitrate,
         "ack": args.ack,
+        "topology": topology,
+        "transport": args.transport,
+        "profile": args.profile,
         "rtt_ms": ring_s,
         "baseline_rtt_ms": bare_s,
         "ratio_median": ring_s["median"] / bare_s["median"],
@@ -306,7 +380,7 @@ def run(args: argparse.Namespace) -> int:
     }
     rows = [
         [
-            "tokenring",
+            f"tokenring ({args.transport})",
             f"{ring_s['median']:.3f}",
             f"{ring_s['p90']:.3f}",
             f"{ring_s['p99']:.3f}",
@@ -323,7 +397,8 @@ def run(args: argparse.Namespace) -> int:
         ],
     ]
     print(
-        f"token round trip, {args.nodes} nodes, {report['rounds']} rounds, bitrate {args.bitrate}, ack {args.ack}"
+        f"token round trip, {args.nodes} nodes, {report['rounds']} rounds, bitrate {args.bitrate}, ack {args.ack}, "
+        f"{args.transport} ({topology}s){', profile ' + args.profile if args.profile else ''}"
     )
     print(format_table(rows, ["ring", "median ms", "p90 ms", "p99 ms", "max ms", "per hop us"]))
     print(

@@ -2,7 +2,9 @@
 
 Same Zenoh settings as the real ring (peers on loopback, multicast off, express publishers,
 congestion control DROP, real-time priority); process 0 times the rounds and prints them as
-one JSON line on stdout.
+one JSON line on stdout. ``--mode client``: every process is a client of a router at ``--port``
+(the router topology of ``Launcher(router=True)``); otherwise process 0 listens there and the
+others connect to it, forming a full mesh of peers.
 """
 
 from __future__ import annotations
@@ -28,10 +30,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--warmup", type=int, default=200)
     p.add_argument("--ring", default="bare")
     p.add_argument("--timeout", type=float, default=120.0)
+    p.add_argument("--mode", default="peer", choices=("peer", "client"))
     args = p.parse_args(argv)
     i, n = args.index, args.count
     endpoint = f"tcp/127.0.0.1:{args.port}"
-    config = make_config(listen=[endpoint]) if i == 0 else make_config(connect=[endpoint])
+    if args.mode == "client":
+        config = make_config(mode="client", connect=[endpoint])
+    elif i == 0:
+        config = make_config(listen=[endpoint])
+    else:
+        config = make_config(connect=[endpoint])
     prefix = f"tokenring-bare/{args.ring}"
     done = threading.Event()
     stamps: list[float] = []
@@ -45,14 +53,23 @@ def main(argv: list[str] | None = None) -> int:
         )
         put = publisher.put
 
+        put_times: list[float] = []
+        perf = time.perf_counter
+
         if i == 0:
 
             def handle(sample: zenoh.Sample) -> None:
-                stamps.append(time.perf_counter())
+                stamps.append(perf())
                 if len(stamps) >= total:
                     done.set()
                     return
-                put(sample.payload.to_bytes())
+                payload = sample.payload.to_bytes()
+                if len(stamps) & 15:
+                    put(payload)
+                else:  # every 16th put is timed, as the node OS times its sends
+                    t0 = perf()
+                    put(payload)
+                    put_times.append(perf() - t0)
 
         else:
 
@@ -72,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 print(json.dumps({"error": "bare ring did not form"}), flush=True)
                 return 1
-            time.sleep(0.3)  # let every peer connect to every other
+            time.sleep(0.3 + 0.01 * n)  # let every peer connect to every other
             put(bytes(514))
             if not done.wait(args.timeout):
                 print(
@@ -82,7 +99,9 @@ def main(argv: list[str] | None = None) -> int:
                 session.put(f"{prefix}/stop", b"")
                 return 1
             rounds = [b - a for a, b in itertools.pairwise(stamps)][args.warmup :]
-            print(json.dumps({"rounds_s": rounds}), flush=True)
+            put_times.sort()
+            put_us = put_times[len(put_times) // 2] * 1e6 if put_times else float("nan")
+            print(json.dumps({"rounds_s": rounds, "put_us_median": put_us}), flush=True)
             session.put(f"{prefix}/stop", b"")
             time.sleep(0.1)
         else:

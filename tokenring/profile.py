@@ -12,9 +12,13 @@ interrupt lock. The ``arcnet`` profile adds, per pass, on the node that holds th
   channel this node gets or stores (a C51 loop reading the controller's auto-incrementing data
   register with MOVX and writing the user structure in XRAM, switching DPTR each byte); an
   inbox or outbox costs its 4 header bytes per visit (state, sender, sequence, code);
-* **the sonar's interrupt lock** — the sonar measures one sensor every 15 ms and samples it for
+* **the sonar's interrupt lock** — the sonar measures one sensor every ~15 ms and samples it for
   510 x 20 µs = 10.2 ms with the ARCNET interrupt disabled (seed §4.3.2): a token arriving in
-  that window waits until it ends.
+  that window waits until it ends. The sonar's cycle is not synchronised with the token, so the
+  phase at which the token finds it is drawn at random per visit (on average the token waits
+  10.2/15 x 10.2/2 = 3.5 ms there). A strictly periodic 15 ms schedule would instead phase-lock
+  with a round near a multiple of 15 ms and make the token wait almost the whole lock every
+  round; the real sonar's evaluation time varies with the echo, which breaks such locking.
 
 All three scale with ``2.5 Mbit/s / bitrate`` like the wire time, so ``up --speed K`` (which
 speeds the wire up K times) keeps the proportions. The delay is applied where ``--bitrate``
@@ -24,6 +28,7 @@ plus the profile's hop time. Without ``--profile`` the node OS does not call int
 
 from __future__ import annotations
 
+import random
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -90,7 +95,7 @@ class Pacer:
         self.byte_s = profile.byte_s * self.scale
         lock = profile.locks.get(node.name)
         self.lock = None if lock is None else (lock[0] * self.scale, lock[1] * self.scale)
-        self.start = start
+        self._phase = random.Random(int(start * 1e6) ^ node.node_id).random
         self.last_copy_bytes = 0
         self.held_s = 0.0  # total time the token waited for a locked interrupt
 
@@ -105,7 +110,7 @@ class Pacer:
         held = 0.0
         if self.lock is not None:
             period, locked = self.lock
-            phase = (t_in - self.start) % period
+            phase = self._phase() * period
             if phase < locked:
                 held = locked - phase
                 self.held_s += held

@@ -1,0 +1,724 @@
+"""bench/RESULTS.md and its PNG plots, generated from one suite run (``bench/results/<date>.json``).
+
+Sections the run did not include are filled from the latest earlier result file that has them,
+and say so with that file's date. Never edit RESULTS.md by hand: rerun ``python -m bench``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tokenring.bench import ROUTER_FROM
+
+HERE = Path(__file__).resolve().parent
+REPRODUCE = "python -m bench"
+
+
+def md_table(rows: list[list[Any]], head: list[str]) -> str:
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def f(value: Any, digits: int = 2) -> str:
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return "-"
+    return f"{value:.{digits}f}"
+
+
+def verdict(ok: bool | None) -> str:
+    return "-" if ok is None else ("**met**" if ok else "**missed**")
+
+
+def previous_section(name: str, out_dir: Path, current: Path | None) -> tuple[dict[str, Any], str] | None:
+    """The latest earlier run's ``name`` section (or bench/recovery.py's own file) and its date."""
+    files = sorted(out_dir.glob("*.json"), key=lambda p: p.stat().st_mtime, reverse=True)
+    for path in files:
+        if current is not None and path.resolve() == current.resolve():
+            continue
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+        if isinstance(data, dict) and name in data.get("sections", {}):
+            return data["sections"][name], f"{data['date']} ({path.name})"
+        if name == "recovery" and isinstance(data, dict) and data.get("benchmark") == "recovery":
+            return data, f"{data['date']} ({path.name}, `python -m bench.recovery`)"
+    return None
+
+
+# ---------------------------------------------------------------------------------------------
+# plots
+
+
+def _plt() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_scaling(runs: list[dict[str, Any]], path: Path) -> None:
+    plt = _plt()
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.5))
+    styles = {"peer": ("tab:blue", "o"), "router": ("tab:red", "s")}
+    for topology, (color, marker) in styles.items():
+        good = [r for r in runs if r["topology"] == topology and "rtt_ms" in r]
+        bare = [r for r in runs if r["topology"] == topology and "bare_rtt_ms" in r]
+        if good:
+            n = [r["nodes"] for r in good]
+            ax1.plot(
+                n,
+                [r["rtt_ms"]["median"] for r in good],
+                marker=marker,
+                color=color,
+                label=f"tokenring, {topology}s",
+            )
+            ax1.plot(
+                n,
+                [r["rtt_ms"]["p99"] for r in good],
+                marker=marker,
+                color=color,
+                ls=":",
+                alpha=0.6,
+                label=f"p99, {topology}s",
+            )
+            ax2.plot(
+                n,
+                [r["per_hop_us"] for r in good],
+                marker=marker,
+                color=color,
+                label=f"tokenring, {topology}s",
+            )
+        if bare:
+            n = [r["nodes"] for r in bare]
+            ax1.plot(
+                n,
+                [r["bare_rtt_ms"]["median"] for r in bare],
+                marker=marker,
+                color=color,
+                ls="--",
+                mfc="none",
+                label=f"bare Zenoh, {topology}s",
+            )
+            ax2.plot(
+                n,
+                [r["bare_rtt_ms"]["median"] * 1e3 / r["nodes"] for r in bare],
+                marker=marker,
+                color=color,
+                ls="--",
+                mfc="none",
+                label=f"bare Zenoh, {topology}s",
+            )
+    ax1.axhline(100, color="grey", lw=0.8, ls="-.")
+    ax1.text(2.1, 110, "aim: p99 < 100 ms at 255", fontsize=8, color="grey")
+    for ax in (ax1, ax2):
+        ax.set_xscale("log", base=2)
+        ax.set_xlabel("nodes in the ring")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    ax1.set_yscale("log")
+    ax1.set_ylabel("token round trip (ms)")
+    ax1.set_title("round trip vs ring size (bitrate max)")
+    ax2.set_ylabel("median round trip / N (µs per hop)")
+    ax2.set_title("per-hop cost")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_resources(runs: list[dict[str, Any]], path: Path) -> None:
+    plt = _plt()
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4))
+    for topology, color in (("peer", "tab:blue"), ("router", "tab:red")):
+        good = [r for r in runs if r["topology"] == topology and "rtt_ms" in r]
+        if not good:
+            continue
+        n = [r["nodes"] for r in good]
+        ax1.plot(
+            n, [r["rss_mb"]["mean"] for r in good], "o-", color=color, label=f"RSS per node, {topology}s"
+        )
+        ax2.plot(
+            n, [r["cpu_all_nodes_pct"] for r in good], "o-", color=color, label=f"all nodes, {topology}s"
+        )
+        ax2.plot(
+            n,
+            [r["launcher_cpu_pct"] for r in good],
+            "x--",
+            color=color,
+            label=f"launcher (router), {topology}s",
+        )
+    ax1.set_ylabel("MB")
+    ax2.set_ylabel("% of one core")
+    ax2.axhline(200, color="grey", lw=0.8)
+    ax2.text(2.1, 205, "the machine: 2 cores", fontsize=8, color="grey")
+    for ax in (ax1, ax2):
+        ax.set_xscale("log", base=2)
+        ax.set_xlabel("nodes")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+    ax1.set_title("memory per node process")
+    ax2.set_title("CPU while circulating at bitrate max")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_transports(runs: list[dict[str, Any]], path: Path) -> None:
+    plt = _plt()
+    good = [r for r in runs if "rtt_ms" in r]
+    sizes = sorted({r["nodes"] for r in good})
+    fig, axes = plt.subplots(1, len(sizes), figsize=(5.5 * len(sizes), 4), squeeze=False)
+    for ax, n in zip(axes[0], sizes, strict=True):
+        rows = [r for r in good if r["nodes"] == n]
+        labels = [label_transport(r) for r in rows]
+        med = [r["rtt_ms"]["median"] for r in rows]
+        p99 = [r["rtt_ms"]["p99"] for r in rows]
+        x = np.arange(len(rows))
+        ax.bar(x - 0.2, med, 0.4, label="median")
+        ax.bar(x + 0.2, p99, 0.4, label="p99", alpha=0.6)
+        ax.axhline(
+            rows[0]["bare_rtt_ms"]["median"], color="k", ls="--", lw=1, label="bare Zenoh ring (median)"
+        )
+        ax.set_xticks(x, labels, fontsize=8)
+        ax.set_ylabel("round trip (ms)")
+        ax.set_title(f"{n} nodes, bitrate max")
+        ax.legend(fontsize=8)
+        ax.grid(True, axis="y", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_profile(section: dict[str, Any], path: Path) -> None:
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(8, 4))
+    lo, hi = section["seed_ms"]
+    ax.axvspan(lo, hi, color="tab:green", alpha=0.15, label=f"seed: {lo:.0f}-{hi:.0f} ms (7 computers)")
+    for run, color in zip(section["runs"], ("tab:grey", "tab:blue"), strict=False):
+        values = np.array(run["rounds_s"]) * 1e3
+        ax.hist(
+            values,
+            bins=40,
+            range=(10, 50),
+            alpha=0.6,
+            color=color,
+            label=f"{run['label']}: median {np.median(values):.1f} ms",
+        )
+    ax.set_xlabel("token round trip (ms)")
+    ax.set_ylabel("rounds")
+    ax.set_title("--profile arcnet, the seed's seven computers at 2.5 Mbit/s")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def label_transport(r: dict[str, Any]) -> str:
+    return f"{r['transport']} ({r['topology']}s)" if r["transport"] == "zenoh" else r["transport"]
+
+
+# ---------------------------------------------------------------------------------------------
+# sections
+
+
+def pick(runs: list[dict[str, Any]], topology: str, n: int) -> dict[str, Any] | None:
+    return next((r for r in runs if r["topology"] == topology and r["nodes"] == n and "rtt_ms" in r), None)
+
+
+def aims(sections: dict[str, Any]) -> str:
+    rows: list[list[Any]] = []
+    runs = sections.get("scaling", {}).get("runs", [])
+    r8 = pick(runs, "peer", 8)
+    if r8 and "ratio_median" in r8:
+        rows.append(
+            [
+                "8-node round trip vs bare Zenoh ring (peers, same run)",
+                "≤ 1.2×",
+                f"{r8['ratio_median']:.2f}× ({f(r8['rtt_ms']['median'], 3)} vs {f(r8['bare_rtt_ms']['median'], 3)} ms)",
+                verdict(r8["ratio_median"] <= 1.2),
+            ]
+        )
+    for topology in ("peer", "router"):
+        a, b = pick(runs, topology, 8), pick(runs, topology, 64)
+        if a and b:
+            growth = b["per_hop_us"] / a["per_hop_us"]
+            rows.append(
+                [
+                    f"per-hop cost flat from 8 to 64 nodes ({topology}s)",
+                    "within 1.5×",
+                    f"{growth:.2f}× ({a['per_hop_us']:.0f} → {b['per_hop_us']:.0f} µs)",
+                    verdict(growth <= 1.5),
+                ]
+            )
+    big = max((r for r in runs if "rtt_ms" in r), key=lambda r: r["nodes"], default=None)
+    if big and big["nodes"] >= 128:
+        rows.append(
+            [
+                f"{big['nodes']} nodes circulate, p99 round trip ({big['topology']}s)",
+                "< 100 ms",
+                f"{f(big['rtt_ms']['p99'], 1)} ms (median {f(big['rtt_ms']['median'], 1)})",
+                verdict(big["rtt_ms"]["p99"] < 100 and big["nodes"] == 255),
+            ]
+        )
+    prof = sections.get("profile")
+    if prof and prof.get("runs"):
+        busy = prof["runs"][-1]
+        lo, hi = prof["seed_ms"]
+        med = busy["rtt_ms"]["median"]
+        rows.append(
+            [
+                "--profile arcnet, 7 nodes with programs",
+                f"seed {lo:.0f}-{hi:.0f} ms",
+                f"median {f(med, 1)} ms (p10-p90 {f(np.percentile(np.array(busy['rounds_s']) * 1e3, 10), 1)}-{f(busy['rtt_ms']['p90'], 1)})",
+                verdict(lo <= med <= hi),
+            ]
+        )
+    rec = sections.get("recovery")
+    if rec:
+        for kind, s in rec.get("summary", {}).items():
+            if s.get("aim_ms") and s.get("median_ms") is not None:
+                rows.append(
+                    [
+                        f"recovery after {kind} (median, 8 nodes)",
+                        f"< {s['aim_ms']:.0f} ms",
+                        f"{s['median_ms']:.1f} ms",
+                        verdict(s["median_ms"] < s["aim_ms"]),
+                    ]
+                )
+    if not rows:
+        return ""
+    return "## Aims\n\n" + md_table(rows, ["aim", "target", "measured", ""]) + "\n"
+
+
+def scaling_md(section: dict[str, Any], plots: Path) -> str:
+    runs = section["runs"]
+    rows = []
+    for r in runs:
+        if "rtt_ms" not in r:
+            rows.append(
+                [
+                    r["topology"],
+                    r["nodes"],
+                    f(r.get("bare_rtt_ms", {}).get("median"), 3),
+                    "failed: " + r.get("error", "?")[:60],
+                    "",
+                    "",
+                    "",
+                    "",
+                    "",
+                    "",
+                    "",
+                    "",
+                    "",
+                    "",
+                ]
+            )
+            continue
+        bare = r.get("bare_rtt_ms", {})
+        rows.append(
+            [
+                r["topology"],
+                r["nodes"],
+                f(bare.get("median"), 3),
+                f(r["rtt_ms"]["median"], 3),
+                f(r["rtt_ms"]["p90"], 3),
+                f(r["rtt_ms"]["p99"], 3),
+                f(r["rtt_ms"]["max"], 2),
+                f(r.get("ratio_median")) + "×",
+                f(r["per_hop_us"], 0),
+                f(bare.get("median", np.nan) * 1e3 / r["nodes"], 0),
+                f(r["handler_us"]["median"], 0),
+                f(r["rss_mb"]["mean"], 0),
+                f(r["cpu_per_node_pct"], 1),
+                f(r["launcher_cpu_pct"], 0),
+                f(r["form_s"], 1),
+                "/".join(f(x, 1) for x in r.get("load_after", [])[:1]),
+            ]
+        )
+    head = [
+        "topology",
+        "N",
+        "bare median ms",
+        "median ms",
+        "p90",
+        "p99",
+        "max",
+        "ratio",
+        "µs/hop",
+        "bare µs/hop",
+        "handler µs",
+        "RSS MB/node",
+        "CPU %/node",
+        "launcher CPU %",
+        "forms in s",
+        "load",
+    ]
+    rows = [row + [""] * (len(head) - len(row)) for row in rows]
+    text = [
+        "## Round trip vs ring size",
+        "",
+        "Bitrate max, adaptive acks; every tokenring ring against a bare Zenoh ring (N processes forwarding 514 bytes, no OS work) of the same size and topology, measured right before it. *peers*: a full mesh of Zenoh peers (the default of `tokenring up`); *routers*: every node a client of the launcher's Zenoh router (`tokenring up --router`). The round trip is timed by the round master (the lowest ID); CPU is per node while circulating, `launcher` is the launcher process with the router in it; `load` is the 1-minute load average after the run (the machine is shared).",
+        "",
+    ]
+    text.append(md_table(rows, head))
+    text += [
+        "",
+        f"![round trip and per-hop cost vs N]({plots}/scaling.png)",
+        "",
+        f"![memory and CPU vs N]({plots}/resources.png)",
+        "",
+    ]
+    fits = section.get("fits", {})
+    for topology, fit in fits.items():
+        text.append(
+            f"* **{topology}s** ({', '.join(map(str, fit['sizes']))} nodes): round trip ≈ {fit['rtt_ms_intercept']:.2f} ms + "
+            f"{fit['rtt_ms_per_node'] * 1e3:.0f} µs × N (R² {fit['r2']:.3f}); as a power law N^{fit['power_law_exponent']:.2f}; "
+            f"RSS {fit['rss_mb_per_node']:.0f} MB per node process, so memory grows linearly (255 nodes ≈ {fit['rss_mb_per_node'] * 255 / 1024:.1f} GB)."
+        )
+    text.append("")
+    text.append(topology_choice(runs))
+    return "\n".join(text) + "\n"
+
+
+def topology_choice(runs: list[dict[str, Any]]) -> str:
+    both = sorted(
+        {r["nodes"] for r in runs if r["topology"] == "peer" and "rtt_ms" in r}
+        & {r["nodes"] for r in runs if r["topology"] == "router" and "rtt_ms" in r}
+    )
+    lines = [
+        "**Topology.** Peers reach each other directly (one TCP hop per pass) but every pair keeps a link: N(N−1)/2 links, each with its own keep-alives, and N sessions gossiping. Through a router every pass is two hops (node → router → node) and the router process carries all traffic, but each node keeps one link."
+    ]
+    for n in both:
+        p, r = pick(runs, "peer", n), pick(runs, "router", n)
+        assert p is not None and r is not None
+        lines.append(
+            f"At {n} nodes: peers {f(p['rtt_ms']['median'], 2)} ms (p99 {f(p['rtt_ms']['p99'], 2)}), router {f(r['rtt_ms']['median'], 2)} ms (p99 {f(r['rtt_ms']['p99'], 2)}); the ring formed in {f(p['form_s'], 1)} s vs {f(r['form_s'], 1)} s."
+        )
+    lines.append(
+        f"So `tokenring up` keeps peers for the robot's eight nodes, and `tokenring bench --topology auto` uses a router from {ROUTER_FROM} nodes on; 255 peers (32 385 links) are not attempted."
+    )
+    return " ".join(lines) + "\n"
+
+
+def transports_md(section: dict[str, Any], plots: Path) -> str:
+    rows = []
+    for r in section["runs"]:
+        if "rtt_ms" not in r:
+            rows.append(
+                [
+                    r["nodes"],
+                    label_transport(r),
+                    "failed: " + r.get("error", "?")[:60],
+                    "",
+                    "",
+                    "",
+                    "",
+                    "",
+                    "",
+                    "",
+                ]
+            )
+            continue
+        rows.append(
+            [
+                r["nodes"],
+                label_transport(r),
+                f(r["rtt_ms"]["median"], 3),
+                f(r["rtt_ms"]["p99"], 3),
+                f(r["ratio_to_bare_zenoh"]) + "×",
+                f(r["per_hop_us"], 0),
+                f(r["handler_us"]["median"], 0),
+                f(r["rss_mb"]["mean"], 0),
+                f(r["cpu_per_node_pct"], 1),
+                f(r["form_s"], 1),
+            ]
+        )
+    text = [
+        "## Zenoh against what users would otherwise pick",
+        "",
+        "The same node OS and ring (acks, recovery, channels) over each backend of the transport boundary (`tokenring/transport/`, python-can style: `tokenring node --transport zenoh|udp|zmq`). `udp`: one datagram per frame on loopback; `zmq`: PUSH/PULL sockets of ZeroMQ; both learn membership from a small TCP registry in the launcher (a closed connection = a crashed node). The ratio is to the bare Zenoh ring (peers) of the same run.",
+        "",
+        md_table(
+            rows,
+            [
+                "N",
+                "transport",
+                "median ms",
+                "p99 ms",
+                "vs bare Zenoh",
+                "µs/hop",
+                "handler µs",
+                "RSS MB/node",
+                "CPU %/node",
+                "forms in s",
+            ],
+        ),
+        "",
+        f"![transports]({plots}/transports.png)",
+        "",
+        "What Zenoh costs: a Rust runtime per process (threads, memory) and a routing layer on every put, so raw sockets pass the token faster on one host. What it buys: the key space that `sniff`, `monitor`, `status`, `fault` and the world simulator use to reach every node without knowing addresses; liveliness tokens instead of a hand-made registry; routers, so a ring spans hosts (`--router`, across network namespaces in the tests) and scales past a full mesh; TLS and access control from its configuration. The socket backends carry only the token path; their nodes still use Zenoh for the control plane.",
+    ]
+    return "\n".join(text) + "\n"
+
+
+def load_md(section: dict[str, Any]) -> str:
+    rows = [
+        [
+            r["label"],
+            f(r["rtt_ms"]["median"], 3),
+            f(r["rtt_ms"]["p90"], 3),
+            f(r["rtt_ms"]["p99"], 3),
+            f(r["handler_us"]["median"], 0),
+            f(r["handler_us"]["p99"], 0),
+            f(r["cpu_per_node_pct"], 1),
+            f(r["rss_mb"]["mean"], 0),
+        ]
+        for r in section["runs"]
+    ]
+    ratio = ""
+    if len(section["runs"]) == 2:
+        ratio = f"\nWith every program reading and writing its channels the round trip is {section['runs'][1]['rtt_ms']['median'] / section['runs'][0]['rtt_ms']['median']:.2f}× the idle ring's.\n"
+    return (
+        "## Real channel load\n\nThe robot's eight nodes at bitrate max: idle (no programs) and with all eight programs running against the world simulator (room `office`), each copying the channels it unlocked at every visit.\n\n"
+        + md_table(
+            rows,
+            ["ring", "median ms", "p90", "p99", "handler µs median", "handler p99", "CPU %/node", "RSS MB"],
+        )
+        + "\n"
+        + ratio
+    )
+
+
+def commands_md(section: dict[str, Any], plots: Path) -> str:
+    rows = [
+        [
+            s["label"],
+            s["commands"],
+            s["acknowledged"],
+            s["lost"],
+            f(s["ms"]["median"], 2),
+            f(s["ms"]["p99"], 2),
+            f(s["ms"]["max"], 2),
+            f(s["rounds"]["median"], 0),
+            f(s["rounds"]["max"], 0),
+            f(s["waited_rounds"]["median"], 0),
+            f(s["waited_rounds"]["max"], 0),
+            section["seed_worst_rounds"],
+        ]
+        for s in section["scenarios"]
+    ]
+    return (
+        "## Command latency\n\n"
+        f"`send_command` until the command is back at the sender acknowledged, on the robot's {section['nodes']} nodes at bitrate max (program `bench/programs/commander.py`). *rounds* are the sender's token visits in that time; *waited* are the rounds its outbox found the inbox occupied by another sender's command. The seed's worst case is n − 2 = {section['seed_worst_rounds']} rounds of waiting.\n\n"
+        + md_table(
+            rows,
+            [
+                "scenario",
+                "commands",
+                "acked",
+                "lost",
+                "median ms",
+                "p99 ms",
+                "max ms",
+                "rounds median",
+                "rounds max",
+                "waited median",
+                "waited max",
+                "seed worst",
+            ],
+        )
+        + "\n"
+    )
+
+
+def profile_md(section: dict[str, Any], plots: Path) -> str:
+    m = section["model"]
+    lo, hi = section["seed_ms"]
+    rows = [["seed robot (2001): 7 computers, 2.5 Mbit/s, 8051 at 16 MHz", f"{lo:.0f}-{hi:.0f}", "", ""]]
+    for r in section["runs"]:
+        values = np.array(r["rounds_s"]) * 1e3
+        rows.append(
+            [
+                f"tokenring `--profile arcnet`, {r['label']}",
+                f(np.median(values), 1),
+                f"{np.percentile(values, 10):.1f}-{np.percentile(values, 90):.1f}",
+                f(np.max(values), 1),
+            ]
+        )
+    return (
+        "## The seed's timing: `--profile arcnet`\n\n"
+        f"Seven nodes (the seed's seven computers: {', '.join(section['nodes'])}) at 2.5 Mbit/s with the profile of `tokenring/profile.py`: per pass {m['wire_ms_per_hop']:.3f} ms wire time, {m['visit_ms']:.3f} ms of 8051 interrupt and header work, {m['byte_us']:.0f} µs per byte of each unlocked channel the node copies, and on the sonar the 10.2 ms interrupt lock of every 15 ms measurement (the token waits {m['sonar_mean_hold_ms']:.1f} ms there on average). Without any channel copied the model gives {m['no_copy_ms']:.1f} ms a round.\n\n"
+        + md_table(rows, ["", "round trip median ms", "p10-p90 ms", "max ms"])
+        + f"\n\n![profile arcnet]({plots}/profile.png)\n"
+    )
+
+
+def recovery_md(section: dict[str, Any]) -> str:
+    rows = []
+    for kind, s in section["summary"].items():
+        rows.append(
+            [
+                kind,
+                s["trials"],
+                f(s["median_ms"], 1),
+                f(s["p90_ms"], 1),
+                f(s["max_ms"], 1),
+                "-" if s["aim_ms"] is None else f"< {s['aim_ms']:.0f}",
+                s["not_recovered"],
+                s["tokens_regenerated"],
+                s["duplicates_eliminated"],
+            ]
+        )
+    load = section.get("machine", {}).get("load_1min")
+    return (
+        "## Recovery\n\n"
+        f"`bench/recovery.py`: faults injected at run time into an {section['nodes']}-node ring at bitrate max, recovery timed from the wire (until one token has gone round every node that should be in the ring), load {f(load, 1)} at its end.\n\n"
+        + md_table(
+            rows,
+            [
+                "fault",
+                "trials",
+                "median ms",
+                "p90 ms",
+                "max ms",
+                "aim",
+                "not recovered",
+                "tokens regenerated",
+                "duplicates eliminated",
+            ],
+        )
+        + "\n"
+    )
+
+
+def download_md(section: dict[str, Any]) -> str:
+    rows = []
+    for r in section["runs"]:
+        for mode in ("raw", "zlib"):
+            m = r[mode]
+            rows.append(
+                [
+                    r["bitrate"],
+                    mode,
+                    m["wire_bytes"],
+                    m["chunks"],
+                    f(m["rounds_per_chunk"], 2),
+                    f(r["round_ms"]["median"], 2),
+                    f(m["seconds_median"], 1),
+                    f(m["source_bytes_per_s"], 0),
+                    f"{m['vs_seed'][0]:.0f}-{m['vs_seed'][1]:.0f}×",
+                ]
+            )
+    return (
+        "## Program download\n\n`bench/download.py`: all eight programs of `modules/` through the token of the eight-node ring, one 30-byte chunk per round (the seed needed 3-4 minutes for all).\n\n"
+        + md_table(
+            rows,
+            [
+                "bitrate",
+                "sent as",
+                "bytes on the ring",
+                "chunks",
+                "rounds/chunk",
+                "round ms (idle)",
+                "seconds",
+                "program B/s",
+                "faster than the seed",
+            ],
+        )
+        + "\n"
+    )
+
+
+def robot_md(out_dir: Path) -> str:
+    lines = [
+        "## The robot's own benchmarks",
+        "",
+        "Slow (minutes each), so the suite does not run them; their latest result files:",
+        "",
+    ]
+    for name, command in (
+        ("localization", "python -m bench.localization --json bench/results/localization-DATE.json"),
+        ("mapping", "python -m bench.mapping --json bench/results/mapping-DATE.json"),
+    ):
+        files = sorted(out_dir.glob(f"{name}-*.json"))
+        if files:
+            lines.append(
+                f"* `{name}`: [{files[-1].name}](results/{files[-1].name}) (`{command.split(' --json')[0]}`)"
+            )
+        else:
+            lines.append(f"* `{name}`: no result file yet — `{command}`")
+    return "\n".join(lines) + "\n"
+
+
+def write_report(results: dict[str, Any], out_dir: Path, md_path: Path | None = None) -> Path:
+    """Write the PNGs under ``out_dir/plots`` and RESULTS.md beside ``out_dir``; returns its path."""
+    out_dir = Path(out_dir)
+    md_path = md_path or out_dir.parent / "RESULTS.md"
+    plots = out_dir / "plots"
+    plots.mkdir(parents=True, exist_ok=True)
+    current = out_dir / f"{results['date'][:10]}{'-quick' if results.get('quick') else ''}.json"
+    sections: dict[str, Any] = dict(results["sections"])
+    borrowed: dict[str, str] = {}
+    for name in ("scaling", "transports", "load", "commands", "profile", "recovery", "download"):
+        if name not in sections:
+            found = previous_section(name, out_dir, current)
+            if found is not None:
+                sections[name], borrowed[name] = found
+    m = results["machine"]
+    head = [
+        "# Benchmark results",
+        "",
+        f"Generated by `{results['command']}` on {results['date']} — do not edit; to reproduce the whole report run:",
+        "",
+        "```",
+        f".venv/bin/{REPRODUCE}        # about 30 minutes; --quick: under 2 minutes",
+        "```",
+        "",
+        f"Machine: {m['cpus']} cores, {m['memory_gib']} GiB, Python {m['python']}, Zenoh {m['zenoh']}, Linux {m['kernel']}; "
+        f"shared with other work: load average {results['load_start'][0]} at the start, {results['load_end'][0]} at the end of the run "
+        f"({results['seconds'] / 60:.0f} min). Times are medians unless marked; ratios compare runs of the same suite run.",
+        "",
+    ]
+    if borrowed:
+        head.append(
+            "Not run this time, taken from earlier runs: "
+            + "; ".join(f"{k} from {v}" for k, v in borrowed.items())
+            + ".\n"
+        )
+    if results.get("errors"):
+        head.append(
+            "Sections that failed in this run: "
+            + "; ".join(f"{k}: {v}" for k, v in results["errors"].items())
+            + "\n"
+        )
+    parts = ["\n".join(head), aims(sections)]
+    rel = Path(os.path.relpath(plots, md_path.parent))
+    if "scaling" in sections:
+        plot_scaling(sections["scaling"]["runs"], plots / "scaling.png")
+        plot_resources(sections["scaling"]["runs"], plots / "resources.png")
+        parts.append(scaling_md(sections["scaling"], rel))
+    if "transports" in sections:
+        plot_transports(sections["transports"]["runs"], plots / "transports.png")
+        parts.append(transports_md(sections["transports"], rel))
+    if "load" in sections:
+        parts.append(load_md(sections["load"]))
+    if "commands" in sections:
+        parts.append(commands_md(sections["commands"], rel))
+    if "profile" in sections:
+        plot_profile(sections["profile"], plots / "profile.png")
+        parts.append(profile_md(sections["profile"], rel))
+    if "recovery" in sections:
+        parts.append(recovery_md(sections["recovery"]))
+    if "download" in sections:
+        parts.append(download_md(sections["download"]))
+    parts.append(robot_md(out_dir))
+    md_path.write_text("\n".join(p for p in parts if p).rstrip() + "\n")
+    return md_path

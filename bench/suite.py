@@ -1,0 +1,582 @@
+"""The benchmark suite: ``python -m bench [--quick]`` writes bench/results/<date>.json and bench/RESULTS.md.
+
+Sections (``--sections``, all by default):
+
+* ``scaling``    round trip vs ring size at ``--bitrate max``, each ring against a bare Zenoh
+                 ring of the same size and topology measured in the same run (ratio, per hop),
+                 both topologies: a full mesh of peers and clients of a Zenoh router;
+                 RSS and CPU per node, the launcher's (router's) CPU, a fit of the cost in N;
+* ``transports`` the same ring over Zenoh (peers, router), plain UDP sockets and ZeroMQ;
+* ``load``       the robot's eight programs running (world simulator, real channel load) vs
+                 the same eight nodes idle;
+* ``commands``   command latency (send -> acknowledged) in rounds and ms, free inbox and seven
+                 senders contending for one inbox, against the seed's n-2 rounds;
+* ``profile``    ``--profile arcnet`` on the seed's seven computers vs its 30-40 ms;
+* ``recovery``   bench/recovery.py (crash, hang, token loss, partition heal);
+* ``download``   bench/download.py (all eight programs through the token).
+
+``--quick`` (under 2 minutes) runs a subset of sizes and sections; sections it leaves out are
+taken into RESULTS.md from the latest earlier run that has them, with that run's date. The
+robot's own benchmarks (bench/localization.py, bench/mapping.py) take many minutes and are
+referenced from their latest result files, never run here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import datetime as dt
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+import traceback
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+RESULTS_DIR = HERE / "results"
+SECTIONS = ("scaling", "transports", "load", "commands", "profile", "recovery", "download")
+QUICK_SECTIONS = ("scaling", "transports", "commands", "profile")
+FULL_SIZES = {"peer": [2, 4, 8, 16, 32, 64], "router": [8, 16, 32, 64, 128, 255]}
+QUICK_SIZES = {"peer": [2, 4, 8], "router": [8]}
+SEED_NODES = ["main", "motor", "sonar", "compass", "copro", "map", "lcd"]  # the seed's 7 computers
+
+
+def rounds_for(n: int, quick: bool) -> tuple[int, int]:
+    """Rounds measured and discarded for a ring of ``n``: about the same wall time per size."""
+    budget = 6000 if quick else 16000
+    rounds = int(np.clip(budget / n, 150, 800 if quick else 2000))
+    return rounds, max(50, rounds // 5)
+
+
+def timeout_for(n: int) -> float:
+    return 60.0 + 1.5 * n
+
+
+class Progress:
+    """``[step/total] what ... (elapsed)`` lines on stderr, so a long run shows where it is."""
+
+    def __init__(self, total: int) -> None:
+        self.total = total
+        self.step = 0
+        self.t0 = time.monotonic()
+
+    def say(self, text: str) -> None:
+        self.step += 1
+        elapsed = time.monotonic() - self.t0
+        sys.stderr.write(f"[{self.step}/{self.total} {elapsed:5.0f}s] {text}\n")
+        sys.stderr.flush()
+
+    def note(self, text: str) -> None:
+        sys.stderr.write(f"{'':>14}{text}\n")
+        sys.stderr.flush()
+
+
+def load_avg() -> list[float]:
+    return [round(x, 2) for x in os.getloadavg()]
+
+
+def stats_ms(seconds: list[float]) -> dict[str, float]:
+    from tokenring.bench import summarize
+
+    return summarize(seconds)
+
+
+def ring_record(run: Any, n: int) -> dict[str, Any]:
+    """The figures of one ``run_ring`` result that the report needs."""
+    rtt = stats_ms(run.rounds_s)
+    return {
+        "rtt_ms": rtt,
+        "per_hop_us": rtt["median"] * 1e3 / n,
+        "handler_us": run.handler_us,
+        "send_us": run.stats.get("send_us", {}),
+        "rss_mb": {"mean": float(np.mean(run.rss_mb)), "max": float(np.max(run.rss_mb))},
+        "cpu_per_node_pct": float(np.mean(run.cpu_s) / run.wall_s * 100),
+        "cpu_all_nodes_pct": float(np.sum(run.cpu_s) / run.wall_s * 100),
+        "launcher_cpu_pct": float(run.launcher_cpu_s / run.wall_s * 100),
+        "form_s": run.form_s,
+        "rounds_s": [round(x, 7) for x in run.rounds_s],
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# sections
+
+
+def section_scaling(ctx: Context) -> dict[str, Any]:
+    from tokenring.bench import run_bare, run_ring
+
+    out: dict[str, Any] = {"runs": []}
+    for topology, sizes in ctx.sizes.items():
+        for n in sizes:
+            rounds, warmup = rounds_for(n, ctx.quick)
+            router = topology == "router"
+            record: dict[str, Any] = {
+                "topology": topology,
+                "nodes": n,
+                "rounds": rounds,
+                "load_before": load_avg(),
+            }
+            ctx.progress.say(f"scaling: bare Zenoh ring, {n} processes, {topology} ({rounds} rounds)")
+            try:
+                bare = run_bare(n, rounds, warmup, timeout_for(n), router=router)
+                record["bare_rtt_ms"] = stats_ms(bare)
+                record["bare_rounds_s"] = [round(x, 7) for x in bare]
+                ctx.progress.note(f"median {record['bare_rtt_ms']['median']:.3f} ms")
+            except Exception as exc:
+                record["bare_error"] = str(exc)
+                ctx.progress.note(f"failed: {exc}")
+            ctx.progress.say(f"scaling: tokenring ring, {n} nodes, {topology}")
+            try:
+                run = run_ring(n, rounds, warmup, timeout=timeout_for(n), router=router)
+                record.update(ring_record(run, n))
+                if "bare_rtt_ms" in record:
+                    record["ratio_median"] = record["rtt_ms"]["median"] / record["bare_rtt_ms"]["median"]
+                    record["ratio_p99"] = record["rtt_ms"]["p99"] / record["bare_rtt_ms"]["p99"]
+                ctx.progress.note(
+                    f"median {record['rtt_ms']['median']:.3f} ms, p99 {record['rtt_ms']['p99']:.3f} ms"
+                    + (f", ratio {record['ratio_median']:.2f}x" if "ratio_median" in record else "")
+                )
+            except Exception as exc:
+                record["error"] = str(exc)
+                ctx.progress.note(f"failed: {exc}")
+            record["load_after"] = load_avg()
+            out["runs"].append(record)
+    out["fits"] = fit_costs(out["runs"])
+    return out
+
+
+def fit_costs(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Least-squares fits of how the cost grows with N, per topology: round trip = a + b N,
+    RSS per node (mean), CPU of all nodes together."""
+    fits: dict[str, Any] = {}
+    for topology in ("peer", "router"):
+        good = [r for r in runs if r["topology"] == topology and "rtt_ms" in r]
+        if len(good) < 2:
+            continue
+        n = np.array([r["nodes"] for r in good], float)
+        rtt = np.array([r["rtt_ms"]["median"] for r in good])
+        b, a = np.polyfit(n, rtt, 1)
+        pred = a + b * n
+        r2 = 1 - np.sum((rtt - pred) ** 2) / max(np.sum((rtt - rtt.mean()) ** 2), 1e-12)
+        # the exponent of a power law rtt ~ N^k, from the log-log slope
+        k = float(np.polyfit(np.log(n), np.log(rtt), 1)[0])
+        fits[topology] = {
+            "rtt_ms_intercept": float(a),
+            "rtt_ms_per_node": float(b),
+            "r2": float(r2),
+            "power_law_exponent": k,
+            "rss_mb_per_node": float(np.mean([r["rss_mb"]["mean"] for r in good])),
+            "sizes": [int(x) for x in n],
+        }
+    return fits
+
+
+def section_transports(ctx: Context) -> dict[str, Any]:
+    from tokenring.bench import run_bare, run_ring
+
+    sizes = [8] if ctx.quick else [8, 64]
+    out: dict[str, Any] = {"runs": []}
+    for n in sizes:
+        rounds, warmup = rounds_for(n, ctx.quick)
+        ctx.progress.say(f"transports: bare Zenoh ring (peers), {n} processes")
+        bare = stats_ms(run_bare(n, rounds, warmup, timeout_for(n)))
+        ctx.progress.note(f"median {bare['median']:.3f} ms")
+        variants = [("zenoh", "peer"), ("zenoh", "router"), ("udp", "-"), ("zmq", "-")]
+        for transport, topology in variants:
+            ctx.progress.say(
+                f"transports: ring of {n} over {transport} {'' if topology == '-' else topology}"
+            )
+            record: dict[str, Any] = {
+                "nodes": n,
+                "transport": transport,
+                "topology": topology,
+                "bare_rtt_ms": bare,
+            }
+            try:
+                run = run_ring(
+                    n,
+                    rounds,
+                    warmup,
+                    timeout=timeout_for(n),
+                    transport=transport,
+                    router=topology == "router",
+                )
+                record.update(ring_record(run, n))
+                record["ratio_to_bare_zenoh"] = record["rtt_ms"]["median"] / bare["median"]
+                ctx.progress.note(
+                    f"median {record['rtt_ms']['median']:.3f} ms, p99 {record['rtt_ms']['p99']:.3f} ms"
+                )
+            except Exception as exc:
+                record["error"] = str(exc)
+                ctx.progress.note(f"failed: {exc}")
+            record["load"] = load_avg()
+            out["runs"].append(record)
+    return out
+
+
+def robot_plans(names: list[str], programs: bool) -> list[Any]:
+    from tokenring.commands.up import default_programs_dir
+    from tokenring.launcher import NodePlan
+    from tokenring.protocol import default_protocol
+
+    protocol = default_protocol()
+    folder = default_programs_dir()
+    return [
+        NodePlan(protocol.nodes[name].id, name, str(folder / f"{name}.py") if programs else None)
+        for name in names
+    ]
+
+
+def world_plan(ring: str, speed: str = "1") -> Any:
+    from tokenring.commands.up import world_service
+
+    args = argparse.Namespace(
+        world="office", speed=speed, seed=1, ring=ring, log_level="warning", zenoh_config=None
+    )
+    return world_service(args)
+
+
+@contextlib.contextmanager
+def node_store() -> Iterator[list[str]]:
+    """Node arguments keeping program stores in a throw-away directory."""
+    with tempfile.TemporaryDirectory(prefix="tokenring-bench-") as store:
+        yield ["--store", store]
+
+
+def section_load(ctx: Context) -> dict[str, Any]:
+    from tokenring.bench import run_ring
+    from tokenring.protocol import default_protocol
+
+    names = list(default_protocol().nodes)
+    rounds, warmup = (1500, 500) if not ctx.quick else (600, 200)
+    out: dict[str, Any] = {"nodes": names, "bitrate": "max", "runs": []}
+    for label, programs in (("idle", False), ("eight programs", True)):
+        ctx.progress.say(f"load: the robot's {len(names)} nodes, {label}, bitrate max")
+        ring = f"load{os.getpid()}{int(programs)}"
+        with node_store() as store:
+            run = run_ring(
+                len(names),
+                rounds,
+                warmup + (1500 if programs else 0),  # programs first calibrate and settle
+                timeout=240.0,
+                plans=robot_plans(names, programs),
+                services=[world_plan(ring)] if programs else [],
+                ring=ring,
+                extra_node_args=store,
+            )
+        record = {"label": label, **ring_record(run, len(names)), "load": load_avg()}
+        ctx.progress.note(
+            f"median {record['rtt_ms']['median']:.3f} ms, handler {record['handler_us']['median']:.0f} us"
+        )
+        out["runs"].append(record)
+    return out
+
+
+def section_commands(ctx: Context) -> dict[str, Any]:
+    from tokenring.bench import run_ring
+    from tokenring.cliutil import query
+    from tokenring.protocol import default_protocol
+
+    protocol = default_protocol()
+    names = list(protocol.nodes)
+    n = len(names)
+    count = 10 if ctx.quick else 40
+    program = str(HERE / "programs" / "commander.py")
+    scenarios = {
+        "free inbox (main to each module)": {"main": [f"{x}.command" for x in names if x != "main"]},
+        f"{n - 1} senders, one inbox (motor)": {x: ["motor.command"] for x in names if x != "motor"},
+    }
+    out: dict[str, Any] = {"nodes": n, "bitrate": "max", "seed_worst_rounds": n - 2, "scenarios": []}
+    for label, senders in scenarios.items():
+        ctx.progress.say(f"commands: {label}, {count} rounds of commands per sender")
+        plan = {"send": senders, "count": count, "settle_s": 1.0}
+        os.environ["TOKENRING_CMDBENCH"] = json.dumps(plan)
+        samples: list[dict[str, Any]] = []
+        try:
+            collector = CommandCollector(list(senders), query, protocol)
+            with node_store() as store:
+                plans = robot_plans(names, False)
+                for p in plans:
+                    p.program = program
+                run_ring(
+                    n,
+                    200,
+                    100,
+                    timeout=120.0,
+                    plans=plans,
+                    extra_node_args=store,
+                    ring=f"cmd{os.getpid()}{len(out['scenarios'])}",
+                    on_ready=collector,
+                )
+            samples = collector.samples
+        finally:
+            os.environ.pop("TOKENRING_CMDBENCH", None)
+        ok = [s for s in samples if s.get("ms") is not None]
+        ms = np.array([s["ms"] for s in ok]) if ok else np.array([np.nan])
+        visits = np.array([s["visits"] for s in ok]) if ok else np.array([np.nan])
+        waited = np.array([s["waited"] for s in ok]) if ok else np.array([np.nan])
+        record = {
+            "label": label,
+            "senders": senders,
+            "commands": len(samples),
+            "lost": len(samples) - len(ok),
+            "acknowledged": sum(1 for s in ok if s["acked"]),
+            "ms": {
+                "median": float(np.median(ms)),
+                "p99": float(np.percentile(ms, 99)),
+                "max": float(np.max(ms)),
+            },
+            "rounds": {"median": float(np.median(visits)), "max": float(np.max(visits))},
+            "waited_rounds": {"median": float(np.median(waited)), "max": float(np.max(waited))},
+            "round_ms": collector.round_ms,
+            "samples": samples,
+        }
+        ctx.progress.note(
+            f"{len(ok)} commands: median {record['ms']['median']:.2f} ms = {record['rounds']['median']:.0f} rounds; "
+            f"waited for the inbox up to {record['waited_rounds']['max']:.0f} rounds"
+        )
+        out["scenarios"].append(record)
+    return out
+
+
+class CommandCollector:
+    """Called by run_ring once the ring circulates: waits for the senders' programs to finish
+    and collects their samples (``report()`` of bench/programs/commander.py)."""
+
+    def __init__(self, senders: list[str], query: Callable[..., Any], protocol: Any) -> None:
+        self.senders = senders
+        self.query = query
+        self.protocol = protocol
+        self.samples: list[dict[str, Any]] = []
+        self.round_ms: dict[str, float] = {}
+
+    def __call__(self, session: Any, ring: str) -> None:
+        from tokenring import keys
+
+        deadline = time.monotonic() + 120.0
+        pending = set(self.senders)
+        while pending and time.monotonic() < deadline:
+            for name in sorted(pending):
+                node_id = self.protocol.nodes[name].id
+                replies = self.query(session, keys.control(ring, node_id, "program"), timeout=2.0)
+                if replies and replies[0][1].get("ok"):
+                    report = replies[0][1]["result"].get("report", {})
+                    if report.get("finished"):
+                        self.samples += [dict(s, sender=name) for s in report["samples"]]
+                        pending.discard(name)
+            time.sleep(0.3)
+        main_id = self.protocol.nodes["main"].id
+        replies = self.query(session, keys.control(ring, main_id, "stats"), timeout=2.0)
+        if replies and replies[0][1].get("ok"):
+            self.round_ms = replies[0][1]["result"]["round_ms"]
+
+
+def section_profile(ctx: Context) -> dict[str, Any]:
+    from tokenring.bench import run_ring
+    from tokenring.profile import PROFILES
+    from tokenring.ring import hop_time
+
+    profile = PROFILES["arcnet"]
+    n = len(SEED_NODES)
+    rounds = 150 if ctx.quick else 600
+    out: dict[str, Any] = {
+        "profile": profile.name,
+        "nodes": SEED_NODES,
+        "bitrate": "2.5M",
+        "seed_ms": list(profile.reference_ms or ()),
+        "model": {
+            "wire_ms_per_hop": hop_time(2.5e6) * 1e3,
+            "visit_ms": profile.visit_s * 1e3,
+            "byte_us": profile.byte_s * 1e6,
+            "sonar_lock_ms": [x * 1e3 for x in profile.locks["sonar"]],
+        },
+        "runs": [],
+    }
+    for label, programs in (("idle (no programs)", False), ("the seven programs running", True)):
+        ctx.progress.say(f"profile arcnet: the seed's {n} computers, {label}")
+        ring = f"prof{os.getpid()}{int(programs)}"
+        with node_store() as store:
+            run = run_ring(
+                n,
+                rounds,
+                60 + (60 if programs else 0),
+                bitrate="2.5M",
+                profile="arcnet",
+                timeout=240.0,
+                plans=robot_plans(SEED_NODES, programs),
+                services=[world_plan(ring)] if programs else [],
+                ring=ring,
+                extra_node_args=store,
+            )
+        record = {"label": label, **ring_record(run, n), "load": load_avg()}
+        ctx.progress.note(f"median {record['rtt_ms']['median']:.1f} ms, p90 {record['rtt_ms']['p90']:.1f} ms")
+        out["runs"].append(record)
+    # what the model alone predicts without any channel copied: wire + visit per hop + the
+    # sonar's expected hold (the chance to arrive in the lock times the mean rest of it)
+    period, locked = profile.locks["sonar"]
+    hold = locked / period * locked / 2
+    out["model"]["no_copy_ms"] = n * (hop_time(2.5e6) + profile.visit_s) * 1e3 + hold * 1e3
+    out["model"]["sonar_mean_hold_ms"] = hold * 1e3
+    return out
+
+
+def section_recovery(ctx: Context) -> dict[str, Any]:
+    from bench.recovery import run as run_recovery
+
+    trials = 3 if ctx.quick else 10
+    ctx.progress.say(f"recovery: crash, hang, loss, heal on an 8-node ring, {trials} trials each")
+    report = run_recovery(trials, ["crash", "hang", "loss", "heal"], "adaptive", quiet=True)
+    for kind, s in report["summary"].items():
+        ctx.progress.note(f"{kind}: median {s['median_ms']} ms")
+    return report
+
+
+def section_download(ctx: Context) -> dict[str, Any]:
+    from bench.download import run_bitrate
+
+    out: dict[str, Any] = {"runs": []}
+    with tempfile.TemporaryDirectory(prefix="tokenring-bench-store-") as store:
+        for bitrate in ("2.5M", "max"):
+            ctx.progress.say(f"download: all eight programs through the token at {bitrate}")
+            result = run_bitrate(bitrate, 1, Path(store))
+            ctx.progress.note(
+                f"zlib {result['zlib']['seconds_median']:.1f} s, raw {result['raw']['seconds_median']:.1f} s"
+            )
+            out["runs"].append(result)
+    return out
+
+
+SECTION_FUNCTIONS: dict[str, Callable[[Context], dict[str, Any]]] = {
+    "scaling": section_scaling,
+    "transports": section_transports,
+    "load": section_load,
+    "commands": section_commands,
+    "profile": section_profile,
+    "recovery": section_recovery,
+    "download": section_download,
+}
+
+
+class Context:
+    def __init__(self, quick: bool, sizes: dict[str, list[int]], progress: Progress) -> None:
+        self.quick = quick
+        self.sizes = sizes
+        self.progress = progress
+
+
+def count_steps(sections: list[str], sizes: dict[str, list[int]], quick: bool) -> int:
+    per = {
+        "scaling": 2 * sum(len(v) for v in sizes.values()),
+        "transports": 5 * (1 if quick else 2),
+        "load": 2,
+        "commands": 2,
+        "profile": 2,
+        "recovery": 1,
+        "download": 2,
+    }
+    return sum(per[s] for s in sections)
+
+
+def machine() -> dict[str, Any]:
+    from importlib.metadata import version
+
+    mem = Path("/proc/meminfo").read_text().split("\n")[0].split()[1]
+    return {
+        "cpus": os.cpu_count(),
+        "memory_gib": round(int(mem) / 2**20, 1),
+        "python": platform.python_version(),
+        "zenoh": version("eclipse-zenoh"),
+        "pyzmq": version("pyzmq"),
+        "kernel": platform.release(),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m bench", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--quick", action="store_true", help="a subset in under 2 minutes")
+    parser.add_argument("--sections", help=f"comma-separated subset of {','.join(SECTIONS)}")
+    parser.add_argument("--sizes", help="ring sizes for scaling, e.g. peer:2,8,32/router:8,64,255")
+    parser.add_argument("--out", default=str(RESULTS_DIR), help="results directory (default bench/results)")
+    parser.add_argument("--no-report", action="store_true", help="write the JSON only, not RESULTS.md")
+    args = parser.parse_args(argv)
+    from tokenring.errors import UsageError
+
+    if args.sections:
+        sections = [s.strip() for s in args.sections.split(",") if s.strip()]
+        unknown = sorted(set(sections) - set(SECTIONS))
+        if unknown:
+            raise UsageError(f"--sections: unknown {', '.join(unknown)} (known: {', '.join(SECTIONS)})")
+    else:
+        sections = list(QUICK_SECTIONS if args.quick else SECTIONS)
+    sizes = dict(QUICK_SIZES if args.quick else FULL_SIZES)
+    if args.sizes:
+        sizes = parse_sizes(args.sizes)
+    command = "python -m bench" + ("".join(f" {a}" for a in (argv if argv is not None else sys.argv[1:])))
+    started = dt.datetime.now()
+    results: dict[str, Any] = {
+        "date": started.isoformat(timespec="seconds"),
+        "command": command.strip(),
+        "quick": args.quick,
+        "machine": machine(),
+        "load_start": load_avg(),
+        "sections": {},
+        "errors": {},
+    }
+    progress = Progress(count_steps(sections, sizes, args.quick))
+    sys.stderr.write(f"{command.strip()}: sections {', '.join(sections)}; load {results['load_start']}\n")
+    ctx = Context(args.quick, sizes, progress)
+    for name in sections:
+        t0 = time.monotonic()
+        try:
+            results["sections"][name] = SECTION_FUNCTIONS[name](ctx)
+            results["sections"][name]["seconds"] = round(time.monotonic() - t0, 1)
+        except Exception as exc:
+            results["errors"][name] = f"{type(exc).__name__}: {exc}"
+            sys.stderr.write(f"section {name} failed: {exc}\n{traceback.format_exc()}\n")
+    results["load_end"] = load_avg()
+    results["seconds"] = round(time.monotonic() - progress.t0, 1)
+    out_dir = Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stem = started.strftime("%Y-%m-%d") + ("-quick" if args.quick else "")
+    path = out_dir / f"{stem}.json"
+    path.write_text(json.dumps(results, indent=1) + "\n")
+    sys.stderr.write(f"written {path} ({results['seconds']:.0f} s)\n")
+    if not args.no_report:
+        from bench.report import write_report
+
+        md = write_report(results, out_dir)
+        sys.stderr.write(f"written {md}\n")
+    return 1 if results["errors"] else 0
+
+
+def parse_sizes(text: str) -> dict[str, list[int]]:
+    from tokenring.errors import UsageError
+
+    sizes: dict[str, list[int]] = {}
+    for part in text.split("/"):
+        topology, _, values = part.partition(":")
+        if topology not in ("peer", "router") or not values:
+            raise UsageError(f"--sizes {text!r}: expected peer:2,8/router:8,255")
+        try:
+            sizes[topology] = [int(v) for v in values.split(",") if v]
+        except ValueError:
+            raise UsageError(f"--sizes {text!r}: ring sizes are whole numbers") from None
+        bad = [v for v in sizes[topology] if not 2 <= v <= 255]
+        if bad:
+            raise UsageError(f"--sizes: {bad} outside 2..255")
+    return sizes
+
+
+if __name__ == "__main__":
+    with contextlib.suppress(KeyboardInterrupt):
+        sys.exit(main())
+    sys.exit(130)

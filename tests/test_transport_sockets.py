@@ -1,0 +1,208 @@
+"""The udp and zmq transports: the same node OS and ring semantics over plain sockets.
+
+In-process rings (fast) check the ring logic over each backend; one multi-process test per
+backend runs real ``tokenring node --transport ...`` processes and kills one.
+"""
+
+from __future__ import annotations
+
+import signal
+import socket
+import sys
+import time
+
+import pytest
+from memring import wait_for
+from ringutil import stats, wait_until
+
+from tokenring.errors import TransportError, UsageError
+from tokenring.node import NodeOS
+from tokenring.protocol import default_protocol
+from tokenring.transport.factory import make_transport
+from tokenring.transport.registry import MembershipRegistry, RegistryClient, parse_address
+from tokenring.transport.sockets import BACKENDS
+from tokenring.zconfig import make_config, open_session
+
+sys.setswitchinterval(0.0005)  # several nodes in one process, as in tests/memring.py
+IDS = [10, 20, 30, 40]
+
+
+class SocketRing:
+    """NodeOS instances in this process, talking over one socket backend and a registry."""
+
+    def __init__(self, kind: str, ids: list[int] = IDS) -> None:
+        self.protocol = default_protocol()
+        self.registry = MembershipRegistry().start()
+        self.kind = kind
+        self.nodes: dict[int, NodeOS] = {}
+        for node_id in ids:
+            self.add(node_id)
+
+    def add(self, node_id: int) -> NodeOS:
+        transport = BACKENDS[self.kind]("sock", node_id, self.registry.address)
+        node = NodeOS(self.protocol, node_id, transport, bitrate=None)
+        node.start()
+        self.nodes[node_id] = node
+        return node
+
+    def by_name(self, name: str) -> NodeOS:
+        return self.nodes[self.protocol.node(name).id]
+
+    def wait_rounds(self, rounds: int, timeout: float = 5.0) -> None:
+        node = self.nodes[min(self.nodes)]
+        start = node.stats.visits
+        wait_for(lambda: node.stats.visits >= start + rounds, timeout, f"{rounds} rounds over {self.kind}")
+
+    def close(self) -> None:
+        for node in self.nodes.values():
+            node.close()
+        self.registry.close()
+
+
+@pytest.fixture(params=sorted(BACKENDS))
+def ring(request):
+    r = SocketRing(request.param)
+    r.wait_rounds(20)
+    yield r
+    r.close()
+
+
+def test_ring_forms_in_id_order_and_counts_rounds(ring):
+    successors = {n.node_id: n.membership.successor for n in ring.nodes.values()}
+    assert successors == {10: 20, 20: 30, 30: 40, 40: 10}
+    main = ring.by_name("main")
+    before = main.stats.rounds
+    ring.wait_rounds(50)
+    assert main.stats.rounds >= before + 50
+    assert sum(n.stats.tokens_regenerated for n in ring.nodes.values()) == 1  # main started it
+    assert all(n.stats.rejected_crc == 0 and n.stats.send_errors == 0 for n in ring.nodes.values())
+
+
+def test_data_and_commands_keep_the_seed_semantics(ring):
+    sonar, main, motor = ring.by_name("sonar"), ring.by_name("main"), ring.by_name("motor")
+    sonar.publish().write(distances=[1, 2, 3, 4, 5, 6, 7, 8], sweep=9)
+    reader = main.subscribe("sonar.data")
+    motor.set_own_input_id()
+    motor.unlock_data("motor.command")
+    outbox = main.send_command("motor", "MOVE_FORWARD", distance_mm=300, speed_pct=20)
+    assert outbox.done.wait(2)
+    assert outbox.transmitted and outbox.acknowledged
+    assert motor.get_command().args == {"distance_mm": 300, "speed_pct": 20}
+    ring.wait_rounds(3)
+    assert reader.read()["distances"] == [1, 2, 3, 4, 5, 6, 7, 8]
+    assert motor.stats.commands_received == 1
+
+
+def test_a_leaver_is_removed_and_a_late_joiner_inserted(ring):
+    ring.nodes.pop(30).leave(grace=0.5)
+    wait_for(lambda: ring.by_name("motor").membership.successor == 40, 2.0, "motor routes around sonar")
+    ring.wait_rounds(20)
+    ring.add(30)
+    wait_for(lambda: ring.by_name("motor").membership.successor == 30, 2.0, "sonar back after motor")
+    ring.wait_rounds(20)
+    assert ring.registry.live() == IDS
+
+
+def test_a_vanished_node_is_seen_at_once_and_skipped(ring):
+    """A closed registry connection is what a crash looks like (the process's sockets close)."""
+    victim = ring.nodes.pop(30)
+    victim.paused = True  # its watchdog stands still, like a dead process
+    t0 = time.monotonic()
+    assert victim.transport.registry is not None
+    victim.transport.registry.close()
+    wait_for(lambda: 30 not in ring.by_name("motor").membership.live, 1.0, "motor sees sonar gone")
+    assert time.monotonic() - t0 < 0.5
+    ring.wait_rounds(20)
+    victim.close()
+
+
+def test_registry_addresses_and_errors():
+    assert parse_address("tcp/127.0.0.1:7000") == ("127.0.0.1", 7000)
+    for bad in ("localhost", "host:port", "host:70000", ":12"):
+        with pytest.raises(UsageError, match="HOST:PORT"):
+            parse_address(bad)
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with pytest.raises(TransportError, match="cannot reach the membership registry"):
+        RegistryClient(f"127.0.0.1:{port}", 5, "127.0.0.1:1", timeout=1.0).connect()
+    with pytest.raises(UsageError, match="needs --registry"):
+        make_transport("udp", None, "r", 5, 514)
+    with pytest.raises(UsageError, match="unknown"):
+        make_transport("carrier-pigeon", None, "r", 5, 514)
+
+
+def test_registry_takes_a_respawned_node_and_reports_live_changes():
+    registry = MembershipRegistry().start()
+    seen: list[tuple[int, bool]] = []
+    try:
+        watcher = RegistryClient(registry.address, 1, "127.0.0.1:1001")
+        watcher.on_live = lambda node_id, alive: seen.append((node_id, alive))
+        assert watcher.connect() == set()
+        first = RegistryClient(registry.address, 7, "127.0.0.1:1007")
+        first.connect()
+        first.announce()
+        wait_for(lambda: (7, True) in seen, 2.0, "7 announced")
+        second = RegistryClient(registry.address, 7, "127.0.0.1:2007")  # respawned before 'first' closed
+        second.connect()
+        second.announce()
+        wait_for(lambda: watcher.addrs.get(7) == "127.0.0.1:2007", 2.0, "the new address")
+        first.close()  # the old connection's end must not withdraw the new process
+        time.sleep(0.2)
+        assert registry.live() == [7]
+        second.close()
+        wait_for(lambda: seen[-1] == (7, False), 2.0, "7 gone")
+        watcher.close()
+    finally:
+        registry.close()
+
+
+@pytest.mark.parametrize("kind", sorted(BACKENDS))
+def test_node_processes_over_sockets_form_a_ring_and_survive_a_kill(kind, procs, ring_name, endpoint):
+    registry = MembershipRegistry().start()
+    session = open_session(make_config(listen=[endpoint]))  # the control plane stays on Zenoh
+    try:
+        nodes = {
+            node_id: procs.tokenring(
+                "node",
+                "--id",
+                str(node_id),
+                "--ring",
+                ring_name,
+                "--bitrate",
+                "max",
+                "--no-store",
+                "--transport",
+                kind,
+                "--registry",
+                registry.address,
+                "--connect",
+                endpoint,
+            )
+            for node_id in (10, 20, 30)
+        }
+
+        def formed():
+            found = stats(session, ring_name, 10)
+            return found.get(10, {}).get("active") == [10, 20, 30] and found[10]["stats"]["visits"] > 50
+
+        wait_until(formed, 20.0, f"a ring of three over {kind}")
+        nodes[20].send_signal(signal.SIGKILL)
+        nodes[20].wait(5)
+
+        def healed():
+            found = stats(session, ring_name, 10)
+            return found.get(10, {}).get("active") == [10, 30] and found[10]["successor"] == 30
+
+        wait_until(healed, 5.0, "node 10 routes around the killed node 20")
+        before = stats(session, ring_name, 10)[10]["stats"]["visits"]
+        wait_until(
+            lambda: stats(session, ring_name, 10)[10]["stats"]["visits"] > before + 50, 5.0, "circulating"
+        )
+        for node_id in (10, 30):
+            nodes[node_id].send_signal(signal.SIGTERM)
+        for node_id in (10, 30):
+            assert nodes[node_id].wait(5) == 0
+    finally:
+        session.close()
+        registry.close()
