@@ -59,6 +59,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--respawn", action="store_true", help="restart nodes that die, like a supervisor")
     p.add_argument(
+        "--profile",
+        choices=("arcnet",),
+        help="emulate the seed robot's hardware timing on top of the wire: the 8051s' per-visit work and "
+        "channel copies, the sonar's interrupt lock (tokenring/profile.py; needs a bitrate, not max)",
+    )
+    p.add_argument(
         "--router",
         action="store_true",
         help="this launcher is its host's Zenoh router (needs --listen); its nodes are clients of it. "
@@ -114,6 +120,10 @@ def run(args: argparse.Namespace) -> int:
     wire = args.bitrate if bitrate is None or args.no_world else format_bitrate(bitrate * speed)
     if args.duration is not None and args.duration <= 0:
         raise UsageError("--duration must be positive")
+    if args.profile and bitrate is None:
+        raise UsageError(
+            f"--profile {args.profile} emulates hardware timing: give a bitrate such as 2.5M, not max"
+        )
     selection = [s.strip() for s in args.nodes.split(",") if s.strip()] if args.nodes else None
     programs = None if args.no_programs else (args.programs or default_programs_dir())
     if programs is not None and not Path(programs).is_dir():
@@ -137,6 +147,7 @@ def run(args: argparse.Namespace) -> int:
         log_level=args.log_level,
         respawn=args.respawn,
         router=args.router,
+        profile=args.profile,
         services=services,
         extra_node_args=["--store", args.store] if args.store else [],
     )
