@@ -206,9 +206,13 @@ def add_node_arguments(parser: argparse.ArgumentParser) -> None:
         choices=TRANSPORTS,
         help="what carries the token (default %(default)s; udp/zmq need --registry, for comparisons)",
     )
-    parser.add_argument("--registry", metavar="HOST:PORT", help="membership registry of the udp/zmq transports")
     parser.add_argument(
-        "--profile", choices=sorted(PROFILES), help="emulate a hardware's timing on top of the wire (arcnet: the seed robot)"
+        "--registry", metavar="HOST:PORT", help="membership registry of the udp/zmq transports"
+    )
+    parser.add_argument(
+        "--profile",
+        choices=sorted(PROFILES),
+        help="emulate a hardware's timing on top of the wire (arcnet: the seed robot)",
     )
 
 
