@@ -43,6 +43,10 @@ from tokenring.ring import ACK_REQUESTED, EPOCH_MASK
 from tokenring.transport.base import Transport
 
 log = logging.getLogger("tokenring.node")
+
+#: a watchdog that overslept this long (and 4 reconfiguration times) was frozen, e.g. SIGSTOP;
+#: shorter gaps happen on any loaded machine and must not make the node ask to rejoin
+FROZEN_AFTER_S = 1.0
 perf_counter = time.perf_counter
 
 
@@ -651,7 +655,7 @@ class NodeOS:
                 self._wake_lock.acquire(timeout=0.05)
                 continue
             now = perf_counter()
-            if now - last_tick > max(0.2, 4 * self.timing.current.recon):
+            if now - last_tick > max(FROZEN_AFTER_S, 4 * self.timing.current.recon):
                 # this process was frozen (SIGSTOP, a long pause): whatever we hold is old; ask
                 # to rejoin and give the ring one reconfiguration time before regenerating
                 log.warning("woke up after %.1f s frozen; asking to rejoin", now - last_tick)
@@ -661,7 +665,8 @@ class NodeOS:
                 self._announce_rejoin()
             last_tick = now
             if now >= refresh_at or self.timing.due():
-                self._ack_interval = self.timing.refresh(len(self.membership.active)).ack_interval
+                # live, not active: exclusions must not shrink the timeouts that caused them
+                self._ack_interval = self.timing.refresh(len(self.membership.live)).ack_interval
                 refresh_at = now + (0.1 if now - self._started_at < 3.0 else 0.5)
                 for node_id in self.membership.probes_due(time.monotonic(), self._exclusion_backoff):
                     # a ping, not the token: a node that is still hung costs the ring nothing

@@ -7,10 +7,12 @@ Timeouts (all derived, never guessed; see README "Timing"):
   default 2.5 Mbit/s, 0 at ``max``).
 * **ack timeout** — ARCNET's 74.7 µs response timeout scaled by bitrate, but never below
   4 x the 99th percentile of the measured ack latency nor below 5 ms (Python and the OS
-  scheduler cannot promise less on a loaded 2-core machine), and never above 50 ms.
+  scheduler cannot promise less on a loaded 2-core machine), and never above 50 ms or a sixth
+  of the reconfiguration timeout, whichever is longer (so three tries end by half of it).
 * **reconfiguration timeout** — ARCNET's 840 ms scaled by bitrate, but never below 10 x the
   median round time (the median, so that a disturbance does not inflate its own timeout),
-  3 hop times per live node, nor 50 ms. The highest live ID
+  3 hop times per live node (a hop at ``max`` counted as 1 ms, so 255 nodes wait 765 ms),
+  nor 50 ms. The highest live ID
   regenerates a lost token after it; every next lower rank waits one more ``slot``.
 """
 
@@ -34,6 +36,9 @@ ARCNET_RECON_TIMEOUT_S = 0.840
 ACK_FLOOR_S = 0.005
 ACK_CAP_S = 0.050
 RECON_FLOOR_S = 0.050
+#: what one pass costs at least when the wire is not paced (``--bitrate max``): Python and Zenoh
+#: on a loaded machine; keeps a large ring's reconfiguration timeout above its round time
+HOP_FLOOR_S = 0.001
 ACK_RETRIES = 2
 MIN_ROUND_SAMPLES = 16  # rounds measured before the timeouts follow the measurements
 
@@ -190,18 +195,20 @@ class Timing:
         round_p99 = self.rounds.percentile(99, default=0.0)
         self.round_median = self.rounds.percentile(50, default=0.0)
         ack_p99 = self.ack_latency.percentile(99, default=0.0)
-        # capped: three unanswered passes must skip a hung node well before the
-        # reconfiguration timeout would regenerate the token instead
-        ack = min(max(ACK_FLOOR_S, 4 * ack_p99, ARCNET_RESPONSE_TIMEOUT_S * self.scale), ACK_CAP_S)
         recon = max(
             RECON_FLOOR_S,
             10 * self.round_median,  # the median: a disturbance must not inflate its own timeout
-            3 * self.hop * live,
+            3 * max(self.hop, HOP_FLOOR_S) * live,
             ARCNET_RECON_TIMEOUT_S * self.scale,
         )  # ring-wide quantities only: every node must derive (nearly) the same value, or the
         # highest-rank-first rule breaks (a node's own ack latency must not enter here)
         if len(self.rounds) < MIN_ROUND_SAMPLES:
             recon = max(recon, 0.2)  # not enough measured yet: be patient at start-up
+        # capped: three unanswered passes must skip a hung node well before the
+        # reconfiguration timeout would regenerate the token instead (a big ring's longer
+        # reconfiguration time buys its busier machine a longer cap)
+        ack_cap = max(ACK_CAP_S, recon / 6)
+        ack = min(max(ACK_FLOOR_S, 4 * ack_p99, ARCNET_RESPONSE_TIMEOUT_S * self.scale), ack_cap)
         return Timeouts(
             hop=self.hop,
             ack=ack,

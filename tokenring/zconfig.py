@@ -14,6 +14,9 @@ import zenoh
 
 from tokenring.errors import TransportError, UsageError
 
+#: how long a client keeps retrying its router before the node reports it cannot connect
+CLIENT_CONNECT_TIMEOUT_MS = 60_000
+
 VALID_SCHEMES = ("tcp/", "udp/", "tls/", "quic/", "unixsock-stream/", "ws/")
 
 
@@ -53,6 +56,13 @@ def make_config(
         config.insert_json5("listen/endpoints", json.dumps(["tcp/127.0.0.1:0"]))
     if connect:
         config.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    if mode == "client" and not path:
+        # Zenoh's clients give up on the first refused connect; a router busy accepting hundreds
+        # of nodes (a 255-node ring starting at once) needs them to retry for a while.
+        config.insert_json5("connect/timeout_ms", str(CLIENT_CONNECT_TIMEOUT_MS))
+        config.insert_json5(
+            "connect/retry", '{"period_init_ms": 100, "period_max_ms": 2000, "period_increase_factor": 2}'
+        )
     return config
 
 
