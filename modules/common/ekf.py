@@ -233,10 +233,18 @@ class PoseEKF:
     def predict(self, dl: float, dr: float, dt_s: float = 0.0) -> None:
         """Advance by ``dl``, ``dr`` half-steps of the left and right motor over ``dt_s`` seconds."""
         new, A, Q = self.motion(dl, dr, dt_s)
-        self.last_kind = motion_kind(dl, dr)
+        kind, previous = motion_kind(dl, dr), self.last_kind
+        self.last_kind = kind
         self.x = new
         self.x[2] = wrap(self.x[2])
         self.P = A @ self.P @ A.T + Q
+        if kind == "straight" and previous != "straight" and "glide" in self.index:
+            # the last turn's slip is fixed in the pose now: a straight move does not observe the
+            # glide factor, and heading corrections on it (a bent compass) must not rewrite it —
+            # after a 4° turn a 2° pull made the glide 9 and the next 90° turn 64°, gated out
+            i = self.index["glide"]
+            self.P[i, :i] = self.P[:i, i] = 0.0
+            self.P[i, i + 1 :] = self.P[i + 1 :, i] = 0.0
 
     # ---------------------------------------------------------------------------------------
     # corrections
