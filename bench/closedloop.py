@@ -17,6 +17,7 @@ exploration ended and the map's score; ``bench.mapping --closed-loop`` uses it f
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 from collections.abc import Callable
@@ -234,6 +235,7 @@ class Run:
     """What a closed-loop run produced."""
 
     vectors: np.ndarray
+    variants: dict[tuple[str, str], np.ndarray]
     truth_path: np.ndarray
     pose_path: np.ndarray
     finished: str
@@ -258,7 +260,7 @@ class ClosedLoop:
     ) -> None:
         from modules.common.navigator import ExploreAvoid, ExploreLeftWall
         from modules.common.pilot import Pilot
-        from modules.common.vectorgen import OUR_METHOD, PoseHistory, Vectorizer, default_layout
+        from modules.common.vectorgen import OUR_METHOD, SEED_METHOD, PoseHistory, Vectorizer, default_layout
         from tokenring.world import load_world
         from tokenring.world.physics import TrackedRobot
 
@@ -275,6 +277,12 @@ class ClosedLoop:
         self.method = OUR_METHOD if method is None else method
         self.vectors: list[tuple[float, float, float, float]] = []
         self.vectorizer = Vectorizer(self.layout, self.method, self._emit)
+        # the same sweeps through both methods on both poses (what bench.mapping replays)
+        self.variants: dict[tuple[str, str], tuple[Vectorizer, list[tuple[float, float, float, float]]]] = {}
+        for name, variant_method in (("seed", SEED_METHOD), ("ours", OUR_METHOD)):
+            for source in ("dead reckoning", "filter") if localizer else ("dead reckoning",):
+                out: list[tuple[float, float, float, float]] = []
+                self.variants[(name, source)] = (Vectorizer(self.layout, variant_method, out.append), out)
         self.history = PoseHistory()
         self.scanning = False
         self.core = None
@@ -307,9 +315,14 @@ class ClosedLoop:
                 self.scanning = True
             elif command == "STOP_SCAN":
                 self.scanning = False
-                self.vectorizer.end_scan()
+                for vectorizer in self._vectorizers():
+                    vectorizer.end_scan()
             elif command == "FLUSH":
-                self.vectorizer.flush()
+                for vectorizer in self._vectorizers():
+                    vectorizer.flush()
+
+    def _vectorizers(self) -> list[Any]:
+        return [self.vectorizer, *(v for v, _ in self.variants.values())]
 
     def _position_reached(self, status: int, seq: int) -> None:
         if self.calibration_turns <= 0:
@@ -324,6 +337,7 @@ class ClosedLoop:
     def _copro(self) -> None:
         from modules.common.sync import Sample
         from modules.common.units import pose_from_wire, pose_to_wire
+        from modules.common.vectorgen import OUR_METHOD
 
         motor = self.motor.data()
         self.history.add(motor["stamp_ms"], pose_from_wire(motor["x_mm"], motor["y_mm"], motor["angle_cdeg"]))
@@ -362,9 +376,18 @@ class ClosedLoop:
                 self.scanning and motor["direction"] == 1 and motor["distance_mm"] > 10 and pose is not None
             )
             at_sweep = self._pose_at(sonar["stamp_ms"], pose)
-            self.vectorizer.sweep(sonar, at_sweep, bool(active))
+            self.vectorizer.sweep(sonar, at_sweep if self.method == OUR_METHOD else pose, bool(active))
             if at_sweep is not None:
                 self.poses.append(at_sweep)
+            dr_now, dr_at = self.history.latest(), self.history.at(sonar["stamp_ms"])
+            for (name, source), (vectorizer, _) in self.variants.items():
+                if source == "filter":
+                    if not self.pose_filtered:
+                        continue
+                    chosen = at_sweep if name == "ours" else pose
+                else:
+                    chosen = dr_at if name == "ours" else dr_now
+                vectorizer.sweep(sonar, chosen, bool(active))
 
     def _pose_at(self, stamp_ms: int, pose: Any) -> Any:
         """copro's: dead reckoning at the sweep, the filter's pose carried there by dead reckoning."""
@@ -475,7 +498,8 @@ class ClosedLoop:
                         )
                     )
             self.now += TICK_MS
-        self.vectorizer.flush()
+        for vectorizer in self._vectorizers():
+            vectorizer.flush()
         errs = np.asarray(self.errors).reshape(-1, 2)
         pose_errors = {}
         if len(errs):
@@ -487,6 +511,9 @@ class ClosedLoop:
             }
         return Run(
             vectors=np.asarray(self.vectors, dtype=float).reshape(-1, 4),
+            variants={
+                k: np.asarray(out, dtype=float).reshape(-1, 4) for k, (_, out) in self.variants.items()
+            },
             truth_path=np.asarray(self.truth, dtype=float).reshape(-1, 4)[:, 1:3],
             pose_path=np.asarray(self.poses, dtype=float).reshape(-1, 3)[:, :2],
             finished=finished,
@@ -497,52 +524,133 @@ class ClosedLoop:
         )
 
 
-def main(argv: list[str] | None = None) -> int:
+def explore(
+    world: str,
+    seed: int,
+    seed_method: bool = False,
+    dead_reckoning: bool = False,
+    walls: str | None = None,
+    minutes: float = 30.0,
+    out: str | None = None,
+    variant_pngs: bool = False,
+) -> dict[str, Any]:
+    """One closed-loop exploration, scored: the map as the robot made it and the four variants
+    (seed/ours × dead reckoning/filter) of the same drive; PNGs to ``out``."""
     from modules.common.mapscore import score_map
     from tokenring.commands.map import load_truth, write_map
 
-    parser = argparse.ArgumentParser(prog="python -m bench.closedloop", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--world", default="office")
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--minutes", type=float, default=30.0, help="simulated minutes at most")
-    parser.add_argument("--seed-method", action="store_true", help="the seed's vector generation")
-    parser.add_argument("--dead-reckoning", action="store_true", help="no Localizer")
-    parser.add_argument("--walls", choices=("exploration", "off"), help="the Localizer's walls mode")
-    parser.add_argument("--out", metavar="DIR", help="write the map PNG here")
-    parser.add_argument("--moves", action="store_true", help="print the navigator's moves")
-    args = parser.parse_args(argv)
     config = None
-    if args.walls:
+    if walls:
         from modules.copro import EXPLORATION_CONFIG
 
-        config = {**EXPLORATION_CONFIG, "walls": {**EXPLORATION_CONFIG["walls"], "mode": args.walls}}
+        config = {**EXPLORATION_CONFIG, "walls": {**EXPLORATION_CONFIG["walls"], "mode": walls}}
     loop = ClosedLoop(
-        args.world,
-        args.seed,
-        method=0 if args.seed_method else None,
-        localizer=not args.dead_reckoning,
+        world,
+        seed,
+        method=0 if seed_method else None,
+        localizer=not dead_reckoning,
         localizer_config=config,
     )
-    run = loop.run(args.minutes)
-    world, truth = load_truth(args.world)
-    score = score_map(run.vectors, truth)
-    if args.moves:
-        print("\n".join(run.log))
-    print(
-        f"{args.world} seed {args.seed}: {run.finished} after {run.sim_seconds:.0f} s simulated; moves {run.moves}; "
-        f"{len(run.vectors)} vectors, coverage {score['coverage']:.1%}, precision {score['precision']:.1%}, "
-        f"orientation {score['orientation_error_deg'] or 0:.1f}°, corners {score['corners_closed']}/{score['corners_total']}; "
-        + ", ".join(f"{k} {v:.1f}" for k, v in run.pose_errors.items())
+    run = loop.run(minutes)
+    name, truth = load_truth(world)
+    rows = []
+    for (method, source), vectors in [(("as run", "as run"), run.vectors), *run.variants.items()]:
+        score = score_map(vectors, truth)
+        rows.append({"room": world, "seed": seed, "method": method, "pose": source, **score})
+        if out and (method == "as run" or variant_pngs):
+            Path(out).mkdir(parents=True, exist_ok=True)
+            tag = "" if method == "as run" else f"-{method}-{'ekf' if source == 'filter' else 'dr'}"
+            write_map(
+                vectors,
+                str(Path(out) / f"{world}-seed{seed}{tag}.png"),
+                truth,
+                name,
+                title=f"{world}, closed loop, seed {seed}, {method}, {source}",
+                paths={"true": run.truth_path, "mapping pose": run.pose_path},
+            )
+    return {
+        "room": world,
+        "seed": seed,
+        "finished": run.finished,
+        "sim_seconds": run.sim_seconds,
+        "moves": run.moves,
+        "pose_errors": run.pose_errors,
+        "log": run.log,
+        "rows": rows,
+    }
+
+
+def format_rows(rows: list[dict[str, Any]]) -> str:
+    header = (
+        f"{'room':8} {'seed':>4} {'method':7} {'pose':15} {'vectors':>7} {'coverage':>9} "
+        f"{'precision':>9} {'orient.':>8} {'corners':>8}"
     )
-    if args.out:
-        Path(args.out).mkdir(parents=True, exist_ok=True)
-        write_map(
-            run.vectors,
-            str(Path(args.out) / f"{args.world}-seed{args.seed}.png"),
-            truth,
-            world,
-            title=f"{args.world}, closed loop, seed {args.seed}",
-            paths={"true": run.truth_path, "mapping pose": run.pose_path},
+    lines = [header, "-" * len(header)]
+    for r in rows:
+        orient = f"{r['orientation_error_deg']:.1f}°" if r["orientation_error_deg"] is not None else "-"
+        lines.append(
+            f"{r['room']:8} {r['seed']:4d} {r['method']:7} {r['pose']:15} {r['vectors']:7d} "
+            f"{r['coverage']:9.1%} {r['precision']:9.1%} {orient:>8} "
+            f"{r['corners_closed']:>4}/{r['corners_total']:<3}"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from concurrent.futures import ProcessPoolExecutor
+
+    parser = argparse.ArgumentParser(prog="python -m bench.closedloop", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--world", default="office", help="room(s), comma-separated (default office)")
+    parser.add_argument("--seed", default="1", help="noise seed(s): 1 or 1,2,3 or 1-3")
+    parser.add_argument("--minutes", type=float, default=30.0, help="simulated minutes at most")
+    parser.add_argument(
+        "--seed-method", action="store_true", help="the robot runs the seed's vector generation"
+    )
+    parser.add_argument("--dead-reckoning", action="store_true", help="no Localizer")
+    parser.add_argument("--walls", choices=("exploration", "off"), help="the Localizer's walls mode")
+    parser.add_argument("--out", metavar="DIR", help="write the maps' PNGs here")
+    parser.add_argument("--moves", action="store_true", help="print the navigator's moves")
+    parser.add_argument("--variants", action="store_true", help="also score seed/ours × DR/filter")
+    parser.add_argument("--jobs", type=int, default=1, help="runs in parallel (default 1)")
+    parser.add_argument("--json", metavar="FILE", help="write every run's rows as JSON")
+    args = parser.parse_args(argv)
+    seeds: list[int] = []
+    for part in args.seed.split(","):
+        lo, _, hi = part.partition("-")
+        seeds += list(range(int(lo), int(hi or lo) + 1))
+    jobs = [(w.strip(), s) for w in args.world.split(",") if w.strip() for s in seeds]
+    options = dict(
+        seed_method=args.seed_method,
+        dead_reckoning=args.dead_reckoning,
+        walls=args.walls,
+        minutes=args.minutes,
+        out=args.out,
+        variant_pngs=args.variants,
+    )
+    results: list[dict[str, Any]] = []
+    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        futures = [pool.submit(explore, w, s, **options) for w, s in jobs]
+        for future in futures:
+            result = future.result()
+            results.append(result)
+            r = result["rows"][0]
+            if args.moves:
+                print("\n".join(result["log"]))
+            print(
+                f"{result['room']} seed {result['seed']}: {result['finished']} after "
+                f"{result['sim_seconds']:.0f} s simulated; moves {result['moves']}; {r['vectors']} vectors, "
+                f"coverage {r['coverage']:.1%}, precision {r['precision']:.1%}, "
+                f"orientation {r['orientation_error_deg'] or 0:.1f}°, corners {r['corners_closed']}/{r['corners_total']}; "
+                + ", ".join(f"{k} {v:.1f}" for k, v in result["pose_errors"].items()),
+                flush=True,
+            )
+    rows = [r for result in results for r in (result["rows"] if args.variants else result["rows"][:1])]
+    if len(rows) > 1:
+        print()
+        print(format_rows(rows))
+    if args.json:
+        Path(args.json).write_text(
+            json.dumps([{k: v for k, v in r.items() if k != "log"} for r in results], indent=1) + "\n"
         )
     return 0
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from modules.common.navigator import NAV, Calibrate, ExploreAvoid, ExploreLeftWall
 from modules.common.pilot import (
     FORWARD,
@@ -14,6 +16,7 @@ from modules.common.pilot import (
     TURN_RIGHT,
     Abort,
     Move,
+    Outcome,
     Pilot,
     Sensors,
     side_slope,
@@ -204,7 +207,7 @@ def test_explore2_follows_the_left_wall_and_turns_at_corners():
     assert [(a.kind, a.cm) for a in find[0].abort] == [("ahead_within", 25), ("front_within", 8)]
     turn = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
     assert turn[0].direction == TURN_RIGHT and turn[0].amount == 90  # the wall is now on the left
-    seg = nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED)
+    seg = settle(nav, Outcome(REASON["DONE"], turn[0]), s)  # at rest: the left pair reads it parallel
     assert [m.label for m in seg] == ["follow"] and seg[0].scan
     # drifting away from the wall by 1 cm per 10 cm: the next segment starts with a left turn
     samples = [(d, [FAR] * 7 + [30 + d // 100]) for d in range(0, 600, 12)]
@@ -214,6 +217,7 @@ def test_explore2_follows_the_left_wall_and_turns_at_corners():
     # the front blocked: inner corner, turn right about 90°
     inner = nav.plan(Outcome(REASON["CLOSE"], seg[0], trigger="ahead_within"), s, STOPPED)
     assert inner[0].direction == TURN_RIGHT and 85 <= inner[0].amount <= 95
+    assert settle(nav, Outcome(REASON["DONE"], inner[0]), s)[-1].label == "follow"
     # the wall lost: outer corner, drive on, turn left, pick the wall up again
     lost = next(a for a in seg[0].abort if a.kind == "left_beyond")
     assert lost.sweeps == 2  # one dropout of the side sonar is no corner
@@ -230,6 +234,76 @@ def test_explore2_follows_the_left_wall_and_turns_at_corners():
     # ALERT: only the escape the lock allows
     esc = nav.plan(Outcome(REASON["ALERT"], seg[0]), s, REVERSE)
     assert esc[0].direction == REVERSE and nav.state == NAV["BACK_OFF"]
+
+
+def settle(nav: ExploreLeftWall, last, s: Sensors, sweeps: int = 30) -> list[Move] | None:
+    """Plan at rest, one sonar sweep (120 ms) per call, until the navigator stops waiting."""
+    for _ in range(sweeps):
+        moves = nav.plan(last, s, STOPPED)
+        if moves != []:
+            return moves
+        last = Outcome(REASON["DONE"])
+        s.sweep += 1
+        s.stamp_ms += 120
+    raise AssertionError("the navigator kept waiting")
+
+
+def test_wall_angle_from_the_left_pair_inside_and_beyond_the_beam():
+    from modules.common.navigator import wall_angle_deg
+
+    for degrees in (-12.0, 0.0, 5.0, 14.0):  # inside ±15°: both read the perpendicular distance
+        diff = 160.0 * math.sin(math.radians(degrees))
+        assert abs(wall_angle_deg(300.0 + diff, 300.0, 160.0) - degrees) < 0.01
+    # beyond: the beam's edge is the nearest ray, each reading e / cos(|a| - 15°)
+    a = math.radians(40.0)
+    diff = 160.0 * math.sin(a) / math.cos(a - math.radians(15.0))
+    assert abs(wall_angle_deg(400.0 + diff, 400.0, 160.0) - 40.0) < 0.01
+
+
+def test_explore2_turns_a_wall_left_askew_by_a_turn_parallel_with_the_left_pair():
+    nav = ExploreLeftWall(LAYOUT)
+    s = sensors_with(front=20)
+    find = nav.plan(None, s, STOPPED)
+    turn = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
+    # after the turn the wall runs away ahead by about 20°: front sonar 6 cm farther than the rear
+    s = sensors_with(left_front=36, left_rear=30)
+    align = settle(nav, Outcome(REASON["DONE"], turn[0]), s)
+    assert align[0].label == "align" and align[0].direction == TURN_LEFT
+    assert 20 <= align[0].amount <= 24  # asin(60/160) = 22°
+    s = sensors_with(left_front=30, left_rear=30)
+    assert settle(nav, Outcome(REASON["DONE"], align[0]), s)[-1].label == "follow"
+
+
+def test_explore2_looks_for_the_wall_when_the_turn_left_it_out_of_view():
+    for ahead, direction in ((30, TURN_RIGHT), (FAR, TURN_LEFT)):
+        nav = ExploreLeftWall(LAYOUT)
+        s = sensors_with(front=20)
+        find = nav.plan(None, s, STOPPED)
+        turn = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
+        # nothing on the left: a wall still ahead means turn on (right), none means turn back (left)
+        search = settle(nav, Outcome(REASON["DONE"], turn[0]), sensors_with(front=ahead))
+        assert search[0].label == "search" and search[0].direction == direction
+        assert [a.kind for a in search[0].abort] == ["left_parallel"]
+        s = sensors_with(left_front=31, left_rear=30)  # parallel within 4°: a fine turn, then follow
+        fine = settle(nav, Outcome(REASON["NONE"], search[0], trigger="left_parallel"), s)
+        assert fine[0].label == "align" and fine[0].direction == TURN_LEFT and fine[0].amount == 4
+        s = sensors_with(left_front=30, left_rear=30)
+        assert settle(nav, Outcome(REASON["DONE"], fine[0]), s)[-1].label == "follow"
+
+
+def test_left_parallel_aborts_a_turn_when_the_left_pair_reads_alike():
+    b = Bench()
+    b.pilot.start([Move(TURN_RIGHT, 120, 40, abort=(Abort("left_parallel", 60, "NONE"),))], b.sensors)
+    b.motor_runs(1)
+    assert b.tick(2, distances=_with(LAYOUT.left_front, 40)) is None  # the rear one sees nothing yet
+    d = _with(LAYOUT.left_front, 40)
+    d[LAYOUT.left_rear] = 45
+    assert b.tick(2, distances=d) is None  # askew
+    d[LAYOUT.left_rear] = 41
+    b.tick(1, distances=d)
+    assert "motor:STOP" in b.names()
+    out = b.tick(4, motor_state=MOTOR_STATE["IDLE"])
+    assert out is not None and out.reason == REASON["NONE"] and out.trigger == "left_parallel"
 
 
 def _with(index: int, cm: int) -> list[int]:
@@ -293,8 +367,6 @@ def test_explore2_corrects_a_turn_the_floor_let_slip_by_the_compass():
     fix = nav.plan(Outcome(REASON["DONE"]), s, STOPPED)
     assert fix[0].direction == TURN_RIGHT and fix[0].amount == 8
     assert [round(e, 6) for e in nav.turn_errors] == [-8.0]
-    s.heading_cdeg = 17900  # within 1.5° after settling again: on with the wall
-    assert nav.plan(Outcome(REASON["DONE"], fix[0]), s, STOPPED) == []
-    s.stamp_ms += nav.s.settle_ms
-    seg = nav.plan(Outcome(REASON["DONE"]), s, STOPPED)
+    s.heading_cdeg = 17900  # within 1.5° after settling again, the wall parallel: on with it
+    seg = settle(nav, Outcome(REASON["DONE"], fix[0]), s)
     assert seg[-1].label == "follow"

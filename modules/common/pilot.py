@@ -55,7 +55,8 @@ class Abort:
 
     kinds: ``front_within`` (a front sonar reads ≤ cm), ``ahead_within`` (the straight-ahead
     one), ``rear_within``, ``left_within``,
-    ``right_within`` (the side's front sonar ≤ cm), ``left_beyond`` / ``right_beyond`` (the
+    ``right_within`` (the side's front sonar ≤ cm), ``left_parallel`` (both left sonars ≤ cm and
+    within 1 cm of each other: the robot runs parallel to a wall), ``left_beyond`` / ``right_beyond`` (the
     side's front sonar reads more than cm or nothing), ``corner_left`` / ``corner_right``
     (copro reports CORNER on that side). ``sweeps``: the condition must hold on this many
     consecutive sonar sweeps (a single dropout of a side sonar is no corner)."""
@@ -351,6 +352,9 @@ class Pilot:
             return d[lay.left_front] <= cm
         if kind == "right_within":
             return d[lay.right_front] <= cm
+        if kind == "left_parallel":  # both left sonars on one wall at the same distance
+            front, rear = d[lay.left_front], d[lay.left_rear]
+            return front <= cm and rear <= cm and abs(front - rear) <= 1
         if kind == "left_beyond":
             return d[lay.left_front] > cm
         if kind == "right_beyond":
