@@ -36,8 +36,7 @@ from tokenring.zconfig import make_config, open_session
 #: exit code of a node process killed on purpose by the ``crash`` fault
 CRASH_EXIT_CODE = 70
 STOP_TIMEOUT_S = 1.5
-START_WAVE = 16  # nodes started at once; a bigger ring starts wave after wave
-WAVE_TIMEOUT_S = 60.0  # how long a wave may take to come up before the next starts anyway
+KILL_REAP_S = 10.0  # after SIGKILL, how long the kernel may take to reap them all
 
 
 def _set_pdeathsig() -> None:  # pragma: no cover - runs in the child between fork and exec
@@ -353,33 +352,12 @@ class Launcher:
             from tokenring.transport.registry import MembershipRegistry
 
             self.registry = MembershipRegistry().start()
-        self._spawn_in_waves()
+        for plan in self.plans:
+            self.spawn(plan)
         # supervision (death reports, --respawn) runs beside whoever owns the launcher: `up`'s
         # run() loop as well as in-process users such as chaos and the benchmarks
         self._supervisor = threading.Thread(target=self._supervise, name="launcher-supervisor", daemon=True)
         self._supervisor.start()
-
-    def _spawn_in_waves(self) -> None:
-        """Start the nodes; a big ring in waves of :data:`START_WAVE`, each wave's liveliness
-        awaited before the next. Hundreds of interpreters importing at once leave every process
-        seconds between time slices, and the forming ring would take that for hung nodes."""
-        assert self.session is not None
-        for first in range(0, len(self.plans), START_WAVE):
-            wave = self.plans[first : first + START_WAVE]
-            for plan in wave:
-                self.spawn(plan)
-            if len(self.plans) <= START_WAVE or self.transport != "zenoh" or self._stop.is_set():
-                continue
-            waiting = {plan.node_id for plan in wave}
-            deadline = time.monotonic() + WAVE_TIMEOUT_S
-            while waiting and time.monotonic() < deadline and not self._stop.is_set():
-                for reply in self.session.liveliness().get(keys.node(self.ring, "*"), timeout=1.0):
-                    if reply.ok:
-                        waiting.discard(int(str(reply.ok.key_expr).rsplit("/", 1)[-1]))
-                if any(self.children[i].process.poll() is not None for i in waiting):
-                    break  # a node died starting: the supervisor reports it
-                if waiting:
-                    time.sleep(0.1)
 
     def _supervise(self) -> None:
         while not self._stop.wait(0.05):
@@ -493,15 +471,25 @@ class Launcher:
             with contextlib.suppress(ProcessLookupError):
                 child.process.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + STOP_TIMEOUT_S
+        stubborn = []
         for child in running:
-            remaining = max(0.0, deadline - time.monotonic())
             try:
-                child.process.wait(remaining)
+                child.process.wait(max(0.0, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
-                self.say(f"node {child.plan.name} did not stop in {STOP_TIMEOUT_S} s: killing it")
-                child.process.kill()
-                child.process.wait(1.0)
+                stubborn.append(child)
             child.reported = True
+        if stubborn:  # all at once: a big ring on a loaded machine may have many of them
+            names = ", ".join(c.plan.name for c in stubborn[:8]) + (" ..." if len(stubborn) > 8 else "")
+            self.say(f"{len(stubborn)} node(s) did not stop in {STOP_TIMEOUT_S} s: killing {names}")
+            for child in stubborn:
+                with contextlib.suppress(ProcessLookupError):
+                    child.process.kill()
+            reap_deadline = time.monotonic() + KILL_REAP_S
+            for child in stubborn:
+                try:
+                    child.process.wait(max(0.1, reap_deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    self.say(f"node {child.plan.name} (pid {child.process.pid}) survived SIGKILL")
         for name, process in self.service_children.items():
             if process.poll() is None:
                 with contextlib.suppress(ProcessLookupError):

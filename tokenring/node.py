@@ -47,6 +47,13 @@ log = logging.getLogger("tokenring.node")
 #: a watchdog that overslept this long (and 4 reconfiguration times) was frozen, e.g. SIGSTOP;
 #: shorter gaps happen on any loaded machine and must not make the node ask to rejoin
 FROZEN_AFTER_S = 1.0
+FALSE_EXCLUSION_S = 2.0  # a skipped successor alive again within this was slow, not dead
+ACK_GRACE_MAX = 8.0  # its ack timeout grows at most this many times
+PREPARED_NEIGHBOURS = 8  # live nodes either side whose token and ack paths are declared ahead
+SETTLE_RECONS = 2  # a booting ring starts this many reconfiguration times after the last join
+SETTLE_CAP_S = 30.0  # ... but at the latest this long (or 0.5 s per live node) after boot
+LATECOMER_RECONS = 10  # how many reconfiguration times a booting node waits for main's token
+REGENERATION_BACKOFF_MAX = 7  # reconfiguration times added after fruitless regenerations
 perf_counter = time.perf_counter
 
 
@@ -173,6 +180,13 @@ class NodeOS:
         self._last_visit = 0.0
         self._last_counter = -1
         self._exclusion_backoff: dict[int, float] = {}
+        # a successor this node skipped that proved alive soon after was only slow (a loaded
+        # machine): it gets a longer ack timeout next time, so one slow spell cannot snowball
+        # into a storm of exclusions and regenerations (like TCP's backed-off RTO)
+        self._ack_grace: dict[int, float] = {}
+        self._skipped_at: dict[int, float] = {}
+        self._regeneration_streak = 0  # own regenerations with no visit in between
+        self._live_changed_at = 0.0  # when liveliness last changed (a node came or went)
         self._leaving_nodes: set[int] = set()
         self._started_at = 0.0
         self._paced = 0.0  # seconds the last pass slept to emulate wire time
@@ -225,11 +239,14 @@ class NodeOS:
         members = self.transport.open(self._on_frame, self._on_message, self._on_membership)
         for member in members:
             self.membership.set_live(member, True)
-            self.transport.prepare(member)
+        for member in members:
+            if self._near(member):
+                self.transport.prepare(member)
         self.transport.prepare(self.membership.successor)
         now = perf_counter()
         self._started_at = now
         self._last_seen = now
+        self._live_changed_at = now
         self.transport.announce()
         self._joined = True
         self._watchdog = threading.Thread(target=self._watch, name=f"watchdog-{self.node_id}", daemon=True)
@@ -371,6 +388,7 @@ class NodeOS:
             if self._last_visit:
                 self._rounds_add(t_in - self._last_visit)
             self._last_visit = t_in
+            self._regeneration_streak = 0
             counter = work[self._o_counter]
             if (counter - self._last_counter) & 0xFF > 1 and self._last_counter >= 0:
                 stats.rounds_missed += ((counter - self._last_counter) & 0xFF) - 1
@@ -593,6 +611,9 @@ class NodeOS:
         if node_id in self._leaving_nodes:
             return  # it still answers while it hands over, but it is on its way out
         self._exclusion_backoff.pop(node_id, None)
+        skipped_at = self._skipped_at.pop(node_id, None)
+        if skipped_at is not None and perf_counter() - skipped_at < FALSE_EXCLUSION_S:
+            self._ack_grace[node_id] = min(ACK_GRACE_MAX, 2 * self._ack_grace.get(node_id, 1.0))
         if self.membership.include(node_id):
             self._successor_changed()
             if tell:
@@ -607,9 +628,11 @@ class NodeOS:
         if node_id == self.node_id:
             return
         changed = self.membership.set_live(node_id, alive)
+        self._live_changed_at = perf_counter()
         if alive:
             self._leaving_nodes.discard(node_id)
-            self.transport.prepare(node_id)
+            if self._near(node_id):
+                self.transport.prepare(node_id)
         else:
             self._senders.pop(node_id, None)
         if changed:
@@ -617,6 +640,17 @@ class NodeOS:
         if not alive:
             self._lost_member(node_id)
             self._leaving_nodes.discard(node_id)
+
+    def _near(self, node_id: int) -> bool:
+        """Whether ``node_id`` is among the next or previous :data:`PREPARED_NEIGHBOURS` live
+        nodes: the ones this node passes to or acknowledges after a skip. Their paths are
+        declared ahead; anyone else's on first use (255 nodes declaring paths to all others
+        would be 65 000 declarations through one router)."""
+        live = sorted(self.membership.live)
+        if len(live) <= 2 * PREPARED_NEIGHBOURS + 1 or node_id not in live:
+            return True
+        distance = (live.index(node_id) - live.index(self.node_id)) % len(live)
+        return distance <= PREPARED_NEIGHBOURS or distance >= len(live) - PREPARED_NEIGHBOURS
 
     def _lost_member(self, node_id: int) -> None:
         """A node vanished (crash or leave). If our last pass went to it, pass again."""
@@ -678,7 +712,7 @@ class NodeOS:
             deadlines = [refresh_at]
             with self._token_lock:
                 if self._ack_pending:
-                    due = self._last_sent_time + timeouts.ack
+                    due = self._last_sent_time + timeouts.ack * self._ack_grace.get(self._last_sent_did, 1.0)
                     if now >= due:
                         self._pass_timed_out(now)
                     else:
@@ -701,13 +735,23 @@ class NodeOS:
 
     def _regeneration_deadline(self, timeouts: R.Timeouts) -> float:
         booting = self._last_visit == 0.0 and not self._has_sent
+        # while nodes are still coming up (liveliness keeps changing), the ring is not started:
+        # as on ARCNET, where every join reconfigures, a ring that starts circulating while a
+        # hundred more interpreters boot on the same cores would only reconfigure again and again
+        settled = self._live_changed_at + SETTLE_RECONS * timeouts.recon
+        settled = min(settled, self._started_at + max(SETTLE_CAP_S, 0.5 * len(self.membership.live)))
         if booting and self.preferred_master == self.node_id:
             # main starts the ring: wait briefly for a token that may already circulate
-            return self._started_at + max(0.15, 4 * timeouts.hop * len(self.membership.active))
+            return max(settled, self._started_at + max(0.15, 4 * timeouts.hop * len(self.membership.active)))
         lost_since = max(self._last_seen + timeouts.recon, self._stall_wake)
-        deadline = lost_since + self.membership.rank() * timeouts.slot
+        # a token this node regenerated that never came back: wait longer each time (a slow
+        # ring is still forming around it), as Ethernet backs off after collisions
+        backoff = timeouts.recon * min(2**self._regeneration_streak - 1, REGENERATION_BACKOFF_MAX)
+        deadline = lost_since + self.membership.rank() * timeouts.slot + backoff
         if booting and self.preferred_master in self._live:
-            deadline += 1.0  # main is up and will start the token: give it time
+            # main is up and has started (or will start) the token: a node joining a big ring
+            # on a busy machine may wait seconds before its predecessor routes the token to it
+            deadline = max(deadline, settled) + max(1.0, LATECOMER_RECONS * timeouts.recon)
         return deadline
 
     def _pass_timed_out(self, now: float) -> None:
@@ -724,6 +768,7 @@ class NodeOS:
         self.stats.successors_declared_dead += 1
         self.stats.reconfigurations += 1
         log.warning("successor %d did not acknowledge %d passes; skipping it", did, R.ACK_RETRIES + 1)
+        self._skipped_at[did] = now
         if self.membership.exclude(did, self._backoff(did)):
             self._successor_changed()
         self._bump_epoch(now)
@@ -743,6 +788,8 @@ class NodeOS:
                 return
             first = self._last_visit == 0.0 and not self._has_sent
             self.stats.tokens_regenerated += 1
+            if not first:
+                self._regeneration_streak += 1
             if not first:
                 self.stats.reconfigurations += 1
                 log.warning(
