@@ -118,9 +118,20 @@ def test_ours_on_a_straight_wall_gives_one_vector_within_5_cm_even_with_sonar_no
         vectors = drive(WallTracker, walls, -600.0, 2600.0, sigma_cm=sigma, use_contact=False)
         assert len(vectors) == 1, (sigma, vectors)
         x1, y1, x2, y2 = vectors[0]
-        assert abs(x1 - (0.0 - beam_bias(d))) < 50.0, vectors
-        assert abs(x2 - (2000.0 + beam_bias(d))) < 50.0, vectors
+        # the wall came into view and went out of it: the beam's reach past its ends is taken off
+        assert beam_bias(d) > 50.0
+        assert abs(x1 - 0.0) < 50.0, vectors
+        assert abs(x2 - 2000.0) < 50.0, vectors
         assert abs(y1 - WALL_Y) < 20.0 and abs(y2 - WALL_Y) < 20.0, vectors
+
+
+def test_ours_keeps_the_ends_where_the_scan_started_and_stopped_beside_the_wall():
+    walls = [(0.0, WALL_Y, 2000.0, WALL_Y)]
+    vectors = drive(WallTracker, walls, 500.0, 1500.0, use_contact=False)
+    assert len(vectors) == 1
+    x1, _, x2, _ = vectors[0]
+    front, rear = LAYOUT.left.front_xy[0], LAYOUT.left.rear_xy[0]
+    assert abs(x1 - (500.0 + rear)) < 20.0 and abs(x2 - (1500.0 + front)) < 20.0, vectors
 
 
 def test_seed_method_breaks_up_under_noise_where_ours_does_not():

@@ -133,6 +133,7 @@ class WallSettings:
     speed_pct: int = 100
     lap_min_mm: int = 5000  # driven along walls before a lap can end
     lap_radius_mm: float = 450.0
+    lap_overlap_mm: float = 0.0  # a lap ends this far short of its start at the latest
     max_laps: int = 1
     settle_ms: int = 1200  # at rest after a turn before it is judged by the fused heading
     check_min_deg: float = 10.0  # turns at least this big are checked (smaller ones slip < 1°)
@@ -202,8 +203,9 @@ class ExploreLeftWall(Navigator):
         self.s = settings or WallSettings()
         self.phase = "find"
         self.follow_mm = 0
-        self.lap_start: tuple[float, float] | None = None
+        self.lap_start: tuple[float, float, float] | None = None  # where following began, heading
         self.laps = 0
+        self.lap_short_mm: float | None = None  # the lap's start lies this far ahead
         self.outer_tries = 0
         self.corrections: list[float] = []
         self.check: TurnCheck | None = None
@@ -224,9 +226,13 @@ class ExploreLeftWall(Navigator):
 
     def _segment(self) -> Move:
         s = self.s
+        length = s.segment_mm
+        if self.lap_short_mm is not None:  # the lap's start is just ahead: end the segment there
+            length = max(100, min(length, round(self.lap_short_mm) + 50))
+            self.lap_short_mm = None
         return Move(
             FORWARD,
-            s.segment_mm,
+            length,
             s.speed_pct,
             scan=True,
             abort=(*self._front_stop(), Abort("left_beyond", self._lost_limit(), "CORNER", s.lost_sweeps)),
@@ -434,7 +440,7 @@ class ExploreLeftWall(Navigator):
 
         # phase follow
         if self.lap_start is None and sensors.pose is not None:
-            self.lap_start = sensors.pose[:2]
+            self.lap_start = sensors.pose
         if label == "follow" and blocked:
             return self._inner(sensors)
         if label == "follow" and last.trigger == "left_beyond":
@@ -465,9 +471,19 @@ class ExploreLeftWall(Navigator):
         )
 
     def _lap_done(self, sensors: Sensors) -> bool:
+        """Back where following began, along the same wall: heading the same way, and level with
+        the start or past it (so the first wall is mapped up to where its first vector began)."""
         if self.lap_start is None or sensors.pose is None or self.follow_mm < self.s.lap_min_mm:
             return False
-        if math.dist(self.lap_start, sensors.pose[:2]) > self.s.lap_radius_mm:
+        x0, y0, heading0 = self.lap_start
+        x, y, heading = sensors.pose
+        if math.hypot(x - x0, y - y0) > self.s.lap_radius_mm:
+            return False
+        if abs(math.remainder(heading - heading0, 2 * math.pi)) > math.radians(45.0):
+            return False
+        along = (x - x0) * math.cos(heading0) + (y - y0) * math.sin(heading0)
+        if along < -self.s.lap_overlap_mm:
+            self.lap_short_mm = -along
             return False
         self.laps += 1
         self.follow_mm = 0

@@ -234,17 +234,27 @@ class TrackerSettings:
     split_after: int = 3  # consecutive misfits that end a run
     min_points: int = 6
     min_length_mm: float = 100.0  # the seed's minimum object size
+    #: how far past a wall's free end the beam still reads it, per mm of range: its echo from the
+    #: edge stays strong out to about 14° off the axis (the world's beam: 80 mm at 30 cm, 140 at 60)
+    edge_reach: float = 0.25
 
 
 @dataclass
 class _Run:
     points: list[Point] = field(default_factory=list)
-    misfits: list[Point] = field(default_factory=list)
+    ranges: list[float] = field(default_factory=list)
+    misfits: list[tuple[Point, float]] = field(default_factory=list)  # (point, range mm)
     line: tuple[np.ndarray, np.ndarray] | None = None
+    start_free: bool = False  # the wall came into view (rather than the scan starting beside it)
 
 
 class WallTracker:
-    """Ours for one side: groups global side-sonar points into straight runs → vectors."""
+    """Ours for one side: groups global side-sonar points into straight runs → vectors.
+
+    A run's end is *free* when the wall went out of view there (the readings vanished or jumped
+    beyond it) and *held* when the scan stopped beside it or a nearer wall took over. At a free
+    end the beam kept reading the wall's edge for ``edge_reach`` × range past it, each point
+    placed on the beam's axis: the vector is shortened by that much there."""
 
     def __init__(
         self, sensors: SideSensors, emit: Callable[[Vector], None], settings: TrackerSettings | None = None
@@ -254,16 +264,25 @@ class WallTracker:
         self.settings = settings or TrackerSettings()
         self.run = _Run()
         self.robot_xy: Point | None = None
+        self.sweeps_in_scan = 0
+        self.empty_sweeps = 0  # consecutive sweeps without a usable reading on this side
+        self.sweeps_since_fit = 0  # sweeps since a point last joined the current run
 
     def feed(self, sweep: SweepInput) -> None:
         if not sweep.active:
-            self._close()
+            self._close(free_end=self.sweeps_since_fit >= 2)
+            self.sweeps_in_scan = self.empty_sweeps = 0
             return
+        self.sweeps_in_scan += 1
         self.robot_xy = sweep.pose[:2]
+        self.sweeps_since_fit += 1
+        usable = False
         for which, cm in (("rear", sweep.rear_cm), ("front", sweep.front_cm)):
             if cm == NO_CONTACT_CM or cm * 10.0 > self.settings.max_range_mm:
                 continue
-            self._add(self.sensors.point(sweep.pose, which, cm * 10.0))
+            usable = True
+            self._add(self.sensors.point(sweep.pose, which, cm * 10.0), cm * 10.0)
+        self.empty_sweeps = 0 if usable else self.empty_sweeps + 1
 
     def _fits(self, p: Point) -> bool:
         run, s = self.run, self.settings
@@ -280,42 +299,68 @@ class WallTracker:
         along = (np.asarray(run.points) - centroid) @ direction
         return float(along.min()) - s.gap_mm <= t <= float(along.max()) + s.gap_mm
 
-    def _add(self, p: Point) -> None:
+    def _add(self, p: Point, range_mm: float, from_misfits: bool = False) -> None:
         run, s = self.run, self.settings
         if self._fits(p):
+            if not run.points:
+                # a wall coming into view mid-scan (after empty sweeps) has a free start
+                run.start_free = not from_misfits and self.sweeps_in_scan > 1 and self.empty_sweeps >= 1
             run.points.append(p)
+            run.ranges.append(range_mm)
             run.misfits = []  # isolated misfits were noise
+            self.sweeps_since_fit = 0
             if len(run.points) >= 3:
                 pts = np.asarray(run.points)
                 centroid, direction = fit_line(pts)
                 spread = float(np.ptp((pts - centroid) @ direction))
                 run.line = (centroid, direction) if spread >= 30.0 else None
             return
-        run.misfits.append(p)
+        run.misfits.append((p, range_mm))
         if len(run.misfits) >= s.split_after:
             misfits = run.misfits
             run.misfits = []
-            self._close()
-            for q in misfits:
-                self._add(q)
+            self._close(free_end=self._beyond(run, [q for q, _ in misfits]))
+            for q, r in misfits:
+                self._add(q, r, from_misfits=True)
 
-    def _close(self) -> None:
+    def _beyond(self, run: _Run, misfits: list[Point]) -> bool:
+        """The misfits lie beyond the run's line as seen from the robot: its wall ended there."""
+        if run.line is None or self.robot_xy is None:
+            return False
+        centroid, direction = run.line
+        normal = np.array([-direction[1], direction[0]])
+        robot_side = float((np.asarray(self.robot_xy) - centroid) @ normal)
+        offsets = (np.asarray(misfits) - centroid) @ normal
+        return bool(float(np.mean(offsets)) * robot_side < 0)
+
+    def _close(self, free_end: bool = False) -> None:
         run, s = self.run, self.settings
         self.run = _Run()
         if len(run.points) < s.min_points:
             return
         pts = np.asarray(run.points)
+        ranges = np.asarray(run.ranges)
         centroid, direction = fit_line(pts)
         keep = line_residuals(pts, centroid, direction) <= s.tolerance_mm / 2
         if keep.sum() >= s.min_points:
-            pts = pts[keep]
-        vector = segment_from_points(pts, reference=self._first_point(run))
+            pts, ranges = pts[keep], ranges[keep]
+        vector = segment_from_points(pts, reference=run.points[0])
+        reach = s.edge_reach * float(np.median(ranges))
+        vector = trim_vector(vector, reach if run.start_free else 0.0, reach if free_end else 0.0)
         if vector_length(vector) >= s.min_length_mm:
             self.emit(vector)
 
-    @staticmethod
-    def _first_point(run: _Run) -> Point:
-        return run.points[0]
+
+def trim_vector(v: Vector, start_mm: float, end_mm: float) -> Vector:
+    """``v`` shortened by ``start_mm`` at its start and ``end_mm`` at its end (never below a
+    quarter of its length)."""
+    length = vector_length(v)
+    if length <= 0.0 or start_mm + end_mm <= 0.0:
+        return v
+    scale = min(1.0, 0.75 * length / (start_mm + end_mm))
+    a, b = start_mm * scale / length, end_mm * scale / length
+    dx, dy = v[2] - v[0], v[3] - v[1]
+    return (v[0] + a * dx, v[1] + a * dy, v[2] - b * dx, v[3] - b * dy)
 
 
 # ---------------------------------------------------------------------------------------------
