@@ -90,6 +90,8 @@ def drive(generator_cls, walls, start_x, end_x, y=0.0, sigma_cm=0.0, seed=1, use
         x += step
         t += SWEEP_MS
     gen.feed(SweepInput(t, (x, y, 0.0), 255, 255, NONE, False))  # STOP_SCAN
+    if isinstance(gen, WallTracker):
+        gen.finish()  # FLUSH: ours keeps a run open over the stops between moves
     return vectors
 
 
@@ -132,6 +134,25 @@ def test_ours_keeps_the_ends_where_the_scan_started_and_stopped_beside_the_wall(
     x1, _, x2, _ = vectors[0]
     front, rear = LAYOUT.left.front_xy[0], LAYOUT.left.rear_xy[0]
     assert abs(x1 - (500.0 + rear)) < 20.0 and abs(x2 - (1500.0 + front)) < 20.0, vectors
+
+
+def test_ours_runs_on_over_the_stops_between_moves_along_one_wall():
+    walls = [(0.0, WALL_Y, 3000.0, WALL_Y)]
+    vectors: list = []
+    gen = WallTracker(LAYOUT.left, vectors.append)
+    t = 0
+    for start in (200.0, 800.0, 1400.0):  # three 600 mm segments, a stop and a small turn between
+        for k in range(50):
+            pose = (start + k * 12.0, 0.0, math.radians(2.0 if start == 800.0 else 0.0))
+            front, rear = side_readings(pose, LAYOUT.left, walls)
+            gen.feed(SweepInput(t, pose, front, rear, NONE, True))
+            t += SWEEP_MS
+        gen.feed(SweepInput(t, pose, 255, 255, NONE, False))
+        assert vectors == []
+    gen.finish()
+    assert len(vectors) == 1
+    x1, y1, x2, y2 = vectors[0]
+    assert x1 < 300.0 and x2 > 1900.0 and abs(y1 - WALL_Y) < 20 and abs(y2 - WALL_Y) < 20
 
 
 def test_seed_method_breaks_up_under_noise_where_ours_does_not():

@@ -246,13 +246,15 @@ class _Run:
     misfits: list[tuple[Point, float]] = field(default_factory=list)  # (point, range mm)
     line: tuple[np.ndarray, np.ndarray] | None = None
     start_free: bool = False  # the wall came into view (rather than the scan starting beside it)
+    empty_since_fit: int = 0  # sweeps without any reading since the last point joined
 
 
 class WallTracker:
     """Ours for one side: groups global side-sonar points into straight runs → vectors.
 
-    A run's end is *free* when the wall went out of view there (the readings vanished or jumped
-    beyond it) and *held* when the scan stopped beside it or a nearer wall took over. At a free
+    A run outlasts the stops between moves while its wall goes on (its points are global). Its
+    end is *free* when the wall went out of view there (the readings vanished or jumped beyond
+    it) and *held* when vector generation ended beside it or a nearer wall took over. At a free
     end the beam kept reading the wall's edge for ``edge_reach`` × range past it, each point
     placed on the beam's axis: the vector is shortened by that much there."""
 
@@ -266,16 +268,13 @@ class WallTracker:
         self.robot_xy: Point | None = None
         self.sweeps_in_scan = 0
         self.empty_sweeps = 0  # consecutive sweeps without a usable reading on this side
-        self.sweeps_since_fit = 0  # sweeps since a point last joined the current run
 
     def feed(self, sweep: SweepInput) -> None:
-        if not sweep.active:
-            self._close(free_end=self.sweeps_since_fit >= 2)
+        if not sweep.active:  # a stop between two moves: the run goes on if its wall does
             self.sweeps_in_scan = self.empty_sweeps = 0
             return
         self.sweeps_in_scan += 1
         self.robot_xy = sweep.pose[:2]
-        self.sweeps_since_fit += 1
         usable = False
         for which, cm in (("rear", sweep.rear_cm), ("front", sweep.front_cm)):
             if cm == NO_CONTACT_CM or cm * 10.0 > self.settings.max_range_mm:
@@ -283,6 +282,12 @@ class WallTracker:
             usable = True
             self._add(self.sensors.point(sweep.pose, which, cm * 10.0), cm * 10.0)
         self.empty_sweeps = 0 if usable else self.empty_sweeps + 1
+        if not usable and self.run.points:
+            self.run.empty_since_fit += 1
+
+    def finish(self) -> None:
+        """The end of vector generation (FLUSH): the open run becomes a vector."""
+        self._close(free_end=self.run.empty_since_fit >= 2)
 
     def _fits(self, p: Point) -> bool:
         run, s = self.run, self.settings
@@ -308,7 +313,7 @@ class WallTracker:
             run.points.append(p)
             run.ranges.append(range_mm)
             run.misfits = []  # isolated misfits were noise
-            self.sweeps_since_fit = 0
+            run.empty_since_fit = 0
             if len(run.points) >= 3:
                 pts = np.asarray(run.points)
                 centroid, direction = fit_line(pts)
@@ -319,7 +324,7 @@ class WallTracker:
         if len(run.misfits) >= s.split_after:
             misfits = run.misfits
             run.misfits = []
-            self._close(free_end=self._beyond(run, [q for q, _ in misfits]))
+            self._close(free_end=run.empty_since_fit >= 2 or self._beyond(run, [q for q, _ in misfits]))
             for q, r in misfits:
                 self._add(q, r, from_misfits=True)
 
@@ -576,6 +581,9 @@ class Vectorizer:
 
     def flush(self) -> None:
         self.end_scan()
+        for generator in self.generators.values():
+            if isinstance(generator, WallTracker):
+                generator.finish()
         for post in self.post.values():
             post.flush()
 
