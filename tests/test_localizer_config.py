@@ -84,3 +84,21 @@ def test_missing_file_and_command_line_exit_code(tmp_path: Path, capsys: pytest.
     )
     err = capsys.readouterr().err
     assert "no such log file" in err or "bad.yaml:2: filter.odometry_model" in err
+
+
+def test_up_refuses_a_bad_localizer_file_before_starting_anything(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    bad = tmp_path / "loc.yaml"
+    bad.write_text("filter:\n  enabled: maybe\n")
+    result = subprocess.run(
+        [sys.executable, "-m", "tokenring", "up", "--localizer", str(bad), "--duration", "1"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 2
+    assert f"{bad}:2: filter.enabled" in result.stderr
+    assert "Traceback" not in result.stderr
+    assert "starting" not in result.stdout  # refused before the launcher started a node

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -99,6 +100,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     mission.add_argument(
         "--action-speed", type=int, default=50, metavar="PCT", help="speed of the action file's moves"
     )
+    mission.add_argument(
+        "--localizer",
+        metavar="YAML",
+        help="copro's sync + EKF configuration, e.g. config/localization.yaml (the Darmstadt "
+        "setup: compass + walls of the wall file, data and error logs); default: exploration "
+        "mode without logs",
+    )
     add_ring_options(p)
 
 
@@ -151,6 +159,11 @@ def run(args: argparse.Namespace) -> int:
         services=services,
         extra_node_args=["--store", args.store] if args.store else [],
     )
+    if args.localizer:
+        from modules.common.locconfig import load_config
+
+        load_config(args.localizer)  # a bad file is refused (file:line, key) before anything starts
+        os.environ["TOKENRING_LOCALIZER_CONFIG"] = str(Path(args.localizer).resolve())
     mission = None
     if args.explore and args.actions:
         raise UsageError("--explore and --actions both drive the robot: give one of them")
