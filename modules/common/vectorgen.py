@@ -266,14 +266,15 @@ class WallTracker:
         self.settings = settings or TrackerSettings()
         self.run = _Run()
         self.robot_xy: Point | None = None
-        self.sweeps_in_scan = 0
+        self.heading: float | None = None  # at the last sweep of vector generation
         self.empty_sweeps = 0  # consecutive sweeps without a usable reading on this side
 
     def feed(self, sweep: SweepInput) -> None:
         if not sweep.active:  # a stop between two moves: the run goes on if its wall does
-            self.sweeps_in_scan = self.empty_sweeps = 0
             return
-        self.sweeps_in_scan += 1
+        if self.heading is None or abs(math.remainder(sweep.pose[2] - self.heading, 2 * math.pi)) > 0.35:
+            self.empty_sweeps = 0  # looking elsewhere now: what was (not) seen before does not count
+        self.heading = sweep.pose[2]
         self.robot_xy = sweep.pose[:2]
         usable = False
         for which, cm in (("rear", sweep.rear_cm), ("front", sweep.front_cm)):
@@ -304,12 +305,12 @@ class WallTracker:
         along = (np.asarray(run.points) - centroid) @ direction
         return float(along.min()) - s.gap_mm <= t <= float(along.max()) + s.gap_mm
 
-    def _add(self, p: Point, range_mm: float, from_misfits: bool = False) -> None:
+    def _add(self, p: Point, range_mm: float, start_free: bool | None = None) -> None:
         run, s = self.run, self.settings
         if self._fits(p):
             if not run.points:
-                # a wall coming into view mid-scan (after empty sweeps) has a free start
-                run.start_free = not from_misfits and self.sweeps_in_scan > 1 and self.empty_sweeps >= 1
+                # a wall coming into view (after sweeps without readings) has a free start
+                run.start_free = self.empty_sweeps >= 1 if start_free is None else start_free
             run.points.append(p)
             run.ranges.append(range_mm)
             run.misfits = []  # isolated misfits were noise
@@ -324,9 +325,11 @@ class WallTracker:
         if len(run.misfits) >= s.split_after:
             misfits = run.misfits
             run.misfits = []
-            self._close(free_end=run.empty_since_fit >= 2 or self._beyond(run, [q for q, _ in misfits]))
+            beyond = self._beyond(run, [q for q, _ in misfits])
+            real = self._close(free_end=run.empty_since_fit >= 2 or beyond)
+            # the next wall came into view: from nothing (the run was noise) or in front of this one
             for q, r in misfits:
-                self._add(q, r, from_misfits=True)
+                self._add(q, r, start_free=not real or not beyond)
 
     def _beyond(self, run: _Run, misfits: list[Point]) -> bool:
         """The misfits lie beyond the run's line as seen from the robot: its wall ended there."""
@@ -338,11 +341,12 @@ class WallTracker:
         offsets = (np.asarray(misfits) - centroid) @ normal
         return bool(float(np.mean(offsets)) * robot_side < 0)
 
-    def _close(self, free_end: bool = False) -> None:
+    def _close(self, free_end: bool = False) -> bool:
+        """The run as a vector (if it makes one); False if it was too short to count as a wall."""
         run, s = self.run, self.settings
         self.run = _Run()
         if len(run.points) < s.min_points:
-            return
+            return False
         pts = np.asarray(run.points)
         ranges = np.asarray(run.ranges)
         centroid, direction = fit_line(pts)
@@ -354,6 +358,7 @@ class WallTracker:
         vector = trim_vector(vector, reach if run.start_free else 0.0, reach if free_end else 0.0)
         if vector_length(vector) >= s.min_length_mm:
             self.emit(vector)
+        return True
 
 
 def trim_vector(v: Vector, start_mm: float, end_mm: float) -> Vector:
