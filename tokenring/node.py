@@ -182,7 +182,8 @@ class NodeOS:
         self._exclusion_backoff: dict[int, float] = {}
         # a successor this node skipped that proved alive soon after was only slow (a loaded
         # machine): it gets a longer ack timeout next time, so one slow spell cannot snowball
-        # into a storm of exclusions and regenerations (like TCP's backed-off RTO)
+        # into a storm of exclusions and regenerations (like TCP's backed-off RTO); every pass
+        # it acknowledges in time halves the extra again
         self._ack_grace: dict[int, float] = {}
         self._skipped_at: dict[int, float] = {}
         self._regeneration_streak = 0  # own regenerations with no visit in between
@@ -554,6 +555,10 @@ class NodeOS:
                     if self._ack_pending:
                         self.timing.ack_latency.add(now - self._last_sent_time)
                         self.stats.passes_acked += 1
+                        if sender in self._ack_grace:  # answering in time again: shrink it back
+                            grace = self._ack_grace.pop(sender) / 2
+                            if grace > 1.0:
+                                self._ack_grace[sender] = grace
                     self._ack_pending = False
                     self._retries = 0
                     self._confirmed_did = sender
@@ -746,12 +751,15 @@ class NodeOS:
         lost_since = max(self._last_seen + timeouts.recon, self._stall_wake)
         # a token this node regenerated that never came back: wait longer each time (a slow
         # ring is still forming around it), as Ethernet backs off after collisions
-        backoff = timeouts.recon * min(2**self._regeneration_streak - 1, REGENERATION_BACKOFF_MAX)
+        streak = max(0, self._regeneration_streak - 1)  # a second try is normal recovery
+        backoff = timeouts.recon * min(2**streak - 1, REGENERATION_BACKOFF_MAX)
         deadline = lost_since + self.membership.rank() * timeouts.slot + backoff
-        if booting and self.preferred_master in self._live:
-            # main is up and has started (or will start) the token: a node joining a big ring
-            # on a busy machine may wait seconds before its predecessor routes the token to it
-            deadline = max(deadline, settled) + max(1.0, LATECOMER_RECONS * timeouts.recon)
+        if booting:
+            deadline = max(deadline, settled + self.membership.rank() * timeouts.slot)
+            if self.preferred_master in self._live:
+                # main is up and has started (or will start) the token: a node joining a big
+                # ring on a busy machine may wait seconds before its predecessor routes it here
+                deadline += max(1.0, LATECOMER_RECONS * timeouts.recon)
         return deadline
 
     def _pass_timed_out(self, now: float) -> None:
