@@ -257,6 +257,7 @@ class ClosedLoop:
         localizer: bool = True,
         localizer_config: dict[str, Any] | None = None,
         calibrate: bool = True,
+        start_deg: float | None = None,
     ) -> None:
         from modules.common.navigator import ExploreAvoid, ExploreLeftWall
         from modules.common.pilot import Pilot
@@ -265,6 +266,11 @@ class ClosedLoop:
         from tokenring.world.physics import TrackedRobot
 
         self.world = load_world(world)
+        if start_deg is not None:  # another start heading: the calibration turns end elsewhere
+            import dataclasses
+
+            start = dataclasses.replace(self.world.start, theta=math.radians(start_deg))
+            self.world = dataclasses.replace(self.world, start=start)
         rng = np.random.default_rng(seed)
         self.robot = TrackedRobot(self.world, rng)
         self.now = 0.0
@@ -531,6 +537,7 @@ def explore(
     dead_reckoning: bool = False,
     walls: str | None = None,
     minutes: float = 30.0,
+    start_deg: float | None = None,
     out: str | None = None,
     variant_pngs: bool = False,
 ) -> dict[str, Any]:
@@ -550,6 +557,7 @@ def explore(
         method=0 if seed_method else None,
         localizer=not dead_reckoning,
         localizer_config=config,
+        start_deg=start_deg,
     )
     run = loop.run(minutes)
     name, truth = load_truth(world)
@@ -608,6 +616,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--dead-reckoning", action="store_true", help="no Localizer")
     parser.add_argument("--walls", choices=("exploration", "off"), help="the Localizer's walls mode")
+    parser.add_argument("--start-deg", type=float, help="the robot's start heading (default: the room's)")
     parser.add_argument("--out", metavar="DIR", help="write the maps' PNGs here")
     parser.add_argument("--moves", action="store_true", help="print the navigator's moves")
     parser.add_argument("--variants", action="store_true", help="also score seed/ours × DR/filter")
@@ -624,6 +633,7 @@ def main(argv: list[str] | None = None) -> int:
         dead_reckoning=args.dead_reckoning,
         walls=args.walls,
         minutes=args.minutes,
+        start_deg=args.start_deg,
         out=args.out,
         variant_pngs=args.variants,
     )

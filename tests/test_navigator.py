@@ -202,7 +202,7 @@ def test_explore2_follows_the_left_wall_and_turns_at_corners():
 
     nav = ExploreLeftWall(LAYOUT)
     s = sensors_with(left_front=30, left_rear=30)
-    find = nav.plan(None, s, STOPPED)  # first a wall ahead (an island on the left does not count)
+    find = nav.plan(None, sensors_with(), STOPPED)  # nothing near: drive until a wall is ahead
     assert [m.label for m in find] == ["find"]
     assert [(a.kind, a.cm) for a in find[0].abort] == [("ahead_within", 25), ("front_within", 8)]
     turn = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
@@ -246,6 +246,37 @@ def settle(nav: ExploreLeftWall, last, s: Sensors, sweeps: int = 30) -> list[Mov
         s.sweep += 1
         s.stamp_ms += 120
     raise AssertionError("the navigator kept waiting")
+
+
+def test_explore2_first_faces_the_nearest_echo_around_then_drives_to_it():
+    nav = ExploreLeftWall(LAYOUT)
+    s = sensors_with(right_front=70, front=140)  # a wall 70 cm to the right, something farther ahead
+    s.heading_cdeg = 0
+    face = nav.plan(None, s, STOPPED)
+    assert face[0].label == "face" and face[0].direction == TURN_RIGHT and face[0].amount == 90
+    s = sensors_with(front=60)
+    s.heading_cdeg = 9000  # turned right by 90° (clockwise heading grew)
+    find = settle(nav, Outcome(REASON["DONE"], face[0]), s)
+    assert [m.label for m in find] == ["find"]
+
+
+def test_explore2_leaves_an_island_it_went_round_and_finds_the_room_wall():
+    from modules.common.pilot import Outcome
+
+    nav = ExploreLeftWall(LAYOUT)
+    nav.phase = "follow"
+    s = sensors_with(left_front=30, left_rear=30)
+    seg = nav.plan(None, s, STOPPED)
+    # round a pillar on the left: four left turns of 90° (counter-clockwise), 3 m along its faces
+    for heading in (90.0, 180.0, 270.0, 360.0):
+        for _ in range(2):
+            seg = nav.plan(Outcome(REASON["DONE"], seg[-1], driven_mm=600), s, STOPPED)
+        s.pose = (s.pose[0], s.pose[1], math.radians(heading))
+    s.pose = (50.0, 0.0, 0.0)
+    leave = nav.plan(Outcome(REASON["DONE"], seg[-1], driven_mm=600), s, STOPPED)
+    assert leave is not None and nav.note == "left an island" and nav.islands
+    assert leave[0].label == "leave" and leave[0].direction == TURN_RIGHT  # away from it
+    assert nav.phase == "find"
 
 
 def test_wall_angle_from_the_left_pair_inside_and_beyond_the_beam():
@@ -356,7 +387,7 @@ def test_explore2_corrects_a_turn_the_floor_let_slip_by_the_compass():
     nav = ExploreLeftWall(LAYOUT)
     s = sensors_with(left_front=30, left_rear=30)
     s.heading_cdeg = 9000  # east, navigation convention
-    find = nav.plan(None, s, STOPPED)
+    find = nav.plan(None, sensors_with(), STOPPED)
     turn = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
     assert turn[0].direction == TURN_RIGHT and turn[0].amount == 90
     s.heading_cdeg = 17200  # turned right by 82° only (clockwise heading grew by 82°)

@@ -127,14 +127,16 @@ class WallSettings:
     lost_sweeps: int = 2  # ... on this many sweeps in a row (one dropout is no corner)
     segment_mm: int = 600
     find_mm: int = 5000
+    face_cm: int = 150  # at the start, an echo this near (not ahead) is turned to before driving
     reacquire_mm: int = 900
     clear_mm: int = 400  # drive on past an outer corner before turning left
     max_correction_deg: float = 15.0
     speed_pct: int = 100
-    lap_min_mm: int = 5000  # driven along walls before a lap can end
+    lap_min_mm: int = 2500  # driven along walls before a lap can end
     lap_radius_mm: float = 450.0
     lap_overlap_mm: float = 0.0  # a lap ends this far short of its start at the latest
     max_laps: int = 1
+    max_islands: int = 3  # laps round an island (turning left all round) before giving up
     settle_ms: int = 1200  # at rest after a turn before it is judged by the fused heading
     check_min_deg: float = 10.0  # turns at least this big are checked (smaller ones slip < 1°)
     turn_tolerance_deg: float = 1.5
@@ -206,6 +208,9 @@ class ExploreLeftWall(Navigator):
         self.lap_start: tuple[float, float, float] | None = None  # where following began, heading
         self.laps = 0
         self.lap_short_mm: float | None = None  # the lap's start lies this far ahead
+        self.rotation = 0.0  # rad turned since following began (left positive)
+        self.last_heading: float | None = None
+        self.islands: list[tuple[float, float]] = []  # where laps round an island began
         self.outer_tries = 0
         self.corrections: list[float] = []
         self.check: TurnCheck | None = None
@@ -395,7 +400,16 @@ class ExploreLeftWall(Navigator):
                 self.state = NAV["TURN"]
                 return judged
             label = "turned"
+        self._count_rotation(sensors)
         if self._lap_done(sensors):
+            if self.rotation > math.pi and len(self.islands) < s.max_islands:
+                # a lap turning left all round had its wall outside: an island — leave it
+                self.islands.append(self.lap_start[:2] if self.lap_start else (0.0, 0.0))
+                self.lap_start, self.follow_mm, self.laps = None, 0, 0
+                self.phase, self.last_follow = "find", None
+                self.state = NAV["TURN"]
+                self.note = "left an island"
+                return self._turn(-90, "leave", sensors) or [self._forward(s.find_mm, "find")]
             self.state = NAV["DONE"]
             self.note = "lap closed"
             return None
@@ -404,9 +418,14 @@ class ExploreLeftWall(Navigator):
         if self.phase == "find":  # drive until a wall blocks the way, then put it on the left
             self.state = NAV["ENTRY"]
             if label == "find" and (blocked or last.done):
+                self.rotation = 0.0
                 self.phase = "follow"
                 self.state = NAV["TURN"]
                 return self._turn(-90, "inner", sensors, align=True) or [self._segment()]
+            if label not in ("face", "turned", "leave") and not self.islands:
+                facing = self._face_nearest(sensors)
+                if facing:
+                    return facing
             return [self._forward(s.find_mm, "find")]
 
         if self.phase == "outer":  # the wall ended: drive past its end, then turn left
@@ -469,6 +488,26 @@ class ExploreLeftWall(Navigator):
         return self._forward(
             self.s.reacquire_mm, "reacquire", Abort("left_within", self._lost_limit() - 5, "NONE")
         )
+
+    def _face_nearest(self, sensors: Sensors) -> list[Move]:
+        """At the start: turn toward the nearest echo around (most likely a wall of the room, not
+        an island in it), unless a front sonar has it already."""
+        from modules.common.robot import SONAR_MOUNTS
+
+        d = sensors.distances
+        nearest = min(range(len(d)), key=lambda i: d[i])
+        if d[nearest] > self.s.face_cm or nearest in self.layout.front:
+            return []
+        return self._turn(math.degrees(SONAR_MOUNTS[nearest].angle), "face", sensors)
+
+    def _count_rotation(self, sensors: Sensors) -> None:
+        """The heading turned through since following began (positive: left), for telling a
+        room's wall (a lap turns right all round) from an island's (it turns left)."""
+        if sensors.pose is None:
+            return
+        if self.last_heading is not None:
+            self.rotation += math.remainder(sensors.pose[2] - self.last_heading, 2 * math.pi)
+        self.last_heading = sensors.pose[2]
 
     def _lap_done(self, sensors: Sensors) -> bool:
         """Back where following began, along the same wall: heading the same way, and level with
