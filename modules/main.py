@@ -153,12 +153,13 @@ class Program(UserProgram):
         if moves is None:
             self.stop_explore(nav.note or "done", aborted=False)
             return
-        log.info(
-            "%s after %s: %s",
-            NAV_NAMES.get(nav.state, nav.state),
-            ended,
-            ", ".join(f"{m.label or m.direction} {m.amount}" for m in moves),
-        )
+        if moves:  # (an empty plan: the navigator waits at rest, e.g. for a turn to be judged)
+            log.info(
+                "%s after %s: %s",
+                NAV_NAMES.get(nav.state, nav.state),
+                ended,
+                ", ".join(f"{m.label or m.direction} {m.amount}" for m in moves),
+            )
         pilot.start(moves, self.sensors)
 
     # -- exploration control ---------------------------------------------------------------------
