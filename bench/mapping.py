@@ -142,6 +142,7 @@ def run_room(room: str, args: argparse.Namespace, out: Path, port: int) -> dict[
     if args.programs:
         cmd += ["--programs", args.programs]
     started = time.monotonic()
+    finished = ""
     ring_log = (out / f"{room}-ring.log").open("w", encoding="utf-8")
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     with open_session(make_config(connect=[endpoint])) as session:
@@ -153,7 +154,10 @@ def run_room(room: str, args: argparse.Namespace, out: Path, port: int) -> dict[
             line = proc.stdout.readline() if proc.stdout else ""
             ring_log.write(line)
             if "explore |" in line:
-                print(f"  [{time.monotonic() - started:5.0f} s] {line.split('|', 1)[1].strip()}", flush=True)
+                said = line.split("|", 1)[1].strip()
+                print(f"  [{time.monotonic() - started:5.0f} s] {said}", flush=True)
+                if said.startswith("exploration "):
+                    finished = said.removeprefix("exploration ")
         if recorder is not None:
             recorder.close()
     code = proc.wait()
@@ -164,6 +168,7 @@ def run_room(room: str, args: argparse.Namespace, out: Path, port: int) -> dict[
         "motor_log": recorder.motor_log if recorder else [],
         "truth": recorder.truth if recorder else [],
         "live": live,
+        "finished": finished,
     }
 
 
@@ -187,7 +192,47 @@ def load_recording(path: Path, live: Path) -> dict[str, Any]:
         "code": 0,
         "records": [tuple(r) for r in data["records"]],
         "motor_log": data["motor_log"],
+        "truth": data.get("truth", []),
         "live": live,
+        "finished": "(replayed)",
+    }
+
+
+def pose_error(result: dict[str, Any]) -> dict[str, float]:
+    """How far copro's filtered pose was from the truth (median, 95th percentile, max; mm and °),
+    compared where a truth sample lies within 150 ms of the pose's stamp."""
+    import bisect
+    import math
+
+    from modules.common.units import pose_from_wire
+
+    truth = sorted(result.get("truth", []))
+    stamps = [t[0] for t in truth]
+    position, heading = [], []
+    last = None
+    for _, _, copro in result["records"]:
+        stamp = copro["pose_stamp_ms"]
+        if copro["pose_source"] != 2 or stamp == last or not stamps:
+            continue
+        last = stamp
+        i = bisect.bisect_left(stamps, stamp)
+        near = min((j for j in (i - 1, i) if 0 <= j < len(stamps)), key=lambda j: abs(stamps[j] - stamp))
+        if abs(stamps[near] - stamp) > 150:
+            continue
+        _, tx, ty, tth = truth[near]
+        x, y, th = pose_from_wire(copro["pose_x_mm"], copro["pose_y_mm"], copro["pose_angle_cdeg"])
+        position.append(math.hypot(x - tx, y - ty))
+        heading.append(abs(math.degrees(math.remainder(th - tth, 2 * math.pi))))
+    if not position:
+        return {}
+    p, h = np.asarray(position), np.asarray(heading)
+    return {
+        "samples": len(p),
+        "position_median_mm": round(float(np.median(p)), 1),
+        "position_p95_mm": round(float(np.percentile(p, 95)), 1),
+        "position_max_mm": round(float(p.max()), 1),
+        "heading_median_deg": round(float(np.median(h)), 2),
+        "heading_p95_deg": round(float(np.percentile(h, 95)), 2),
     }
 
 
@@ -205,7 +250,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=1, help="the world's noise seed")
     parser.add_argument("--programs", help="module programs directory (default: modules/)")
     parser.add_argument("--out", default="bench-mapping", help="directory for the maps (PNG, JSON)")
-    parser.add_argument("--json", metavar="FILE", help="also write the table as JSON")
+    parser.add_argument(
+        "--json",
+        metavar="FILE",
+        help="the results file (default bench/results/mapping-<date>.json; '' for none)",
+    )
     parser.add_argument(
         "--ring-log-level",
         default="warning",
@@ -221,6 +270,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
+    rooms: dict[str, dict[str, Any]] = {}
     for room in [r.strip() for r in args.rooms.split(",") if r.strip()]:
         recording = out / f"{room}-drive.msgpack"
         if args.replay:
@@ -231,6 +281,19 @@ def main(argv: list[str] | None = None) -> int:
             save_recording(recording, result)
         world, truth = load_truth(room)
         print(f"  {len(result['records'])} sweeps recorded, ring exit code {result['code']}", flush=True)
+        errors = pose_error(result)
+        if errors:
+            print(
+                f"  filtered pose vs truth: median {errors['position_median_mm']:.0f} mm, "
+                f"p95 {errors['position_p95_mm']:.0f} mm, heading median {errors['heading_median_deg']:.1f}°",
+                flush=True,
+            )
+        rooms[room] = {
+            "ring_exit_code": result["code"],
+            "sweeps": len(result["records"]),
+            "finished": result.get("finished", ""),
+            "pose_error": pose_error(result),
+        }
         variants = [("seed", SEED_METHOD, "dead reckoning"), ("ours", OUR_METHOD, "dead reckoning"),
                     ("seed", SEED_METHOD, "filter"), ("ours", OUR_METHOD, "filter")]  # fmt: skip
         for name, method, source in variants:
@@ -266,9 +329,40 @@ def main(argv: list[str] | None = None) -> int:
             f"{r['room']:8} {r['method']:11} {r['pose']:15} {r['vectors']:7d} {r['coverage']:9.1%} "
             f"{r['precision']:9.1%} {orient:>8} {r['corners_closed']:>4}/{r['corners_total']:<3}"
         )
-    if args.json:
-        Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
+    target = args.json if args.json is not None else default_results_path()
+    if target:
+        Path(target).parent.mkdir(parents=True, exist_ok=True)
+        Path(target).write_text(json.dumps(results_document(args, rooms, rows), indent=1) + "\n")
+        print(f"\nresults in {target}")
     return 0
+
+
+def default_results_path() -> str:
+    import datetime as dt
+
+    return str(Path(__file__).parent / "results" / f"mapping-{dt.date.today().isoformat()}.json")
+
+
+def results_document(args: argparse.Namespace, rooms: dict[str, dict[str, Any]], rows: list[dict]) -> dict:
+    """The run's settings, what each room's drive did, and the table's rows."""
+    import datetime as dt
+    import os
+
+    return {
+        "benchmark": "mapping",
+        "date": dt.datetime.now().isoformat(timespec="seconds"),
+        "machine": {"cpus": os.cpu_count(), "load_1min": os.getloadavg()[0]},
+        "command": "python -m bench.mapping " + " ".join(sys.argv[1:]),
+        "settings": {
+            "speed": args.speed,
+            "duration_s": args.duration,
+            "seed": args.seed,
+            "bitrate": args.bitrate,
+        },
+        "aim": "ours with the filter: coverage >= 85 %, precision >= 90 %, corners closed",
+        "rooms": rooms,
+        "rows": rows,
+    }
 
 
 if __name__ == "__main__":
