@@ -20,8 +20,11 @@ REPRODUCE = "python -m bench"
 
 
 def md_table(rows: list[list[Any]], head: list[str]) -> str:
+    """A Markdown table; a short row (e.g. a run that failed) is padded with empty cells."""
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
-    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    lines += [
+        "| " + " | ".join(str(c) for c in [*row, *[""] * (len(head) - len(row))]) + " |" for row in rows
+    ]
     return "\n".join(lines)
 
 
@@ -309,16 +312,6 @@ def scaling_md(section: dict[str, Any], plots: Path) -> str:
                     r["nodes"],
                     f(r.get("bare_rtt_ms", {}).get("median"), 3),
                     "failed: " + r.get("error", "?")[:60],
-                    "",
-                    "",
-                    "",
-                    "",
-                    "",
-                    "",
-                    "",
-                    "",
-                    "",
-                    "",
                 ]
             )
             continue
@@ -417,13 +410,6 @@ def transports_md(section: dict[str, Any], plots: Path) -> str:
                     r["nodes"],
                     label_transport(r),
                     "failed: " + r.get("error", "?")[:60],
-                    "",
-                    "",
-                    "",
-                    "",
-                    "",
-                    "",
-                    "",
                 ]
             )
             continue
