@@ -405,15 +405,7 @@ class ClosedLoop:
             return pose
         if not self.pose_filtered:
             return at_sweep
-        at_filter = self.history.at(self.pose_stamp)
-        if at_filter is None:
-            return pose
-        dx, dy = at_sweep[0] - at_filter[0], at_sweep[1] - at_filter[1]
-        c, s = math.cos(at_filter[2]), math.sin(at_filter[2])
-        fwd, left = c * dx + s * dy, -s * dx + c * dy
-        x, y, th = pose
-        c, s = math.cos(th), math.sin(th)
-        return (x + c * fwd - s * left, y + s * fwd + c * left, th + (at_sweep[2] - at_filter[2]))
+        return self.history.carry(pose, self.pose_stamp, stamp_ms)
 
     def _main(self) -> str | None:
         from modules.common.pilot import Sensors

@@ -100,7 +100,7 @@ def replay(
                 continue
             pose = pose_from_wire(copro["pose_x_mm"], copro["pose_y_mm"], copro["pose_angle_cdeg"])
             if method == OUR_METHOD:
-                pose = carried(pose, history, copro["pose_stamp_ms"], sonar["stamp_ms"])
+                pose = history.carry(pose, copro["pose_stamp_ms"], sonar["stamp_ms"])
         else:
             pose = history.at(sonar["stamp_ms"]) if method == OUR_METHOD else dr
         active = bool(copro["scanning"]) and motor["direction"] == forward and motor["distance_mm"] > 10
@@ -109,23 +109,6 @@ def replay(
             poses.append(pose)
     vectorizer.flush()
     return np.asarray(vectors, dtype=float).reshape(-1, 4)
-
-
-def carried(
-    pose: tuple[float, float, float], history: Any, from_ms: int, to_ms: int
-) -> tuple[float, float, float]:
-    """``pose`` (at ``from_ms``) moved on by the dead-reckoned motion until ``to_ms``."""
-    import math
-
-    a, b = history.at(from_ms), history.at(to_ms)
-    if a is None or b is None:
-        return pose
-    dx, dy = b[0] - a[0], b[1] - a[1]
-    c, s = math.cos(a[2]), math.sin(a[2])
-    fwd, left = c * dx + s * dy, -s * dx + c * dy
-    x, y, th = pose
-    c, s = math.cos(th), math.sin(th)
-    return (x + c * fwd - s * left, y + s * fwd + c * left, th + b[2] - a[2])
 
 
 def run_room(room: str, args: argparse.Namespace, out: Path, port: int) -> dict[str, Any]:

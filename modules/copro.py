@@ -15,7 +15,6 @@ are published in the ``pose_*`` fields (source 2 = EKF, 1 = dead reckoning).
 from __future__ import annotations
 
 import logging
-import math
 import os as _os
 import queue
 import threading
@@ -223,16 +222,7 @@ class Program(UserProgram):
             return pose
         if self.pose_source != POSE_EKF:
             return at_sweep
-        at_filter = self.history.at(self.pose_stamp)
-        if at_filter is None:
-            return pose
-        # the dead-reckoned motion from the filter's stamp to the sweep, in the robot's frame then
-        dx, dy = at_sweep[0] - at_filter[0], at_sweep[1] - at_filter[1]
-        c, s = math.cos(at_filter[2]), math.sin(at_filter[2])
-        fwd, left = c * dx + s * dy, -s * dx + c * dy
-        x, y, th = pose
-        c, s = math.cos(th), math.sin(th)
-        return (x + c * fwd - s * left, y + s * fwd + c * left, th + (at_sweep[2] - at_filter[2]))
+        return self.history.carry(pose, self.pose_stamp, stamp_ms)
 
     def _publish(self) -> None:
         left, right = self.vectorizer.hypotheses["left"], self.vectorizer.hypotheses["right"]

@@ -202,3 +202,17 @@ def test_pose_history_interpolates_position_and_heading_across_the_wrap():
     assert (x, y) == (50.0, 25.0)
     assert abs(abs(th) - math.pi) < 1e-9
     assert h.at(500) == (100.0, 50.0, -math.pi + 0.1)
+
+
+def test_pose_history_carries_a_pose_by_the_recorded_motion_in_its_own_frame() -> None:
+    from modules.common.vectorgen import PoseHistory
+
+    history = PoseHistory()
+    history.add(0, (0.0, 0.0, 0.0))
+    history.add(1000, (100.0, 0.0, 0.0))  # 100 mm forward, then a quarter turn left on the spot
+    history.add(2000, (100.0, 0.0, math.pi / 2))
+    # a pose facing +Y at t=0 goes 100 mm forward (to +Y) and ends facing -X
+    x, y, th = history.carry((500.0, 500.0, math.pi / 2), 0, 2000)
+    assert (x, y) == pytest.approx((500.0, 600.0))
+    assert th == pytest.approx(math.pi)
+    assert PoseHistory().carry((1.0, 2.0, 3.0), 0, 10) == (1.0, 2.0, 3.0)  # nothing recorded

@@ -533,6 +533,19 @@ class PoseHistory:
                 return (p0[0] + f * (p1[0] - p0[0]), p0[1] + f * (p1[1] - p0[1]), p0[2] + f * dth)
         return self.samples[-1][1]
 
+    def carry(self, pose: Pose, from_ms: int, to_ms: int) -> Pose:
+        """``pose`` (valid at ``from_ms``, e.g. the filter's) moved on by the recorded motion
+        until ``to_ms``: that motion in the robot's frame, applied in the pose's frame."""
+        a, b = self.at(from_ms), self.at(to_ms)
+        if a is None or b is None:
+            return pose
+        dx, dy = b[0] - a[0], b[1] - a[1]
+        c, s = math.cos(a[2]), math.sin(a[2])
+        forward, left = c * dx + s * dy, -s * dx + c * dy
+        x, y, th = pose
+        c, s = math.cos(th), math.sin(th)
+        return (x + c * forward - s * left, y + s * forward + c * left, th + (b[2] - a[2]))
+
 
 # ---------------------------------------------------------------------------------------------
 # both sides, one method: what copro runs per sweep (and the mapping benchmark replays)
