@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import io
-import json
 import sys
 import tempfile
 import time
@@ -112,7 +111,7 @@ def run_bitrate(bitrate: str, repeat: int, store: Path) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from tokenring.cliutil import format_table
+    from tokenring.cliutil import format_table, write_json
     from tokenring.ring import parse_bitrate
 
     parser = argparse.ArgumentParser(prog="python -m bench.download", description=__doc__.split("\n\n")[0])
@@ -173,11 +172,7 @@ def main(argv: list[str] | None = None) -> int:
         "ms/round loading = time per token round while programs travel (incl. the PC's polls)"
     )
     if args.json:
-        text = json.dumps(results, indent=1)
-        if args.json == "-":
-            print(text)
-        else:
-            Path(args.json).write_text(text + "\n")
+        write_json(args.json, results)
     return 0
 
 

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from tokenring import keys
-from tokenring.cliutil import format_table, free_port, query
+from tokenring.cliutil import format_table, free_port, query, write_json
 from tokenring.errors import TokenRingError, UsageError
 from tokenring.launcher import Launcher, NodePlan
 from tokenring.zconfig import make_config, open_session
@@ -407,9 +407,5 @@ def run(args: argparse.Namespace) -> int:
         f"RSS max {report['rss_mb']['max']:.0f} MB   CPU/node {report['cpu_per_node_pct']['mean']:.0f} %"
     )
     if args.json:
-        text = json.dumps(report, indent=2)
-        if args.json == "-":
-            print(text)
-        else:
-            Path(args.json).write_text(text + "\n")
+        write_json(args.json, report)
     return 0

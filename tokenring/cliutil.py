@@ -7,6 +7,7 @@ import json
 import socket
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import msgpack
@@ -138,6 +139,15 @@ def free_port() -> int:
 
 def print_json(value: Any, stream: Any = None) -> None:
     (stream or sys.stdout).write(json.dumps(value, default=_default) + "\n")
+
+
+def write_json(target: str, value: Any) -> None:
+    """A ``--json TARGET`` report: ``-`` prints it, anything else is the file to write."""
+    text = json.dumps(value, indent=2, default=_default) + "\n"
+    if target == "-":
+        sys.stdout.write(text)
+    else:
+        Path(target).write_text(text)
 
 
 def _default(value: Any) -> Any:

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-from pathlib import Path
 
 from tokenring import keys
 from tokenring.chaos import format_report, load_scenario, run_scenario
+from tokenring.cliutil import write_json
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -42,10 +41,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"chaos | {text}", file=sys.stderr, flush=True)
 
     report = run_scenario(scenario, ring=ring, endpoint=args.connect, progress=progress, log_file=args.logs)
-    if args.json == "-":
-        print(json.dumps(report, indent=2, default=str))
-    else:
+    if args.json != "-":
         sys.stdout.write(format_report(report))
-        if args.json:
-            Path(args.json).write_text(json.dumps(report, indent=2, default=str) + "\n")
+    if args.json:
+        write_json(args.json, report)
     return 0 if report["ok"] else 1
