@@ -200,3 +200,27 @@ def test_data_channels_survive_the_loss_of_tokens_and_other_nodes():
         )
     finally:
         ring.close()
+
+
+def test_a_successor_skipped_while_only_slow_gets_a_longer_ack_timeout_that_shrinks_back(ring):
+    predecessor = ring.nodes[30]
+    ring.freeze(40)
+    wait_for(lambda: 40 in predecessor.membership.excluded, 3, "node 30 to skip the stalled node")
+    ring.freeze(40, False)  # back well within FALSE_EXCLUSION_S: it was slow, not hung
+    wait_for(lambda: 40 not in predecessor.membership.excluded, 3, "the node to be taken back")
+    assert predecessor.stats.successors_only_slow == 1
+    # every pass it then acknowledges in time halves the extra again, down to none
+    wait_for(lambda: 40 not in predecessor._ack_grace, 5, "the ack grace to shrink back")
+    ring.wait_rounds(20, node_id=10)
+    assert_one_token_through(ring, IDS)
+
+
+def test_big_rings_get_timeouts_that_grow_with_the_live_count():
+    from tokenring.ring import ACK_CAP_S, Timing
+
+    timing = Timing(bitrate=None)
+    timing.ack_latency.add(1.0)  # a starved machine: acks a second late
+    small, big = timing.refresh(8), timing.refresh(255)
+    assert small.ack == ACK_CAP_S  # the robot's ring keeps its 50 ms cap: hangs found fast
+    assert big.recon >= 0.765  # 3 x 1 ms per live node at --bitrate max
+    assert big.ack == pytest.approx(big.recon / 6)  # three tries end by half of it

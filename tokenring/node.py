@@ -77,6 +77,7 @@ class NodeStats:
         "pass_retries",
         "unacked_passes",
         "successors_declared_dead",
+        "successors_only_slow",  # declared dead but alive again at once: their ack timeout grew
         "successor_changes",
         "reconfigurations",
         "tokens_regenerated",
@@ -619,6 +620,7 @@ class NodeOS:
         skipped_at = self._skipped_at.pop(node_id, None)
         if skipped_at is not None and perf_counter() - skipped_at < FALSE_EXCLUSION_S:
             self._ack_grace[node_id] = min(ACK_GRACE_MAX, 2 * self._ack_grace.get(node_id, 1.0))
+            self.stats.successors_only_slow += 1
         if self.membership.include(node_id):
             self._successor_changed()
             if tell:
