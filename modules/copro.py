@@ -36,12 +36,16 @@ MIN_DRIVEN_MM = 10  # the seed: vectors only after more than 1 cm driven
 #: correct against the long walls of the robot's own map (handed over as they are found), no log
 #: files. Without known walls a compass offset is unobservable (it only soaked up the errors of
 #: early map walls and kept them), and on straight moves the tracks cannot turn the robot: the
-#: heading then holds through a magnetic anomaly instead of following the compass into it.
+#: heading then holds through a magnetic anomaly instead of following the compass into it. The
+#: step scale is measured by the front and rear sonar on straight drives (the map's own walls
+#: cannot see it: they were drawn with it); it is the floor's, so it drifts little between moves.
 EXPLORATION_CONFIG: dict[str, Any] = {
     "filter": {
         "initial_pose": "motor",
         "estimate": ["glide", "step_scale"],
-        "noise": {"rotation_rad_per_mm": 0.00002},
+        "noise": {"rotation_rad_per_mm": 0.00002, "step_scale_per_move": 0.001},
+        "initial": {"step_scale_sigma": 0.01},
+        "travel": {"enabled": True},
     },
     "walls": {"mode": "exploration", "association": {"min_wall_length_mm": 1000.0}},
     "logs": {"enabled": False},

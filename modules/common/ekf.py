@@ -294,6 +294,16 @@ class PoseEKF:
         hx, H = self.heading_model()
         return self.update("compass", np.array([heading]), hx, H, np.array([[sigma**2]]), angles=(0,))
 
+    def correct_step_scale(self, scale: float, sigma: float) -> bool:
+        """Correction with a measured step scale (a straight drive's true over nominal length);
+        through the state's correlation with the pose it moves the pose by the length misjudged."""
+        i = self.index.get("step_scale")
+        if i is None:
+            return False
+        H = np.zeros((1, len(self.x)))
+        H[0, i] = 1.0
+        return self.update("travel", np.array([scale]), np.array([self.x[i]]), H, np.array([[sigma**2]]))
+
     def line_model(self, wall: KnownWall) -> tuple[np.ndarray, np.ndarray]:
         """Predicted robot-frame line (α_r, d_r) of a known wall and its Jacobian."""
         x, y, psi = float(self.x[0]), float(self.x[1]), float(self.x[2])

@@ -67,8 +67,10 @@ from modules.common.sync import (
 )
 from modules.common.walls import (
     DetectorParams,
+    GaugeParams,
     KnownWall,
     SonarMount,
+    TravelGauge,
     WallDetector,
     from_frame,
     load_known_walls,
@@ -229,7 +231,7 @@ class LocalizationCore:
             "compass": CompassSync(
                 self.track, config["filter"]["compass"]["mode"], config["filter"]["compass"]["north_deg"]
             ),
-            "sonar": SonarSync(self.track, self.detector),
+            "sonar": SonarSync(self.track, self.detector, self._travel_gauge(config)),
             "battery": NewestSync("battery"),
             "truth": NewestSync("truth"),
         }
@@ -255,12 +257,19 @@ class LocalizationCore:
         self.walls_unassociated = 0
         self.walls_associated = 0
         self.compass_skipped_turning = 0
+        self.travel = {"used": 0, "oblique": 0, "unknown": 0, "rejected": 0}
         self._last_loss_message = -1000
         self._feed_lock = threading.Lock()
         self._fed = 0
         self._events: list[tuple[int, str, dict[str, Any]]] = []
         self._events_lock = threading.Lock()
         self.message("I", 0, f"localisation started: sensors {', '.join(self.sensors)}; walls {walls_mode}")
+
+    def _travel_gauge(self, config: dict[str, Any]) -> TravelGauge | None:
+        travel = config["filter"]["travel"]
+        if not travel["enabled"] or "sonar" not in self.sensors:
+            return None
+        return TravelGauge(sonar_mounts(config), GaugeParams(max_range_mm=travel["max_range_mm"]))
 
     # ---------------------------------------------------------------------------------------
     # input
@@ -416,6 +425,8 @@ class LocalizationCore:
             if sonar is not None and use.get("sonar"):
                 for wall in sonar.get("walls", []):
                     wall_results.append(self._correct_wall(wall, stamp))
+                for travel in sonar.get("travel", []):
+                    self._correct_travel(travel, stamp)
         self._store_positions(stamp, data, wall_results)
         self.last_sync_ms = stamp
         self.syncs += 1
@@ -464,6 +475,35 @@ class LocalizationCore:
                 f"{wall['kind']} wall (sonar {wall['sensors']}) rejected by the gate for wall {best[1].index}",
             )
         return [best[1].index, int(accepted)]
+
+    def _correct_travel(self, travel: dict[str, Any], stamp: int) -> None:
+        """A straight drive's step scale from a sonar's range series; the beam's incidence on the
+        known wall it meets (if any) turns the range's change back into the distance driven."""
+        ekf = self.ekf
+        assert ekf is not None
+        mount = sonar_mounts(self.config)[travel["sensor"]]
+        x, y, psi = ekf.pose
+        origin = from_frame((mount.x, mount.y), (x, y, psi))
+        direction = psi + mount.angle
+        settings = self.config["filter"]["travel"]
+        incidence = _beam_hit(origin, direction, travel["range_mm"], self.known_walls)
+        if incidence is None:
+            if not settings["unknown_wall"]:
+                self.travel["unknown"] += 1
+                return
+            incidence = 0.0  # no wall of the map there: taken as square on
+        if incidence > math.radians(settings["max_incidence_deg"]):
+            self.travel["oblique"] += 1
+            return
+        scale = travel["scale"] / math.cos(incidence)
+        sigma = math.hypot(travel["sigma"], settings["model_sigma"])
+        if ekf.correct_step_scale(scale, sigma):
+            self.travel["used"] += 1
+            self.message(
+                "D", stamp, f"sonar {travel['sensor']}: step scale {scale:.4f} ± {travel['sigma']:.4f}"
+            )
+        else:
+            self.travel["rejected"] += 1
 
     def _store_positions(self, stamp: int, data: dict[str, dict[str, Any]], walls: list[list[int]]) -> None:
         log = self.data_log
@@ -534,6 +574,7 @@ class LocalizationCore:
             "walls_fitted": self.detector.fitted if self.detector else 0,
             "compass_skipped": self.synchronisers["compass"].skipped,
             "compass_skipped_turning": self.compass_skipped_turning,
+            "travel": dict(self.travel),
         }
         if self.ekf is not None:
             out["gates"] = self.ekf.gates.as_dict()
@@ -555,6 +596,35 @@ class LocalizationCore:
         for log in (self.data_log, self.error_log):
             if log is not None:
                 log.close()
+
+
+def _beam_hit(
+    origin: tuple[float, float], direction: float, range_mm: float, walls: list[KnownWall]
+) -> float | None:
+    """The incidence (rad, 0 = square on) of a beam on the nearest known wall it meets near the
+    measured range (within 25 % or 150 mm); None when it meets none there."""
+    ox, oy = origin
+    dx, dy = math.cos(direction), math.sin(direction)
+    best: tuple[float, float] | None = None
+    for wall in walls:
+        ex, ey = wall.x2 - wall.x1, wall.y2 - wall.y1
+        denominator = dx * ey - dy * ex
+        if abs(denominator) < 1e-9:
+            continue
+        wx, wy = wall.x1 - ox, wall.y1 - oy
+        t = (wx * ey - wy * ex) / denominator  # along the beam
+        u = (wx * dy - wy * dx) / denominator  # along the wall, 0..1 on it
+        if t <= 0 or not -0.05 <= u <= 1.05:
+            continue
+        if (
+            abs(t - range_mm) > max(150.0, 0.25 * range_mm)
+            and abs(t * abs(denominator) / wall.length - range_mm) > 150.0
+        ):
+            continue
+        incidence = math.acos(min(1.0, abs(denominator) / wall.length))
+        if best is None or t < best[0]:
+            best = (t, incidence)
+    return best[1] if best is not None else None
 
 
 def open_logs(

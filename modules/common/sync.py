@@ -343,20 +343,24 @@ class SonarSync:
 
     sensor = "sonar"
 
-    def __init__(self, track: OdometryTrack, detector: Any | None) -> None:
+    def __init__(self, track: OdometryTrack, detector: Any | None, gauge: Any | None = None) -> None:
         self.track = track
         self.detector = detector
+        self.gauge = gauge
         self.newest: list[int | None] | None = None
 
     def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any] | None:
         if not samples and self.detector is None:
             return None
+        travel: list[dict[str, Any]] = []
         for sample in samples:
             self.newest = [None if d == NO_CONTACT_CM else int(d) * 10 for d in sample.values["distances"]]
-            if self.detector is not None:
-                pose = self.track.pose_at(sample.stamp_ms)
-                if pose is not None:
+            pose = self.track.pose_at(sample.stamp_ms)
+            if pose is not None:
+                if self.detector is not None:
                     self.detector.add(sample.stamp_ms, pose, self.newest)
+                if self.gauge is not None:
+                    travel.extend(self.gauge.add(pose, self.newest))
         walls: list[dict[str, Any]] = []
         if self.detector is not None and samples:
             at_sync = self.track.pose_at(sync_ms)
@@ -364,12 +368,15 @@ class SonarSync:
                 walls = self.detector.detect(at_sync)
         if not samples:
             return None
-        return {
+        record: dict[str, Any] = {
             "distances_mm": list(self.newest or []),
             "walls": walls,
             "count": len(samples),
             "stamp_ms": samples[-1].stamp_ms,
         }
+        if travel:
+            record["travel"] = travel
+        return record
 
 
 class NewestSync:

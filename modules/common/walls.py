@@ -24,6 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from tokenring.errors import UsageError
 
 TWO_PI = 2.0 * math.pi
@@ -358,3 +360,106 @@ def _extent(points: list, alpha: float, d: float, pose: tuple[float, float, floa
     for t in (min(ts), max(ts)):
         ends.append(list(to_frame((foot[0] + t * ux, foot[1] + t * uy), pose)))
     return ends[0], ends[1]
+
+
+# =============================================================================================
+# the travel gauge: the true length of straight moves from the front and rear sonar
+
+
+@dataclass(frozen=True)
+class GaugeParams:
+    """Which sonars look along the track and what a usable range series is (mm)."""
+
+    sensors: tuple[int, ...] = (1, 5)  # front and rear (modules/common/robot.py)
+    min_range_mm: float = 150.0
+    max_range_mm: float = 800.0  # farther, the first echo comes late (+6 mm at 1 m): a slope bias
+    min_points: int = 12
+    min_span_mm: float = 250.0  # nominal travel the points must span
+    max_sigma_mm: float = 15.0  # residual scatter of a plane ahead or behind (a post: larger)
+    outlier_mm: float = 30.0
+    min_sigma_scale: float = 0.002  # the least uncertainty a measured scale may claim
+
+
+class TravelGauge:
+    """The step scale of straight drives, measured by the sonars looking ahead and behind.
+
+    While the robot drives straight (its odometry-frame heading unchanged), the front sonar's
+    range to a wall ahead falls, and the rear's to a wall behind grows, by the *true* distance
+    travelled times cos φ (φ: the beam's angle to the wall's normal; the sonar returns the
+    nearest point in its beam). Against the nominal distance of the step counters the slope of
+    a line through (nominal travel, range) is the step scale — what own-map wall corrections
+    cannot see, as the map was drawn with the same scale. A run ends when the heading changes;
+    its fits come back from :meth:`add` as ``{"sensor", "scale", "sigma", "range_mm", ...}``.
+    """
+
+    def __init__(self, mounts: list[SonarMount], params: GaugeParams | None = None) -> None:
+        self.mounts = mounts
+        self.params = params or GaugeParams()
+        self.origin: tuple[float, float, float] | None = None
+        self.points: dict[int, list[tuple[float, float]]] = {i: [] for i in self.params.sensors}
+        self.measured = 0
+
+    def add(self, pose: tuple[float, float, float], distances: list[int | None]) -> list[dict[str, Any]]:
+        """One sweep at its odometry-frame ``pose``; returns the fits of a run that just ended."""
+        done: list[dict[str, Any]] = []
+        if self.origin is not None and abs(wrap(pose[2] - self.origin[2])) > 1e-6:
+            done = self.finish()
+        if self.origin is None:
+            self.origin = pose
+        ox, oy, heading = self.origin
+        travel = (pose[0] - ox) * math.cos(heading) + (pose[1] - oy) * math.sin(heading)
+        p = self.params
+        for i in p.sensors:
+            if i < len(distances):
+                r = distances[i]
+                if r is not None and p.min_range_mm <= r <= p.max_range_mm:
+                    self.points[i].append((travel, float(r)))
+        return done
+
+    def finish(self) -> list[dict[str, Any]]:
+        """End the current run (a turn began): the fits of its range series."""
+        out = []
+        for i, pts in self.points.items():
+            fit = self._fit(i, pts)
+            if fit is not None:
+                out.append(fit)
+        self.origin = None
+        self.points = {i: [] for i in self.params.sensors}
+        self.measured += len(out)
+        return out
+
+    def _fit(self, sensor: int, pts: list[tuple[float, float]]) -> dict[str, Any] | None:
+        p = self.params
+        if len(pts) < p.min_points:
+            return None
+        u = np.array([t for t, _ in pts])
+        r = np.array([d for _, d in pts])
+        keep = np.ones(len(u), dtype=bool)
+        for _ in range(3):  # a robust line: drop points far off, fit again
+            if keep.sum() < p.min_points or np.ptp(u[keep]) < p.min_span_mm:
+                return None
+            slope, intercept = np.polyfit(u[keep], r[keep], 1)
+            residual = r - (slope * u + intercept)
+            new = np.abs(residual) <= max(p.outlier_mm, 3.0 * float(np.std(residual[keep])))
+            if (new == keep).all():
+                break
+            keep = new
+        n = int(keep.sum())
+        if n < p.min_points or n < 0.7 * len(u) or np.ptp(u[keep]) < p.min_span_mm:
+            return None
+        sigma = float(np.std(residual[keep], ddof=2)) if n > 2 else float("inf")
+        if sigma > p.max_sigma_mm:
+            return None
+        spread = float(np.sum((u[keep] - u[keep].mean()) ** 2))
+        # the front range falls as the robot drives on, the rear one grows
+        ahead = math.cos(self.mounts[sensor].angle) > 0
+        scale = -slope if ahead else slope
+        return {
+            "sensor": sensor,
+            "scale": float(scale),
+            "sigma": max(math.sqrt(max(sigma, 5.0) ** 2 / spread), p.min_sigma_scale),
+            "n": n,
+            "span_mm": float(np.ptp(u[keep])),
+            "range_mm": float(np.mean(r[keep])),
+            "residual_mm": sigma,
+        }
