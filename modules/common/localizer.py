@@ -257,7 +257,7 @@ class LocalizationCore:
         self.walls_unassociated = 0
         self.walls_associated = 0
         self.compass_skipped_turning = 0
-        self.travel = {"used": 0, "oblique": 0, "unknown": 0, "rejected": 0}
+        self.travel = {"used": 0, "assumed_square": 0, "oblique": 0, "unknown": 0, "rejected": 0}
         self._last_loss_message = -1000
         self._feed_lock = threading.Lock()
         self._fed = 0
@@ -482,15 +482,17 @@ class LocalizationCore:
         ekf = self.ekf
         assert ekf is not None
         mount = sonar_mounts(self.config)[travel["sensor"]]
-        x, y, psi = ekf.pose
-        origin = from_frame((mount.x, mount.y), (x, y, psi))
-        direction = psi + mount.angle
+        pose = ekf.pose
+        ex, ey, eh = travel.get("end", (0.0, 0.0, 0.0))
+        end = (*from_frame((ex, ey), pose), pose[2] + eh)  # the robot where the run ended
+        origin = from_frame((mount.x, mount.y), end)
         settings = self.config["filter"]["travel"]
-        incidence = _beam_hit(origin, direction, travel["range_mm"], self.known_walls)
+        incidence = _beam_hit(origin, end[2] + mount.angle, travel["range_end_mm"], self.known_walls)
         if incidence is None:
             if not settings["unknown_wall"]:
                 self.travel["unknown"] += 1
                 return
+            self.travel["assumed_square"] += 1
             incidence = 0.0  # no wall of the map there: taken as square on
         if incidence > math.radians(settings["max_incidence_deg"]):
             self.travel["oblique"] += 1

@@ -375,6 +375,15 @@ class SonarSync:
             "stamp_ms": samples[-1].stamp_ms,
         }
         if travel:
+            at_sync = self.track.pose_at(sync_ms)
+            for fit in travel:  # where the run ended, seen from the pose at the sync
+                ex, ey, eh = fit.pop("end_pose")
+                if at_sync is not None:
+                    c, s = math.cos(at_sync[2]), math.sin(at_sync[2])
+                    dx, dy = ex - at_sync[0], ey - at_sync[1]
+                    fit["end"] = [c * dx + s * dy, -s * dx + c * dy, wrap(eh - at_sync[2])]
+                else:
+                    fit["end"] = [0.0, 0.0, 0.0]
             record["travel"] = travel
         return record
 

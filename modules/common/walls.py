@@ -396,6 +396,7 @@ class TravelGauge:
         self.mounts = mounts
         self.params = params or GaugeParams()
         self.origin: tuple[float, float, float] | None = None
+        self.end: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the run's last pose
         self.points: dict[int, list[tuple[float, float]]] = {i: [] for i in self.params.sensors}
         self.measured = 0
 
@@ -406,6 +407,7 @@ class TravelGauge:
             done = self.finish()
         if self.origin is None:
             self.origin = pose
+        self.end = pose
         ox, oy, heading = self.origin
         travel = (pose[0] - ox) * math.cos(heading) + (pose[1] - oy) * math.sin(heading)
         p = self.params
@@ -461,5 +463,7 @@ class TravelGauge:
             "n": n,
             "span_mm": float(np.ptp(u[keep])),
             "range_mm": float(np.mean(r[keep])),
+            "range_end_mm": float(slope * u[-1] + intercept),  # where the run ended
+            "end_pose": list(self.end),
             "residual_mm": sigma,
         }
