@@ -4,7 +4,8 @@ Every 100 simulated ms: one flip measurement (20 samples with the flip coil set,
 mains fields and the bridges' offsets cancel), the bridge within ±45° of its zero crossing gives
 the angle by arccos, a short circular mean filters it (not while the robot turns). The motors'
 static field is cancelled in the sensor by the compensation coils once CALIBRATE has learned it;
-their running field (while motor.data says the robot moves) is subtracted in software.
+their running field (while motor.data says the robot moves) is subtracted in software; motor.data
+arrives a token round after a start or stop, so the short mean starts again when it changes.
 
 CALIBRATE: the compass turns the robot once round in eight 45° steps (it commands the motor
 itself and waits for each POSITION_REACHED), measuring at rest at each stop; a circle fit
@@ -59,6 +60,7 @@ class Program(UserProgram):
         self.reference_ut: float | None = None
         self.state = UNCALIBRATED
         self.recent: list[float] = []
+        self.last_direction = STOPPED
         self.heading = 0.0
         self.bridge = 0
         self.magnitude = 0.0
@@ -85,7 +87,11 @@ class Program(UserProgram):
         if direction != STOPPED and self.state != CALIBRATING:
             field = field - self.running_field
         heading, bridge = heading_from_bridges(float(field[0]), float(field[1]))
-        if direction in (TURN_LEFT, TURN_RIGHT):
+        started_or_stopped = (direction == STOPPED) != (self.last_direction == STOPPED)
+        self.last_direction = direction
+        if direction in (TURN_LEFT, TURN_RIGHT) or started_or_stopped:
+            # the mean starts again: the samples before it heard of a start or stop (a token
+            # round late) had the running field wrongly subtracted or kept
             self.recent = [heading]
         else:
             self.recent = [*self.recent[-(FILTER_LENGTH - 1) :], heading]

@@ -46,6 +46,7 @@ EXPLORATION_CONFIG: dict[str, Any] = {
         "noise": {"rotation_rad_per_mm": 0.00002, "step_scale_per_move": 0.001},
         "initial": {"step_scale_sigma": 0.01},
         "travel": {"enabled": True},
+        "compass": {"settle_ms": 400},
     },
     "walls": {"mode": "exploration", "association": {"min_wall_length_mm": 1000.0}},
     "logs": {"enabled": False},

@@ -194,3 +194,48 @@ def test_localizer_on_the_ring_publishes_the_fused_pose_and_replays_identically(
     result = replay(log_path, tmp_path / "replayed.trlog")
     assert result.identical, result.first_difference
     assert result.compared > 100
+
+
+def test_compass_samples_just_after_the_motors_start_or_stop_are_left_out() -> None:
+    """The compass module subtracts the motors' running field while the ring says they run and
+    hears of a start or stop a token round late: the samples in between are bent. With
+    ``settle_ms`` they are left out; without, a whole leg's heading is pulled toward them."""
+
+    def heading_after(settle_ms: int) -> tuple[float, LocalizationCore]:
+        config = load_config(
+            {
+                "filter": {
+                    "initial_pose": {"x_mm": 0, "y_mm": 0, "heading_deg": 0},
+                    "estimate": ["glide", "step_scale"],
+                    "noise": {"rotation_rad_per_mm": 0.00002},
+                    "compass": {"settle_ms": settle_ms},
+                },
+                "walls": {"mode": "off"},
+                "sensors": {"sonar": {"use": False}, "battery": {"use": False}, "truth": {"use": False}},
+                "logs": {"enabled": False},
+            }
+        )
+        core = LocalizationCore(config)
+        steps, sample = 0, 0
+        changes = []
+        for cycle in range(6):  # rest 2 s, drive 2 s, ...
+            moving = cycle % 2 == 1
+            start = cycle * 2000
+            changes.append(start)
+            for t in range(start, start + 2000, 20):
+                steps += 4 if moving else 0
+                values = {"steps_left": steps, "steps_right": steps, "x_mm": 0, "y_mm": 0, "angle_cdeg": 0}
+                core.feed(Sample("odometry", t, {**values, "state": int(moving)}))
+                if t % 100 == 0:
+                    bent = 4.0 if t - start < 300 and cycle > 0 else 0.0  # a round late: bent 4°
+                    cdeg = round((90.0 - bent) * 100)  # robot along +x: north 90° to its left
+                    core.feed(Sample("compass", t, {"heading_cdeg": cdeg, "state": 1}, seq=sample))
+                    sample += 1
+                core.maybe_sync()
+        return math.degrees(core.ekf.pose[2]), core
+
+    bent_in, _ = heading_after(0)
+    kept_out, core = heading_after(400)
+    assert abs(bent_in) > 0.3  # the bent samples pass the gate and pull the heading
+    assert abs(kept_out) < 0.05
+    assert core.synchronisers["compass"].settling >= 15  # 3 bent samples at each of 5 changes

@@ -224,12 +224,14 @@ class LocalizationCore:
             if walls_mode != "off" and "sonar" in self.sensors
             else None
         )
+        odometry_sync = OdometrySync(
+            self.track, None if config["filter"]["initial_pose"] == "motor" else (0, 0)
+        )
+        compass = config["filter"]["compass"]
         self.synchronisers: dict[str, Any] = {
-            "odometry": OdometrySync(
-                self.track, None if config["filter"]["initial_pose"] == "motor" else (0, 0)
-            ),
+            "odometry": odometry_sync,
             "compass": CompassSync(
-                self.track, config["filter"]["compass"]["mode"], config["filter"]["compass"]["north_deg"]
+                self.track, compass["mode"], compass["north_deg"], odometry_sync, compass["settle_ms"]
             ),
             "sonar": SonarSync(self.track, self.detector, self._travel_gauge(config)),
             "battery": NewestSync("battery"),
@@ -576,6 +578,7 @@ class LocalizationCore:
             "walls_fitted": self.detector.fitted if self.detector else 0,
             "compass_skipped": self.synchronisers["compass"].skipped,
             "compass_skipped_turning": self.compass_skipped_turning,
+            "compass_skipped_settling": self.synchronisers["compass"].settling,
             "travel": dict(self.travel),
         }
         if self.ekf is not None:

@@ -38,6 +38,8 @@ from modules.common.walls import wrap
 SENSORS = ("odometry", "compass", "sonar", "battery", "truth")
 
 NO_CONTACT_CM = 255
+#: a compass sample this much newer than the newest step-counter sample is not judged yet
+UNKNOWN_MOTION_MS = 60
 
 
 @dataclass(frozen=True)
@@ -277,11 +279,18 @@ class OdometrySync:
         self.track = track
         self.last: tuple[int, int] | None = baseline
         self.pose = (0.0, 0.0, 0.0)  # odometry frame
+        # when the motors were switched on or off (the stamp of the last sample before the
+        # change): the compass subtracts their running field by what the ring last told it
+        self.moving: bool | None = None
+        self.changes: deque[int] = deque(maxlen=8)
+        self.newest_ms: int | None = None
+        self._previous_ms: int | None = None
 
     def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any]:
         dl_total = dr_total = 0
         for sample in samples:
             left, right = int(sample.values["steps_left"]), int(sample.values["steps_right"])
+            self._note_motion(sample, left, right)
             if self.last is None:
                 self.last = (left, right)
                 self.track.append(sample.stamp_ms, self.pose)
@@ -299,6 +308,28 @@ class OdometrySync:
         stamp = samples[-1].stamp_ms if samples else sync_ms
         return {"dl": dl_total, "dr": dr_total, "count": len(samples), "stamp_ms": stamp}
 
+    def _note_motion(self, sample: Sample, left: int, right: int) -> None:
+        """Record a start or stop of the motors (motor state MOVING, else steps made)."""
+        state = sample.values.get("state")
+        if state is not None:
+            moving = int(state) == 1
+        else:
+            moving = self.last is not None and (left, right) != self.last
+        if self.moving is not None and moving != self.moving:
+            self.changes.append(self._previous_ms if self._previous_ms is not None else sample.stamp_ms)
+        self.moving = moving
+        self._previous_ms = sample.stamp_ms
+        self.newest_ms = sample.stamp_ms if self.newest_ms is None else max(self.newest_ms, sample.stamp_ms)
+
+    def settling(self, stamp_ms: int, settle_ms: int) -> bool:
+        """True if the motors started or stopped within ``settle_ms`` before ``stamp_ms``, or the
+        step counters have not yet reported that far (what the motors did then is not known)."""
+        if settle_ms <= 0:
+            return False
+        if self.newest_ms is None or stamp_ms > self.newest_ms + UNKNOWN_MOTION_MS:
+            return True
+        return any(change <= stamp_ms < change + settle_ms for change in self.changes)
+
 
 class CompassSync:
     """Newest heading or circular mean, each sample carried to the sync time with the odometry.
@@ -310,11 +341,21 @@ class CompassSync:
     sensor = "compass"
     USABLE_STATES = (1,)  # compass_state OK; UNCALIBRATED, DISTURBED, CALIBRATING are skipped
 
-    def __init__(self, track: OdometryTrack, mode: str = "newest", north_deg: float = 90.0) -> None:
+    def __init__(
+        self,
+        track: OdometryTrack,
+        mode: str = "newest",
+        north_deg: float = 90.0,
+        motion: OdometrySync | None = None,
+        settle_ms: int = 0,
+    ) -> None:
         self.track = track
         self.mode = mode
         self.north = math.radians(north_deg)
+        self.motion = motion
+        self.settle_ms = settle_ms
         self.skipped = 0
+        self.settling = 0
 
     def heading(self, sample: Sample) -> float:
         """The sample's heading in the internal convention (rad, CCW from +X)."""
@@ -323,6 +364,12 @@ class CompassSync:
     def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any] | None:
         usable = [s for s in samples if s.values.get("state", 1) in self.USABLE_STATES]
         self.skipped += len(samples) - len(usable)
+        if self.motion is not None and self.settle_ms > 0:
+            # the compass module subtracts the motors' running field while the ring says they
+            # run: it learns of a start or stop a token round late, and its mean carries it on
+            steady = [s for s in usable if not self.motion.settling(s.stamp_ms, self.settle_ms)]
+            self.settling += len(usable) - len(steady)
+            usable = steady
         if not usable:
             return None
         chosen = usable[-1:] if self.mode == "newest" else usable
