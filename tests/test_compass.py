@@ -101,3 +101,46 @@ def test_compass_module_calibrates_by_turning_and_then_follows_the_true_heading(
         for node_id in (20, 40):
             ring.nodes[node_id].stop_program()
         ring.close()
+
+
+def test_calibration_leaves_out_readings_taken_after_the_motor_stopped() -> None:
+    """motor.data tells the compass of the stop a token round late: readings taken at rest in
+    that time lie on the static circle and would pull the running field's estimate short."""
+
+    class Stub:
+        """Readings every 40 ms; the motor stops at 400 ms, motor.data says so at 560 ms."""
+
+        def __init__(self) -> None:
+            self.now = 0.0
+            self.running = True
+            self.period_real = 0.0
+            self.clock = self
+            self.os = self
+            self.motor = {"stamp_ms": 0.0, "direction": 3}
+
+        def now_ms(self) -> float:
+            return self.now
+
+        def read_field(self):
+            stamp = self.now
+            self.now += 40.0
+            moving = stamp < 400.0
+            field = np.array([2.0, 1.5]) if moving else np.zeros(2)  # running field or none
+            if self.now <= 560.0:
+                self.motor = {"stamp_ms": min(self.now, 400.0), "direction": 3}
+            else:
+                self.motor = {"stamp_ms": self.now, "direction": 0}
+            return field, stamp
+
+        def motors_moving(self) -> int:
+            return int(self.motor["direction"])
+
+        def receive_command(self, timeout=None):
+            if self.motor["direction"] == 0:
+                return type("Cmd", (), {"name": "POSITION_REACHED", "args": {"status": 0}})()
+            return None
+
+    turning: list[np.ndarray] = []
+    assert CompassProgram._turn_and_listen(Stub(), turning)
+    assert len(turning) >= 8
+    assert all(field[0] == 2.0 for field in turning)  # none taken at rest
