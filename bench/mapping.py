@@ -37,6 +37,9 @@ class Recorder:
         self.sonar = protocol.channel("sonar.data")
         self.motor = protocol.channel("motor.data")
         self.copro = protocol.channel("copro.data")
+        self.compass = protocol.channel("compass.data")
+        self.compass_log: list[dict] = []
+        self.last_compass: int | None = None
         self.size = protocol.token_size
         self.records: list[tuple[dict, dict, dict]] = []
         self.last_sweep: int | None = None
@@ -60,8 +63,12 @@ class Recorder:
         token = frame[: self.size]
         sonar = self.sonar.decode(token)
         motor = self.motor.decode(token)
+        compass = self.compass.decode(token)
         with self.lock:
             self.motor_log.append(motor)
+            if compass["sample"] != self.last_compass and compass["stamp_ms"]:
+                self.last_compass = compass["sample"]
+                self.compass_log.append(compass)
             if sonar["sweep"] != self.last_sweep and sonar["stamp_ms"]:
                 self.last_sweep = sonar["sweep"]
                 self.records.append((sonar, motor, self.copro.decode(token)))
@@ -150,6 +157,7 @@ def run_room(room: str, args: argparse.Namespace, out: Path, port: int) -> dict[
         "records": recorder.records if recorder else [],
         "motor_log": recorder.motor_log if recorder else [],
         "truth": recorder.truth if recorder else [],
+        "compass_log": recorder.compass_log if recorder else [],
         "live": live,
         "finished": finished,
     }
@@ -159,7 +167,7 @@ def save_recording(path: Path, result: dict[str, Any]) -> None:
     """The drive as recorded (sweeps and motor samples), for ``--replay``."""
     import msgpack
 
-    keep = ("records", "motor_log", "truth")
+    keep = ("records", "motor_log", "truth", "compass_log")
     path.write_bytes(msgpack.packb({key: result[key] for key in keep}))
 
 
@@ -176,6 +184,7 @@ def load_recording(path: Path, live: Path) -> dict[str, Any]:
         "records": [tuple(r) for r in data["records"]],
         "motor_log": data["motor_log"],
         "truth": data.get("truth", []),
+        "compass_log": data.get("compass_log", []),
         "live": live,
         "finished": "(replayed)",
     }
@@ -217,6 +226,52 @@ def pose_error(result: dict[str, Any]) -> dict[str, float]:
         "heading_median_deg": round(float(np.median(h)), 2),
         "heading_p95_deg": round(float(np.percentile(h, 95)), 2),
     }
+
+
+def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any]:
+    """The compass module's heading against the truth (OK samples only, degrees): steady, and
+    within ``settle_ms`` after the motors started or stopped (motor.data's state as recorded)."""
+    import bisect
+    import math
+
+    from modules.common.units import cdeg_to_heading
+
+    truth = sorted(result.get("truth", []))
+    stamps = [t[0] for t in truth]
+    changes, moving = [], None
+    for m in result.get("motor_log", []):
+        now = m["state"] == 1
+        if moving is not None and now != moving:
+            changes.append(m["stamp_ms"])
+        moving = now
+    steady, settling = [], []
+    for c in result.get("compass_log", []):
+        if c["state"] != 1 or not stamps:
+            continue
+        i = bisect.bisect_left(stamps, c["stamp_ms"])
+        near = min(
+            (j for j in (i - 1, i) if 0 <= j < len(stamps)), key=lambda j: abs(stamps[j] - c["stamp_ms"])
+        )
+        if abs(stamps[near] - c["stamp_ms"]) > 60:
+            continue
+        north = math.pi / 2  # the bundled rooms' (tokenring/world/model.py)
+        truth_heading = (north - truth[near][3]) % (2 * math.pi)
+        error = abs(
+            math.degrees(math.remainder(cdeg_to_heading(c["heading_cdeg"]) - truth_heading, 2 * math.pi))
+        )
+        k = bisect.bisect_right(changes, c["stamp_ms"])
+        after_change = k > 0 and c["stamp_ms"] - changes[k - 1] < settle_ms
+        (settling if after_change else steady).append(error)
+    out: dict[str, Any] = {}
+    for name, values in (("steady", steady), ("after_start_or_stop", settling)):
+        if values:
+            v = np.asarray(values)
+            out[name] = {
+                "samples": len(v),
+                "median_deg": round(float(np.median(v)), 2),
+                "p95_deg": round(float(np.percentile(v, 95)), 2),
+            }
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -271,11 +326,18 @@ def main(argv: list[str] | None = None) -> int:
                 f"p95 {errors['position_p95_mm']:.0f} mm, heading median {errors['heading_median_deg']:.1f}°",
                 flush=True,
             )
+        compass = compass_error(result)
+        for name, c in compass.items():
+            print(
+                f"  compass vs truth, {name.replace('_', ' ')}: median {c['median_deg']:.2f}°, p95 {c['p95_deg']:.2f}° ({c['samples']} samples)",
+                flush=True,
+            )
         rooms[room] = {
             "ring_exit_code": result["code"],
             "sweeps": len(result["records"]),
             "finished": result.get("finished", ""),
             "pose_error": pose_error(result),
+            "compass_error": compass,
         }
         variants = [("seed", SEED_METHOD, "dead reckoning"), ("ours", OUR_METHOD, "dead reckoning"),
                     ("seed", SEED_METHOD, "filter"), ("ours", OUR_METHOD, "filter")]  # fmt: skip
