@@ -216,7 +216,7 @@ def run_ring(
                         formed = formed or time.monotonic()
                         if stats["stats"]["visits"] >= warmup:
                             break
-                dead = [c for c in launcher.children.values() if c.process.poll() is not None]
+                dead = [c for c in launcher.child_list() if c.process.poll() is not None]
                 if dead:
                     raise TokenRingError(f"node {dead[0].plan.name} died while the ring formed")
                 time.sleep(0.1)
@@ -225,7 +225,7 @@ def run_ring(
                     f"ring of {n} did not form in {timeout:.0f} s "
                     f"(active {len(stats.get('active', []))}, visits {stats.get('stats', {}).get('visits', 0)})"
                 )
-            cpu0 = {c.process.pid: proc_cpu_s(c.process.pid) for c in launcher.children.values()}
+            cpu0 = {c.process.pid: proc_cpu_s(c.process.pid) for c in launcher.child_list()}
             own_cpu = time.process_time()
             t0 = time.monotonic()
             start_visits = stats["stats"]["visits"]
@@ -241,8 +241,8 @@ def run_ring(
             if on_ready is not None:  # e.g. collect what programs measured, while the ring runs
                 on_ready(session, ring)
             launcher_cpu = time.process_time() - own_cpu
-            cpu = [proc_cpu_s(c.process.pid) - cpu0[c.process.pid] for c in launcher.children.values()]
-            rss = [proc_rss_mb(c.process.pid) for c in launcher.children.values()]
+            cpu = [proc_cpu_s(c.process.pid) - cpu0[c.process.pid] for c in launcher.child_list()]
+            rss = [proc_rss_mb(c.process.pid) for c in launcher.child_list()]
             stats = query(session, key, timeout=2.0)[0][1]["result"]
             round_list = query(session, keys.control(ring, master, "rounds"), timeout=2.0)[0][1]["result"]
             return RingRun(

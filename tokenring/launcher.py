@@ -36,6 +36,8 @@ from tokenring.zconfig import make_config, open_session
 #: exit code of a node process killed on purpose by the ``crash`` fault
 CRASH_EXIT_CODE = 70
 STOP_TIMEOUT_S = 1.5
+#: a ring bigger than this boots in waves of at most this many nodes at a time (8 per core)
+BOOT_CONCURRENCY = 8 * max(1, os.cpu_count() or 1)
 KILL_REAP_S = 10.0  # after SIGKILL, how long the kernel may take to reap them all
 
 
@@ -138,6 +140,8 @@ class Launcher:
         self._stop = threading.Event()
         self._children_lock = threading.RLock()
         self._supervisor: threading.Thread | None = None
+        self._booter: threading.Thread | None = None
+        self._children_gone = threading.Event()
         self._stop_signal: int | None = None
         self._selector = selectors.DefaultSelector()
         self._selector_lock = threading.Lock()
@@ -260,7 +264,7 @@ class Launcher:
     def command_for(self, plan: NodePlan) -> list[str]:
         cmd = [sys.executable, "-m", "tokenring", "--log-level", self.log_level, "node"]
         cmd += ["--id", str(plan.node_id), "--ring", self.ring, "--bitrate", self.bitrate]
-        cmd += ["--ack", self.ack_mode]
+        cmd += ["--ack", self.ack_mode, "--expect", str(len(self.plans))]
         if plan.name and not plan.name.startswith("node"):
             cmd += ["--name", plan.name]
         if self.protocol_path:
@@ -320,6 +324,11 @@ class Launcher:
                 raise TransportError(f"{service.name} did not come up within {service.ready_timeout:.0f} s")
         return process
 
+    def child_list(self) -> list[Child]:
+        """The node processes started so far (a big ring is still adding them while it boots)."""
+        with self._children_lock:
+            return list(self.children.values())
+
     def spawn(self, plan: NodePlan) -> Child:
         previous = self.children.get(plan.node_id)
         command = self.command_for(plan)
@@ -352,12 +361,55 @@ class Launcher:
             from tokenring.transport.registry import MembershipRegistry
 
             self.registry = MembershipRegistry().start()
-        for plan in self.plans:
-            self.spawn(plan)
+        if self.transport == "zenoh" and len(self.plans) > BOOT_CONCURRENCY:
+            self._booter = threading.Thread(target=self._boot_in_waves, name="launcher-boot", daemon=True)
+            self._booter.start()
+        else:
+            for plan in self.plans:
+                self.spawn(plan)
         # supervision (death reports, --respawn) runs beside whoever owns the launcher: `up`'s
         # run() loop as well as in-process users such as chaos and the benchmarks
         self._supervisor = threading.Thread(target=self._supervise, name="launcher-supervisor", daemon=True)
         self._supervisor.start()
+
+    def _boot_in_waves(self) -> None:
+        """Start a big ring's nodes so that at most :data:`BOOT_CONCURRENCY` are booting (started,
+        not yet live) at a time: 255 interpreters importing at once on two cores starve each
+        other and the router, whose handshakes then time out (nodes exit unable to connect)."""
+        assert self.session is not None
+        live: set[int] = set()
+        changed = threading.Condition()
+
+        def on_liveliness(sample: zenoh.Sample) -> None:
+            node_id = keys.id_from_key(str(sample.key_expr))
+            if node_id is not None and sample.kind == zenoh.SampleKind.PUT:
+                with changed:
+                    live.add(node_id)
+                    changed.notify()
+
+        subscriber = self.session.liveliness().declare_subscriber(keys.node(self.ring, "*"), on_liveliness)
+        try:
+            for plan in self.plans:
+                with changed:
+                    while not self._stop.is_set():
+                        booting = [
+                            c
+                            for c in self.child_list()
+                            if c.plan.node_id not in live and c.process.poll() is None
+                        ]
+                        if len(booting) < BOOT_CONCURRENCY:
+                            break
+                        changed.wait(0.2)
+                with self._children_lock:  # stop() lists the children under this lock
+                    if self._stop.is_set():
+                        break
+                    self.spawn(plan)
+        finally:
+            with contextlib.suppress(zenoh.ZError):
+                subscriber.undeclare()
+        # the nodes' parent-death signal fires when the *thread* that started them ends: this
+        # one must outlive them, so it waits until stop() has seen them all exit
+        self._children_gone.wait()
 
     def _supervise(self) -> None:
         while not self._stop.wait(0.05):
@@ -378,7 +430,7 @@ class Launcher:
                     "exit": describe_exit(c.process.poll()) if c.process.poll() is not None else None,
                     "restarts": c.restarts,
                 }
-                for c in self.children.values()
+                for c in self.child_list()
             ],
             "services": [
                 {"name": name, "pid": p.pid, "running": p.poll() is None}
@@ -418,7 +470,7 @@ class Launcher:
 
     def check_children(self) -> None:
         """Report nodes that died; restart them if ``--respawn``."""
-        for child in list(self.children.values()):
+        for child in self.child_list():
             code = child.process.poll()
             if code is None or child.reported:
                 continue
@@ -443,7 +495,7 @@ class Launcher:
                 break
             if (
                 self.children
-                and all(c.process.poll() is not None for c in self.children.values())
+                and all(c.process.poll() is not None for c in self.child_list())
                 and not self.respawn
             ):
                 self.say("every node has exited")
@@ -462,7 +514,7 @@ class Launcher:
             self._supervisor.join(timeout=1.0)
         with self._children_lock:
             self.check_children()  # report what died before the stop
-        running = [c for c in self.children.values() if c.process.poll() is None]
+        running = [c for c in self.child_list() if c.process.poll() is None]
         if running and self.session is not None:
             with contextlib.suppress(zenoh.ZError):  # nobody needs a handover: all are leaving
                 self.session.put(keys.ring_event(self.ring), RING_EVENT.pack(EVENT_RING_STOPPING, 0, 0, 0, 0))
@@ -470,7 +522,9 @@ class Launcher:
         for child in running:
             with contextlib.suppress(ProcessLookupError):
                 child.process.send_signal(signal.SIGTERM)
-        deadline = time.monotonic() + STOP_TIMEOUT_S
+        # 255 nodes leaving at once on two cores need longer than the robot's eight
+        stop_timeout = max(STOP_TIMEOUT_S, 0.02 * len(running))
+        deadline = time.monotonic() + stop_timeout
         stubborn = []
         for child in running:
             try:
@@ -480,7 +534,7 @@ class Launcher:
             child.reported = True
         if stubborn:  # all at once: a big ring on a loaded machine may have many of them
             names = ", ".join(c.plan.name for c in stubborn[:8]) + (" ..." if len(stubborn) > 8 else "")
-            self.say(f"{len(stubborn)} node(s) did not stop in {STOP_TIMEOUT_S} s: killing {names}")
+            self.say(f"{len(stubborn)} node(s) did not stop in {stop_timeout:.1f} s: killing {names}")
             for child in stubborn:
                 with contextlib.suppress(ProcessLookupError):
                     child.process.kill()
@@ -490,6 +544,9 @@ class Launcher:
                     child.process.wait(max(0.1, reap_deadline - time.monotonic()))
                 except subprocess.TimeoutExpired:
                     self.say(f"node {child.plan.name} (pid {child.process.pid}) survived SIGKILL")
+        self._children_gone.set()
+        if self._booter is not None:
+            self._booter.join(timeout=1.0)
         for name, process in self.service_children.items():
             if process.poll() is None:
                 with contextlib.suppress(ProcessLookupError):
@@ -502,7 +559,7 @@ class Launcher:
                     process.wait(1.0)
         if self._reader is not None:
             self._reader.join(timeout=1.0)
-        for process in [c.process for c in self.children.values()] + list(self.service_children.values()):
+        for process in [c.process for c in self.child_list()] + list(self.service_children.values()):
             if process.stdout is not None:
                 process.stdout.close()
         self.flush_output()

@@ -52,8 +52,13 @@ ACK_GRACE_MAX = 8.0  # its ack timeout grows at most this many times
 PREPARED_NEIGHBOURS = 8  # live nodes either side whose token and ack paths are declared ahead
 SETTLE_RECONS = 2  # a booting ring starts this many reconfiguration times after the last join
 SETTLE_CAP_S = 30.0  # ... but at the latest this long (or 0.5 s per live node) after boot
+EXPECT_CAP_S = 5.0  # a ring told how many nodes boot waits for them this long (or 0.5 s each)
 LATECOMER_RECONS = 10  # how many reconfiguration times a booting node waits for main's token
 REGENERATION_BACKOFF_MAX = 7  # reconfiguration times added after fruitless regenerations
+#: how often a node pings an excluded node that is not among its neighbours: only the nodes
+#: that would pass to it need to find out quickly that it is back (at 255 nodes, every node
+#: pinging every excluded node ten times a second, each answer re-announced to all, is a storm)
+FAR_PROBE_S = 2.0
 perf_counter = time.perf_counter
 
 
@@ -191,6 +196,10 @@ class NodeOS:
         self._live_changed_at = 0.0  # when liveliness last changed (a node came or went)
         self._leaving_nodes: set[int] = set()
         self._started_at = 0.0
+        #: how many nodes the launcher is starting: a booting ring waits for all of them (or the
+        #: settle cap) before its first token, so it does not circulate among interpreters
+        #: that are still importing on the same cores
+        self.expected_nodes: int | None = None
         self._paced = 0.0  # seconds the last pass slept to emulate wire time
         self._stall_wake = 0.0  # when the watchdog last woke far too late
 
@@ -216,6 +225,8 @@ class NodeOS:
         self.msg_fault: Callable[[bytes], bool] | None = None
         # --profile: seconds a pass may take after the token arrived (wire + emulated hardware)
         self.pacer: Callable[[float], float] | None = None
+        # called (from the program's thread) when a user program raised: the system layer reports it
+        self.on_program_error: Callable[[], None] | None = None
 
         self._joined = False
         self._leaving = False
@@ -605,8 +616,12 @@ class NodeOS:
             log.debug("rejoin: %s", exc)
 
     def _backoff(self, node_id: int) -> float:
-        """How long until an excluded node is pinged (again): 0.05 s, then every 0.1 s. A ping
-        is a few bytes, so a healed partition merges within a tenth of a second or two."""
+        """How long until an excluded node is pinged (again): 0.05 s, then every 0.1 s by its
+        neighbours (a ping is a few bytes, so a healed partition merges within a tenth of a
+        second or two), every :data:`FAR_PROBE_S` by everyone else."""
+        if not self._near(node_id):
+            self._exclusion_backoff[node_id] = FAR_PROBE_S
+            return FAR_PROBE_S
         previous = self._exclusion_backoff.get(node_id, 0.025)
         value = min(0.1, previous * 2)
         self._exclusion_backoff[node_id] = value
@@ -745,8 +760,12 @@ class NodeOS:
         # while nodes are still coming up (liveliness keeps changing), the ring is not started:
         # as on ARCNET, where every join reconfigures, a ring that starts circulating while a
         # hundred more interpreters boot on the same cores would only reconfigure again and again
+        live = len(self.membership.live)
         settled = self._live_changed_at + SETTLE_RECONS * timeouts.recon
-        settled = min(settled, self._started_at + max(SETTLE_CAP_S, 0.5 * len(self.membership.live)))
+        settled = min(settled, self._started_at + max(SETTLE_CAP_S, 0.5 * live))
+        if booting and self.expected_nodes and live < self.expected_nodes:
+            # the launcher is still starting nodes (one that died at boot costs this much)
+            settled = self._started_at + max(EXPECT_CAP_S, 0.5 * self.expected_nodes)
         if booting and self.preferred_master == self.node_id:
             # main starts the ring: wait briefly for a token that may already circulate
             return max(settled, self._started_at + max(0.15, 4 * timeouts.hop * len(self.membership.active)))
@@ -1089,6 +1108,8 @@ class NodeOS:
                 self.program_error = last
                 log.error("user program %s failed: %s", type(program).__name__, last)
                 log.debug("traceback:\n%s", traceback.format_exc())
+                if self.on_program_error is not None:
+                    self.on_program_error()
             finally:
                 try:
                     program.teardown()

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import gc
 import logging
 import signal
 import sys
@@ -201,6 +202,13 @@ def add_node_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--autostart", action="store_true", help="start the stored program at boot")
     parser.add_argument("--duration", type=float, help="leave after this many seconds")
     parser.add_argument(
+        "--expect",
+        type=int,
+        metavar="N",
+        help="N nodes are booting together (the launcher says so): the first token waits until "
+        "all N are live, at most 5 s or 0.5 s per node",
+    )
+    parser.add_argument(
         "--transport",
         default="zenoh",
         choices=TRANSPORTS,
@@ -258,11 +266,15 @@ def run_node(args: argparse.Namespace) -> int:
             profile=args.profile,
         )
         node.stop_event = stop
+        node.os.expected_nodes = args.expect
         node.start()
         try:
             node.run_program(args.program)
             if args.autostart and not args.program:
                 node.system.start_installed()
+            # what booting allocated (modules, the protocol, Zenoh) lives as long as the node: out
+            # of the collector's sight, a full collection no longer walks it during a visit
+            gc.freeze()
             node.wait(args.duration)
         finally:
             node.shutdown()

@@ -473,6 +473,7 @@ class SystemLayer:
     def install(self) -> SystemLayer:
         """Hook into the node OS and start the worker thread."""
         self.os.system_handler = self.handle
+        self.os.on_program_error = lambda: self._work.put((self._watch_program, ()))
         self._worker = threading.Thread(target=self._work_loop, name=f"system-{self.me}", daemon=True)
         self._worker.start()
         return self
@@ -878,10 +879,9 @@ class SystemLayer:
 
     def _work_loop(self) -> None:
         while not self._closing:
-            try:
-                item = self._work.get(timeout=0.2)
-            except queue.Empty:
-                item = ()
+            # blocks: a failed program wakes it through NodeOS.on_program_error (no polling,
+            # which 255 idle nodes would pay for 5 times a second each)
+            item = self._work.get()
             if item is None:
                 return
             if item:
