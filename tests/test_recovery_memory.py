@@ -224,3 +224,29 @@ def test_big_rings_get_timeouts_that_grow_with_the_live_count():
     assert small.ack == ACK_CAP_S  # the robot's ring keeps its 50 ms cap: hangs found fast
     assert big.recon >= 0.765  # 3 x 1 ms per live node at --bitrate max
     assert big.ack == pytest.approx(big.recon / 6)  # three tries end by half of it
+
+
+def test_a_booting_ring_told_its_size_starts_only_once_every_node_is_live():
+    ring = MemoryRing([10, 20], bitrate=None, expected_nodes=3)
+    try:
+        # two nodes alone would have settled after two reconfiguration times (0.4 s at start)
+        time.sleep(1.0)
+        assert [n.stats.visits for n in ring.nodes.values()] == [0, 0]
+        ring.add(30)
+        ring.wait_rounds(20, node_id=10)
+        assert_one_token_through(ring, [10, 20, 30])
+    finally:
+        ring.close()
+
+
+def test_only_an_excluded_nodes_neighbours_ping_it_often():
+    from tokenring.node import FAR_PROBE_S, PREPARED_NEIGHBOURS, NodeOS
+    from tokenring.protocol import default_protocol
+    from tokenring.transport.memory import MemoryHub, MemoryTransport
+
+    node = NodeOS(default_protocol(), 1, MemoryTransport(MemoryHub(), "mem", 1))
+    for other in range(2, 101):  # a big ring: 100 live nodes
+        node.membership.set_live(other, True)
+    near, far = 1 + PREPARED_NEIGHBOURS, 50
+    assert node._backoff(near) <= 0.1  # it would pass to it: finds out within 0.1 s it is back
+    assert node._backoff(far) == FAR_PROBE_S  # 98 others pinging it 10 times a second: a storm

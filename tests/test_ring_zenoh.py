@@ -246,6 +246,26 @@ def test_a_node_that_dies_is_reported_with_its_exit_code(procs, ring_name, endpo
     assert "node sonar (id 30) killed by SIGKILL" in launcher.stdout.read()
 
 
+def test_a_ring_bigger_than_the_boot_wave_starts_in_waves_and_stops_cleanly(procs, ring_name, endpoint):
+    # what 255 nodes on two cores need (at most 8 per core booting), shown with waves of 3
+    launcher = up(
+        procs, ring_name, endpoint, "--bitrate", "max", "--no-programs", "--no-world", "--boot-wave", "3"
+    )
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, ALL_IDS, timeout=40)
+        pids = launcher_pids(session, ring_name)
+        procs.watch(pids)
+        assert len(pids) == len(ALL_IDS)
+    launcher.send_signal(signal.SIGTERM)
+    assert launcher.wait(10) == 0
+    output = launcher.stdout.read()
+    assert "booting in waves: at most 3 nodes starting at a time" in output
+    # the nodes' parent-death signal is tied to the thread that started them: the waves'
+    # thread must outlive them, or every node is SIGKILLed when it ends
+    assert "killed" not in output and "exited" not in output
+    assert wait_gone(pids, 2.0) == []
+
+
 def test_a_second_ring_joins_the_network_when_the_default_port_is_taken(procs, endpoint):
     env = {"TOKENRING_ENDPOINT": endpoint}
     first = procs.tokenring(

@@ -113,8 +113,12 @@ class Launcher:
         router: bool = False,
         transport: str = "zenoh",
         profile: str | None = None,
+        boot_concurrency: int = BOOT_CONCURRENCY,
     ) -> None:
+        if boot_concurrency < 1:
+            raise UsageError(f"--boot-wave {boot_concurrency}: at least one node must boot at a time")
         self.plans = list(plans)
+        self.boot_concurrency = boot_concurrency
         self.transport = transport  # udp/zmq: the token path over sockets, membership from our registry
         self.profile = profile  # tokenring.profile: emulated hardware timing on every node
         self.registry: Any = None
@@ -361,7 +365,8 @@ class Launcher:
             from tokenring.transport.registry import MembershipRegistry
 
             self.registry = MembershipRegistry().start()
-        if self.transport == "zenoh" and len(self.plans) > BOOT_CONCURRENCY:
+        if self.transport == "zenoh" and len(self.plans) > self.boot_concurrency:
+            self.say(f"booting in waves: at most {self.boot_concurrency} nodes starting at a time")
             self._booter = threading.Thread(target=self._boot_in_waves, name="launcher-boot", daemon=True)
             self._booter.start()
         else:
@@ -373,7 +378,7 @@ class Launcher:
         self._supervisor.start()
 
     def _boot_in_waves(self) -> None:
-        """Start a big ring's nodes so that at most :data:`BOOT_CONCURRENCY` are booting (started,
+        """Start a big ring's nodes so that at most ``boot_concurrency`` are booting (started,
         not yet live) at a time: 255 interpreters importing at once on two cores starve each
         other and the router, whose handshakes then time out (nodes exit unable to connect)."""
         assert self.session is not None
@@ -397,7 +402,7 @@ class Launcher:
                             for c in self.child_list()
                             if c.plan.node_id not in live and c.process.poll() is None
                         ]
-                        if len(booting) < BOOT_CONCURRENCY:
+                        if len(booting) < self.boot_concurrency:
                             break
                         changed.wait(0.2)
                 with self._children_lock:  # stop() lists the children under this lock

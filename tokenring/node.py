@@ -120,6 +120,7 @@ class NodeOS:
         bitrate: float | None = None,
         ack_mode: str = "adaptive",
         master_id: int | None = None,
+        expected_nodes: int | None = None,
     ) -> None:
         if not 1 <= node_id <= 255:
             raise TokenRingError(f"node ID {node_id} is outside 1..255")
@@ -199,7 +200,7 @@ class NodeOS:
         #: how many nodes the launcher is starting: a booting ring waits for all of them (or the
         #: settle cap) before its first token, so it does not circulate among interpreters
         #: that are still importing on the same cores
-        self.expected_nodes: int | None = None
+        self.expected_nodes = expected_nodes
         self._paced = 0.0  # seconds the last pass slept to emulate wire time
         self._stall_wake = 0.0  # when the watchdog last woke far too late
 

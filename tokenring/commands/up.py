@@ -71,6 +71,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="this launcher is its host's Zenoh router (needs --listen); its nodes are clients of it. "
         "For rings across hosts: only router-to-router links cross between hosts",
     )
+    p.add_argument(
+        "--boot-wave",
+        type=int,
+        metavar="N",
+        help="at most N nodes booting at a time; a bigger ring starts in waves, a new node as each "
+        "booting one comes live (default: 8 per core)",
+    )
     world = p.add_argument_group("simulated world")
     world.add_argument(
         "--world",
@@ -111,7 +118,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tokenring.launcher import Launcher, install_signal_handlers, plans_from_protocol
+    from tokenring.launcher import BOOT_CONCURRENCY, Launcher, install_signal_handlers, plans_from_protocol
     from tokenring.protocol import load_protocol
     from tokenring.ring import format_bitrate, parse_bitrate
 
@@ -158,6 +165,7 @@ def run(args: argparse.Namespace) -> int:
         profile=args.profile,
         services=services,
         extra_node_args=["--store", args.store] if args.store else [],
+        boot_concurrency=BOOT_CONCURRENCY if args.boot_wave is None else args.boot_wave,
     )
     if args.localizer:
         from modules.common.locconfig import load_config
