@@ -245,6 +245,7 @@ def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any
             changes.append(m["stamp_ms"])
         moving = now
     steady, settling = [], []
+    states = [c["state"] for c in result.get("compass_log", [])]
     for c in result.get("compass_log", []):
         if c["state"] != 1 or not stamps:
             continue
@@ -263,6 +264,8 @@ def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any
         after_change = k > 0 and c["stamp_ms"] - changes[k - 1] < settle_ms
         (settling if after_change else steady).append(error)
     out: dict[str, Any] = {}
+    if states:
+        out["disturbed_fraction"] = round(states.count(2) / len(states), 3)
     for name, values in (("steady", steady), ("after_start_or_stop", settling)):
         if values:
             v = np.asarray(values)
@@ -328,6 +331,8 @@ def main(argv: list[str] | None = None) -> int:
             )
         compass = compass_error(result)
         for name, c in compass.items():
+            if not isinstance(c, dict):
+                continue
             print(
                 f"  compass vs truth, {name.replace('_', ' ')}: median {c['median_deg']:.2f}°, p95 {c['p95_deg']:.2f}° ({c['samples']} samples)",
                 flush=True,
