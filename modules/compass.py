@@ -47,6 +47,7 @@ CALIBRATION_STOPS = 8
 CALIBRATION_SPEED_PCT = 50
 DISTURBED_RATIO = 0.012
 MEASUREMENT_MS = 2 * SAMPLES  # a flip measurement: 20 samples set, 20 reset, at 1 kHz
+MOTOR_TICK_MS = 20  # the motor issues a batch of steps this often (modules/motor.py)
 
 
 class Program(UserProgram):
@@ -189,22 +190,27 @@ class Program(UserProgram):
         return None
 
     def _turn_and_listen(self, turning: list[np.ndarray]) -> bool:
-        """Collect readings while the turn runs; True if it ended well. motor.data tells of the
-        stop a token round late: only readings begun before the motor's last stamp seen moving
-        count (readings at rest lie on the static circle; they pulled the running field's
-        estimate short by 10 % at speed 60, bending every heading taken on the move by ~1°)."""
+        """Collect readings while the turn runs; True if it ended well. Only readings taken while
+        the motors surely ran count: motor.data says "turning" a batch of steps (20 ms) before
+        they are energised and tells of the stop a token round late. Readings at rest lie on the
+        static circle: they pulled the running field's estimate 3-10 % short (speed 20-60),
+        bending every heading taken on the move by up to a degree."""
         deadline_ms = self.clock.now_ms() + 60_000  # 45° at 50 % takes ~6 simulated seconds
         readings: list[tuple[float, np.ndarray]] = []
-        last_moving_ms = -math.inf
+        first_moving_ms, last_moving_ms = math.inf, -math.inf
         while self.running and self.clock.now_ms() < deadline_ms:
             field, stamp = self.read_field()
             if self.motors_moving() != STOPPED:
                 readings.append((stamp, field))
-                last_moving_ms = max(last_moving_ms, float(self.motor["stamp_ms"]))
+                motor_ms = float(self.motor["stamp_ms"])
+                first_moving_ms = min(first_moving_ms, motor_ms)
+                last_moving_ms = max(last_moving_ms, motor_ms)
             command = self.os.receive_command(timeout=self.period_real)
             if command is not None and command.name == "POSITION_REACHED":
-                cut = last_moving_ms - MEASUREMENT_MS
-                turning.extend(field for stamp, field in readings if stamp <= cut)
+                # the motor says it turns before its first batch of steps energises it
+                begin = first_moving_ms + MOTOR_TICK_MS
+                end = last_moving_ms - MEASUREMENT_MS
+                turning.extend(field for stamp, field in readings if begin <= stamp <= end)
                 return command.args["status"] == 0
         return False
 
