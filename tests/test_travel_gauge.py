@@ -125,12 +125,11 @@ def test_the_step_scale_converges_from_the_front_sonar_on_a_drive_toward_a_wall(
 
 def test_an_offset_between_the_sonar_and_step_counter_stamps_does_not_tilt_the_fit() -> None:
     # the sonar's stamps 100 ms early at 100 mm/s: every reading on the move is 10 mm nearer
-    # than its travel says, the readings at rest (before, between and after two moves) are not
+    # than its travel says, the readings at rest at the wall are not (one common line: 0.998)
     rng = np.random.default_rng(2)
     gauge = TravelGauge(MOUNTS)
     true_scale = 1.01
-    travel = [0.0] * 5 + list(np.arange(8.0, 300.0, 12.0)) + [300.0] * 5
-    travel += list(np.arange(312.0, 600.0, 12.0)) + [600.0] * 5
+    travel = list(np.arange(0.0, 600.0, 12.0)) + [600.0] * 20
     last = None
     for u in travel:
         moving = last is not None and u != last
@@ -138,4 +137,4 @@ def test_an_offset_between_the_sonar_and_step_counter_stamps_does_not_tilt_the_f
         front = 780.0 - true_scale * u - (10.0 if moving else 0.0) + rng.normal(0, 3)
         gauge.add((u, 0.0, 0.0), ranges(front))
     (fit,) = gauge.add((0.0, 0.0, 0.5), ranges())
-    assert fit["scale"] == pytest.approx(true_scale, abs=max(0.004, 3 * fit["sigma"]))
+    assert fit["scale"] == pytest.approx(true_scale, abs=0.006)
