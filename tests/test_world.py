@@ -190,3 +190,33 @@ def test_world_process_refuses_a_bad_world_file(procs, tmp_path):
     out, _ = proc.communicate(timeout=15)
     assert proc.returncode == 2
     assert f"{bad}:3: wall 2 has zero length" in out
+
+
+def test_a_sweep_pings_each_pair_from_where_the_driving_robot_is_by_then(monkeypatch):
+    import tokenring.world.sim as sim_module
+
+    sim = Simulator(load_world("empty"), seed=3, clock=SimClock(1.0))
+    used: list[tuple[float, float, float]] = []
+    real = sim_module.sonar_world_pose
+
+    def recording(x: float, y: float, theta: float, sensor: int):
+        used.append((x, y, theta))
+        return real(x, y, theta, sensor)
+
+    monkeypatch.setattr(sim_module, "sonar_world_pose", recording)
+    rate = 200.0  # half-steps per second: 50 steps are 250 ms of driving
+    moved = steps(sim, 50, 50, 1, rate)["moved_mm"]
+    start = sim.robot.pose
+    speed_mm_per_ms = moved / 250.0
+    slot = 15.0
+    sim.sonar_ping({"sensors": list(range(8)), "slot_ms": slot})
+    for i, (x, y, theta) in enumerate(used):
+        ahead = speed_mm_per_ms * slot * i  # pair 7 is pinged 105 ms after pair 0
+        assert x == pytest.approx(start.x + ahead * math.cos(start.theta), abs=0.01)
+        assert y == pytest.approx(start.y + ahead * math.sin(start.theta), abs=0.01)
+        assert theta == pytest.approx(start.theta, abs=1e-9)
+    # once the motors stop, every pair is pinged from where the robot stands
+    sim.motor_steps({"left": 0, "right": 0, "rate_hz": rate, "move": 1, "energised": False})
+    used.clear()
+    sim.sonar_ping({"sensors": list(range(8)), "slot_ms": slot})
+    assert {(round(x, 6), round(y, 6)) for x, y, _ in used} == {(round(start.x, 6), round(start.y, 6))}

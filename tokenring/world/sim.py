@@ -67,6 +67,10 @@ def _float(request: dict[str, Any], key: str, default: float | None = None) -> f
     return float(value)
 
 
+#: a velocity older than this (no batch of steps since) no longer moves the sonar's later pings
+VELOCITY_HOLD_MS = 250.0
+
+
 class Simulator:
     """The robot's hardware and its room."""
 
@@ -90,6 +94,10 @@ class Simulator:
         self.last_ms = self.clock.now_ms()
         self.steps_total = [0, 0]
         self.lock = threading.RLock()
+        # how the robot moves until the motor's next batch of steps (mm/ms, mm/ms, rad/ms) and
+        # since when: a sonar sweep pings its pairs one after another while it drives on
+        self.velocity = (0.0, 0.0, 0.0)
+        self.velocity_since_ms = 0.0
 
     # -- time and power -------------------------------------------------------------------------
     def advance(self, now_ms: float | None = None) -> float:
@@ -148,7 +156,19 @@ class Simulator:
                 return reply
             self.steps_total[0] += left
             self.steps_total[1] += right
+            before = self.robot.pose
             result = self.robot.apply_steps(left, right, rate, move)
+            after = self.robot.pose
+            duration_ms = 1000.0 * max(abs(left), abs(right)) / rate
+            if energised and duration_ms > 0 and not (result.blocked or result.stalled):
+                self.velocity = (
+                    (after.x - before.x) / duration_ms,
+                    (after.y - before.y) / duration_ms,
+                    math.remainder(after.theta - before.theta, 2 * math.pi) / duration_ms,
+                )
+            else:
+                self.velocity = (0.0, 0.0, 0.0)
+            self.velocity_since_ms = now
             self.energised = energised
             self.motor_pack_a = MOTOR_PACK_A_PER_MOTOR_A * current_ma / 1000.0
             self.motors.current_a = self.motor_pack_a if energised else 0.0
@@ -183,8 +203,12 @@ class Simulator:
             now = self.advance()
             pose = self.robot.pose
             envelopes, stamps = [], []
+            vx, vy, omega = self.velocity if now - self.velocity_since_ms <= VELOCITY_HOLD_MS else (0, 0, 0)
             for i, sensor in enumerate(sensors):
-                sx, sy, direction = sonar_world_pose(pose.x, pose.y, pose.theta, sensor)
+                # pair i is pinged i slots later, from where the driving robot is by then
+                ahead = i * slot
+                x, y, theta = pose.x + vx * ahead, pose.y + vy * ahead, pose.theta + omega * ahead
+                sx, sy, direction = sonar_world_pose(x, y, theta, sensor)
                 if self.powered:
                     samples = echo.envelope(self.world, sx, sy, direction, self.sonar_rng, ping)
                 else:
