@@ -27,13 +27,19 @@ def test_ring_forms_in_id_order_and_main_counts_rounds(ring):
     assert successors == {10: 20, 20: 30, 30: 40, 40: 50, 50: 60, 60: 70, 70: 80, 80: 10}
     main = ring.by_name("main")
     lcd = ring.by_name("lcd")
-    counters = []
-    for _ in range(30):
-        lcd.wait_visit(1.0)
-        counters.append(lcd.counter)
+    # every pass to lcd on the wire (a waiting thread may miss visits on a loaded machine)
+    ring.hub.wire.clear()
+    ring.hub.tapping = True
+    wait_for(
+        lambda: sum(1 for _, did, _ in list(ring.hub.wire) if did == lcd.node_id) >= 30,
+        10,
+        "30 passes to lcd",
+    )
+    ring.hub.tapping = False
+    offset = ring.protocol.header.counter
+    counters = [frame[offset] for _, did, frame in list(ring.hub.wire) if did == lcd.node_id]
     steps = {(b - a) & 0xFF for a, b in itertools.pairwise(counters)}
-    assert steps <= {1, 2}, steps  # one per round (2 only if a wakeup was missed)
-    assert 1 in steps
+    assert 1 in steps and steps <= {0, 1}, steps  # main adds one per round (0: a pass retried)
     assert main.stats.rounds >= 20
     assert ring.regenerated() == 1  # main started the one token
 
