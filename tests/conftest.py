@@ -25,6 +25,11 @@ REPO = Path(__file__).resolve().parent.parent
 TOKENRING = [sys.executable, "-m", "tokenring"]
 
 
+def run_tokenring(*args: str, timeout: float = 60.0, **kwargs) -> subprocess.CompletedProcess:
+    """Run one ``tokenring`` command to completion (text output captured), as a user would."""
+    return subprocess.run([*TOKENRING, *args], capture_output=True, text=True, timeout=timeout, **kwargs)
+
+
 def pid_alive(pid: int) -> bool:
     """True if ``pid`` exists and is not a zombie."""
     try:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from conftest import run_tokenring
 
 from modules.common.locconfig import DEFAULTS, ConfigError, default_config_path, load_config, parse_config
 
@@ -87,17 +88,9 @@ def test_missing_file_and_command_line_exit_code(tmp_path: Path, capsys: pytest.
 
 
 def test_up_refuses_a_bad_localizer_file_before_starting_anything(tmp_path: Path) -> None:
-    import subprocess
-    import sys
-
     bad = tmp_path / "loc.yaml"
     bad.write_text("filter:\n  enabled: maybe\n")
-    result = subprocess.run(
-        [sys.executable, "-m", "tokenring", "up", "--localizer", str(bad), "--duration", "1"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    result = run_tokenring("up", "--localizer", str(bad), "--duration", "1")
     assert result.returncode == 2
     assert f"{bad}:2: filter.enabled" in result.stderr
     assert "Traceback" not in result.stderr

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import run_tokenring
 from memring import MemoryRing
 
 from tokenring.channels import ChannelBuffer, DataRegistration
@@ -58,12 +57,7 @@ def test_bad_profile_requests_are_usage_errors():
     with pytest.raises(UsageError, match="needs a bitrate"):
         Pacer(ARCNET, fake_node("main"), None, 0.0)
     assert install(fake_node("main"), None, 2.5e6, 0.0) is None
-    result = subprocess.run(
-        [sys.executable, "-m", "tokenring", "bench", "--profile", "arcnet", "--bitrate", "max"],
-        capture_output=True,
-        text=True,
-        timeout=30,
-    )
+    result = run_tokenring("bench", "--profile", "arcnet", "--bitrate", "max", timeout=30)
     assert result.returncode == 2 and "not max" in result.stderr and "Traceback" not in result.stderr
 
 

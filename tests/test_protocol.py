@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import copy
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from conftest import run_tokenring
 
 from tokenring.errors import ProtocolError
 from tokenring.protocol import load_protocol, parse_protocol
@@ -160,12 +159,7 @@ def test_header_field_missing():
 def test_cli_refuses_a_broken_protocol_with_exit_code_2(tmp_path):
     bad = tmp_path / "protocol.yaml"
     bad.write_text(TEXT.replace("address: 116", "address: 600"))
-    result = subprocess.run(
-        [sys.executable, "-m", "tokenring", "up", "--protocol", str(bad), "--duration", "1"],
-        capture_output=True,
-        text=True,
-        timeout=30,
-    )
+    result = run_tokenring("up", "--protocol", str(bad), "--duration", "1", timeout=30)
     assert result.returncode == 2
     assert "nodes.sonar.data" in result.stderr and "past the token's last byte" in result.stderr
     assert "Traceback" not in result.stderr

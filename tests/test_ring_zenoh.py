@@ -12,7 +12,7 @@ import threading
 import time
 
 import zenoh
-from conftest import REPO, pid_alive, wait_gone
+from conftest import REPO, pid_alive, run_tokenring, wait_gone
 from ringutil import control, launcher_pids, stats, tap, wait_ring, wait_until, write_probe_programs
 
 from tokenring import keys
@@ -329,9 +329,7 @@ def test_bad_command_line_input_exits_2_with_a_message():
         (["up", "--connect", "localhost:7447"], "not of the form tcp/HOST:PORT"),
     ]
     for args, message in cases:
-        result = subprocess.run(
-            [sys.executable, "-m", "tokenring", *args], capture_output=True, text=True, timeout=30, cwd=REPO
-        )
+        result = run_tokenring(*args, timeout=30, cwd=REPO)
         assert result.returncode == 2, (args, result.stderr)
         assert message in result.stderr, (args, result.stderr)
         assert "Traceback" not in result.stderr

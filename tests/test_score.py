@@ -3,22 +3,15 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from conftest import run_tokenring
 
 from modules.common.mapscore import score_map, true_corners
 from tokenring.commands.map import load_map_file, write_map
 
 SQUARE = np.array([[0, 0, 4000, 0], [4000, 0, 4000, 3000], [4000, 3000, 0, 3000], [0, 3000, 0, 0]], float)
-
-
-def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "tokenring", *args], capture_output=True, text=True, timeout=60
-    )
 
 
 def test_a_perfect_map_scores_full_marks_and_closes_every_corner():
@@ -58,30 +51,32 @@ def test_map_files_round_trip_and_score_from_the_command_line(tmp_path):
     assert np.allclose(load_map_file(str(tmp_path / "map.json")), vectors)
     assert np.allclose(load_map_file(str(tmp_path / "map.dxf")), vectors)  # the TRUTH layer is left out
 
-    out = run_cli("score", str(tmp_path / "map.json"), "--world", "empty", "--json")
+    out = run_tokenring("score", str(tmp_path / "map.json"), "--world", "empty", "--json")
     assert out.returncode == 0, out.stderr
     score = json.loads(out.stdout)
     assert score["world"] == "empty" and score["vectors"] == 4
-    text = run_cli("score", str(tmp_path / "map.dxf"), "--world", "empty")
+    text = run_tokenring("score", str(tmp_path / "map.dxf"), "--world", "empty")
     assert text.returncode == 0 and "coverage" in text.stdout
 
     converted = tmp_path / "again.png"
-    out = run_cli("map", "--from", str(tmp_path / "map.json"), "--out", str(converted), "--world", "empty")
+    out = run_tokenring(
+        "map", "--from", str(tmp_path / "map.json"), "--out", str(converted), "--world", "empty"
+    )
     assert out.returncode == 0 and converted.exists(), out.stderr
 
 
 def test_bad_map_files_and_options_are_clear_errors(tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text('{"vectors": [[1, 2, 3]]}')
-    out = run_cli("score", str(bad), "--world", "empty")
+    out = run_tokenring("score", str(bad), "--world", "empty")
     assert out.returncode == 2 and "vectors[0]" in out.stderr and "Traceback" not in out.stderr
     broken = tmp_path / "broken.json"
     broken.write_text('{"vectors": [\n  [1, 2, 3, 4],,\n]}')
-    out = run_cli("score", str(broken), "--world", "empty")
+    out = run_tokenring("score", str(broken), "--world", "empty")
     assert out.returncode == 2 and "broken.json:2" in out.stderr
-    out = run_cli("score", str(tmp_path / "missing.json"), "--world", "empty")
+    out = run_tokenring("score", str(tmp_path / "missing.json"), "--world", "empty")
     assert out.returncode == 2 and "no such map file" in out.stderr
-    out = run_cli("score", str(bad), "--world", "atlantis")
+    out = run_tokenring("score", str(bad), "--world", "atlantis")
     assert out.returncode == 2 and "atlantis" in out.stderr
-    out = run_cli("map", "--out", str(tmp_path / "map.svg"), "--from", str(bad))
+    out = run_tokenring("map", "--out", str(tmp_path / "map.svg"), "--from", str(bad))
     assert out.returncode == 2 and ".svg" in out.stderr
