@@ -67,13 +67,22 @@ class NodeProcess:
         transport: str = "zenoh",
         registry: str | None = None,
         profile: str | None = None,
+        expected_nodes: int | None = None,
     ) -> None:
         self.protocol = protocol
         self.ring = ring
         self.session = session
         # the token path's transport; the control plane below stays on the Zenoh session
         self.transport = make_transport(transport, session, ring, node_id, protocol.frame_size, registry)
-        self.os = NodeOS(protocol, node_id, self.transport, name=name, bitrate=bitrate, ack_mode=ack_mode)
+        self.os = NodeOS(
+            protocol,
+            node_id,
+            self.transport,
+            name=name,
+            bitrate=bitrate,
+            ack_mode=ack_mode,
+            expected_nodes=expected_nodes,
+        )
         install_profile(self.os, profile, bitrate, time.perf_counter())
         self.stop_event = threading.Event()
         self.control: dict[str, ControlHandler] = {
@@ -264,9 +273,9 @@ def run_node(args: argparse.Namespace) -> int:
             transport=args.transport,
             registry=args.registry,
             profile=args.profile,
+            expected_nodes=args.expect,
         )
         node.stop_event = stop
-        node.os.expected_nodes = args.expect
         node.start()
         try:
             node.run_program(args.program)

@@ -884,15 +884,14 @@ class SystemLayer:
             item = self._work.get()
             if item is None:
                 return
-            if item:
-                action, args = item
-                try:
-                    action(*args)
-                except Exception as exc:  # the worker must survive anything
-                    log.exception("system worker: %s", exc)
-                    if args and isinstance(args[0], _Job):
-                        args[0].detail = f"{type(exc).__name__}: {exc}"
-                        args[0].status = Status.STORE_ERROR
+            action, args = item
+            try:
+                action(*args)
+            except Exception as exc:  # the worker must survive anything
+                log.exception("system worker: %s", exc)
+                if args and isinstance(args[0], _Job):
+                    args[0].detail = f"{type(exc).__name__}: {exc}"
+                    args[0].status = Status.STORE_ERROR
             self._watch_program()
 
     def _verify(self, job: _Job, dl: _Download, digest: bytes) -> None:
