@@ -10,6 +10,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import zenoh
 from conftest import REPO, pid_alive, run_tokenring, wait_gone
@@ -246,6 +247,12 @@ def test_a_node_that_dies_is_reported_with_its_exit_code(procs, ring_name, endpo
     assert "node sonar (id 30) killed by SIGKILL" in launcher.stdout.read()
 
 
+def process_start_s(pid: int) -> float:
+    """When ``pid`` started, in seconds since boot (/proc/PID/stat, field 22)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return int(fields[19]) / os.sysconf("SC_CLK_TCK")
+
+
 def test_a_ring_bigger_than_the_boot_wave_starts_in_waves_and_stops_cleanly(procs, ring_name, endpoint):
     # what 255 nodes on two cores need (at most 8 per core booting), shown with waves of 3
     launcher = up(
@@ -256,10 +263,14 @@ def test_a_ring_bigger_than_the_boot_wave_starts_in_waves_and_stops_cleanly(proc
         pids = launcher_pids(session, ring_name)
         procs.watch(pids)
         assert len(pids) == len(ALL_IDS)
+        started = sorted(process_start_s(pid) for pid in pids)
     launcher.send_signal(signal.SIGTERM)
     assert launcher.wait(10) == 0
     output = launcher.stdout.read()
     assert "booting in waves: at most 3 nodes starting at a time" in output
+    # the fourth node started only once one of the first three was live (an interpreter's boot,
+    # well over 0.2 s), not with them
+    assert started[3] - started[0] > 0.2, started
     # the nodes' parent-death signal is tied to the thread that started them: the waves'
     # thread must outlive them, or every node is SIGKILLed when it ends
     assert "killed" not in output and "exited" not in output
