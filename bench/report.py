@@ -372,7 +372,7 @@ def scaling_md(section: dict[str, Any], plots: Path) -> str:
     text = [
         "## Round trip vs ring size",
         "",
-        "Bitrate max, adaptive acks; every tokenring ring against a bare Zenoh ring (N processes forwarding 514 bytes, no OS work) of the same size and topology, measured right before it. *peers*: a full mesh of Zenoh peers (the default of `tokenring up`); *routers*: every node a client of the launcher's Zenoh router (`tokenring up --router`). The round trip is timed by the round master (the lowest ID); CPU is per node while circulating, `launcher` is the launcher process with the router in it; `load` is the 1-minute load average after the run (the machine is shared).",
+        "Bitrate max, adaptive acks; every tokenring ring against a bare Zenoh ring (N processes forwarding 514 bytes, no OS work) of the same size and topology, measured right before it. *peers*: a full mesh of Zenoh peers (the default of `tokenring up`); *routers*: every node a client of the launcher's Zenoh router (`tokenring up --router`). The round trip is timed by the round master (the lowest ID); `handler` is the median time a node holds the token, from its arrival to the put that passes it on (the visit's bookkeeping runs after the put); CPU is per node while circulating, `launcher` is the launcher process with the router in it; `load` is the 1-minute load average after the run (the machine is shared).",
         "",
     ]
     text.append(md_table(rows, head))

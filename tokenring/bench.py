@@ -3,7 +3,8 @@
 Both rings have N processes on this machine and are measured in the same run (alternating when
 ``--repeat`` > 1), so the ratio is meaningful even where absolute times are noisy. The ring's
 round trip is timed by its round master (the time between two of its visits); the baseline's by
-its process 0. Reports median, p90, p99 and max, per-hop cost, handler time, RSS and CPU.
+its process 0. Reports median, p90, p99 and max, per-hop cost, handler time (from the token's
+arrival to the put that passes it on), RSS and CPU.
 """
 
 from __future__ import annotations
