@@ -127,13 +127,14 @@ def test_late_joiner_is_inserted_and_a_leaver_removed_without_losing_the_token(p
         found = wait_ring(session, ring_name, [10, 30, 40, 50])
         assert found[30]["successor"] == 40 and found[40]["successor"] == 50
         joiner.send_signal(signal.SIGTERM)
-        assert joiner.wait(5) == 0
+        # upper bounds only (a loaded machine in the full suite can stretch the handover)
+        assert joiner.wait(15) == 0
         wait_until(
-            lambda: stats(session, ring_name).get(30, {}).get("successor") == 50, 5, "sonar to pass to copro"
+            lambda: stats(session, ring_name).get(30, {}).get("successor") == 50, 15, "sonar to pass to copro"
         )
         before = stats(session, ring_name)[10]["stats"]["visits"]
         wait_until(
-            lambda: stats(session, ring_name)[10]["stats"]["visits"] > before + 100, 5, "the ring to go on"
+            lambda: stats(session, ring_name)[10]["stats"]["visits"] > before + 100, 15, "the ring to go on"
         )
         totals = stats(session, ring_name)
         assert set(totals) == {10, 30, 50}
