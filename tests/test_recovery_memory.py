@@ -231,6 +231,25 @@ def test_big_rings_get_timeouts_that_grow_with_the_live_count():
     assert big.ack == pytest.approx(big.recon / 6)  # three tries end by half of it
 
 
+def test_timeouts_come_from_the_same_percentiles_as_numpys():
+    import random
+
+    import numpy as np
+
+    from tokenring.ring import RollingStats
+
+    stats = RollingStats(1000)
+    assert stats.percentiles((50, 99), default=-1.0) == [-1.0, -1.0]
+    stats.add(0.25)
+    assert stats.percentiles((0, 50, 100)) == [0.25, 0.25, 0.25]
+    rng = random.Random(7)
+    for _ in range(1500):  # wrapped: the last 512 of them are read
+        stats.add(rng.expovariate(1000.0))
+    last = stats.recent(512)
+    for q in (0, 1, 50, 90, 99, 100):
+        assert stats.percentile(q) == pytest.approx(float(np.percentile(last, q)), rel=1e-12)
+
+
 def test_a_booting_ring_told_its_size_starts_only_once_every_node_is_live():
     ring = MemoryRing([10, 20], bitrate=None, expected_nodes=3)
     try:
