@@ -457,6 +457,9 @@ class ClosedLoop:
             return None
         nav = self.navigator
         moves = nav.plan(self.last_outcome, sensors, self.pilot.alert_lock)
+        for target, command, args in nav.commands:
+            self._send(target, command, **args)
+        nav.commands.clear()
         ended = self.last_outcome
         self.last_outcome = None
         if moves is None:

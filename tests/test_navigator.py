@@ -401,3 +401,92 @@ def test_explore2_corrects_a_turn_the_floor_let_slip_by_the_compass():
     s.heading_cdeg = 17900  # within 1.5° after settling again, the wall parallel: on with it
     seg = settle(nav, Outcome(REASON["DONE"], fix[0]), s)
     assert seg[-1].label == "follow"
+
+
+def _leg(start: tuple[float, float], heading_deg: float, length: int, right_cm=None):
+    """A follow segment's outcome samples along a straight leg: (samples, poses), every 100 mm;
+    ``right_cm(x, y)`` the right side's reading there (FAR: nothing)."""
+    th = math.radians(heading_deg)
+    samples, poses = [], []
+    for d in range(0, length + 1, 100):
+        x, y = start[0] + d * math.cos(th), start[1] + d * math.sin(th)
+        r = [FAR] * 8
+        r[LAYOUT.left_front] = r[LAYOUT.left_rear] = 30
+        if right_cm is not None:
+            r[LAYOUT.right_front] = r[LAYOUT.right_rear] = right_cm(x, y)
+        samples.append((d, r))
+        poses.append((x, y, th))
+    return samples, poses
+
+
+def _room_lap(nav: ExploreLeftWall, s: Sensors, right_cm=None) -> list[Move] | None:
+    """Follow a 4 m x 3 m room's walls clockwise at 40 cm (legs west, north, east, south),
+    back to where following began; the plan after the lap."""
+    from modules.common.pilot import Outcome
+
+    s.pose = (3600.0, 400.0, math.pi)
+    seg = nav.plan(None, s, STOPPED)
+    legs = [
+        ((3600, 400), 180, 3200),
+        ((400, 400), 90, 2200),
+        ((400, 2600), 0, 3200),
+        ((3600, 2600), -90, 2200),
+    ]
+    for (start, heading, length), turn_to in zip(legs, (90, 0, -90, 180), strict=True):
+        samples, poses = _leg(start, heading, length, right_cm)
+        s.pose = (*poses[-1][:2], math.radians(turn_to))
+        seg = nav.plan(
+            Outcome(REASON["DONE"], seg[-1], driven_mm=length, samples=samples, poses=poses), s, STOPPED
+        )
+        if seg is None or nav.phase == "approach":
+            return seg
+    s.pose = (3550.0, 400.0, math.pi)
+    return nav.plan(Outcome(REASON["DONE"], seg[-1], driven_mm=100), s, STOPPED)
+
+
+def test_explore2_goes_round_a_free_standing_obstacle_seen_on_the_right_after_the_lap():
+    from modules.common.pilot import Outcome
+
+    nav = ExploreLeftWall(LAYOUT)
+    nav.phase = "follow"
+    s = sensors_with(left_front=30, left_rear=30)
+    # on the first leg (west along y = 400) a pillar 80 cm to the right for x 1800..2200
+    aim = _room_lap(nav, s, lambda x, y: 80 if 1800 <= x <= 2200 else FAR)
+    assert nav.note == "lap closed" and aim is not None
+    assert nav.commands == [("copro", "FLUSH", {})]  # the room's last wall is no neighbour of the pillar's
+    cx, cy = nav.target
+    assert 1800 <= cx <= 2200 and 1300 <= cy <= 1340  # 40 cm of robot to sensor + 80 cm echo
+    # from (3550, 400) heading west the pillar lies 31° to the right
+    assert aim[0].label == "aim" and aim[0].direction == TURN_RIGHT and 29 <= aim[0].amount <= 33
+    approach = nav.plan(Outcome(REASON["DONE"], aim[0]), s, STOPPED)
+    assert approach[0].label == "approach" and approach[0].direction == FORWARD
+    assert ("ahead_within", 25) in [(a.kind, a.cm) for a in approach[0].abort]
+    # it blocks the way: turn right, it is on the left now, then go round it turning left
+    s.pose = (cx + 300.0, cy - 500.0, math.radians(150))
+    inner = nav.plan(Outcome(REASON["CLOSE"], approach[0], trigger="ahead_within"), s, STOPPED)
+    assert inner[0].label == "inner" and inner[0].direction == TURN_RIGHT and inner[0].amount == 90
+    s.pose = (1550.0, 1000.0, 0.0)  # round it on a square of 0.9 m
+    seg = settle(nav, Outcome(REASON["DONE"], inner[0]), s)  # the left pair reads it parallel
+    assert seg[-1].label == "follow" and nav.phase == "follow"
+    ends = []
+    for _ in range(5):  # four faces and the first one again
+        samples, poses = _leg(s.pose[:2], math.degrees(s.pose[2]), 900)
+        s.pose = (*poses[-1][:2], s.pose[2] + math.radians(90))
+        ends.append(
+            nav.plan(
+                Outcome(REASON["DONE"], seg[-1], driven_mm=400, samples=samples, poses=poses), s, STOPPED
+            )
+        )
+        seg = ends[-1] if ends[-1] else seg
+    assert all(e is not None for e in ends[:-1]) and ends[-1] is None  # ends on the first face, once round
+    assert nav.state == NAV["DONE"] and nav.note == "lap closed, 1 island(s) gone round"
+
+
+def test_explore2_ends_at_the_lap_when_nothing_stood_inside_it():
+    nav = ExploreLeftWall(LAYOUT)
+    nav.phase = "follow"
+    s = sensors_with(left_front=30, left_rear=30)
+    # one stray echo on the right is no island
+    assert _room_lap(nav, s, lambda x, y: 80 if 1950 <= x <= 2050 else FAR) is None
+    assert len(nav.sightings) == 4  # both ends of one sweep, on the way out and back
+    assert nav.note == "lap closed" and nav.commands == [] and nav.target is None

@@ -106,6 +106,7 @@ class Outcome:
     driven_mm: int = 0
     samples: list[tuple[int, list[int]]] = field(default_factory=list)  # (distance_mm, distances)
     trigger: str = ""
+    poses: list[tuple[float, float, float] | None] = field(default_factory=list)  # the pose at each sample
 
     @property
     def done(self) -> bool:
@@ -151,6 +152,7 @@ class Pilot:
         self._abort_sweep = 0
         self._abort_counts: dict[int, int] = {}
         self._samples: list[tuple[int, list[int]]] = []
+        self._poses: list[tuple[float, float, float] | None] = []
         self._last_sweep: int | None = None
         self._scanning = False
         self._seen_moving = False
@@ -203,6 +205,7 @@ class Pilot:
         self._seq_before = sensors.move_seq
         self._started_ms = sensors.stamp_ms
         self._samples = []
+        self._poses = []
         self._last_sweep = sensors.sweep
         self._abort_sweep = sensors.sweep
         self._abort_counts = {}
@@ -237,6 +240,7 @@ class Pilot:
             if sensors.sweep != self._last_sweep:
                 self._last_sweep = sensors.sweep
                 self._samples.append((sensors.distance_mm, list(sensors.distances)))
+                self._poses.append(sensors.pose)
             if self.state == self.STARTING and (
                 sensors.move_seq != self._seq_before or sensors.motor_state == MOTOR_STATE["MOVING"]
             ):
@@ -335,7 +339,7 @@ class Pilot:
             self.send("copro", "STOP_SCAN")
             self._scanning = False
         move = self.moves[min(self.index, len(self.moves) - 1)] if self.moves else None
-        self.outcome = Outcome(reason, move, self.index, driven, self._samples, trigger)
+        self.outcome = Outcome(reason, move, self.index, driven, self._samples, trigger, self._poses)
         self.state = self.IDLE
 
     def _triggered(self, condition: Abort, sensors: Sensors) -> bool:
