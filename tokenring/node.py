@@ -437,6 +437,9 @@ class NodeOS:
                 work[self._o_counter] = (counter + 1) & 0xFF
             self._paced = 0.0
             self._forward(t_in)
+            # the handler's time: from the frame's arrival to the put that passes it on (the time
+            # the token is held here), without the emulated wire time
+            held = self._last_sent_time - t_in - self._paced
             # bookkeeping after the pass: on a loaded machine it overlaps the successor's work
             # instead of delaying the token (bench/RESULTS.md measures the per-hop cost)
             if self._last_visit:
@@ -451,9 +454,7 @@ class NodeOS:
                 stats.rounds += 1
         if flags & ACK_REQUESTED:  # after the pass: the token must not wait for our ack
             self._send_ack(sid, crc)
-        # the handler's time: from the frame's arrival to the put that passes it on (the time
-        # the token is held here), without the emulated wire time
-        self._handler_add(self._last_sent_time - t_in - self._paced)
+        self._handler_add(held)
         if self._visit_waiters:
             with self._visit_cond:
                 self._visit_cond.notify_all()
