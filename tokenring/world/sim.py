@@ -117,6 +117,21 @@ class Simulator:
         """The relays hold and the electronics battery is not flat."""
         return self.relay_on and self.electronics.soc > 0.0
 
+    def pose_at(self, at_ms: float, now_ms: float | None = None) -> Pose:
+        """Where the robot is at ``at_ms``: a batch of steps moves it to where the motor had got
+        to when it sent them, and until the next batch it drives on at that batch's velocity (the
+        motor steps on meanwhile; the next batch brings those steps). Without this, every sonar
+        ping, compass reading and truth sample between two batches saw the robot where the last
+        batch left it — at speed 20 tens to hundreds of simulated ms behind its stamp. ``now_ms``
+        (default ``at_ms``): when asked; no batch for ``VELOCITY_HOLD_MS`` by then: it stands."""
+        pose = self.robot.pose
+        asked = at_ms if now_ms is None else now_ms
+        if asked - self.velocity_since_ms > VELOCITY_HOLD_MS:
+            return pose
+        ahead = max(0.0, at_ms - self.velocity_since_ms)
+        vx, vy, omega = self.velocity
+        return Pose(pose.x + vx * ahead, pose.y + vy * ahead, pose.theta + omega * ahead)
+
     def motors_running(self, _now_ms: float | None = None) -> bool:
         """The motor driver is on: the coils carry current (and make their running field)."""
         return self.energised
@@ -201,14 +216,11 @@ class Simulator:
         slot = _float(request, "slot_ms", SONAR_SLOT_MS)
         with self.lock:
             now = self.advance()
-            pose = self.robot.pose
             envelopes, stamps = [], []
-            vx, vy, omega = self.velocity if now - self.velocity_since_ms <= VELOCITY_HOLD_MS else (0, 0, 0)
             for i, sensor in enumerate(sensors):
                 # pair i is pinged i slots later, from where the driving robot is by then
-                ahead = i * slot
-                x, y, theta = pose.x + vx * ahead, pose.y + vy * ahead, pose.theta + omega * ahead
-                sx, sy, direction = sonar_world_pose(x, y, theta, sensor)
+                pose = self.pose_at(now + i * slot, now)
+                sx, sy, direction = sonar_world_pose(pose.x, pose.y, pose.theta, sensor)
                 if self.powered:
                     samples = echo.envelope(self.world, sx, sy, direction, self.sonar_rng, ping)
                 else:
@@ -226,7 +238,7 @@ class Simulator:
         samples = _int(request, "samples", 20, 1, 1000)
         with self.lock:
             now = self.advance()
-            pose = self.robot.pose
+            pose = self.pose_at(now)
             running = self.motors_running(now)
             out = []
             for i, setting in enumerate(settings):
@@ -303,7 +315,7 @@ class Simulator:
         """Ground truth: for logs and scoring only, never for the modules."""
         with self.lock:
             now = self.advance()
-            pose = self.robot.pose
+            pose = self.pose_at(now)
             return {
                 "stamp_ms": int(now),
                 "t_ms": now,
