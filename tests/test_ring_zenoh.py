@@ -328,7 +328,9 @@ def test_bench_cli_writes_the_promised_json(procs, tmp_path):
     for key in ("rtt_ms", "baseline_rtt_ms"):
         assert report[key]["median"] > 0 and report[key]["p99"] >= report[key]["median"]
     assert report["ratio_median"] == report["rtt_ms"]["median"] / report["baseline_rtt_ms"]["median"]
-    assert "ratio (median)" in result.stdout
+    # the time the token is held (arrival to put) and the put itself, measured apart
+    assert 0 < report["handler_us"]["median"] < 5000 and 0 < report["put_us"]["median"] < 5000
+    assert "ratio (median)" in result.stdout and "then the put" in result.stdout
 
 
 def test_bad_command_line_input_exits_2_with_a_message():

@@ -318,6 +318,7 @@ def run(args: argparse.Namespace) -> int:
     rss: list[float] = []
     cpu: list[float] = []
     handler: list[dict[str, float]] = []
+    puts: list[float] = []  # per run: the median µs of the put that passes the token on
     wall = 0.0
     total = 2 * args.repeat
     step = 0
@@ -352,6 +353,7 @@ def run(args: argparse.Namespace) -> int:
         rss += result.rss_mb
         cpu += [c / result.wall_s for c in result.cpu_s]
         handler.append(result.handler_us)
+        puts.append(result.stats.get("send_us", {}).get("median", float("nan")))
         wall += result.wall_s
         progress(f"        median {summarize(result.rounds_s)['median']:.3f} ms", args.quiet)
     ring_s, bare_s = summarize(ring), summarize(bare)
@@ -375,6 +377,7 @@ def run(args: argparse.Namespace) -> int:
             "median": float(np.median([h["median"] for h in handler])),
             "p99": float(np.median([h["p99"] for h in handler])),
         },
+        "put_us": {"median": float(np.median(puts))},
         "rss_mb": {"max": max(rss), "mean": float(np.mean(rss))},
         "cpu_per_node_pct": {"mean": float(np.mean(cpu) * 100), "max": float(np.max(cpu) * 100)},
         "machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]},
@@ -404,7 +407,7 @@ def run(args: argparse.Namespace) -> int:
     print(format_table(rows, ["ring", "median ms", "p90 ms", "p99 ms", "max ms", "per hop us"]))
     print(
         f"ratio (median) {report['ratio_median']:.2f}x   ratio (p99) {report['ratio_p99']:.2f}x   "
-        f"handler median {report['handler_us']['median']:.1f} us   "
+        f"handler median {report['handler_us']['median']:.1f} us (then the put {report['put_us']['median']:.0f} us)   "
         f"RSS max {report['rss_mb']['max']:.0f} MB   CPU/node {report['cpu_per_node_pct']['mean']:.0f} %"
     )
     if args.json:
