@@ -491,8 +491,9 @@ class NodeOS:
         if hop:
             delay = t_in + hop - perf_counter()
             if delay > 0:
+                slept_from = perf_counter()
                 time.sleep(delay)  # emulated wire time; a lone node also waits 1 ms per pass
-                self._paced += delay
+                self._paced += perf_counter() - slept_from  # with the sleep's overshoot
         if did != self._last_sent_did or not self._ack_pending:
             self._retries = 0
         elif self._retries:
