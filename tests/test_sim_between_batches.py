@@ -82,3 +82,12 @@ def test_the_robot_stands_once_the_motors_stop_or_no_batch_came_for_a_while():
     stopped = sim.robot.pose
     clock.t += 50.0
     assert sim.truth()["x"] == pytest.approx(stopped.x, abs=1e-9)
+
+
+def test_without_power_the_robot_stands_between_batches_too():
+    sim, clock, _ = driving()
+    sim.charger_relay({"on": False, "reason": "test"})  # the relays drop: no power for the motors
+    assert sim.motor_steps({"left": 10, "right": 10, "rate_hz": 184.5, "move": 1})["power"] is False
+    standing = sim.robot.pose
+    clock.t += 50.0
+    assert sim.truth()["x"] == pytest.approx(standing.x, abs=1e-9)

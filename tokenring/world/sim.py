@@ -123,10 +123,11 @@ class Simulator:
         motor steps on meanwhile; the next batch brings those steps). Without this, every sonar
         ping, compass reading and truth sample between two batches saw the robot where the last
         batch left it — at speed 20 tens to hundreds of simulated ms behind its stamp. ``now_ms``
-        (default ``at_ms``): when asked; no batch for ``VELOCITY_HOLD_MS`` by then: it stands."""
+        (default ``at_ms``): when asked; no batch for ``VELOCITY_HOLD_MS`` by then, the motors off
+        or no power: it stands."""
         pose = self.robot.pose
         asked = at_ms if now_ms is None else now_ms
-        if asked - self.velocity_since_ms > VELOCITY_HOLD_MS:
+        if not (self.energised and self.powered) or asked - self.velocity_since_ms > VELOCITY_HOLD_MS:
             return pose
         ahead = max(0.0, at_ms - self.velocity_since_ms)
         vx, vy, omega = self.velocity
@@ -167,6 +168,7 @@ class Simulator:
             }
             if not self.powered or self.motors.soc <= 0.0:
                 self.energised = False
+                self.velocity, self.velocity_since_ms = (0.0, 0.0, 0.0), now
                 reply["power"] = False
                 return reply
             self.steps_total[0] += left
