@@ -490,3 +490,25 @@ def test_explore2_ends_at_the_lap_when_nothing_stood_inside_it():
     assert _room_lap(nav, s, lambda x, y: 80 if 1950 <= x <= 2050 else FAR) is None
     assert len(nav.sightings) == 4  # both ends of one sweep, on the way out and back
     assert nav.note == "lap closed" and nav.commands == [] and nav.target is None
+
+
+def test_explore2_does_not_visit_an_island_again_whose_echoes_lie_just_outside_its_path_round():
+    from modules.common.pilot import Outcome
+
+    nav = ExploreLeftWall(LAYOUT)
+    nav.phase = "follow"
+    s = sensors_with(left_front=30, left_rear=30)
+    aim = _room_lap(nav, s, lambda x, y: 80 if 1600 <= x <= 2400 else FAR)
+    approach = nav.plan(Outcome(REASON["DONE"], aim[0]), s, STOPPED)
+    inner = nav.plan(Outcome(REASON["CLOSE"], approach[0], trigger="ahead_within"), s, STOPPED)
+    s.pose = (2000.0, 1000.0, 0.0)  # the path round it, mapped off to the east: x 2000..2900
+    seg = settle(nav, Outcome(REASON["DONE"], inner[0]), s)
+    end = seg
+    for _ in range(5):
+        samples, poses = _leg(s.pose[:2], math.degrees(s.pose[2]), 900)
+        s.pose = (*poses[-1][:2], s.pose[2] + math.radians(90))
+        end = nav.plan(
+            Outcome(REASON["DONE"], seg[-1], driven_mm=900, samples=samples, poses=poses), s, STOPPED
+        )
+        seg = end or seg
+    assert end is None and nav.visits == 1  # the echoes west of x = 2000 were the same pillar's

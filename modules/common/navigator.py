@@ -156,6 +156,9 @@ class WallSettings:
     sighting_link_mm: float = 350.0  # sightings this near each other belong to one obstacle
     sighting_min: int = 8  # an obstacle needs this many sightings (one dropout is none)
     inside_margin_mm: float = 150.0  # ... lying this far inside the lap's path (the room's walls lie outside)
+    #: sightings inside or this near the path round an island visited were of that island (a path
+    #: mapped a few cm off left some of them outside it: a second visit mapped junk on the ring)
+    circled_margin_mm: float = 700.0
     #: round an island: turned left this much (once round and onto the first face again, so that
     #: its corner with the last face closes) and a follow segment this long on that face
     island_turn_deg: float = 405.0
@@ -552,7 +555,11 @@ class ExploreLeftWall(Navigator):
             for p in self.sightings
             if point_in_polygon(p, outer)
             and distance_to_path(p, outer) >= s.inside_margin_mm
-            and not any(point_in_polygon(p, ring) for ring in self.circled if len(ring) >= 3)
+            and not any(
+                point_in_polygon(p, ring) or distance_to_path(p, ring) < s.circled_margin_mm
+                for ring in self.circled
+                if len(ring) >= 3
+            )
         ]
         groups: list[list[tuple[float, float]]] = []
         unassigned = list(points)
