@@ -14,24 +14,13 @@ import pytest
 
 from modules.common.robot import STEP_MM
 from tokenring.world import load_world
-from tokenring.world.clock import SimClock
+from tokenring.world.clock import ManualClock
 from tokenring.world.sim import VELOCITY_HOLD_MS, Simulator
-
-
-class ManualClock(SimClock):
-    """Simulated time that moves only when the test says so."""
-
-    def __init__(self) -> None:
-        super().__init__(1.0)
-        self.t = 1000.0
-
-    def now_ms(self) -> float:
-        return self.t
 
 
 def driving(rate_hz: float = 184.5) -> tuple[Simulator, ManualClock, float]:
     """A simulator whose robot just got a batch of 100 ms of forward steps; (sim, clock, mm/ms)."""
-    clock = ManualClock()
+    clock = ManualClock(1000.0)
     sim = Simulator(load_world("empty"), seed=5, clock=clock)  # start (1000, 1500) facing +X
     steps = round(rate_hz * 0.1)
     moved = sim.motor_steps({"left": steps, "right": steps, "rate_hz": rate_hz, "move": 1})["moved_mm"]

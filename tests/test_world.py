@@ -17,7 +17,7 @@ from modules.common.robot import MAX_STEP_RATE_HZ, STEP_MM
 from tokenring import keys
 from tokenring.hw import HardwareError, MotorHardware, SonarHardware
 from tokenring.world import Floor, Pose, Wall, World, load_world
-from tokenring.world.clock import SimClock
+from tokenring.world.clock import ManualClock, SimClock
 from tokenring.world.physics import TrackedRobot, cast_rays
 from tokenring.world.service import ready_key
 from tokenring.world.sim import HardwareRequestError, Simulator
@@ -86,21 +86,9 @@ def test_ray_casting_hits_walls_and_circles_with_incidence():
     assert math.isinf(hits.distance[3])
 
 
-class SteppingClock(SimClock):
-    """Simulated time that advances 10 ms per reading, whatever the real clock does."""
-
-    def __init__(self) -> None:
-        super().__init__(1.0)
-        self.t = 0.0
-
-    def now_ms(self) -> float:
-        self.t += 10.0
-        return self.t
-
-
 def test_the_simulator_is_deterministic_given_its_seed():
     def run(seed: int) -> tuple:
-        sim = Simulator(load_world("office"), seed=seed, clock=SteppingClock())
+        sim = Simulator(load_world("office"), seed=seed, clock=ManualClock(step_ms=10.0))
         steps(sim, 500, 500, 1)
         steps(sim, -300, 300, 2)
         ping = sim.sonar_ping({"sensors": list(range(8))})["envelopes"]
@@ -195,7 +183,8 @@ def test_world_process_refuses_a_bad_world_file(procs, tmp_path):
 def test_a_sweep_pings_each_pair_from_where_the_driving_robot_is_by_then(monkeypatch):
     import tokenring.world.sim as sim_module
 
-    sim = Simulator(load_world("empty"), seed=3, clock=SimClock(1.0))
+    # time stands still between the batch and the sweep: the robot has not driven on meanwhile
+    sim = Simulator(load_world("empty"), seed=3, clock=ManualClock(1000.0))
     used: list[tuple[float, float, float]] = []
     real = sim_module.sonar_world_pose
 

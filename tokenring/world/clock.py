@@ -53,3 +53,20 @@ class SimClock:
     def synced(cls, sim_ms: float, speed: float, sent_mono: float, received_mono: float) -> SimClock:
         """A copy of the world's clock from a ``hw/clock`` answer, read half-way through the round trip."""
         return cls(speed, sim_ms, (sent_mono + received_mono) / 2)
+
+
+class ManualClock(SimClock):
+    """Simulated time that moves only when told (``t`` or :meth:`advance`), or by ``step_ms`` at
+    every reading: the simulator tested deterministically, whatever the real clock does."""
+
+    def __init__(self, start_ms: float = 0.0, step_ms: float = 0.0) -> None:
+        super().__init__(1.0)
+        self.t = float(start_ms)
+        self.step_ms = float(step_ms)
+
+    def now_ms(self) -> float:
+        self.t += self.step_ms
+        return self.t
+
+    def advance(self, ms: float) -> None:
+        self.t += ms
