@@ -206,3 +206,28 @@ def test_bitrate_paces_the_ring():
         assert per_round >= 4 * 2.2e-3  # four hops of ~2.29 ms wire time each
     finally:
         ring.close()
+
+
+def test_the_handler_time_is_how_long_the_token_is_held_not_the_put_after_it():
+    """``handler`` (bench, status, monitor) runs from a frame's arrival to the put that passes it
+    on: a slow put after that point, and the visit's bookkeeping, are not in it."""
+    ring = MemoryRing([10, 20, 30], bitrate=None)
+    try:
+        ring.wait_rounds(20)
+        slow = ring.nodes[20]
+
+        def slow_put(_did: int, _work: bytearray) -> bool:
+            time.sleep(0.003)  # the transport takes 3 ms to send ...
+            return False  # ... and sends
+
+        slow.tx_fault = slow_put
+        before = slow.stats.visits
+        ring.wait_rounds(60)
+        assert slow.stats.visits >= before + 50
+        rounds = slow.timing.rounds.percentile(50, last=40)
+        held = slow.timing.handler.percentile(50, last=40)
+        assert rounds > 0.003  # every round waits for the slow put
+        assert held < 0.001, f"handler {held * 1e6:.0f} us includes the put"
+        assert sum(n.stats.tokens_regenerated for n in ring.nodes.values()) <= 1  # the boot token only
+    finally:
+        ring.close()
