@@ -34,7 +34,6 @@ import numpy as np
 
 VISIT_MS = 20  # main and copro see the token this often (an 8-node round at 2.5 Mbit/s)
 TICK_MS = 10  # the simulation's step
-MOTOR_TICK_MS = 20  # the motor issues a batch of steps this often (modules/motor.py)
 COMPASS_PERIOD_MS = 100
 COMPASS_SIGMA_DEG = 1.0  # SPEC §5
 COMPASS_MEAN = 3  # the compass module's short circular mean (reset while turning, starting, stopping)
@@ -475,6 +474,7 @@ class ClosedLoop:
     # -- the clock -----------------------------------------------------------------------------
     def run(self, minutes: float = 30.0, progress: Callable[[str], None] | None = None) -> Run:
         from modules.common.pilot import TURN_LEFT, TURN_RIGHT
+        from modules.common.robot import MOTOR_TICK_MS
 
         end_ms = minutes * 60_000.0
         finished = "time is up"

@@ -31,6 +31,7 @@ from modules.common.compass import (
     flip_measurement,
     heading_from_bridges,
 )
+from modules.common.robot import MOTOR_TICK_MS
 from modules.common.units import heading_to_cdeg
 from tokenring.program import UserProgram
 
@@ -47,7 +48,6 @@ CALIBRATION_STOPS = 8
 CALIBRATION_SPEED_PCT = 50
 DISTURBED_RATIO = 0.012
 MEASUREMENT_MS = 2 * SAMPLES  # a flip measurement: 20 samples set, 20 reset, at 1 kHz
-MOTOR_TICK_MS = 20  # the motor issues a batch of steps this often (modules/motor.py)
 
 
 class Program(UserProgram):

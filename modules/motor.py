@@ -31,7 +31,7 @@ from modules.common.odometry import (
     steps_for_angle,
     steps_for_distance,
 )
-from modules.common.robot import DEFAULT_MOTOR_CURRENT_MA, MAX_SPEED_MM_S, STEP_MM
+from modules.common.robot import DEFAULT_MOTOR_CURRENT_MA, MAX_SPEED_MM_S, MOTOR_TICK_MS, STEP_MM
 from modules.common.units import cdeg_to_rad, pose_to_wire
 from tokenring.errors import ChannelError
 from tokenring.program import UserProgram
@@ -42,7 +42,7 @@ STOPPED, FORWARD, REVERSE, TURN_LEFT, TURN_RIGHT = range(5)  # enum direction
 IDLE, MOVING, STALLED_STATE, COLLISION_STATE = range(4)  # enum motor_state
 DONE, ABORTED, STALLED, COLLISION = range(4)  # enum move_status
 BAD_ARGUMENT = 2  # enum error_code
-TICK_SIM_S = 0.02  # a batch of steps every 20 simulated ms ...
+TICK_SIM_S = MOTOR_TICK_MS / 1000.0  # a batch of steps every 20 simulated ms ...
 TICK_MIN_REAL_S = 0.004  # ... but not more often than every 4 real ms
 IDLE_PUBLISH_SIM_S = 0.05  # the counters' sample rate while standing
 NOTICE_PATIENCE_S = 5.0  # real seconds a reply is offered to a target that does not take it

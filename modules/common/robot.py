@@ -17,6 +17,7 @@ MAX_SPEED_MM_S = 100.0  # 100 % = 10 cm/s, the start-stop limit (no ramps)
 MAX_STEP_RATE_HZ = MAX_SPEED_MM_S / STEP_MM  # 184.5 half-steps per second at 100 %
 DEFAULT_GLIDE_FACTOR = 6.5  # half-steps per degree of turn on tiles
 DEFAULT_MOTOR_CURRENT_MA = 1000  # per motor, set through the 8-bit DAC (20 mA per count)
+MOTOR_TICK_MS = 20.0  # the motor module issues a batch of steps every 20 simulated ms
 ROBOT_RADIUS_MM = 190.0  # the collision circle the simulator uses
 
 # -- compass (seed §3.3.3) -------------------------------------------------------------------------
