@@ -67,7 +67,7 @@ def _float(request: dict[str, Any], key: str, default: float | None = None) -> f
     return float(value)
 
 
-#: a velocity older than this (no batch of steps since) no longer moves the sonar's later pings
+#: a velocity older than this (no batch of steps since) no longer carries the robot on (pose_at)
 VELOCITY_HOLD_MS = 250.0
 
 
@@ -167,8 +167,7 @@ class Simulator:
                 "power": True,
             }
             if not self.powered or self.motors.soc <= 0.0:
-                self.energised = False
-                self.velocity, self.velocity_since_ms = (0.0, 0.0, 0.0), now
+                self.energised = False  # pose_at: a robot without energised motors stands
                 reply["power"] = False
                 return reply
             self.steps_total[0] += left
