@@ -512,3 +512,14 @@ def test_explore2_does_not_visit_an_island_again_whose_echoes_lie_just_outside_i
         )
         seg = end or seg
     assert end is None and nav.visits == 1  # the echoes west of x = 2000 were the same pillar's
+
+
+def test_sightings_link_into_groups_through_their_neighbours():
+    from modules.common.navigator import linked_groups
+
+    chain = [(x, 0.0) for x in range(0, 1500, 300)]  # 300 mm apart: one obstacle end to end
+    apart = [(5000.0, 0.0), (5200.0, 100.0)]
+    groups = sorted(linked_groups([*apart, *chain], 350.0), key=len)
+    assert [sorted(g) for g in groups] == [sorted(apart), sorted(chain)]
+    assert sorted(linked_groups([(0.0, 0.0), (400.0, 0.0)], 350.0)) == [[(0.0, 0.0)], [(400.0, 0.0)]]
+    assert linked_groups([], 350.0) == []

@@ -561,22 +561,10 @@ class ExploreLeftWall(Navigator):
                 if len(ring) >= 3
             )
         ]
-        groups: list[list[tuple[float, float]]] = []
-        unassigned = list(points)
-        while unassigned:
-            group = [unassigned.pop()]
-            grown = True
-            while grown:
-                grown = False
-                for p in list(unassigned):
-                    if any(math.dist(p, q) <= s.sighting_link_mm for q in group):
-                        group.append(p)
-                        unassigned.remove(p)
-                        grown = True
-            if len(group) >= s.sighting_min:
-                groups.append(group)
         found = []
-        for group in groups:
+        for group in linked_groups(points, s.sighting_link_mm):
+            if len(group) < s.sighting_min:
+                continue
             cx = sum(p[0] for p in group) / len(group)
             cy = sum(p[1] for p in group) / len(group)
             if all(math.dist((cx, cy), u) > s.sighting_link_mm for u in self.unreached):
@@ -679,6 +667,25 @@ def point_in_polygon(p: tuple[float, float], polygon: list[tuple[float, float]])
         if (y1 > y) != (y2 > y) and x < x1 + (y - y1) * (x2 - x1) / (y2 - y1):
             inside = not inside
     return inside
+
+
+def linked_groups(points: list[tuple[float, float]], link: float) -> list[list[tuple[float, float]]]:
+    """The points split into groups in which each lies within ``link`` of another (single linkage)."""
+    groups = []
+    unassigned = list(points)
+    while unassigned:
+        group = [unassigned.pop()]
+        frontier = list(group)
+        while frontier:
+            q = frontier.pop()
+            near, far = [], []
+            for p in unassigned:
+                (near if math.dist(p, q) <= link else far).append(p)
+            unassigned = far
+            group += near
+            frontier += near
+        groups.append(group)
+    return groups
 
 
 def distance_to_path(p: tuple[float, float], path: list[tuple[float, float]]) -> float:
