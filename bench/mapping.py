@@ -330,9 +330,12 @@ def main(argv: list[str] | None = None) -> int:
                 flush=True,
             )
         compass = compass_error(result)
-        for name, c in compass.items():
-            if not isinstance(c, dict):
+        if "disturbed_fraction" in compass:
+            print(f"  compass DISTURBED in {compass['disturbed_fraction']:.1%} of its readings", flush=True)
+        for name in ("steady", "after_start_or_stop"):
+            if name not in compass:
                 continue
+            c = compass[name]
             print(
                 f"  compass vs truth, {name.replace('_', ' ')}: median {c['median_deg']:.2f}°, p95 {c['p95_deg']:.2f}° ({c['samples']} samples)",
                 flush=True,
@@ -341,7 +344,7 @@ def main(argv: list[str] | None = None) -> int:
             "ring_exit_code": result["code"],
             "sweeps": len(result["records"]),
             "finished": result.get("finished", ""),
-            "pose_error": pose_error(result),
+            "pose_error": errors,
             "compass_error": compass,
         }
         variants = [("seed", SEED_METHOD, "dead reckoning"), ("ours", OUR_METHOD, "dead reckoning"),
