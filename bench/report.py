@@ -383,6 +383,12 @@ def scaling_md(section: dict[str, Any], plots: Path) -> str:
         "",
     ]
     text.append(md_table(rows, head))
+    for r in section["runs"]:
+        for kind, errors in r.get("failed_pairs", {}).items():
+            for error in errors:
+                text.append(
+                    f"\n{r['topology']} {r['nodes']}: a {kind} run failed and is not pooled: {error[:120]}"
+                )
     text += [
         "",
         f"![round trip and per-hop cost vs N]({plots}/scaling.png)",

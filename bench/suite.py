@@ -155,6 +155,8 @@ def section_scaling(ctx: Context) -> dict[str, Any]:
             bare_rounds: list[float] = []
             ring_runs: list[Any] = []
             pair_ratios: list[float] = []
+            bare_errors: list[str] = []
+            ring_errors: list[str] = []
             for pair in range(pairs):
                 of = f" (pair {pair + 1}/{pairs})" if pairs > 1 else ""
                 ctx.progress.say(f"scaling: bare Zenoh ring, {n} processes, {topology} ({rounds} rounds){of}")
@@ -164,7 +166,7 @@ def section_scaling(ctx: Context) -> dict[str, Any]:
                     bare_rounds += bare
                     ctx.progress.note(f"median {np.median(bare) * 1e3:.3f} ms")
                 except Exception as exc:
-                    record["bare_error"] = str(exc)
+                    bare_errors.append(str(exc))
                     ctx.progress.note(f"failed: {exc}")
                 ctx.progress.say(f"scaling: tokenring ring, {n} nodes, {topology}{of}")
                 try:
@@ -176,13 +178,18 @@ def section_scaling(ctx: Context) -> dict[str, Any]:
                     if bare:
                         pair_ratios.append(float(np.median(run.rounds_s) / np.median(bare)))
                 except Exception as exc:
-                    record["error"] = str(exc)
+                    ring_errors.append(str(exc))
                     ctx.progress.note(f"failed: {exc}")
+            if bare_errors and not bare_rounds:
+                record["bare_error"] = bare_errors[-1]
+            if ring_errors and not ring_runs:
+                record["error"] = ring_errors[-1]
+            if (bare_errors and bare_rounds) or (ring_errors and ring_runs):
+                record["failed_pairs"] = {"bare": bare_errors, "ring": ring_errors}  # pooled without them
             if bare_rounds:
                 record["bare_rtt_ms"] = stats_ms(bare_rounds)
                 record["bare_rounds_s"] = [round(x, 7) for x in bare_rounds]
             if ring_runs:
-                record.pop("error", None)
                 record.update(ring_record(pool_runs(ring_runs), n))
                 if "bare_rtt_ms" in record:
                     record["ratio_median"] = record["rtt_ms"]["median"] / record["bare_rtt_ms"]["median"]
