@@ -158,18 +158,6 @@ class NodeOS:
         self._token_size = protocol.token_size
         self._frame_size = protocol.frame_size
         self._cmd = _Offsets(protocol)
-        # what the token path reads before it accepts a frame, in one tuple: one lookup instead of
-        # eight on a path that runs with cold caches
-        self._frame_layout = (
-            self._token_size,
-            self._frame_size,
-            self._const_lo,
-            self._const_hi,
-            self._const_bytes,
-            self._o_did,
-            self._o_sid,
-            self._o_epoch,
-        )
 
         self._work = bytearray(self._frame_size)
         self._token_lock = threading.RLock()
@@ -368,25 +356,25 @@ class NodeOS:
             return
         if self._departed:
             return
-        size, frame_size, const_lo, const_hi, const_bytes, o_did, o_sid, o_epoch = self._frame_layout
-        if len(frame) != frame_size:
+        size = self._token_size
+        if len(frame) != self._frame_size:
             stats.rejected_length += 1
             return
         crc = frame[size] | (frame[size + 1] << 8)
         if crc16_arc(memoryview(frame)[:size]) != crc:
             stats.rejected_crc += 1
             return
-        if frame[const_lo:const_hi] != const_bytes:
+        if frame[self._const_lo : self._const_hi] != self._const_bytes:
             stats.rejected_marker += 1
             return
-        if frame[o_did] != self.node_id:
+        if frame[self._o_did] != self.node_id:
             stats.rejected_did += 1
             return
-        sid = frame[o_sid]
+        sid = frame[self._o_sid]
         if sid not in self._live:
             stats.rejected_sid += 1
             return
-        flags = frame[o_epoch]
+        flags = frame[self._o_epoch]
         if crc == self._accepted_crc and sid == self._accepted_sid:
             stats.duplicate_passes += 1  # a retry of a pass we already took
             if flags & ACK_REQUESTED:
