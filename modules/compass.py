@@ -11,7 +11,8 @@ CALIBRATE: the compass turns the robot once round in eight 45° steps (it comman
 itself and waits for each POSITION_REACHED), measuring at rest at each stop; a circle fit
 through the eight readings gives the static field (centre) and the Earth's field (radius); the
 readings taken while turning lie on a circle round static + running field, which gives the
-running field. State: UNCALIBRATED, CALIBRATING, OK, DISTURBED (the field
+running field; every straight move afterwards measures it again (the field driving minus the
+field at rest before and after: :class:`~modules.common.compass.RunningFieldLearner`). State: UNCALIBRATED, CALIBRATING, OK, DISTURBED (the field
 strength, averaged like the heading, is off by more than 1.2 % from the calibrated one: an
 anomaly, iron nearby; a flip measurement's strength scatters by about 0.5 %, the mean of three by
 0.3 %, and an anomaly across the Earth's field bends the heading long before it changes the
@@ -22,16 +23,20 @@ from __future__ import annotations
 
 import logging
 import math
+from typing import Any
 
 import numpy as np
 
 from modules.common.compass import (
+    FLIP_SAMPLES,
+    MEASUREMENT_MS,
+    RunningFieldLearner,
     circular_mean,
     fit_circle,
+    fit_circle_robust,
     flip_measurement,
     heading_from_bridges,
 )
-from modules.common.robot import MOTOR_TICK_MS
 from modules.common.units import heading_to_cdeg
 from tokenring.program import UserProgram
 
@@ -42,12 +47,16 @@ STOPPED = 0  # enum direction
 TURN_LEFT, TURN_RIGHT = 3, 4
 SAMPLE_PERIOD_SIM_S = 0.1
 MIN_PERIOD_REAL_S = 0.005
-SAMPLES = 20  # one 50 Hz period at 1 kHz
+SAMPLES = FLIP_SAMPLES  # one 50 Hz period at 1 kHz
 FILTER_LENGTH = 3
 CALIBRATION_STOPS = 8
 CALIBRATION_SPEED_PCT = 50
 DISTURBED_RATIO = 0.012
-MEASUREMENT_MS = 2 * SAMPLES  # a flip measurement: 20 samples set, 20 reset, at 1 kHz
+
+
+def motor_steps(motor: Any) -> tuple[int, int]:
+    """The step counters of a motor.data snapshot (a channel buffer or a dict)."""
+    return int(motor["steps_left"]), int(motor["steps_right"])
 
 
 class Program(UserProgram):
@@ -71,6 +80,7 @@ class Program(UserProgram):
         self.samples = 0
         self.stamp_ms = 0.0
         self.calibration: dict = {}
+        self.learner = RunningFieldLearner(self.running_field)
         self.period_real = max(MIN_PERIOD_REAL_S, self.clock.to_real(SAMPLE_PERIOD_SIM_S))
 
     # -- measuring ------------------------------------------------------------------------------
@@ -88,6 +98,14 @@ class Program(UserProgram):
     def sample(self) -> None:
         field, stamp = self.read_field()
         direction = self.motors_moving()
+        learned = self.state in (OK, DISTURBED) and self.motor.visits
+        if learned and self.learner.add(stamp, field, self.motor.read()):
+            self.running_field = self.learner.estimate.copy()
+            log.info(
+                "compass: running field %s µT after %d straight moves",
+                np.round(self.running_field, 3).tolist(),
+                self.learner.moves,
+            )
         if direction != STOPPED and self.state != CALIBRATING:
             field = field - self.running_field
         heading, bridge = heading_from_bridges(float(field[0]), float(field[1]))
@@ -151,6 +169,7 @@ class Program(UserProgram):
         for _ in range(CALIBRATION_STOPS):
             readings = [self.read_field()[0] for _ in range(3)]
             stops.append(np.mean(readings, axis=0))
+            steps_before = motor_steps(self.motor) if self.motor.visits else None
             if not self.os.deliver(
                 "motor",
                 "TURN_LEFT",
@@ -159,17 +178,18 @@ class Program(UserProgram):
                 timeout=5.0,
             ):
                 return self._calibration_failed("the motor did not take the turn command")
-            if not self._turn_and_listen(turning):
+            if not self._turn_and_listen(turning, steps_before):
                 return self._calibration_failed("the motor did not report the turn done")
         cx, cy, radius = fit_circle(np.array(stops))
         static = np.array([cx, cy])
         if len(turning) >= 8:  # the readings while turning lie on a circle round static + running
-            rx, ry, _ = fit_circle(np.array(turning))
+            rx, ry, _ = fit_circle_robust(np.array(turning))
             running = np.array([rx, ry]) - static
         else:
             running = np.mean(turning, axis=0) - static if turning else np.zeros(2)
         self.compensation = (-cx, -cy)
         self.running_field = running
+        self.learner.reset(running)
         self.reference_ut = radius
         self.state = OK
         self.recent = []
@@ -189,28 +209,31 @@ class Program(UserProgram):
         self.publish()
         return None
 
-    def _turn_and_listen(self, turning: list[np.ndarray]) -> bool:
+    def _turn_and_listen(
+        self, turning: list[np.ndarray], steps_before: tuple[int, int] | None = None
+    ) -> bool:
         """Collect readings while the turn runs; True if it ended well. Only readings taken while
-        the motors surely ran count: motor.data says "turning" a batch of steps (20 ms) before
-        they are energised and tells of the stop a token round late. Readings at rest lie on the
-        static circle: they pulled the running field's estimate 3-10 % short (speed 20-60),
+        the motors surely ran count: from the first one taken after motor.data showed the step
+        counters moved (``steps_before``: theirs before the turn; it says "turning" before the
+        first batch of steps, and on a busy ring that batch can come 100 ms or more later) until
+        the last stamp it said "turning" (it tells of the stop a token round late). Readings at
+        rest lie on the static circle: they pulled the running field's estimate 3-15 % short,
         bending every heading taken on the move by up to a degree."""
         deadline_ms = self.clock.now_ms() + 60_000  # 45° at 50 % takes ~6 simulated seconds
         readings: list[tuple[float, np.ndarray]] = []
-        first_moving_ms, last_moving_ms = math.inf, -math.inf
+        last_moving_ms = -math.inf
+        stepped = False  # a snapshot of motor.data read before the reading showed steps made
         while self.running and self.clock.now_ms() < deadline_ms:
             field, stamp = self.read_field()
             if self.motors_moving() != STOPPED:
-                readings.append((stamp, field))
-                motor_ms = float(self.motor["stamp_ms"])
-                first_moving_ms = min(first_moving_ms, motor_ms)
-                last_moving_ms = max(last_moving_ms, motor_ms)
+                if stepped:
+                    readings.append((stamp, field))
+                last_moving_ms = max(last_moving_ms, float(self.motor["stamp_ms"]))
+                stepped = stepped or steps_before is None or motor_steps(self.motor) != steps_before
             command = self.os.receive_command(timeout=self.period_real)
             if command is not None and command.name == "POSITION_REACHED":
-                # the motor says it turns before its first batch of steps energises it
-                begin = first_moving_ms + MOTOR_TICK_MS
                 end = last_moving_ms - MEASUREMENT_MS
-                turning.extend(field for stamp, field in readings if begin <= stamp <= end)
+                turning.extend(field for stamp, field in readings if stamp <= end)
                 return command.args["status"] == 0
         return False
 
@@ -227,5 +250,7 @@ class Program(UserProgram):
             "field_ut": self.magnitude,
             "samples": self.samples,
             "calibration": dict(self.calibration),
+            "running_ut": self.running_field.tolist(),
+            "running_moves": {"learned": self.learner.moves, "rejected": self.learner.rejected},
             "compensation_ut": list(self.compensation),
         }

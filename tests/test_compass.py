@@ -144,3 +144,134 @@ def test_calibration_leaves_out_readings_taken_after_the_motor_stopped() -> None
     assert CompassProgram._turn_and_listen(Stub(), turning)
     assert len(turning) >= 8
     assert all(field[0] == 2.0 for field in turning)  # none taken at rest
+
+
+def test_calibration_counts_readings_only_once_the_step_counters_moved() -> None:
+    """motor.data says "turning" before the first batch of steps; on a busy ring that batch can
+    come 100 ms or more later, and readings at rest in that time pulled the estimate short."""
+
+    class Stub:
+        """Readings every 40 ms; motor.data says turning from 0, the first steps come at 300 ms."""
+
+        def __init__(self) -> None:
+            self.now = 0.0
+            self.running = True
+            self.period_real = 0.0
+            self.clock = self
+            self.os = self
+            self.motor = {"stamp_ms": 0.0, "direction": 3, "steps_left": 0, "steps_right": 0}
+
+        def now_ms(self) -> float:
+            return self.now
+
+        def read_field(self):
+            stamp = self.now
+            self.now += 40.0
+            moving = 300.0 <= stamp < 1000.0
+            field = np.array([2.0, 1.5]) if moving else np.zeros(2)
+            steps = 0 if self.now < 300.0 else int(self.now - 300.0)
+            direction = 3 if self.now <= 1100.0 else 0
+            self.motor = {
+                "stamp_ms": min(self.now, 1000.0),
+                "direction": direction,
+                "steps_left": -steps,
+                "steps_right": steps,
+            }
+            return field, stamp
+
+        def motors_moving(self) -> int:
+            return int(self.motor["direction"])
+
+        def receive_command(self, timeout=None):
+            if self.motor["direction"] == 0:
+                return type("Cmd", (), {"name": "POSITION_REACHED", "args": {"status": 0}})()
+            return None
+
+    turning: list[np.ndarray] = []
+    assert CompassProgram._turn_and_listen(Stub(), turning, (0, 0))
+    assert len(turning) >= 8
+    assert all(field[0] == 2.0 for field in turning)  # none taken at rest
+
+
+def test_robust_circle_fit_leaves_out_readings_of_another_circle() -> None:
+    from modules.common.compass import fit_circle_robust
+
+    rng = np.random.default_rng(5)
+    angles = rng.uniform(0, 2 * math.pi, 200)
+    running = np.column_stack([8.0 + 18 * np.cos(angles), -2.5 + 18 * np.sin(angles)])
+    at_rest = np.column_stack([6.0 + 18 * np.cos(angles[:20]), -4.0 + 18 * np.sin(angles[:20])])
+    points = np.vstack([running, at_rest]) + rng.normal(0, 0.08, (220, 2))
+    plain = fit_circle(points)
+    robust = fit_circle_robust(points)
+    assert math.hypot(plain[0] - 8.0, plain[1] + 2.5) > 0.1  # pulled toward the static circle
+    assert robust[:2] == pytest.approx((8.0, -2.5), abs=0.03)
+    assert robust[2] == pytest.approx(18.0, abs=0.03)
+
+
+def straight_moves_timeline(
+    moves: list[tuple[float, float, int]], heading_field, running_true, lag_ms=130.0, seed=1, until_ms=None
+):
+    """(stamp, raw field, motor.data as heard) every 100 ms: the motor energised from a move's
+    first batch (20 ms after its start) to its end, motor.data a token round (``lag_ms``) late,
+    saying "moving" from the start, its counters moved from the first batch."""
+    rng = np.random.default_rng(seed)
+    end = until_ms if until_ms is not None else moves[-1][1] + 1000.0
+    out = []
+    for t in np.arange(0.0, end, 100.0):
+
+        def motor_at(when: float) -> dict:
+            steps = 0
+            for start, stop, _direction in moves:
+                if when >= start + 20.0:
+                    steps += int(min(when, stop) - start - 20.0)
+            for start, stop, direction in moves:
+                if start <= when < stop:
+                    return {
+                        "direction": direction,
+                        "stamp_ms": when,
+                        "steps_left": steps,
+                        "steps_right": steps,
+                    }
+            return {"direction": 0, "stamp_ms": when, "steps_left": steps, "steps_right": steps}
+
+        energised = any(start + 20.0 <= t < stop for start, stop, _ in moves)
+        field = np.asarray(heading_field(t), float) + (np.asarray(running_true) if energised else 0.0)
+        field = field + rng.normal(0.0, 0.08, 2)
+        out.append((float(t), field, motor_at(max(0.0, t + 40.0 - lag_ms))))
+    return out
+
+
+@pytest.mark.parametrize("lag_ms", [50.0, 130.0, 400.0])
+def test_running_field_is_learned_again_on_straight_moves(lag_ms: float) -> None:
+    from modules.common.compass import RunningFieldLearner
+
+    true_running = np.array([2.0, 1.5])
+    learner = RunningFieldLearner(np.array([1.8, 1.3]))  # a calibration 10-13 % short
+    moves = []
+    for k in range(5):  # forward, then a turn to the next heading
+        moves += [
+            (1000.0 + 4000.0 * k, 2600.0 + 4000.0 * k, 1),
+            (3600.0 + 4000.0 * k, 4000.0 + 4000.0 * k, 3),
+        ]
+
+    def earth(t: float) -> tuple[float, float]:
+        heading = 0.3 * ((t - 3600.0) // 4000.0)
+        return 18.0 * math.cos(heading), 18.0 * math.sin(heading)
+
+    for stamp, field, motor in straight_moves_timeline(moves, earth, true_running, lag_ms=lag_ms):
+        learner.add(stamp, field, motor)
+    assert learner.moves == 5 and learner.rejected == 0
+    assert learner.estimate == pytest.approx(true_running, abs=0.06)
+
+
+def test_running_field_is_not_learned_where_the_field_changed_or_on_turns() -> None:
+    from modules.common.compass import RunningFieldLearner
+
+    first = np.array([1.8, 1.3])
+    learner = RunningFieldLearner(first)
+    moves = [(1000.0, 2600.0, 1), (4000.0, 5600.0, 3)]  # a straight move past iron, a turn
+    iron = lambda t: (18.0, 0.0) if t < 2000.0 else (18.0, 0.6)  # noqa: E731
+    for stamp, field, motor in straight_moves_timeline(moves, iron, np.array([2.0, 1.5])):
+        learner.add(stamp, field, motor)
+    assert learner.moves == 0 and learner.rejected == 1
+    assert learner.estimate == pytest.approx(first)

@@ -66,6 +66,23 @@ def fit_circle(points: np.ndarray) -> tuple[float, float, float]:
     return float(cx), float(cy), float(math.sqrt(max(cx * cx + cy * cy - f, 0.0)))
 
 
+def fit_circle_robust(points: np.ndarray, rounds: int = 2) -> tuple[float, float, float]:
+    """:func:`fit_circle` again without the points far off the first fit (more than 3 robust σ,
+    at least 0.3 µT): readings of another circle (taken at rest among those while turning) pull
+    a least-squares fit toward their centre."""
+    pts = np.asarray(points, dtype=float)
+    cx, cy, radius = fit_circle(pts)
+    for _ in range(rounds):
+        residual = np.abs(np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) - radius)
+        sigma = 1.4826 * float(np.median(residual))
+        keep = pts[residual <= max(3.0 * sigma, 0.3)]
+        if len(keep) < 3 or len(keep) == len(pts):
+            break
+        pts = keep
+        cx, cy, radius = fit_circle(pts)
+    return cx, cy, radius
+
+
 def circular_mean(angles: Sequence[float]) -> float:
     """Mean direction of angles (radians), in [0, 2 pi)."""
     s = sum(math.sin(a) for a in angles)
@@ -77,3 +94,130 @@ def angle_difference(a: float, b: float) -> float:
     """a - b folded into (-pi, pi]."""
     d = math.remainder(a - b, 2 * math.pi)
     return math.pi if d == -math.pi else d
+
+
+FORWARD, REVERSE = 1, 2  # enum direction (STOPPED 0, TURN_LEFT 3, TURN_RIGHT 4)
+FLIP_SAMPLES = 20  # one 50 Hz period at 1 kHz, with the flip coil set and again reset
+MEASUREMENT_MS = 2 * FLIP_SAMPLES  # a flip measurement takes this long from its stamp
+
+
+class RunningFieldLearner:
+    """The motors' running field, learned again on every straight move.
+
+    Calibration finds it from readings taken while turning, told apart from those at rest by
+    motor.data, which arrives a token round late and says "moving" before the first batch of
+    steps: on a busy ring readings at rest counted as turning pulled the estimate toward the
+    static circle (bench.mapping's rings: 3-15 % short; the heading on the move then ±0.3-1.3°
+    off, with a sign that turns with the heading). On a straight move the robot does not turn,
+    so the field the sensor sees while driving minus the field at rest before and after the
+    move is the running field alone. A reading counts only where motor.data proves the state:
+    at rest when the snapshot read before it said stopped and one read after it still did
+    (stamped at or after the reading's end); moving when a snapshot read before it showed the
+    step counters moved and one read after it still said moving at or after its end. A move
+    whose field at rest before and after differs (an anomaly, iron nearby) or whose readings
+    scatter is not used. The calibration's estimate weighs as ``prior_moves`` moves.
+    """
+
+    REST_KEEP = 3
+    MIN_MOVING = 5
+    REST_AGREE_UT = 0.25  # a reading scatters by ~0.08 µT; more than this: the field changed
+    MAX_SPREAD_UT = 0.5
+    MAX_STEP_UT = 1.0
+
+    def __init__(self, running: np.ndarray | Sequence[float], prior_moves: float = 1.0) -> None:
+        self.prior_moves = prior_moves
+        self.reset(running)
+
+    def reset(self, running: np.ndarray | Sequence[float]) -> None:
+        """Start again from a calibration's estimate."""
+        self.prior = np.asarray(running, dtype=float).copy()
+        self.estimate = self.prior.copy()
+        self.total = np.zeros(2)
+        self.moves = 0
+        self.rejected = 0
+        self.previous_direction: int | None = None  # of the snapshot read before this reading
+        self.last_steps: tuple[int, int] | None = None
+        self.unconfirmed: list[tuple[float, np.ndarray]] = []  # at rest if a later snapshot says so
+        self.rest: list[np.ndarray] = []  # proven at rest since the last move
+        self.move: dict | None = None
+        self.pending: tuple[list[np.ndarray], list[np.ndarray]] | None = None
+        self.after: list[np.ndarray] = []
+
+    def add(self, stamp_ms: float, field: np.ndarray, motor: dict) -> bool:
+        """One reading (after compensation, running field not subtracted) and motor.data as read
+        just after it; True when a move was learned from (``estimate`` changed)."""
+        field = np.asarray(field, dtype=float)
+        direction = int(motor.get("direction", 0))
+        steps = (int(motor.get("steps_left", 0)), int(motor.get("steps_right", 0)))
+        motor_ms = float(motor.get("stamp_ms", 0.0))
+        previous, self.previous_direction = self.previous_direction, direction
+        learned = False
+        if direction == 0:
+            if self.move is not None:
+                self._end_move()
+            if previous == 0:
+                self.unconfirmed.append((stamp_ms, field))
+            proven = [f for s, f in self.unconfirmed if s + MEASUREMENT_MS <= motor_ms]
+            self.unconfirmed = [(s, f) for s, f in self.unconfirmed if s + MEASUREMENT_MS > motor_ms]
+            self.rest = [*self.rest, *proven][-self.REST_KEEP :]
+            if self.pending is not None and proven:
+                self.after.extend(proven)
+                if len(self.after) >= self.REST_KEEP:
+                    learned = self._learn()
+            self.last_steps = steps
+            return learned
+        self.unconfirmed = []  # the motor may have started before they were taken
+        if self.move is not None and self.move["direction"] != direction:
+            self.move = None  # one move replaced another without a stop heard: no clean rest
+        if self.move is None:
+            if self.pending is not None:
+                learned = self._learn() if self.after else self._drop()
+            self.move = {
+                "direction": direction,
+                "steps0": self.last_steps,
+                "stepped": False,
+                "last_ms": -math.inf,
+                "before": self.rest,
+                "moving": [],
+            }
+            self.rest = []
+        move = self.move
+        if move["stepped"] and previous == direction:
+            move["moving"].append((stamp_ms, field))
+        move["stepped"] = move["stepped"] or (move["steps0"] is not None and steps != move["steps0"])
+        move["last_ms"] = max(move["last_ms"], motor_ms)
+        return learned
+
+    def _end_move(self) -> None:
+        move, self.move = self.move, None
+        self.rest, self.after, self.pending = [], [], None
+        if move is None or move["direction"] not in (FORWARD, REVERSE):
+            return
+        moving = [f for s, f in move["moving"] if s + MEASUREMENT_MS <= move["last_ms"]]
+        if len(moving) >= self.MIN_MOVING and move["before"]:
+            self.pending = (move["before"], moving)
+
+    def _drop(self) -> bool:
+        self.pending, self.after = None, []
+        return False
+
+    def _learn(self) -> bool:
+        assert self.pending is not None
+        before, moving = self.pending
+        after = self.after
+        self.pending, self.after = None, []
+        rest_before, rest_after = np.mean(before, axis=0), np.mean(after, axis=0)
+        middle = np.median(np.asarray(moving), axis=0)
+        spread = float(np.max(np.hypot(*(np.asarray(moving) - middle).T)))
+        observed = middle - (rest_before + rest_after) / 2
+        if (
+            float(np.hypot(*(rest_before - rest_after))) > self.REST_AGREE_UT
+            or spread > self.MAX_SPREAD_UT
+            or float(np.hypot(*(observed - self.estimate))) > self.MAX_STEP_UT
+        ):
+            self.rejected += 1
+            return False
+        self.moves += 1
+        self.total += observed
+        self.estimate = (self.prior_moves * self.prior + self.total) / (self.prior_moves + self.moves)
+        return True
