@@ -274,3 +274,24 @@ def test_only_an_excluded_nodes_neighbours_ping_it_often():
     near, far = 1 + PREPARED_NEIGHBOURS, 50
     assert node._backoff(near) <= 0.1  # it would pass to it: finds out within 0.1 s it is back
     assert node._backoff(far) == FAR_PROBE_S  # 98 others pinging it 10 times a second: a storm
+
+
+def test_an_idle_watchdog_sleeps_until_its_deadline_instead_of_polling():
+    # with nothing due, a node's timer thread wakes for the token-loss deadline (one
+    # reconfiguration time after the last visit, later for lower ranks) and lets the timeout
+    # refresh ride along; it used to wake every half reconfiguration time, plus the refresh
+    ring = MemoryRing([1, 2, 3, 4], bitrate=None, ack_mode="never")
+    try:
+        ring.wait_rounds(200, timeout=10.0)
+        time.sleep(3.2)  # past the start-up phase of fast timeout refreshes
+        before = {i: n.stats.watchdog_wakes for i, n in ring.nodes.items()}
+        started = time.monotonic()
+        time.sleep(2.0)
+        elapsed = time.monotonic() - started
+        for node_id, node in ring.nodes.items():
+            recon = node.timing.current.recon
+            wakes_per_s = (node.stats.watchdog_wakes - before[node_id]) / elapsed
+            assert wakes_per_s <= 1.25 / recon, (node_id, wakes_per_s, recon)
+        assert_one_token_through(ring, [1, 2, 3, 4])
+    finally:
+        ring.close()
