@@ -167,13 +167,15 @@ class RunningFieldLearner:
             self.last_steps = steps
             return learned
         self.unconfirmed = []  # the motor may have started before they were taken
-        if self.move is not None and self.move["direction"] != direction:
-            self.move = None  # one move replaced another without a stop heard: no clean rest
+        seq = motor.get("move_seq")
+        if self.move is not None and (self.move["direction"], self.move["seq"]) != (direction, seq):
+            self.move = None  # one move followed another without a stop heard: no clean rest
         if self.move is None:
             if self.pending is not None:
                 learned = self._learn() if self.after else self._drop()
             self.move = {
                 "direction": direction,
+                "seq": seq,
                 "steps0": self.last_steps,
                 "stepped": False,
                 "last_ms": -math.inf,
