@@ -245,6 +245,9 @@ def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any
             changes.append(m["stamp_ms"])
         moving = now
     steady, settling = [], []
+    moving: list[tuple[float, float]] = []  # (true heading, signed error) on straight moves
+    directions = [(m["stamp_ms"], m["direction"]) for m in result.get("motor_log", []) if m["stamp_ms"]]
+    direction_stamps = [d[0] for d in directions]
     states = [c["state"] for c in result.get("compass_log", [])]
     for c in result.get("compass_log", []):
         if c["state"] != 1 or not stamps:
@@ -257,15 +260,23 @@ def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any
             continue
         north = math.pi / 2  # the bundled rooms' (tokenring/world/model.py)
         truth_heading = (north - truth[near][3]) % (2 * math.pi)
-        error = abs(
-            math.degrees(math.remainder(cdeg_to_heading(c["heading_cdeg"]) - truth_heading, 2 * math.pi))
-        )
+        signed = math.degrees(math.remainder(cdeg_to_heading(c["heading_cdeg"]) - truth_heading, 2 * math.pi))
         k = bisect.bisect_right(changes, c["stamp_ms"])
         after_change = k > 0 and c["stamp_ms"] - changes[k - 1] < settle_ms
-        (settling if after_change else steady).append(error)
+        (settling if after_change else steady).append(abs(signed))
+        d = bisect.bisect_right(direction_stamps, c["stamp_ms"]) - 1
+        if not after_change and d >= 0 and directions[d][1] in (1, 2):  # FORWARD, REVERSE
+            moving.append((truth[near][3], signed))
     out: dict[str, Any] = {}
     if states:
         out["disturbed_fraction"] = round(states.count(2) / len(states), 3)
+    if len(moving) >= 20:
+        # the compass's error on straight moves as a + b cos(heading) + c sin(heading): a running
+        # field misjudged by the calibration bends the heading by a first harmonic (b, c)
+        theta, err = np.asarray(moving).T
+        design = np.column_stack([np.ones_like(theta), np.cos(theta), np.sin(theta)])
+        (_, b, c), *_ = np.linalg.lstsq(design, err, rcond=None)
+        out["moving_harmonic_deg"] = round(float(math.hypot(b, c)), 2)
     for name, values in (("steady", steady), ("after_start_or_stop", settling)):
         if values:
             v = np.asarray(values)
@@ -332,6 +343,11 @@ def main(argv: list[str] | None = None) -> int:
         compass = compass_error(result)
         if "disturbed_fraction" in compass:
             print(f"  compass DISTURBED in {compass['disturbed_fraction']:.1%} of its readings", flush=True)
+        if "moving_harmonic_deg" in compass:
+            print(
+                f"  compass on straight moves: error ±{compass['moving_harmonic_deg']:.2f}° with the heading",
+                flush=True,
+            )
         for name in ("steady", "after_start_or_stop"):
             if name not in compass:
                 continue
