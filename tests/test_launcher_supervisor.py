@@ -1,0 +1,58 @@
+"""The launcher's supervisor: children's exits wake it through pidfds, it does not poll them."""
+
+from __future__ import annotations
+
+import io
+import sys
+import time
+
+from tokenring.launcher import EXIT_CHECK_S, Launcher, NodePlan
+
+from memring import wait_for
+
+
+class ShortLivedLauncher(Launcher):
+    """Its "nodes" are tiny processes that exit after a given time: supervision is what is tested."""
+
+    lifetimes = {1: 0.3, 2: 60.0}
+
+    def command_for(self, plan: NodePlan) -> list[str]:
+        lifetime = self.lifetimes[plan.node_id]
+        return [sys.executable, "-c", f"import time, sys; time.sleep({lifetime}); sys.exit(3)"]
+
+
+def test_a_childs_exit_is_reported_at_once_without_polling_the_others(procs, ring_name, endpoint):
+    output = io.StringIO()
+    launcher = ShortLivedLauncher(
+        [NodePlan(1, "short", None), NodePlan(2, "long", None)],
+        ring=ring_name,
+        listen=[endpoint],
+        output=output,
+    )
+    checks = 0
+    check_children = launcher.check_children
+
+    def counting_check() -> None:
+        nonlocal checks
+        checks += 1
+        check_children()
+
+    launcher.check_children = counting_check  # type: ignore[method-assign]
+    launcher.start()
+    try:
+        procs.watch([c.process.pid for c in launcher.child_list()])
+        short = launcher.children[1].process
+        started = time.monotonic()
+        wait_for(lambda: short.poll() is not None, 5.0, "the short-lived child to exit")
+        exited = time.monotonic()
+        wait_for(lambda: launcher.deaths, 2.0, "its death to be reported")
+        assert time.monotonic() - exited < 0.2  # woken by its exit, not by a periodic check
+        assert launcher.deaths == [("short", 1, 3)]
+        time.sleep(1.0)
+        # the old supervisor checked every child 20 times a second; now: the exit, and a
+        # safety-net check every EXIT_CHECK_S
+        assert checks <= 2 + (time.monotonic() - started) / EXIT_CHECK_S
+    finally:
+        launcher.stop()
+    assert launcher.children[2].process.poll() is not None  # stop() ended the long-lived one
+    assert "node short (id 1) exited with code 3" in output.getvalue()
