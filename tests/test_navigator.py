@@ -91,6 +91,25 @@ def test_abort_condition_stops_the_motor_and_reports_the_reason():
     assert b.pilot.alert_lock == STOPPED
 
 
+def test_a_forward_move_goes_no_further_than_its_ahead_abort_allows_plus_slack():
+    """When the ring stalls, neither the sweep that trips the abort nor the STOP arrives: the
+    motor must stop by itself short of the wall the move saw at its start."""
+    b = Bench()
+    seen = [FAR] * 8
+    seen[LAYOUT.front[1]] = 40  # a wall 40 cm ahead
+    b.sensors.distances = seen
+    close = (Abort("ahead_within", 25, "CLOSE"),)
+    b.pilot.start([Move(FORWARD, 600, scan=True, abort=close)], b.sensors)
+    assert b.sent[-1][2]["distance_mm"] == (40 - 25) * 10 + b.pilot.settings.ahead_slack_mm
+    b = Bench()
+    b.pilot.start([Move(FORWARD, 600, scan=True, abort=close)], b.sensors)  # nothing ahead
+    assert b.sent[-1][2]["distance_mm"] == 600
+    b = Bench()
+    b.sensors.distances = seen
+    b.pilot.start([Move(FORWARD, 600, scan=True)], b.sensors)  # no abort ahead: as asked
+    assert b.sent[-1][2]["distance_mm"] == 600
+
+
 def test_alert_aborts_and_locks_every_direction_but_the_opposite_until_the_navigator_commands_it():
     b = Bench()
     b.pilot.start([Move(FORWARD, 3000)], b.sensors)

@@ -124,6 +124,11 @@ class PilotSettings:
     move_margin_s: float = 8.0  # simulated slack on top of a move's nominal duration
     mm_per_s_at_full: float = 100.0  # start-stop maximum: 10 cm/s = 100 %
     turn_mm_per_deg: float = 6.5 * 0.5419  # track travel per degree of turn (glide factor 6.5)
+    #: a forward move with an ``ahead_within`` abort goes at most this far past where that abort
+    #: should stop it (as seen at its start): normally a sweep, main's reaction and the STOP take
+    #: 25-40 mm; when the ring stalls none of them come and the motor stops there by itself
+    ahead_slack_mm: int = 100
+    min_forward_mm: int = 50  # a capped move still lasts until a sweep can show its abort
 
 
 Send = Callable[..., Any]  # send(target, command, **args)
@@ -201,6 +206,7 @@ class Pilot:
             self.send("copro", "START_SCAN")
             self._scanning = True
         name, arg = MOTOR_COMMAND[move.direction]
+        amount = self._capped_amount(move, sensors)
         self.reached.clear()
         self._seq_before = sensors.move_seq
         self._started_ms = sensors.stamp_ms
@@ -211,8 +217,28 @@ class Pilot:
         self._abort_counts = {}
         self._visits = 0
         self._seen_moving = False
-        self.send("motor", name, **{arg: int(move.amount), "speed_pct": int(move.speed_pct)})
+        self.send("motor", name, **{arg: amount, "speed_pct": int(move.speed_pct)})
         self.state = self.STARTING
+
+    def _capped_amount(self, move: Move, sensors: Sensors) -> int:
+        """The distance to command: a forward move whose ``ahead_within`` abort sees a wall ahead
+        at its start goes no further than that abort's distance plus ``ahead_slack_mm``. The
+        abort needs a sweep to reach main and a STOP to reach the motor; when the ring stalls
+        for a few hundred milliseconds (a lost token, a busy machine: 3 simulated seconds at
+        speed 20) neither comes, and a 600 mm segment used to drive into the wall it had seen
+        (office, ring under load: 11 cm of steps against the wall, the position 15 cm off for
+        the rest of the run). Normally the abort stops the move well before the cap."""
+        amount = int(move.amount)
+        if move.direction != FORWARD:
+            return amount
+        ahead = sensors.distances[self.layout.front[len(self.layout.front) // 2]]
+        if ahead >= NO_CONTACT_CM:
+            return amount
+        for condition in move.abort:
+            if condition.kind == "ahead_within":
+                free_mm = (ahead - condition.cm) * 10 + self.settings.ahead_slack_mm
+                amount = min(amount, max(free_mm, self.settings.min_forward_mm))
+        return amount
 
     def _alerting(self, direction: int, sensors: Sensors) -> set[int]:
         if direction == FORWARD:
