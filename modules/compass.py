@@ -12,11 +12,12 @@ itself and waits for each POSITION_REACHED), measuring at rest at each stop; a c
 through the eight readings gives the static field (centre) and the Earth's field (radius); the
 readings taken while turning lie on a circle round static + running field, which gives the
 running field; every straight move afterwards measures it again (the field driving minus the
-field at rest before and after: :class:`~modules.common.compass.RunningFieldLearner`). State: UNCALIBRATED, CALIBRATING, OK, DISTURBED (the field
-strength, averaged like the heading, is off by more than 1.2 % from the calibrated one: an
-anomaly, iron nearby; a flip measurement's strength scatters by about 0.5 %, the mean of three by
-0.3 %, and an anomaly across the Earth's field bends the heading long before it changes the
-strength much — the office pillar's by ~0.7° at 1 %).
+field at rest before and after: :class:`~modules.common.compass.RunningFieldLearner`). State:
+UNCALIBRATED, CALIBRATING, OK, DISTURBED (the field strength, averaged like the heading, is off
+by more than 0.8 % from the calibrated one: an anomaly, iron nearby; a flip measurement's strength
+scatters by about 0.5 %, the mean of three by 0.3 %, and an anomaly across the Earth's field bends
+the heading long before it changes the strength much — the office pillar's by ~0.7° at 1 %, ~0.55°
+at 0.8 %).
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ SAMPLES = FLIP_SAMPLES  # one 50 Hz period at 1 kHz
 FILTER_LENGTH = 3
 CALIBRATION_STOPS = 8
 CALIBRATION_SPEED_PCT = 50
-DISTURBED_RATIO = 0.012
+DISTURBED_RATIO = 0.008
 
 
 def motor_steps(motor: Any) -> tuple[int, int]:
