@@ -103,6 +103,38 @@ def test_compass_module_calibrates_by_turning_and_then_follows_the_true_heading(
         ring.close()
 
 
+def test_compass_module_learns_a_misjudged_running_field_again_on_straight_moves():
+    sim = Simulator(load_world("empty"), seed=5, speed=40.0)
+    ring = MemoryRing([10, 20, 40])
+    main = ring.nodes[10]
+    main.set_own_input_id()
+    data = main.subscribe("compass.data")
+    ring.nodes[20].start_program(MotorProgram, MotorHardware.local(sim))
+    ring.nodes[40].start_program(CompassProgram, CompassHardware.local(sim))
+    try:
+        wait_for(lambda: data.visits and data.read()["sample"] > 2, 10, "compass samples")
+        assert main.deliver("compass", "CALIBRATE", timeout=5)
+        wait_for(lambda: data.read()["state"] == 1, 30, "calibration done")
+        compass = ring.nodes[40].program
+        compass.running_field = np.array([1.7, 1.2])  # as a busy ring's calibration left it
+        compass.learner.reset(compass.running_field)
+        for _ in range(4):
+            sample = data.read()["sample"]
+            wait_for(lambda s=sample: data.read()["sample"] >= s + 6, 10, "readings at rest")
+            assert main.deliver("motor", "MOVE_FORWARD", distance_mm=250, speed_pct=100, timeout=5)
+            cmd = main.receive_command(timeout=20)
+            assert cmd is not None and cmd.name == "POSITION_REACHED"
+        sample = data.read()["sample"]
+        wait_for(lambda s=sample: data.read()["sample"] >= s + 6, 10, "readings at rest")
+        report = compass.report()
+        assert report["running_moves"]["learned"] >= 3, report
+        assert report["running_ut"] == pytest.approx([2.0, 1.5], abs=0.12)  # MOTOR_RUNNING_UT
+    finally:
+        for node_id in (20, 40):
+            ring.nodes[node_id].stop_program()
+        ring.close()
+
+
 def test_calibration_leaves_out_readings_taken_after_the_motor_stopped() -> None:
     """motor.data tells the compass of the stop a token round late: readings taken at rest in
     that time lie on the static circle and would pull the running field's estimate short."""
