@@ -57,8 +57,9 @@ def rounds_for(n: int, quick: bool) -> tuple[int, int]:
 
 def pairs_for(n: int, quick: bool) -> int:
     """Alternating bare/ring pairs per size: small rings take seconds, and on two shared cores a
-    single pair can land in a fast or a slow scheduling mode (the bare 8-node ring's median moves
-    between 0.6 and 0.8 ms from run to run), so they are measured three times and pooled."""
+    single pair can land in a fast or a slow mode (the bare 8-node ring's median moves between
+    0.6 and 0.8 ms from run to run: fast while other work keeps both virtual CPUs busy, slow when
+    they halt between hops), so they are measured three times and pooled."""
     return 1 if quick or n > 16 else 3
 
 
