@@ -11,6 +11,7 @@ from hwprograms import program
 from memring import MemoryRing, wait_for
 
 from modules.common.compass import angle_difference, fit_circle, flip_measurement, heading_from_bridges
+from modules.common.robot import MAX_STEP_RATE_HZ
 from modules.common.units import cdeg_to_heading
 from tokenring.hw import CompassHardware, MotorHardware
 from tokenring.world import load_world
@@ -255,11 +256,12 @@ def straight_moves_timeline(
             steps = 0
             for start, stop, _direction in moves:
                 if when >= start + 20.0:
-                    steps += int(min(when, stop) - start - 20.0)
+                    steps += int((min(when, stop) - start - 20.0) * MAX_STEP_RATE_HZ / 1000.0)
             for start, stop, direction in moves:
                 if start <= when < stop:
                     return {
                         "direction": direction,
+                        "speed_pct": 100,
                         "stamp_ms": when,
                         "steps_left": steps,
                         "steps_right": steps,
@@ -294,6 +296,23 @@ def test_running_field_is_learned_again_on_straight_moves(lag_ms: float) -> None
         learner.add(stamp, field, motor)
     assert learner.moves == 5 and learner.rejected == 0
     assert learner.estimate == pytest.approx(true_running, abs=0.06)
+
+
+@pytest.mark.parametrize("rest_ms", [300.0, 600.0])
+def test_running_field_is_learned_with_short_rests_between_the_moves(rest_ms: float) -> None:
+    """The pilot starts the next segment a few readings after the last: the readings at rest
+    before a move are proven by the move's own start (its stamp less the steps made since)."""
+    from modules.common.compass import RunningFieldLearner
+
+    learner = RunningFieldLearner(np.array([1.8, 1.3]))
+    moves, t = [], 1000.0
+    for _ in range(6):
+        moves.append((t, t + 6000.0, 1))
+        t += 6000.0 + rest_ms
+    for stamp, field, motor in straight_moves_timeline(moves, lambda t: (18.0, 0.0), [2.0, 1.5]):
+        learner.add(stamp, field, motor)
+    assert learner.moves >= 5
+    assert learner.estimate == pytest.approx([2.0, 1.5], abs=0.06)
 
 
 def test_running_field_is_not_learned_where_the_field_changed_or_on_turns() -> None:

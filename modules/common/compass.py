@@ -17,6 +17,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from modules.common.odometry import step_rate_hz
+from modules.common.robot import MOTOR_TICK_MS
+
 ADC_MID = 2048
 COUNTS_PER_UT = 20.0  # bridge + amplifier: the module's datasheet value
 COMPENSATION_SENSITIVITY_LOSS = 0.002  # relative gain lost per µT of compensation field
@@ -166,13 +169,20 @@ class RunningFieldLearner:
                     learned = self._learn()
             self.last_steps = steps
             return learned
-        self.unconfirmed = []  # the motor may have started before they were taken
         seq = motor.get("move_seq")
         if self.move is not None and (self.move["direction"], self.move["seq"]) != (direction, seq):
             self.move = None  # one move followed another without a stop heard: no clean rest
         if self.move is None:
+            # readings taken before the move began were at rest: it began when motor.data's stamp
+            # says, less the time its counters took to get where they are now
+            began = self._move_began(motor, steps, motor_ms)
+            proven = [f for s, f in self.unconfirmed if s + MEASUREMENT_MS <= began]
+            self.rest = [*self.rest, *proven][-self.REST_KEEP :]
             if self.pending is not None:
+                self.after.extend(proven)
                 learned = self._learn() if self.after else self._drop()
+        self.unconfirmed = []  # the motor may have started before they were taken
+        if self.move is None:
             self.move = {
                 "direction": direction,
                 "seq": seq,
@@ -189,6 +199,18 @@ class RunningFieldLearner:
         move["stepped"] = move["stepped"] or (move["steps0"] is not None and steps != move["steps0"])
         move["last_ms"] = max(move["last_ms"], motor_ms)
         return learned
+
+    def _move_began(self, motor: dict, steps: tuple[int, int], motor_ms: float) -> float:
+        """The latest time the move heard now can have energised the motors (sim ms)."""
+        if self.last_steps is None:
+            return -math.inf
+        made = max(abs(steps[0] - self.last_steps[0]), abs(steps[1] - self.last_steps[1]))
+        if made == 0:
+            return motor_ms  # no batch of steps yet when motor.data was stamped
+        rate = step_rate_hz(float(motor.get("speed_pct", 0)))
+        if rate <= 0:
+            return -math.inf
+        return motor_ms - 1000.0 * made / rate - MOTOR_TICK_MS
 
     def _end_move(self) -> None:
         move, self.move = self.move, None
