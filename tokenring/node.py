@@ -61,10 +61,10 @@ REGENERATION_BACKOFF_MAX = 7  # reconfiguration times added after fruitless rege
 FAR_PROBE_S = 2.0
 #: the watchdog's timeout refresh waits up to this long for a wake it has anyway (a pass's ack
 #: timer, the token-loss timer) instead of waking for it alone: at 64 nodes the watchdogs' wakes
-#: cost the ring ~20 µs of CPU per hop on two cores
-REFRESH_SLACK_S = 0.5
+#: cost the ring ~20 µs of CPU per hop on two cores, at 255 ~16 µs after the first cut
+REFRESH_SLACK_S = 1.5
 #: the watchdog sleeps at most this many reconfiguration times, so a missed wake costs no more
-WATCH_MAX_SLEEP_RECONS = 2.0
+WATCH_MAX_SLEEP_RECONS = 4.0
 perf_counter = time.perf_counter
 
 
