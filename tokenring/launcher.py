@@ -42,6 +42,9 @@ BOOT_CONCURRENCY = 8 * max(1, os.cpu_count() or 1)
 #: when they cannot (no pidfd_open)
 EXIT_CHECK_S = 1.0
 CHILD_POLL_S = 0.05
+#: ``--respawn`` starts a dead node again this long after its exit (systemd's RestartSec default):
+#: the ring heals around it first, instead of sharing two cores with a booting interpreter
+RESPAWN_DELAY_S = 0.1
 KILL_REAP_S = 10.0  # after SIGKILL, how long the kernel may take to reap them all
 
 
@@ -157,6 +160,7 @@ class Launcher:
         self._exits_wake_r, self._exits_wake_w = os.pipe()
         self._exits.register(self._exits_wake_r, selectors.EVENT_READ, None)
         self._pidfds_work = True
+        self._respawn_due: dict[int, float] = {}  # node ID -> when --respawn starts it again
         self._stop_signal: int | None = None
         self._selector = selectors.DefaultSelector()
         self._selector_lock = threading.Lock()
@@ -443,7 +447,10 @@ class Launcher:
     def _supervise(self) -> None:
         try:
             while not self._stop.is_set():
-                ready = self._exits.select(EXIT_CHECK_S if self._pidfds_work else CHILD_POLL_S)
+                timeout = EXIT_CHECK_S if self._pidfds_work else CHILD_POLL_S
+                if self._respawn_due:
+                    timeout = max(0.0, min(timeout, min(self._respawn_due.values()) - time.monotonic()))
+                ready = self._exits.select(timeout)
                 with self._exits_lock:
                     for key, _ in ready:
                         if key.data is not None:  # a child exited (else stop() woke us)
@@ -517,7 +524,7 @@ class Launcher:
         return {"id": child.plan.node_id, "pid": child.process.pid, "signal": name}
 
     def check_children(self) -> None:
-        """Report nodes that died; restart them if ``--respawn``."""
+        """Report nodes that died; with ``--respawn`` start them again RESPAWN_DELAY_S later."""
         for child in self.child_list():
             code = child.process.poll()
             if code is None or child.reported:
@@ -527,6 +534,12 @@ class Launcher:
             self.deaths.append((plan.name, plan.node_id, code))
             self.say(f"node {plan.name} (id {plan.node_id}) {describe_exit(code)}")
             if self.respawn and not self._stop.is_set():
+                self._respawn_due.setdefault(plan.node_id, time.monotonic() + RESPAWN_DELAY_S)
+        now = time.monotonic()
+        for node_id, due in list(self._respawn_due.items()):
+            if now >= due and not self._stop.is_set():
+                del self._respawn_due[node_id]
+                plan = self.children[node_id].plan
                 self.say(f"respawning {plan.name} (id {plan.node_id})")
                 self.spawn(plan)
 
