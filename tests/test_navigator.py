@@ -110,6 +110,31 @@ def test_a_forward_move_goes_no_further_than_its_ahead_abort_allows_plus_slack()
     assert b.sent[-1][2]["distance_mm"] == 600
 
 
+def test_a_move_numbered_like_another_commanders_last_one_is_still_seen_and_finished():
+    """Move numbers are the commanders' command sequence numbers: main's first turn can carry the
+    number of the compass's last calibration turn."""
+    b = Bench()
+    b.sensors.move_seq = 144  # the compass's last turn; the motor stands
+    b.pilot.start([Move(TURN_RIGHT, 90, 50)], b.sensors)
+    b.sensors.motor_state, b.sensors.motor_direction = MOTOR_STATE["MOVING"], TURN_RIGHT
+    assert b.tick(3) is None
+    b.pilot.note_position_reached(MOVE_STATUS["DONE"], 144)
+    b.sensors.motor_state, b.sensors.motor_direction = MOTOR_STATE["IDLE"], STOPPED
+    out = b.tick(3)
+    assert out is not None and out.done
+
+
+def test_a_move_the_motor_never_runs_times_out():
+    b = Bench()
+    b.pilot.start([Move(FORWARD, 100, 100)], b.sensors)
+    out = None
+    for _ in range(200):  # 24 simulated seconds of an idle motor
+        out = b.tick() or out
+        if out is None and b.names()[-1] == "motor:STOP":
+            b.sensors.motor_state = MOTOR_STATE["IDLE"]
+    assert out is not None and out.reason == REASON["TIMEOUT"]
+
+
 def test_alert_aborts_and_locks_every_direction_but_the_opposite_until_the_navigator_commands_it():
     b = Bench()
     b.pilot.start([Move(FORWARD, 3000)], b.sensors)

@@ -161,6 +161,7 @@ class Pilot:
         self._last_sweep: int | None = None
         self._scanning = False
         self._seen_moving = False
+        self._idle_at_send = True
         self._visits = 0
 
     # -- the navigator's side ---------------------------------------------------------------
@@ -209,6 +210,7 @@ class Pilot:
         amount = self._capped_amount(move, sensors)
         self.reached.clear()
         self._seq_before = sensors.move_seq
+        self._idle_at_send = sensors.motor_state != MOTOR_STATE["MOVING"]
         self._started_ms = sensors.stamp_ms
         self._samples = []
         self._poses = []
@@ -274,7 +276,7 @@ class Pilot:
             if (
                 not self._seen_moving
                 and sensors.motor_state == MOTOR_STATE["MOVING"]
-                and sensors.move_seq != self._seq_before
+                and self._ours(move, sensors)
             ):
                 self._seen_moving = True
                 self._started_ms = sensors.stamp_ms  # the move's time runs from here (sensor time)
@@ -305,8 +307,11 @@ class Pilot:
                     return self._take()
                 self._next(sensors)
                 return self._take() if self.state == self.IDLE else None
-            if self._seen_moving and sensors.stamp_ms - self._started_ms > self._expected_ms(move):
-                self._stop(REASON["TIMEOUT"], "move took too long")
+            if sensors.stamp_ms - self._started_ms > self._expected_ms(move):
+                # (from the send until the move is seen running, then from there)
+                self._stop(
+                    REASON["TIMEOUT"], "move took too long" if self._seen_moving else "move never seen"
+                )
             return None
         # STOPPING: wait for the motor to stand still
         if self._stop_ms is None:
@@ -331,10 +336,20 @@ class Pilot:
         # without POSITION_REACHED: our move was seen running and the motor stands again
         return (
             self._seen_moving
-            and sensors.move_seq != self._seq_before
+            and (sensors.move_seq != self._seq_before or self._idle_at_send)
             and sensors.motor_state == MOTOR_STATE["IDLE"]
             and self._visits >= self.settings.settle_visits
         )
+
+    def _ours(self, move: Move, sensors: Sensors) -> bool:
+        """The motor runs the move we sent: a new move number, or — the motor stood when we sent
+        it — a move in our direction. Move numbers are the commanders' command sequence numbers,
+        so another commander's last move (the compass's calibration turns) can carry the number
+        ours gets: on the ring main's first turn once had the compass's last turn's 144, was never
+        taken for ours and the exploration waited 75 s for it (square, seed 2)."""
+        if sensors.move_seq != self._seq_before:
+            return True
+        return self._idle_at_send and sensors.motor_direction == move.direction
 
     def _next(self, sensors: Sensors) -> None:
         move = self.moves[self.index]
