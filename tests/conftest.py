@@ -126,3 +126,23 @@ def port() -> int:
 @pytest.fixture
 def endpoint(port: int) -> str:
     return f"tcp/127.0.0.1:{port}"
+
+
+#: threads of an in-process node (tokenring.node, tokenring.system): a test module that leaves
+#: one running keeps a ring circulating in this process and slows every later test's timing
+NODE_THREAD_PREFIXES = ("watchdog-", "system-", "program-")
+
+
+@pytest.fixture(autouse=True, scope="module")
+def no_leaked_nodes() -> Iterator[None]:
+    """Fail the module that leaves in-process nodes running (as ``procs`` does for processes)."""
+    import threading
+
+    yield
+    deadline = time.monotonic() + 2.0
+    while True:
+        leaked = sorted(t.name for t in threading.enumerate() if t.name.startswith(NODE_THREAD_PREFIXES))
+        if not leaked or time.monotonic() > deadline:
+            break
+        time.sleep(0.05)
+    assert not leaked, f"in-process nodes left running (close their NodeOS): {leaked}"
