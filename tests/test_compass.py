@@ -136,23 +136,36 @@ def test_compass_module_learns_a_misjudged_running_field_again_on_straight_moves
         ring.close()
 
 
+class TurningCompassStub:
+    """What ``CompassProgram._turn_and_listen`` uses of a compass program, on a simulated clock:
+    a reading every 40 ms; ``read_field`` also updates motor.data as the scenario says."""
+
+    def __init__(self, motor: dict) -> None:
+        self.now = 0.0
+        self.running = True
+        self.period_real = 0.0
+        self.clock = self
+        self.os = self
+        self.motor = motor
+
+    def now_ms(self) -> float:
+        return self.now
+
+    def motors_moving(self) -> int:
+        return int(self.motor["direction"])
+
+    def receive_command(self, timeout=None):
+        if self.motor["direction"] == 0:
+            return type("Cmd", (), {"name": "POSITION_REACHED", "args": {"status": 0}})()
+        return None
+
+
 def test_calibration_leaves_out_readings_taken_after_the_motor_stopped() -> None:
     """motor.data tells the compass of the stop a token round late: readings taken at rest in
     that time lie on the static circle and would pull the running field's estimate short."""
 
-    class Stub:
-        """Readings every 40 ms; the motor stops at 400 ms, motor.data says so at 560 ms."""
-
-        def __init__(self) -> None:
-            self.now = 0.0
-            self.running = True
-            self.period_real = 0.0
-            self.clock = self
-            self.os = self
-            self.motor = {"stamp_ms": 0.0, "direction": 3}
-
-        def now_ms(self) -> float:
-            return self.now
+    class Stub(TurningCompassStub):
+        """The motor stops at 400 ms, motor.data says so at 560 ms."""
 
         def read_field(self):
             stamp = self.now
@@ -165,16 +178,8 @@ def test_calibration_leaves_out_readings_taken_after_the_motor_stopped() -> None
                 self.motor = {"stamp_ms": self.now, "direction": 0}
             return field, stamp
 
-        def motors_moving(self) -> int:
-            return int(self.motor["direction"])
-
-        def receive_command(self, timeout=None):
-            if self.motor["direction"] == 0:
-                return type("Cmd", (), {"name": "POSITION_REACHED", "args": {"status": 0}})()
-            return None
-
     turning: list[np.ndarray] = []
-    assert CompassProgram._turn_and_listen(Stub(), turning)
+    assert CompassProgram._turn_and_listen(Stub({"stamp_ms": 0.0, "direction": 3}), turning)
     assert len(turning) >= 8
     assert all(field[0] == 2.0 for field in turning)  # none taken at rest
 
@@ -183,19 +188,8 @@ def test_calibration_counts_readings_only_once_the_step_counters_moved() -> None
     """motor.data says "turning" before the first batch of steps; on a busy ring that batch can
     come 100 ms or more later, and readings at rest in that time pulled the estimate short."""
 
-    class Stub:
-        """Readings every 40 ms; motor.data says turning from 0, the first steps come at 300 ms."""
-
-        def __init__(self) -> None:
-            self.now = 0.0
-            self.running = True
-            self.period_real = 0.0
-            self.clock = self
-            self.os = self
-            self.motor = {"stamp_ms": 0.0, "direction": 3, "steps_left": 0, "steps_right": 0}
-
-        def now_ms(self) -> float:
-            return self.now
+    class Stub(TurningCompassStub):
+        """motor.data says turning from 0, the first steps come at 300 ms."""
 
         def read_field(self):
             stamp = self.now
@@ -212,16 +206,9 @@ def test_calibration_counts_readings_only_once_the_step_counters_moved() -> None
             }
             return field, stamp
 
-        def motors_moving(self) -> int:
-            return int(self.motor["direction"])
-
-        def receive_command(self, timeout=None):
-            if self.motor["direction"] == 0:
-                return type("Cmd", (), {"name": "POSITION_REACHED", "args": {"status": 0}})()
-            return None
-
     turning: list[np.ndarray] = []
-    assert CompassProgram._turn_and_listen(Stub(), turning, (0, 0))
+    motor = {"stamp_ms": 0.0, "direction": 3, "steps_left": 0, "steps_right": 0}
+    assert CompassProgram._turn_and_listen(Stub(motor), turning, (0, 0))
     assert len(turning) >= 8
     assert all(field[0] == 2.0 for field in turning)  # none taken at rest
 
