@@ -31,6 +31,9 @@ import numpy as np
 from modules.common.compass import (
     FLIP_SAMPLES,
     MEASUREMENT_MS,
+    STOPPED,
+    TURN_LEFT,
+    TURN_RIGHT,
     RunningFieldLearner,
     circular_mean,
     fit_circle,
@@ -44,8 +47,6 @@ from tokenring.program import UserProgram
 log = logging.getLogger("tokenring.compass")
 
 UNCALIBRATED, OK, DISTURBED, CALIBRATING = range(4)  # enum compass_state
-STOPPED = 0  # enum direction
-TURN_LEFT, TURN_RIGHT = 3, 4
 SAMPLE_PERIOD_SIM_S = 0.1
 MIN_PERIOD_REAL_S = 0.005
 SAMPLES = FLIP_SAMPLES  # one 50 Hz period at 1 kHz
@@ -99,8 +100,8 @@ class Program(UserProgram):
     def sample(self) -> None:
         field, stamp = self.read_field()
         direction = self.motors_moving()
-        learned = self.state in (OK, DISTURBED) and self.motor.visits
-        if learned and self.learner.add(stamp, field, self.motor.read()):
+        learning = self.state in (OK, DISTURBED) and self.motor.visits
+        if learning and self.learner.add(stamp, field, self.motor.read()):
             self.running_field = self.learner.estimate.copy()
             log.info(
                 "compass: running field %s µT after %d straight moves",

@@ -19,6 +19,7 @@ import numpy as np
 
 from modules.common.odometry import step_rate_hz
 from modules.common.robot import MOTOR_TICK_MS
+from tokenring.protocol import default_protocol
 
 ADC_MID = 2048
 COUNTS_PER_UT = 20.0  # bridge + amplifier: the module's datasheet value
@@ -99,7 +100,9 @@ def angle_difference(a: float, b: float) -> float:
     return math.pi if d == -math.pi else d
 
 
-FORWARD, REVERSE = 1, 2  # enum direction (STOPPED 0, TURN_LEFT 3, TURN_RIGHT 4)
+_DIRECTION = default_protocol().enums["direction"]  # motor.data's direction field
+STOPPED, FORWARD, REVERSE = _DIRECTION["STOPPED"], _DIRECTION["FORWARD"], _DIRECTION["REVERSE"]
+TURN_LEFT, TURN_RIGHT = _DIRECTION["TURN_LEFT"], _DIRECTION["TURN_RIGHT"]
 FLIP_SAMPLES = 20  # one 50 Hz period at 1 kHz, with the flip coil set and again reset
 MEASUREMENT_MS = 2 * FLIP_SAMPLES  # a flip measurement takes this long from its stamp
 
@@ -150,15 +153,15 @@ class RunningFieldLearner:
         """One reading (after compensation, running field not subtracted) and motor.data as read
         just after it; True when a move was learned from (``estimate`` changed)."""
         field = np.asarray(field, dtype=float)
-        direction = int(motor.get("direction", 0))
+        direction = int(motor.get("direction", STOPPED))
         steps = (int(motor.get("steps_left", 0)), int(motor.get("steps_right", 0)))
         motor_ms = float(motor.get("stamp_ms", 0.0))
         previous, self.previous_direction = self.previous_direction, direction
         learned = False
-        if direction == 0:
+        if direction == STOPPED:
             if self.move is not None:
                 self._end_move()
-            if previous == 0:
+            if previous == STOPPED:
                 self.unconfirmed.append((stamp_ms, field))
             proven = [f for s, f in self.unconfirmed if s + MEASUREMENT_MS <= motor_ms]
             self.unconfirmed = [(s, f) for s, f in self.unconfirmed if s + MEASUREMENT_MS > motor_ms]
