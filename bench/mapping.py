@@ -246,6 +246,10 @@ def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any
         moving = now
     steady, settling = [], []
     moving: list[tuple[float, float]] = []  # (true heading, signed error) on straight moves
+    from tokenring.protocol import default_protocol
+
+    direction = default_protocol().enums["direction"]
+    straight = (direction["FORWARD"], direction["REVERSE"])
     directions = [(m["stamp_ms"], m["direction"]) for m in result.get("motor_log", []) if m["stamp_ms"]]
     direction_stamps = [d[0] for d in directions]
     states = [c["state"] for c in result.get("compass_log", [])]
@@ -265,7 +269,7 @@ def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any
         after_change = k > 0 and c["stamp_ms"] - changes[k - 1] < settle_ms
         (settling if after_change else steady).append(abs(signed))
         d = bisect.bisect_right(direction_stamps, c["stamp_ms"]) - 1
-        if not after_change and d >= 0 and directions[d][1] in (1, 2):  # FORWARD, REVERSE
+        if not after_change and d >= 0 and directions[d][1] in straight:
             moving.append((truth[near][3], signed))
     out: dict[str, Any] = {}
     if states:
