@@ -59,6 +59,38 @@ def test_a_childs_exit_is_reported_at_once_without_polling_the_others(procs, rin
     assert "node short (id 1) exited with code 3" in output.getvalue()
 
 
+def test_an_exit_is_reported_even_while_another_thread_polls_that_child(procs, ring_name, endpoint):
+    # Popen.poll() answers None while another thread is inside poll() for the same child (a
+    # status query, run()'s loop): the supervisor woken by the pidfd must still reap and report
+    # it then, not at its next safety-net check a second later (this test's first version
+    # polled beside the supervisor and failed that way once in a full suite run)
+    from pathlib import Path
+
+    launcher = ShortLivedLauncher(
+        [NodePlan(1, "short", None), NodePlan(2, "long", None)],
+        ring=ring_name,
+        listen=[endpoint],
+        output=io.StringIO(),
+    )
+    launcher.start()
+    try:
+        procs.watch([c.process.pid for c in launcher.child_list()])
+        short = launcher.children[1].process
+        stat = Path(f"/proc/{short.pid}/stat")
+        short._waitpid_lock.acquire()  # what another thread inside short.poll() holds
+        try:
+            wait_for(lambda: stat.read_text().rsplit(")", 1)[1].split()[0] == "Z", 5.0, "the child to exit")
+            time.sleep(0.1)  # the supervisor has woken on the pidfd meanwhile
+        finally:
+            short._waitpid_lock.release()
+        released = time.monotonic()
+        wait_for(lambda: launcher.deaths, 2.0, "its death to be reported")
+        assert time.monotonic() - released < 0.5  # not at the next check, EXIT_CHECK_S later
+        assert launcher.deaths == [("short", 1, 3)]
+    finally:
+        launcher.stop()
+
+
 def test_respawn_starts_a_dead_node_again_after_a_short_delay(procs, ring_name, endpoint):
     # systemd's RestartSec: the ring heals around the dead node first instead of sharing the
     # cores with a booting interpreter (crash recovery 21 ms with the delay, 27 ms without)

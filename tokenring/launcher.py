@@ -451,13 +451,20 @@ class Launcher:
                 if self._respawn_due:
                     timeout = max(0.0, min(timeout, min(self._respawn_due.values()) - time.monotonic()))
                 ready = self._exits.select(timeout)
+                exited = []
                 with self._exits_lock:
                     for key, _ in ready:
                         if key.data is not None:  # a child exited (else stop() woke us)
                             self._exits.unregister(key.fileobj)
                             os.close(key.fd)
+                            exited.append(key.data)
                 if self._stop.is_set():
                     break
+                for child in exited:
+                    # reap it here: Popen.poll() answers None while another thread is inside
+                    # poll() (status queries, run()), and the exit would wait for the next check
+                    with contextlib.suppress(subprocess.TimeoutExpired):
+                        child.process.wait(timeout=1.0)
                 with self._children_lock:
                     self.check_children()
         finally:
