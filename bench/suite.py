@@ -7,6 +7,8 @@ Sections (``--sections``, all by default):
                  both topologies: a full mesh of peers and clients of a Zenoh router;
                  RSS and CPU per node, the launcher's (router's) CPU, a fit of the cost in N;
 * ``transports`` the same ring over Zenoh (peers, router), plain UDP sockets and ZeroMQ;
+* ``runtime``    Zenoh's async runtime as tokenring sets it (one worker thread per process)
+                 against Zenoh's defaults, both rings (bare and tokenring) under each;
 * ``load``       the robot's eight programs running (world simulator, real channel load) vs
                  the same eight nodes idle;
 * ``commands``   command latency (send -> acknowledged) in rounds and ms, free inbox and seven
@@ -29,6 +31,7 @@ import datetime as dt
 import json
 import os
 import platform
+import subprocess
 import sys
 import tempfile
 import time
@@ -41,7 +44,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 RESULTS_DIR = HERE / "results"
-SECTIONS = ("scaling", "transports", "load", "commands", "profile", "recovery", "download")
+SECTIONS = ("scaling", "transports", "runtime", "load", "commands", "profile", "recovery", "download")
 QUICK_SECTIONS = ("scaling", "transports", "commands", "profile")
 FULL_SIZES = {"peer": [2, 4, 8, 16, 32, 64], "router": [8, 16, 32, 64, 128, 255]}
 QUICK_SIZES = {"peer": [2, 4, 8], "router": [8]}
@@ -271,6 +274,66 @@ def section_transports(ctx: Context) -> dict[str, Any]:
             except Exception as exc:
                 record["error"] = str(exc)
                 ctx.progress.note(f"failed: {exc}")
+            record["load"] = load_avg()
+            out["runs"].append(record)
+    return out
+
+
+RUNTIMES = {"tokenring": None, "zenoh defaults": "()"}  # None: tokenring's NODE_RUNTIME; "()": Zenoh's own
+
+
+def runtime_cases(quick: bool) -> list[tuple[int, str]]:
+    return [(8, "peer")] if quick else [(8, "peer"), (64, "router")]
+
+
+def section_runtime(ctx: Context) -> dict[str, Any]:
+    """``tokenring bench`` under each Zenoh runtime, as a subprocess: the runtime is fixed when a
+    process first uses Zenoh, and the router lives in the process that runs the benchmark."""
+    from tokenring.zconfig import NODE_RUNTIME
+
+    out: dict[str, Any] = {"node_runtime": NODE_RUNTIME, "runs": []}
+    for n, topology in runtime_cases(ctx.quick):
+        rounds, warmup = rounds_for(n, ctx.quick)
+        for label, value in RUNTIMES.items():
+            ctx.progress.say(f"runtime: {n} nodes ({topology}s), bare and tokenring, Zenoh runtime {label}")
+            record: dict[str, Any] = {"nodes": n, "topology": topology, "runtime": label}
+            with tempfile.TemporaryDirectory() as tmp:
+                path = Path(tmp) / "bench.json"
+                cmd = [sys.executable, "-m", "tokenring", "bench", "--nodes", str(n), "--topology", topology]
+                cmd += [
+                    "--rounds",
+                    str(rounds),
+                    "--warmup",
+                    str(warmup),
+                    "--repeat",
+                    str(pairs_for(n, ctx.quick)),
+                ]
+                cmd += ["--timeout", str(timeout_for(n)), "--quiet", "--json", str(path)]
+                env = dict(os.environ, ZENOH_RUNTIME=value or NODE_RUNTIME)
+                done = subprocess.run(
+                    cmd,
+                    env=env,
+                    capture_output=True,
+                    text=True,
+                    timeout=4 * timeout_for(n) * pairs_for(n, ctx.quick),
+                )
+                if done.returncode != 0 or not path.exists():
+                    record["error"] = (done.stderr.strip().splitlines() or [f"exit {done.returncode}"])[-1]
+                    ctx.progress.note(f"failed: {record['error']}")
+                else:
+                    result = json.loads(path.read_text())
+                    record.update(
+                        rtt_ms=result["rtt_ms"],
+                        bare_rtt_ms=result["baseline_rtt_ms"],
+                        ratio=result["ratio_median"],
+                        per_hop_us=result["per_hop_us"],
+                        handler_us=result["handler_us"],
+                        cpu_per_node_pct=result["cpu_per_node_pct"]["mean"],
+                    )
+                    ctx.progress.note(
+                        f"bare {result['baseline_rtt_ms']['median']:.3f} ms, "
+                        f"tokenring {result['rtt_ms']['median']:.3f} ms ({result['ratio_median']:.2f}×)"
+                    )
             record["load"] = load_avg()
             out["runs"].append(record)
     return out
@@ -511,6 +574,7 @@ def section_download(ctx: Context) -> dict[str, Any]:
 SECTION_FUNCTIONS: dict[str, Callable[[Context], dict[str, Any]]] = {
     "scaling": section_scaling,
     "transports": section_transports,
+    "runtime": section_runtime,
     "load": section_load,
     "commands": section_commands,
     "profile": section_profile,
@@ -530,6 +594,7 @@ def count_steps(sections: list[str], sizes: dict[str, list[int]], quick: bool) -
     per = {
         "scaling": 2 * sum(pairs_for(n, quick) for v in sizes.values() for n in v),
         "transports": 5 * (1 if quick else 2),
+        "runtime": len(RUNTIMES) * len(runtime_cases(quick)),
         "load": 2,
         "commands": 2,
         "profile": 2,
@@ -564,6 +629,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-report", action="store_true", help="write the JSON only, not RESULTS.md")
     args = parser.parse_args(argv)
     from tokenring.errors import UsageError
+    from tokenring.zconfig import use_node_runtime
+
+    use_node_runtime()  # as `tokenring up`/`bench` run: the routers in this process, the nodes
 
     if args.sections:
         sections = [s.strip() for s in args.sections.split(",") if s.strip()]

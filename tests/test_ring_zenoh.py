@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import os
@@ -347,3 +348,41 @@ def test_bad_command_line_input_exits_2_with_a_message():
         assert result.returncode == 2, (args, result.stderr)
         assert message in result.stderr, (args, result.stderr)
         assert "Traceback" not in result.stderr
+
+
+def zenoh_threads(pid: int) -> set[str]:
+    """The names of a process's Zenoh runtime threads (rx-0, tx-0, acc-0, ...)."""
+    names = set()
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        with contextlib.suppress(OSError):
+            names.add(Path(f"/proc/{pid}/task/{tid}/comm").read_text().strip())
+    return {n for n in names if n.split("-")[0] in ("rx", "tx", "net", "acc", "app")}
+
+
+def test_nodes_run_zenoh_on_one_thread_unless_the_user_sets_the_runtime(procs, ring_name, endpoint):
+    # one worker thread per process: 0.84 -> 0.66 ms for the bare 8-node ring (bench/RESULTS.md)
+    for user_runtime in (None, "()"):  # "()": Zenoh's defaults, a thread per runtime
+        ring = ring_name + ("user" if user_runtime else "")
+        env = {"ZENOH_RUNTIME": user_runtime} if user_runtime else None
+        launcher = up(procs, ring, endpoint, "--nodes", "main,motor", "--no-programs", "--no-world", env=env)
+        with tap(endpoint) as session:
+            wait_ring(session, ring, [10, 20])
+            pids = launcher_pids(session, ring)
+            procs.watch(pids)
+            threads = {pid: zenoh_threads(pid) for pid in pids}
+        launcher.send_signal(signal.SIGINT)
+        assert launcher.wait(10) == 130
+        for pid, names in threads.items():
+            if user_runtime is None:  # rx-1 and on: tokio's blocking pool, named as its workers
+                assert "rx-0" in names and all(n.startswith("rx-") for n in names), (pid, names)
+            else:
+                assert {"acc-0", "app-0", "net-0"} <= names, (pid, names)
+
+
+def test_a_bad_zenoh_runtime_is_named_without_a_traceback(ring_name):
+    result = run_tokenring(
+        "status", "--ring", ring_name, timeout=30, cwd=REPO, env=dict(os.environ, ZENOH_RUNTIME="(rx: 3)")
+    )
+    assert result.returncode != 0
+    assert "$ZENOH_RUNTIME='(rx: 3)' is not a Zenoh runtime configuration" in result.stderr, result.stderr
+    assert "Traceback" not in result.stderr

@@ -27,7 +27,7 @@ from tokenring import keys
 from tokenring.cliutil import format_table, free_port, query, write_json
 from tokenring.errors import TokenRingError, UsageError
 from tokenring.launcher import Launcher, NodePlan
-from tokenring.zconfig import make_config, open_session
+from tokenring.zconfig import make_config, node_environment, open_session
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 #: from this ring size on, ``--topology auto`` makes the nodes clients of a Zenoh router: a full
@@ -102,7 +102,7 @@ def run_bare(
     base = [sys.executable, "-m", "tokenring.bench_bare", "--count", str(n), "--port", str(port)]
     base += ["--rounds", str(rounds), "--warmup", str(warmup), "--ring", ring, "--timeout", str(timeout)]
     base += ["--mode", "client" if router else "peer"]
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    env = node_environment()  # the same Zenoh runtime as the ring's nodes
     router_session = (
         open_session(make_config(mode="router", listen=[f"tcp/127.0.0.1:{port}"])) if router else None
     )

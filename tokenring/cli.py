@@ -12,6 +12,7 @@ import sys
 from collections.abc import Callable
 
 from tokenring.errors import TokenRingError
+from tokenring.zconfig import use_node_runtime
 
 Runner = Callable[[argparse.Namespace], int]
 
@@ -54,6 +55,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     _setup_logging(args.log_level)
+    use_node_runtime()  # the launcher's router and every node it starts
     try:
         return runners[args.command](args)
     except TokenRingError as exc:

@@ -31,7 +31,7 @@ from tokenring import keys
 from tokenring.control import answer_query
 from tokenring.errors import TransportError, UsageError
 from tokenring.ring import EVENT_RING_STOPPING, RING_EVENT
-from tokenring.zconfig import make_config, open_session
+from tokenring.zconfig import make_config, node_environment, open_session
 
 #: exit code of a node process killed on purpose by the ``crash`` fault
 CRASH_EXIT_CODE = 70
@@ -305,7 +305,7 @@ class Launcher:
         return cmd + self.extra_node_args + plan.extra_args
 
     def _popen(self, argv: list[str], name: str) -> subprocess.Popen:
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        env = node_environment()
         process = subprocess.Popen(
             argv,
             stdin=subprocess.DEVNULL,

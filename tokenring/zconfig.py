@@ -8,11 +8,19 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import zenoh
 
 from tokenring.errors import TransportError, UsageError
+
+#: Zenoh's async runtimes (RON, read by Zenoh from ``$ZENOH_RUNTIME`` when a process first uses
+#: it) for a process that handles one frame at a time: one worker thread receives, sends and runs
+#: Zenoh's housekeeping, instead of six threads (rx ×2, tx, net, acc, app) handing each frame to
+#: one another. bench/RESULTS.md measures both; a user's own ``$ZENOH_RUNTIME`` wins.
+NODE_RUNTIME = (
+    "(rx:(worker_threads:1),tx:(handover:rx),net:(handover:rx),acc:(handover:rx),app:(handover:rx))"
+)
 
 #: how long a client keeps retrying its router before the node reports it cannot connect
 CLIENT_CONNECT_TIMEOUT_MS = 60_000
@@ -66,9 +74,32 @@ def make_config(
     return config
 
 
+def node_environment(base: Mapping[str, str] | None = None) -> dict[str, str]:
+    """The environment for a node (or bare-ring) process: ``base`` (default ``os.environ``)
+    with :data:`NODE_RUNTIME` unless ``$ZENOH_RUNTIME`` is already set there."""
+    env = dict(os.environ if base is None else base, PYTHONUNBUFFERED="1")
+    env.setdefault("ZENOH_RUNTIME", NODE_RUNTIME)
+    return env
+
+
+def use_node_runtime() -> None:
+    """Give this process (and so every process it starts) :data:`NODE_RUNTIME`, unless
+    ``$ZENOH_RUNTIME`` is set; must run before the process's first Zenoh session."""
+    os.environ.setdefault("ZENOH_RUNTIME", NODE_RUNTIME)
+
+
 def open_session(config: zenoh.Config) -> zenoh.Session:
     """Open a session; Zenoh's own errors become :class:`TransportError` here, once."""
     try:
         return zenoh.open(config)
     except zenoh.ZError as exc:
         raise TransportError(f"cannot open a Zenoh session: {exc}") from exc
+    except BaseException as exc:  # Zenoh's Rust panics arrive as pyo3's PanicException
+        if type(exc).__name__ != "PanicException":
+            raise
+        if "RuntimeParam" in str(exc) or "SpannedError" in str(exc):
+            raise TransportError(
+                f"$ZENOH_RUNTIME={os.environ.get('ZENOH_RUNTIME', '')!r} is not a Zenoh runtime "
+                f"configuration (RON, e.g. {NODE_RUNTIME!r}): {exc}"
+            ) from None
+        raise TransportError(f"Zenoh failed while opening a session: {exc}") from None
