@@ -236,6 +236,18 @@ def pick(runs: list[dict[str, Any]], topology: str, n: int) -> dict[str, Any] | 
     return next((r for r in runs if r["topology"] == topology and r["nodes"] == n and "rtt_ms" in r), None)
 
 
+def defaults_note(runtime: dict[str, Any], n: int, topology: str) -> str:
+    """The runtime section's pair on Zenoh's default runtime, for the same size: the ratio moves
+    with the baseline, which that runtime slows more than tokenring's own work."""
+    for r in runtime.get("runs", []):
+        if (r["nodes"], r["topology"], r["runtime"]) == (n, topology, "zenoh defaults") and "ratio" in r:
+            return (
+                f"; both rings on Zenoh's default runtime: {r['ratio']:.2f}× "
+                f"({f(r['rtt_ms']['median'], 3)} vs {f(r['bare_rtt_ms']['median'], 3)} ms, both slower)"
+            )
+    return ""
+
+
 def aims(sections: dict[str, Any]) -> str:
     rows: list[list[Any]] = []
     runs = sections.get("scaling", {}).get("runs", [])
@@ -252,7 +264,8 @@ def aims(sections: dict[str, Any]) -> str:
                     if len(r8.get("pair_ratios", [])) > 1
                     else ""
                 )
-                + ")",
+                + ")"
+                + defaults_note(sections.get("runtime", {}), 8, "peer"),
                 verdict(r8["ratio_median"] <= 1.2),
             ]
         )
