@@ -89,7 +89,8 @@ def use_node_runtime() -> None:
 
 
 def open_session(config: zenoh.Config) -> zenoh.Session:
-    """Open a session; Zenoh's own errors become :class:`TransportError` here, once."""
+    """Open a session; Zenoh's own errors become :class:`TransportError` here, once (a malformed
+    ``$ZENOH_RUNTIME``, which Zenoh reports by panicking, a :class:`UsageError`)."""
     try:
         return zenoh.open(config)
     except zenoh.ZError as exc:
@@ -97,8 +98,8 @@ def open_session(config: zenoh.Config) -> zenoh.Session:
     except BaseException as exc:  # Zenoh's Rust panics arrive as pyo3's PanicException
         if type(exc).__name__ != "PanicException":
             raise
-        if "RuntimeParam" in str(exc) or "SpannedError" in str(exc):
-            raise TransportError(
+        if "RuntimeParam" in str(exc) or "SpannedError" in str(exc):  # the user's environment
+            raise UsageError(
                 f"$ZENOH_RUNTIME={os.environ.get('ZENOH_RUNTIME', '')!r} is not a Zenoh runtime "
                 f"configuration (RON, e.g. {NODE_RUNTIME!r}): {exc}"
             ) from None
