@@ -248,6 +248,23 @@ def defaults_note(runtime: dict[str, Any], n: int, topology: str) -> str:
     return ""
 
 
+def defaults_growth_note(runtime: dict[str, Any], topology: str) -> str:
+    """Per-hop growth from 8 to 64 nodes with both rings on Zenoh's default runtime, if the
+    runtime section measured both sizes in this topology."""
+    found = {
+        r["nodes"]: r
+        for r in runtime.get("runs", [])
+        if r["topology"] == topology and r["runtime"] == "zenoh defaults" and "per_hop_us" in r
+    }
+    if 8 not in found or 64 not in found:
+        return ""
+    a, b = found[8]["per_hop_us"], found[64]["per_hop_us"]
+    return (
+        f"; both rings on Zenoh's default runtime: {b['ring'] / a['ring']:.2f}× "
+        f"({a['ring']:.0f} → {b['ring']:.0f} µs; bare {b['baseline'] / a['baseline']:.2f}×)"
+    )
+
+
 def aims(sections: dict[str, Any]) -> str:
     rows: list[list[Any]] = []
     runs = sections.get("scaling", {}).get("runs", [])
@@ -282,6 +299,7 @@ def aims(sections: dict[str, Any]) -> str:
                     f"; bare Zenoh {bare_b / bare_a:.2f}× ({bare_a:.0f} → {bare_b:.0f} µs); "
                     f"tokenring's own share {a['per_hop_us'] - bare_a:.0f} → {b['per_hop_us'] - bare_b:.0f} µs"
                 )
+            measured += defaults_growth_note(sections.get("runtime", {}), topology)
             rows.append(
                 [
                     f"per-hop cost flat from 8 to 64 nodes ({topology}s)",
@@ -748,13 +766,17 @@ def robot_md(out_dir: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_report(results: dict[str, Any], out_dir: Path, md_path: Path | None = None) -> Path:
-    """Write the PNGs under ``out_dir/plots`` and RESULTS.md beside ``out_dir``; returns its path."""
+def write_report(
+    results: dict[str, Any], out_dir: Path, md_path: Path | None = None, current: Path | None = None
+) -> Path:
+    """Write the PNGs under ``out_dir/plots`` and RESULTS.md beside ``out_dir``; returns its path.
+
+    Sections missing from ``results`` come from the latest other result file in ``out_dir``
+    (``current``: the file ``results`` was written to, never its own source)."""
     out_dir = Path(out_dir)
     md_path = md_path or out_dir.parent / "RESULTS.md"
     plots = out_dir / "plots"
     plots.mkdir(parents=True, exist_ok=True)
-    current = out_dir / f"{results['date'][:10]}{'-quick' if results.get('quick') else ''}.json"
     sections: dict[str, Any] = dict(results["sections"])
     borrowed: dict[str, str] = {}
     for name in ("scaling", "transports", "runtime", "load", "commands", "profile", "recovery", "download"):

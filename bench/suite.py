@@ -283,7 +283,7 @@ RUNTIMES = {"tokenring": None, "zenoh defaults": "()"}  # None: tokenring's NODE
 
 
 def runtime_cases(quick: bool) -> list[tuple[int, str]]:
-    return [(8, "peer")] if quick else [(8, "peer"), (64, "router")]
+    return [(8, "peer")] if quick else [(8, "peer"), (8, "router"), (64, "router")]
 
 
 def section_runtime(ctx: Context) -> dict[str, Any]:
@@ -669,16 +669,27 @@ def main(argv: list[str] | None = None) -> int:
     results["seconds"] = round(time.monotonic() - progress.t0, 1)
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
-    stem = started.strftime("%Y-%m-%d") + ("-quick" if args.quick else "")
-    path = out_dir / f"{stem}.json"
+    path = result_path(out_dir, started, args.quick, sections if args.sections else None)
     path.write_text(json.dumps(results, indent=1) + "\n")
     sys.stderr.write(f"written {path} ({results['seconds']:.0f} s)\n")
     if not args.no_report:
         from bench.report import write_report
 
-        md = write_report(results, out_dir)
+        md = write_report(results, out_dir, current=path)
         sys.stderr.write(f"written {md}\n")
     return 1 if results["errors"] else 0
+
+
+def result_path(out_dir: Path, started: dt.datetime, quick: bool, sections: list[str] | None) -> Path:
+    """``<date>[-quick][-<sections>].json``, with the time added rather than overwrite an earlier
+    run's file: a partial run on the same day must not erase the full run's other sections."""
+    stem = started.strftime("%Y-%m-%d") + ("-quick" if quick else "")
+    if sections:
+        stem += "-" + "+".join(sections)
+    path = out_dir / f"{stem}.json"
+    if path.exists():
+        path = out_dir / f"{stem}-{started.strftime('%H%M%S')}.json"
+    return path
 
 
 def parse_sizes(text: str) -> dict[str, list[int]]:

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import datetime as dt
+
 from bench.report import aims, runtime_md
+from bench.suite import result_path
 
 
 def ring(nodes: int, topology: str, bare_ms: float, ring_ms: float, p99_ms: float) -> dict:
@@ -64,3 +67,33 @@ def test_the_8_node_aim_is_judged_on_the_shared_runtime_and_names_the_defaults_b
     assert "74.4 ms" in big and big.endswith("**met** |")
     # without the runtime section the row carries no such note
     assert "default runtime" not in aims({"scaling": scaling})
+
+
+def test_a_later_run_on_the_same_day_never_overwrites_an_earlier_result_file(tmp_path):
+    morning, evening = dt.datetime(2026, 11, 21, 9, 0, 0), dt.datetime(2026, 11, 21, 19, 30, 5)
+    full = result_path(tmp_path, morning, False, None)
+    assert full.name == "2026-11-21.json"
+    full.write_text("{}")
+    assert result_path(tmp_path, evening, False, ["runtime"]).name == "2026-11-21-runtime.json"
+    assert result_path(tmp_path, evening, True, None).name == "2026-11-21-quick.json"
+    assert result_path(tmp_path, evening, False, None).name == "2026-11-21-193005.json"
+
+
+def test_the_router_flatness_aim_names_the_growth_on_zenohs_default_runtime():
+    scaling = {"runs": [ring(8, "router", 0.8, 1.03, 1.3), ring(64, "router", 10.25, 14.71, 19.1)]}
+    runtime = {
+        "node_runtime": "x",
+        "runs": [
+            runtime_run(8, "router", "zenoh defaults", 1.434, 1.714),
+            runtime_run(64, "router", "zenoh defaults", 15.9, 19.84),
+        ],
+    }
+    row = next(
+        line for line in aims({"scaling": scaling, "runtime": runtime}).splitlines() if "(routers)" in line
+    )
+    # 129 -> 230 µs per hop under tokenring's runtime; 214 -> 310 µs under Zenoh's defaults
+    assert row.startswith(
+        "| per-hop cost flat from 8 to 64 nodes (routers) | within 1.5× | 1.79× (129 → 230 µs)"
+    )
+    assert "both rings on Zenoh's default runtime: 1.45× (214 → 310 µs; bare 1.39×)" in row
+    assert row.endswith("**missed** |")
