@@ -256,9 +256,18 @@ def recovery_time(
     return max(done) - start
 
 
-def collect_stats(session: zenoh.Session, ring: str) -> dict[int, dict[str, int]]:
+def collect_stats(
+    session: zenoh.Session, ring: str, expect: set[int] | None = None
+) -> dict[int, dict[str, int]]:
+    """Every answering node's counters; stops waiting once all of ``expect`` answered, so a hung
+    node (which answers nothing) does not hold up the scenario's schedule."""
     out = {}
-    for _, reply in query(session, keys.control(ring, "*", "stats"), timeout=1.5):
+
+    def enough(replies: list[tuple[str, Any]]) -> bool:
+        answered = {r["result"]["id"] for _, r in replies if r.get("ok")}
+        return expect is not None and expect <= answered
+
+    for _, reply in query(session, keys.control(ring, "*", "stats"), timeout=1.5, enough=enough):
         if reply.get("ok"):
             result = reply["result"]
             out[result["id"]] = {k: result["stats"].get(k, 0) for k in STAT_KEYS}
@@ -368,6 +377,7 @@ def _run(session, ring, scenario, protocol, say, launcher) -> dict[str, Any]:
     time.sleep(1.0)  # a calm second to start from
     client = FaultClient(session, ring)
     membership = Membership(set(present))
+    known: dict[int, dict[str, int]] = {}  # each node's latest counters
     t0 = time.perf_counter()
     steps: list[dict[str, Any]] = []
     for step in scenario.faults:
@@ -379,8 +389,13 @@ def _run(session, ring, scenario, protocol, say, launcher) -> dict[str, Any]:
             if step.node == "all"
             else [protocol.node(int(step.node) if step.node.isdigit() else step.node).id]
         )
-        before = collect_stats(session, ring)
-        probes = collect_probes(session, ring, sorted(present)) if scenario.workload == "probe" else {}
+        # only the nodes that should answer are waited for; a hung one keeps its last counters
+        # (it is stopped: they cannot move), so the next step's deltas stay its own
+        known.update(collect_stats(session, ring, membership.present))
+        before = dict(known)
+        probes = (
+            collect_probes(session, ring, sorted(membership.present)) if scenario.workload == "probe" else {}
+        )
         injected = time.perf_counter()
         errors = []
         for node_id in targets:
@@ -410,7 +425,8 @@ def _run(session, ring, scenario, protocol, say, launcher) -> dict[str, Any]:
     time.sleep(
         max(0.0, max(t0 + scenario.duration, steps[-1]["injected"] + scenario.settle) - time.perf_counter())
     )
-    end_stats = collect_stats(session, ring)
+    known.update(collect_stats(session, ring, membership.present))
+    end_stats = dict(known)
     end_probes = (
         collect_probes(session, ring, sorted(membership.present)) if scenario.workload == "probe" else {}
     )
@@ -429,6 +445,7 @@ def _run(session, ring, scenario, protocol, say, launcher) -> dict[str, Any]:
         report_steps.append(
             {
                 "at": step["at"],
+                "injected_s": round(start - t0, 3),  # when it really landed (the schedule's "at")
                 "node": step["node"],
                 "kind": step["kind"],
                 "recovered_ms": None if recovered is None else recovered * 1e3,

@@ -7,6 +7,7 @@ import json
 import socket
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -93,12 +94,17 @@ def discover(session: zenoh.Session, ring: str, timeout: float = 5.0, settle: fl
 
 
 def query(
-    session: zenoh.Session, key: str, request: Any = None, timeout: float = 2.0
+    session: zenoh.Session,
+    key: str,
+    request: Any = None,
+    timeout: float = 2.0,
+    enough: Callable[[list[tuple[str, Any]]], bool] | None = None,
 ) -> list[tuple[str, Any]]:
     """Query a control key; returns (key, decoded reply) for every answer.
 
-    A key with a wildcard asks every matching node (and waits for all, up to ``timeout``); a
-    plain key asks the best matching one only, so a hung node elsewhere cannot delay it."""
+    A key with a wildcard asks every matching node (and waits for all, up to ``timeout``, or
+    until ``enough`` says the answers so far suffice: a hung node answers nothing); a plain key
+    asks the best matching one only, so a hung node elsewhere cannot delay it."""
     payload = msgpack.packb(request) if request is not None else None
     out: list[tuple[str, Any]] = []
     wildcard = "*" in key
@@ -114,6 +120,8 @@ def query(
         for reply in replies:
             if reply.ok is not None:
                 out.append((str(reply.ok.key_expr), msgpack.unpackb(reply.ok.payload.to_bytes())))
+                if enough is not None and enough(out):
+                    break
     except zenoh.ZError as exc:
         raise TransportError(f"query {key} failed: {exc}") from exc
     return out
