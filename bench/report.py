@@ -545,12 +545,12 @@ def runtime_md(section: dict[str, Any]) -> str:
                 f"{f(zenoh['bare_rtt_ms']['median'], 3)} → {f(ours['bare_rtt_ms']['median'], 3)} ms"
             )
     text = [
-        "## Zenoh's runtime: one thread per process",
+        "## Zenoh's runtime: one thread for a node's frames",
         "",
         "Zenoh runs its I/O on async runtimes, by default six threads per process (rx ×2, tx, net, acc, app), "
-        "so a frame is read on one thread, handed to Python, and its successor's frame written by another. "
+        "so a frame is read on one thread, handed to Python, and the frame passed on written by another. "
         "tokenring's processes (`tokenring up`, `bench`, every node the launcher starts) set "
-        f"`ZENOH_RUNTIME={section['node_runtime']}`, one worker thread doing all of it, unless the user's "
+        f"`ZENOH_RUNTIME={section['node_runtime']}`, one worker thread receiving and sending, unless the user's "
         "environment sets `ZENOH_RUNTIME` (`()` gives Zenoh's defaults). Both rings of every comparison in "
         "this report run under the same runtime; here each pair runs under each runtime "
         "(`extra µs/hop`: tokenring's per-hop cost over the bare ring's).",
@@ -573,7 +573,7 @@ def runtime_md(section: dict[str, Any]) -> str:
         "",
     ]
     if gains:
-        text += ["One thread: " + "; ".join(gains) + ".", ""]
+        text += ["tokenring's runtime against Zenoh's defaults: " + "; ".join(gains) + ".", ""]
     return "\n".join(text) + "\n"
 
 

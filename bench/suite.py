@@ -7,7 +7,7 @@ Sections (``--sections``, all by default):
                  both topologies: a full mesh of peers and clients of a Zenoh router;
                  RSS and CPU per node, the launcher's (router's) CPU, a fit of the cost in N;
 * ``transports`` the same ring over Zenoh (peers, router), plain UDP sockets and ZeroMQ;
-* ``runtime``    Zenoh's async runtime as tokenring sets it (one worker thread per process)
+* ``runtime``    Zenoh's async runtime as tokenring sets it (one worker thread for rx and tx)
                  against Zenoh's defaults, both rings (bare and tokenring) under each;
 * ``load``       the robot's eight programs running (world simulator, real channel load) vs
                  the same eight nodes idle;
