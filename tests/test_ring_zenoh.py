@@ -359,7 +359,9 @@ def zenoh_threads(pid: int) -> set[str]:
     return {n for n in names if n.split("-")[0] in ("rx", "tx", "net", "acc", "app")}
 
 
-def test_nodes_receive_and_send_on_one_zenoh_thread_unless_the_user_sets_the_runtime(procs, ring_name, endpoint):
+def test_nodes_receive_and_send_on_one_zenoh_thread_unless_the_user_sets_the_runtime(
+    procs, ring_name, endpoint
+):
     # one worker thread receives and sends: 0.83 -> 0.66 ms for the bare 8-node ring (RESULTS.md)
     for user_runtime in (None, "()"):  # "()": Zenoh's defaults, a thread per runtime
         ring = ring_name + ("user" if user_runtime else "")
