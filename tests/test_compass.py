@@ -3,7 +3,10 @@ out (the seed's compass never worked), and the module calibrating itself on an i
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 import pytest
@@ -72,8 +75,11 @@ def test_flip_removes_the_bridge_offset():
     assert field == pytest.approx(expected, abs=0.3)
 
 
-def test_compass_module_calibrates_by_turning_and_then_follows_the_true_heading():
-    sim = Simulator(load_world("empty"), seed=11, speed=40.0)
+@contextlib.contextmanager
+def motor_and_compass_ring(seed: int) -> Iterator[tuple[Simulator, MemoryRing, Any, Any]]:
+    """main, motor and compass on an in-memory ring over the empty room, compass samples flowing:
+    (simulator, ring, main, main's view of compass.data); the programs stop on the way out."""
+    sim = Simulator(load_world("empty"), seed=seed, speed=40.0)
     ring = MemoryRing([10, 20, 40])
     main = ring.nodes[10]
     main.set_own_input_id()
@@ -82,6 +88,15 @@ def test_compass_module_calibrates_by_turning_and_then_follows_the_true_heading(
     ring.nodes[40].start_program(CompassProgram, CompassHardware.local(sim))
     try:
         wait_for(lambda: data.visits and data.read()["sample"] > 2, 10, "compass samples")
+        yield sim, ring, main, data
+    finally:
+        for node_id in (20, 40):
+            ring.nodes[node_id].stop_program()
+        ring.close()
+
+
+def test_compass_module_calibrates_by_turning_and_then_follows_the_true_heading():
+    with motor_and_compass_ring(seed=11) as (sim, ring, main, data):
         assert data.read()["state"] == 0  # UNCALIBRATED
         assert main.deliver("compass", "CALIBRATE", timeout=5)
         wait_for(lambda: data.read()["state"] == 1, 30, "calibration done")
@@ -98,22 +113,10 @@ def test_compass_module_calibrates_by_turning_and_then_follows_the_true_heading(
             heading = cdeg_to_heading(data.read()["heading_cdeg"])
             errors.append(math.degrees(abs(angle_difference(heading, sim.truth()["heading_rad"]))))
         assert max(errors) <= 2.5, errors
-    finally:
-        for node_id in (20, 40):
-            ring.nodes[node_id].stop_program()
-        ring.close()
 
 
 def test_compass_module_learns_a_misjudged_running_field_again_on_straight_moves():
-    sim = Simulator(load_world("empty"), seed=5, speed=40.0)
-    ring = MemoryRing([10, 20, 40])
-    main = ring.nodes[10]
-    main.set_own_input_id()
-    data = main.subscribe("compass.data")
-    ring.nodes[20].start_program(MotorProgram, MotorHardware.local(sim))
-    ring.nodes[40].start_program(CompassProgram, CompassHardware.local(sim))
-    try:
-        wait_for(lambda: data.visits and data.read()["sample"] > 2, 10, "compass samples")
+    with motor_and_compass_ring(seed=5) as (_sim, ring, main, data):
         assert main.deliver("compass", "CALIBRATE", timeout=5)
         wait_for(lambda: data.read()["state"] == 1, 30, "calibration done")
         compass = ring.nodes[40].program
@@ -130,10 +133,6 @@ def test_compass_module_learns_a_misjudged_running_field_again_on_straight_moves
         report = compass.report()
         assert report["running_moves"]["learned"] >= 3, report
         assert report["running_ut"] == pytest.approx([2.0, 1.5], abs=0.12)  # MOTOR_RUNNING_UT
-    finally:
-        for node_id in (20, 40):
-            ring.nodes[node_id].stop_program()
-        ring.close()
 
 
 class TurningCompassStub:
