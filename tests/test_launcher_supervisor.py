@@ -22,14 +22,17 @@ class ShortLivedLauncher(Launcher):
         return [sys.executable, "-c", f"import time, sys; time.sleep({lifetime}); sys.exit(3)"]
 
 
+def short_and_long(ring: str, endpoint: str, **options) -> ShortLivedLauncher:
+    """A launcher of two children: "short" (id 1) exits with code 3 after 0.3 s, "long" lives on."""
+    options.setdefault("output", io.StringIO())
+    return ShortLivedLauncher(
+        [NodePlan(1, "short", None), NodePlan(2, "long", None)], ring=ring, listen=[endpoint], **options
+    )
+
+
 def test_a_childs_exit_is_reported_at_once_without_polling_the_others(procs, ring_name, endpoint):
     output = io.StringIO()
-    launcher = ShortLivedLauncher(
-        [NodePlan(1, "short", None), NodePlan(2, "long", None)],
-        ring=ring_name,
-        listen=[endpoint],
-        output=output,
-    )
+    launcher = short_and_long(ring_name, endpoint, output=output)
     checks = 0
     check_children = launcher.check_children
 
@@ -66,12 +69,7 @@ def test_an_exit_is_reported_even_while_another_thread_polls_that_child(procs, r
     # polled beside the supervisor and failed that way once in a full suite run)
     from pathlib import Path
 
-    launcher = ShortLivedLauncher(
-        [NodePlan(1, "short", None), NodePlan(2, "long", None)],
-        ring=ring_name,
-        listen=[endpoint],
-        output=io.StringIO(),
-    )
+    launcher = short_and_long(ring_name, endpoint)
     launcher.start()
     try:
         procs.watch([c.process.pid for c in launcher.child_list()])
@@ -96,13 +94,7 @@ def test_respawn_starts_a_dead_node_again_after_a_short_delay(procs, ring_name, 
     # cores with a booting interpreter (crash recovery 21 ms with the delay, 27 ms without)
     from tokenring.launcher import RESPAWN_DELAY_S
 
-    launcher = ShortLivedLauncher(
-        [NodePlan(1, "short", None), NodePlan(2, "long", None)],
-        ring=ring_name,
-        listen=[endpoint],
-        output=io.StringIO(),
-        respawn=True,
-    )
+    launcher = short_and_long(ring_name, endpoint, respawn=True)
     launcher.start()
     try:
         first = launcher.children[1]
