@@ -109,7 +109,7 @@ class Program(UserProgram):
         pose = None
         if copro["pose_source"]:
             pose = pose_from_wire(copro["pose_x_mm"], copro["pose_y_mm"], copro["pose_angle_cdeg"])
-        elif self.motor.visits:
+        elif self.motor.published:
             pose = pose_from_wire(motor["x_mm"], motor["y_mm"], motor["angle_cdeg"])
         heading = compass["heading_cdeg"] if self.compass.visits and compass["state"] != 3 else None
         return Sensors(

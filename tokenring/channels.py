@@ -42,6 +42,14 @@ class ChannelBuffer:
         self.mutex = threading.Lock()
         self.visits = 0  # how many visits copied into/out of this buffer
 
+    @property
+    def published(self) -> bool:
+        """True once the channel holds anything but the token's initial zeros (SPEC: main starts
+        the token as zeros), i.e. its owner has stored into it; a reader started together with
+        the owner may copy the zeros first, which are no data."""
+        with self.mutex:
+            return any(self.raw)
+
     def read(self) -> dict[str, Any]:
         """All fields as plain Python values, consistent with one visit."""
         with self.mutex:

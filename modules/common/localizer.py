@@ -727,8 +727,8 @@ class Localizer:
 
     def _step(self, core: LocalizationCore) -> SyncResult | None:
         for sensor, buffer in self.buffers.items():
-            if buffer.visits == 0:
-                continue  # nothing copied out of the token yet
+            if buffer.visits == 0 or not buffer.published:
+                continue  # nothing copied out of the token yet, or only its zeros before the owner's first store
             values = buffer.read()
             seq_field = SEQ_FIELDS.get(sensor)
             seq = values.get(seq_field) if seq_field else None
