@@ -244,7 +244,13 @@ def test_compass_samples_just_after_the_motors_start_or_stop_are_left_out() -> N
 def test_the_start_pose_from_the_motor_waits_for_the_motors_first_publication(ring) -> None:
     """Programs start together: copro may read motor.data while it still holds the token's initial
     zeros. Those are no pose — the filter starts where the motor says once it publishes."""
-    config = load_config({"filter": {"initial_pose": "motor"}, "sensors": {"battery": {"use": False}}})
+    config = load_config(
+        {
+            "filter": {"initial_pose": "motor"},
+            "sensors": {"battery": {"use": False}},
+            "logs": {"enabled": False},
+        }
+    )
     copro = ring.by_name("copro")
     loc = Localizer(copro, config)
     loc.setup()
