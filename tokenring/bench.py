@@ -276,7 +276,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bitrate", default="max", help="emulated bitrate of the ring (default %(default)s)")
     p.add_argument("--ack", default="adaptive", choices=("adaptive", "always", "never"))
     p.add_argument("--repeat", type=int, default=1, help="alternate bare/ring runs this many times")
-    p.add_argument("--timeout", type=float, default=120.0, help="seconds allowed per run")
+    p.add_argument(
+        "--timeout",
+        type=float,
+        help="seconds allowed per run (default: 120 plus 1 ms per node and round, plus the wire time)",
+    )
     p.add_argument("--json", metavar="FILE", help="write the results as JSON ('-' for stdout)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.add_argument(
@@ -292,6 +296,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="what carries the ring's token (the baseline stays a bare Zenoh ring)",
     )
     p.add_argument("--profile", help="emulated hardware timing (arcnet: the seed robot; needs a bitrate)")
+
+
+def run_budget(nodes: int, rounds: int, bitrate: float | None) -> float:
+    """Seconds a run of ``rounds`` may take: forming plus 1 ms per hop (a 255-node round is ~80 ms
+    on two cores) plus the emulated wire time; a fixed 120 s failed 2000 rounds of 255 nodes."""
+    from tokenring.ring import hop_time
+
+    return 120.0 + rounds * nodes * (0.001 + hop_time(bitrate))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -311,6 +323,8 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(
                 f"--profile {args.profile} emulates hardware timing: give a bitrate such as 2.5M, not max"
             )
+    if args.timeout is None:
+        args.timeout = run_budget(args.nodes, args.rounds + args.warmup, bitrate)
     router = args.topology == "router" or (args.topology == "auto" and args.nodes >= ROUTER_FROM)
     topology = "router" if router else "peer"
     bare: list[float] = []
