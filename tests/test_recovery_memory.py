@@ -91,26 +91,33 @@ def test_a_lost_token_is_regenerated_once_by_the_highest_node():
         ring.close()
 
 
-def test_a_lost_pass_is_retried_or_regenerated_once(ring):
-    before_each = {i: n.stats.tokens_regenerated for i, n in ring.nodes.items()}
-    before_regen = sum(before_each.values())
-    before_retry = sum(n.stats.pass_retries for n in ring.nodes.values())
-    ring.hub.drop_frames(1)
-    wait_for(
-        lambda: (
-            sum(n.stats.tokens_regenerated for n in ring.nodes.values()) > before_regen
-            or sum(n.stats.pass_retries for n in ring.nodes.values()) > before_retry
-        ),
-        3,
-        "a retry or a regeneration",
-    )
-    ring.wait_rounds(20, node_id=10)
-    assert_one_token_through(ring, IDS)
-    # one node regenerates (the highest rank), never several at once; on a loaded machine it may
-    # have to try twice when its first token is held up longer than a reconfiguration time
-    regenerated_by = [i for i, n in ring.nodes.items() if n.stats.tokens_regenerated > before_each[i]]
-    assert len(regenerated_by) <= 1, regenerated_by
-    assert sum(n.stats.tokens_regenerated for n in ring.nodes.values()) - before_regen <= 2
+def test_a_lost_pass_is_retried_or_regenerated_once():
+    # at ARCNET's 2.5 Mbit/s the ranks' regeneration slots are 210 ms apart (at max only 12.5 ms,
+    # which a stalled test process can outlast: nodes 70 and 80 both regenerated once in a full run)
+    ring = MemoryRing(IDS, bitrate=2.5e6)
+    try:
+        ring.wait_rounds(30)
+        before_each = {i: n.stats.tokens_regenerated for i, n in ring.nodes.items()}
+        before_regen = sum(before_each.values())
+        before_retry = sum(n.stats.pass_retries for n in ring.nodes.values())
+        ring.hub.drop_frames(1)
+        wait_for(
+            lambda: (
+                sum(n.stats.tokens_regenerated for n in ring.nodes.values()) > before_regen
+                or sum(n.stats.pass_retries for n in ring.nodes.values()) > before_retry
+            ),
+            5,
+            "a retry or a regeneration",
+        )
+        ring.wait_rounds(20, node_id=10)
+        assert_one_token_through(ring, IDS)
+        # one node regenerates (the highest rank), never several at once; on a loaded machine it
+        # may have to try twice when its first token is held up longer than a reconfiguration time
+        regenerated_by = [i for i, n in ring.nodes.items() if n.stats.tokens_regenerated > before_each[i]]
+        assert len(regenerated_by) <= 1, regenerated_by
+        assert sum(n.stats.tokens_regenerated for n in ring.nodes.values()) - before_regen <= 2
+    finally:
+        ring.close()
 
 
 def test_an_injected_duplicate_token_is_eliminated(ring):
