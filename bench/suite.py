@@ -286,6 +286,22 @@ def runtime_cases(quick: bool) -> list[tuple[int, str]]:
     return [(8, "peer")] if quick else [(8, "peer"), (8, "router"), (64, "router")]
 
 
+def bench_cli(args: list[str], runtime: str, timeout: float) -> dict[str, Any]:
+    """``tokenring bench <args> --json`` in its own process under Zenoh ``runtime``: its results,
+    or ``{"error": why}`` (a failed or overlong run must not end the suite and lose its report)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "bench.json"
+        cmd = [sys.executable, "-m", "tokenring", "bench", *args, "--quiet", "--json", str(path)]
+        env = dict(os.environ, ZENOH_RUNTIME=runtime)
+        try:
+            done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return {"error": f"no result in {timeout:.0f} s"}
+        if done.returncode != 0 or not path.exists():
+            return {"error": (done.stderr.strip().splitlines() or [f"exit {done.returncode}"])[-1]}
+        return json.loads(path.read_text())
+
+
 def section_runtime(ctx: Context) -> dict[str, Any]:
     """``tokenring bench`` under each Zenoh runtime, as a subprocess: the runtime is fixed when a
     process first uses Zenoh, and the router lives in the process that runs the benchmark."""
@@ -294,46 +310,29 @@ def section_runtime(ctx: Context) -> dict[str, Any]:
     out: dict[str, Any] = {"node_runtime": NODE_RUNTIME, "runs": []}
     for n, topology in runtime_cases(ctx.quick):
         rounds, warmup = rounds_for(n, ctx.quick)
+        pairs = pairs_for(n, ctx.quick)
+        args = ["--nodes", str(n), "--topology", topology, "--rounds", str(rounds), "--warmup", str(warmup)]
+        args += ["--repeat", str(pairs), "--timeout", str(timeout_for(n))]
         for label, value in RUNTIMES.items():
             ctx.progress.say(f"runtime: {n} nodes ({topology}s), bare and tokenring, Zenoh runtime {label}")
             record: dict[str, Any] = {"nodes": n, "topology": topology, "runtime": label}
-            with tempfile.TemporaryDirectory() as tmp:
-                path = Path(tmp) / "bench.json"
-                cmd = [sys.executable, "-m", "tokenring", "bench", "--nodes", str(n), "--topology", topology]
-                cmd += [
-                    "--rounds",
-                    str(rounds),
-                    "--warmup",
-                    str(warmup),
-                    "--repeat",
-                    str(pairs_for(n, ctx.quick)),
-                ]
-                cmd += ["--timeout", str(timeout_for(n)), "--quiet", "--json", str(path)]
-                env = dict(os.environ, ZENOH_RUNTIME=value or NODE_RUNTIME)
-                done = subprocess.run(
-                    cmd,
-                    env=env,
-                    capture_output=True,
-                    text=True,
-                    timeout=4 * timeout_for(n) * pairs_for(n, ctx.quick),
+            result = bench_cli(args, value or NODE_RUNTIME, timeout=4 * timeout_for(n) * pairs)
+            if "error" in result:
+                record["error"] = result["error"]
+                ctx.progress.note(f"failed: {record['error']}")
+            else:
+                record.update(
+                    rtt_ms=result["rtt_ms"],
+                    bare_rtt_ms=result["baseline_rtt_ms"],
+                    ratio=result["ratio_median"],
+                    per_hop_us=result["per_hop_us"],
+                    handler_us=result["handler_us"],
+                    cpu_per_node_pct=result["cpu_per_node_pct"]["mean"],
                 )
-                if done.returncode != 0 or not path.exists():
-                    record["error"] = (done.stderr.strip().splitlines() or [f"exit {done.returncode}"])[-1]
-                    ctx.progress.note(f"failed: {record['error']}")
-                else:
-                    result = json.loads(path.read_text())
-                    record.update(
-                        rtt_ms=result["rtt_ms"],
-                        bare_rtt_ms=result["baseline_rtt_ms"],
-                        ratio=result["ratio_median"],
-                        per_hop_us=result["per_hop_us"],
-                        handler_us=result["handler_us"],
-                        cpu_per_node_pct=result["cpu_per_node_pct"]["mean"],
-                    )
-                    ctx.progress.note(
-                        f"bare {result['baseline_rtt_ms']['median']:.3f} ms, "
-                        f"tokenring {result['rtt_ms']['median']:.3f} ms ({result['ratio_median']:.2f}×)"
-                    )
+                ctx.progress.note(
+                    f"bare {result['baseline_rtt_ms']['median']:.3f} ms, "
+                    f"tokenring {result['rtt_ms']['median']:.3f} ms ({result['ratio_median']:.2f}×)"
+                )
             record["load"] = load_avg()
             out["runs"].append(record)
     return out

@@ -26,7 +26,7 @@ import numpy as np
 from tokenring import keys
 from tokenring.cliutil import format_table, free_port, query, write_json
 from tokenring.errors import TokenRingError, UsageError
-from tokenring.launcher import Launcher, NodePlan
+from tokenring.launcher import Launcher, NodePlan, die_with_parent
 from tokenring.zconfig import make_config, node_environment, open_session
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
@@ -106,9 +106,15 @@ def run_bare(
     router_session = (
         open_session(make_config(mode="router", listen=[f"tcp/127.0.0.1:{port}"])) if router else None
     )
-    first = subprocess.Popen([*base, "--index", "0"], stdout=subprocess.PIPE, text=True, env=env)
+    # like the launcher's nodes, the bare ring dies with a benchmark that is killed
+    first = subprocess.Popen(
+        [*base, "--index", "0"], stdout=subprocess.PIPE, text=True, env=env, preexec_fn=die_with_parent
+    )
     others = [
-        subprocess.Popen([*base, "--index", str(i)], stdout=subprocess.DEVNULL, env=env) for i in range(1, n)
+        subprocess.Popen(
+            [*base, "--index", str(i)], stdout=subprocess.DEVNULL, env=env, preexec_fn=die_with_parent
+        )
+        for i in range(1, n)
     ]
     try:
         out, _ = first.communicate(timeout=timeout + 30)

@@ -48,7 +48,8 @@ RESPAWN_DELAY_S = 0.1
 KILL_REAP_S = 10.0  # after SIGKILL, how long the kernel may take to reap them all
 
 
-def _set_pdeathsig() -> None:  # pragma: no cover - runs in the child between fork and exec
+def die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
+    """``preexec_fn`` of a child process: the kernel kills it when its parent dies, even by SIGKILL."""
     libc = ctypes.CDLL("libc.so.6", use_errno=True)
     libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
 
@@ -314,7 +315,7 @@ class Launcher:
             text=True,
             bufsize=1,
             env=env,
-            preexec_fn=_set_pdeathsig,  # only prctl in the child: async-signal-safe
+            preexec_fn=die_with_parent,  # only prctl in the child: async-signal-safe
         )
         assert process.stdout is not None
         with self._selector_lock:
