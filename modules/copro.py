@@ -183,7 +183,7 @@ class Program(UserProgram):
     def _update_pose(self) -> tuple[float, float, float] | None:
         """Record dead reckoning; return the best pose now (EKF if running)."""
         motor = self.motor.read()
-        if self.motor.visits and self.motor.published:
+        if self.motor.published:
             self.history.add(
                 motor["stamp_ms"], pose_from_wire(motor["x_mm"], motor["y_mm"], motor["angle_cdeg"])
             )

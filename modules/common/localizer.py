@@ -727,7 +727,7 @@ class Localizer:
 
     def _step(self, core: LocalizationCore) -> SyncResult | None:
         for sensor, buffer in self.buffers.items():
-            if buffer.visits == 0 or not buffer.published:
+            if not buffer.published:
                 continue  # nothing copied out of the token yet, or only its zeros before the owner's first store
             values = buffer.read()
             seq_field = SEQ_FIELDS.get(sensor)
