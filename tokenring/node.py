@@ -16,7 +16,6 @@ off that path. User programs run in their own thread and talk to the handler onl
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import os
 import random
@@ -37,9 +36,9 @@ from tokenring.channels import (
     _Offsets,
 )
 from tokenring.errors import ChannelError, TokenRingError
-from tokenring.frame import crc16_arc
 from tokenring.protocol import Channel, CommandChannel, Protocol
-from tokenring.ring import ACK_REQUESTED, EPOCH_MASK
+from tokenring.ring import EPOCH_MASK
+from tokenring.tokenpath import TokenPathBase
 from tokenring.transport.base import Transport
 
 log = logging.getLogger("tokenring.node")
@@ -114,7 +113,7 @@ class NodeStats:
         return {name: getattr(self, name) for name in self.FIELDS}
 
 
-class NodeOS:
+class NodeOS(TokenPathBase):  # type: ignore[misc, valid-type]
     """One node of the ring: the token handler, ring membership and the user-program API."""
 
     def __init__(
@@ -187,6 +186,7 @@ class NodeOS:
         self._ack_interval = self.timing.current.ack_interval
         self._rounds_add = self.timing.rounds.add
         self._handler_add = self.timing.handler.add
+        self._send_add = self.timing.send.add
         self._ack_pending = False
         self._retries = 0
         self._confirmed_did = 0
@@ -228,8 +228,11 @@ class NodeOS:
         # the node process sets it, in-process rings may leave it None
         self.request_ring_shutdown: Callable[[str], bool] | None = None
 
-        # hooks filled by later layers (system commands, fault injection)
+        # hooks filled by later layers (system commands, fault injection); the system handler is
+        # called at a visit whose token carries a system command (its issuer byte set) or while
+        # this node has one to send (system_busy): an idle visit costs no Python call for it
         self.system_handler: Callable[[bytearray], bool] | None = None
+        self.system_busy = False
         self.rx_fault: Callable[[bytes, bytes | None], bool] | None = None
         self.tx_fault: Callable[[int, bytearray], bool] | None = None
         self.msg_fault: Callable[[bytes], bool] | None = None
@@ -357,184 +360,24 @@ class NodeOS:
     # =========================================================================================
     # the token handler
 
-    def _on_frame(self, frame: bytes) -> None:
-        t_in = perf_counter()
-        stats = self.stats
-        stats.frames_received += 1
-        if self.rx_fault is not None and self.rx_fault(frame):
-            return
-        if self._departed:
-            return
-        size = self._token_size
-        if len(frame) != self._frame_size:
-            stats.rejected_length += 1
-            return
-        # CRC-16/ARC over a frame and its own (little-endian) CRC is zero: no slicing, no view
-        if crc16_arc(frame):
-            stats.rejected_crc += 1
-            return
-        crc = frame[size] | (frame[size + 1] << 8)
-        if not frame.startswith(self._const_bytes, self._const_lo):
-            stats.rejected_marker += 1
-            return
-        if frame[self._o_did] != self.node_id:
-            stats.rejected_did += 1
-            return
-        sid = frame[self._o_sid]
-        if sid not in self._live:
-            stats.rejected_sid += 1
-            return
-        flags = frame[self._o_epoch]
-        if crc == self._accepted_crc and sid == self._accepted_sid:
-            stats.duplicate_passes += 1  # a retry of a pass we already took
-            if flags & ACK_REQUESTED:
-                self._send_ack(sid, crc)
-            return
-        epoch, origin = flags & EPOCH_MASK, frame[self._o_origin]
-        if epoch != self._epoch or origin != self._origin:
-            if R.epoch_order(epoch, origin, self._epoch, self._origin) < 0:
-                stats.stale_tokens += 1
-                self._send_message(
-                    sid, R.ACK_MESSAGE.pack(b"S", self.node_id, crc, self._epoch, self._origin)
-                )
-                return
-            self._adopt_epoch(epoch, origin, t_in)
-        self._accepted_crc, self._accepted_sid = crc, sid
-        if sid in self._excluded:
-            self._include(sid, tell=True)
-        with self._token_lock:
-            work = self._work
-            work[:] = frame
-            self._last_seen = t_in
-            if self._leaving:
-                self._forward(t_in)
-                if flags & ACK_REQUESTED:
-                    self._send_ack(sid, crc)
-                return
-            counter = work[self._o_counter]
-            system = self.system_handler
-            if not (system(work) if system is not None else work[self._o_issuer]):
-                finished = None
-                for item in self._active:
-                    if item.visit(work) is True:
-                        finished = finished or []
-                        finished.append(item)
-                if finished:
-                    self._drop_outboxes(finished)
-                if self._pending_outboxes:
-                    self._activate_outboxes()
-                if t_in < self._recovery_until and self._outboxes:
-                    self._sweep_own_commands(work)
-            # a round starts where the ring wraps: the node that gets the token from a higher ID
-            # counts it (main, the lowest ID, in the robot's ring; a lone node at every pass).
-            # This needs no shared view of who is in the ring, so even while views differ
-            # (a partition healing) exactly one node per round counts, and no two rounds
-            # carry identical bytes that a receiver would take for a retransmission.
-            wraps = sid >= self.node_id
-            if wraps:
-                work[self._o_counter] = (counter + 1) & 0xFF
-            self._paced = 0.0
-            self._forward(t_in)
-            # the handler's time: from the frame's arrival to the put that passes it on (the time
-            # the token is held here), without the emulated wire time
-            held = self._last_sent_time - t_in - self._paced
-            # bookkeeping after the pass: on a loaded machine it overlaps the successor's work
-            # instead of delaying the token (bench/RESULTS.md measures the per-hop cost)
-            if self._last_visit:
-                self._rounds_add(t_in - self._last_visit)
-            self._last_visit = t_in
-            if self._regeneration_streak:  # the token is back: the loss timer starts afresh
-                self._regeneration_streak = 0
-                self._wake()
-            if (counter - self._last_counter) & 0xFF > 1 and self._last_counter >= 0:
-                stats.rounds_missed += ((counter - self._last_counter) & 0xFF) - 1
-            self._last_counter = counter
-            stats.visits += 1
-            if wraps:
-                stats.rounds += 1
-        if flags & ACK_REQUESTED:  # after the pass: the token must not wait for our ack
-            self._send_ack(sid, crc)
-        self._handler_add(held)
-        if self._visit_waiters:
-            with self._visit_cond:
-                self._visit_cond.notify_all()
+    # the handler itself (_on_frame, _forward, _transmit, _wake) is the TokenPathBase's: C or
+    # Python (tokenring/tokenpath.py); what follows are the rare steps both call
 
-    def _forward(self, t_in: float) -> None:
-        """Seal and pass the working token to the successor (caller holds the token lock).
+    def _answer_stale(self, sid: int, crc: int) -> None:
+        """A pass from an older epoch: drop it and tell its sender which token is current."""
+        self.stats.stale_tokens += 1
+        self._send_message(sid, R.ACK_MESSAGE.pack(b"S", self.node_id, crc, self._epoch, self._origin))
 
-        The working buffer is the last frame sent until the next accepted one replaces it, so
-        retries and regeneration need no copy.
-        """
-        work = self._work
-        did = self.membership.successor
-        work[self._o_sid] = self.node_id
-        work[self._o_did] = did
-        if did == self.node_id:
-            want_ack = False
-        elif self._ack_adaptive:
-            want_ack = (
-                did != self._confirmed_did
-                or t_in < self._recovery_until
-                or t_in - self._confirmed_at > self._ack_interval
-            )
-        else:
-            want_ack = self._ack_always
-        work[self._o_epoch] = self._epoch | ACK_REQUESTED if want_ack else self._epoch
-        work[self._o_origin] = self._origin
-        size = self._token_size
-        crc = crc16_arc(self._work_body)
-        work[size] = crc & 0xFF
-        work[size + 1] = crc >> 8
-        hop = self._hop if self.pacer is None else self.pacer(t_in)  # --profile: tokenring.profile
-        if did == self.node_id:
-            hop = max(hop, 0.001)
-        if hop:
-            delay = t_in + hop - perf_counter()
-            if delay > 0:
-                slept_from = perf_counter()
-                time.sleep(delay)  # emulated wire time; a lone node also waits 1 ms per pass
-                self._paced += perf_counter() - slept_from  # with the sleep's overshoot
-        if did != self._last_sent_did or not self._ack_pending:
-            self._retries = 0
-        elif self._retries:
-            # the previous pass to this successor is still unanswered after a retry: a new
-            # token must not restart the count, or a hung successor eats token after token
-            self._retries += 1
-        self._last_sent_did = did
-        self._last_sent_crc = crc
-        self._has_sent = True
-        self._ack_pending = want_ack or (self._ack_pending and self._retries > 0)
-        self._last_sent_time = perf_counter()  # also ends the handler's time (see _on_frame)
-        self._transmit(did)
-        if want_ack:
-            self._wake()
+    def _send_failed(self, did: int, exc: BaseException) -> None:
+        """A send on the token path raised: count it and log it translated; the watchdog retries."""
+        self.stats.send_errors += 1
+        error = exc if isinstance(exc, TokenRingError) else self.transport.translate(did, exc)
+        log.warning("%s", error)
 
-    def _wake(self) -> None:
-        """Wake the watchdog (idempotent)."""
-        with contextlib.suppress(RuntimeError):  # already awake
-            self._wake_lock.release()
-
-    def _transmit(self, did: int) -> None:
-        if self._closing:
-            return
-        if self.tx_fault is not None and self.tx_fault(did, self._work):
-            return
-        sender = self._senders.get(did)
-        try:
-            if sender is None:
-                sender = self._senders[did] = self.transport.sender(did)
-            stats = self.stats
-            if stats.frames_sent & 15:
-                sender(self._work)
-            else:  # every 16th send is timed
-                t0 = perf_counter()
-                sender(self._work)
-                self.timing.send.add(perf_counter() - t0)
-            stats.frames_sent += 1
-        except Exception as exc:
-            self.stats.send_errors += 1
-            error = exc if isinstance(exc, TokenRingError) else self.transport.translate(did, exc)
-            log.warning("%s", error)
+    def _notify_visit(self) -> None:
+        """Wake the threads blocked in :meth:`wait_visit`."""
+        with self._visit_cond:
+            self._visit_cond.notify_all()
 
     def _adopt_epoch(self, epoch: int, origin: int, now: float) -> None:
         self._epoch, self._origin = epoch & EPOCH_MASK, origin

@@ -445,8 +445,8 @@ class SystemLayer:
         # issuer
         self._queue: deque[Transaction] = deque()
         self._current: Transaction | None = None
-        self._busy = False  # a transaction is queued or in flight: the only check when idle
-        self._lock = threading.Lock()  # _queue and _busy change together
+        self.os.system_busy = False  # a transaction is queued or in flight: the node skips us when idle
+        self._lock = threading.Lock()  # _queue and system_busy change together
         self._saved: bytes | None = None
         self._rest = False  # leave the next free round to others
 
@@ -491,14 +491,14 @@ class SystemLayer:
         """Called at every token visit; True while a system command is active (user channels pause)."""
         issuer = work[self._o_issuer]
         if not issuer:
-            if not self._busy:
+            if not self.os.system_busy:
                 return False
             return self._begin(work)
         if issuer == self.me:
             return self._returned(work)
         if issuer not in self.os.membership.active:
             self._clear_orphan(work, issuer)
-            return self._begin(work) if self._busy else False
+            return self._begin(work) if self.os.system_busy else False
         target = work[self._o_target]
         if target == self.me or target == self.all_nodes:
             self._take(work)
@@ -543,7 +543,7 @@ class SystemLayer:
                 return False
             with self._lock:
                 if not self._queue:
-                    self._busy = False
+                    self.os.system_busy = False
                     return False
                 tx = self._queue.popleft()
             self._current = tx
@@ -635,7 +635,7 @@ class SystemLayer:
         self._restore(work)
         self._rest = True  # one free round for others before our next transaction
         with self._lock:
-            self._busy = bool(self._queue) or self._current is not None
+            self.os.system_busy = bool(self._queue) or self._current is not None
         return False
 
     def _restore(self, work: bytearray) -> None:
@@ -654,7 +654,7 @@ class SystemLayer:
             return tx
         with self._lock:
             self._queue.append(tx)
-            self._busy = True
+            self.os.system_busy = True
         return tx
 
     def execute(self, steps: list[Step], what: str = "", timeout: float = 10.0) -> Transaction:

@@ -1,0 +1,276 @@
+"""The token path: the handler that runs once per token visit, native or in Python.
+
+:class:`~tokenring.node.NodeOS` inherits the handler (``_on_frame``), the pass (``_forward``)
+and the send (``_transmit``) from :data:`TokenPathBase`: the C type of
+``tokenring/_tokenpath.c`` when it was compiled at install, else :class:`PyTokenPath` below,
+the same steps in Python. Both keep the ring's state in the same attributes, so the watchdog,
+the acks and the user API (all Python) read and write it alike; everything rare (a stale
+epoch, an excluded sender, a leaving node, hooks, commands, a failed send) calls the same
+Python methods of the node from either. ``TOKENRING_NATIVE=0`` picks the Python path;
+``tests/test_tokenpath.py`` runs one scenario through both and compares every byte sent.
+
+The visit (see :mod:`tokenring.node` for what each step means):
+
+1. check the frame (length, CRC-16/ARC, markers, DID, SID a ring member, pass not a repeat,
+   epoch not stale) — anything else is dropped and counted, never raised;
+2. system commands (``system_handler``; skipped while no command is anywhere: the issuer byte
+   is clear and the node's ``system_busy`` is not set);
+3. the registered, unlocked user channels (data copies, inbox, outgoing commands);
+4. the counter where the ring wraps, then seal and pass the token to the successor at once;
+   the bookkeeping (round and handler times, counters, the pass's ack) comes after the put.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from tokenring import ring as R
+from tokenring.frame import crc16_arc
+from tokenring.ring import ACK_REQUESTED, EPOCH_MASK
+
+log = logging.getLogger("tokenring.node")
+perf_counter = time.perf_counter
+
+
+class PyTokenPath:
+    """The token path in Python: the fallback where the C extension is missing, and the
+    reference the native path is tested against."""
+
+    system_busy = False  # a system command is queued or in flight here (set by the system layer)
+
+    # attributes the node sets up (declared for the type checker; NodeOS.__init__ assigns them)
+    node_id: int
+    stats: Any
+    membership: Any
+    transport: Any
+    system_handler: Any
+    rx_fault: Any
+    tx_fault: Any
+    pacer: Any
+    _work: bytearray
+    _work_body: memoryview
+    _token_lock: Any
+    _live: Any
+    _excluded: Any
+    _senders: dict[int, Any]
+    _active: tuple[Any, ...]
+    _pending_outboxes: list[Any]
+    _outboxes: dict[str, Any]
+
+    def _on_frame(self, frame: bytes) -> None:
+        t_in = perf_counter()
+        stats = self.stats
+        stats.frames_received += 1
+        if self.rx_fault is not None and self.rx_fault(frame):
+            return
+        if self._departed:
+            return
+        size = self._token_size
+        if len(frame) != self._frame_size:
+            stats.rejected_length += 1
+            return
+        # CRC-16/ARC over a frame and its own (little-endian) CRC is zero: no slicing, no view
+        if crc16_arc(frame):
+            stats.rejected_crc += 1
+            return
+        crc = frame[size] | (frame[size + 1] << 8)
+        if not frame.startswith(self._const_bytes, self._const_lo):
+            stats.rejected_marker += 1
+            return
+        if frame[self._o_did] != self.node_id:
+            stats.rejected_did += 1
+            return
+        sid = frame[self._o_sid]
+        if sid not in self._live:
+            stats.rejected_sid += 1
+            return
+        flags = frame[self._o_epoch]
+        if crc == self._accepted_crc and sid == self._accepted_sid:
+            stats.duplicate_passes += 1  # a retry of a pass we already took
+            if flags & ACK_REQUESTED:
+                self._send_ack(sid, crc)
+            return
+        epoch, origin = flags & EPOCH_MASK, frame[self._o_origin]
+        if epoch != self._epoch or origin != self._origin:
+            if R.epoch_order(epoch, origin, self._epoch, self._origin) < 0:
+                self._answer_stale(sid, crc)
+                return
+            self._adopt_epoch(epoch, origin, t_in)
+        self._accepted_crc, self._accepted_sid = crc, sid
+        if sid in self._excluded:
+            self._include(sid, True)
+        with self._token_lock:
+            work = self._work
+            work[:] = frame
+            self._last_seen = t_in
+            if self._leaving:
+                self._forward(t_in)
+                if flags & ACK_REQUESTED:
+                    self._send_ack(sid, crc)
+                return
+            counter = work[self._o_counter]
+            system = self.system_handler
+            if system is None:
+                system_active = work[self._o_issuer] != 0
+            elif work[self._o_issuer] or self.system_busy:
+                system_active = system(work)
+            else:
+                system_active = False
+            if not system_active:
+                finished = None
+                for item in self._active:
+                    if item.visit(work) is True:
+                        finished = finished or []
+                        finished.append(item)
+                if finished:
+                    self._drop_outboxes(finished)
+                if self._pending_outboxes:
+                    self._activate_outboxes()
+                if t_in < self._recovery_until and self._outboxes:
+                    self._sweep_own_commands(work)
+            # a round starts where the ring wraps: the node that gets the token from a higher ID
+            # counts it (main, the lowest ID, in the robot's ring; a lone node at every pass).
+            # This needs no shared view of who is in the ring, so even while views differ
+            # (a partition healing) exactly one node per round counts, and no two rounds
+            # carry identical bytes that a receiver would take for a retransmission.
+            wraps = sid >= self.node_id
+            if wraps:
+                work[self._o_counter] = (counter + 1) & 0xFF
+            self._paced = 0.0
+            self._forward(t_in)
+            # the handler's time: from the frame's arrival to the put that passes it on (the time
+            # the token is held here), without the emulated wire time
+            held = self._last_sent_time - t_in - self._paced
+            # bookkeeping after the pass: on a loaded machine it overlaps the successor's work
+            # instead of delaying the token (bench/RESULTS.md measures the per-hop cost)
+            if self._last_visit:
+                self._rounds_add(t_in - self._last_visit)
+            self._last_visit = t_in
+            if self._regeneration_streak:  # the token is back: the loss timer starts afresh
+                self._regeneration_streak = 0
+                self._wake()
+            if (counter - self._last_counter) & 0xFF > 1 and self._last_counter >= 0:
+                stats.rounds_missed += ((counter - self._last_counter) & 0xFF) - 1
+            self._last_counter = counter
+            stats.visits += 1
+            if wraps:
+                stats.rounds += 1
+        if flags & ACK_REQUESTED:  # after the pass: the token must not wait for our ack
+            self._send_ack(sid, crc)
+        self._handler_add(held)
+        if self._visit_waiters:
+            self._notify_visit()
+
+    def _forward(self, t_in: float) -> None:
+        """Seal and pass the working token to the successor (caller holds the token lock).
+
+        The working buffer is the last frame sent until the next accepted one replaces it, so
+        retries and regeneration need no copy.
+        """
+        work = self._work
+        did = self.membership.successor
+        work[self._o_sid] = self.node_id
+        work[self._o_did] = did
+        if did == self.node_id:
+            want_ack = False
+        elif self._ack_adaptive:
+            want_ack = (
+                did != self._confirmed_did
+                or t_in < self._recovery_until
+                or t_in - self._confirmed_at > self._ack_interval
+            )
+        else:
+            want_ack = self._ack_always
+        work[self._o_epoch] = self._epoch | ACK_REQUESTED if want_ack else self._epoch
+        work[self._o_origin] = self._origin
+        size = self._token_size
+        crc = crc16_arc(self._work_body)
+        work[size] = crc & 0xFF
+        work[size + 1] = crc >> 8
+        hop = self._hop if self.pacer is None else self.pacer(t_in)  # --profile: tokenring.profile
+        if did == self.node_id:
+            hop = max(hop, 0.001)
+        if hop:
+            delay = t_in + hop - perf_counter()
+            if delay > 0:
+                slept_from = perf_counter()
+                time.sleep(delay)  # emulated wire time; a lone node also waits 1 ms per pass
+                self._paced += perf_counter() - slept_from  # with the sleep's overshoot
+        if did != self._last_sent_did or not self._ack_pending:
+            self._retries = 0
+        elif self._retries:
+            # the previous pass to this successor is still unanswered after a retry: a new
+            # token must not restart the count, or a hung successor eats token after token
+            self._retries += 1
+        self._last_sent_did = did
+        self._last_sent_crc = crc
+        self._has_sent = True
+        self._ack_pending = want_ack or (self._ack_pending and self._retries > 0)
+        self._last_sent_time = perf_counter()  # also ends the handler's time (see _on_frame)
+        self._transmit(did)
+        if want_ack:
+            self._wake()
+
+    def _transmit(self, did: int) -> None:
+        """Send the working buffer to ``did`` as it is (a pass, a retry, a regeneration)."""
+        if self._closing:
+            return
+        if self.tx_fault is not None and self.tx_fault(did, self._work):
+            return
+        try:
+            sender = self._senders.get(did)
+            if sender is None:
+                sender = self._senders[did] = self.transport.sender(did)
+            stats = self.stats
+            if stats.frames_sent & 15:
+                sender(self._work)
+            else:  # every 16th send is timed
+                t0 = perf_counter()
+                sender(self._work)
+                self._send_add(perf_counter() - t0)
+            stats.frames_sent += 1
+        except Exception as exc:
+            self._send_failed(did, exc)
+
+    def _wake(self) -> None:
+        """Wake the watchdog (idempotent)."""
+        with contextlib.suppress(RuntimeError):  # already awake
+            self._wake_lock.release()
+
+    # state the node initialises (class defaults keep the type checker and both paths alike)
+    _departed = False
+    _leaving = False
+    _closing = False
+
+
+def _load_native() -> type | None:
+    """The C token path, or None (not built, or ``TOKENRING_NATIVE=0``)."""
+    if os.environ.get("TOKENRING_NATIVE", "1") == "0":
+        return None
+    try:
+        from tokenring import _tokenpath  # type: ignore[attr-defined]
+    except ImportError:
+        return None
+    source = Path(__file__).with_name("_tokenpath.c")
+    library = Path(_tokenpath.__file__)
+    if source.exists() and source.stat().st_mtime > library.stat().st_mtime:
+        log.warning(
+            "%s is newer than its build %s; the token path runs in Python until it is rebuilt "
+            "(pip install -e .)",
+            source,
+            library.name,
+        )
+        return None
+    return _tokenpath.TokenPath
+
+
+_native = _load_native()
+#: what NodeOS inherits its token path from
+TokenPathBase: type = _native if _native is not None else PyTokenPath
+#: True when the token path runs in C
+NATIVE: bool = _native is not None
