@@ -795,6 +795,7 @@ def write_report(
         "```",
         "",
         f"Machine: {m['cpus']} cores, {m['memory_gib']} GiB, Python {m['python']}, Zenoh {m['zenoh']}, Linux {m['kernel']}; "
+        f"token path in {m.get('token_path', 'Python')} (`tokenring/tokenpath.py`); "
         f"shared with other work: load average {results['load_start'][0]} at the start, {results['load_end'][0]} at the end of the run "
         f"({results['seconds'] / 60:.0f} min). Times are medians unless marked; ratios compare runs of the same suite run.",
         "",

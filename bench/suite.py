@@ -606,6 +606,8 @@ def count_steps(sections: list[str], sizes: dict[str, list[int]], quick: bool) -
 def machine() -> dict[str, Any]:
     from importlib.metadata import version
 
+    from tokenring import tokenpath
+
     mem = Path("/proc/meminfo").read_text().split("\n")[0].split()[1]
     return {
         "cpus": os.cpu_count(),
@@ -614,6 +616,7 @@ def machine() -> dict[str, Any]:
         "zenoh": version("eclipse-zenoh"),
         "pyzmq": version("pyzmq"),
         "kernel": platform.release(),
+        "token_path": "C" if tokenpath.NATIVE else "Python",
     }
 
 

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from tokenring import keys
+from tokenring import keys, tokenpath
 from tokenring.cliutil import format_table, free_port, query, write_json
 from tokenring.errors import TokenRingError, UsageError
 from tokenring.launcher import Launcher, NodePlan, die_with_parent
@@ -401,6 +401,7 @@ def run(args: argparse.Namespace) -> int:
         "rss_mb": {"max": max(rss), "mean": float(np.mean(rss))},
         "cpu_per_node_pct": {"mean": float(np.mean(cpu) * 100), "max": float(np.max(cpu) * 100)},
         "machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]},
+        "token_path": "C" if tokenpath.NATIVE else "Python",
     }
     rows = [
         [
@@ -428,7 +429,8 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"ratio (median) {report['ratio_median']:.2f}x   ratio (p99) {report['ratio_p99']:.2f}x   "
         f"handler median {report['handler_us']['median']:.1f} us (then the put {report['put_us']['median']:.0f} us)   "
-        f"RSS max {report['rss_mb']['max']:.0f} MB   CPU/node {report['cpu_per_node_pct']['mean']:.0f} %"
+        f"RSS max {report['rss_mb']['max']:.0f} MB   CPU/node {report['cpu_per_node_pct']['mean']:.0f} %   "
+        f"token path in {report['token_path']}"
     )
     if args.json:
         write_json(args.json, report)

@@ -1,0 +1,64 @@
+"""The token path in C against the same path in Python (tokenring/tokenpath.py)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tokenring import tokenpath
+
+SCENARIO = Path(__file__).with_name("tokenpath_scenario.py")
+
+
+def run_scenario(native: bool) -> dict[str, Any]:
+    env = dict(os.environ, TOKENRING_NATIVE="1" if native else "0")
+    done = subprocess.run(
+        [sys.executable, str(SCENARIO)], env=env, capture_output=True, text=True, timeout=60, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
+def test_the_native_token_path_is_built_and_used():
+    assert tokenpath.NATIVE, "tokenring/_tokenpath.c is not built: pip install -e . compiles it"
+    from tokenring.node import NodeOS
+
+    assert NodeOS._on_frame.__qualname__ == "TokenPath._on_frame"
+
+
+def test_c_and_python_paths_send_the_same_bytes_and_keep_the_same_state():
+    python, native = run_scenario(native=False), run_scenario(native=True)
+    assert (python["native"], native["native"]) == (False, True)
+    steps = {step["step"]: step for step in python["steps"]}
+    # the scenario reaches every branch it names (checked on the reference, then compared)
+    first = steps["a pass"]
+    assert [entry[:2] for entry in first["sent"]] == [["frame", 30], ["message", 10]]
+    assert steps["bad CRC"]["stats"]["rejected_crc"] == 1 and not steps["bad CRC"]["sent"]
+    assert steps["an older epoch"]["sent"][0][2].startswith(b"S".hex())
+    assert steps["the send fails"]["stats"]["send_errors"] == 1
+    assert steps["the successor is gone: passes to main"]["sent"][0][:2] == ["frame", 10]
+    assert steps["alone: passes to itself"]["sent"] == [steps["alone: passes to itself"]["sent"][0]]
+    assert steps["alone: passes to itself"]["sent"][0][:2] == ["frame", 20]
+    assert python["calls"] == [10, 11]  # the hook ran while busy, not once idle
+    for reference, candidate in zip(python["steps"], native["steps"], strict=True):
+        assert candidate == reference, f"the C path differs at step {reference['step']!r}"
+
+
+@pytest.mark.skipif(not tokenpath.NATIVE, reason="checks of the C type itself")
+def test_the_c_type_refuses_a_visit_before_setup_and_a_wrong_buffer():
+    path = tokenpath.TokenPathBase()
+    with pytest.raises(RuntimeError, match="before the node set it up"):
+        path._on_frame(bytes(514))
+    path._frame_size = 514
+    with pytest.raises(ValueError, match="_work must be 514 bytes"):
+        path._work = bytearray(10)
+    with pytest.raises(TypeError, match="_work must be bytearray"):
+        path._work = bytes(514)
+    with pytest.raises(TypeError):
+        path._leaving = 1  # flags are bools, as the Python path keeps them

@@ -1,0 +1,181 @@
+"""One node's token path driven through every branch; prints what it did as JSON.
+
+Run as a program by tests/test_tokenpath.py, once with ``TOKENRING_NATIVE=0`` (Python) and once
+with the C path: the two outputs must be identical — every frame, ack and broadcast sent, every
+counter and every piece of ring state after each step.
+"""
+
+from __future__ import annotations
+
+import json
+import random
+import sys
+from typing import Any
+
+from tokenring import tokenpath
+from tokenring.frame import Token
+from tokenring.node import NodeOS
+from tokenring.protocol import default_protocol
+from tokenring.ring import ACK_REQUESTED
+from tokenring.transport.base import Transport
+
+STATE = (
+    "_epoch",
+    "_origin",
+    "_accepted_crc",
+    "_accepted_sid",
+    "_last_counter",
+    "_retries",
+    "_ack_pending",
+    "_last_sent_did",
+    "_last_sent_crc",
+    "_has_sent",
+    "_regeneration_streak",
+    "system_busy",
+)
+
+
+class Recorder(Transport):
+    """A transport that records what the node sends; one send can be made to fail."""
+
+    kind = "recorder"
+
+    def __init__(self, node_id: int) -> None:
+        super().__init__("parity", node_id)
+        self.log: list[list[Any]] = []
+        self.fail_next_send = False
+
+    def _open(self, on_frame: Any, on_message: Any, on_membership: Any) -> set[int]:
+        return set()
+
+    def _send_frame(self, did: int, frame: bytes | bytearray) -> None:
+        if self.fail_next_send:
+            self.fail_next_send = False
+            raise OSError("link down")
+        self.log.append(["frame", did, bytes(frame).hex()])
+
+    def _send_message(self, did: int, payload: bytes) -> None:
+        self.log.append(["message", did, payload.hex()])
+
+    def _broadcast(self, payload: bytes) -> None:
+        self.log.append(["broadcast", payload.hex()])
+
+    def _announce(self) -> None:
+        pass
+
+    def _withdraw(self) -> None:
+        pass
+
+    def _close(self) -> None:
+        pass
+
+
+def main() -> int:
+    random.seed(1)  # the command sequence number starts at random
+    protocol = default_protocol()
+    main_id, motor_id, sonar_id = (protocol.nodes[n].id for n in ("main", "motor", "sonar"))
+    transport = Recorder(motor_id)
+    node = NodeOS(protocol, motor_id, transport, ack_mode="adaptive")
+    for member in (main_id, sonar_id):
+        node.membership.set_live(member, True)
+    steps: list[dict[str, Any]] = []
+
+    def frame(sid: int = main_id, did: int = motor_id, counter: int = 7, epoch: int = 0, origin: int = 0,
+              ack: bool = True, issuer: int = 0, fill: int = 0) -> bytes:  # fmt: skip
+        token = Token(protocol)
+        token.buffer[protocol.header.offsets["epoch_origin"] + 1 :] = bytes([fill]) * (
+            len(token.buffer) - protocol.header.offsets["epoch_origin"] - 1
+        )
+        token["sid"], token["did"], token["counter"] = sid, did, counter
+        token["epoch"] = epoch | (ACK_REQUESTED if ack else 0)
+        token["epoch_origin"], token["syscmd_issuer"] = origin, issuer
+        return token.to_frame()
+
+    def step(name: str, data: bytes | None = None) -> None:
+        if data is not None:
+            node._on_frame(data)
+        node._recovery_until = 0.0  # the window after an epoch change depends on the clock
+        steps.append(
+            {
+                "step": name,
+                "sent": transport.log[:],
+                "stats": node.stats.as_dict(),
+                "state": {name: getattr(node, name) for name in STATE},
+                "live": sorted(node.membership.active),
+            }
+        )
+        transport.log.clear()
+
+    step("a pass", frame(fill=1))
+    step("the same pass again", frame(fill=1))
+    step("the same pass again, no ack asked", frame(fill=1, ack=False))
+    good = frame(fill=2)
+    step("too short", good[:-1])
+    step("bad CRC", good[:100] + bytes([good[100] ^ 0xFF]) + good[101:])
+    marker = bytearray(good)
+    marker[protocol.header.offsets["size_marker"]] ^= 1
+    step("bad marker", Token(protocol, bytes(marker)).to_frame())
+    step("for another node", frame(did=sonar_id, fill=3))
+    step("from a node not in the ring", frame(sid=99, fill=3))
+    step("a pass from the successor: the ring wraps", frame(sid=sonar_id, fill=4))
+    step("a newer epoch", frame(epoch=3, origin=main_id, fill=5))
+    step("an older epoch", frame(epoch=2, origin=main_id, fill=6))
+    node.membership.exclude(main_id, retry_after=60.0)
+    step("from an excluded node", frame(epoch=3, origin=main_id, fill=7))
+    step("a system command on the token", frame(epoch=3, origin=main_id, issuer=sonar_id, fill=8))
+    node.system_busy = True
+    step("system busy, no hook", frame(epoch=3, origin=main_id, fill=9))
+    calls: list[int] = []
+    node.system_handler = lambda work: calls.append(work[12]) or len(calls) % 2 == 1
+    step("system hook says active", frame(epoch=3, origin=main_id, fill=10))
+    step("system hook says idle", frame(epoch=3, origin=main_id, fill=11))
+    node.system_busy = False
+    step("system idle: the hook is skipped", frame(epoch=3, origin=main_id, fill=12))
+    node.system_handler = None
+    motor_data = node.publish("motor.data")
+    motor_data.raw[:4] = b"\x01\x02\x03\x04"
+    main_data = node.subscribe("main.data")
+    step("channels: publish motor.data, copy main.data", frame(epoch=3, origin=main_id, fill=13))
+    steps[-1]["main.data"] = bytes(main_data.raw[:8]).hex()
+    node.set_own_input_id()
+    node.unlock_data("motor.command")
+    outbox = node.send_command("main", "STOP_EXPLORE")
+    step("a command goes out", frame(epoch=3, origin=main_id, fill=0))
+    step("the next visit", frame(epoch=3, origin=main_id, counter=8, fill=0))
+    steps[-1]["outbox"] = [outbox.transmitted, outbox.acknowledged]
+    node._recovery_until = 1e18
+    node._on_frame(frame(epoch=3, origin=main_id, counter=9, fill=0))
+    step("inside the recovery window")
+    node.rx_fault = lambda data: data[protocol.header.offsets["counter"]] == 66
+    step("rx fault drops it", frame(epoch=3, origin=main_id, counter=66))
+    step("rx fault lets it pass", frame(epoch=3, origin=main_id, counter=67))
+    node.rx_fault = None
+    node.tx_fault = lambda did, work: True
+    step("tx fault drops the pass", frame(epoch=3, origin=main_id, counter=68))
+    node.tx_fault = None
+    transport.fail_next_send = True
+    step("the send fails", frame(epoch=3, origin=main_id, counter=69))
+    with node._token_lock:
+        node._transmit(sonar_id)
+    step("the watchdog resends")
+    with node._token_lock:
+        node._forward(0.0)
+    step("the watchdog passes again")
+    node._regeneration_streak = 2
+    step("the token is back after a regeneration", frame(epoch=3, origin=main_id, counter=70))
+    node._leaving = True
+    step("leaving: only passed on", frame(epoch=3, origin=main_id, counter=71))
+    node._leaving = False
+    node._departed = True
+    step("departed: ignored", frame(epoch=3, origin=main_id, counter=72))
+    node._departed = False
+    node.membership.set_live(sonar_id, False)
+    step("the successor is gone: passes to main", frame(epoch=3, origin=main_id, counter=73))
+    node.membership.set_live(main_id, False)
+    step("alone: passes to itself", frame(sid=motor_id, epoch=3, origin=main_id, counter=74, ack=False))
+    json.dump({"native": tokenpath.NATIVE, "steps": steps, "calls": calls}, sys.stdout)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,870 @@
+/*
+ * The token path in C: the same visit as tokenring/tokenpath.py's PyTokenPath, step for step.
+ *
+ * TokenPath is the base type of tokenring.node.NodeOS. It keeps the ring state the visit
+ * touches in C fields, exposed to Python under the attribute names the node uses (_epoch,
+ * _accepted_crc, _last_sent_time, ...), so the watchdog, the acks and the user API read and
+ * write them as before. The common visit (checks, copy, counter, seal, put) runs without
+ * executing any Python code; every rare step calls the node's Python methods, exactly where
+ * the Python path calls them. tests/test_tokenpath.py compares the two paths byte for byte.
+ *
+ * Why C: a visit runs in a process whose caches the other nodes' visits have evicted, and the
+ * interpreter's cost grows with every object and opcode it touches there (bench/RESULTS.md).
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <structmember.h>
+
+#include <errno.h>
+#include <string.h>
+#include <time.h>
+
+static int ack_requested = 0x80; /* tokenring.ring.ACK_REQUESTED, read at import */
+static int epoch_mask = 0x7F;    /* tokenring.ring.EPOCH_MASK, read at import */
+static PyObject *epoch_order;    /* tokenring.ring.epoch_order */
+
+/* interned attribute and method names */
+static PyObject *s_frames_received, *s_frames_sent, *s_rejected_length, *s_rejected_crc,
+    *s_rejected_marker, *s_rejected_did, *s_rejected_sid, *s_duplicate_passes, *s_rounds,
+    *s_rounds_missed, *s_visits, *s_successor, *s_visit, *s_acquire, *s_release, *s_send_ack,
+    *s_answer_stale, *s_adopt_epoch, *s_include, *s_drop_outboxes, *s_activate_outboxes,
+    *s_sweep_own_commands, *s_notify_visit, *s_send_failed, *s_sender;
+
+typedef struct {
+    PyObject_HEAD
+    /* objects the node sets up */
+    PyObject *stats, *membership, *transport, *system_handler, *rx_fault, *tx_fault, *pacer;
+    PyObject *work, *token_lock, *wake_lock, *live, *excluded, *senders, *active;
+    PyObject *pending_outboxes, *outboxes, *const_bytes, *rounds_add, *handler_add, *send_add;
+    /* the layout, from protocol.yaml */
+    int node_id, token_size, frame_size, o_sid, o_did, o_counter, o_issuer, o_epoch, o_origin;
+    int const_lo;
+    /* ring state */
+    int epoch, origin, accepted_crc, accepted_sid, last_counter, retries, last_sent_did;
+    int last_sent_crc, confirmed_did, regeneration_streak, visit_waiters;
+    double last_seen, last_visit, last_sent_time, confirmed_at, recovery_until, ack_interval;
+    double hop, paced;
+    char ack_pending, has_sent, ack_adaptive, ack_always, closing, leaving, departed;
+    char system_busy;
+} TokenPath;
+
+/* ------------------------------------------------------------------------------------------ */
+
+static double now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts); /* time.perf_counter's clock on Linux */
+    return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+static void sleep_for(double seconds)
+{
+    struct timespec ts;
+    ts.tv_sec = (time_t)seconds;
+    ts.tv_nsec = (long)((seconds - (double)ts.tv_sec) * 1e9);
+    Py_BEGIN_ALLOW_THREADS
+    while (clock_nanosleep(CLOCK_MONOTONIC, 0, &ts, &ts) == EINTR) {
+    }
+    Py_END_ALLOW_THREADS
+}
+
+/* CRC-16/ARC (poly 0x8005 reflected, init 0), table-driven */
+static unsigned short crc_table[256];
+
+static void crc_init(void)
+{
+    for (int i = 0; i < 256; i++) {
+        unsigned short crc = (unsigned short)i;
+        for (int bit = 0; bit < 8; bit++)
+            crc = (crc & 1) ? (unsigned short)((crc >> 1) ^ 0xA001) : (unsigned short)(crc >> 1);
+        crc_table[i] = crc;
+    }
+}
+
+static unsigned int crc16_arc(const unsigned char *data, Py_ssize_t size)
+{
+    unsigned int crc = 0;
+    for (Py_ssize_t i = 0; i < size; i++)
+        crc = (crc >> 8) ^ crc_table[(crc ^ data[i]) & 0xFF];
+    return crc;
+}
+
+static int stats_add(TokenPath *self, PyObject *name, long by)
+{
+    PyObject *value = PyObject_GetAttr(self->stats, name);
+    if (value == NULL)
+        return -1;
+    long current = PyLong_AsLong(value);
+    Py_DECREF(value);
+    if (current == -1 && PyErr_Occurred())
+        return -1;
+    PyObject *updated = PyLong_FromLong(current + by);
+    if (updated == NULL)
+        return -1;
+    int rc = PyObject_SetAttr(self->stats, name, updated);
+    Py_DECREF(updated);
+    return rc;
+}
+
+static long stats_get(TokenPath *self, PyObject *name)
+{
+    PyObject *value = PyObject_GetAttr(self->stats, name);
+    if (value == NULL)
+        return -1;
+    long current = PyLong_AsLong(value);
+    Py_DECREF(value);
+    return current;
+}
+
+/* a hook's answer as C truth: 1, 0, or -1 with an exception set */
+static int truth_of(PyObject *result)
+{
+    if (result == NULL)
+        return -1;
+    int truth = PyObject_IsTrue(result);
+    Py_DECREF(result);
+    return truth;
+}
+
+static int call_method_status(PyObject *self, PyObject *name, PyObject *a, PyObject *b,
+                              PyObject *c)
+{
+    PyObject *result = PyObject_CallMethodObjArgs(self, name, a, b, c, NULL);
+    if (result == NULL)
+        return -1;
+    Py_DECREF(result);
+    return 0;
+}
+
+static int send_ack(TokenPath *self, int sid, int crc)
+{
+    PyObject *py_sid = PyLong_FromLong(sid), *py_crc = PyLong_FromLong(crc);
+    int rc = (py_sid && py_crc)
+        ? call_method_status((PyObject *)self, s_send_ack, py_sid, py_crc, NULL) : -1;
+    Py_XDECREF(py_sid);
+    Py_XDECREF(py_crc);
+    return rc;
+}
+
+static int wake(TokenPath *self)
+{
+    if (self->wake_lock == NULL)
+        return 0;
+    PyObject *result = PyObject_CallMethodNoArgs(self->wake_lock, s_release);
+    if (result != NULL) {
+        Py_DECREF(result);
+        return 0;
+    }
+    if (PyErr_ExceptionMatches(PyExc_RuntimeError)) { /* already awake */
+        PyErr_Clear();
+        return 0;
+    }
+    return -1;
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* the send */
+
+static int transmit(TokenPath *self, int did)
+{
+    if (self->closing)
+        return 0;
+    PyObject *py_did = PyLong_FromLong(did);
+    if (py_did == NULL)
+        return -1;
+    if (self->tx_fault != NULL && self->tx_fault != Py_None) {
+        int dropped = truth_of(PyObject_CallFunctionObjArgs(self->tx_fault, py_did, self->work, NULL));
+        if (dropped != 0) {
+            Py_DECREF(py_did);
+            return dropped < 0 ? -1 : 0;
+        }
+    }
+    PyObject *sender = PyDict_GetItemWithError(self->senders, py_did); /* borrowed */
+    Py_XINCREF(sender);
+    int ok = 0;
+    if (sender == NULL && !PyErr_Occurred()) {
+        sender = PyObject_CallMethodOneArg(self->transport, s_sender, py_did);
+        if (sender != NULL && PyDict_SetItem(self->senders, py_did, sender) < 0)
+            Py_CLEAR(sender);
+    }
+    if (sender != NULL) {
+        long sent = stats_get(self, s_frames_sent);
+        if (sent == -1 && PyErr_Occurred()) {
+            ok = -1;
+        } else if (sent & 15) {
+            ok = truth_of(PyObject_CallOneArg(sender, self->work)) < 0 ? -1 : 0;
+        } else { /* every 16th send is timed */
+            double t0 = now();
+            PyObject *result = PyObject_CallOneArg(sender, self->work);
+            double took = now() - t0;
+            if (result == NULL) {
+                ok = -1;
+            } else {
+                Py_DECREF(result);
+                PyObject *py_took = PyFloat_FromDouble(took);
+                PyObject *added = py_took ? PyObject_CallOneArg(self->send_add, py_took) : NULL;
+                Py_XDECREF(py_took);
+                ok = added == NULL ? -1 : 0;
+                Py_XDECREF(added);
+            }
+        }
+        if (ok == 0)
+            ok = stats_add(self, s_frames_sent, 1);
+        Py_DECREF(sender);
+    } else {
+        ok = -1;
+    }
+    if (ok < 0 && PyErr_ExceptionMatches(PyExc_Exception)) {
+        /* a backend error: counted and logged by the node, the watchdog retries the pass */
+        PyObject *type, *value, *traceback;
+        PyErr_Fetch(&type, &value, &traceback);
+        PyErr_NormalizeException(&type, &value, &traceback);
+        if (traceback != NULL)
+            PyException_SetTraceback(value, traceback);
+        ok = call_method_status((PyObject *)self, s_send_failed, py_did, value, NULL);
+        Py_XDECREF(type);
+        Py_XDECREF(value);
+        Py_XDECREF(traceback);
+    }
+    Py_DECREF(py_did);
+    return ok;
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* the pass: seal the working token and send it to the successor (caller holds the token lock) */
+
+static int forward(TokenPath *self, double t_in)
+{
+    unsigned char *work = (unsigned char *)PyByteArray_AS_STRING(self->work);
+    PyObject *successor = PyObject_GetAttr(self->membership, s_successor);
+    if (successor == NULL)
+        return -1;
+    long did = PyLong_AsLong(successor);
+    Py_DECREF(successor);
+    if (did == -1 && PyErr_Occurred())
+        return -1;
+    work[self->o_sid] = (unsigned char)self->node_id;
+    work[self->o_did] = (unsigned char)did;
+    int want_ack;
+    if (did == self->node_id)
+        want_ack = 0;
+    else if (self->ack_adaptive)
+        want_ack = did != self->confirmed_did || t_in < self->recovery_until ||
+                   t_in - self->confirmed_at > self->ack_interval;
+    else
+        want_ack = self->ack_always;
+    work[self->o_epoch] = (unsigned char)(want_ack ? self->epoch | ack_requested : self->epoch);
+    work[self->o_origin] = (unsigned char)self->origin;
+    unsigned int crc = crc16_arc(work, self->token_size);
+    work[self->token_size] = (unsigned char)(crc & 0xFF);
+    work[self->token_size + 1] = (unsigned char)(crc >> 8);
+    double hop = self->hop;
+    if (self->pacer != NULL && self->pacer != Py_None) { /* --profile: tokenring.profile */
+        PyObject *py_t = PyFloat_FromDouble(t_in);
+        PyObject *paced = py_t ? PyObject_CallOneArg(self->pacer, py_t) : NULL;
+        Py_XDECREF(py_t);
+        if (paced == NULL)
+            return -1;
+        hop = PyFloat_AsDouble(paced);
+        Py_DECREF(paced);
+        if (hop == -1.0 && PyErr_Occurred())
+            return -1;
+    }
+    if (did == self->node_id && hop < 0.001)
+        hop = 0.001;
+    if (hop != 0.0) {
+        double delay = t_in + hop - now();
+        if (delay > 0) {
+            double slept_from = now();
+            sleep_for(delay); /* emulated wire time; a lone node also waits 1 ms per pass */
+            self->paced += now() - slept_from;
+        }
+    }
+    if (did != self->last_sent_did || !self->ack_pending)
+        self->retries = 0;
+    else if (self->retries)
+        self->retries += 1; /* still unanswered after a retry: a new token keeps the count */
+    self->last_sent_did = (int)did;
+    self->last_sent_crc = (int)crc;
+    self->has_sent = 1;
+    self->ack_pending = want_ack || (self->ack_pending && self->retries > 0);
+    self->last_sent_time = now(); /* also ends the handler's time */
+    if (transmit(self, (int)did) < 0)
+        return -1;
+    return want_ack ? wake(self) : 0;
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* the visit */
+
+static int visit_channels(TokenPath *self, double t_in)
+{
+    PyObject *active = self->active;
+    if (active == NULL || !PyTuple_Check(active))
+        return 0;
+    Py_INCREF(active); /* the user API may swap the tuple while a channel runs Python code */
+    PyObject *finished = NULL;
+    int rc = 0;
+    for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(active); i++) {
+        PyObject *item = PyTuple_GET_ITEM(active, i);
+        PyObject *result = PyObject_CallMethodOneArg(item, s_visit, self->work);
+        if (result == NULL) {
+            rc = -1;
+            break;
+        }
+        int done = result == Py_True;
+        Py_DECREF(result);
+        if (done) {
+            if (finished == NULL && (finished = PyList_New(0)) == NULL) {
+                rc = -1;
+                break;
+            }
+            if (PyList_Append(finished, item) < 0) {
+                rc = -1;
+                break;
+            }
+        }
+    }
+    Py_DECREF(active);
+    if (rc == 0 && finished != NULL)
+        rc = call_method_status((PyObject *)self, s_drop_outboxes, finished, NULL, NULL);
+    Py_XDECREF(finished);
+    if (rc < 0)
+        return -1;
+    if (self->pending_outboxes != NULL) {
+        int pending = PyObject_IsTrue(self->pending_outboxes);
+        if (pending < 0)
+            return -1;
+        if (pending && call_method_status((PyObject *)self, s_activate_outboxes, NULL, NULL, NULL) < 0)
+            return -1;
+    }
+    if (t_in < self->recovery_until && self->outboxes != NULL) {
+        int any = PyObject_IsTrue(self->outboxes);
+        if (any < 0)
+            return -1;
+        if (any && call_method_status((PyObject *)self, s_sweep_own_commands, self->work, NULL, NULL) < 0)
+            return -1;
+    }
+    return 0;
+}
+
+/* the rest of the visit, under the token lock: 1 when the pass is done and the bookkeeping
+   after it should run, 0 when the visit ends here (leaving), -1 on error */
+static int visit_locked(TokenPath *self, const unsigned char *frame, int sid, int crc, int flags,
+                        double t_in, double *held, int *counter_out, int *wraps_out)
+{
+    unsigned char *work = (unsigned char *)PyByteArray_AS_STRING(self->work);
+    memcpy(work, frame, (size_t)self->frame_size);
+    self->last_seen = t_in;
+    if (self->leaving) {
+        if (forward(self, t_in) < 0)
+            return -1;
+        if ((flags & ack_requested) && send_ack(self, sid, crc) < 0)
+            return -1;
+        return 0;
+    }
+    int counter = work[self->o_counter];
+    int system_active;
+    if (self->system_handler == NULL || self->system_handler == Py_None)
+        system_active = work[self->o_issuer] != 0;
+    else if (work[self->o_issuer] || self->system_busy)
+        system_active = truth_of(PyObject_CallOneArg(self->system_handler, self->work));
+    else
+        system_active = 0;
+    if (system_active < 0)
+        return -1;
+    if (!system_active && visit_channels(self, t_in) < 0)
+        return -1;
+    work = (unsigned char *)PyByteArray_AS_STRING(self->work);
+    int wraps = sid >= self->node_id; /* where the ring wraps the round is counted */
+    if (wraps)
+        work[self->o_counter] = (unsigned char)((counter + 1) & 0xFF);
+    self->paced = 0.0;
+    if (forward(self, t_in) < 0)
+        return -1;
+    *held = self->last_sent_time - t_in - self->paced;
+    *counter_out = counter;
+    *wraps_out = wraps;
+    return 1;
+}
+
+static int bookkeeping(TokenPath *self, double t_in, int counter, int wraps)
+{
+    if (self->last_visit != 0.0) {
+        PyObject *gap = PyFloat_FromDouble(t_in - self->last_visit);
+        PyObject *added = gap ? PyObject_CallOneArg(self->rounds_add, gap) : NULL;
+        Py_XDECREF(gap);
+        if (added == NULL)
+            return -1;
+        Py_DECREF(added);
+    }
+    self->last_visit = t_in;
+    if (self->regeneration_streak) { /* the token is back: the loss timer starts afresh */
+        self->regeneration_streak = 0;
+        if (wake(self) < 0)
+            return -1;
+    }
+    int missed = (counter - self->last_counter) & 0xFF;
+    if (missed > 1 && self->last_counter >= 0 && stats_add(self, s_rounds_missed, missed - 1) < 0)
+        return -1;
+    self->last_counter = counter;
+    if (stats_add(self, s_visits, 1) < 0)
+        return -1;
+    if (wraps && stats_add(self, s_rounds, 1) < 0)
+        return -1;
+    return 0;
+}
+
+/* the node set up everything the visit uses without checks (NodeOS.__init__ does) */
+static int ready(TokenPath *self)
+{
+    if (self->stats && self->membership && self->transport && self->work && self->token_lock &&
+        self->live && self->excluded && self->senders && PyDict_Check(self->senders) &&
+        self->const_bytes && self->rounds_add && self->handler_add && self->send_add &&
+        PyByteArray_GET_SIZE(self->work) == self->frame_size && self->token_size > 0 &&
+        self->token_size + 2 <= self->frame_size)
+        return 1;
+    PyErr_SetString(PyExc_RuntimeError, "the token path is used before the node set it up");
+    return 0;
+}
+
+static PyObject *TokenPath_on_frame(TokenPath *self, PyObject *frame_obj)
+{
+    double t_in = now();
+    if (!ready(self))
+        return NULL;
+    if (stats_add(self, s_frames_received, 1) < 0)
+        return NULL;
+    if (self->rx_fault != NULL && self->rx_fault != Py_None) {
+        int dropped = truth_of(PyObject_CallOneArg(self->rx_fault, frame_obj));
+        if (dropped != 0)
+            return dropped < 0 ? NULL : Py_NewRef(Py_None);
+    }
+    if (self->departed)
+        Py_RETURN_NONE;
+    Py_buffer view;
+    if (PyObject_GetBuffer(frame_obj, &view, PyBUF_SIMPLE) < 0)
+        return NULL;
+    PyObject *rc = NULL;
+    const unsigned char *frame = (const unsigned char *)view.buf;
+    int size = self->token_size;
+    PyObject *reject = NULL;
+    if (view.len != self->frame_size)
+        reject = s_rejected_length;
+    else if (crc16_arc(frame, view.len) != 0) /* over a frame and its own CRC: zero */
+        reject = s_rejected_crc;
+    else if (memcmp(frame + self->const_lo, PyBytes_AS_STRING(self->const_bytes),
+                    (size_t)PyBytes_GET_SIZE(self->const_bytes)) != 0)
+        reject = s_rejected_marker;
+    else if (frame[self->o_did] != self->node_id)
+        reject = s_rejected_did;
+    if (reject != NULL) {
+        if (stats_add(self, reject, 1) == 0)
+            rc = Py_NewRef(Py_None);
+        goto done;
+    }
+    int sid = frame[self->o_sid];
+    PyObject *py_sid = PyLong_FromLong(sid);
+    int member = py_sid ? PySequence_Contains(self->live, py_sid) : -1;
+    Py_XDECREF(py_sid);
+    if (member <= 0) {
+        if (member == 0 && stats_add(self, s_rejected_sid, 1) == 0)
+            rc = Py_NewRef(Py_None);
+        goto done;
+    }
+    int crc = frame[size] | (frame[size + 1] << 8);
+    int flags = frame[self->o_epoch];
+    if (crc == self->accepted_crc && sid == self->accepted_sid) { /* a retry of a pass we took */
+        if (stats_add(self, s_duplicate_passes, 1) == 0 &&
+            (!(flags & ack_requested) || send_ack(self, sid, crc) == 0))
+            rc = Py_NewRef(Py_None);
+        goto done;
+    }
+    int epoch = flags & epoch_mask, origin = frame[self->o_origin];
+    if (epoch != self->epoch || origin != self->origin) {
+        PyObject *order = PyObject_CallFunction(epoch_order, "iiii", epoch, origin, self->epoch,
+                                                self->origin);
+        if (order == NULL)
+            goto done;
+        long newer = PyLong_AsLong(order);
+        Py_DECREF(order);
+        if (newer == -1 && PyErr_Occurred())
+            goto done;
+        PyObject *a = PyLong_FromLong(sid), *b = PyLong_FromLong(crc);
+        int failed = !a || !b;
+        if (!failed && newer < 0) {
+            failed = call_method_status((PyObject *)self, s_answer_stale, a, b, NULL) < 0;
+            Py_XDECREF(a);
+            Py_XDECREF(b);
+            if (!failed)
+                rc = Py_NewRef(Py_None);
+            goto done;
+        }
+        Py_XDECREF(a);
+        Py_XDECREF(b);
+        if (failed)
+            goto done;
+        PyObject *e = PyLong_FromLong(epoch), *o = PyLong_FromLong(origin);
+        PyObject *t = PyFloat_FromDouble(t_in);
+        failed = !e || !o || !t ||
+                 call_method_status((PyObject *)self, s_adopt_epoch, e, o, t) < 0;
+        Py_XDECREF(e);
+        Py_XDECREF(o);
+        Py_XDECREF(t);
+        if (failed)
+            goto done;
+    }
+    self->accepted_crc = crc;
+    self->accepted_sid = sid;
+    py_sid = PyLong_FromLong(sid);
+    int excluded = py_sid ? PySequence_Contains(self->excluded, py_sid) : -1;
+    if (excluded > 0)
+        excluded = call_method_status((PyObject *)self, s_include, py_sid, Py_True, NULL);
+    Py_XDECREF(py_sid);
+    if (excluded < 0)
+        goto done;
+
+    PyObject *locked = PyObject_CallMethodNoArgs(self->token_lock, s_acquire);
+    if (locked == NULL)
+        goto done;
+    Py_DECREF(locked);
+    double held = 0.0;
+    int counter = 0, wraps = 0;
+    int passed = visit_locked(self, frame, sid, crc, flags, t_in, &held, &counter, &wraps);
+    if (passed > 0 && bookkeeping(self, t_in, counter, wraps) < 0)
+        passed = -1;
+    /* release whatever happened; an error raised above stays the one reported */
+    PyObject *type = NULL, *value = NULL, *traceback = NULL;
+    if (passed < 0)
+        PyErr_Fetch(&type, &value, &traceback);
+    PyObject *released = PyObject_CallMethodNoArgs(self->token_lock, s_release);
+    if (passed < 0) {
+        Py_XDECREF(released);
+        PyErr_Restore(type, value, traceback);
+        goto done;
+    }
+    if (released == NULL)
+        goto done;
+    Py_DECREF(released);
+    if (passed == 0) {
+        rc = Py_NewRef(Py_None);
+        goto done;
+    }
+    /* after the pass: the token must not wait for our ack */
+    if ((flags & ack_requested) && send_ack(self, sid, crc) < 0)
+        goto done;
+    PyObject *py_held = PyFloat_FromDouble(held);
+    PyObject *added = py_held ? PyObject_CallOneArg(self->handler_add, py_held) : NULL;
+    Py_XDECREF(py_held);
+    if (added == NULL)
+        goto done;
+    Py_DECREF(added);
+    if (self->visit_waiters &&
+        call_method_status((PyObject *)self, s_notify_visit, NULL, NULL, NULL) < 0)
+        goto done;
+    rc = Py_NewRef(Py_None);
+done:
+    PyBuffer_Release(&view);
+    return rc;
+}
+
+static PyObject *TokenPath_forward(TokenPath *self, PyObject *arg)
+{
+    if (!ready(self))
+        return NULL;
+    double t_in = PyFloat_AsDouble(arg);
+    if (t_in == -1.0 && PyErr_Occurred())
+        return NULL;
+    if (forward(self, t_in) < 0)
+        return NULL;
+    Py_RETURN_NONE;
+}
+
+static PyObject *TokenPath_transmit(TokenPath *self, PyObject *arg)
+{
+    if (!ready(self))
+        return NULL;
+    long did = PyLong_AsLong(arg);
+    if (did == -1 && PyErr_Occurred())
+        return NULL;
+    if (transmit(self, (int)did) < 0)
+        return NULL;
+    Py_RETURN_NONE;
+}
+
+static PyObject *TokenPath_wake(TokenPath *self, PyObject *Py_UNUSED(ignored))
+{
+    if (wake(self) < 0)
+        return NULL;
+    Py_RETURN_NONE;
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* the type */
+
+static int TokenPath_traverse(TokenPath *self, visitproc visit, void *arg)
+{
+    Py_VISIT(self->stats);
+    Py_VISIT(self->membership);
+    Py_VISIT(self->transport);
+    Py_VISIT(self->system_handler);
+    Py_VISIT(self->rx_fault);
+    Py_VISIT(self->tx_fault);
+    Py_VISIT(self->pacer);
+    Py_VISIT(self->work);
+    Py_VISIT(self->token_lock);
+    Py_VISIT(self->wake_lock);
+    Py_VISIT(self->live);
+    Py_VISIT(self->excluded);
+    Py_VISIT(self->senders);
+    Py_VISIT(self->active);
+    Py_VISIT(self->pending_outboxes);
+    Py_VISIT(self->outboxes);
+    Py_VISIT(self->const_bytes);
+    Py_VISIT(self->rounds_add);
+    Py_VISIT(self->handler_add);
+    Py_VISIT(self->send_add);
+    return 0;
+}
+
+static int TokenPath_clear(TokenPath *self)
+{
+    Py_CLEAR(self->stats);
+    Py_CLEAR(self->membership);
+    Py_CLEAR(self->transport);
+    Py_CLEAR(self->system_handler);
+    Py_CLEAR(self->rx_fault);
+    Py_CLEAR(self->tx_fault);
+    Py_CLEAR(self->pacer);
+    Py_CLEAR(self->work);
+    Py_CLEAR(self->token_lock);
+    Py_CLEAR(self->wake_lock);
+    Py_CLEAR(self->live);
+    Py_CLEAR(self->excluded);
+    Py_CLEAR(self->senders);
+    Py_CLEAR(self->active);
+    Py_CLEAR(self->pending_outboxes);
+    Py_CLEAR(self->outboxes);
+    Py_CLEAR(self->const_bytes);
+    Py_CLEAR(self->rounds_add);
+    Py_CLEAR(self->handler_add);
+    Py_CLEAR(self->send_add);
+    return 0;
+}
+
+static void TokenPath_dealloc(TokenPath *self)
+{
+    PyObject_GC_UnTrack(self);
+    TokenPath_clear(self);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+/* the attributes must hold what the visit expects: checked once where they are set, so the
+   visit can use them without checks */
+static int set_checked(TokenPath *self, PyObject *value, PyObject **slot, PyTypeObject *type,
+                       const char *name)
+{
+    if (value == NULL) {
+        PyErr_Format(PyExc_AttributeError, "%s cannot be deleted", name);
+        return -1;
+    }
+    if (type != NULL && !PyObject_TypeCheck(value, type)) {
+        PyErr_Format(PyExc_TypeError, "%s must be %s, not %s", name, type->tp_name,
+                     Py_TYPE(value)->tp_name);
+        return -1;
+    }
+    Py_XSETREF(*slot, Py_NewRef(value));
+    return 0;
+}
+
+static PyObject *get_work(TokenPath *self, void *Py_UNUSED(closure))
+{
+    return Py_NewRef(self->work ? self->work : Py_None);
+}
+
+static int set_work(TokenPath *self, PyObject *value, void *Py_UNUSED(closure))
+{
+    if (value != NULL && PyByteArray_Check(value) && self->frame_size &&
+        PyByteArray_GET_SIZE(value) != self->frame_size) {
+        PyErr_Format(PyExc_ValueError, "_work must be %d bytes", self->frame_size);
+        return -1;
+    }
+    return set_checked(self, value, &self->work, &PyByteArray_Type, "_work");
+}
+
+static PyObject *get_const_bytes(TokenPath *self, void *Py_UNUSED(closure))
+{
+    return Py_NewRef(self->const_bytes ? self->const_bytes : Py_None);
+}
+
+static int set_const_bytes(TokenPath *self, PyObject *value, void *Py_UNUSED(closure))
+{
+    return set_checked(self, value, &self->const_bytes, &PyBytes_Type, "_const_bytes");
+}
+
+static PyGetSetDef TokenPath_getset[] = {
+    {"_work", (getter)get_work, (setter)set_work, "the working token (a bytearray frame)", NULL},
+    {"_const_bytes", (getter)get_const_bytes, (setter)set_const_bytes,
+     "the header's constant markers", NULL},
+    {NULL},
+};
+
+#define OBJ(name, field) {name, T_OBJECT, offsetof(TokenPath, field), 0, NULL}
+#define INT(name, field) {name, T_INT, offsetof(TokenPath, field), 0, NULL}
+#define DBL(name, field) {name, T_DOUBLE, offsetof(TokenPath, field), 0, NULL}
+#define BOOL(name, field) {name, T_BOOL, offsetof(TokenPath, field), 0, NULL}
+
+static PyMemberDef TokenPath_members[] = {
+    OBJ("stats", stats),
+    OBJ("membership", membership),
+    OBJ("transport", transport),
+    OBJ("system_handler", system_handler),
+    OBJ("rx_fault", rx_fault),
+    OBJ("tx_fault", tx_fault),
+    OBJ("pacer", pacer),
+    OBJ("_token_lock", token_lock),
+    OBJ("_wake_lock", wake_lock),
+    OBJ("_live", live),
+    OBJ("_excluded", excluded),
+    OBJ("_senders", senders),
+    OBJ("_active", active),
+    OBJ("_pending_outboxes", pending_outboxes),
+    OBJ("_outboxes", outboxes),
+    OBJ("_rounds_add", rounds_add),
+    OBJ("_handler_add", handler_add),
+    OBJ("_send_add", send_add),
+    INT("node_id", node_id),
+    INT("_token_size", token_size),
+    INT("_frame_size", frame_size),
+    INT("_o_sid", o_sid),
+    INT("_o_did", o_did),
+    INT("_o_counter", o_counter),
+    INT("_o_issuer", o_issuer),
+    INT("_o_epoch", o_epoch),
+    INT("_o_origin", o_origin),
+    INT("_const_lo", const_lo),
+    INT("_epoch", epoch),
+    INT("_origin", origin),
+    INT("_accepted_crc", accepted_crc),
+    INT("_accepted_sid", accepted_sid),
+    INT("_last_counter", last_counter),
+    INT("_retries", retries),
+    INT("_last_sent_did", last_sent_did),
+    INT("_last_sent_crc", last_sent_crc),
+    INT("_confirmed_did", confirmed_did),
+    INT("_regeneration_streak", regeneration_streak),
+    INT("_visit_waiters", visit_waiters),
+    DBL("_last_seen", last_seen),
+    DBL("_last_visit", last_visit),
+    DBL("_last_sent_time", last_sent_time),
+    DBL("_confirmed_at", confirmed_at),
+    DBL("_recovery_until", recovery_until),
+    DBL("_ack_interval", ack_interval),
+    DBL("_hop", hop),
+    DBL("_paced", paced),
+    BOOL("_ack_pending", ack_pending),
+    BOOL("_has_sent", has_sent),
+    BOOL("_ack_adaptive", ack_adaptive),
+    BOOL("_ack_always", ack_always),
+    BOOL("_closing", closing),
+    BOOL("_leaving", leaving),
+    BOOL("_departed", departed),
+    BOOL("system_busy", system_busy),
+    {NULL},
+};
+
+static PyMethodDef TokenPath_methods[] = {
+    {"_on_frame", (PyCFunction)TokenPath_on_frame, METH_O,
+     "The token handler: one call per frame received."},
+    {"_forward", (PyCFunction)TokenPath_forward, METH_O,
+     "Seal and pass the working token to the successor (caller holds the token lock)."},
+    {"_transmit", (PyCFunction)TokenPath_transmit, METH_O,
+     "Send the working buffer to a node as it is (a pass, a retry, a regeneration)."},
+    {"_wake", (PyCFunction)TokenPath_wake, METH_NOARGS, "Wake the watchdog (idempotent)."},
+    {NULL},
+};
+
+static PyTypeObject TokenPathType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "tokenring._tokenpath.TokenPath",
+    .tp_doc = PyDoc_STR("The token path in C: the base of tokenring.node.NodeOS."),
+    .tp_basicsize = sizeof(TokenPath),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE | Py_TPFLAGS_HAVE_GC,
+    .tp_new = PyType_GenericNew,
+    .tp_dealloc = (destructor)TokenPath_dealloc,
+    .tp_traverse = (traverseproc)TokenPath_traverse,
+    .tp_clear = (inquiry)TokenPath_clear,
+    .tp_members = TokenPath_members,
+    .tp_getset = TokenPath_getset,
+    .tp_methods = TokenPath_methods,
+};
+
+static struct PyModuleDef tokenpath_module = {
+    PyModuleDef_HEAD_INIT,
+    .m_name = "tokenring._tokenpath",
+    .m_doc = "The token path in C (see tokenring/tokenpath.py).",
+    .m_size = -1,
+};
+
+static int intern(PyObject **slot, const char *name)
+{
+    *slot = PyUnicode_InternFromString(name);
+    return *slot == NULL ? -1 : 0;
+}
+
+static int read_int(PyObject *module, const char *name, int *out)
+{
+    PyObject *value = PyObject_GetAttrString(module, name);
+    if (value == NULL)
+        return -1;
+    long number = PyLong_AsLong(value);
+    Py_DECREF(value);
+    if (number == -1 && PyErr_Occurred())
+        return -1;
+    *out = (int)number;
+    return 0;
+}
+
+PyMODINIT_FUNC PyInit__tokenpath(void)
+{
+    crc_init();
+    struct {
+        PyObject **slot;
+        const char *name;
+    } names[] = {
+        {&s_frames_received, "frames_received"}, {&s_frames_sent, "frames_sent"},
+        {&s_rejected_length, "rejected_length"}, {&s_rejected_crc, "rejected_crc"},
+        {&s_rejected_marker, "rejected_marker"}, {&s_rejected_did, "rejected_did"},
+        {&s_rejected_sid, "rejected_sid"},       {&s_duplicate_passes, "duplicate_passes"},
+        {&s_rounds, "rounds"},                   {&s_rounds_missed, "rounds_missed"},
+        {&s_visits, "visits"},                   {&s_successor, "successor"},
+        {&s_visit, "visit"},                     {&s_acquire, "acquire"},
+        {&s_release, "release"},                 {&s_send_ack, "_send_ack"},
+        {&s_answer_stale, "_answer_stale"},      {&s_adopt_epoch, "_adopt_epoch"},
+        {&s_include, "_include"},                {&s_drop_outboxes, "_drop_outboxes"},
+        {&s_activate_outboxes, "_activate_outboxes"},
+        {&s_sweep_own_commands, "_sweep_own_commands"},
+        {&s_notify_visit, "_notify_visit"},      {&s_send_failed, "_send_failed"},
+        {&s_sender, "sender"},
+    };
+    for (size_t i = 0; i < sizeof(names) / sizeof(names[0]); i++)
+        if (intern(names[i].slot, names[i].name) < 0)
+            return NULL;
+    PyObject *ring = PyImport_ImportModule("tokenring.ring");
+    if (ring == NULL)
+        return NULL;
+    epoch_order = PyObject_GetAttrString(ring, "epoch_order");
+    int failed = epoch_order == NULL || read_int(ring, "ACK_REQUESTED", &ack_requested) < 0 ||
+                 read_int(ring, "EPOCH_MASK", &epoch_mask) < 0;
+    Py_DECREF(ring);
+    if (failed || PyType_Ready(&TokenPathType) < 0)
+        return NULL;
+    PyObject *module = PyModule_Create(&tokenpath_module);
+    if (module == NULL)
+        return NULL;
+    if (PyModule_AddObjectRef(module, "TokenPath", (PyObject *)&TokenPathType) < 0) {
+        Py_DECREF(module);
+        return NULL;
+    }
+    return module;
+}
