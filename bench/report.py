@@ -535,9 +535,16 @@ def runtime_md(section: dict[str, Any]) -> str:
                 f(r["cpu_per_node_pct"], 1),
             ]
         )
-    gains = []
+    gains, direct = [], []
     for (n, topology), runs in sorted(by_case.items()):
         ours, zenoh = runs.get("tokenring", {}), runs.get("zenoh defaults", {})
+        threaded = runs.get("callback on a Python thread", {})
+        if "rtt_ms" in ours and "rtt_ms" in threaded:
+            direct.append(
+                f"{n} nodes ({topology}s): tokenring {f(threaded['rtt_ms']['median'], 3)} → {f(ours['rtt_ms']['median'], 3)} ms "
+                f"({f(ours['rtt_ms']['median'] / threaded['rtt_ms']['median'])}×), the bare ring "
+                f"{f(threaded['bare_rtt_ms']['median'], 3)} → {f(ours['bare_rtt_ms']['median'], 3)} ms"
+            )
         if "rtt_ms" in ours and "rtt_ms" in zenoh:
             gains.append(
                 f"{n} nodes ({topology}s): tokenring {f(zenoh['rtt_ms']['median'], 3)} → {f(ours['rtt_ms']['median'], 3)} ms "
@@ -545,14 +552,17 @@ def runtime_md(section: dict[str, Any]) -> str:
                 f"{f(zenoh['bare_rtt_ms']['median'], 3)} → {f(ours['bare_rtt_ms']['median'], 3)} ms"
             )
     text = [
-        "## Zenoh's runtime: one thread for a node's frames",
+        "## Zenoh's runtime: one thread for a node's frames, the callback on it",
         "",
         "Zenoh runs its I/O on async runtimes, by default six threads per process (rx ×2, tx, net, acc, app), "
         "so a frame is read on one thread, handed to Python, and the frame passed on written by another. "
         "tokenring's processes (`tokenring up`, `bench`, every node the launcher starts) set "
         f"`ZENOH_RUNTIME={section['node_runtime']}`, one worker thread receiving and sending, unless the user's "
-        "environment sets `ZENOH_RUNTIME` (`()` gives Zenoh's defaults). Both rings of every comparison in "
-        "this report run under the same runtime; here each pair runs under each runtime "
+        "environment sets `ZENOH_RUNTIME` (`()` gives Zenoh's defaults). zenoh-python by default hands every "
+        "received sample to a Python thread of its own, a thread switch and a wake per hop; the token's "
+        "subscriber runs its callback on the receiving thread instead (`indirect=False`; "
+        "`TOKENRING_ZENOH_DIRECT=0` restores the default). Both rings of every comparison in "
+        "this report run under the same configuration; here each pair runs under each "
         "(`extra µs/hop`: tokenring's per-hop cost over the bare ring's).",
         "",
         md_table(
@@ -560,7 +570,7 @@ def runtime_md(section: dict[str, Any]) -> str:
             [
                 "N",
                 "topology",
-                "Zenoh runtime",
+                "configuration",
                 "bare median ms",
                 "median ms",
                 "p99 ms",
@@ -574,6 +584,11 @@ def runtime_md(section: dict[str, Any]) -> str:
     ]
     if gains:
         text += ["tokenring's runtime against Zenoh's defaults: " + "; ".join(gains) + ".", ""]
+    if direct:
+        text += [
+            "The callback on the receiving thread against a Python thread: " + "; ".join(direct) + ".",
+            "",
+        ]
     return "\n".join(text) + "\n"
 
 
@@ -795,7 +810,8 @@ def write_report(
         "```",
         "",
         f"Machine: {m['cpus']} cores, {m['memory_gib']} GiB, Python {m['python']}, Zenoh {m['zenoh']}, Linux {m['kernel']}; "
-        f"token path in {m.get('token_path', 'Python')} (`tokenring/tokenpath.py`); "
+        f"token path in {m.get('token_path', 'Python')} "
+        f"(`tokenring/{'_tokenpath.c' if m.get('token_path') == 'C' else 'tokenpath.py'}`); "
         f"shared with other work: load average {results['load_start'][0]} at the start, {results['load_end'][0]} at the end of the run "
         f"({results['seconds'] / 60:.0f} min). Times are medians unless marked; ratios compare runs of the same suite run.",
         "",

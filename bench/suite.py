@@ -279,22 +279,32 @@ def section_transports(ctx: Context) -> dict[str, Any]:
     return out
 
 
-RUNTIMES = {"tokenring": None, "zenoh defaults": "()"}  # None: tokenring's NODE_RUNTIME; "()": Zenoh's own
+#: the environments the runtime section runs both rings under: tokenring's (its NODE_RUNTIME, the
+#: token's callback on Zenoh's receiving thread), Zenoh's default runtime ("()"), and zenoh-python's
+#: default of handing every sample to a Python thread of its own
+RUNTIMES: dict[str, dict[str, str]] = {
+    "tokenring": {},
+    "zenoh defaults": {"ZENOH_RUNTIME": "()"},
+    "callback on a Python thread": {"TOKENRING_ZENOH_DIRECT": "0"},
+}
 
 
 def runtime_cases(quick: bool) -> list[tuple[int, str]]:
     return [(8, "peer")] if quick else [(8, "peer"), (8, "router"), (64, "router")]
 
 
-def bench_cli(args: list[str], runtime: str, timeout: float) -> dict[str, Any]:
-    """``tokenring bench <args> --json`` in its own process under Zenoh ``runtime``: its results,
-    or ``{"error": why}`` (a failed or overlong run must not end the suite and lose its report)."""
+def bench_cli(
+    args: list[str], runtime: str, timeout: float, env: dict[str, str] | None = None
+) -> dict[str, Any]:
+    """``tokenring bench <args> --json`` in its own process under Zenoh ``runtime`` (and ``env``):
+    its results, or ``{"error": why}`` (a failed or overlong run must not end the suite and lose
+    its report)."""
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "bench.json"
         cmd = [sys.executable, "-m", "tokenring", "bench", *args, "--quiet", "--json", str(path)]
-        env = dict(os.environ, ZENOH_RUNTIME=runtime)
+        environment = dict(os.environ, ZENOH_RUNTIME=runtime, **(env or {}))
         try:
-            done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
+            done = subprocess.run(cmd, env=environment, capture_output=True, text=True, timeout=timeout)
         except subprocess.TimeoutExpired:
             return {"error": f"no result in {timeout:.0f} s"}
         if done.returncode != 0 or not path.exists():
@@ -313,10 +323,12 @@ def section_runtime(ctx: Context) -> dict[str, Any]:
         pairs = pairs_for(n, ctx.quick)
         args = ["--nodes", str(n), "--topology", topology, "--rounds", str(rounds), "--warmup", str(warmup)]
         args += ["--repeat", str(pairs), "--timeout", str(timeout_for(n))]
-        for label, value in RUNTIMES.items():
-            ctx.progress.say(f"runtime: {n} nodes ({topology}s), bare and tokenring, Zenoh runtime {label}")
+        for label, env in RUNTIMES.items():
+            ctx.progress.say(f"runtime: {n} nodes ({topology}s), bare and tokenring, {label}")
             record: dict[str, Any] = {"nodes": n, "topology": topology, "runtime": label}
-            result = bench_cli(args, value or NODE_RUNTIME, timeout=4 * timeout_for(n) * pairs)
+            environment = {"ZENOH_RUNTIME": NODE_RUNTIME, **env}
+            runtime = environment.pop("ZENOH_RUNTIME")
+            result = bench_cli(args, runtime, timeout=4 * timeout_for(n) * pairs, env=environment)
             if "error" in result:
                 record["error"] = result["error"]
                 ctx.progress.note(f"failed: {record['error']}")

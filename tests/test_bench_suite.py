@@ -29,6 +29,15 @@ def test_a_bench_run_that_fails_is_recorded_not_raised():
     assert result == {"error": "tokenring bench: error: --rounds must be 10..16000"}
 
 
+def test_a_bench_run_gets_its_environment_and_the_python_token_path_circulates():
+    result = bench_cli(
+        ["--nodes", "3", "--rounds", "50", "--warmup", "10"], NODE_RUNTIME, 120, {"TOKENRING_NATIVE": "0"}
+    )
+    assert "error" not in result, result
+    assert result["token_path"] == "Python"
+    assert result["rounds"] >= 50 and result["rtt_ms"]["median"] > 0
+
+
 def test_an_overlong_bench_run_is_stopped_with_its_bare_ring():
     before = bare_ring_pids()
     # 16000 rounds of 8 processes take ~10 s: the budget ends inside the bare ring's run

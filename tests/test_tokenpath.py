@@ -16,10 +16,15 @@ from tokenring import tokenpath
 SCENARIO = Path(__file__).with_name("tokenpath_scenario.py")
 
 
-def run_scenario(native: bool) -> dict[str, Any]:
+def run_scenario(native: bool, *args: str) -> dict[str, Any]:
     env = dict(os.environ, TOKENRING_NATIVE="1" if native else "0")
     done = subprocess.run(
-        [sys.executable, str(SCENARIO)], env=env, capture_output=True, text=True, timeout=60, check=False
+        [sys.executable, str(SCENARIO), *args],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
     )
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout)
@@ -48,6 +53,16 @@ def test_c_and_python_paths_send_the_same_bytes_and_keep_the_same_state():
     assert python["calls"] == [10, 11]  # the hook ran while busy, not once idle
     for reference, candidate in zip(python["steps"], native["steps"], strict=True):
         assert candidate == reference, f"the C path differs at step {reference['step']!r}"
+
+
+@pytest.mark.parametrize("native", [True, False], ids=["C", "Python"])
+def test_a_visit_that_may_wait_leaves_the_receiving_thread_and_the_frames_keep_their_order(native):
+    result = run_scenario(native, "deferral")
+    assert result["native"] is native
+    assert result["returned_in_s"] < 1.0  # the receiving thread did not wait for the hook
+    assert result["hook_ran_on_token_thread"]
+    assert result["order"] == [1, 2, 3]
+    assert result["inline_after"] and result["pending"] == 0
 
 
 @pytest.mark.skipif(not tokenpath.NATIVE, reason="checks of the C type itself")

@@ -8,8 +8,11 @@ counter and every piece of ring state after each step.
 from __future__ import annotations
 
 import json
+import queue
 import random
 import sys
+import threading
+import time
 from typing import Any
 
 from tokenring import tokenpath
@@ -177,5 +180,61 @@ def main() -> int:
     return 0
 
 
+def deferral() -> int:
+    """A visit that may wait goes to the token thread, the frames after it follow in order, and
+    once the queue is empty the visits are back on the receiving thread."""
+    protocol = default_protocol()
+    main_id, motor_id, sonar_id = (protocol.nodes[n].id for n in ("main", "motor", "sonar"))
+    transport = Recorder(motor_id)
+    node = NodeOS(protocol, motor_id, transport)
+    for member in (main_id, sonar_id):
+        node.membership.set_live(member, True)
+    frames: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
+    token_thread = threading.Thread(target=node._token_loop, args=(frames,), daemon=True)
+    token_thread.start()
+    node._defer = frames.put
+    user = protocol.user_area_offset
+    gate, waited_on = threading.Event(), []
+
+    def slow_hook(data: bytes) -> bool:  # a delay fault, say
+        waited_on.append(threading.get_ident())
+        return not gate.wait(5)
+
+    def frame(fill: int) -> bytes:
+        token = Token(protocol)
+        token["sid"], token["did"], token["epoch"] = main_id, motor_id, ACK_REQUESTED
+        token.buffer[user] = fill
+        return token.to_frame()
+
+    node.rx_fault = slow_hook
+    started = time.monotonic()
+    node._on_frame(frame(1))
+    returned_in = time.monotonic() - started
+    deadline = time.monotonic() + 5
+    while not waited_on and time.monotonic() < deadline:  # frame 1 waits in the hook
+        time.sleep(0.001)
+    node.rx_fault = None
+    node._on_frame(frame(2))  # no hook now, but frame 1 is still in flight: it must not overtake
+    gate.set()
+    deadline = time.monotonic() + 5
+    while node.stats.visits < 2 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    node._on_frame(frame(3))
+    inline = node.stats.visits == 3  # visited before _on_frame returned
+    frames.put(None)
+    token_thread.join(5)
+    sent = [bytes.fromhex(entry[2])[user] for entry in transport.log if entry[0] == "frame"]
+    result = {
+        "native": tokenpath.NATIVE,
+        "returned_in_s": returned_in,
+        "order": sent,
+        "inline_after": inline,
+        "hook_ran_on_token_thread": waited_on == [token_thread.ident],
+        "pending": node._deferred_pending,
+    }
+    json.dump(result, sys.stdout)
+    return 0
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(deferral() if sys.argv[1:] == ["deferral"] else main())

@@ -36,12 +36,13 @@ typedef struct {
     PyObject *stats, *membership, *transport, *system_handler, *rx_fault, *tx_fault, *pacer;
     PyObject *work, *token_lock, *wake_lock, *live, *excluded, *senders, *active;
     PyObject *pending_outboxes, *outboxes, *const_bytes, *rounds_add, *handler_add, *send_add;
+    PyObject *defer; /* hands a frame to the node's token thread (set by NodeOS.start) */
     /* the layout, from protocol.yaml */
     int node_id, token_size, frame_size, o_sid, o_did, o_counter, o_issuer, o_epoch, o_origin;
     int const_lo;
     /* ring state */
     int epoch, origin, accepted_crc, accepted_sid, last_counter, retries, last_sent_did;
-    int last_sent_crc, confirmed_did, regeneration_streak, visit_waiters;
+    int last_sent_crc, confirmed_did, regeneration_streak, visit_waiters, deferred_pending;
     double last_seen, last_visit, last_sent_time, confirmed_at, recovery_until, ack_interval;
     double hop, paced;
     char ack_pending, has_sent, ack_adaptive, ack_always, closing, leaving, departed;
@@ -428,7 +429,7 @@ static int ready(TokenPath *self)
     return 0;
 }
 
-static PyObject *TokenPath_on_frame(TokenPath *self, PyObject *frame_obj)
+static PyObject *visit_frame(TokenPath *self, PyObject *frame_obj)
 {
     double t_in = now();
     if (!ready(self))
@@ -568,6 +569,44 @@ done:
     return rc;
 }
 
+static int is_set(PyObject *hook)
+{
+    return hook != NULL && hook != Py_None;
+}
+
+/* The receiving thread's entry. A visit that may wait (emulated wire time, a pacer, a fault
+   hook: delay, soft hang) goes to the node's token thread instead, and so does every frame
+   while one is queued there, to keep their order: Zenoh's receiving thread must never wait,
+   it also carries the node's acks, events and control queries. */
+static PyObject *TokenPath_on_frame(TokenPath *self, PyObject *frame_obj)
+{
+    if (is_set(self->defer) && (self->deferred_pending > 0 || self->hop != 0.0 ||
+                                is_set(self->pacer) || is_set(self->rx_fault) ||
+                                is_set(self->tx_fault))) {
+        self->deferred_pending += 1;
+        PyObject *queued = PyObject_CallOneArg(self->defer, frame_obj);
+        if (queued == NULL) {
+            self->deferred_pending -= 1;
+            return NULL;
+        }
+        Py_DECREF(queued);
+        Py_RETURN_NONE;
+    }
+    return visit_frame(self, frame_obj);
+}
+
+static PyObject *TokenPath_visit_frame(TokenPath *self, PyObject *frame_obj)
+{
+    return visit_frame(self, frame_obj);
+}
+
+static PyObject *TokenPath_deferred_done(TokenPath *self, PyObject *Py_UNUSED(ignored))
+{
+    if (self->deferred_pending > 0)
+        self->deferred_pending -= 1;
+    Py_RETURN_NONE;
+}
+
 static PyObject *TokenPath_forward(TokenPath *self, PyObject *arg)
 {
     if (!ready(self))
@@ -624,6 +663,7 @@ static int TokenPath_traverse(TokenPath *self, visitproc visit, void *arg)
     Py_VISIT(self->rounds_add);
     Py_VISIT(self->handler_add);
     Py_VISIT(self->send_add);
+    Py_VISIT(self->defer);
     return 0;
 }
 
@@ -649,6 +689,7 @@ static int TokenPath_clear(TokenPath *self)
     Py_CLEAR(self->rounds_add);
     Py_CLEAR(self->handler_add);
     Py_CLEAR(self->send_add);
+    Py_CLEAR(self->defer);
     return 0;
 }
 
@@ -733,6 +774,7 @@ static PyMemberDef TokenPath_members[] = {
     OBJ("_rounds_add", rounds_add),
     OBJ("_handler_add", handler_add),
     OBJ("_send_add", send_add),
+    OBJ("_defer", defer),
     INT("node_id", node_id),
     INT("_token_size", token_size),
     INT("_frame_size", frame_size),
@@ -754,6 +796,7 @@ static PyMemberDef TokenPath_members[] = {
     INT("_confirmed_did", confirmed_did),
     INT("_regeneration_streak", regeneration_streak),
     INT("_visit_waiters", visit_waiters),
+    INT("_deferred_pending", deferred_pending),
     DBL("_last_seen", last_seen),
     DBL("_last_visit", last_visit),
     DBL("_last_sent_time", last_sent_time),
@@ -775,7 +818,11 @@ static PyMemberDef TokenPath_members[] = {
 
 static PyMethodDef TokenPath_methods[] = {
     {"_on_frame", (PyCFunction)TokenPath_on_frame, METH_O,
-     "The token handler: one call per frame received."},
+     "A frame received: visited here, or handed to the token thread when the visit may wait."},
+    {"_visit_frame", (PyCFunction)TokenPath_visit_frame, METH_O,
+     "The token handler: one call per frame."},
+    {"_deferred_done", (PyCFunction)TokenPath_deferred_done, METH_NOARGS,
+     "The token thread finished a frame handed to it."},
     {"_forward", (PyCFunction)TokenPath_forward, METH_O,
      "Seal and pass the working token to the successor (caller holds the token lock)."},
     {"_transmit", (PyCFunction)TokenPath_transmit, METH_O,

@@ -18,7 +18,7 @@ import time
 
 import zenoh
 
-from tokenring.zconfig import make_config, open_session
+from tokenring.zconfig import hop_callback, make_config, open_session
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
             def handle(sample: zenoh.Sample) -> None:
                 put(sample.payload.to_bytes())
 
-        subscriber = session.declare_subscriber(f"{prefix}/hop/{i}", handle)
+        subscriber = session.declare_subscriber(f"{prefix}/hop/{i}", hop_callback(handle))
         stop = session.declare_subscriber(f"{prefix}/stop", lambda _s: done.set())
         token = session.liveliness().declare_token(f"{prefix}/live/{i}")
         if i == 0:

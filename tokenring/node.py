@@ -1,6 +1,7 @@
 """The node operating system: one token handler per visit, the ring's bookkeeping, the user API.
 
-The handler (``_on_frame``) runs once per token visit, on the transport's receive thread:
+The handler (``_on_frame``) runs once per token visit, on the transport's receiving thread (or on
+the node's token thread while a visit may wait: emulated wire time, a pacer, a fault hook):
 
 1. check the frame (length, CRC-16/ARC, markers, DID, SID a ring member, pass not a repeat,
    epoch not stale) — anything else is dropped and counted, never raised;
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import os
+import queue
 import random
 import socket
 import threading
@@ -263,6 +265,12 @@ class NodeOS(TokenPathBase):  # type: ignore[misc, valid-type]
 
     def start(self) -> None:
         """Join the ring: learn who is live, announce this node, start the watchdog."""
+        self._frames: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
+        self._token_thread = threading.Thread(
+            target=self._token_loop, args=(self._frames,), name=f"token-{self.node_id}", daemon=True
+        )
+        self._token_thread.start()
+        self._defer = self._frames.put
         members = self.transport.open(self._on_frame, self._on_message, self._on_membership)
         for member in members:
             self.membership.set_live(member, True)
@@ -284,6 +292,16 @@ class NodeOS(TokenPathBase):  # type: ignore[misc, valid-type]
             self.node_id,
             sorted(self.membership.live),
         )
+
+    def _token_loop(self, frames: queue.SimpleQueue[bytes | None]) -> None:
+        """The token thread: visits the frames the receiving thread handed over, in order."""
+        while (frame := frames.get()) is not None:
+            try:
+                self._visit_frame(frame)
+            except Exception:
+                log.exception("node %s: the token handler failed", self.name)
+            finally:
+                self._deferred_done()
 
     def leave(self, grace: float | None = None) -> None:
         """Leave cleanly and close: a handover, then the transport goes (no handover when the
@@ -344,6 +362,8 @@ class NodeOS(TokenPathBase):  # type: ignore[misc, valid-type]
         self.stop_program()
         if self._watchdog is not None and self._watchdog is not threading.current_thread():
             self._watchdog.join(timeout=1.0)
+        if self._defer is not None:
+            self._frames.put(None)
         try:
             self.transport.close()
         except TokenRingError as exc:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -63,6 +64,33 @@ class PyTokenPath:
     _outboxes: dict[str, Any]
 
     def _on_frame(self, frame: bytes) -> None:
+        """A frame received: visited here, or handed to the token thread when the visit may wait
+        (wire time, a pacer, a fault hook), and every frame while one is queued there, to keep
+        their order — Zenoh's receiving thread must never wait: it also carries the node's
+        acks, events and control queries."""
+        if self._defer is not None:
+            with self._defer_lock:
+                deferred = (
+                    self._deferred_pending > 0
+                    or self._hop != 0.0
+                    or self.pacer is not None
+                    or self.rx_fault is not None
+                    or self.tx_fault is not None
+                )
+                if deferred:
+                    self._deferred_pending += 1
+            if deferred:
+                self._defer(frame)
+                return
+        self._visit_frame(frame)
+
+    def _deferred_done(self) -> None:
+        """The token thread finished a frame handed to it."""
+        with self._defer_lock:
+            self._deferred_pending = max(0, self._deferred_pending - 1)
+
+    def _visit_frame(self, frame: bytes) -> None:
+        """The token handler: one call per frame."""
         t_in = perf_counter()
         stats = self.stats
         stats.frames_received += 1
@@ -243,6 +271,9 @@ class PyTokenPath:
             self._wake_lock.release()
 
     # state the node initialises (class defaults keep the type checker and both paths alike)
+    _defer: Any = None
+    _deferred_pending = 0
+    _defer_lock = threading.Lock()  # the fallback's counter; one lock for all nodes is enough
     _departed = False
     _leaving = False
     _closing = False

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import zenoh
 
@@ -22,6 +23,20 @@ from tokenring.errors import TransportError, UsageError
 #: the late joiner), never in 80 with them apart. bench/RESULTS.md measures this against
 #: Zenoh's defaults; a user's own ``$ZENOH_RUNTIME`` wins.
 NODE_RUNTIME = "(rx:(worker_threads:1),tx:(handover:rx))"
+
+#: the token's subscriber runs its callback on the Zenoh thread that received the frame
+#: (``indirect=False``): by default zenoh-python hands every sample to a Python thread of its
+#: own, a thread switch and a wake per hop. ``TOKENRING_ZENOH_DIRECT=0`` restores the default;
+#: bench/RESULTS.md measures both, the bare ring always under the same choice.
+DIRECT_CALLBACKS = os.environ.get("TOKENRING_ZENOH_DIRECT", "1") != "0"
+
+
+def hop_callback(callback: Callable[[zenoh.Sample], None]) -> Any:
+    """The handler to subscribe the token path with (see :data:`DIRECT_CALLBACKS`)."""
+    if DIRECT_CALLBACKS:
+        return zenoh.handlers.Callback(callback, indirect=False)
+    return callback
+
 
 #: how long a client keeps retrying its router before the node reports it cannot connect
 CLIENT_CONNECT_TIMEOUT_MS = 60_000

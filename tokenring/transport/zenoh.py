@@ -15,6 +15,7 @@ import zenoh
 
 from tokenring import keys
 from tokenring.transport.base import FrameHandler, MembershipHandler, MessageHandler, Transport
+from tokenring.zconfig import hop_callback
 
 
 class ZenohTransport(Transport):
@@ -57,7 +58,9 @@ class ZenohTransport(Transport):
         self._keep.append(
             session.liveliness().declare_subscriber(keys.node(ring, "*"), liveliness_callback, history=True)
         )
-        self._keep.append(session.declare_subscriber(keys.token(ring, self.node_id), frame_callback))
+        self._keep.append(
+            session.declare_subscriber(keys.token(ring, self.node_id), hop_callback(frame_callback))
+        )
         self._keep.append(session.declare_subscriber(keys.ack(ring, self.node_id), message_callback))
         self._keep.append(session.declare_subscriber(keys.ring_event(ring), message_callback))
         self._event_publisher = session.declare_publisher(
