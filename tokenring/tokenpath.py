@@ -9,7 +9,9 @@ epoch, an excluded sender, a leaving node, hooks, commands, a failed send) calls
 Python methods of the node from either. ``TOKENRING_NATIVE=0`` picks the Python path;
 ``tests/test_tokenpath.py`` runs one scenario through both and compares every byte sent.
 
-The visit (see :mod:`tokenring.node` for what each step means):
+``_on_frame`` is the receiving thread's entry: it visits at once, or hands the frame to the
+node's token thread while the visit may wait (see its docstring). The visit (``_visit_frame``;
+see :mod:`tokenring.node` for what each step means):
 
 1. check the frame (length, CRC-16/ARC, markers, DID, SID a ring member, pass not a repeat,
    epoch not stale) — anything else is dropped and counted, never raised;
