@@ -30,13 +30,38 @@ static PyObject *s_frames_received, *s_frames_sent, *s_rejected_length, *s_rejec
     *s_answer_stale, *s_adopt_epoch, *s_include, *s_drop_outboxes, *s_activate_outboxes,
     *s_sweep_own_commands, *s_notify_visit, *s_send_failed, *s_sender;
 
+/* The objects the node sets up, once: (Python attribute, C field). The struct, the garbage
+   collector's traverse and clear, and the attribute table all come from this list. _defer hands
+   a frame to the node's token thread (set by NodeOS.start). */
+#define OBJECT_MEMBERS(X)                                                                         \
+    X("stats", stats)                                                                             \
+    X("membership", membership)                                                                   \
+    X("transport", transport)                                                                     \
+    X("system_handler", system_handler)                                                           \
+    X("rx_fault", rx_fault)                                                                       \
+    X("tx_fault", tx_fault)                                                                       \
+    X("pacer", pacer)                                                                             \
+    X("_token_lock", token_lock)                                                                  \
+    X("_wake_lock", wake_lock)                                                                    \
+    X("_live", live)                                                                              \
+    X("_excluded", excluded)                                                                      \
+    X("_senders", senders)                                                                        \
+    X("_active", active)                                                                          \
+    X("_pending_outboxes", pending_outboxes)                                                      \
+    X("_outboxes", outboxes)                                                                      \
+    X("_rounds_add", rounds_add)                                                                  \
+    X("_handler_add", handler_add)                                                                \
+    X("_send_add", send_add)                                                                      \
+    X("_defer", defer)
+/* ... and the two whose type is checked where they are set (see TokenPath_getset) */
+#define CHECKED_OBJECTS(X) X("_work", work) X("_const_bytes", const_bytes)
+#define ALL_OBJECTS(X) OBJECT_MEMBERS(X) CHECKED_OBJECTS(X)
+
+#define DECLARE_FIELD(name, field) PyObject *field;
+
 typedef struct {
     PyObject_HEAD
-    /* objects the node sets up */
-    PyObject *stats, *membership, *transport, *system_handler, *rx_fault, *tx_fault, *pacer;
-    PyObject *work, *token_lock, *wake_lock, *live, *excluded, *senders, *active;
-    PyObject *pending_outboxes, *outboxes, *const_bytes, *rounds_add, *handler_add, *send_add;
-    PyObject *defer; /* hands a frame to the node's token thread (set by NodeOS.start) */
+    ALL_OBJECTS(DECLARE_FIELD)
     /* the layout, from protocol.yaml */
     int node_id, token_size, frame_size, o_sid, o_did, o_counter, o_issuer, o_epoch, o_origin;
     int const_lo;
@@ -641,55 +666,18 @@ static PyObject *TokenPath_wake(TokenPath *self, PyObject *Py_UNUSED(ignored))
 /* ------------------------------------------------------------------------------------------ */
 /* the type */
 
+#define VISIT_FIELD(name, field) Py_VISIT(self->field);
+#define CLEAR_FIELD(name, field) Py_CLEAR(self->field);
+
 static int TokenPath_traverse(TokenPath *self, visitproc visit, void *arg)
 {
-    Py_VISIT(self->stats);
-    Py_VISIT(self->membership);
-    Py_VISIT(self->transport);
-    Py_VISIT(self->system_handler);
-    Py_VISIT(self->rx_fault);
-    Py_VISIT(self->tx_fault);
-    Py_VISIT(self->pacer);
-    Py_VISIT(self->work);
-    Py_VISIT(self->token_lock);
-    Py_VISIT(self->wake_lock);
-    Py_VISIT(self->live);
-    Py_VISIT(self->excluded);
-    Py_VISIT(self->senders);
-    Py_VISIT(self->active);
-    Py_VISIT(self->pending_outboxes);
-    Py_VISIT(self->outboxes);
-    Py_VISIT(self->const_bytes);
-    Py_VISIT(self->rounds_add);
-    Py_VISIT(self->handler_add);
-    Py_VISIT(self->send_add);
-    Py_VISIT(self->defer);
+    ALL_OBJECTS(VISIT_FIELD)
     return 0;
 }
 
 static int TokenPath_clear(TokenPath *self)
 {
-    Py_CLEAR(self->stats);
-    Py_CLEAR(self->membership);
-    Py_CLEAR(self->transport);
-    Py_CLEAR(self->system_handler);
-    Py_CLEAR(self->rx_fault);
-    Py_CLEAR(self->tx_fault);
-    Py_CLEAR(self->pacer);
-    Py_CLEAR(self->work);
-    Py_CLEAR(self->token_lock);
-    Py_CLEAR(self->wake_lock);
-    Py_CLEAR(self->live);
-    Py_CLEAR(self->excluded);
-    Py_CLEAR(self->senders);
-    Py_CLEAR(self->active);
-    Py_CLEAR(self->pending_outboxes);
-    Py_CLEAR(self->outboxes);
-    Py_CLEAR(self->const_bytes);
-    Py_CLEAR(self->rounds_add);
-    Py_CLEAR(self->handler_add);
-    Py_CLEAR(self->send_add);
-    Py_CLEAR(self->defer);
+    ALL_OBJECTS(CLEAR_FIELD)
     return 0;
 }
 
@@ -750,31 +738,13 @@ static PyGetSetDef TokenPath_getset[] = {
     {NULL},
 };
 
-#define OBJ(name, field) {name, T_OBJECT, offsetof(TokenPath, field), 0, NULL}
+#define OBJ(name, field) {name, T_OBJECT, offsetof(TokenPath, field), 0, NULL},
 #define INT(name, field) {name, T_INT, offsetof(TokenPath, field), 0, NULL}
 #define DBL(name, field) {name, T_DOUBLE, offsetof(TokenPath, field), 0, NULL}
 #define BOOL(name, field) {name, T_BOOL, offsetof(TokenPath, field), 0, NULL}
 
 static PyMemberDef TokenPath_members[] = {
-    OBJ("stats", stats),
-    OBJ("membership", membership),
-    OBJ("transport", transport),
-    OBJ("system_handler", system_handler),
-    OBJ("rx_fault", rx_fault),
-    OBJ("tx_fault", tx_fault),
-    OBJ("pacer", pacer),
-    OBJ("_token_lock", token_lock),
-    OBJ("_wake_lock", wake_lock),
-    OBJ("_live", live),
-    OBJ("_excluded", excluded),
-    OBJ("_senders", senders),
-    OBJ("_active", active),
-    OBJ("_pending_outboxes", pending_outboxes),
-    OBJ("_outboxes", outboxes),
-    OBJ("_rounds_add", rounds_add),
-    OBJ("_handler_add", handler_add),
-    OBJ("_send_add", send_add),
-    OBJ("_defer", defer),
+    OBJECT_MEMBERS(OBJ)
     INT("node_id", node_id),
     INT("_token_size", token_size),
     INT("_frame_size", frame_size),
