@@ -296,13 +296,14 @@ def runtime_cases(quick: bool) -> list[tuple[int, str]]:
 def bench_cli(
     args: list[str], runtime: str, timeout: float, env: dict[str, str] | None = None
 ) -> dict[str, Any]:
-    """``tokenring bench <args> --json`` in its own process under Zenoh ``runtime`` (and ``env``):
+    """``tokenring bench <args> --json`` in its own process under Zenoh ``runtime`` (``env`` adds to
+    the environment and may override it):
     its results, or ``{"error": why}`` (a failed or overlong run must not end the suite and lose
     its report)."""
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "bench.json"
         cmd = [sys.executable, "-m", "tokenring", "bench", *args, "--quiet", "--json", str(path)]
-        environment = dict(os.environ, ZENOH_RUNTIME=runtime, **(env or {}))
+        environment = {**os.environ, "ZENOH_RUNTIME": runtime, **(env or {})}  # env wins
         try:
             done = subprocess.run(cmd, env=environment, capture_output=True, text=True, timeout=timeout)
         except subprocess.TimeoutExpired:
@@ -326,9 +327,7 @@ def section_runtime(ctx: Context) -> dict[str, Any]:
         for label, env in RUNTIMES.items():
             ctx.progress.say(f"runtime: {n} nodes ({topology}s), bare and tokenring, {label}")
             record: dict[str, Any] = {"nodes": n, "topology": topology, "runtime": label}
-            environment = {"ZENOH_RUNTIME": NODE_RUNTIME, **env}
-            runtime = environment.pop("ZENOH_RUNTIME")
-            result = bench_cli(args, runtime, timeout=4 * timeout_for(n) * pairs, env=environment)
+            result = bench_cli(args, NODE_RUNTIME, timeout=4 * timeout_for(n) * pairs, env=env)
             if "error" in result:
                 record["error"] = result["error"]
                 ctx.progress.note(f"failed: {record['error']}")
