@@ -86,9 +86,8 @@ def main() -> int:
     def frame(sid: int = main_id, did: int = motor_id, counter: int = 7, epoch: int = 0, origin: int = 0,
               ack: bool = True, issuer: int = 0, fill: int = 0) -> bytes:  # fmt: skip
         token = Token(protocol)
-        token.buffer[protocol.header.offsets["epoch_origin"] + 1 :] = bytes([fill]) * (
-            len(token.buffer) - protocol.header.offsets["epoch_origin"] - 1
-        )
+        user, size = protocol.user_area_offset, protocol.token_size
+        token.buffer[user:size] = bytes([fill]) * (size - user)
         token["sid"], token["did"], token["counter"] = sid, did, counter
         token["epoch"] = epoch | (ACK_REQUESTED if ack else 0)
         token["epoch_origin"], token["syscmd_issuer"] = origin, issuer
@@ -103,7 +102,7 @@ def main() -> int:
                 "step": name,
                 "sent": transport.log[:],
                 "stats": node.stats.as_dict(),
-                "state": {name: getattr(node, name) for name in STATE},
+                "state": {attribute: getattr(node, attribute) for attribute in STATE},
                 "live": sorted(node.membership.active),
             }
         )
@@ -194,10 +193,11 @@ def deferral() -> int:
     token_thread.start()
     node._defer = frames.put
     user = protocol.user_area_offset
-    gate, waited_on = threading.Event(), []
+    gate, entered, waited_on = threading.Event(), threading.Event(), []
 
     def slow_hook(data: bytes) -> bool:  # a delay fault, say
         waited_on.append(threading.get_ident())
+        entered.set()
         return not gate.wait(5)
 
     def frame(fill: int) -> bytes:
@@ -210,9 +210,7 @@ def deferral() -> int:
     started = time.monotonic()
     node._on_frame(frame(1))
     returned_in = time.monotonic() - started
-    deadline = time.monotonic() + 5
-    while not waited_on and time.monotonic() < deadline:  # frame 1 waits in the hook
-        time.sleep(0.001)
+    entered.wait(5)  # frame 1 waits in the hook
     node.rx_fault = None
     node._on_frame(frame(2))  # no hook now, but frame 1 is still in flight: it must not overtake
     gate.set()
