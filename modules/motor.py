@@ -177,9 +177,9 @@ class Program(UserProgram):
                 direction = TURN_LEFT if name == "TURN_LEFT" else TURN_RIGHT
             totals = (n, n)
             rates = (step_rate_hz(speed), step_rate_hz(speed))
-        self.move_seq = cmd.seq
+        self.move_seq = cmd.seq & 0xFF  # the motor publishes its move number as a u8
         self.distance_mm = 0.0
-        self.move = Move(cmd.seq, cmd.sender, direction, speed, totals, signs, rates, now)
+        self.move = Move(self.move_seq, cmd.sender, direction, speed, totals, signs, rates, now)
         self.state, self.direction, self.speed_pct = MOVING, direction, speed
         if totals == (0, 0):
             self._finish(DONE)

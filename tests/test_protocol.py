@@ -64,10 +64,12 @@ def test_command_dtypes_overlay_the_header_and_arguments():
     inbox = protocol.channel("motor.command")
     move = inbox.command("MOVE_FORWARD")
     assert move.dtype.itemsize == inbox.size
-    assert move.dtype.names[:4] == ("sender", "state", "code", "seq")
+    assert move.dtype.names[:5] == ("sender", "state", "code", "seq", "incarnation")
     assert inbox.command(move.code) is move
     assert "VECTOR" in inbox.commands  # common commands are accepted by every inbox
-    assert np.dtype(move.dtype).fields["distance_mm"][1] == 4
+    header_size = sum(f.size for f in protocol.command_header)
+    assert header_size == 9  # u8 sender, state, code; u16 seq; u32 incarnation
+    assert np.dtype(move.dtype).fields["distance_mm"][1] == header_size
 
 
 def test_missing_file_is_named():
@@ -158,7 +160,9 @@ def test_header_field_missing():
 
 def test_cli_refuses_a_broken_protocol_with_exit_code_2(tmp_path):
     bad = tmp_path / "protocol.yaml"
-    bad.write_text(TEXT.replace("address: 116", "address: 600"))
+    sonar_data = load_protocol(REPO / "protocol.yaml").channel("sonar.data").address
+    assert TEXT.count(f"address: {sonar_data}\n") == 1
+    bad.write_text(TEXT.replace(f"address: {sonar_data}\n", "address: 600\n"))
     result = run_tokenring("up", "--protocol", str(bad), "--duration", "1", timeout=30)
     assert result.returncode == 2
     assert "nodes.sonar.data" in result.stderr and "past the token's last byte" in result.stderr

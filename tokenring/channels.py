@@ -8,7 +8,8 @@ registered-letter semantics:
   the token, and marks it occupied;
 * the receiver's OS copies it into the user's structure only if the inbox is **unlocked**, sets
   the acknowledge state and **locks** the inbox (the user unlocks it to receive the next one);
-  a command whose (sender, seq) was already taken is acknowledged but never handed over twice;
+  a command is named by (sender, incarnation, seq): the one last taken is acknowledged again
+  but never handed over twice, an older copy is cleared unexecuted (:class:`CommandMemory`);
 * when the token is back at the sender, its OS records transmitted/acknowledged and **clears**
   the inbox in every case. There is no retry: the user program resends if it wants.
 
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -111,6 +113,7 @@ class ReceivedCommand:
     code: int
     seq: int
     args: dict[str, Any]
+    incarnation: int = 0
 
 
 class _Offsets:
@@ -122,6 +125,7 @@ class _Offsets:
         self.state = head["state"]
         self.code = head["code"]
         self.seq = head["seq"]
+        self.incarnation = head["incarnation"]
         self.FREE = protocol.command_states["FREE"]
         self.OCCUPIED = protocol.command_states["OCCUPIED"]
         self.ACKNOWLEDGED = protocol.command_states["ACKNOWLEDGED"]
@@ -151,6 +155,61 @@ class DataRegistration:
             buffer.visits += 1
 
 
+NEW, REPEAT, STALE = "new", "repeat", "stale"
+_FORGET_TAKEN = 0x4000
+
+
+class _SenderRecord:
+    """What a receiver remembers of one sender: its incarnation, seqs and earlier incarnations."""
+
+    __slots__ = ("incarnation", "newest", "retired", "taken")
+
+    def __init__(self, incarnation: int, seq: int) -> None:
+        self.incarnation = incarnation
+        self.newest = seq  # the newest seq seen from this incarnation, taken or refused
+        self.taken = -1  # the seq last taken from it (-1: none yet)
+        self.retired: deque[int] = deque(maxlen=64)
+
+
+class CommandMemory:
+    """The receiver's side of exactly-once delivery (see protocol.yaml's command_channel).
+
+    It belongs to the node, not to the program's inbox, so a program restarted on a node that
+    stays up still never takes a command twice."""
+
+    __slots__ = ("_senders",)
+
+    def __init__(self) -> None:
+        self._senders: dict[int, _SenderRecord] = {}
+
+    def classify(self, sender: int, incarnation: int, seq: int) -> str:
+        """NEW (never seen: may be taken), REPEAT (the one last taken) or STALE (an old copy)."""
+        record = self._senders.get(sender)
+        if record is None:
+            return NEW
+        if incarnation != record.incarnation:
+            return STALE if incarnation in record.retired else NEW
+        if seq == record.taken:
+            return REPEAT
+        return NEW if 0 < (seq - record.newest) & 0xFFFF < 0x8000 else STALE
+
+    def saw(self, sender: int, incarnation: int, seq: int, taken: bool) -> None:
+        """Record a NEW command as seen (refused: inbox locked) or taken."""
+        record = self._senders.get(sender)
+        if record is None:
+            record = self._senders[sender] = _SenderRecord(incarnation, seq)
+        elif incarnation != record.incarnation:
+            record.retired.append(record.incarnation)
+            record.incarnation, record.taken = incarnation, -1
+        record.newest = seq
+        if taken:
+            record.taken = seq
+        elif record.taken >= 0 and (seq - record.taken) & 0xFFFF >= _FORGET_TAKEN:
+            # a copy of the command taken can lag only a few seqs behind: far past it, the same
+            # number coming round again (2^16 refused commands later) is a new command
+            record.taken = -1
+
+
 class Inbox:
     """This node's own command channel (set_own_input_id + get_data)."""
 
@@ -160,16 +219,23 @@ class Inbox:
         "channel",
         "end",
         "event",
-        "last_seq",
         "live",
         "locked",
+        "memory",
         "received",
         "refused",
         "start",
         "stats",
     )
 
-    def __init__(self, channel: CommandChannel, offsets: _Offsets, live: set[int], stats: Any) -> None:
+    def __init__(
+        self,
+        channel: CommandChannel,
+        offsets: _Offsets,
+        live: set[int],
+        stats: Any,
+        memory: CommandMemory | None = None,
+    ) -> None:
         self.channel = channel
         self.buffer = ChannelBuffer(channel)
         self.start = channel.address
@@ -178,7 +244,7 @@ class Inbox:
         self.locked = True
         self.received = False
         self.event = threading.Event()
-        self.last_seq: dict[int, int] = {}
+        self.memory = memory if memory is not None else CommandMemory()
         self.live = live
         self.refused = 0
         self.stats = stats
@@ -196,18 +262,28 @@ class Inbox:
             return
         if state != off.OCCUPIED:
             return
-        seq = work[a + off.seq]
-        if self.last_seq.get(sender) == seq:
+        s, i = a + off.seq, a + off.incarnation
+        seq = work[s] | work[s + 1] << 8
+        incarnation = int.from_bytes(work[i : i + 4], "little")
+        verdict = self.memory.classify(sender, incarnation, seq)
+        if verdict is REPEAT:
             work[a + off.state] = off.ACKNOWLEDGED  # already taken once: ack, never twice
             self.stats.duplicate_commands += 1
             return
+        if verdict is STALE:
+            # an old copy (a token regenerated from an earlier one, or a dead incarnation's
+            # leftover): never executed, never acknowledged; cleared so the inbox is free
+            work[a : self.end] = bytes(self.end - a)
+            self.stats.stale_commands_cleared += 1
+            return
         if self.locked:
+            self.memory.saw(sender, incarnation, seq, taken=False)
             self.refused += 1
             self.stats.inbox_full += 1
             return
         with self.buffer.mutex:
             self.buffer.raw[:] = work[a : self.end]
-        self.last_seq[sender] = seq
+        self.memory.saw(sender, incarnation, seq, taken=True)
         work[a + off.state] = off.ACKNOWLEDGED
         self.locked = True  # the flap closes by itself
         self.received = True
@@ -220,13 +296,15 @@ class Inbox:
         with self.buffer.mutex:
             raw = bytes(self.buffer.raw)
         code = raw[off.code]
+        seq = raw[off.seq] | raw[off.seq + 1] << 8
+        incarnation = int.from_bytes(raw[off.incarnation : off.incarnation + 4], "little")
         try:
             command = self.channel.command(code)
         except ChannelError:
-            return ReceivedCommand(raw[off.sender], f"UNKNOWN_{code}", code, raw[off.seq], {})
+            return ReceivedCommand(raw[off.sender], f"UNKNOWN_{code}", code, seq, {}, incarnation)
         view = np.ndarray((), dtype=command.dtype, buffer=raw)
         args = {f.name: f.to_python(view[f.name]) for f in command.args}
-        return ReceivedCommand(raw[off.sender], command.name, code, raw[off.seq], args)
+        return ReceivedCommand(raw[off.sender], command.name, code, seq, args, incarnation)
 
 
 class Outbox:
@@ -239,7 +317,9 @@ class Outbox:
         "command",
         "done",
         "end",
+        "ident",
         "image",
+        "incarnation",
         "own_id",
         "queued_at",
         "rounds_waited",
@@ -261,15 +341,19 @@ class Outbox:
         seq: int,
         args: dict[str, Any],
         stats: Any,
+        incarnation: int = 1,
     ) -> None:
         self.channel = channel
         self.command = command
         self._off = offsets
         self.own_id = own_id
         self.seq = seq
+        self.incarnation = incarnation
         self.start = channel.address
         self.end = channel.end
-        self.image = encode_command(channel, command, own_id, seq, offsets.OCCUPIED, args)
+        self.image = encode_command(channel, command, own_id, seq, offsets.OCCUPIED, args, incarnation)
+        # where (sender, seq, incarnation) sit in the channel: what names this command
+        self.ident = tuple((o, self.image[o]) for o in _ident_offsets(offsets))
         self.state = Outbox.WAITING
         self.transmitted = False
         self.acknowledged = False
@@ -284,7 +368,7 @@ class Outbox:
         mine = work[a + off.sender] == self.own_id and work[a + off.state] != off.FREE
         if self.state == Outbox.IN_TOKEN:
             if mine:
-                if work[a + off.seq] == self.seq:
+                if all(work[a + o] == v for o, v in self.ident):
                     self.transmitted = True
                     self.acknowledged = work[a + off.state] == off.ACKNOWLEDGED
                 # back at the sender the inbox is cleared in every case — also of an older
@@ -313,6 +397,11 @@ class Outbox:
             self.done.set()
 
 
+def _ident_offsets(off: _Offsets) -> tuple[int, ...]:
+    """Channel-relative offsets of the bytes that name a command: sender, seq, incarnation."""
+    return (off.sender, off.seq, off.seq + 1, *range(off.incarnation, off.incarnation + 4))
+
+
 def encode_command(
     channel: CommandChannel,
     command: Command,
@@ -320,6 +409,7 @@ def encode_command(
     seq: int,
     state: int,
     args: dict[str, Any],
+    incarnation: int = 1,
 ) -> bytes:
     """The full channel image of a command; arguments are checked against ``protocol.yaml``."""
     names = command.arg_names()
@@ -338,6 +428,7 @@ def encode_command(
     view["state"] = state
     view["code"] = command.code
     view["seq"] = seq
+    view["incarnation"] = incarnation
     for field in command.args:
         value = args[field.name]
         _check_value(f"{channel.name} {command.name}", field, value)

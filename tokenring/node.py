@@ -31,6 +31,7 @@ from typing import Any
 from tokenring import ring as R
 from tokenring.channels import (
     ChannelBuffer,
+    CommandMemory,
     DataRegistration,
     Inbox,
     Outbox,
@@ -222,7 +223,12 @@ class NodeOS(TokenPathBase):  # type: ignore[misc, valid-type]
         self._active: tuple[Any, ...] = ()
         self._pending_outboxes: list[Outbox] = []
         self._regs_lock = threading.Lock()
-        self._cmd_seq = random.randrange(256)
+        # exactly-once commands: a random incarnation per process, a sequence per target inbox
+        # (protocol.yaml, command_channel), and the receiver's memory of what it took, kept by
+        # the node so that a restarted program never takes a command twice
+        self.incarnation = random.SystemRandom().randrange(1, 1 << 32)
+        self._cmd_seqs: dict[str, int] = {}
+        self.command_memory = CommandMemory()
         self._visit_waiters = 0
         self._visit_cond = threading.Condition()
 
@@ -755,7 +761,7 @@ class NodeOS(TokenPathBase):  # type: ignore[misc, valid-type]
             raise ChannelError(f"{ch.name} belongs to {ch.node}, not to {self.name}")
         with self._regs_lock:
             if self._inbox is None or self._inbox.channel is not ch:
-                self._inbox = Inbox(ch, self._cmd, self.membership.live, self.stats)
+                self._inbox = Inbox(ch, self._cmd, self.membership.live, self.stats, self.command_memory)
             self._rebuild_active()
 
     def get_data(self, channel: str, owner: str = "program") -> ChannelBuffer:
@@ -853,8 +859,8 @@ class NodeOS(TokenPathBase):  # type: ignore[misc, valid-type]
                 raise ChannelError(f"a command to {ch.name} is still travelling; wait for it first")
             if current is not None:
                 current.cancel()
-            self._cmd_seq = (self._cmd_seq + 1) & 0xFF
-            outbox = Outbox(ch, cmd, self._cmd, self.node_id, self._cmd_seq, args, self.stats)
+            seq = self._cmd_seqs[ch.name] = (self._cmd_seqs.get(ch.name, 0) + 1) & 0xFFFF
+            outbox = Outbox(ch, cmd, self._cmd, self.node_id, seq, args, self.stats, self.incarnation)
             self._outboxes[ch.name] = outbox
             self._pending_outboxes.append(outbox)
         return outbox

@@ -50,7 +50,7 @@ HEADER_FIELDS = (
     "epoch",
     "epoch_origin",
 )
-COMMAND_HEADER_FIELDS = ("sender", "state", "code", "seq")
+COMMAND_HEADER_FIELDS = ("sender", "state", "code", "seq", "incarnation")
 _TOP_KEYS = {"version", "token", "system", "command_channel", "common_commands", "enums", "nodes"}
 _FIELD_KEYS = {"type", "unit", "enum", "doc", "offset", "const"}
 

@@ -1,0 +1,255 @@
+"""Exactly once, or not acknowledged: commands across sequence wrap, respawn and stale copies.
+
+A command is named by (sender, incarnation, seq) with a sequence per target inbox
+(protocol.yaml, ``command_channel``). These tests failed when one 8-bit counter served all of a
+sender's targets and the receiver refused whatever equalled the last seq it took from that
+sender: any multiple of 256 commands to other inboxes in between made the next one look like a
+repeat, acknowledged and never handed over.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+
+import pytest
+from memring import MemoryRing, wait_for
+from ringutil import control, launcher_pids, tap, wait_ring, wait_until
+
+from tokenring.channels import NEW, REPEAT, STALE, CommandMemory
+from tokenring.protocol import default_protocol
+
+PROTOCOL = default_protocol()
+MAIN, MOTOR, SONAR = (PROTOCOL.nodes[n].id for n in ("main", "motor", "sonar"))
+
+
+class Receiver:
+    """Takes every command from a node's inbox on a thread of its own, like a program does."""
+
+    def __init__(self, node) -> None:
+        self.node = node
+        self.taken: list[tuple[int, int, int]] = []  # (sender, incarnation, count)
+        self._stop = threading.Event()
+        node.set_own_input_id()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            cmd = self.node.receive_command(timeout=0.05)
+            if cmd is not None:
+                self.taken.append((cmd.sender, cmd.incarnation, cmd.args.get("count", -1)))
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(2)
+
+
+@pytest.fixture
+def ring():
+    r = MemoryRing([MAIN, MOTOR, SONAR], bitrate=None)
+    r.wait_rounds(3)
+    yield r
+    r.close()
+
+
+def test_commands_to_other_inboxes_in_between_never_make_one_look_repeated(ring):
+    """The reproduction: one command to motor, then 255 to sonar, six times over."""
+    main = ring.nodes[MAIN]
+    motor, sonar = Receiver(ring.nodes[MOTOR]), Receiver(ring.nodes[SONAR])
+    try:
+        acked_to_motor = 0
+        for turn in range(6):
+            acked_to_motor += main.deliver("motor", "VECTOR_COUNTER", count=turn, timeout=10)
+            for n in range(255):
+                assert main.deliver("sonar", "VECTOR_COUNTER", count=n, timeout=10)
+        assert acked_to_motor == 6
+        wait_for(lambda: len(motor.taken) >= 6, 5, "motor's program to take six commands")
+        assert [count for _, _, count in motor.taken] == [0, 1, 2, 3, 4, 5]
+        assert len(sonar.taken) == 6 * 255
+    finally:
+        motor.stop()
+        sonar.stop()
+
+
+def test_three_hundred_commands_to_one_inbox_arrive_once_each_in_order(ring):
+    main = ring.nodes[MAIN]
+    motor = Receiver(ring.nodes[MOTOR])
+    try:
+        for n in range(300):
+            assert main.deliver("motor", "VECTOR_COUNTER", count=n, timeout=10)
+        wait_for(lambda: len(motor.taken) >= 300, 5, "300 commands taken")
+        time.sleep(0.05)  # a few more rounds: nothing may arrive twice
+        assert [count for _, _, count in motor.taken] == list(range(300))
+    finally:
+        motor.stop()
+
+
+def test_a_respawned_sender_is_heard_although_its_seq_repeats(ring):
+    """A new incarnation numbers its commands from 1 again: the same (sender, seq) as the
+    last one taken from its predecessor is a new command, not a repeat."""
+    motor = Receiver(ring.nodes[MOTOR])
+    try:
+        first = ring.nodes[MAIN]
+        assert first.deliver("motor", "VECTOR_COUNTER", count=1, timeout=10)
+        wait_for(lambda: len(motor.taken) == 1, 5, "the first incarnation's command")
+        first.close()
+        wait_for(lambda: MAIN not in ring.nodes[MOTOR].membership.live, 5, "main's departure")
+        second = ring.add(MAIN)
+        assert second.incarnation != first.incarnation
+        ring.wait_rounds(3, MAIN, timeout=10)
+        assert second.deliver("motor", "VECTOR_COUNTER", count=2, timeout=10)
+        wait_for(lambda: len(motor.taken) == 2, 5, "the second incarnation's command")
+        (_, inc1, c1), (_, inc2, c2) = motor.taken
+        assert (inc1, c1) == (first.incarnation, 1) and (inc2, c2) == (second.incarnation, 2)
+    finally:
+        motor.stop()
+
+
+def test_stale_copies_are_cleared_never_taken_and_never_acknowledged(ring):
+    """A token regenerated from an old copy brings back a command already taken (acknowledged
+    again, not taken again) and one of an earlier seq (cleared unexecuted)."""
+    main = ring.nodes[MAIN]
+    motor_node = ring.nodes[MOTOR]
+    motor = Receiver(motor_node)
+    channel = PROTOCOL.channel("motor.command")
+    try:
+        boxes = []
+        for n in (10, 11):
+            boxes.append(main.send_command("motor", "VECTOR_COUNTER", count=n))
+            assert boxes[-1].done.wait(5) and boxes[-1].acknowledged
+        wait_for(lambda: len(motor.taken) == 2, 5, "two commands")
+        time.sleep(0.1)  # past main's post-start recovery window, where it sweeps its own old commands
+        before = motor_node.stats.as_dict()
+        queue = [boxes[1].image, boxes[0].image]  # the last taken, then an older one
+
+        def replay(work: bytearray) -> bool:  # one copy per visit of main, as old tokens would
+            if queue:
+                work[channel.address : channel.end] = queue.pop(0)
+            return False
+
+        main.system_handler, main.system_busy = replay, True
+        wait_for(lambda: not queue, 5, "both copies replayed")
+        ring.wait_rounds(5, MOTOR)
+        main.system_handler, main.system_busy = None, False
+        after = motor_node.stats.as_dict()
+        assert [c for _, _, c in motor.taken] == [10, 11]  # nothing taken twice
+        assert after["duplicate_commands"] - before["duplicate_commands"] == 1  # 11: acked again
+        assert after["stale_commands_cleared"] - before["stale_commands_cleared"] == 1  # 10: cleared
+    finally:
+        motor.stop()
+
+
+def test_the_memory_decides_new_repeat_and_stale():
+    memory = CommandMemory()
+    assert memory.classify(10, 7, 1) is NEW
+    memory.saw(10, 7, 1, taken=True)
+    assert memory.classify(10, 7, 1) is REPEAT
+    assert memory.classify(10, 7, 2) is NEW
+    assert memory.classify(10, 7, 0) is STALE
+    memory.saw(10, 7, 2, taken=False)  # refused: the inbox was locked
+    assert memory.classify(10, 7, 2) is STALE  # a copy of a refused command is never taken later
+    assert memory.classify(10, 7, 1) is REPEAT
+    memory.saw(10, 9, 1, taken=True)  # a new incarnation
+    assert memory.classify(10, 7, 3) is STALE  # the earlier incarnation's leftovers are stale
+    assert memory.classify(10, 9, 1) is REPEAT
+    assert memory.classify(20, 7, 1) is NEW  # senders are remembered apart
+
+
+def test_the_memory_never_mistakes_a_new_command_for_a_repeat_after_a_full_wrap():
+    """A locked inbox refuses commands while the sender keeps sending: after 2^16 of them the
+    seq comes round to the one last taken, and is still a new command."""
+    memory = CommandMemory()
+    memory.saw(10, 7, 5, taken=True)
+    for step in range(1, 1 << 16):
+        seq = (5 + step) & 0xFFFF
+        assert memory.classify(10, 7, seq) is NEW, step
+        memory.saw(10, 7, seq, taken=False)
+    assert memory.classify(10, 7, 5) is NEW
+
+
+PROGRAMS = {
+    "main": """
+from tokenring.program import UserProgram
+
+class Program(UserProgram):
+    def setup(self):
+        self.acked = {"motor": 0, "sonar": 0}
+        self.finished = False
+
+    def run(self):
+        for turn in range(6):
+            self.acked["motor"] += self.os.deliver("motor", "VECTOR_COUNTER", count=turn, timeout=10)
+            for n in range(255):
+                self.acked["sonar"] += self.os.deliver("sonar", "VECTOR_COUNTER", count=n, timeout=10)
+        self.finished = True
+        while self.running:
+            self.sleep(0.1)
+
+    def report(self):
+        return {"acked": self.acked, "finished": self.finished}
+""",
+    "receiver": """
+from tokenring.program import UserProgram
+
+class Program(UserProgram):
+    def setup(self):
+        self.os.set_own_input_id()
+        self.counts = []
+
+    def run(self):
+        while self.running:
+            cmd = self.os.receive_command(timeout=0.1)
+            if cmd is not None:
+                self.counts.append(cmd.args["count"])
+
+    def report(self):
+        return {"taken": len(self.counts), "counts": self.counts[-8:]}
+""",
+}
+
+
+def test_the_reproduction_on_real_processes_delivers_six_of_six(tmp_path, procs, ring_name, endpoint):
+    """The issue's reproduction as a user ran it: a 3-node ring at bitrate max, small programs."""
+    programs = tmp_path / "programs"
+    programs.mkdir()
+    (programs / "main.py").write_text(PROGRAMS["main"])
+    (programs / "motor.py").write_text(PROGRAMS["receiver"])
+    (programs / "sonar.py").write_text(PROGRAMS["receiver"])
+    launcher = procs.tokenring(
+        "up",
+        "--ring",
+        ring_name,
+        "--listen",
+        endpoint,
+        "--nodes",
+        "main,motor,sonar",
+        "--no-world",
+        "--bitrate",
+        "max",
+        "--programs",
+        str(programs),
+    )
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [MAIN, MOTOR, SONAR], timeout=40)
+        procs.watch(launcher_pids(session, ring_name))
+
+        def main_report() -> dict:
+            report = control(session, ring_name, MAIN, "program")["report"]
+            return report if report.get("finished") else {}
+
+        report = wait_until(main_report, 120, "main to send its 1536 commands", interval=0.5)
+        assert report["acked"] == {"motor": 6, "sonar": 6 * 255}
+        wait_until(
+            lambda: control(session, ring_name, MOTOR, "program")["report"]["taken"] >= 6,
+            10,
+            "motor's program to take six",
+        )
+        time.sleep(0.2)  # rounds in which a wrongly repeated command would arrive
+        motor_report = control(session, ring_name, MOTOR, "program")["report"]
+        sonar_report = control(session, ring_name, SONAR, "program")["report"]
+        assert motor_report["taken"] == 6 and motor_report["counts"] == [0, 1, 2, 3, 4, 5]
+        assert sonar_report["taken"] == 6 * 255
+    launcher.send_signal(signal.SIGTERM)
+    assert launcher.wait(30) == 0
