@@ -26,6 +26,7 @@ token circulates. Exit code 1 if any fault did not recover or an invariant broke
 from __future__ import annotations
 
 import io
+import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
@@ -39,6 +40,7 @@ from tokenring.cliutil import free_port, query
 from tokenring.errors import TokenRingError, UsageError
 from tokenring.faults import KINDS, NEEDS_VALUE, FaultClient, parse_partition, validate
 from tokenring.launcher import Launcher, NodePlan
+from tokenring.ledger import judge as ledger_judge
 from tokenring.protocol import Protocol, default_protocol
 from tokenring.wire import first_full_round, passes, settled
 from tokenring.yamlfile import read_yaml
@@ -46,6 +48,9 @@ from tokenring.zconfig import make_config, open_session
 
 RING_KEYS = {"nodes", "bitrate", "ack", "respawn", "workload"}
 FAULT_KEYS = {"at", "node", "kind", "value", "jitter", "count", "soft"}
+LEDGER_ENV = "TOKENRING_PROBE_LEDGER"  # where the probe programs write their ledgers
+RESTART_S = 10.0  # a node that crashed this recently and does not answer is still restarting
+EFFECT_S = 0.05  # after a crash or hang is acknowledged, until its node has surely stopped
 STAT_KEYS = (
     "tokens_regenerated",
     "stale_tokens",
@@ -256,6 +261,32 @@ def recovery_time(
     return max(done) - start
 
 
+def episodes(
+    frames: list[tuple[float, bytes]], steps: list[dict[str, Any]], finished: float
+) -> list[tuple[int, int, float | None]]:
+    """Faults grouped by overlap, each group judged against what should circulate after its last.
+
+    A fault whose ring has not recovered when the next one lands is still in flight: the two are
+    one episode, and the ring to expect is the one after both (two nodes hung at once make one
+    ring without either, never the ring without the first alone). Returns ``(first, last,
+    recovered_at)`` per episode, ``recovered_at`` a ``perf_counter`` time or None."""
+    out = []
+    first = 0
+    while first < len(steps):
+        last = first
+        while True:
+            start = steps[last]["effective"]
+            end = steps[last + 1]["injected"] if last + 1 < len(steps) else finished
+            rings = [set(r) for r in steps[last]["expected"]]
+            took = recovery_time(frames, rings, start, end) if rings and start < end else None
+            if took is not None or last + 1 >= len(steps):
+                break
+            last += 1
+        out.append((first, last, None if took is None else start + took))
+        first = last + 1
+    return out
+
+
 def collect_stats(
     session: zenoh.Session, ring: str, expect: set[int] | None = None
 ) -> dict[int, dict[str, int]]:
@@ -319,16 +350,29 @@ def run_scenario(
     progress: Any = None,
     protocol: Protocol | None = None,
     log_file: str | None = None,
+    ledger_dir: str | None = None,
 ) -> dict[str, Any]:
-    """Run a scenario against a launched ring (or an existing one) and judge it."""
+    """Run a scenario against a launched ring (or an existing one) and judge it.
+
+    A launched ring runs the probe with a ledger (``ledger_dir``, else a temporary directory);
+    its commands are judged from the ledgers once every node has stopped. A running ring
+    (``ring``) is judged from its probes' reports, if it runs the probe."""
     protocol = protocol or default_protocol()
     say = progress or (lambda text: None)
     launcher = None
+    scratch = None
+    ledger: Path | None = None
     if ring is None:
         port = free_port()
         ring = f"chaos{port}"
         endpoint = f"tcp/127.0.0.1:{port}"
         program = str(Path(__file__).with_name("chaosprobe.py")) if scenario.workload == "probe" else None
+        if scenario.workload == "probe":
+            if ledger_dir is None:
+                scratch = tempfile.TemporaryDirectory(prefix="tokenring-ledger-")
+                ledger_dir = scratch.name
+            ledger = Path(ledger_dir)
+            ledger.mkdir(parents=True, exist_ok=True)
         plans = []
         for node_id in scenario.nodes:
             spec = protocol.by_id[node_id]
@@ -348,6 +392,7 @@ def run_scenario(
             respawn=scenario.respawn,
             output=open(log_file, "w") if log_file else io.StringIO(),  # noqa: SIM115 - the launcher owns it
             log_level="info" if log_file else "warning",
+            env={LEDGER_ENV: str(ledger)} if ledger is not None else None,
         )
         say(
             f"launching {len(plans)} nodes on ring {ring} ({endpoint}), bitrate {scenario.bitrate}, ack {scenario.ack}"
@@ -355,14 +400,58 @@ def run_scenario(
         launcher.start()
     connect = [endpoint] if endpoint else [keys.default_endpoint()]
     try:
-        with open_session(make_config(connect=connect)) as session:
-            return _run(session, ring, scenario, protocol, say, launcher)
+        try:
+            with open_session(make_config(connect=connect)) as session:
+                report = _run(session, ring, scenario, protocol, say, launcher, ledger)
+        finally:
+            if launcher is not None:
+                launcher.stop()
+        if ledger is not None:
+            _judge_ledger(report, ledger_judge(ledger))
+        return report
     finally:
-        if launcher is not None:
-            launcher.stop()
+        if scratch is not None:
+            scratch.cleanup()
 
 
-def _run(session, ring, scenario, protocol, say, launcher) -> dict[str, Any]:
+def _judge_ledger(report: dict[str, Any], verdict: Any) -> None:
+    """Fill the report's command figures from the ledgers' verdict."""
+    for step in report["faults"]:
+        step["commands_lost"] = verdict.lost_between(step["wall_from"], step["wall_to"])
+        step["commands_duplicated"] = None  # a duplicate is judged over the whole run
+    report["commands"] = verdict.as_dict()
+    report["end"]["commands_lost"] = len(verdict.lost)
+    report["end"]["commands_duplicated"] = len(verdict.duplicated)
+    invariants = report["invariants"]
+    invariants["no_command_executed_twice"] = not verdict.duplicated
+    invariants["no_acknowledged_command_lost"] = not verdict.lost
+    invariants["no_command_taken_unsent"] = not verdict.phantom
+    report["ok"] = all(invariants.values())
+
+
+def _quiesce(session: Any, ring: str, ledger: Path, nodes: set[int], say: Any) -> bool:
+    """Stop the workload and let the last commands land: every live probe writes 'quiesced'
+    once it sends no more and knows the fate of everything it sent."""
+    (ledger / "quiesce").touch()
+    deadline = time.monotonic() + 10.0
+    waiting = set(nodes)
+    while waiting and time.monotonic() < deadline:
+        latest: dict[int, tuple[float, Path]] = {}
+        for path in ledger.glob("ledger-*.jsonl"):
+            node = int(path.name.split("-")[1])
+            mtime = path.stat().st_mtime
+            if node not in latest or mtime > latest[node][0]:
+                latest[node] = (mtime, path)
+        waiting = {n for n in nodes if n not in latest or '"ev":"quiesced"' not in latest[n][1].read_text()}
+        if waiting:
+            time.sleep(0.1)
+    if waiting:
+        say(f"probes on {sorted(waiting)} did not quiesce in 10 s")
+    time.sleep(0.3)  # the receivers write down the last commands they took
+    return not waiting
+
+
+def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[str, Any]:
     deadline = time.monotonic() + 30
     live: dict[int, dict] = {}
     while time.monotonic() < deadline:
@@ -380,6 +469,7 @@ def _run(session, ring, scenario, protocol, say, launcher) -> dict[str, Any]:
     known: dict[int, dict[str, int]] = {}  # each node's latest counters
     t0 = time.perf_counter()
     steps: list[dict[str, Any]] = []
+    crashed_at: dict[int, float] = {}
     for step in scenario.faults:
         wait = t0 + step.at - time.perf_counter()
         if wait > 0:
@@ -393,20 +483,26 @@ def _run(session, ring, scenario, protocol, say, launcher) -> dict[str, Any]:
         # (it is stopped: they cannot move), so the next step's deltas stay its own
         known.update(collect_stats(session, ring, membership.present))
         before = dict(known)
-        probes = (
-            collect_probes(session, ring, sorted(membership.present)) if scenario.workload == "probe" else {}
-        )
-        injected = time.perf_counter()
-        errors = []
+        injected, wall = time.perf_counter(), time.time()
+        errors, skipped = [], []
         for node_id in targets:
             try:
                 client.inject(node_id, step.request)
             except TokenRingError as exc:
-                errors.append(f"{node_id}: {exc}")
+                if scenario.respawn and time.perf_counter() - crashed_at.get(node_id, -1e9) < RESTART_S:
+                    # crashed a moment ago and not back yet: its faults died with its process
+                    skipped.append(f"{node_id}: still restarting after its crash")
+                else:
+                    errors.append(f"{node_id}: {exc}")
+            if step.kind == "crash":
+                crashed_at[node_id] = time.perf_counter()
+        # the wire may still carry passes of a node that was told to crash or hang until it
+        # acts (a hang stops the process 10 ms after it answers): recovery counts from then
+        effective = time.perf_counter() + (EFFECT_S if step.kind in ("crash", "hang") else 0.0)
         membership.apply(step, targets, scenario.respawn)
         say(
             f"{injected - t0:6.2f} s  {step.kind:9s} on {step.node}"
-            + (f"  ({'; '.join(errors)})" if errors else "")
+            + (f"  ({'; '.join(errors + skipped)})" if errors or skipped else "")
         )
         steps.append(
             {
@@ -415,10 +511,12 @@ def _run(session, ring, scenario, protocol, say, launcher) -> dict[str, Any]:
                 "kind": step.kind,
                 "targets": targets,
                 "injected": injected,
+                "effective": effective,
+                "wall": wall,
                 "expected": [sorted(r) for r in membership.expected()],
                 "before": before,
-                "probes_before": probes,
                 "errors": errors,
+                "skipped": skipped,
             }
         )
     # settle after the last fault has actually landed (a slow step, e.g. a resume, delays it)
@@ -427,45 +525,52 @@ def _run(session, ring, scenario, protocol, say, launcher) -> dict[str, Any]:
     )
     known.update(collect_stats(session, ring, membership.present))
     end_stats = dict(known)
-    end_probes = (
-        collect_probes(session, ring, sorted(membership.present)) if scenario.workload == "probe" else {}
-    )
     frames = capture.snapshot()
-    capture.close()
-    finished = time.perf_counter()
-    report_steps = []
-    for index, step in enumerate(steps):
-        start = step["injected"]
-        end = steps[index + 1]["injected"] if index + 1 < len(steps) else finished
-        after = steps[index + 1]["before"] if index + 1 < len(steps) else end_stats
-        rings = [set(r) for r in step["expected"]]
-        recovered = recovery_time(frames, rings, start, end) if rings else None
-        probes_after = steps[index + 1]["probes_before"] if index + 1 < len(steps) else end_probes
-        lost, duplicated = command_losses(probes_after, protocol) if probes_after else (0, 0)
-        report_steps.append(
-            {
-                "at": step["at"],
-                "injected_s": round(start - t0, 3),  # when it really landed (the schedule's "at")
-                "node": step["node"],
-                "kind": step["kind"],
-                "recovered_ms": None if recovered is None else recovered * 1e3,
-                "expected_rings": step["expected"],
-                "tokens_regenerated": stat_delta(step["before"], after, "tokens_regenerated"),
-                "duplicates_eliminated": stat_delta(step["before"], after, "stale_tokens")
-                + stat_delta(step["before"], after, "duplicate_passes"),
-                "crc_rejects": stat_delta(step["before"], after, "rejected_crc"),
-                "pass_retries": stat_delta(step["before"], after, "pass_retries"),
-                "commands_lost": lost,
-                "commands_duplicated": duplicated,
-                "errors": step["errors"],
-            }
-        )
+    finished, finished_wall = time.perf_counter(), time.time()
     final = [f for f in frames if f[0] >= finished - min(1.0, scenario.settle)]
     seq, _ = passes(final)
     rings = membership.expected()
     one_token = (
         settled(seq) and len(rings) == 1 and first_full_round(seq[len(seq) // 2 :], rings[0]) is not None
     )
+    # commands: the workload stops and its last commands land before anything is compared
+    end_probes: dict[int, dict[str, Any]] = {}
+    if ledger is not None:
+        _quiesce(session, ring, ledger, set(membership.present), say)
+    elif scenario.workload == "probe":
+        end_probes = collect_probes(session, ring, sorted(membership.present))
+    capture.close()
+    report_steps = []
+    recovered_at: dict[int, tuple[float | None, int]] = {}
+    for first, last, at in episodes(frames, steps, finished):
+        for index in range(first, last + 1):
+            recovered_at[index] = (at, first)
+    for index, step in enumerate(steps):
+        start = step["injected"]
+        after = steps[index + 1]["before"] if index + 1 < len(steps) else end_stats
+        at, episode = recovered_at[index]
+        report_steps.append(
+            {
+                "at": step["at"],
+                "injected_s": round(start - t0, 3),  # when it really landed (the schedule's "at")
+                "node": step["node"],
+                "kind": step["kind"],
+                "recovered_ms": None if at is None else (at - start) * 1e3,
+                "episode": episode,  # faults still in flight together are judged together
+                "expected_rings": step["expected"],
+                "tokens_regenerated": stat_delta(step["before"], after, "tokens_regenerated"),
+                "duplicates_eliminated": stat_delta(step["before"], after, "stale_tokens")
+                + stat_delta(step["before"], after, "duplicate_passes"),
+                "crc_rejects": stat_delta(step["before"], after, "rejected_crc"),
+                "pass_retries": stat_delta(step["before"], after, "pass_retries"),
+                "commands_lost": 0,
+                "commands_duplicated": 0,
+                "wall_from": step["wall"],
+                "wall_to": steps[index + 1]["wall"] if index + 1 < len(steps) else finished_wall + 3600,
+                "errors": step["errors"],
+                "skipped": step["skipped"],
+            }
+        )
     lost, duplicated = command_losses(end_probes, protocol) if end_probes else (0, 0)
     invariants = {
         "exactly_one_token_at_end": one_token,
@@ -480,12 +585,14 @@ def _run(session, ring, scenario, protocol, say, launcher) -> dict[str, Any]:
         "frames_captured": len(frames),
         "faults": report_steps,
         "end": {"passes_judged": len(seq), "commands_lost": lost, "commands_duplicated": duplicated},
+        "commands_judged_by": "ledger" if ledger is not None else ("reports" if end_probes else "none"),
         "invariants": invariants,
         "ok": all(invariants.values()),
     }
 
 
 def format_report(report: dict[str, Any]) -> str:
+    """The report as a table per fault, the commands' verdict and the invariants."""
     from tokenring.cliutil import format_table
 
     rows = []
@@ -496,17 +603,32 @@ def format_report(report: dict[str, Any]) -> str:
                 s["node"],
                 s["kind"],
                 "-" if s["recovered_ms"] is None else f"{s['recovered_ms']:.1f}",
+                s.get("episode", ""),
                 s["tokens_regenerated"],
                 s["duplicates_eliminated"],
                 s["crc_rejects"],
                 s["commands_lost"],
-                s["commands_duplicated"],
             ]
         )
     table = format_table(
-        rows, ["at s", "node", "fault", "recover ms", "regen", "dup elim", "crc rej", "cmd lost", "cmd dup"]
+        rows, ["at s", "node", "fault", "recover ms", "episode", "regen", "dup elim", "crc rej", "cmd lost"]
     )
+    commands = report.get("commands")
+    summary = ""
+    if commands:
+        summary = (
+            f"\ncommands (from the probes' ledgers, after the workload stopped): sent {commands['sent']}, "
+            f"acknowledged {commands['acked']}, not acknowledged {commands['unacked']}, "
+            f"not transmitted {commands['untransmitted']}, taken {commands['taken']}; "
+            f"lost {commands['lost']}, duplicated {commands['duplicated']}, never sent {commands['phantom']}"
+            + (
+                f", {commands['lost_at_receiver_crash']} acknowledged to a program killed before it logged them"
+                if commands["lost_at_receiver_crash"]
+                else ""
+            )
+            + "\n"
+        )
     verdict = "\n".join(
         f"  {'ok  ' if ok else 'FAIL'} {name.replace('_', ' ')}" for name, ok in report["invariants"].items()
     )
-    return f"{table}\n\ninvariants:\n{verdict}\n"
+    return f"{table}\n{summary}\ninvariants:\n{verdict}\n"

@@ -1,11 +1,42 @@
 """The command workload ``tokenring chaos`` runs on every node (a user program file).
 
-Each node sends numbered commands (``VECTOR_COUNTER``, accepted by every inbox) to the next
-node of protocol.yaml in a loop and records which numbers were acknowledged; it records every
-number it takes from its own inbox. Lost: acknowledged but never taken; duplicated: taken twice.
+Each node sends numbered commands (``VECTOR``, accepted by every inbox) to the next node of
+protocol.yaml in a loop and takes every command from its own inbox. A command carries its
+sender's run tag (random per program incarnation) and its number, so (sender, run, n) names it
+across crashes and respawns.
+
+With ``$TOKENRING_PROBE_LEDGER`` set to a directory, every incarnation appends a JSON-lines
+ledger there, ``ledger-<node>-<pid>.jsonl``, flushed line by line so that it survives a crash:
+
+- ``{"ev": "start", "node", "run", "pid", "t"}``
+- ``{"ev": "send", "to", "run", "n", "t"}``, then ``{"ev": "outcome", "to", "n", "result", "t"}``
+  with result ``acked``, ``unacked`` (transmitted, not acknowledged) or ``untransmitted``
+- ``{"ev": "take", "from", "run", "n", "t"}``
+- ``{"ev": "quiesced", "t"}`` once a file ``quiesce`` appears in the directory: it sends no more
+  and every send has its outcome; ``{"ev": "stop", "t"}`` when it ends cleanly.
+
+The judge compares the ledgers after the ring stopped: lost = acknowledged but taken by no
+incarnation of the target; duplicated = taken twice. Without the variable the program keeps
+the same facts in memory for ``report()`` (the last 4000 of each).
 """
 
+import json
+import os
+import random
+import threading
+import time
+
 from tokenring.program import UserProgram
+
+HALF = 1 << 15  # a VECTOR argument is an i16: a 30-bit value travels as two 15-bit halves
+
+
+def split(value):
+    return value >> 15, value & (HALF - 1)
+
+
+def join(high, low):
+    return (high << 15) | low
 
 
 class Program(UserProgram):
@@ -14,39 +45,89 @@ class Program(UserProgram):
         names = list(self.os.protocol.nodes)
         mine = self.os.name
         self.target = names[(names.index(mine) + 1) % len(names)] if mine in names else None
+        self.target_id = self.os.protocol.nodes[self.target].id if self.target else None
+        self.run_tag = random.randrange(1, 1 << 30)
+        self.number = 0
         self.acked = []
         self.taken = {}
         self.duplicates = 0
-        self.sequence = 0
+        self.quiesced = False
+        self._lock = threading.Lock()
+        self._file = None
+        self._dir = os.environ.get("TOKENRING_PROBE_LEDGER")
+        if self._dir:
+            path = os.path.join(self._dir, f"ledger-{self.os.node_id}-{os.getpid()}.jsonl")
+            self._file = open(path, "a", buffering=1)  # noqa: SIM115 - open for the program's life
+        self._log(ev="start", node=self.os.node_id, run=self.run_tag, pid=os.getpid())
+
+    def _log(self, **entry):
+        if self._file is None:
+            return
+        entry["t"] = time.time()
+        line = json.dumps(entry, separators=(",", ":")) + "\n"
+        with self._lock:
+            if not self._file.closed:
+                self._file.write(line)  # line-buffered: one write(2) a line, kept if we are killed
+
+    def _quiesce_requested(self):
+        return self._dir is not None and os.path.exists(os.path.join(self._dir, "quiesce"))
 
     def run(self):
-        import threading
-
         threading.Thread(target=self._receive, name="probe-receive", daemon=True).start()
         while self.running:
-            if self.target is None:
-                self.sleep(0.1)
+            if self.target is None or self.quiesced:
+                self.sleep(0.05)
                 continue
-            self.sequence = (self.sequence + 1) & 0xFFFF
-            box = self.os.send_command(self.target, "VECTOR_COUNTER", count=self.sequence)
-            if box.done.wait(1.0) and box.acknowledged:
-                self.acked.append(self.sequence)
+            if self._quiesce_requested():
+                self.quiesced = True
+                self._log(ev="quiesced")
+                continue
+            self.number += 1
+            n = self.number
+            run_hi, run_lo = split(self.run_tag)
+            n_hi, n_lo = split(n)
+            self._log(ev="send", to=self.target_id, run=self.run_tag, n=n)
+            box = self.os.send_command(self.target, "VECTOR", x1=run_hi, y1=run_lo, x2=n_hi, y2=n_lo)
+            while not box.done.wait(0.5):
+                if not self.running:
+                    box.cancel()
+                    break
+            if not box.done.is_set():
+                result = "untransmitted"  # stopping: the fate of a command still in the token is unknown
+            elif box.acknowledged:
+                result = "acked"
+                self.acked.append(n)
+            else:
+                result = "unacked" if box.transmitted else "untransmitted"
+            self._log(ev="outcome", to=self.target_id, n=n, result=result)
             self.sleep(0.01)
 
     def _receive(self):
         while self.running:
             cmd = self.os.receive_command(timeout=0.1)
-            if cmd is None or cmd.name != "VECTOR_COUNTER":
+            if cmd is None or cmd.name != "VECTOR":
                 continue
-            seen = self.taken.setdefault(str(cmd.sender), [])
-            if cmd.args["count"] in seen[-64:]:
+            a = cmd.args
+            run, n = join(a["x1"], a["y1"]), join(a["x2"], a["y2"])
+            self._log(ev="take", **{"from": cmd.sender}, run=run, n=n)
+            key = f"{cmd.sender}:{run}"
+            seen = self.taken.setdefault(key, set())
+            if n in seen:
                 self.duplicates += 1
-            seen.append(cmd.args["count"])
+            seen.add(n)
+
+    def teardown(self):
+        self._log(ev="stop")
+        if self._file is not None:
+            with self._lock:
+                self._file.close()
 
     def report(self):
         return {
             "target": self.target,
+            "run": self.run_tag,
+            "quiesced": self.quiesced,
             "acked": self.acked[-4000:],
-            "taken": {k: v[-4000:] for k, v in self.taken.items()},
+            "taken": {k: sorted(v)[-4000:] for k, v in self.taken.items()},
             "duplicates": self.duplicates,
         }

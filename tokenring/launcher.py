@@ -20,7 +20,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -122,11 +122,13 @@ class Launcher:
         transport: str = "zenoh",
         profile: str | None = None,
         boot_concurrency: int = BOOT_CONCURRENCY,
+        env: Mapping[str, str] | None = None,
     ) -> None:
         if boot_concurrency < 1:
             raise UsageError(f"--boot-wave {boot_concurrency}: at least one node must boot at a time")
         self.plans = list(plans)
         self.boot_concurrency = boot_concurrency
+        self.extra_env = dict(env or {})  # added to every node's environment (chaos: the ledger)
         self.transport = transport  # udp/zmq: the token path over sockets, membership from our registry
         self.profile = profile  # tokenring.profile: emulated hardware timing on every node
         self.registry: Any = None
@@ -307,6 +309,7 @@ class Launcher:
 
     def _popen(self, argv: list[str], name: str) -> subprocess.Popen:
         env = node_environment()
+        env.update(self.extra_env)
         process = subprocess.Popen(
             argv,
             stdin=subprocess.DEVNULL,
