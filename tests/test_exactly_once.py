@@ -12,6 +12,7 @@ from __future__ import annotations
 import signal
 import threading
 import time
+from collections import Counter
 
 import pytest
 from memring import MemoryRing, wait_for
@@ -58,16 +59,31 @@ def test_commands_to_other_inboxes_in_between_never_make_one_look_repeated(ring)
     """The reproduction: one command to motor, then 255 to sonar, six times over."""
     main = ring.nodes[MAIN]
     motor, sonar = Receiver(ring.nodes[MOTOR]), Receiver(ring.nodes[SONAR])
+    unclear: Counter[tuple[str, int]] = Counter()
+
+    def send(target: str, count: int) -> None:
+        while True:  # like os.deliver, resending what was not acknowledged
+            box = main.send_command(target, "VECTOR_COUNTER", count=count)
+            assert box.done.wait(10)
+            if box.acknowledged:
+                return
+            if box.transmitted:
+                unclear[target, count] += 1
+
     try:
-        acked_to_motor = 0
         for turn in range(6):
-            acked_to_motor += main.deliver("motor", "VECTOR_COUNTER", count=turn, timeout=10)
+            send("motor", turn)
             for n in range(255):
-                assert main.deliver("sonar", "VECTOR_COUNTER", count=n, timeout=10)
-        assert acked_to_motor == 6
+                send("sonar", turn * 255 + n)
         wait_for(lambda: len(motor.taken) >= 6, 5, "motor's program to take six commands")
-        assert [count for _, _, count in motor.taken] == [0, 1, 2, 3, 4, 5]
-        assert len(sonar.taken) == 6 * 255
+        wait_for(lambda: len(sonar.taken) >= 6 * 255, 5, "sonar's program to take them all")
+        time.sleep(0.05)  # rounds in which a wrongly repeated command would arrive
+        for target, receiver, expected in (("motor", motor, 6), ("sonar", sonar, 6 * 255)):
+            counts = [count for _, _, count in receiver.taken]
+            assert sorted(set(counts)) == list(range(expected)), target
+            # taken twice only after a resend of a "transmitted, not acknowledged" one
+            extra = Counter(counts) - Counter(range(expected))
+            assert all(unclear[target, c] >= n for c, n in extra.items()), (target, extra)
     finally:
         motor.stop()
         sonar.stop()
@@ -127,6 +143,9 @@ def test_stale_copies_are_cleared_never_taken_and_never_acknowledged(ring):
         def replay(work: bytearray) -> bool:  # one copy per visit of main, as old tokens would
             if queue:
                 work[channel.address : channel.end] = queue.pop(0)
+                # a regeneration (a loaded machine) opens main's recovery window, in which it
+                # would sweep its own old command away before motor saw the copy
+                main._recovery_until = 0.0
             return False
 
         main.system_handler, main.system_busy = replay, True
@@ -175,20 +194,32 @@ from tokenring.program import UserProgram
 
 class Program(UserProgram):
     def setup(self):
-        self.acked = {"motor": 0, "sonar": 0}
+        self.acked = {"motor": [], "sonar": []}
+        self.unclear = {"motor": [], "sonar": []}  # transmitted, not acknowledged: may be taken
         self.finished = False
+
+    def send(self, target, count):
+        while self.running:  # like os.deliver, resending what was not acknowledged
+            box = self.os.send_command(target, "VECTOR_COUNTER", count=count)
+            if not box.done.wait(10):
+                return
+            if box.acknowledged:
+                self.acked[target].append(count)
+                return
+            if box.transmitted:
+                self.unclear[target].append(count)
 
     def run(self):
         for turn in range(6):
-            self.acked["motor"] += self.os.deliver("motor", "VECTOR_COUNTER", count=turn, timeout=10)
+            self.send("motor", turn)
             for n in range(255):
-                self.acked["sonar"] += self.os.deliver("sonar", "VECTOR_COUNTER", count=n, timeout=10)
+                self.send("sonar", turn * 255 + n)
         self.finished = True
         while self.running:
             self.sleep(0.1)
 
     def report(self):
-        return {"acked": self.acked, "finished": self.finished}
+        return {"acked": self.acked, "unclear": self.unclear, "finished": self.finished}
 """,
     "receiver": """
 from tokenring.program import UserProgram
@@ -205,7 +236,7 @@ class Program(UserProgram):
                 self.counts.append(cmd.args["count"])
 
     def report(self):
-        return {"taken": len(self.counts), "counts": self.counts[-8:]}
+        return {"taken": len(self.counts), "counts": self.counts}
 """,
 }
 
@@ -240,16 +271,19 @@ def test_the_reproduction_on_real_processes_delivers_six_of_six(tmp_path, procs,
             return report if report.get("finished") else {}
 
         report = wait_until(main_report, 120, "main to send its 1536 commands", interval=0.5)
-        assert report["acked"] == {"motor": 6, "sonar": 6 * 255}
+        assert report["acked"] == {"motor": list(range(6)), "sonar": list(range(6 * 255))}
         wait_until(
             lambda: control(session, ring_name, MOTOR, "program")["report"]["taken"] >= 6,
             10,
             "motor's program to take six",
         )
         time.sleep(0.2)  # rounds in which a wrongly repeated command would arrive
-        motor_report = control(session, ring_name, MOTOR, "program")["report"]
-        sonar_report = control(session, ring_name, SONAR, "program")["report"]
-        assert motor_report["taken"] == 6 and motor_report["counts"] == [0, 1, 2, 3, 4, 5]
-        assert sonar_report["taken"] == 6 * 255
+        for target, expected in (("motor", 6), ("sonar", 6 * 255)):
+            counts = control(session, ring_name, PROTOCOL.nodes[target].id, "program")["report"]["counts"]
+            assert sorted(set(counts)) == list(range(expected)), target  # every acknowledged one taken
+            # taken twice only where a resend followed a "transmitted, not acknowledged"
+            # (the acknowledgement lost with a token): never by the OS itself
+            extra = Counter(counts) - Counter(range(expected))
+            assert not extra - Counter(report["unclear"][target]), (target, extra)
     launcher.send_signal(signal.SIGTERM)
     assert launcher.wait(30) == 0

@@ -50,6 +50,7 @@ RING_KEYS = {"nodes", "bitrate", "ack", "respawn", "workload"}
 FAULT_KEYS = {"at", "node", "kind", "value", "jitter", "count", "soft"}
 LEDGER_ENV = "TOKENRING_PROBE_LEDGER"  # where the probe programs write their ledgers
 RESTART_S = 10.0  # a node that crashed this recently and does not answer is still restarting
+SETTLE_MAX_S = 30.0  # how much longer than the settle time a ring may take to converge
 EFFECT_S = 0.05  # after a crash or hang is acknowledged, until its node has surely stopped
 STAT_KEYS = (
     "tokens_regenerated",
@@ -519,20 +520,30 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
                 "skipped": skipped,
             }
         )
-    # settle after the last fault has actually landed (a slow step, e.g. a resume, delays it)
+    # settle after the last fault has actually landed (a slow step, e.g. a resume, delays it);
+    # then, while the ring has not converged yet, wait for it up to SETTLE_MAX_S more: on a
+    # loaded machine a respawned node may take seconds to start, and a verdict taken before it
+    # could would fail a healthy ring
     time.sleep(
         max(0.0, max(t0 + scenario.duration, steps[-1]["injected"] + scenario.settle) - time.perf_counter())
     )
+    rings = membership.expected()
+    give_up = time.perf_counter() + SETTLE_MAX_S
+    while True:
+        frames = capture.snapshot()
+        finished, finished_wall = time.perf_counter(), time.time()
+        final = [f for f in frames if f[0] >= finished - min(1.0, scenario.settle)]
+        seq, _ = passes(final)
+        one_token = (
+            settled(seq) and len(rings) == 1 and first_full_round(seq[len(seq) // 2 :], rings[0]) is not None
+        )
+        if one_token or finished > give_up:
+            break
+        time.sleep(0.25)
+    if finished - steps[-1]["injected"] > scenario.settle + 1.5:
+        say(f"the ring converged {finished - steps[-1]['injected']:.1f} s after the last fault")
     known.update(collect_stats(session, ring, membership.present))
     end_stats = dict(known)
-    frames = capture.snapshot()
-    finished, finished_wall = time.perf_counter(), time.time()
-    final = [f for f in frames if f[0] >= finished - min(1.0, scenario.settle)]
-    seq, _ = passes(final)
-    rings = membership.expected()
-    one_token = (
-        settled(seq) and len(rings) == 1 and first_full_round(seq[len(seq) // 2 :], rings[0]) is not None
-    )
     # commands: the workload stops and its last commands land before anything is compared
     end_probes: dict[int, dict[str, Any]] = {}
     if ledger is not None:
@@ -584,7 +595,12 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
         "scenario": scenario.source,
         "frames_captured": len(frames),
         "faults": report_steps,
-        "end": {"passes_judged": len(seq), "commands_lost": lost, "commands_duplicated": duplicated},
+        "end": {
+            "passes_judged": len(seq),
+            "converged_after_last_fault_s": round(finished - steps[-1]["injected"], 3) if one_token else None,
+            "commands_lost": lost,
+            "commands_duplicated": duplicated,
+        },
         "commands_judged_by": "ledger" if ledger is not None else ("reports" if end_probes else "none"),
         "invariants": invariants,
         "ok": all(invariants.values()),
