@@ -27,6 +27,7 @@ The hooks sit on the token path only while a fault is active; with none they are
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import random
 import signal
@@ -41,6 +42,8 @@ from tokenring.launcher import CRASH_EXIT_CODE
 
 if TYPE_CHECKING:
     from tokenring.node import NodeOS
+
+log = logging.getLogger("tokenring.faults")
 
 KINDS = (
     "crash",
@@ -135,21 +138,26 @@ class FaultInjector:
         self._thawed.set()
         self._lock = threading.Lock()
         self.counts = {"dropped": 0, "corrupted": 0, "duplicated": 0, "lost": 0, "blocked": 0, "delayed": 0}
+        self.changed_at = float("-inf")  # time.monotonic() of the last change of the faults
+        #: called with the listing after every change (the node process tells the ring, whose
+        #: nodes tell a regeneration with a cause from a spurious one: tokenring.regeneration)
+        self.on_change: Callable[[dict[str, Any]], None] | None = None
 
     # -- control ----------------------------------------------------------------------------------
     def handle(self, request: dict[str, Any]) -> dict[str, Any]:
         """Apply one request; returns the active faults afterwards."""
         spec = validate(request)
         kind = spec["kind"]
+        later: threading.Timer | None = None  # started after the ring was told
         with self._lock:
             if kind == "crash":
-                threading.Timer(0.01, self._exit, args=(CRASH_EXIT_CODE,)).start()  # after the reply
+                later = threading.Timer(0.01, self._exit, args=(CRASH_EXIT_CODE,))  # after the reply
             elif kind == "hang":
                 if spec["soft"]:
                     self._thawed.clear()
                     self.os.paused = True
                 else:
-                    threading.Timer(0.01, os.kill, args=(os.getpid(), signal.SIGSTOP)).start()
+                    later = threading.Timer(0.01, os.kill, args=(os.getpid(), signal.SIGSTOP))
                 self.active["hang"] = {"since": time.time(), **spec}
             elif kind == "resume":
                 self._resume()
@@ -167,7 +175,21 @@ class FaultInjector:
                 self.active.pop("leave", None)
                 self.os.join()
             self._install()
-            return self.listing()
+            listing = self.listing()
+        if kind != "list":
+            self._changed(listing)
+        if later is not None:
+            later.start()
+        return listing
+
+    def _changed(self, listing: dict[str, Any]) -> None:
+        """The faults changed: note when, and tell whoever listens (never raises)."""
+        self.changed_at = time.monotonic()
+        if self.on_change is not None:
+            try:
+                self.on_change(listing)
+            except Exception:  # a fault must never take the node down
+                log.exception("telling the ring of a fault failed")
 
     def _resume(self) -> None:
         self.active.pop("hang", None)
@@ -230,6 +252,10 @@ class FaultInjector:
             if lose["count"] <= 0:
                 active.pop("lose", None)
                 self._install()
+                # the token path must not wait for the notice: it goes from a thread of its own
+                threading.Thread(
+                    target=self._changed, args=(self.listing(),), name="fault-notice", daemon=True
+                ).start()
             self.counts["lost"] += 1
             return True
         corrupt = active.get("corrupt")

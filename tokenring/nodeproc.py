@@ -32,6 +32,7 @@ from tokenring.profile import PROFILES
 from tokenring.profile import install as install_profile
 from tokenring.program import load_program_file
 from tokenring.protocol import Protocol, load_protocol
+from tokenring.regeneration import RegenerationLedger
 from tokenring.ring import parse_bitrate
 from tokenring.system import (
     DEFAULT_CAPACITY,
@@ -86,7 +87,7 @@ class NodeProcess:
         install_profile(self.os, profile, bitrate, time.perf_counter())
         self.stop_event = threading.Event()
         self.control: dict[str, ControlHandler] = {
-            "stats": lambda _: self.os.snapshot(),
+            "stats": lambda _: self._stats(),
             "rounds": lambda _: self.os.round_times(),
             "visits": lambda _: self.os.stats.visits,
             "leave": self._request_leave,
@@ -95,6 +96,13 @@ class NodeProcess:
             "peers": lambda _: self._peers(),
         }
         self.faults = FaultInjector(self.os)
+        # every regeneration counted by cause (spurious: no fault, no membership change); the
+        # nodes tell each other when their faults change, so a regeneration caused by a fault
+        # elsewhere (main lost the token, charger regenerates it) is not taken for a spurious one
+        self.regenerations = RegenerationLedger(self.os, self.faults)
+        self.regenerations.install()
+        self.faults.on_change = self._tell_faults
+        self.control["faultnote"] = self.regenerations.note
         # the OS's system commands; the node's program and time stamp live in its store
         self.system = SystemLayer(
             self.os,
@@ -106,6 +114,28 @@ class NodeProcess:
         self._queryable: Any = None
         self.hardware: Any = None
         self.pclink: PcLinkServer | None = None
+
+    def _stats(self) -> dict[str, Any]:
+        """The node's snapshot with its regenerations by cause and its uptime (``stats`` verb)."""
+        snapshot = self.os.snapshot()
+        snapshot["regenerations"] = self.regenerations.report()
+        snapshot["uptime_s"] = snapshot["regenerations"]["uptime_s"]
+        return snapshot
+
+    def _tell_faults(self, listing: dict[str, Any]) -> None:
+        """Tell every node of the ring that this node's faults changed (``ctl/*/faultnote``)."""
+        payload = msgpack.packb({"id": self.os.node_id, "faults": sorted(listing["faults"])})
+        try:
+            self.session.get(
+                keys.control(self.ring, "*", "faultnote"),
+                lambda _reply: None,  # the answers say nothing; nobody waits for them
+                target=zenoh.QueryTarget.ALL,
+                consolidation=zenoh.ConsolidationMode.NONE,
+                payload=payload,
+                timeout=2.0,
+            )
+        except zenoh.ZError as exc:
+            log.warning("could not tell the ring of a fault change: %s", exc)
 
     def _peers(self) -> dict[str, Any]:
         """The Zenoh links of this node (diagnostics: who it reaches directly)."""

@@ -3,7 +3,9 @@
 Membership and the successor chain, the round-trip time, per-node counters like the Linux
 arcnet driver's (reconfigurations, successor changes, unacknowledged passes, CRC rejects,
 inbox-full refusals, regenerations, stale tokens dropped), the faults active on each node, and
-an event log where fault periods, membership changes and reconfigurations are marked.
+an event log where fault periods, membership changes and reconfigurations are marked. The
+ring's regenerations per hour, and the spurious ones among them (no fault on any node and no
+node come or gone in the seconds before: tokenring/regeneration.py), head the view.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from typing import Any
 
 from tokenring import keys
 from tokenring.cliutil import add_ring_options, discover, format_table, query, tap_session
+from tokenring.regeneration import format_rates, ring_rates
 
 COUNTERS = (
     ("reconfigurations", "reconf"),
@@ -46,7 +49,13 @@ def snapshot(session: Any, ring: str) -> dict[str, Any]:
     for _, reply in query(session, keys.control(ring, "*", "fault"), {"kind": "list"}, timeout=1.0):
         if reply.get("ok"):
             faults[reply["result"]["id"]] = reply["result"]["faults"]
-    return {"t": time.time(), "nodes": nodes, "faults": faults}
+    return {"t": time.time(), "nodes": nodes, "faults": faults, "regenerations": ring_rates(nodes.values())}
+
+
+def spurious(node: dict[str, Any]) -> int | None:
+    """The node's spurious regenerations (None from a node that does not count them)."""
+    ledger = node.get("regenerations")
+    return None if ledger is None else int(ledger["spurious"])
 
 
 def diff_events(previous: dict[str, Any] | None, current: dict[str, Any]) -> list[str]:
@@ -67,7 +76,11 @@ def diff_events(previous: dict[str, Any] | None, current: dict[str, Any]) -> lis
         for key, label in COUNTERS:
             grown = new["stats"].get(key, 0) - old["stats"].get(key, 0)
             if grown > 0 and key not in ("successor_changes",):
-                events.append(f"{names[node_id]}: {label} +{grown}")
+                note = ""
+                if key == "tokens_regenerated":
+                    more = (spurious(new) or 0) - (spurious(old) or 0)
+                    note = f" (SPURIOUS +{more})" if more > 0 else ""
+                events.append(f"{names[node_id]}: {label} +{grown}{note}")
     old_faults, new_faults = previous["faults"], current["faults"]
     for node_id in sorted(set(old_faults) | set(new_faults)):
         old_set, new_set = set(old_faults.get(node_id) or {}), set(new_faults.get(node_id) or {})
@@ -97,6 +110,7 @@ def render(ring: str, snap: dict[str, Any], events: list[tuple[float, str]]) -> 
             current = nodes[current]["successor"]
         chain.append(f"{nodes[current]['name']}({current})" if current in nodes else f"?({current})")
         lines.append("ring: " + " -> ".join(chain))
+        lines.append(format_rates(snap.get("regenerations") or ring_rates(nodes.values())))
     rows = []
     for node_id, n in sorted(nodes.items()):
         faults = snap["faults"].get(node_id)
@@ -109,6 +123,7 @@ def render(ring: str, snap: dict[str, Any], events: list[tuple[float, str]]) -> 
                 f"{n['round_ms']['median']:.2f}",
                 f"{n['handler_us']['median']:.0f}",
                 *[n["stats"].get(key, 0) for key, _ in COUNTERS],
+                "?" if spurious(n) is None else spurious(n),
                 ",".join(sorted(faults)) if faults else "-",
             ]
         )
@@ -120,6 +135,7 @@ def render(ring: str, snap: dict[str, Any], events: list[tuple[float, str]]) -> 
         "round ms",
         "handler us",
         *[label for _, label in COUNTERS],
+        "spurious",
         "faults",
     ]
     lines.append(format_table(rows, headers))

@@ -18,13 +18,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from tokenring import keys
     from tokenring.cliutil import discover, format_table, print_json, query, tap_session
+    from tokenring.regeneration import format_rates, ring_rates
 
     with tap_session(args) as session:
         discover(session, args.ring, timeout=args.timeout + 3.0)
         replies = query(session, keys.control(args.ring, "*", "stats"), timeout=args.timeout)
     nodes = sorted((r["result"] for _, r in replies if r.get("ok")), key=lambda n: n["id"])
+    rates = ring_rates(nodes)
     if args.json:
-        print_json({"ring": args.ring, "nodes": nodes})
+        print_json({"ring": args.ring, "regenerations": rates, "nodes": nodes})
         return 0 if nodes else 1
     if not nodes:
         print(f"no node of ring {args.ring!r} answered", file=sys.stderr)
@@ -41,6 +43,8 @@ def run(args: argparse.Namespace) -> int:
             f"{n['send_us']['median']:.0f}",
             n["stats"]["rejected_crc"],
             n["stats"]["reconfigurations"],
+            n["stats"]["tokens_regenerated"],
+            n["regenerations"]["spurious"] if "regenerations" in n else "?",
             n["program"] or "-",
         ]
         for n in nodes
@@ -59,8 +63,11 @@ def run(args: argparse.Namespace) -> int:
                 "put us",
                 "crc rej",
                 "reconf",
+                "regen",
+                "spurious",
                 "program",
             ],
         )
     )
+    print(format_rates(rates))
     return 0

@@ -1,0 +1,179 @@
+"""Regenerations by cause (tokenring/regeneration.py): the per-hour arithmetic, the ledger's
+rules, and a real ring where a lost token's regeneration counts as a fault's, not as spurious."""
+
+from __future__ import annotations
+
+import json
+import signal
+import time
+from types import SimpleNamespace
+
+import pytest
+from conftest import run_tokenring
+from ringutil import launcher_pids, stats, tap, wait_ring, wait_until
+
+from tokenring.protocol import default_protocol
+from tokenring.regeneration import QUIET_S, RegenerationLedger, format_rates, per_hour, ring_rates
+
+IDS = [n.id for n in default_protocol().nodes.values()]
+
+
+def node(uptime_s: float, regenerated: int, spurious: int, fault: int = 0, seeds: int = 0) -> dict:
+    ledger = {
+        "uptime_s": uptime_s,
+        "seeds": seeds,
+        "regenerated": regenerated,
+        "fault": fault,
+        "membership": regenerated - spurious - fault,
+        "spurious": spurious,
+    }
+    return {"stats": {"tokens_regenerated": regenerated + seeds}, "regenerations": ledger}
+
+
+def test_per_hour_arithmetic():
+    assert per_hour(3, 3600.0) == 3.0
+    assert per_hour(1, 900.0) == 4.0
+    assert per_hour(0, 60.0) == 0.0
+    assert per_hour(5, 0.0) is None
+
+
+def test_ring_rates_sum_the_nodes_over_the_longest_uptime_and_leave_seeds_out():
+    nodes = [node(1800.0, 2, 1, fault=1, seeds=1), node(3600.0, 1, 0, fault=1), node(600.0, 0, 0)]
+    rates = ring_rates(nodes)
+    assert rates["uptime_s"] == 3600.0
+    assert (rates["regenerated"], rates["fault"], rates["spurious"]) == (3, 2, 1)
+    assert rates["per_hour"] == 3.0 and rates["spurious_per_hour"] == 1.0
+    assert rates["nodes"] == rates["nodes_counted"] == 3
+    # a node that does not count causes adds its raw counter to the total only
+    older = {"stats": {"tokens_regenerated": 4}}
+    mixed = ring_rates([*nodes, older])
+    assert mixed["regenerated"] == 7 and mixed["spurious"] == 1 and mixed["nodes_counted"] == 3
+    assert "do not count causes" in format_rates(mixed)
+    assert ring_rates([])["per_hour"] is None
+    assert "spurious" in format_rates(rates) and "1.0/h" in format_rates(rates)
+
+
+class FakeNode:
+    """What the ledger reads of a NodeOS."""
+
+    def __init__(self) -> None:
+        self.node_id = 80
+        self.stats = SimpleNamespace(tokens_regenerated=0)
+        self.timing = SimpleNamespace(current=SimpleNamespace(recon=0.084))
+        self.membership = SimpleNamespace(live={10, 20, 80}, rank=lambda: 0)
+        self._last_seen = 0.0
+        self._deferred_pending = 0
+        self._last_visit = 0.0
+        self._has_sent = False
+        self._live_changed_at = 0.0
+
+    def _regenerate(self, now: float) -> None:
+        self.stats.tokens_regenerated += 1
+        self._has_sent = True
+
+
+def test_the_ledger_tells_seed_fault_membership_and_spurious_apart():
+    clock = SimpleNamespace(t=1000.0)
+    os_ = FakeNode()
+    faults = SimpleNamespace(active={}, changed_at=float("-inf"))
+    ledger = RegenerationLedger(os_, faults, clock=lambda: clock.t)  # type: ignore[arg-type]
+    ledger.install()
+    os_._regenerate(0.0)  # the ring's first token
+    os_._regenerate(0.0)  # nothing wrong anywhere: spurious
+    faults.active = {"drop": {}}
+    os_._regenerate(0.0)  # a fault active here
+    faults.active = {}
+    faults.changed_at = clock.t
+    clock.t += QUIET_S / 2
+    os_._regenerate(0.0)  # it ended moments ago
+    clock.t += QUIET_S
+    ledger.note({"id": 20, "faults": ["hang"]})  # a fault elsewhere, still active
+    clock.t += 10 * QUIET_S
+    os_._regenerate(0.0)
+    ledger.note({"id": 20, "faults": []})  # ended
+    clock.t += QUIET_S / 2
+    os_._regenerate(0.0)
+    ledger.note({"id": 30, "faults": ["delay"]})
+    os_.membership.live.discard(30)  # a node that is gone with its fault still on
+    clock.t += 10 * QUIET_S
+    os_._regenerate(0.0)  # its stale fault explains nothing: spurious
+    os_._live_changed_at = time.perf_counter()
+    os_._last_seen, os_._deferred_pending = 1.0, 1
+    os_._regenerate(1.5)  # a node just came or went
+    report = ledger.report()
+    assert [r["cause"] for r in report["recent"]] == [
+        "seed",
+        "spurious",
+        "fault",
+        "fault",
+        "fault",
+        "fault",
+        "spurious",
+        "membership",
+    ]
+    assert report["recent"][-1] | {"t": 0} == {
+        "t": 0,
+        "cause": "membership",
+        "since_seen_ms": 500.0,
+        "queued": 1,  # a frame already waited for the token thread
+        "rank": 0,
+        "recon_ms": 84.0,
+        "stalled": False,
+    }
+    assert report["seeds"] == 1 and report["regenerated"] == 7
+    assert (report["fault"], report["membership"], report["spurious"]) == (4, 1, 2)
+    assert os_.stats.tokens_regenerated == 8
+    assert report["uptime_s"] == pytest.approx(clock.t - 1000.0)
+
+
+def test_a_regeneration_that_did_not_happen_is_not_counted():
+    os_ = FakeNode()
+    os_._regenerate = lambda now: None  # type: ignore[method-assign]  # the token came back just in time
+    ledger = RegenerationLedger(os_)  # type: ignore[arg-type]
+    ledger.install()
+    os_._regenerate(0.0)
+    assert ledger.report()["regenerated"] == 0 and ledger.seeds == 0
+
+
+def test_a_lost_token_regenerates_as_a_fault_not_spuriously_and_status_shows_it(procs, ring_name, endpoint):
+    launcher = procs.tokenring("up", "--ring", ring_name, "--listen", endpoint, "--no-world", "--no-programs")
+    ring = ["--ring", ring_name, "-e", endpoint]
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, IDS, timeout=40)
+        pids = launcher_pids(session, ring_name)
+        procs.watch(pids)
+
+        def regenerations() -> int:
+            return sum(
+                n.get("regenerations", {}).get("regenerated", 0) for n in stats(session, ring_name).values()
+            )
+
+        before = regenerations()
+        injected = time.time()
+        fault = run_tokenring("fault", "main", "lose", *ring, "--timeout", "3")
+        assert fault.returncode == 0, fault.stderr
+        wait_until(lambda: regenerations() > before, 30, "the lost token regenerated")
+
+        status = run_tokenring("status", "--json", *ring)
+        assert status.returncode == 0, status.stderr
+        report = json.loads(status.stdout)
+        after = [
+            (n["name"], r)
+            for n in report["nodes"]
+            for r in n["regenerations"]["recent"]
+            if r["t"] >= injected
+        ]
+        assert after, report["nodes"]
+        assert all(r["cause"] == "fault" for _, r in after), after
+        assert all(r["since_seen_ms"] > 0 and r["rank"] >= 0 for _, r in after), after
+        rates = report["regenerations"]
+        assert rates["fault"] >= 1 and rates["nodes_counted"] == len(IDS)
+        assert rates["per_hour"] > 0 and rates["uptime_s"] > 0
+        assert all("uptime_s" in n and "spurious" in n["regenerations"] for n in report["nodes"])
+
+        text = run_tokenring("status", *ring)
+        assert text.returncode == 0 and "spurious" in text.stdout and "/h" in text.stdout
+        monitor = run_tokenring("monitor", "--once", *ring)
+        assert monitor.returncode == 0 and "spurious (no fault" in monitor.stdout
+    launcher.send_signal(signal.SIGTERM)
+    launcher.wait(20)
