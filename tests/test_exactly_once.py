@@ -287,3 +287,34 @@ def test_the_reproduction_on_real_processes_delivers_six_of_six(tmp_path, procs,
             assert not extra - Counter(report["unclear"][target]), (target, extra)
     launcher.send_signal(signal.SIGTERM)
     assert launcher.wait(30) == 0
+
+
+def test_a_respawned_receiver_remembers_what_its_predecessor_took(tmp_path):
+    """The memory lives in the node's store: a process started again reads back what the last
+    one took, so a token that kept a taken command (a partition: its sender could not clear it)
+    does not hand it over a second time."""
+    log = tmp_path / "main" / "inbox-memory"
+    first = CommandMemory(log)
+    first.saw(30, 7, 314, taken=True)
+    first.saw(30, 7, 315, taken=False)  # refused: not written down
+    first.saw(20, 5, 9, taken=True)
+    first.saw(20, 6, 1, taken=True)  # sender 20 came back as a new incarnation
+    # the kill: no close; a line that is not three numbers is skipped
+    with log.open("a") as f:
+        f.write("30 7")
+    second = CommandMemory(log)
+    assert second.classify(30, 7, 314) is REPEAT
+    assert second.classify(30, 7, 313) is STALE
+    assert second.classify(30, 7, 316) is NEW
+    assert second.classify(20, 5, 10) is STALE  # the retired incarnation stays retired
+    assert second.classify(20, 6, 1) is REPEAT
+    assert len(log.read_text().splitlines()) == 3  # compacted: one line per incarnation
+    second.close()
+
+
+def test_an_unwritable_memory_log_leaves_the_memory_in_ram(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    memory = CommandMemory(blocker / "inbox-memory")  # a directory that cannot exist
+    memory.saw(30, 7, 1, taken=True)
+    assert memory.classify(30, 7, 1) is REPEAT

@@ -18,16 +18,21 @@ The objects here run inside the token handler: each ``visit`` is a handful of by
 
 from __future__ import annotations
 
+import logging
+import os
 import threading
 import time
 from collections import deque
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from tokenring.errors import ChannelError
 from tokenring.protocol import Channel, Command, CommandChannel, Protocol
+
+log = logging.getLogger("tokenring.channels")
 
 
 class ChannelBuffer:
@@ -175,12 +180,22 @@ class CommandMemory:
     """The receiver's side of exactly-once delivery (see protocol.yaml's command_channel).
 
     It belongs to the node, not to the program's inbox, so a program restarted on a node that
-    stays up still never takes a command twice."""
+    stays up still never takes a command twice. With a ``log`` file (the node's store: the seed's
+    battery-backed RAM) every command taken is appended there before it is acknowledged, and a
+    node process started again reads it back: a respawned receiver never takes again what its
+    predecessor took, even from a token that kept the command since (a partition)."""
 
-    __slots__ = ("_senders",)
+    __slots__ = ("_fd", "_lines", "_path", "_senders")
 
-    def __init__(self) -> None:
+    COMPACT_AFTER = 50_000  # lines in the log before it is rewritten as one line per incarnation
+
+    def __init__(self, log: str | os.PathLike[str] | None = None) -> None:
         self._senders: dict[int, _SenderRecord] = {}
+        self._fd = -1
+        self._lines = 0
+        self._path = Path(log) if log is not None else None
+        if self._path is not None:
+            self._load()
 
     def classify(self, sender: int, incarnation: int, seq: int) -> str:
         """NEW (never seen: may be taken), REPEAT (the one last taken) or STALE (an old copy)."""
@@ -195,6 +210,11 @@ class CommandMemory:
 
     def saw(self, sender: int, incarnation: int, seq: int, taken: bool) -> None:
         """Record a NEW command as seen (refused: inbox locked) or taken."""
+        self._apply(sender, incarnation, seq, taken)
+        if taken and self._fd >= 0:
+            self._append(f"{sender} {incarnation} {seq}\n")
+
+    def _apply(self, sender: int, incarnation: int, seq: int, taken: bool) -> None:
         record = self._senders.get(sender)
         if record is None:
             record = self._senders[sender] = _SenderRecord(incarnation, seq)
@@ -208,6 +228,52 @@ class CommandMemory:
             # a copy of the command taken can lag only a few seqs behind: far past it, the same
             # number coming round again (2^16 refused commands later) is a new command
             record.taken = -1
+
+    def _load(self) -> None:
+        """Read the log back (a line cut short by a kill is skipped) and rewrite it compactly."""
+        assert self._path is not None
+        try:
+            text = self._path.read_text(errors="replace") if self._path.exists() else ""
+            for line in text.splitlines():
+                parts = line.split()
+                if len(parts) == 3 and all(p.lstrip("-").isdigit() for p in parts):
+                    sender, incarnation, seq = map(int, parts)
+                    self._apply(sender, incarnation, seq, taken=seq >= 0)
+            self._compact()
+        except OSError as exc:
+            log.warning("%s: the inbox memory stays in RAM only: %s", self._path, exc)
+            self._fd = -1
+
+    def _compact(self) -> None:
+        assert self._path is not None
+        lines = []
+        for sender, record in self._senders.items():
+            lines += [f"{sender} {old} -1\n" for old in record.retired]
+            lines.append(f"{sender} {record.incarnation} {record.taken}\n")
+        self._path.parent.mkdir(parents=True, exist_ok=True)
+        fresh = self._path.with_name(self._path.name + ".new")
+        fresh.write_text("".join(lines))
+        os.replace(fresh, self._path)
+        if self._fd >= 0:
+            os.close(self._fd)
+        self._fd = os.open(self._path, os.O_WRONLY | os.O_APPEND)
+        self._lines = len(lines)
+
+    def _append(self, line: str) -> None:
+        try:
+            os.write(self._fd, line.encode())  # one write(2): kept by the kernel if we are killed
+            self._lines += 1
+            if self._lines > self.COMPACT_AFTER:
+                self._compact()
+        except OSError as exc:
+            log.warning("%s: the inbox memory stays in RAM only: %s", self._path, exc)
+            self._fd = -1
+
+    def close(self) -> None:
+        """Close the log (the memory stays usable, in RAM only)."""
+        if self._fd >= 0:
+            os.close(self._fd)
+            self._fd = -1
 
 
 class Inbox:

@@ -22,6 +22,7 @@ import msgpack
 import zenoh
 
 from tokenring import keys
+from tokenring.channels import CommandMemory
 from tokenring.control import answer_query
 from tokenring.errors import UsageError
 from tokenring.faults import FaultInjector
@@ -103,6 +104,8 @@ class NodeProcess:
         self.regenerations.install()
         self.faults.on_change = self._tell_faults
         self.control["faultnote"] = self.regenerations.note
+        if store is not None:  # what the inbox took survives a crash, like the stored program
+            self.os.command_memory = CommandMemory(store / ring / self.os.name / "inbox-memory")
         # the OS's system commands; the node's program and time stamp live in its store
         self.system = SystemLayer(
             self.os,
