@@ -7,10 +7,10 @@ import time
 
 import pytest
 from memring import MemoryRing, wait_for
-
-from tokenring.wire import first_full_round, passes, settled
+from ringjudge import Header, one_token
 
 IDS = [10, 20, 30, 40, 50, 60, 70, 80]
+HEADER = Header.from_protocol()
 
 
 @pytest.fixture
@@ -21,27 +21,32 @@ def ring():
     r.close()
 
 
-def capture(ring: MemoryRing, seconds: float) -> list:
-    """Fresh passes on the wire for ``seconds``."""
+def capture(ring: MemoryRing, seconds: float) -> list[tuple[float, bytes]]:
+    """Every frame on the hub for ``seconds``, in the order the hub carried them (one lock:
+    each sender's own send order too), as ``(index, frame)`` for the judge."""
     ring.hub.wire.clear()
     ring.hub.tapping = True
-    t0 = time.monotonic()
     time.sleep(seconds)
     ring.hub.tapping = False
-    frames = [(t0 + i * 1e-6, frame) for i, (_, _, frame) in enumerate(ring.hub.wire)]
-    return passes(frames)[0]
+    return [(float(i), frame) for i, (_, _, frame) in enumerate(ring.hub.wire)]
 
 
 def assert_one_token_through(ring: MemoryRing, members: list[int], seconds: float = 0.3) -> None:
-    """Exactly one token, going round through ``members``. On a loaded machine a stall can
-    provoke a fresh regeneration at any moment (itself healed within a round), so a capture
-    that ends inside one is taken again; a second token that persists fails every capture."""
+    """Exactly one token, going round through ``members``, in the second half of a capture
+    (tests/ringjudge.py's rules). On a loaded machine a stall can provoke a fresh regeneration
+    at any moment (itself healed within a round), so a capture that ends inside one is taken
+    again; a second token that persists fails every capture."""
+    verdicts = []
     for _ in range(3):
-        seq = capture(ring, seconds)
-        tail = seq[len(seq) // 2 :]
-        if settled(seq) and first_full_round(tail, members) is not None:
+        frames = capture(ring, seconds)
+        verdict = one_token(frames[len(frames) // 2 :], HEADER, members)
+        if verdict.ok:
             return
-    raise AssertionError(f"not exactly one token going round through {members} in 3 captures")
+        verdicts.append(verdict)
+    raise AssertionError(
+        f"not exactly one token going round through {members} in 3 captures:\n"
+        + "\n".join(map(str, verdicts))
+    )
 
 
 def test_crash_of_any_node_heals_to_one_token(ring):
@@ -120,13 +125,29 @@ def test_a_lost_pass_is_retried_or_regenerated_once():
         ring.close()
 
 
-def test_an_injected_duplicate_token_is_eliminated(ring):
-    old = bytes(ring.nodes[30]._work)  # a copy of an earlier token, as a frozen node might hold
-    ring.wait_rounds(5)
-    ring.hub.send(20, 30, ("frame", old))
-    ring.hub.send(20, 30, ("frame", old))
-    ring.wait_rounds(20, node_id=10)
-    assert_one_token_through(ring, IDS)
+@pytest.mark.xfail(
+    strict=False,  # a skip or regeneration that a loaded machine provokes may end it by chance
+    reason="a replayed pass of the current epoch is taken as new: two tokens go round in one "
+    "epoch (at 10 Mbit/s still two 8 s later; ended by a chance skip in 2 of 5 runs)",
+)
+def test_an_injected_copy_of_an_old_pass_is_eliminated():
+    # This test used to send node 30 a copy of its own last pass (addressed to 40): node 30
+    # refused it for its DID and the test passed with nothing injected. Here node 30 gets node
+    # 20's own pass to it again, a few rounds late and in the same epoch, as a link replaying
+    # an old frame would deliver it; only the round counter tells it from a fresh one.
+    ring = MemoryRing(IDS, bitrate=10e6)
+    try:
+        ring.wait_rounds(30)
+        with ring.nodes[20]._token_lock:
+            old = bytes(ring.nodes[20]._work)  # sealed: the last frame node 20 sent
+        assert HEADER.valid(old) and (old[HEADER.sid], old[HEADER.did]) == (20, 30)
+        ring.wait_rounds(5)
+        ring.hub.send(20, 30, ("frame", old))
+        ring.hub.send(20, 30, ("frame", old))
+        ring.wait_rounds(20, node_id=10)
+        assert_one_token_through(ring, IDS)
+    finally:
+        ring.close()
 
 
 def test_a_partition_forms_two_rings_and_heals_into_one(ring):
