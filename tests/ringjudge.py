@@ -63,7 +63,8 @@ whose outcome was ``unacked`` or ``untransmitted`` is no violation (the token ca
 ack may have been lost and regenerated from an older copy); they are counted. The judge
 relies on the probe writing each line out before it acts on it (a ``send`` line before the
 send), so that a killed program leaves no take without its send. A line torn by a kill is
-skipped and counted.
+skipped and counted. Judge once every program stopped: until then a running incarnation has
+no ``stop`` line and reads as killed (its recent acks as ``lost_at_receiver_crash``).
 """
 
 from __future__ import annotations
@@ -364,6 +365,7 @@ class CommandVerdict:
     misdelivered: list[CommandId] = field(default_factory=list)
     pending: list[CommandId] = field(default_factory=list)
     unresolved: list[CommandId] = field(default_factory=list)
+    acked_at: dict[CommandId, float] = field(default_factory=dict)  # the acked outcome's t
 
     def __str__(self) -> str:
         head = "commands ok" if self.ok else "commands NOT ok"
@@ -481,6 +483,8 @@ def judge_ledgers(directory: str | Path) -> CommandVerdict:
     for cid, (target, sender) in sorted(sends.items()):
         outcome = outcomes.get(cid)
         taken_by = [node for node, _ in takes.get(cid, ())]
+        if outcome is not None and outcome[0] == "acked":
+            verdict.acked_at[cid] = outcome[1]
         if outcome is None:
             (verdict.pending if sender.killed and sender.quiesced is None else verdict.unresolved).append(cid)
         elif outcome[0] == "acked" and target not in taken_by:

@@ -1,7 +1,11 @@
-"""Fault injection at run time on real node processes: every kind heals to exactly one token."""
+"""Fault injection at run time on real node processes: every kind heals to exactly one token,
+and through all of them no acknowledged command is lost or taken twice.
+
+Both are judged by tests/ringjudge.py, which reads only the wire and the probes' ledgers."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import signal
 import subprocess
@@ -11,22 +15,28 @@ from pathlib import Path
 
 import pytest
 from conftest import REPO, TOKENRING, Processes, pid_alive
+from ringjudge import FrameTap, Header, judge_ledgers, one_token
 from ringutil import control, launcher_pids, stats, tap, wait_ring, wait_until
 
-from tokenring.chaos import WireCapture
 from tokenring.cliutil import free_port
 from tokenring.protocol import default_protocol
-from tokenring.wire import first_full_round, passes, settled
 
 IDS = [n.id for n in default_protocol().nodes.values()]
 PROBE = str(REPO / "tokenring" / "chaosprobe.py")
+HEADER = Header.from_protocol()
+LEDGER_ENV = "TOKENRING_PROBE_LEDGER"  # the probe's ledger directory (tokenring/chaosprobe.py)
 
 
 class Ring:
-    """One 8-node ring for the whole module (probe workload, respawn), reset between tests."""
+    """One 8-node ring for the whole module (probe workload with ledgers, respawn), reset
+    between tests; the module's last ring test stops it and judges the ledgers."""
 
     def __init__(self, tmp: Path) -> None:
         self.procs = Processes()
+        self.stopped = False
+        self.launcher_output = ""
+        self.ledger = tmp / "ledger"
+        self.ledger.mkdir()
         self.name = f"f{uuid.uuid4().hex[:8]}"
         self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         programs = tmp / "programs"
@@ -44,10 +54,11 @@ class Ring:
             "--respawn",
             "--programs",
             str(programs),
+            env={LEDGER_ENV: str(self.ledger)},
         )
         self.session = tap(self.endpoint)
         wait_ring(self.session, self.name, IDS, timeout=40)
-        self.capture = WireCapture(self.session, self.name)
+        self.tap = FrameTap(self.session, self.name)
 
     def fault(self, *args: str, check: bool = True) -> subprocess.CompletedProcess:
         result = subprocess.run(
@@ -62,14 +73,19 @@ class Ring:
         return result
 
     def one_token_through(self, members: list[int], timeout: float = 15.0) -> float:
-        """Wait until the last second of the wire shows exactly one token going round ``members``."""
+        """Wait until the last second of the wire shows exactly one token going round ``members``
+        (ringjudge.one_token); on a timeout the last window's verdict says why not."""
+        last = []
 
         def ok() -> bool:
-            now = time.perf_counter()
-            seq, _ = passes([f for f in self.capture.snapshot() if f[0] >= now - 1.0])
-            return settled(seq) and first_full_round(seq[len(seq) // 2 :], members) is not None
+            verdict = one_token(self.tap.snapshot(since=time.perf_counter() - 1.0), HEADER, members)
+            last[:] = [verdict]
+            return verdict.ok
 
-        wait_until(ok, timeout, f"exactly one token through {members}", interval=0.25)
+        try:
+            wait_until(ok, timeout, f"exactly one token through {members}", interval=0.25)
+        except AssertionError as exc:
+            raise AssertionError(f"{exc}\n{last[0] if last else ''}") from None
         return time.perf_counter()
 
     def node_stats(self, node_id: int) -> dict:
@@ -78,17 +94,51 @@ class Ring:
         )["stats"]
 
     def reset(self) -> None:
+        if self.stopped:
+            return
         self.fault("all", "clear", check=False)
         wait_ring(self.session, self.name, IDS, timeout=30)
         self.one_token_through(IDS)
 
-    def close(self) -> None:
-        self.capture.close()
+    def quiesce(self) -> None:
+        """Stop the probes' workload and let the last commands land: every node's latest
+        incarnation writes 'quiesced' (all its sends have an outcome), then every command
+        acknowledged in the last seconds is taken (a hang guard of 10 s each; what is then
+        still missing is for the judge)."""
+        asked = time.time()
+        (self.ledger / "quiesce").touch()
+
+        def quiesced() -> bool:
+            latest = {}
+            for inc in judge_ledgers(self.ledger).incarnations:
+                if inc.node not in latest or inc.started > latest[inc.node].started:
+                    latest[inc.node] = inc
+            return set(latest) >= set(IDS) and all(i.quiesced is not None for i in latest.values())
+
+        wait_until(quiesced, 10, "every probe to quiesce", interval=0.2)
+
+        def landed() -> bool:
+            v = judge_ledgers(self.ledger)
+            return not [c for c in v.lost + v.lost_at_receiver_crash if v.acked_at[c] > asked - 3.0]
+
+        with contextlib.suppress(AssertionError):
+            wait_until(landed, 10, "the last acknowledged commands to be taken", interval=0.2)
+
+    def stop(self) -> None:
+        """Stop the ring (its nodes leave, their programs end cleanly); idempotent."""
+        if self.stopped:
+            return
+        self.stopped = True
+        self.tap.close()
         pids = launcher_pids(self.session, self.name)
         self.session.close()
         self.launcher.send_signal(signal.SIGTERM)
         self.launcher.wait(10)
+        self.launcher_output = self.launcher.stdout.read() if self.launcher.stdout else ""
         self.procs.watch(pids)
+
+    def close(self) -> None:
+        self.stop()
         leaked = self.procs.cleanup()
         assert not leaked, leaked
 
@@ -290,3 +340,15 @@ def test_monitor_shows_the_chain_counters_and_active_faults(ring):
     lines = [json.loads(line) for line in snapshots.stdout.splitlines()]
     assert len(lines) == 2 and len(lines[-1]["nodes"]) == 8
     assert "delay" in lines[-1]["faults"]["60"]
+
+
+def test_no_acknowledged_command_was_lost_or_taken_twice_through_the_faults(ring):
+    # the module's last test on the ring: every fault above ran under the probes' workload
+    ring.quiesce()
+    ring.stop()
+    verdict = judge_ledgers(ring.ledger)
+    assert verdict.ok, f"{verdict}\nlauncher:\n{ring.launcher_output[-3000:]}"
+    assert verdict.acked > 100, verdict  # the workload ran through every fault
+    # sonar's crash shows: a killed incarnation, then the respawned one
+    sonar = sorted((i for i in verdict.incarnations if i.node == 30), key=lambda i: i.started)
+    assert len(sonar) == 2 and sonar[0].killed, sonar
