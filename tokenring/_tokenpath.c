@@ -28,7 +28,7 @@ static PyObject *s_frames_received, *s_frames_sent, *s_rejected_length, *s_rejec
     *s_rejected_marker, *s_rejected_did, *s_rejected_sid, *s_duplicate_passes, *s_rounds,
     *s_rounds_missed, *s_visits, *s_successor, *s_visit, *s_acquire, *s_release, *s_send_ack,
     *s_answer_stale, *s_adopt_epoch, *s_include, *s_drop_outboxes, *s_activate_outboxes,
-    *s_sweep_own_commands, *s_notify_visit, *s_send_failed, *s_sender;
+    *s_sweep_own_commands, *s_notify_visit, *s_send_failed, *s_sender, *s_replayed_passes;
 
 /* The objects the node sets up, once: (Python attribute, C field). The struct, the garbage
    collector's traverse and clear, and the attribute table all come from this list. _defer hands
@@ -540,6 +540,15 @@ static PyObject *visit_frame(TokenPath *self, PyObject *frame_obj)
         if (failed)
             goto done;
     }
+    else if (self->last_counter >= 0) {
+        /* within one epoch every node gets each round once: an older round is a replayed pass */
+        int back = (self->last_counter - frame[self->o_counter]) & 0xFF;
+        if (back > 0 && back < 128) {
+            if (stats_add(self, s_replayed_passes, 1) == 0)
+                rc = Py_NewRef(Py_None);
+            goto done;
+        }
+    }
     self->accepted_crc = crc;
     self->accepted_sid = sid;
     py_sid = PyLong_FromLong(sid);
@@ -862,7 +871,7 @@ PyMODINIT_FUNC PyInit__tokenpath(void)
         {&s_activate_outboxes, "_activate_outboxes"},
         {&s_sweep_own_commands, "_sweep_own_commands"},
         {&s_notify_visit, "_notify_visit"},      {&s_send_failed, "_send_failed"},
-        {&s_sender, "sender"},
+        {&s_sender, "sender"},                   {&s_replayed_passes, "replayed_passes"},
     };
     for (size_t i = 0; i < sizeof(names) / sizeof(names[0]); i++)
         if (intern(names[i].slot, names[i].name) < 0)

@@ -1,7 +1,9 @@
 """The command workload ``tokenring chaos`` runs on every node (a user program file).
 
-Each node sends numbered commands (``VECTOR``, accepted by every inbox) to the next node of
-protocol.yaml in a loop and takes every command from its own inbox. A command carries its
+Each node sends numbered commands (``VECTOR``, accepted by every inbox) in bursts: a run of
+1 to 300 commands to one other node, then a run to another, chosen at random — so sequence
+numbers wrap and interleave between targets as the robot's own traffic does — and takes every
+command from its own inbox. A command carries its
 sender's run tag (random per program incarnation) and its number, so (sender, run, n) names it
 across crashes and respawns.
 
@@ -42,11 +44,11 @@ def join(high, low):
 class Program(UserProgram):
     def setup(self):
         self.os.set_own_input_id()
-        names = list(self.os.protocol.nodes)
-        mine = self.os.name
-        self.target = names[(names.index(mine) + 1) % len(names)] if mine in names else None
-        self.target_id = self.os.protocol.nodes[self.target].id if self.target else None
+        self.others = [n for n in self.os.protocol.nodes if n != self.os.name]
         self.run_tag = random.randrange(1, 1 << 30)
+        self.random = random.Random(self.run_tag)
+        self.target = None
+        self.burst = 0
         self.number = 0
         self.acked = []
         self.taken = {}
@@ -75,9 +77,14 @@ class Program(UserProgram):
     def run(self):
         threading.Thread(target=self._receive, name="probe-receive", daemon=True).start()
         while self.running:
-            if self.target is None or self.quiesced:
+            if not self.others or self.quiesced:
                 self.sleep(0.05)
                 continue
+            if self.burst <= 0:
+                self.target = self.random.choice(self.others)
+                self.burst = self.random.randint(1, 300)
+            self.burst -= 1
+            target_id = self.os.protocol.nodes[self.target].id
             if self._quiesce_requested():
                 self.quiesced = True
                 self._log(ev="quiesced")
@@ -86,7 +93,7 @@ class Program(UserProgram):
             n = self.number
             run_hi, run_lo = split(self.run_tag)
             n_hi, n_lo = split(n)
-            self._log(ev="send", to=self.target_id, run=self.run_tag, n=n)
+            self._log(ev="send", to=target_id, run=self.run_tag, n=n)
             box = self.os.send_command(self.target, "VECTOR", x1=run_hi, y1=run_lo, x2=n_hi, y2=n_lo)
             while not box.done.wait(0.5):
                 if not self.running:
@@ -96,10 +103,10 @@ class Program(UserProgram):
                 result = "untransmitted"  # stopping: the fate of a command still in the token is unknown
             elif box.acknowledged:
                 result = "acked"
-                self.acked.append(n)
+                self.acked.append((target_id, n))
             else:
                 result = "unacked" if box.transmitted else "untransmitted"
-            self._log(ev="outcome", to=self.target_id, n=n, result=result)
+            self._log(ev="outcome", to=target_id, n=n, result=result)
             self.sleep(0.01)
 
     def _receive(self):
@@ -124,10 +131,9 @@ class Program(UserProgram):
 
     def report(self):
         return {
-            "target": self.target,
             "run": self.run_tag,
             "quiesced": self.quiesced,
-            "acked": self.acked[-4000:],
-            "taken": {k: sorted(v)[-4000:] for k, v in self.taken.items()},
+            "acked": self.acked[-4000:],  # [target ID, n]
+            "taken": {k: sorted(v)[-4000:] for k, v in self.taken.items()},  # "sender:run" -> [n]
             "duplicates": self.duplicates,
         }

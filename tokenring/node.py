@@ -83,6 +83,7 @@ class NodeStats:
         "rejected_sid",
         "duplicate_passes",
         "stale_tokens",
+        "replayed_passes",  # an older round of the current epoch delivered again: dropped
         "rounds",
         "rounds_missed",
         "visits",
@@ -332,6 +333,7 @@ class NodeOS(TokenPathBase):  # type: ignore[misc, valid-type]
         self._departed = False
         self._last_seen = perf_counter()
         self._last_visit = 0.0
+        self._last_counter = -1  # rounds went on while we were away, maybe past 128
         self._accepted_crc = -1
         self.transport.announce()
         self._announce_rejoin()
@@ -407,6 +409,7 @@ class NodeOS(TokenPathBase):  # type: ignore[misc, valid-type]
 
     def _adopt_epoch(self, epoch: int, origin: int, now: float) -> None:
         self._epoch, self._origin = epoch & EPOCH_MASK, origin
+        self._last_counter = -1  # a new epoch's token may carry any round (an old copy's)
         self.stats.epoch_changes += 1
         # a newer token exists and is on its way: do not regenerate over it right away
         self._last_seen = max(self._last_seen, now)

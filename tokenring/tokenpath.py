@@ -14,7 +14,8 @@ node's token thread while the visit may wait (see its docstring). The visit (``_
 see :mod:`tokenring.node` for what each step means):
 
 1. check the frame (length, CRC-16/ARC, markers, DID, SID a ring member, pass not a repeat,
-   epoch not stale) — anything else is dropped and counted, never raised;
+   epoch not stale, round not older than the last in this epoch) — anything else is dropped and
+   counted, never raised;
 2. system commands (``system_handler``; skipped while no command is anywhere: the issuer byte
    is clear and the node's ``system_busy`` is not set);
 3. the registered, unlocked user channels (data copies, inbox, outgoing commands);
@@ -60,6 +61,8 @@ class PyTokenPath:
     _token_lock: Any
     _live: Any
     _excluded: Any
+    _last_counter: int
+    _o_counter: int
     _senders: dict[int, Any]
     _active: tuple[Any, ...]
     _pending_outboxes: list[Any]
@@ -131,6 +134,11 @@ class PyTokenPath:
                 self._answer_stale(sid, crc)
                 return
             self._adopt_epoch(epoch, origin, t_in)
+        elif self._last_counter >= 0 and 0 < (self._last_counter - frame[self._o_counter]) & 0xFF < 128:
+            # within one epoch every node gets each round once: an older round is a replayed
+            # pass (a link delivering an old frame again), never a second token
+            stats.replayed_passes += 1
+            return
         self._accepted_crc, self._accepted_sid = crc, sid
         if sid in self._excluded:
             self._include(sid, True)
