@@ -111,3 +111,33 @@ def test_an_ack_to_a_program_killed_right_after_is_reported_apart(tmp_path):
     verdict = judge(tmp_path)
     assert verdict.lost == [] and verdict.lost_at_receiver_crash == [(10, 5, 1)]
     assert verdict.ok
+
+
+def test_bad_chaos_input_is_one_line_and_exit_2(tmp_path):
+    import subprocess
+
+    from conftest import REPO, TOKENRING
+
+    used = tmp_path / "used"
+    used.mkdir()
+    (used / "ledger-10-1.jsonl").write_text("")
+    a_file = tmp_path / "file"
+    a_file.write_text("")
+    cases = [
+        ([], "give a scenario file or --random SEED"),
+        (["scenarios/compound.yaml", "--random", "1"], "give a scenario file or --random SEED"),
+        (["--random", "-1"], "a seed is a whole number"),
+        (["--random", "1", "--kinds", "crash,fly"], "unknown operation 'fly'"),
+        (["--random", "1", "--duration", "2"], "seconds from 5"),
+        (["--random", "1", "--out", str(a_file)], "not a directory"),
+        (["--random", "1", "--ring", "r1"], "drop --ring"),
+        (["scenarios/compound.yaml", "--ledger", str(used)], "holds ledgers of an earlier run"),
+    ]
+    for args, message in cases:
+        result = subprocess.run(
+            [*TOKENRING, "chaos", *args], capture_output=True, text=True, timeout=60, cwd=REPO
+        )
+        assert result.returncode == 2, (args, result.stderr)
+        assert message in result.stderr and "Traceback" not in result.stderr, (args, result.stderr)
+        assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file", "used"]  # nothing written

@@ -90,6 +90,14 @@ def unique_path(directory: Path, stem: str, suffix: str) -> Path:
 def _check(args: argparse.Namespace) -> list[str]:
     if (args.scenario is None) == (args.random is None):
         raise UsageError("give a scenario file or --random SEED (one of them)")
+    if args.ledger:
+        ledger = Path(args.ledger)
+        if ledger.exists() and not ledger.is_dir():
+            raise UsageError(f"--ledger {ledger}: not a directory")
+        if ledger.is_dir() and any(ledger.glob("ledger-*.jsonl")):
+            raise UsageError(
+                f"--ledger {ledger}: holds ledgers of an earlier run; give an empty or new directory"
+            )
     if args.random is None:
         return []
     if args.ring:
@@ -108,7 +116,7 @@ def _check(args: argparse.Namespace) -> list[str]:
         )
     out = Path(args.out)
     if not out.is_dir():
-        raise UsageError(f"--out {out}: no such directory")
+        raise UsageError(f"--out {out}: {'not a directory' if out.exists() else 'no such directory'}")
     return kinds
 
 
