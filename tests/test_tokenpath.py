@@ -59,7 +59,7 @@ def test_c_and_python_paths_send_the_same_bytes_and_keep_the_same_state():
 def test_a_visit_that_may_wait_leaves_the_receiving_thread_and_the_frames_keep_their_order(native):
     result = run_scenario(native, "deferral")
     assert result["native"] is native
-    assert result["returned_in_s"] < 1.0  # the receiving thread did not wait for the hook
+    assert result["returned_before_the_hook"]  # the receiving thread did not wait for the hook
     assert result["hook_ran_on_token_thread"]
     assert result["order"] == [1, 2, 3]
     assert result["inline_after"] and result["pending"] == 0
