@@ -56,6 +56,12 @@ def run_seed(seed: int, duration: float, timeout: float) -> dict[str, Any]:
         "lost_at_receiver_crash": commands.get("lost_at_receiver_crash"),
         "one_token_at_end": report["invariants"]["exactly_one_token_at_end"],
         "broken": sorted(k for k, v in report["invariants"].items() if not v),
+        # what a failure needs to be looked into, kept short
+        "injection_errors": [f"{s['at']} {s['kind']} {e}" for s in report["faults"] for e in s["errors"]][:5],
+        "unrecovered": [
+            f"{s['at']} {s['kind']} {s['node']}" for s in report["faults"] if s["recovered_ms"] is None
+        ][:5],
+        "converged_s": report["end"].get("converged_after_last_fault_s"),
         "wall_s": round(wall, 1),
         "load_1min_at_start": round(load, 2),
     }

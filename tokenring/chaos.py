@@ -50,6 +50,7 @@ RING_KEYS = {"nodes", "bitrate", "ack", "respawn", "workload"}
 FAULT_KEYS = {"at", "node", "kind", "value", "jitter", "count", "soft"}
 LEDGER_ENV = "TOKENRING_PROBE_LEDGER"  # where the probe programs write their ledgers
 RESTART_S = 10.0  # a node that crashed this recently and does not answer is still restarting
+FORM_S = 90.0  # eight interpreters starting on a loaded machine can take a minute
 SETTLE_MAX_S = 30.0  # how much longer than the settle time a ring may take to converge
 EFFECT_S = 0.05  # after a crash or hang is acknowledged, until its node has surely stopped
 STAT_KEYS = (
@@ -469,7 +470,7 @@ def _quiesce(session: Any, ring: str, ledger: Path, nodes: set[int], say: Any) -
 
 
 def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[str, Any]:
-    deadline = time.monotonic() + 30
+    deadline = time.monotonic() + FORM_S
     live: dict[int, dict] = {}
     while time.monotonic() < deadline:
         live = collect_stats(session, ring)
@@ -477,7 +478,7 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
             break
         time.sleep(0.2)
     else:
-        raise TokenRingError(f"ring {ring} did not form in 30 s (answering: {sorted(live)})")
+        raise TokenRingError(f"ring {ring} did not form in {FORM_S:.0f} s (answering: {sorted(live)})")
     present = set(live) if launcher is None else set(scenario.nodes)
     capture = WireCapture(session, ring)
     time.sleep(1.0)  # a calm second to start from
