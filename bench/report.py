@@ -39,20 +39,29 @@ def verdict(ok: bool | None) -> str:
 
 
 def previous_section(name: str, out_dir: Path, current: Path | None) -> tuple[dict[str, Any], str] | None:
-    """The latest earlier run's ``name`` section (or bench/recovery.py's own file) and its date."""
-    files = sorted(out_dir.glob("*.json"), key=lambda p: p.stat().st_mtime, reverse=True)
-    for path in files:
+    """The latest earlier run's ``name`` section (or bench/recovery.py's own file) and its date.
+
+    Latest by the date the run recorded, not by the file's time: a checkout gives every result
+    file the same mtime, and the report would take an older run's figures at random."""
+    found: list[tuple[str, float, dict[str, Any], str]] = []
+    for path in out_dir.glob("*.json"):
         if current is not None and path.resolve() == current.resolve():
             continue
         try:
             data = json.loads(path.read_text())
         except (OSError, ValueError):
             continue
-        if isinstance(data, dict) and name in data.get("sections", {}):
-            return data["sections"][name], f"{data['date']} ({path.name})"
-        if name == "recovery" and isinstance(data, dict) and data.get("benchmark") == "recovery":
-            return data, f"{data['date']} ({path.name}, `python -m bench.recovery`)"
-    return None
+        if not isinstance(data, dict):
+            continue
+        order = (str(data.get("date", "")), path.stat().st_mtime)
+        if name in data.get("sections", {}):
+            found.append((*order, data["sections"][name], f"{data['date']} ({path.name})"))
+        elif name == "recovery" and data.get("benchmark") == "recovery":
+            found.append((*order, data, f"{data['date']} ({path.name}, `python -m bench.recovery`)"))
+    if not found:
+        return None
+    _, _, section, source = max(found, key=lambda item: item[:2])
+    return section, source
 
 
 # ---------------------------------------------------------------------------------------------
