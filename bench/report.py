@@ -357,6 +357,7 @@ def aims(sections: dict[str, Any]) -> str:
                         verdict(s["median_ms"] < s["aim_ms"]),
                     ]
                 )
+    rows += spurious_aim(sections.get("spurious"))
     if not rows:
         return ""
     return "## Aims\n\n" + md_table(rows, ["aim", "target", "measured", ""]) + "\n"
@@ -769,6 +770,124 @@ def download_md(section: dict[str, Any]) -> str:
     )
 
 
+def zero_bound_per_hour(seconds: float) -> float:
+    """The 95 % upper bound of a rate per hour when no event was seen in ``seconds`` (Poisson: 3 / T)."""
+    return 3.0 * 3600.0 / seconds if seconds > 0 else float("inf")
+
+
+def spurious_aim(section: dict[str, Any] | None) -> list[list[Any]]:
+    """The aims row: no spurious regeneration at the default pace without a hog."""
+    if not section:
+        return []
+    quiet = [r for r in section["runs"] if "error" not in r and r["key"] in ("idle", "robot")]
+    if not quiet:
+        return []
+    seconds = sum(r["seconds"] for r in quiet)
+    count = sum(r["by_cause"]["spurious"] for r in quiet)
+    parts = [
+        f"{r['by_cause']['spurious']} in {r['seconds'] / 60:.1f} min ({r['key']}, load {f(r['load1']['median'], 1)})"
+        for r in quiet
+    ]
+    measured = ", ".join(parts) + (
+        f"; with none seen the rate is below {zero_bound_per_hour(seconds):.0f}/h (95 %)"
+        if count == 0
+        else f" = {count * 3600 / seconds:.1f}/h"
+    )
+    return [["spurious token regenerations, default pace, no CPU hog", "none", measured, verdict(count == 0)]]
+
+
+def spurious_md(section: dict[str, Any]) -> str:
+    """bench/spurious.py's table: regenerations with no fault per configuration."""
+    rows = []
+    for r in section["runs"]:
+        if "error" in r:
+            rows.append([r["label"], f"failed: {r['error']}"])
+            continue
+        gaps = r["gaps_at_highest"]
+        rate = r["per_hour"]
+        bound = f" (< {zero_bound_per_hour(r['seconds']):.0f})" if r["regenerated"] == 0 else ""
+        rows.append(
+            [
+                r["label"],
+                f(r["seconds"] / 60, 1),
+                r["rounds"],
+                f(r["round_ms"]["median"], 1),
+                f(r["recon_ms"]["median"], 0),
+                f"{f(gaps['p999_ms'], 0)} / {f(gaps['max_ms'], 0)}",
+                gaps["over_recon"],
+                r["regenerated"],
+                r["by_cause"]["spurious"],
+                f(rate, 1) + bound,
+                f"{f(r['load1']['median'], 1)} / {f(r['load1']['max'], 1)}",
+            ]
+        )
+    hog = next((r["hog"] for r in section["runs"] if r.get("hog")), None)
+    return (
+        "## Spurious regenerations\n\n"
+        f"`bench/spurious.py` (`python -m bench --sections spurious`): the eight-node ring launched by `tokenring up` runs {section['minutes']:g} minutes per configuration with no fault injected; "
+        "every token regeneration in that time is spurious (the token was late, not lost). Regenerations are the sum of the nodes' `tokens_regenerated` deltas, the spurious ones as the nodes' ledgers count them "
+        "(no fault on any node, no node come or gone in the seconds before; `tokenring status` shows both per hour). "
+        f"The CPU hog is {hog or 'a busy loop per core'}, started once the ring circulates. Gaps are the round times of the highest node (rank 0: the first to regenerate a token it misses) against its reconfiguration timeout. "
+        "The machine is shared: the load average (1 min, median / max over the run) includes other work.\n\n"
+        + md_table(
+            rows,
+            [
+                "configuration",
+                "min",
+                "rounds",
+                "round ms",
+                "timeout ms",
+                "gap p99.9 / max ms",
+                "gaps > timeout",
+                "regenerations",
+                "spurious",
+                "per hour (95 % bound)",
+                "load",
+            ],
+        )
+        + "\n"
+        + spurious_findings(section)
+    )
+
+
+def spurious_findings(section: dict[str, Any]) -> str:
+    """What the regenerating nodes saw (their ledgers' details), per pace, summed over its runs."""
+    lines = []
+    for pace, keys in (("default pace", ("idle", "robot")), ("--speed 10", ("speed10",))):
+        details = [
+            d
+            for r in section["runs"]
+            if r.get("key", "").split("+")[0] in keys
+            for d in r.get("regenerations", [])
+        ]
+        if not details:
+            continue
+        n = len(details)
+        rank0 = [d for d in details if d.get("rank") == 0]
+        queued = sum(1 for d in details if d.get("queued"))
+        stalled = sum(1 for d in details if d.get("stalled"))
+        # on time: the highest rank decided within a quarter of its timeout after the timeout
+        on_time = sum(
+            1
+            for d in rank0
+            if d.get("since_seen_ms") and d["since_seen_ms"] < 1.25 * d.get("recon_ms", float("inf"))
+        )
+        lines.append(
+            f"* {pace}, {n} regenerations with details: {len(rank0)} by the highest node (rank 0), {on_time} "
+            f"of them within a quarter of the timeout after it (its watchdog on time, the token elsewhere and "
+            f"late); {n - len(rank0)} by lower ranks, whose own slot passed before the highest node's token or "
+            f"its announcement reached them; {stalled} right after the node's watchdog woke more than a slot "
+            f"late (its own process starved too); {queued} with the token already in hand (taken off the wire, "
+            "queued for the node's token thread, not yet visited)."
+        )
+    if not lines:
+        return ""
+    return (
+        "\nWhat the regenerating nodes saw, from their ledgers (each node keeps its last 16 regenerations, "
+        "the run at most 40):\n\n" + "\n".join(lines) + "\n"
+    )
+
+
 def robot_md(out_dir: Path) -> str:
     lines = [
         "## The robot's own benchmarks",
@@ -803,7 +922,17 @@ def write_report(
     plots.mkdir(parents=True, exist_ok=True)
     sections: dict[str, Any] = dict(results["sections"])
     borrowed: dict[str, str] = {}
-    for name in ("scaling", "transports", "runtime", "load", "commands", "profile", "recovery", "download"):
+    for name in (
+        "scaling",
+        "transports",
+        "runtime",
+        "load",
+        "commands",
+        "profile",
+        "recovery",
+        "download",
+        "spurious",
+    ):
         if name not in sections:
             found = previous_section(name, out_dir, current)
             if found is not None:
@@ -859,6 +988,8 @@ def write_report(
         parts.append(recovery_md(sections["recovery"]))
     if "download" in sections:
         parts.append(download_md(sections["download"]))
+    if "spurious" in sections:
+        parts.append(spurious_md(sections["spurious"]))
     parts.append(robot_md(out_dir))
     md_path.write_text("\n".join(p for p in parts if p).rstrip() + "\n")
     return md_path

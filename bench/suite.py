@@ -1,6 +1,6 @@
 """The benchmark suite: ``python -m bench [--quick]`` writes bench/results/<date>.json and bench/RESULTS.md.
 
-Sections (``--sections``, all by default):
+Sections (``--sections``; all but the slow ``spurious`` by default):
 
 * ``scaling``    round trip vs ring size at ``--bitrate max``, each ring against a bare Zenoh
                  ring of the same size and topology measured in the same run (ratio, per hop),
@@ -16,6 +16,9 @@ Sections (``--sections``, all by default):
 * ``profile``    ``--profile arcnet`` on the seed's seven computers vs its 30-40 ms;
 * ``recovery``   bench/recovery.py (crash, hang, token loss, partition heal);
 * ``download``   bench/download.py (all eight programs through the token).
+* ``spurious``   bench/spurious.py: token regenerations with no fault, minutes per configuration
+                 (default pace and ``--speed 10``, each with and without a CPU hog on both cores);
+                 slow, so only when named: ``--sections spurious [--spurious-minutes M]``.
 
 ``--quick`` (under 2 minutes) runs a subset of sizes and sections; sections it leaves out are
 taken into RESULTS.md from the latest earlier run that has them, with that run's date. The
@@ -44,7 +47,19 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 RESULTS_DIR = HERE / "results"
-SECTIONS = ("scaling", "transports", "runtime", "load", "commands", "profile", "recovery", "download")
+SECTIONS = (
+    "scaling",
+    "transports",
+    "runtime",
+    "load",
+    "commands",
+    "profile",
+    "recovery",
+    "download",
+    "spurious",
+)
+#: run only when named in ``--sections`` (RESULTS.md takes them from their latest run otherwise)
+SLOW_SECTIONS = ("spurious",)
 QUICK_SECTIONS = ("scaling", "transports", "commands", "profile")
 FULL_SIZES = {"peer": [2, 4, 8, 16, 32, 64], "router": [8, 16, 32, 64, 128, 255]}
 QUICK_SIZES = {"peer": [2, 4, 8], "router": [8]}
@@ -566,6 +581,14 @@ def section_recovery(ctx: Context) -> dict[str, Any]:
     return report
 
 
+def section_spurious(ctx: Context) -> dict[str, Any]:
+    from bench.spurious import pick_configs
+    from bench.spurious import run as run_spurious
+
+    minutes = ctx.spurious_minutes or (1.0 if ctx.quick else 5.0)
+    return run_spurious(pick_configs(ctx.spurious_configs), minutes, ctx.progress.say, ctx.progress.note)
+
+
 def section_download(ctx: Context) -> dict[str, Any]:
     from bench.download import run_bitrate
 
@@ -590,17 +613,31 @@ SECTION_FUNCTIONS: dict[str, Callable[[Context], dict[str, Any]]] = {
     "profile": section_profile,
     "recovery": section_recovery,
     "download": section_download,
+    "spurious": section_spurious,
 }
 
 
 class Context:
-    def __init__(self, quick: bool, sizes: dict[str, list[int]], progress: Progress) -> None:
+    def __init__(
+        self,
+        quick: bool,
+        sizes: dict[str, list[int]],
+        progress: Progress,
+        spurious_minutes: float | None = None,
+        spurious_configs: str | None = None,
+    ) -> None:
         self.quick = quick
         self.sizes = sizes
         self.progress = progress
+        self.spurious_minutes = spurious_minutes
+        self.spurious_configs = spurious_configs
 
 
-def count_steps(sections: list[str], sizes: dict[str, list[int]], quick: bool) -> int:
+def count_steps(
+    sections: list[str], sizes: dict[str, list[int]], quick: bool, spurious_configs: str | None = None
+) -> int:
+    from bench.spurious import pick_configs  # a bad --spurious-configs is refused here, before any run
+
     per = {
         "scaling": 2 * sum(pairs_for(n, quick) for v in sizes.values() for n in v),
         "transports": 5 * (1 if quick else 2),
@@ -610,6 +647,7 @@ def count_steps(sections: list[str], sizes: dict[str, list[int]], quick: bool) -
         "profile": 2,
         "recovery": 1,
         "download": 2,
+        "spurious": len(pick_configs(spurious_configs)) if "spurious" in sections else 0,
     }
     return sum(per[s] for s in sections)
 
@@ -640,6 +678,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sizes", help="ring sizes for scaling, e.g. peer:2,8,32/router:8,64,255")
     parser.add_argument("--out", default=str(RESULTS_DIR), help="results directory (default bench/results)")
     parser.add_argument("--no-report", action="store_true", help="write the JSON only, not RESULTS.md")
+    parser.add_argument(
+        "--spurious-minutes",
+        type=float,
+        help="minutes per configuration of the spurious section (default 5, --quick 1)",
+    )
+    parser.add_argument(
+        "--spurious-configs",
+        help="its configurations, e.g. idle,idle+hog (default: idle, robot, speed10, each also +hog)",
+    )
     args = parser.parse_args(argv)
     from tokenring.errors import UsageError
     from tokenring.zconfig import use_node_runtime
@@ -652,7 +699,7 @@ def main(argv: list[str] | None = None) -> int:
         if unknown:
             raise UsageError(f"--sections: unknown {', '.join(unknown)} (known: {', '.join(SECTIONS)})")
     else:
-        sections = list(QUICK_SECTIONS if args.quick else SECTIONS)
+        sections = list(QUICK_SECTIONS) if args.quick else [s for s in SECTIONS if s not in SLOW_SECTIONS]
     sizes = dict(QUICK_SIZES if args.quick else FULL_SIZES)
     if args.sizes:
         sizes = parse_sizes(args.sizes)
@@ -667,9 +714,9 @@ def main(argv: list[str] | None = None) -> int:
         "sections": {},
         "errors": {},
     }
-    progress = Progress(count_steps(sections, sizes, args.quick))
+    progress = Progress(count_steps(sections, sizes, args.quick, args.spurious_configs))
     sys.stderr.write(f"{command.strip()}: sections {', '.join(sections)}; load {results['load_start']}\n")
-    ctx = Context(args.quick, sizes, progress)
+    ctx = Context(args.quick, sizes, progress, args.spurious_minutes, args.spurious_configs)
     for name in sections:
         t0 = time.monotonic()
         try:
