@@ -121,38 +121,41 @@ def main() -> int:
     step("for another node", frame(did=sonar_id, fill=3))
     step("from a node not in the ring", frame(sid=99, fill=3))
     step("a pass from the successor: the ring wraps", frame(sid=sonar_id, fill=4))
-    step("a newer epoch", frame(epoch=3, origin=main_id, fill=5))
+    step("a newer epoch", frame(epoch=3, origin=main_id, counter=25, fill=5))
     step("an older epoch", frame(epoch=2, origin=main_id, fill=6))
     node.membership.exclude(main_id, retry_after=60.0)
-    step("from an excluded node", frame(epoch=3, origin=main_id, fill=7))
-    step("a system command on the token", frame(epoch=3, origin=main_id, issuer=sonar_id, fill=8))
+    step("from an excluded node", frame(epoch=3, origin=main_id, counter=27, fill=7))
+    step("a system command on the token", frame(epoch=3, origin=main_id, counter=28, issuer=sonar_id, fill=8))
     node.system_busy = True
-    step("system busy, no hook", frame(epoch=3, origin=main_id, fill=9))
+    step("system busy, no hook", frame(epoch=3, origin=main_id, counter=29, fill=9))
     calls: list[int] = []
     node.system_handler = lambda work: calls.append(work[12]) or len(calls) % 2 == 1
-    step("system hook says active", frame(epoch=3, origin=main_id, fill=10))
-    step("system hook says idle", frame(epoch=3, origin=main_id, fill=11))
+    step("system hook says active", frame(epoch=3, origin=main_id, counter=30, fill=10))
+    step("system hook says idle", frame(epoch=3, origin=main_id, counter=31, fill=11))
     node.system_busy = False
-    step("system idle: the hook is skipped", frame(epoch=3, origin=main_id, fill=12))
+    step("system idle: the hook is skipped", frame(epoch=3, origin=main_id, counter=32, fill=12))
     node.system_handler = None
     motor_data = node.publish("motor.data")
     motor_data.raw[:4] = b"\x01\x02\x03\x04"
     main_data = node.subscribe("main.data")
-    step("channels: publish motor.data, copy main.data", frame(epoch=3, origin=main_id, fill=13))
+    step("channels: publish motor.data, copy main.data", frame(epoch=3, origin=main_id, counter=33, fill=13))
     steps[-1]["main.data"] = bytes(main_data.raw[:8]).hex()
     node.set_own_input_id()
     node.unlock_data("motor.command")
     outbox = node.send_command("main", "STOP_EXPLORE")
-    step("a command goes out", frame(epoch=3, origin=main_id, fill=0))
-    step("the next visit", frame(epoch=3, origin=main_id, counter=8, fill=0))
+    step("a command goes out", frame(epoch=3, origin=main_id, counter=34, fill=0))
+    step("the next visit", frame(epoch=3, origin=main_id, counter=35, fill=0))
     steps[-1]["outbox"] = [outbox.transmitted, outbox.acknowledged]
     node._recovery_until = 1e18
-    node._on_frame(frame(epoch=3, origin=main_id, counter=9, fill=0))
+    node._on_frame(frame(epoch=3, origin=main_id, counter=36, fill=0))
     step("inside the recovery window")
     step(
-        "an older round of this epoch: a replay, dropped", frame(epoch=3, origin=main_id, counter=5, fill=14)
+        "an older round of this epoch: a replay, dropped", frame(epoch=3, origin=main_id, counter=30, fill=14)
     )
-    step("the same round with other bytes: taken", frame(epoch=3, origin=main_id, counter=9, fill=15))
+    step(
+        "the same round with other bytes: a second token, dropped",
+        frame(epoch=3, origin=main_id, counter=36, fill=15),
+    )
     node.rx_fault = lambda data: data[protocol.header.offsets["counter"]] == 66
     step("rx fault drops it", frame(epoch=3, origin=main_id, counter=66))
     step("rx fault lets it pass", frame(epoch=3, origin=main_id, counter=67))
@@ -208,9 +211,10 @@ def deferral() -> int:
         finally:
             left.set()
 
-    def frame(fill: int) -> bytes:
+    def frame(fill: int) -> bytes:  # one round each, as a ring delivers them
         token = Token(protocol)
         token["sid"], token["did"], token["epoch"] = main_id, motor_id, ACK_REQUESTED
+        token["counter"] = fill
         token.buffer[user] = fill
         return token.to_frame()
 

@@ -541,9 +541,10 @@ static PyObject *visit_frame(TokenPath *self, PyObject *frame_obj)
             goto done;
     }
     else if (self->last_counter >= 0) {
-        /* within one epoch every node gets each round once: an older round is a replayed pass */
+        /* within one epoch every node gets each round once: an older round, or the same round
+           with other bytes, is a replayed pass or a second token */
         int back = (self->last_counter - frame[self->o_counter]) & 0xFF;
-        if (back > 0 && back < 128) {
+        if ((back > 0 && back < 128) || (back == 0 && crc != self->accepted_crc)) {
             if (stats_add(self, s_replayed_passes, 1) == 0)
                 rc = Py_NewRef(Py_None);
             goto done;

@@ -14,7 +14,7 @@ node's token thread while the visit may wait (see its docstring). The visit (``_
 see :mod:`tokenring.node` for what each step means):
 
 1. check the frame (length, CRC-16/ARC, markers, DID, SID a ring member, pass not a repeat,
-   epoch not stale, round not older than the last in this epoch) — anything else is dropped and
+   epoch not stale, round newer than the last in this epoch) — anything else is dropped and
    counted, never raised;
 2. system commands (``system_handler``; skipped while no command is anywhere: the issuer byte
    is clear and the node's ``system_busy`` is not set);
@@ -134,11 +134,14 @@ class PyTokenPath:
                 self._answer_stale(sid, crc)
                 return
             self._adopt_epoch(epoch, origin, t_in)
-        elif self._last_counter >= 0 and 0 < (self._last_counter - frame[self._o_counter]) & 0xFF < 128:
-            # within one epoch every node gets each round once: an older round is a replayed
-            # pass (a link delivering an old frame again), never a second token
-            stats.replayed_passes += 1
-            return
+        elif self._last_counter >= 0:
+            # within one epoch every node gets each round once: an older round, or the same
+            # round with other bytes (a retry repeats them all), is a replayed pass or a second
+            # token — dropped, so its sender skips us into a new epoch that outlives the other
+            back = (self._last_counter - frame[self._o_counter]) & 0xFF
+            if 0 < back < 128 or (back == 0 and crc != self._accepted_crc):
+                stats.replayed_passes += 1
+                return
         self._accepted_crc, self._accepted_sid = crc, sid
         if sid in self._excluded:
             self._include(sid, True)
