@@ -1,38 +1,77 @@
-"""The launcher's supervisor: children's exits wake it through pidfds, it does not poll them."""
+"""The launcher's supervisor: children's exits wake it through pidfds, it does not poll them.
+
+No test here measures how fast the supervisor is: its safety-net check (EXIT_CHECK_S) is made an
+hour long, so that an exit reported at all, before the generous hang guards run out, can only
+have been reported because the exit woke the supervisor. The short-lived child exits when the
+test tells it to (a trigger file), not after a time that a loaded machine may overrun.
+"""
 
 from __future__ import annotations
 
 import io
 import sys
+import threading
 import time
-from typing import ClassVar
+from pathlib import Path
 
+import pytest
 from memring import wait_for
 
-from tokenring.launcher import EXIT_CHECK_S, Launcher, NodePlan
+import tokenring.launcher as launcher_module
+from tokenring.launcher import Launcher, NodePlan
+
+HOUR = 3600.0
+HANG_GUARD_S = 30.0  # how long a step may take before the test calls it hung, not slow
+
+#: the "short" child: waits for its trigger file, takes it away (a respawned child waits for the
+#: next one) and exits with code 3
+SHORT = (
+    "import os, sys, time\n"
+    "path = sys.argv[1]\n"
+    "while not os.path.exists(path):\n"
+    "    time.sleep(0.005)\n"
+    "os.remove(path)\n"
+    "sys.exit(3)\n"
+)
 
 
 class ShortLivedLauncher(Launcher):
-    """Its "nodes" are tiny processes that exit after a given time: supervision is what is tested."""
+    """Its "nodes" are tiny processes: "short" (id 1) exits with code 3 when its trigger file
+    appears, "long" (id 2) lives on. Supervision is what is tested."""
 
-    lifetimes: ClassVar[dict[int, float]] = {1: 0.3, 2: 60.0}
+    def __init__(self, trigger: Path, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.trigger = trigger
 
     def command_for(self, plan: NodePlan) -> list[str]:
-        lifetime = self.lifetimes[plan.node_id]
-        return [sys.executable, "-c", f"import time, sys; time.sleep({lifetime}); sys.exit(3)"]
+        if plan.node_id == 1:
+            return [sys.executable, "-c", SHORT, str(self.trigger)]
+        return [sys.executable, "-c", "import time; time.sleep(600)"]
 
 
-def short_and_long(ring: str, endpoint: str, **options) -> ShortLivedLauncher:
-    """A launcher of two children: "short" (id 1) exits with code 3 after 0.3 s, "long" lives on."""
+@pytest.fixture
+def no_safety_net(monkeypatch):
+    """The supervisor's periodic check comes once an hour: only a child's exit can wake it."""
+    monkeypatch.setattr(launcher_module, "EXIT_CHECK_S", HOUR)
+
+
+def short_and_long(ring: str, endpoint: str, trigger: Path, **options) -> ShortLivedLauncher:
     options.setdefault("output", io.StringIO())
     return ShortLivedLauncher(
-        [NodePlan(1, "short", None), NodePlan(2, "long", None)], ring=ring, listen=[endpoint], **options
+        trigger,
+        [NodePlan(1, "short", None), NodePlan(2, "long", None)],
+        ring=ring,
+        listen=[endpoint],
+        **options,
     )
 
 
-def test_a_childs_exit_is_reported_at_once_without_polling_the_others(procs, ring_name, endpoint):
+def test_a_childs_exit_is_reported_at_once_without_polling_the_others(
+    procs, ring_name, endpoint, tmp_path, no_safety_net
+):
     output = io.StringIO()
-    launcher = short_and_long(ring_name, endpoint, output=output)
+    trigger = tmp_path / "exit-now"
+    launcher = short_and_long(ring_name, endpoint, trigger, output=output)
     checks = 0
     check_children = launcher.check_children
 
@@ -45,65 +84,86 @@ def test_a_childs_exit_is_reported_at_once_without_polling_the_others(procs, rin
     launcher.start()
     try:
         procs.watch([c.process.pid for c in launcher.child_list()])
-        short = launcher.children[1].process
-        started = time.monotonic()
-        wait_for(lambda: short.poll() is not None, 5.0, "the short-lived child to exit")
-        exited = time.monotonic()
-        wait_for(lambda: launcher.deaths, 2.0, "its death to be reported")
-        assert time.monotonic() - exited < 0.2  # woken by its exit, not by a periodic check
+        # a window in which a polling supervisor (the old one checked every child 20 times a
+        # second) would check; this one sleeps until a child exits
+        time.sleep(0.5)
+        assert checks == 0
+        trigger.touch()
+        wait_for(lambda: launcher.deaths, HANG_GUARD_S, "the short-lived child's death to be reported")
         assert launcher.deaths == [("short", 1, 3)]
-        time.sleep(1.0)
-        # the old supervisor checked every child 20 times a second; now: the exit, and a
-        # safety-net check every EXIT_CHECK_S
-        assert checks <= 2 + (time.monotonic() - started) / EXIT_CHECK_S
+        assert checks == 1  # the exit's own check, nothing else
     finally:
         launcher.stop()
     assert launcher.children[2].process.poll() is not None  # stop() ended the long-lived one
     assert "node short (id 1) exited with code 3" in output.getvalue()
 
 
-def test_an_exit_is_reported_even_while_another_thread_polls_that_child(procs, ring_name, endpoint):
+def test_an_exit_is_reported_even_while_another_thread_polls_that_child(
+    procs, ring_name, endpoint, tmp_path, no_safety_net
+):
     # Popen.poll() answers None while another thread is inside poll() for the same child (a
     # status query, run()'s loop): the supervisor woken by the pidfd must still reap and report
-    # it then, not at its next safety-net check a second later (this test's first version
+    # it then, not at its next safety-net check (here an hour later; this test's first version
     # polled beside the supervisor and failed that way once in a full suite run)
-    from pathlib import Path
-
-    launcher = short_and_long(ring_name, endpoint)
+    trigger = tmp_path / "exit-now"
+    launcher = short_and_long(ring_name, endpoint, trigger)
     launcher.start()
     try:
         procs.watch([c.process.pid for c in launcher.child_list()])
         short = launcher.children[1].process
+        woken = threading.Event()  # the supervisor asks the child's Popen about its exit
+        for name in ("poll", "wait"):
+            real = getattr(short, name)
+
+            def asking(*args, _real=real, **kwargs):
+                if threading.current_thread().name == "launcher-supervisor":
+                    woken.set()
+                return _real(*args, **kwargs)
+
+            setattr(short, name, asking)
         stat = Path(f"/proc/{short.pid}/stat")
         short._waitpid_lock.acquire()  # what another thread inside short.poll() holds
         try:
-            wait_for(lambda: stat.read_text().rsplit(")", 1)[1].split()[0] == "Z", 5.0, "the child to exit")
-            time.sleep(0.1)  # the supervisor has woken on the pidfd meanwhile
+            trigger.touch()
+            wait_for(
+                lambda: stat.read_text().rsplit(")", 1)[1].split()[0] == "Z",
+                HANG_GUARD_S,
+                "the child to exit",
+            )
+            assert woken.wait(HANG_GUARD_S), "the exit did not wake the supervisor"
+            assert launcher.deaths == []  # it cannot know yet: the child is not reaped
         finally:
             short._waitpid_lock.release()
-        released = time.monotonic()
-        wait_for(lambda: launcher.deaths, 2.0, "its death to be reported")
-        assert time.monotonic() - released < 0.5  # not at the next check, EXIT_CHECK_S later
+        wait_for(lambda: launcher.deaths, HANG_GUARD_S, "its death to be reported")
         assert launcher.deaths == [("short", 1, 3)]
     finally:
         launcher.stop()
 
 
-def test_respawn_starts_a_dead_node_again_after_a_short_delay(procs, ring_name, endpoint):
+def test_respawn_starts_a_dead_node_again_after_a_short_delay(
+    procs, ring_name, endpoint, tmp_path, no_safety_net, monkeypatch
+):
     # systemd's RestartSec: the ring heals around the dead node first instead of sharing the
-    # cores with a booting interpreter (crash recovery 21 ms with the delay, 27 ms without)
-    from tokenring.launcher import RESPAWN_DELAY_S
-
-    launcher = short_and_long(ring_name, endpoint, respawn=True)
+    # cores with a booting interpreter (crash recovery 21 ms with the delay, 27 ms without).
+    # The delay is made 1 s here: a child's exit and a respawn without any delay can take
+    # longer than the real 0.1 s on a loaded machine, 1 s sets them clearly apart
+    delay = 1.0
+    monkeypatch.setattr(launcher_module, "RESPAWN_DELAY_S", delay)
+    trigger = tmp_path / "exit-now"
+    launcher = short_and_long(ring_name, endpoint, trigger, respawn=True)
     launcher.start()
     try:
         first = launcher.children[1]
         procs.watch([c.process.pid for c in launcher.child_list()])
-        wait_for(lambda: first.process.poll() is not None, 5.0, "the short-lived child to exit")
-        exited = time.monotonic()
-        second = wait_for(lambda: launcher.children[1] is not first and launcher.children[1], 2.0, "respawn")
+        told = time.monotonic()  # the child exits after this, so the respawn is due after it too
+        trigger.touch()
+        second = wait_for(
+            lambda: launcher.children[1] is not first and launcher.children[1], HANG_GUARD_S, "respawn"
+        )
         procs.watch([second.process.pid])
-        assert second.restarts == 1
-        assert RESPAWN_DELAY_S - 0.01 <= second.started - exited < RESPAWN_DELAY_S + 0.3
+        assert first.process.poll() == 3 and second.restarts == 1
+        # not at once: the delay runs from the exit, which came after the trigger ...
+        assert second.started - told >= delay
+        # ... and it is its own timer that started it: the periodic check is an hour away
     finally:
         launcher.stop()
