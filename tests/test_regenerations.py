@@ -177,3 +177,23 @@ def test_a_lost_token_regenerates_as_a_fault_not_spuriously_and_status_shows_it(
         assert monitor.returncode == 0 and "spurious (no fault" in monitor.stdout
     launcher.send_signal(signal.SIGTERM)
     launcher.wait(20)
+
+
+def test_the_reconfiguration_timeout_follows_the_tail_of_rounds_that_came_back():
+    """A starved machine stretches the tail of the rounds, not their median: the timeout stays
+    3 x the 99th percentile of the rounds that came back before it; a longer one (a loss) never
+    lengthens its own timeout."""
+    from tokenring.ring import ROUND_TAIL_FACTOR, Timing
+
+    timing = Timing(None)
+    for _ in range(500):
+        timing.rounds.add(0.001)
+    calm = timing.refresh(live=8).recon
+    assert calm == 0.05  # the floor: 10 x 1 ms median, 3 ms of hops
+    for _ in range(20):
+        timing.rounds.add(0.040)  # late rounds that still came back before the timeout
+    stretched = timing.refresh(live=8).recon
+    assert stretched == ROUND_TAIL_FACTOR * 0.040
+    for _ in range(20):
+        timing.rounds.add(5.0)  # a lost token's gap: longer than the timeout in force
+    assert timing.refresh(live=8).recon == stretched

@@ -664,7 +664,13 @@ class NodeOS(TokenPathBase):  # type: ignore[misc, valid-type]
         if booting and self.preferred_master == self.node_id:
             # main starts the ring: wait briefly for a token that may already circulate
             return max(settled, self._started_at + max(0.15, 4 * timeouts.hop * len(self.membership.active)))
-        lost_since = max(self._last_seen + timeouts.recon, self._stall_wake)
+        # a watchdog that overslept was starved with the rest of the machine: the token is as
+        # late as it was, so even the highest rank gives it one slot after waking
+        lost_since = max(self._last_seen + timeouts.recon, self._stall_wake + timeouts.slot)
+        if self._deferred_pending:
+            # a frame already waits for this node's token thread (taken off the wire, not yet
+            # visited): the token is here and late, not lost - look again a slot later
+            lost_since = max(lost_since, perf_counter() + timeouts.slot)
         # a token this node regenerated that never came back: wait longer each time (a slow
         # ring is still forming around it), as Ethernet backs off after collisions
         streak = max(0, self._regeneration_streak - 1)  # a second try is normal recovery

@@ -12,6 +12,8 @@ Timeouts (all derived, never guessed; see README "Timing"):
 * **reconfiguration timeout** — ARCNET's 840 ms scaled by bitrate, but never below 10 x the
   median round time (the median, so that a disturbance does not inflate its own timeout),
   3 hop times per live node (a hop at ``max`` counted as 1 ms, so 255 nodes wait 765 ms),
+  nor 3 x the 99th percentile of the recent rounds that ended before the timeout (a starved
+  machine stretches the tail, not the median: a token 40 x late is late, not lost),
   nor 50 ms. The highest live ID
   regenerates a lost token after it; every next lower rank waits one more ``slot``.
 """
@@ -44,6 +46,10 @@ RECON_FLOOR_S = 0.050
 HOP_FLOOR_S = 0.001
 ACK_RETRIES = 2
 MIN_ROUND_SAMPLES = 16  # rounds measured before the timeouts follow the measurements
+#: the reconfiguration timeout stays this many times above the 99th percentile of the recent
+#: rounds that came back before it; a round that took longer (a lost token, or a late one that
+#: was regenerated) is left out, so a loss can never lengthen its own timeout
+ROUND_TAIL_FACTOR = 3.0
 
 # header byte ``epoch``: bits 0-6 the ring epoch (mod 128), bit 7 "acknowledge this pass"
 EPOCH_MASK = 0x7F
@@ -199,10 +205,17 @@ class Timing:
 
     def _derive(self, live: int) -> Timeouts:
         self.round_median, round_p99 = self.rounds.percentiles((50, 99), default=0.0)
+        previous = getattr(self, "current", None)
+        tail = 0.0
+        if previous is not None:
+            came_back = sorted(x for x in self.rounds.recent(512) if x < previous.recon)
+            if came_back:
+                tail = ROUND_TAIL_FACTOR * came_back[min(len(came_back) - 1, int(0.99 * len(came_back)))]
         ack_p99 = self.ack_latency.percentile(99, default=0.0)
         recon = max(
             RECON_FLOOR_S,
             10 * self.round_median,  # the median: a disturbance must not inflate its own timeout
+            tail,  # ... but a machine starved for minutes stretches every round's tail
             3 * max(self.hop, HOP_FLOOR_S) * live,
             ARCNET_RECON_TIMEOUT_S * self.scale,
         )  # ring-wide quantities only: every node must derive (nearly) the same value, or the
