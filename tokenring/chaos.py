@@ -49,7 +49,6 @@ from tokenring.zconfig import make_config, open_session
 RING_KEYS = {"nodes", "bitrate", "ack", "respawn", "workload"}
 FAULT_KEYS = {"at", "node", "kind", "value", "jitter", "count", "soft"}
 LEDGER_ENV = "TOKENRING_PROBE_LEDGER"  # where the probe programs write their ledgers
-RESTART_S = 10.0  # a node that crashed this recently and does not answer is still restarting
 FORM_S = 90.0  # eight interpreters starting on a loaded machine can take a minute
 SETTLE_MAX_S = 30.0  # how much longer than the settle time a ring may take to converge
 EFFECT_S = 0.05  # after a crash or hang is acknowledged, until its node has surely stopped
@@ -487,33 +486,42 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
     known: dict[int, dict[str, int]] = {}  # each node's latest counters
     t0 = time.perf_counter()
     steps: list[dict[str, Any]] = []
-    crashed_at: dict[int, float] = {}
+    restarting: set[int] = set()  # crashed, respawn on, its new process not heard from yet
+    hung: set[int] = set()
     for step in scenario.faults:
         wait = t0 + step.at - time.perf_counter()
         if wait > 0:
             time.sleep(wait)
+        # only the nodes that can answer are waited for: a hung one keeps its last counters (it
+        # is stopped: they cannot move), so the next step's deltas stay its own; a crashed one
+        # is restarting until its new process answers
+        answering = membership.present - restarting
+        fresh = collect_stats(session, ring, answering)
+        restarting -= set(fresh)
+        known.update(fresh)
+        before = dict(known)
         targets = (
-            sorted(present)
+            sorted(present - hung - restarting)  # "all": every node that can take a fault now
             if step.node == "all"
             else [protocol.node(int(step.node) if step.node.isdigit() else step.node).id]
         )
-        # only the nodes that should answer are waited for; a hung one keeps its last counters
-        # (it is stopped: they cannot move), so the next step's deltas stay its own
-        known.update(collect_stats(session, ring, membership.present))
-        before = dict(known)
         injected, wall = time.perf_counter(), time.time()
         errors, skipped = [], []
         for node_id in targets:
+            if node_id in restarting:
+                # crashed and not back yet: its faults died with its process, and it answers nothing
+                skipped.append(f"{node_id}: still restarting after its crash")
+                continue
             try:
                 client.inject(node_id, step.request)
             except TokenRingError as exc:
-                if scenario.respawn and time.perf_counter() - crashed_at.get(node_id, -1e9) < RESTART_S:
-                    # crashed a moment ago and not back yet: its faults died with its process
-                    skipped.append(f"{node_id}: still restarting after its crash")
-                else:
-                    errors.append(f"{node_id}: {exc}")
-            if step.kind == "crash":
-                crashed_at[node_id] = time.perf_counter()
+                errors.append(f"{node_id}: {exc}")
+            if step.kind == "crash" and scenario.respawn:
+                restarting.add(node_id)
+            elif step.kind == "hang":
+                hung.add(node_id)
+            elif step.kind == "resume":
+                hung.discard(node_id)
         # the wire may still carry passes of a node that was told to crash or hang until it
         # acts (a hang stops the process 10 ms after it answers): recovery counts from then
         effective = time.perf_counter() + (EFFECT_S if step.kind in ("crash", "hang") else 0.0)
