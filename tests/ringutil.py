@@ -49,9 +49,12 @@ def wait_until(condition: Callable[[], Any], timeout: float, what: str, interval
 
 
 def wait_ring(
-    session: zenoh.Session, ring: str, ids: list[int], timeout: float = 20.0, visits: int = 5
+    session: zenoh.Session, ring: str, ids: list[int], timeout: float = 60.0, visits: int = 5
 ) -> dict:
-    """Wait until every node in ``ids`` answers, sees all of them active and has the token."""
+    """Wait until every node in ``ids`` answers, sees all of them active and has the token.
+
+    ``timeout`` is a hang guard, not a speed limit: eight interpreters booting on two loaded
+    cores (the full suite beside other work) took over 20 s."""
 
     def formed() -> dict | None:
         found = stats(session, ring)
