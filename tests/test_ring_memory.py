@@ -63,7 +63,7 @@ def test_command_transmitted_and_acknowledged_exactly_once(ring):
     motor.set_own_input_id()
     motor.unlock_data("motor.command")
     outbox = main.send_command("motor", "MOVE_FORWARD", distance_mm=500, speed_pct=40)
-    assert outbox.done.wait(2)
+    assert outbox.done.wait(30)
     assert main.command_transmitted("motor") and main.command_acknowledged("motor")
     assert motor.command_received()
     cmd = motor.get_command()
@@ -78,7 +78,7 @@ def test_locked_inbox_gives_transmitted_but_not_acknowledged_and_the_channel_is_
     main, sonar = ring.by_name("main"), ring.by_name("sonar")
     sonar.set_own_input_id()  # registered, never unlocked: the flap stays closed
     outbox = main.send_command("sonar", "SET_METHOD", tangent=1, seed_classifier=0)
-    assert outbox.done.wait(2)
+    assert outbox.done.wait(30)
     assert main.command_transmitted("sonar")
     assert not main.command_acknowledged("sonar")
     assert not sonar.command_received()
@@ -93,7 +93,7 @@ def test_no_retry_and_a_busy_inbox_makes_the_next_sender_wait(ring):
     motor.set_own_input_id()
     first = main.send_command("motor", "STOP")
     second = lcd.send_command("motor", "STOP")
-    assert first.done.wait(2) and second.done.wait(2)
+    assert first.done.wait(30) and second.done.wait(30)
     assert first.acknowledged != second.acknowledged or not second.acknowledged
     assert main.stats.commands_sent == 1 and lcd.stats.commands_sent == 1
 
@@ -105,7 +105,7 @@ def test_receive_command_reopens_the_inbox(ring):
 
     def receiver() -> None:  # a user program's loop, beside the handler
         while len(got) < 3:
-            cmd = motor.receive_command(timeout=2)
+            cmd = motor.receive_command(timeout=30)
             if cmd is None:
                 return
             got.append(cmd.args["distance_mm"])
@@ -113,8 +113,8 @@ def test_receive_command_reopens_the_inbox(ring):
     thread = threading.Thread(target=receiver)
     thread.start()
     for distance in (100, 200, 300):
-        assert main.deliver("motor", "MOVE_FORWARD", distance_mm=distance, speed_pct=10, timeout=2)
-    thread.join(3)
+        assert main.deliver("motor", "MOVE_FORWARD", distance_mm=distance, speed_pct=10, timeout=30)
+    thread.join(30)
     assert got == [100, 200, 300]
     assert motor.stats.commands_received == 3
 
@@ -124,7 +124,7 @@ def test_a_repeated_command_is_never_taken_twice(ring):
     motor.set_own_input_id()
     motor.unlock_data("motor.command")
     outbox = main.send_command("motor", "STOP")
-    assert outbox.done.wait(2) and outbox.acknowledged
+    assert outbox.done.wait(30) and outbox.acknowledged
     motor.unlock_data("motor.command")
     # replay the exact command image into the token once, as a stale copy of the token would
     channel = default_protocol().channel("motor.command")
@@ -136,10 +136,11 @@ def test_a_repeated_command_is_never_taken_twice(ring):
             replayed.set()
         return False
 
-    time.sleep(0.1)  # past main's post-start recovery window, where it sweeps its own old commands
+    # past main's post-start recovery window, where it sweeps its own old commands
+    wait_for(lambda: time.perf_counter() > main._recovery_until, 30, "main's recovery window to end")
     main.system_handler = replay_once
     main.system_busy = True  # the hook is called at every visit, not only when a command is about
-    assert replayed.wait(2)
+    assert replayed.wait(30)
     ring.wait_rounds(3)
     assert motor.stats.commands_received == 1
     assert motor.stats.duplicate_commands >= 1
@@ -165,7 +166,7 @@ def test_late_joiner_is_inserted_and_leaver_removed_without_losing_the_token():
         ring.wait_rounds(20)
         ring.add(40)
         joined = ring.nodes[40]
-        wait_for(lambda: joined.stats.visits > 10, 3, "the joiner to receive the token")
+        wait_for(lambda: joined.stats.visits > 10, 30, "the joiner to receive the token")
         assert ring.nodes[30].membership.successor == 40
         ring.nodes[30].leave()
         ring.wait_rounds(20, node_id=10)
@@ -198,11 +199,12 @@ def test_malformed_frames_are_dropped_and_counted(ring):
 
 
 def test_bitrate_paces_the_ring():
+    # a lower bound only: a loaded machine makes rounds slower, never faster than the wire
     ring = MemoryRing([10, 20, 30, 40], bitrate=2.5e6)
     try:
-        ring.wait_rounds(10, timeout=5)
+        ring.wait_rounds(10, timeout=30)
         t0 = time.monotonic()
-        ring.wait_rounds(20, timeout=5)
+        ring.wait_rounds(20, timeout=30)
         per_round = (time.monotonic() - t0) / 20
         assert per_round >= 4 * 2.2e-3  # four hops of ~2.29 ms wire time each
     finally:
@@ -217,18 +219,24 @@ def test_the_handler_time_is_how_long_the_token_is_held_not_the_put_after_it():
         ring.wait_rounds(20)
         slow = ring.nodes[20]
 
+        put_s = 0.010  # far above what a handler takes, loaded or not: the two cannot be confused
+
         def slow_put(_did: int, _work: bytearray) -> bool:
-            time.sleep(0.003)  # the transport takes 3 ms to send ...
+            time.sleep(put_s)  # the transport takes 10 ms to send ...
             return False  # ... and sends
 
         slow.tx_fault = slow_put
         before = slow.stats.visits
-        ring.wait_rounds(60)
+        ring.wait_rounds(60, timeout=60)
         assert slow.stats.visits >= before + 50
         rounds = slow.timing.rounds.percentile(50, last=40)
         held = slow.timing.handler.percentile(50, last=40)
-        assert rounds > 0.003  # every round waits for the slow put
-        assert held < 0.001, f"handler {held * 1e6:.0f} us includes the put"
+        # the baseline: the handler time of the other two nodes over the same rounds, on the
+        # same machine under the same load, whose puts are quick
+        others = max(ring.nodes[i].timing.handler.percentile(50, last=40) for i in (10, 30))
+        assert rounds > put_s  # every round waits for the slow put
+        # with the put in it, the slow node's handler would take put_s more than theirs
+        assert held < others + put_s / 2, f"handler {held * 1e6:.0f} us (others {others * 1e6:.0f} us)"
         assert sum(n.stats.tokens_regenerated for n in ring.nodes.values()) <= 1  # the boot token only
     finally:
         ring.close()
