@@ -15,7 +15,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
 import uuid
 
 import pytest
@@ -92,7 +91,7 @@ def status(hosts: Hosts, ns: str, ring: str, endpoint: str) -> dict[int, dict]:
         ),
         capture_output=True,
         text=True,
-        timeout=30,
+        timeout=60,  # a hang guard: a loaded machine starts an interpreter slowly
         cwd=REPO,
     )
     if result.returncode != 0 or not result.stdout.strip():
@@ -110,6 +109,12 @@ def one_ring(nodes: dict[int, dict], members: list[int]) -> bool:
     return chained and len({tuple(nodes[i]["epoch"]) for i in members}) == 1
 
 
+def ring_of(nodes: dict[int, dict], members: list[int]) -> dict[int, dict] | None:
+    """``nodes`` if they form one ring of exactly ``members``."""
+    return nodes if one_ring(nodes, members) else None
+
+
+@pytest.mark.timeout(400)  # its hang guards: a loaded machine's status queries are slow
 def test_a_ring_across_two_hosts_splits_on_a_cut_and_heals_into_one(procs, tmp_path):
     hosts = Hosts()
     ring = f"x{uuid.uuid4().hex[:8]}"
@@ -137,22 +142,28 @@ def test_a_ring_across_two_hosts_splits_on_a_cut_and_heals_into_one(procs, tmp_p
                     stdout=log_b,
                 )
             )
-        everyone = [10, 20, 30, 40, 50, 60, 70, 80]
-        wait_until(
-            lambda: one_ring(status(hosts, hosts.a, ring, ep_a), everyone), 40, "one ring across both hosts"
+        everyone, side_a, side_b = [10, 20, 30, 40, 50, 60, 70, 80], [10, 20, 30, 40], [50, 60, 70, 80]
+        joined = wait_until(
+            lambda: ring_of(status(hosts, hosts.a, ring, ep_a), everyone), 60, "one ring across both hosts"
         )
         hosts.cut()
-        cut_at = time.monotonic()
-        wait_until(
-            lambda: one_ring(status(hosts, hosts.a, ring, ep_a), [10, 20, 30, 40]), 20, "host A's own ring"
+        split_a = wait_until(
+            lambda: ring_of(status(hosts, hosts.a, ring, ep_a), side_a), 60, "host A's own ring"
         )
-        wait_until(
-            lambda: one_ring(status(hosts, hosts.b, ring, ep_b), [50, 60, 70, 80]), 20, "host B's own ring"
+        split_b = wait_until(
+            lambda: ring_of(status(hosts, hosts.b, ring, ep_b), side_b), 60, "host B's own ring"
         )
-        assert time.monotonic() - cut_at < 10, "the split must be found well before Zenoh's 10 s lease"
+        # the split was found well before Zenoh's 10 s lease: by the pass acknowledgements. The
+        # nodes that pass across the cable (compass 40 to copro 50, charger 80 to main 10)
+        # declared their successor dead after unanswered passes; had the lease dropped the other
+        # side first, their successor would have changed with no pass left unanswered. (Counted
+        # by the nodes, not timed by this test, whose status queries a loaded machine slows.)
+        for side, node in ((split_a, 40), (split_b, 80)):
+            dead = side[node]["stats"]["successors_declared_dead"]
+            assert dead > joined[node]["stats"]["successors_declared_dead"], (node, dead)
         hosts.mend()
         wait_until(
-            lambda: one_ring(status(hosts, hosts.a, ring, ep_a), everyone), 30, "one ring again after the cut"
+            lambda: one_ring(status(hosts, hosts.a, ring, ep_a), everyone), 60, "one ring again after the cut"
         )
         assert one_ring(status(hosts, hosts.b, ring, ep_b), everyone)
     finally:
@@ -161,8 +172,8 @@ def test_a_ring_across_two_hosts_splits_on_a_cut_and_heals_into_one(procs, tmp_p
             launcher.send_signal(signal.SIGTERM)
         for launcher in launchers:
             try:
-                launcher.wait(10)
+                launcher.wait(30)
             except subprocess.TimeoutExpired:
                 launcher.kill()
-        assert wait_gone(pids, 3) == []
+        assert wait_gone(pids, 30) == []
         hosts.close()
