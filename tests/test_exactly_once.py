@@ -77,7 +77,7 @@ def test_commands_to_other_inboxes_in_between_never_make_one_look_repeated(ring)
                 send("sonar", turn * 255 + n)
         wait_for(lambda: len(motor.taken) >= 6, 5, "motor's program to take six commands")
         wait_for(lambda: len(sonar.taken) >= 6 * 255, 5, "sonar's program to take them all")
-        time.sleep(0.05)  # rounds in which a wrongly repeated command would arrive
+        ring.wait_rounds(20, timeout=30)  # rounds in which a wrongly repeated command would arrive
         for target, receiver, expected in (("motor", motor, 6), ("sonar", sonar, 6 * 255)):
             counts = [count for _, _, count in receiver.taken]
             assert sorted(set(counts)) == list(range(expected)), target
@@ -96,7 +96,7 @@ def test_three_hundred_commands_to_one_inbox_arrive_once_each_in_order(ring):
         for n in range(300):
             assert main.deliver("motor", "VECTOR_COUNTER", count=n, timeout=10)
         wait_for(lambda: len(motor.taken) >= 300, 5, "300 commands taken")
-        time.sleep(0.05)  # a few more rounds: nothing may arrive twice
+        ring.wait_rounds(20, timeout=30)  # a few more rounds: nothing may arrive twice
         assert [count for _, _, count in motor.taken] == list(range(300))
     finally:
         motor.stop()
@@ -136,7 +136,8 @@ def test_stale_copies_are_cleared_never_taken_and_never_acknowledged(ring):
             boxes.append(main.send_command("motor", "VECTOR_COUNTER", count=n))
             assert boxes[-1].done.wait(5) and boxes[-1].acknowledged
         wait_for(lambda: len(motor.taken) == 2, 5, "two commands")
-        time.sleep(0.1)  # past main's post-start recovery window, where it sweeps its own old commands
+        # past main's post-start recovery window, where it sweeps its own old commands
+        wait_for(lambda: time.perf_counter() > main._recovery_until, 30, "main's recovery window to end")
         before = motor_node.stats.as_dict()
         queue = [boxes[1].image, boxes[0].image]  # the last taken, then an older one
 
