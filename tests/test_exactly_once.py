@@ -16,7 +16,7 @@ from collections import Counter
 
 import pytest
 from memring import MemoryRing, wait_for
-from ringutil import control, launcher_pids, tap, wait_ring, wait_until
+from ringutil import control, launcher_pids, stats, tap, wait_ring, wait_until
 
 from tokenring.channels import NEW, REPEAT, STALE, CommandMemory
 from tokenring.protocol import default_protocol
@@ -278,7 +278,11 @@ def test_the_reproduction_on_real_processes_delivers_six_of_six(tmp_path, procs,
             10,
             "motor's program to take six",
         )
-        time.sleep(0.2)  # rounds in which a wrongly repeated command would arrive
+        # rounds in which a wrongly repeated command would arrive
+        visits = stats(session, ring_name, SONAR)[SONAR]["stats"]["visits"]
+        wait_until(
+            lambda: stats(session, ring_name, SONAR)[SONAR]["stats"]["visits"] > visits + 50, 30, "50 rounds"
+        )
         for target, expected in (("motor", 6), ("sonar", 6 * 255)):
             counts = control(session, ring_name, PROTOCOL.nodes[target].id, "program")["report"]["counts"]
             assert sorted(set(counts)) == list(range(expected)), target  # every acknowledged one taken
