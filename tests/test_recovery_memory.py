@@ -328,3 +328,21 @@ def test_an_idle_watchdog_sleeps_until_its_deadline_instead_of_polling():
         assert_one_token_through(ring, [1, 2, 3, 4])
     finally:
         ring.close()
+
+
+def test_a_join_that_comes_while_the_leave_is_still_handing_over_is_not_lost():
+    """The seeded nemesis left sonar out for good: ``join`` 213 ms after ``leave`` arrived while
+    the departure was still handing over, was ignored, and the departure then completed."""
+    ring = MemoryRing(IDS, bitrate=10e6)
+    try:
+        ring.wait_rounds(20)
+        sonar = ring.nodes[30]
+        sonar.depart_in_background()
+        sonar.join()  # at once: the handover has not finished (it has not even started)
+        wait_for(lambda: sonar._rejoin_wanted or not sonar._leaving, 10, "the join to be noted or done")
+        wait_for(lambda: not sonar._leaving and not sonar._departed, 10, "the departure to end in a rejoin")
+        before = sonar.stats.visits
+        wait_for(lambda: sonar.stats.visits > before + 10, 10, "sonar back in the ring")
+        assert_one_token_through(ring, IDS)
+    finally:
+        ring.close()

@@ -169,7 +169,7 @@ class FaultInjector:
                 self._resume()
                 self.active.clear()
             elif kind == "leave":
-                threading.Thread(target=self.os.depart, name="fault-leave", daemon=True).start()
+                self.os.depart_in_background()
                 self.active["leave"] = {"since": time.time(), **spec}
             elif kind == "join":
                 self.active.pop("leave", None)

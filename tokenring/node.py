@@ -253,6 +253,8 @@ class NodeOS(TokenPathBase):  # type: ignore[misc, valid-type]
         self._joined = False
         self._leaving = False
         self._departed = False  # left with the `leave` fault; `join` brings it back
+        self._departure_lock = threading.Lock()
+        self._rejoin_wanted = False  # `join` came while `depart` was still handing over
         self.paused = False  # set by the soft `hang` fault: the watchdog stands still too
         self._stopping = threading.Event()
         self._closing = False  # _stopping as a plain flag for the token path (Event.is_set is Python)
@@ -319,18 +321,36 @@ class NodeOS(TokenPathBase):  # type: ignore[misc, valid-type]
                 self._handover(grace)
         self.close()
 
-    def depart(self, grace: float | None = None) -> None:
+    def depart_in_background(self, grace: float | None = None) -> None:
+        """:meth:`depart` on a thread of its own, marked as leaving at once, so that a ``join``
+        arriving before the thread runs still finds the departure under way."""
+        with self._departure_lock:
+            if not self._joined or self._leaving or self._departed:
+                return
+            self._leaving = True
+        threading.Thread(target=self.depart, args=(grace, True), name="fault-leave", daemon=True).start()
+
+    def depart(self, grace: float | None = None, _marked: bool = False) -> None:
         """Leave the ring but keep the process and its program (the ``leave`` fault)."""
-        if self._joined and not self._leaving:
+        if self._joined and (_marked or not self._leaving):
             self._handover(grace)
-            self._departed = True
-            self._leaving = False
+            with self._departure_lock:
+                self._departed = True
+                self._leaving = False
+                come_back, self._rejoin_wanted = self._rejoin_wanted, False
+            if come_back:
+                self.join()
 
     def join(self) -> None:
-        """Come back after :meth:`depart`: announce liveliness again; the ring inserts us."""
-        if not self._departed:
-            return
-        self._departed = False
+        """Come back after :meth:`depart`: announce liveliness again; the ring inserts us.
+        Asked while the departure is still handing over, it comes back once that is done
+        (ignored, the node would have stayed out for good: the seeded nemesis found it)."""
+        with self._departure_lock:
+            if not self._departed:
+                if self._leaving:
+                    self._rejoin_wanted = True
+                return
+            self._departed = False
         self._last_seen = perf_counter()
         self._last_visit = 0.0
         self._last_counter = -1  # rounds went on while we were away, maybe past 128
