@@ -49,6 +49,7 @@ from tokenring.zconfig import make_config, open_session
 RING_KEYS = {"nodes", "bitrate", "ack", "respawn", "workload"}
 FAULT_KEYS = {"at", "node", "kind", "value", "jitter", "count", "soft"}
 LEDGER_ENV = "TOKENRING_PROBE_LEDGER"  # where the probe programs write their ledgers
+INJECT_S = 5.0  # a starved node may take seconds to answer its fault query
 FORM_S = 90.0  # eight interpreters starting on a loaded machine can take a minute
 SETTLE_MAX_S = 30.0  # how much longer than the settle time a ring may take to converge
 EFFECT_S = 0.05  # after a crash or hang is acknowledged, until its node has surely stopped
@@ -481,7 +482,7 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
     present = set(live) if launcher is None else set(scenario.nodes)
     capture = WireCapture(session, ring)
     time.sleep(1.0)  # a calm second to start from
-    client = FaultClient(session, ring)
+    client = FaultClient(session, ring, timeout=INJECT_S)
     membership = Membership(set(present))
     known: dict[int, dict[str, int]] = {}  # each node's latest counters
     t0 = time.perf_counter()
