@@ -98,6 +98,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=60.0, help="seconds per run (default 60)")
     parser.add_argument("--soak", type=float, default=0.0, help="add one run of this many seconds")
     parser.add_argument(
+        "--list", default="", help="these seeds instead (comma-separated), e.g. to rerun failures"
+    )
+    parser.add_argument(
         "--out", default=None, help="the summary JSON (default bench/results/nemesis-<date>.json)"
     )
     args = parser.parse_args(argv)
@@ -105,9 +108,12 @@ def main(argv: list[str] | None = None) -> int:
     if out.exists():
         print(f"{out}: exists; not overwritten", file=sys.stderr)
         return 2
-    plan = [(args.first + i, args.duration) for i in range(args.seeds)]
+    seeds = (
+        [int(x) for x in args.list.split(",")] if args.list else [args.first + i for i in range(args.seeds)]
+    )
+    plan = [(seed, args.duration) for seed in seeds]
     if args.soak:
-        plan.append((args.first + args.seeds, args.soak))
+        plan.append((max(seeds, default=args.first) + 1, args.soak))
     runs = []
     for index, (seed, duration) in enumerate(plan, 1):
         print(f"[{index}/{len(plan)}] seed {seed}, {duration:g} s ...", file=sys.stderr, flush=True)
