@@ -922,17 +922,9 @@ def write_report(
     plots.mkdir(parents=True, exist_ok=True)
     sections: dict[str, Any] = dict(results["sections"])
     borrowed: dict[str, str] = {}
-    for name in (
-        "scaling",
-        "transports",
-        "runtime",
-        "load",
-        "commands",
-        "profile",
-        "recovery",
-        "download",
-        "spurious",
-    ):
+    from bench.suite import SECTIONS  # at call time: the suite imports this module to write its report
+
+    for name in SECTIONS:
         if name not in sections:
             found = previous_section(name, out_dir, current)
             if found is not None:
