@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import ezdxf
+import pytest
 from conftest import wait_gone
 from ringutil import control, launcher_pids, stats, tap, wait_ring, wait_until
 
@@ -121,7 +122,7 @@ def test_scan_incremental_all_corrupt_start_stop_upload_and_bad_input(procs, rin
         after = chunks(session, ring_name, ids)
         assert after[20] - before[20] == result["outcomes"][0]["chunks"] > 0
         assert all(after[i] == before[i] for i in (10, 30, 60))
-        wait_until(lambda: version(session, ring_name, 20) == 2, 5, "motor's new program runs")
+        wait_until(lambda: version(session, ring_name, 20) == 2, 30, "motor's new program runs")
         assert load_json(ring_name, endpoint, "-i", "--programs", str(programs))["outcomes"] == []
 
         # -a reloads every program
@@ -194,7 +195,7 @@ def test_scan_incremental_all_corrupt_start_stop_upload_and_bad_input(procs, rin
         assert "FAILED: sonar (30): installed, but its start failed" in text, text
         assert [n["id"] for n in load_json(ring_name, endpoint)["scan"]] == ids
     launcher.send_signal(signal.SIGTERM)
-    assert launcher.wait(15) == 0
+    assert launcher.wait(30) == 0
 
 
 def test_token_loss_and_a_crash_mid_transfer_leave_nothing_half_installed(
@@ -247,7 +248,7 @@ def test_token_loss_and_a_crash_mid_transfer_leave_nothing_half_installed(
         assert loader.returncode == 0, out
         faults = query_one(session, keys.control(ring_name, 30, "fault"), {"kind": "list"})
         assert faults["counts"]["lost"] == 2, faults
-        wait_until(lambda: version(session, ring_name, 20) == 2, 5, "motor runs v2")
+        wait_until(lambda: version(session, ring_name, 20) == 2, 30, "motor runs v2")
 
         # the target crashes mid-transfer: the loader names it, the rest of the ring runs on
         big3 = write_program(tmp_path / "motor_v3.py", 3, padding)
@@ -270,16 +271,17 @@ def test_token_loss_and_a_crash_mid_transfer_leave_nothing_half_installed(
         wait_until(
             lambda: stats(session, ring_name, 20).get(20, {}).get("pid") not in (None, pid), 20, "respawn"
         )
-        wait_until(lambda: control(session, ring_name, 20, "program")["program"], 10, "motor's program")
+        wait_until(lambda: control(session, ring_name, 20, "program")["program"], 30, "motor's program")
         assert version(session, ring_name, 20) == 2
         assert system(session, ring_name, 20)["installed"]["stamp_ms"] == file_stamp(big)
         result = load_json(ring_name, endpoint, "-i", "--programs", str(programs))
         assert result["outcomes"] == [] and result["failed"] == []
     launcher.send_signal(signal.SIGTERM)
-    assert launcher.wait(15) == 0
+    assert launcher.wait(30) == 0
     assert os.path.isdir(tmp_path / "store" / ring_name / "motor")
 
 
+@pytest.mark.timeout(300)  # its hang guards
 def test_sigint_during_the_boot_download_stops_everything(procs, ring_name, endpoint):
     launcher = procs.tokenring("up", "--ring", ring_name, "--listen", endpoint, "--no-world")  # 2.5 Mbit/s
     with tap(endpoint) as session:
@@ -291,11 +293,11 @@ def test_sigint_during_the_boot_download_stops_everything(procs, ring_name, endp
             except UsageError:  # not up yet
                 return False
 
-        wait_until(loading, 30, "the boot download under way")
+        wait_until(loading, 90, "the boot download under way")  # a hang guard: boots are slow under load
         pids = launcher_pids(session, ring_name)
         procs.watch(pids)
     launcher.send_signal(signal.SIGINT)
-    out, _ = launcher.communicate(timeout=10)
+    out, _ = launcher.communicate(timeout=60)
     assert launcher.returncode == 130, out
     assert "cancelled" in out and "started:" not in out, out
-    assert wait_gone(pids, 3) == []
+    assert wait_gone(pids, 30) == []
