@@ -50,7 +50,7 @@ class Receiver:
 @pytest.fixture
 def ring():
     r = MemoryRing([MAIN, MOTOR, SONAR], bitrate=None)
-    r.wait_rounds(3)
+    r.wait_rounds(3, timeout=30)
     yield r
     r.close()
 
@@ -75,8 +75,8 @@ def test_commands_to_other_inboxes_in_between_never_make_one_look_repeated(ring)
             send("motor", turn)
             for n in range(255):
                 send("sonar", turn * 255 + n)
-        wait_for(lambda: len(motor.taken) >= 6, 5, "motor's program to take six commands")
-        wait_for(lambda: len(sonar.taken) >= 6 * 255, 5, "sonar's program to take them all")
+        wait_for(lambda: len(motor.taken) >= 6, 30, "motor's program to take six commands")
+        wait_for(lambda: len(sonar.taken) >= 6 * 255, 30, "sonar's program to take them all")
         ring.wait_rounds(20, timeout=30)  # rounds in which a wrongly repeated command would arrive
         for target, receiver, expected in (("motor", motor, 6), ("sonar", sonar, 6 * 255)):
             counts = [count for _, _, count in receiver.taken]
@@ -95,7 +95,7 @@ def test_three_hundred_commands_to_one_inbox_arrive_once_each_in_order(ring):
     try:
         for n in range(300):
             assert main.deliver("motor", "VECTOR_COUNTER", count=n, timeout=10)
-        wait_for(lambda: len(motor.taken) >= 300, 5, "300 commands taken")
+        wait_for(lambda: len(motor.taken) >= 300, 30, "300 commands taken")
         ring.wait_rounds(20, timeout=30)  # a few more rounds: nothing may arrive twice
         assert [count for _, _, count in motor.taken] == list(range(300))
     finally:
@@ -109,14 +109,14 @@ def test_a_respawned_sender_is_heard_although_its_seq_repeats(ring):
     try:
         first = ring.nodes[MAIN]
         assert first.deliver("motor", "VECTOR_COUNTER", count=1, timeout=10)
-        wait_for(lambda: len(motor.taken) == 1, 5, "the first incarnation's command")
+        wait_for(lambda: len(motor.taken) == 1, 30, "the first incarnation's command")
         first.close()
-        wait_for(lambda: MAIN not in ring.nodes[MOTOR].membership.live, 5, "main's departure")
+        wait_for(lambda: MAIN not in ring.nodes[MOTOR].membership.live, 30, "main's departure")
         second = ring.add(MAIN)
         assert second.incarnation != first.incarnation
-        ring.wait_rounds(3, MAIN, timeout=10)
+        ring.wait_rounds(3, MAIN, timeout=30)
         assert second.deliver("motor", "VECTOR_COUNTER", count=2, timeout=10)
-        wait_for(lambda: len(motor.taken) == 2, 5, "the second incarnation's command")
+        wait_for(lambda: len(motor.taken) == 2, 30, "the second incarnation's command")
         (_, inc1, c1), (_, inc2, c2) = motor.taken
         assert (inc1, c1) == (first.incarnation, 1) and (inc2, c2) == (second.incarnation, 2)
     finally:
@@ -133,8 +133,12 @@ def test_stale_copies_are_cleared_never_taken_and_never_acknowledged(ring):
     try:
         boxes = []
         for n in (10, 11):
-            boxes.append(main.send_command("motor", "VECTOR_COUNTER", count=n))
-            assert boxes[-1].done.wait(5) and boxes[-1].acknowledged
+            while True:  # a loaded machine may find motor's inbox still locked: resend until taken
+                box = main.send_command("motor", "VECTOR_COUNTER", count=n)
+                assert box.done.wait(30)
+                if box.acknowledged:
+                    boxes.append(box)
+                    break
         wait_for(lambda: len(motor.taken) == 2, 5, "two commands")
         # past main's post-start recovery window, where it sweeps its own old commands
         wait_for(lambda: time.perf_counter() > main._recovery_until, 30, "main's recovery window to end")
@@ -151,7 +155,7 @@ def test_stale_copies_are_cleared_never_taken_and_never_acknowledged(ring):
 
         main.system_handler, main.system_busy = replay, True
         wait_for(lambda: not queue, 5, "both copies replayed")
-        ring.wait_rounds(5, MOTOR)
+        ring.wait_rounds(5, MOTOR, timeout=30)
         main.system_handler, main.system_busy = None, False
         after = motor_node.stats.as_dict()
         assert [c for _, _, c in motor.taken] == [10, 11]  # nothing taken twice

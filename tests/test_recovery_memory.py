@@ -138,15 +138,15 @@ def test_an_injected_copy_of_an_old_pass_is_eliminated():
     # an old frame would deliver it; only the round counter tells it from a fresh one.
     ring = MemoryRing(IDS, bitrate=10e6)
     try:
-        ring.wait_rounds(30)
+        ring.wait_rounds(30, timeout=60)
         with ring.nodes[20]._token_lock:
             old = bytes(ring.nodes[20]._work)  # sealed: the last frame node 20 sent
         assert HEADER.valid(old) and (old[HEADER.sid], old[HEADER.did]) == (20, 30)
-        ring.wait_rounds(5)
+        ring.wait_rounds(5, timeout=60)
         regenerated = ring.regenerated()
         ring.hub.send(20, 30, ("frame", old))
         ring.hub.send(20, 30, ("frame", old))
-        ring.wait_rounds(20, node_id=10)
+        ring.wait_rounds(20, node_id=10, timeout=60)
         assert_one_token_through(ring, IDS)
         # dropped as an older round of this epoch, not ended by a chance regeneration
         assert ring.nodes[30].stats.replayed_passes == 2
@@ -335,7 +335,7 @@ def test_a_join_that_comes_while_the_leave_is_still_handing_over_is_not_lost():
     the departure was still handing over, was ignored, and the departure then completed."""
     ring = MemoryRing(IDS, bitrate=10e6)
     try:
-        ring.wait_rounds(20)
+        ring.wait_rounds(20, timeout=60)
         sonar = ring.nodes[30]
         sonar.depart_in_background()
         sonar.join()  # at once: the handover has not finished (it has not even started)
