@@ -209,10 +209,13 @@ def test_soft_hang_and_resume(ring):
 
 
 def test_delay_slows_the_round_and_clear_restores_it(ring):
-    before = stats(ring.session, ring.name, 10)[10]["round_ms"]["median"]
+    main_stats = wait_until(lambda: stats(ring.session, ring.name, 10).get(10), 30, "main's counters")
+    before = main_stats["round_ms"]["median"]
     ring.fault("motor", "delay", "20", "--jitter", "2")
     wait_until(
-        lambda: stats(ring.session, ring.name, 10)[10]["round_ms"]["median"] > before + 10,
+        lambda: (
+            stats(ring.session, ring.name, 10).get(10, {}).get("round_ms", {}).get("median", 0) > before + 10
+        ),
         15,
         "rounds to take 20 ms longer",
     )
