@@ -197,3 +197,27 @@ def test_the_reconfiguration_timeout_follows_the_tail_of_rounds_that_came_back()
     for _ in range(20):
         timing.rounds.add(5.0)  # a lost token's gap: longer than the timeout in force
     assert timing.refresh(live=8).recon == stretched
+
+
+def test_recent_rounds_can_be_read_while_the_token_path_appends():
+    """The watchdog reads the recent rounds while the token path adds to them: iterating the
+    deque raised "deque mutated during iteration" and killed the watchdog thread."""
+    import threading
+
+    from tokenring.ring import RollingStats
+
+    stats = RollingStats(4096)
+    stop = threading.Event()
+
+    def token_path() -> None:
+        while not stop.is_set():
+            stats.add(0.001)
+
+    writer = threading.Thread(target=token_path)
+    writer.start()
+    try:
+        for _ in range(20000):  # the old iteration failed about once in 2000 reads
+            assert len(stats.recent(512)) <= 512
+    finally:
+        stop.set()
+        writer.join()

@@ -20,7 +20,6 @@ Timeouts (all derived, never guessed; see README "Timing"):
 
 from __future__ import annotations
 
-import itertools
 import math
 import struct
 import threading
@@ -150,8 +149,9 @@ class RollingStats:
         return np.array(list(self._samples))
 
     def recent(self, count: int) -> list[float]:
-        """The last ``count`` samples (newest first)."""
-        return list(itertools.islice(reversed(self._samples), count))
+        """The last ``count`` samples (newest first). ``list`` copies the deque in one C call,
+        safe while the token path appends; iterating it would raise "deque mutated"."""
+        return list(self._samples)[-count:][::-1]
 
     def percentile(self, q: float, default: float = 0.0, last: int = 512) -> float:
         """Percentile of the last ``last`` samples (bounded work, off the token path)."""
