@@ -39,7 +39,7 @@ COMPASS_SIGMA_DEG = 1.0  # SPEC §5
 COMPASS_MEAN = 3  # the compass module's short circular mean (reset while turning, starting, stopping)
 #: the compass module hears of a start or stop through motor.data, a token round late: on the ring
 #: at speed 20 a round takes 130 ms (median; 90 % within 190, bench.mapping's recording); until then
-#: it subtracts the motors' running field wrongly (tokenring/world/magnetics.py MOTOR_RUNNING_UT)
+#: it subtracts the motors' running field wrongly (modules/world/magnetics.py MOTOR_RUNNING_UT)
 COMPASS_HEARS_MOTOR_MS = 130
 TRUTH_PERIOD_MS = 100
 
@@ -102,7 +102,7 @@ class SimMotor:
             self._finish(0)
 
     def tick(self, now_ms: float) -> None:
-        from modules.common.robot import STEP_MM
+        from modules.description.robot import STEP_MM
 
         move = self.move
         self.stamp_ms = now_ms
@@ -156,8 +156,8 @@ class SimSonar:
     """modules/sonar.py: eight pairs pinged 15 ms apart, threshold + tangent, areas, behaviours."""
 
     def __init__(self, world: Any, rng: np.random.Generator) -> None:
-        from modules.common.robot import SONAR_COUNT
         from modules.common.sonar import NO_CONTACT, make_classifier
+        from modules.description.robot import SONAR_COUNT
 
         self.world = world
         self.rng = rng
@@ -170,9 +170,9 @@ class SimSonar:
         self.published: dict[str, Any] | None = None
 
     def tick(self, now_ms: float, pose: Any) -> None:
-        from modules.common.robot import SONAR_COUNT, SONAR_SLOT_MS, sonar_world_pose
         from modules.common.sonar import contact_tangent, distance_area
-        from tokenring.world import echo
+        from modules.description.robot import SONAR_COUNT, SONAR_SLOT_MS, sonar_world_pose
+        from modules.world import echo
 
         while now_ms >= self.sweep_start + self.next_pair * SONAR_SLOT_MS:
             i = self.next_pair
@@ -215,7 +215,7 @@ class SimCompass:
     def tick(self, now_ms: float, pose: Any, turning: bool, moving: bool = False) -> None:
         from modules.common.compass import circular_mean
         from modules.common.units import heading_to_cdeg
-        from tokenring.world.magnetics import MOTOR_RUNNING_UT
+        from modules.world.magnetics import MOTOR_RUNNING_UT
 
         self.motion.append((now_ms, moving))
         while len(self.motion) > 1 and self.motion[1][0] <= now_ms - COMPASS_HEARS_MOTOR_MS:
@@ -285,8 +285,8 @@ class ClosedLoop:
         from modules.common.navigator import ExploreAvoid, ExploreLeftWall
         from modules.common.pilot import Pilot
         from modules.common.vectorgen import OUR_METHOD, SEED_METHOD, PoseHistory, Vectorizer, default_layout
-        from tokenring.world import load_world
-        from tokenring.world.physics import TrackedRobot
+        from modules.description import load_world
+        from modules.world.physics import TrackedRobot
 
         self.world = load_world(world)
         if start_deg is not None:  # another start heading: the calibration turns end elsewhere
@@ -474,7 +474,7 @@ class ClosedLoop:
     # -- the clock -----------------------------------------------------------------------------
     def run(self, minutes: float = 30.0, progress: Callable[[str], None] | None = None) -> Run:
         from modules.common.pilot import TURN_LEFT, TURN_RIGHT
-        from modules.common.robot import MOTOR_TICK_MS
+        from modules.description.robot import MOTOR_TICK_MS
 
         end_ms = minutes * 60_000.0
         finished = "time is up"
@@ -563,7 +563,7 @@ def explore(
     """One closed-loop exploration, scored: the map as the robot made it and the four variants
     (seed/ours × dead reckoning/filter) of the same drive; PNGs to ``out``."""
     from modules.common.mapscore import score_map
-    from tokenring.commands.map import load_truth, write_map
+    from modules.pc.mapfiles import load_truth, write_map
 
     config = None
     if walls:

@@ -27,12 +27,12 @@ CHUNK_BYTES = 30
 
 
 def run_bitrate(bitrate: str, repeat: int, store: Path) -> dict[str, Any]:
+    from modules.plugin import PROGRAMS_DIR
     from tokenring import keys
     from tokenring.cliutil import free_port, query
-    from tokenring.commands.explore import open_link
-    from tokenring.commands.up import default_programs_dir
     from tokenring.launcher import Launcher, plans_from_protocol
     from tokenring.loader import Loader
+    from tokenring.pclink import open_link
     from tokenring.protocol import default_protocol
 
     protocol = default_protocol()
@@ -56,7 +56,7 @@ def run_bitrate(bitrate: str, repeat: int, store: Path) -> dict[str, Any]:
         nodes = loader.scan(ids, wait=30.0)
         if {n["id"] for n in nodes} != ids:
             raise SystemExit(f"{bitrate}: only {sorted(n['id'] for n in nodes)} answered the scan")
-        items = loader.plan(nodes, "all", default_programs_dir())
+        items = loader.plan(nodes, "all", PROGRAMS_DIR)
         runs: dict[str, list[dict[str, Any]]] = {"raw": [], "zlib": []}
         for _ in range(repeat):
             for mode in ("raw", "zlib"):

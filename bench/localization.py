@@ -27,6 +27,8 @@ from typing import Any
 
 import yaml
 
+from modules.description import keys as robot_keys
+
 
 def square_actions(laps: int, side_mm: int) -> str:
     """The action file of the experiment (seed 000, §10: 3 laps of a 3 m square, counter-clockwise)."""
@@ -49,11 +51,11 @@ def run_experiment(
     say: Any = print,
 ) -> dict[str, Any]:
     """One run on a fresh ring; returns the analysis summary of the Localizer's data log."""
-    from tokenring.analysis import analyse
-    from tokenring.commands.explore import open_link
-    from tokenring.commands.up import default_programs_dir, world_service
+    from modules.pc.analysis import analyse
+    from modules.plugin import PROGRAMS_DIR, world_service
     from tokenring.errors import UsageError
     from tokenring.launcher import Launcher, plans_from_protocol
+    from tokenring.pclink import open_link
     from tokenring.protocol import load_protocol
 
     logs = workdir / f"seed{seed}"
@@ -67,7 +69,7 @@ def run_experiment(
         world="square", speed=str(speed), seed=seed, log_level="warning", zenoh_config=None, ring=ring
     )
     launcher = Launcher(
-        plans_from_protocol(load_protocol(None), None, default_programs_dir()),
+        plans_from_protocol(load_protocol(None), None, PROGRAMS_DIR),
         ring=ring,
         bitrate="max",
         log_level="warning",
@@ -147,10 +149,9 @@ def align(link: Any, speed_pct: int, timeout: float) -> None:
 
 def world_now(session: Any, ring: str) -> int | None:
     """The simulator's time now (ms), from ``world/state``."""
-    from tokenring import keys
     from tokenring.cliutil import query
 
-    for _, reply in query(session, keys.world(ring, "state"), timeout=2.0):
+    for _, reply in query(session, robot_keys.world(ring, "state"), timeout=2.0):
         if reply.get("ok"):
             return int(reply["result"]["stamp_ms"])
     return None
@@ -164,8 +165,8 @@ def drive_only(log_path: Path, start_ms: int) -> dict[str, float]:
 
     import numpy as np
 
-    from tokenring.analysis import Series
-    from tokenring.logs import read_log
+    from modules.common.logs import read_log
+    from modules.pc.analysis import Series
 
     series = Series(read_log(log_path))
     truth = series.array("L")

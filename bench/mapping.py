@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from modules.description import keys as robot_keys
+
 ROOMS = ("empty", "office", "square", "slanted")
 
 
@@ -47,7 +49,7 @@ class Recorder:
         self.lock = threading.Lock()
         self.sub = session.declare_subscriber(keys.token(ring, protocol.node("copro").id), self._on)
         self.truth: list[tuple[int, float, float, float]] = []
-        self.truth_sub = session.declare_subscriber(keys.world(ring, "truth"), self._on_truth)
+        self.truth_sub = session.declare_subscriber(robot_keys.world(ring, "truth"), self._on_truth)
 
     def _on_truth(self, sample: Any) -> None:
         import msgpack
@@ -262,7 +264,7 @@ def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any
         )
         if abs(stamps[near] - c["stamp_ms"]) > 60:
             continue
-        north = math.pi / 2  # the bundled rooms' (tokenring/world/model.py)
+        north = math.pi / 2  # the bundled rooms' (modules/description/room.py)
         truth_heading = (north - truth[near][3]) % (2 * math.pi)
         signed = math.degrees(math.remainder(cdeg_to_heading(c["heading_cdeg"]) - truth_heading, 2 * math.pi))
         k = bisect.bisect_right(changes, c["stamp_ms"])
@@ -295,8 +297,8 @@ def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any
 def main(argv: list[str] | None = None) -> int:
     from modules.common.mapscore import score_map
     from modules.common.vectorgen import OUR_METHOD, SEED_METHOD
+    from modules.pc.mapfiles import load_map_file, load_truth, write_map
     from tokenring.cliutil import free_port
-    from tokenring.commands.map import load_map_file, load_truth, write_map
 
     parser = argparse.ArgumentParser(prog="python -m bench.mapping", description=__doc__.split("\n\n")[0])
     parser.add_argument("--rooms", default=",".join(ROOMS), help="comma-separated bundled rooms")

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from tokenring.bench import ROUTER_FROM
+from tokenring.roundtrip import ROUTER_FROM
 
 HERE = Path(__file__).resolve().parent
 REPRODUCE = "python -m bench"
@@ -922,7 +922,7 @@ def write_report(
     plots.mkdir(parents=True, exist_ok=True)
     sections: dict[str, Any] = dict(results["sections"])
     borrowed: dict[str, str] = {}
-    from bench.suite import SECTIONS  # at call time: the suite imports this module to write its report
+    from bench.sections import SECTIONS
 
     for name in SECTIONS:
         if name not in sections:

@@ -45,22 +45,10 @@ from typing import Any
 
 import numpy as np
 
+from bench.sections import QUICK_SECTIONS, SECTIONS, SLOW_SECTIONS
+
 HERE = Path(__file__).resolve().parent
 RESULTS_DIR = HERE / "results"
-SECTIONS = (
-    "scaling",
-    "transports",
-    "runtime",
-    "load",
-    "commands",
-    "profile",
-    "recovery",
-    "download",
-    "spurious",
-)
-#: run only when named in ``--sections`` (RESULTS.md takes them from their latest run otherwise)
-SLOW_SECTIONS = ("spurious",)
-QUICK_SECTIONS = ("scaling", "transports", "commands", "profile")
 FULL_SIZES = {"peer": [2, 4, 8, 16, 32, 64], "router": [8, 16, 32, 64, 128, 255]}
 QUICK_SIZES = {"peer": [2, 4, 8], "router": [8]}
 SEED_NODES = ["main", "motor", "sonar", "compass", "copro", "map", "lcd"]  # the seed's 7 computers
@@ -86,7 +74,7 @@ def pool_runs(runs: list[Any]) -> Any:
     time of the median run."""
     if len(runs) == 1:
         return runs[0]
-    from tokenring.bench import RingRun
+    from tokenring.roundtrip import RingRun
 
     middle = sorted(runs, key=lambda r: r.handler_us.get("median", 0.0))[len(runs) // 2]
     return RingRun(
@@ -129,7 +117,7 @@ def load_avg() -> list[float]:
 
 
 def stats_ms(seconds: list[float]) -> dict[str, float]:
-    from tokenring.bench import summarize
+    from tokenring.roundtrip import summarize
 
     return summarize(seconds)
 
@@ -156,7 +144,7 @@ def ring_record(run: Any, n: int) -> dict[str, Any]:
 
 
 def section_scaling(ctx: Context) -> dict[str, Any]:
-    from tokenring.bench import run_bare, run_ring
+    from tokenring.roundtrip import run_bare, run_ring
 
     out: dict[str, Any] = {"runs": []}
     for topology, sizes in ctx.sizes.items():
@@ -252,7 +240,7 @@ def fit_costs(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def section_transports(ctx: Context) -> dict[str, Any]:
-    from tokenring.bench import run_bare, run_ring
+    from tokenring.roundtrip import run_bare, run_ring
 
     sizes = [8] if ctx.quick else [8, 64]
     out: dict[str, Any] = {"runs": []}
@@ -365,12 +353,12 @@ def section_runtime(ctx: Context) -> dict[str, Any]:
 
 
 def robot_plans(names: list[str], programs: bool) -> list[Any]:
-    from tokenring.commands.up import default_programs_dir
+    from modules.plugin import PROGRAMS_DIR
     from tokenring.launcher import NodePlan
     from tokenring.protocol import default_protocol
 
     protocol = default_protocol()
-    folder = default_programs_dir()
+    folder = PROGRAMS_DIR
     return [
         NodePlan(protocol.nodes[name].id, name, str(folder / f"{name}.py") if programs else None)
         for name in names
@@ -378,7 +366,7 @@ def robot_plans(names: list[str], programs: bool) -> list[Any]:
 
 
 def world_plan(ring: str, speed: str = "1") -> Any:
-    from tokenring.commands.up import world_service
+    from modules.plugin import world_service
 
     args = argparse.Namespace(
         world="office", speed=speed, seed=1, ring=ring, log_level="warning", zenoh_config=None
@@ -394,8 +382,8 @@ def node_store() -> Iterator[list[str]]:
 
 
 def section_load(ctx: Context) -> dict[str, Any]:
-    from tokenring.bench import run_ring
     from tokenring.protocol import default_protocol
+    from tokenring.roundtrip import run_ring
 
     names = list(default_protocol().nodes)
     rounds, warmup = (1500, 500) if not ctx.quick else (600, 200)
@@ -423,9 +411,9 @@ def section_load(ctx: Context) -> dict[str, Any]:
 
 
 def section_commands(ctx: Context) -> dict[str, Any]:
-    from tokenring.bench import run_ring
     from tokenring.cliutil import query
     from tokenring.protocol import default_protocol
+    from tokenring.roundtrip import run_ring
 
     protocol = default_protocol()
     names = list(protocol.nodes)
@@ -522,9 +510,9 @@ class CommandCollector:
 
 
 def section_profile(ctx: Context) -> dict[str, Any]:
-    from tokenring.bench import run_ring
     from tokenring.profile import PROFILES
     from tokenring.ring import hop_time
+    from tokenring.roundtrip import run_ring
 
     profile = PROFILES["arcnet"]
     n = len(SEED_NODES)

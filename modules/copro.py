@@ -53,7 +53,7 @@ EXPLORATION_CONFIG: dict[str, Any] = {
 }
 
 
-def open_localizer(os: Any) -> Any | None:
+def open_localizer(os: Any, truth: Any = None) -> Any | None:
     """The EKF localizer (modules.common.localizer), configured for exploration; None without it.
 
     ``$TOKENRING_LOCALIZER_CONFIG`` names another configuration file; ``$TOKENRING_LOCALIZER=off``
@@ -66,7 +66,7 @@ def open_localizer(os: Any) -> Any | None:
         return None
     config: Any = _os.environ.get("TOKENRING_LOCALIZER_CONFIG") or EXPLORATION_CONFIG
     try:
-        localizer = Localizer(os, config)
+        localizer = Localizer(os, config, truth=truth)
         localizer.setup()
     except Exception as exc:  # the map still works on dead reckoning
         log.error("localizer unavailable, using dead reckoning: %s", exc)
@@ -121,7 +121,7 @@ class Program(UserProgram):
         self.last_sweep: int | None = None
         self.pose_source = POSE_NONE
         self._make_generators()
-        self.localizer = open_localizer(os)
+        self.localizer = open_localizer(os, self.hw)
         self.sender = threading.Thread(target=self._send_vectors, name="copro-vectors", daemon=True)
         self.sender.start()
 

@@ -31,8 +31,8 @@ from modules.common.odometry import (
     steps_for_angle,
     steps_for_distance,
 )
-from modules.common.robot import DEFAULT_MOTOR_CURRENT_MA, MAX_SPEED_MM_S, MOTOR_TICK_MS, STEP_MM
 from modules.common.units import cdeg_to_rad, pose_to_wire
+from modules.description.robot import DEFAULT_MOTOR_CURRENT_MA, MAX_SPEED_MM_S, MOTOR_TICK_MS, STEP_MM
 from tokenring.errors import ChannelError
 from tokenring.program import UserProgram
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import logging
 
-from modules.common.robot import SONAR_COUNT, SONAR_SLOT_MS
 from modules.common.sonar import (
     NO_CONTACT,
     contact_tangent,
@@ -22,6 +21,7 @@ from modules.common.sonar import (
     distance_area,
     make_classifier,
 )
+from modules.description.robot import SONAR_COUNT, SONAR_SLOT_MS
 from tokenring.program import UserProgram
 
 log = logging.getLogger("tokenring.sonar")

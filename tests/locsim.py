@@ -13,10 +13,10 @@ from collections.abc import Callable, Iterator
 
 import numpy as np
 
-from modules.common.robot import SONAR_BEAM_RAD, SONAR_MOUNTS, SONAR_RANGE_MM, STEP_MM, sonar_world_pose
 from modules.common.sync import Sample
-from tokenring.world import load_world
-from tokenring.world.physics import TrackedRobot, cast_rays
+from modules.description import load_world
+from modules.description.robot import SONAR_BEAM_RAD, SONAR_MOUNTS, SONAR_RANGE_MM, STEP_MM, sonar_world_pose
+from modules.world.physics import TrackedRobot, cast_rays
 
 
 def square_moves(laps: int, side_mm: float) -> list[tuple[str, float]]:

@@ -36,7 +36,7 @@ def test_a_bench_run_gets_its_environment_and_the_python_token_path_circulates()
 #: anybody waits, so no budget has to be guessed against how fast this machine is today
 ENDLESS = ["--nodes", "8", "--rounds", "10", "--warmup", "100000000"]
 HANG_GUARD_S = 60.0
-BARE = b"tokenring.bench_bare"
+BARE = b"tokenring.roundtrip_bare"
 
 
 def processes() -> dict[int, tuple[int, bytes]]:

@@ -10,10 +10,10 @@ from hwprograms import program
 from memring import MemoryRing, wait_for
 
 from modules.common import battery as algo
-from tokenring.hw import ChargerHardware, MotorHardware
-from tokenring.world import Batteries, load_world
-from tokenring.world.battery import MOTOR_PACK_A_PER_MOTOR_A, Battery
-from tokenring.world.sim import Simulator
+from modules.description import Batteries, load_world
+from modules.world.battery import MOTOR_PACK_A_PER_MOTOR_A, Battery
+from modules.world.clients import ChargerHardware, MotorHardware
+from modules.world.sim import Simulator
 
 ChargerProgram = program("charger")
 MotorProgram = program("motor")

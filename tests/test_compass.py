@@ -14,12 +14,12 @@ from hwprograms import program
 from memring import MemoryRing, wait_for
 
 from modules.common.compass import angle_difference, fit_circle, flip_measurement, heading_from_bridges
-from modules.common.robot import MAX_STEP_RATE_HZ
 from modules.common.units import cdeg_to_heading
-from tokenring.hw import CompassHardware, MotorHardware
-from tokenring.world import load_world
-from tokenring.world.magnetics import CompassBridges
-from tokenring.world.sim import Simulator
+from modules.description import load_world
+from modules.description.robot import MAX_STEP_RATE_HZ
+from modules.world.clients import CompassHardware, MotorHardware
+from modules.world.magnetics import CompassBridges
+from modules.world.sim import Simulator
 
 CompassProgram = program("compass")
 MotorProgram = program("motor")

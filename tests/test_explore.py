@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 
 from modules.common.mapscore import score_map
-from tokenring.world import load_world
+from modules.description import load_world
 
 
 def test_up_explores_with_explore_2_and_writes_the_scored_map(procs, ring_name, endpoint, tmp_path):

@@ -6,10 +6,16 @@ import threading
 
 import pytest
 
-from tokenring.hardware import FACTORIES, open_hardware
-from tokenring.hw import ChargerHardware, CompassHardware, HardwareError, MotorHardware, SonarHardware
-from tokenring.world import load_world
-from tokenring.world.sim import Simulator
+from modules.description import load_world
+from modules.world.clients import (
+    ChargerHardware,
+    CompassHardware,
+    HardwareError,
+    MotorHardware,
+    SonarHardware,
+)
+from modules.world.hardware import FACTORIES, open_hardware
+from modules.world.sim import Simulator
 from tokenring.zconfig import make_config, open_session
 
 

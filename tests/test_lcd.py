@@ -23,7 +23,7 @@ from modules.common.lcdui import (
     text_rows,
     unpack_pixels,
 )
-from tokenring.commands.lcd import parse_keys, render, translate_key
+from modules.pc.commands.lcd import parse_keys, render, translate_key
 from tokenring.errors import UsageError
 
 

@@ -12,12 +12,12 @@ from memring import MemoryRing, wait_for
 
 from modules.common.localizer import LocalizationCore, Localizer
 from modules.common.locconfig import load_config
+from modules.common.logs import read_log
 from modules.common.sync import Sample
 from modules.common.units import cdeg_cw_to_rad_ccw
 from modules.common.walls import segments_to_walls
-from tokenring.logs import read_log
-from tokenring.replay import replay
-from tokenring.world import load_world
+from modules.description import load_world
+from modules.pc.replay import replay
 
 
 def run_core(core: LocalizationCore, moves, seed: int, tamper=None) -> dict:

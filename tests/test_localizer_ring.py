@@ -11,13 +11,13 @@ import yaml
 from ringutil import tap, wait_until
 
 from bench.localization import run_actions, wait_for_compass, world_now
-from tokenring import keys
-from tokenring.analysis import analyse
+from modules.common.logs import read_log
+from modules.description import keys as robot_keys
+from modules.pc.analysis import analyse
+from modules.pc.replay import replay
 from tokenring.cliutil import query
-from tokenring.commands.explore import open_link
 from tokenring.errors import UsageError
-from tokenring.logs import read_log
-from tokenring.replay import replay
+from tokenring.pclink import open_link
 
 
 def test_action_file_drive_with_the_localizer_on_copro(procs, ring_name, endpoint, tmp_path):
@@ -50,7 +50,7 @@ def test_action_file_drive_with_the_localizer_on_copro(procs, ring_name, endpoin
             assert state["finished"]["why"] == "action file done", state
             copro = link.read("copro.data")
             assert copro["pose_source"] == 2 and copro["pose_valid"] == 7, copro
-            (_, truth), *_ = query(session, keys.world(ring_name, "state"), timeout=2.0)
+            (_, truth), *_ = query(session, robot_keys.world(ring_name, "state"), timeout=2.0)
             truth = truth["result"]
             assert math.hypot(copro["pose_x_mm"] - truth["x_mm"], copro["pose_y_mm"] - truth["y_mm"]) < 60.0
     finally:

@@ -12,8 +12,17 @@ from pathlib import Path
 
 import pytest
 
+from modules.common.logs import (
+    DataLog,
+    ErrorLog,
+    LogError,
+    convert_csv,
+    convert_text,
+    read_log,
+    sort_log,
+    summary,
+)
 from tokenring.cli import main as cli_main
-from tokenring.logs import DataLog, ErrorLog, LogError, convert_csv, convert_text, read_log, sort_log, summary
 
 CONFIG = {"sensors": {}}
 
@@ -81,7 +90,7 @@ def test_error_log_classes(tmp_path: Path) -> None:
 WRITER = textwrap.dedent(
     """
     import sys, time
-    from tokenring.logs import DataLog
+    from modules.common.logs import DataLog
     log = DataLog(sys.argv[1], "now", {})
     i = 0
     while True:

@@ -10,9 +10,9 @@ from locsim import drive
 
 from modules.common.localizer import LocalizationCore
 from modules.common.locconfig import load_config
-from tokenring.analysis import analyse
+from modules.common.logs import DataLog, LogError
+from modules.pc.analysis import analyse
 from tokenring.cli import main as cli_main
-from tokenring.logs import DataLog, LogError
 
 
 @pytest.fixture(scope="module")

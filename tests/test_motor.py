@@ -10,11 +10,11 @@ from hwprograms import program
 from memring import MemoryRing, wait_for
 
 from modules.common.odometry import DeadReckoning, recalc_glide_factor, steps_for_angle, steps_for_distance
-from modules.common.robot import STEP_MM
 from modules.common.units import cdeg_to_rad, pose_from_wire
-from tokenring.hw import MotorHardware
-from tokenring.world import load_world
-from tokenring.world.sim import Simulator
+from modules.description import load_world
+from modules.description.robot import STEP_MM
+from modules.world.clients import MotorHardware
+from modules.world.sim import Simulator
 
 DONE, ABORTED, STALLED, COLLISION = range(4)
 

@@ -9,9 +9,9 @@ from locsim import drive, square_moves
 
 from modules.common.localizer import LocalizationCore
 from modules.common.locconfig import load_config
+from modules.common.logs import DataLog, ErrorLog, LogError, read_log
+from modules.pc.replay import replay
 from tokenring.cli import main as cli_main
-from tokenring.logs import DataLog, ErrorLog, LogError, read_log
-from tokenring.replay import replay
 
 
 @pytest.fixture(scope="module")

@@ -12,10 +12,10 @@ import math
 
 import pytest
 
-from modules.common.robot import STEP_MM
-from tokenring.world import load_world
-from tokenring.world.clock import ManualClock
-from tokenring.world.sim import VELOCITY_HOLD_MS, Simulator
+from modules.description import load_world
+from modules.description.robot import STEP_MM
+from modules.world.clock import ManualClock
+from modules.world.sim import VELOCITY_HOLD_MS, Simulator
 
 
 def driving(rate_hz: float = 184.5) -> tuple[Simulator, ManualClock, float]:
@@ -43,7 +43,7 @@ def test_truth_between_batches_is_where_the_driving_robot_is_at_its_stamp():
 
 
 def test_a_sweep_between_batches_pings_from_where_the_robot_is_at_each_pairs_stamp(monkeypatch):
-    import tokenring.world.sim as sim_module
+    import modules.world.sim as sim_module
 
     sim, clock, speed = driving()
     after_batch = sim.robot.pose

@@ -12,7 +12,8 @@ from hwprograms import program
 from memring import MemoryRing, wait_for
 
 from modules.common import sonar as algo
-from modules.common.robot import (
+from modules.description import load_world
+from modules.description.robot import (
     FRONT,
     FRONT_RIGHT,
     LEFT_FRONT,
@@ -21,10 +22,10 @@ from modules.common.robot import (
     SONAR_MOUNTS,
     sonar_world_pose,
 )
-from tokenring.hw import SonarHardware
-from tokenring.world import echo, load_world
-from tokenring.world.model import Pose, Wall, World
-from tokenring.world.sim import Simulator
+from modules.description.room import Pose, Wall, World
+from modules.world import echo
+from modules.world.clients import SonarHardware
+from modules.world.sim import Simulator
 
 NAMES = algo.BEHAVIOUR_NAMES
 

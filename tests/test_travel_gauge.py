@@ -14,9 +14,9 @@ from locsim import drive
 from modules.common.ekf import EkfParams, PoseEKF
 from modules.common.localizer import LocalizationCore, _beam_hit
 from modules.common.locconfig import load_config
-from modules.common.robot import SONAR_MOUNTS
 from modules.common.walls import KnownWall, SonarMount, TravelGauge
 from modules.copro import EXPLORATION_CONFIG
+from modules.description.robot import SONAR_MOUNTS
 
 MOUNTS = [SonarMount(m.x, m.y, m.angle) for m in SONAR_MOUNTS]
 FRONT, REAR = 1, 5

@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 from ringutil import tap, wait_until
 
-from modules.common.robot import MAX_STEP_RATE_HZ, STEP_MM
-from tokenring import keys
-from tokenring.hw import HardwareError, MotorHardware, SonarHardware
-from tokenring.world import Floor, Pose, Wall, World, load_world
-from tokenring.world.clock import ManualClock, SimClock
-from tokenring.world.physics import TrackedRobot, cast_rays
-from tokenring.world.service import ready_key
-from tokenring.world.sim import HardwareRequestError, Simulator
+from modules.description import Floor, Pose, Wall, World, load_world
+from modules.description import keys as robot_keys
+from modules.description.robot import MAX_STEP_RATE_HZ, STEP_MM
+from modules.world.clients import HardwareError, MotorHardware, SonarHardware
+from modules.world.clock import ManualClock, SimClock
+from modules.world.physics import TrackedRobot, cast_rays
+from modules.world.service import ready_key
+from modules.world.sim import HardwareRequestError, Simulator
 
 
 def steps(sim: Simulator, left: int, right: int, move: int, rate: float = MAX_STEP_RATE_HZ) -> dict:
@@ -153,7 +153,7 @@ def test_floor_parameters_come_from_the_world():
 
 def test_world_process_serves_hardware_truth_and_info_over_zenoh(procs, ring_name, endpoint, tmp_path):
     world = procs.start(
-        [sys.executable, "-m", "tokenring.world", "--ring", ring_name, "--listen", endpoint, "--world", "square",
+        [sys.executable, "-m", "modules.world", "--ring", ring_name, "--listen", endpoint, "--world", "square",
          "--speed", "20", "--seed", "3"]
     )  # fmt: skip
     with tap(endpoint) as session:
@@ -172,7 +172,7 @@ def test_world_process_serves_hardware_truth_and_info_over_zenoh(procs, ring_nam
             if clocks:
                 received.append((truth["stamp_ms"], clocks[0].now_ms()))
 
-        sub = session.declare_subscriber(keys.world(ring_name, "truth"), on_truth)
+        sub = session.declare_subscriber(robot_keys.world(ring_name, "truth"), on_truth)
         motor = MotorHardware(session, ring_name)
         assert motor.start_pose() == (1000.0, 1000.0, 0.0)
         assert motor.clock.speed == 20.0
@@ -191,7 +191,7 @@ def test_world_process_serves_hardware_truth_and_info_over_zenoh(procs, ring_nam
         # within 200 ms real of its arrival by the motor's copy; a clock of its own would be off
         # by all the time the world had run before the copy was made
         assert min(abs(stamp - at) for stamp, at in received) < 20 * 200
-        info = next(iter(session.get(keys.world(ring_name, "info"), timeout=2))).ok
+        info = next(iter(session.get(robot_keys.world(ring_name, "info"), timeout=2))).ok
         info = msgpack.unpackb(info.payload.to_bytes())["result"]
         assert info["name"] == "square" and len(info["walls"]) == 8 and info["speed"] == 20.0
         sub.undeclare()
@@ -202,14 +202,14 @@ def test_world_process_serves_hardware_truth_and_info_over_zenoh(procs, ring_nam
 def test_world_process_refuses_a_bad_world_file(procs, tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("walls:\n  - [0, 0, 1000, 0]\n  - [5, 5, 5, 5]\nstart: {x: 500, y: 500}\n")
-    proc = procs.start([sys.executable, "-m", "tokenring.world", "--world", str(bad)])
+    proc = procs.start([sys.executable, "-m", "modules.world", "--world", str(bad)])
     out, _ = proc.communicate(timeout=15)
     assert proc.returncode == 2
     assert f"{bad}:3: wall 2 has zero length" in out
 
 
 def test_a_sweep_pings_each_pair_from_where_the_driving_robot_is_by_then(monkeypatch):
-    import tokenring.world.sim as sim_module
+    import modules.world.sim as sim_module
 
     # time stands still between the batch and the sweep: the robot has not driven on meanwhile
     sim = Simulator(load_world("empty"), seed=3, clock=ManualClock(1000.0))

@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from tokenring.world import WorldError, bundled_worlds, load_world
-from tokenring.world.loader import parse_wall_file
+from modules.description import WorldError, bundled_worlds, load_world
+from modules.description.roomfile import parse_wall_file
 
 
 def test_bundled_rooms_load_with_clear_start_poses():

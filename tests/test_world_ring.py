@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 from ringutil import launcher_pids, tap, wait_ring, wait_until
 
-from modules.common.robot import FRONT, RIGHT_FRONT, SONAR_MOUNTS, STEP_MM
-from tokenring import keys
+from modules.description import keys as robot_keys
+from modules.description.robot import FRONT, RIGHT_FRONT, SONAR_MOUNTS, STEP_MM
 from tokenring.errors import TransportError
 from tokenring.pclink import PcLink
 
@@ -65,7 +65,7 @@ def world_state(session, ring: str) -> dict:
     """The world's ground truth right now (world/state), after every hardware request so far."""
     from tokenring.cliutil import query_one
 
-    return query_one(session, keys.world(ring, "state"))
+    return query_one(session, robot_keys.world(ring, "state"))
 
 
 def read(link: PcLink, channel: str) -> dict:

@@ -396,10 +396,11 @@ def run_scenario(
             spec = protocol.by_id[node_id]
             path = program
             if scenario.workload == "modules":
-                from tokenring.commands.up import default_programs_dir
+                from tokenring import extensions
 
-                candidate = default_programs_dir() / f"{spec.name}.py"
-                path = str(candidate) if candidate.exists() else None
+                directory = extensions.programs_dir()
+                candidate = directory / f"{spec.name}.py" if directory is not None else None
+                path = str(candidate) if candidate is not None and candidate.exists() else None
             plans.append(NodePlan(node_id, spec.name, path))
         launcher = Launcher(
             plans,

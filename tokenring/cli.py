@@ -1,4 +1,5 @@
-"""The ``tokenring`` command line; each verb lives in :mod:`tokenring.commands`.
+"""The ``tokenring`` command line: the ring's verbs live in :mod:`tokenring.commands`, an
+application's (the robot's) come through :mod:`tokenring.extensions`.
 
 Exit codes: 0 success; 1 the run failed (a node died, an invariant broke, nobody answered);
 2 bad input (options, files, protocol.yaml); 130 stopped by Ctrl-C.
@@ -26,7 +27,19 @@ def _setup_logging(level: str) -> None:
     )
 
 
+def version() -> str:
+    """The installed distribution's version (``tokenring --version``)."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
+
+    try:
+        return dist_version("tokenring")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
+
+
 def build_parser() -> tuple[argparse.ArgumentParser, dict[str, Runner]]:
+    from tokenring import extensions
     from tokenring.commands import discover
 
     parser = argparse.ArgumentParser(
@@ -35,10 +48,12 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, Runner]]:
         "around a ring of OS processes over Zenoh.",
         epilog="Run 'tokenring COMMAND --help' for a command's options.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     parser.add_argument("--log-level", default="info", choices=("debug", "info", "warning", "error"))
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     runners: dict[str, Runner] = {}
-    for module in discover():
+    verbs = discover() + [module for extension in extensions.loaded() for module in extension.commands()]
+    for module in verbs:
         name = module.__name__.rsplit(".", 1)[-1].replace("_", "-")
         before = set(sub.choices)
         module.add_parser(sub)
@@ -49,7 +64,11 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, Runner]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser, runners = build_parser()
+    try:
+        parser, runners = build_parser()
+    except TokenRingError as exc:  # an application (extension) that fails to load
+        print(f"tokenring: error: {exc}", file=sys.stderr)
+        return exc.exit_code
     args = parser.parse_args(argv)
     if not args.command:
         parser.print_help()

@@ -10,15 +10,7 @@ key                                      what travels on it
 ``tokenring/<ring>/ctl/<ID>/<verb>``     queryables of node ``ID``: ``stats``, ``fault``, ...
 ``tokenring/<ring>/ctl/launcher/<verb>`` queryables of the launcher (``status``)
 ``tokenring/<ring>/pc/<verb>``           the PC link ("serial line") to main
-``tokenring/<ring>/hw/<module>/<what>``  the simulated hardware of one module: ``hw/clock``,
-                                         ``hw/motor/steps``, ``hw/sonar/ping``,
-                                         ``hw/compass/measure``, ``hw/charger/adc``,
-                                         ``hw/charger/relay`` (see tokenring.world.service)
-``tokenring/<ring>/world/<what>``        world simulator: ``world/truth`` (msgpack ground truth:
-                                         pose mm/rad, batteries, time; logs/scoring only),
-                                         ``world/state``, ``world/info``, ``world/control/*``,
-                                         ``world/alive`` (liveliness: the world is up)
-``tokenring/<ring>/lcd/<what>``          the LCD's screen and keypad (hardware, not the ring)
+``tokenring/<ring>/...``                 an application's own keys (the robot's: modules.description.keys)
 =======================================  ========================================================
 """
 
@@ -67,18 +59,6 @@ def control(ring: str, node_id: int | str, verb: str = "**") -> str:
 
 def pc_link(ring: str, verb: str) -> str:
     return f"{PREFIX}/{ring}/pc/{verb}"
-
-
-def hardware(ring: str, module: str, what: str) -> str:
-    return f"{PREFIX}/{ring}/hw/{module}/{what}"
-
-
-def world(ring: str, what: str) -> str:
-    return f"{PREFIX}/{ring}/world/{what}"
-
-
-def lcd(ring: str, what: str) -> str:
-    return f"{PREFIX}/{ring}/lcd/{what}"
 
 
 def id_from_key(key: str) -> int | None:

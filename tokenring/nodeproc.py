@@ -21,12 +21,11 @@ from typing import Any
 import msgpack
 import zenoh
 
-from tokenring import keys
+from tokenring import extensions, keys
 from tokenring.channels import CommandMemory
 from tokenring.control import answer_query
 from tokenring.errors import UsageError
 from tokenring.faults import FaultInjector
-from tokenring.hardware import open_hardware
 from tokenring.node import NodeOS
 from tokenring.pclink import PcLinkServer
 from tokenring.profile import PROFILES
@@ -207,7 +206,7 @@ class NodeProcess:
     def start_program_class(self, program_class: type) -> None:
         """Start a user program with this module's hardware client (opened on first use)."""
         if self.hardware is None:
-            self.hardware = open_hardware(self.os.name, self.session, self.ring)
+            self.hardware = extensions.open_hardware(self.os.name, self.session, self.ring)
         self.os.start_program(program_class, self.hardware)
 
     def wait(self, duration: float | None = None) -> None:

@@ -192,3 +192,17 @@ class PcLink:
 
     def status(self) -> dict[str, Any]:
         return self.call("status")
+
+
+def open_link(session: zenoh.Session, ring: str, wait: float = 3.0) -> PcLink:
+    """A PC link to main, once main answers (a fresh session needs a moment to find it)."""
+    link = PcLink(session, ring)
+    deadline = time.monotonic() + wait
+    while True:
+        try:
+            link.call("status", timeout=1.0)
+            return link
+        except TransportError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.2)

@@ -6,38 +6,11 @@ that carry something), or with ``--json`` one object per frame. It never writes 
 
 from __future__ import annotations
 
-import argparse
-import json
-import sys
 import time
 from typing import Any
 
-import zenoh
-
-from tokenring import keys
-from tokenring.cliutil import add_ring_options, tap_session
-from tokenring.errors import UsageError
 from tokenring.frame import frame_problem
-from tokenring.protocol import Protocol, load_protocol
-
-
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "sniff",
-        help="decode every frame on the wire (read-only)",
-        description="Decode every token frame of a running ring with protocol.yaml.",
-    )
-    p.add_argument("--json", action="store_true", help="one JSON object per frame")
-    p.add_argument("-n", "--count", type=int, metavar="N", help="stop after N frames")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
-    p.add_argument("--to", type=int, metavar="ID", help="only frames addressed to node ID")
-    p.add_argument(
-        "--channels",
-        metavar="LIST",
-        help="comma-separated channels to decode (e.g. sonar.data,motor.command); default: all non-empty",
-    )
-    p.add_argument("--header-only", action="store_true", help="decode only the header")
-    add_ring_options(p)
+from tokenring.protocol import Protocol
 
 
 def decode_frame(
@@ -103,48 +76,3 @@ def format_line(record: dict[str, Any]) -> str:
             text = ",".join(f"{k}={v}" for k, v in fields.items() if v not in (0, [0] * 8, ""))
             parts.append(f"{name}{{{text}}}")
     return "  ".join(parts)
-
-
-def run(args: argparse.Namespace) -> int:
-    protocol = load_protocol(args.protocol)
-    ring = keys.check_ring_name(args.ring)
-    channels = None
-    if args.channels:
-        channels = [c.strip() for c in args.channels.split(",") if c.strip()]
-        for name in channels:
-            try:
-                protocol.channel(name)
-            except Exception as exc:
-                raise UsageError(str(exc)) from None
-    key = keys.token(ring, args.to if args.to is not None else "*")
-    seen = 0
-    last_crc: dict[int | None, int] = {}
-    deadline = None if args.duration is None else time.monotonic() + args.duration
-    with tap_session(args) as session:
-        subscriber = session.declare_subscriber(key, zenoh.handlers.FifoChannel(8192))
-        try:
-            while True:
-                if deadline is not None and time.monotonic() >= deadline:
-                    break
-                sample = subscriber.try_recv()
-                if sample is None:
-                    time.sleep(0.002)
-                    continue
-                frame = sample.payload.to_bytes()
-                did = keys.id_from_key(str(sample.key_expr))
-                record = decode_frame(frame, did, protocol, channels, args.header_only)
-                # a pass repeated because its acknowledgement was late: same bytes, same receiver
-                record["retransmission"] = "crc" in record and last_crc.get(did) == record["crc"]
-                if "crc" in record:
-                    last_crc[did] = record["crc"]
-                if args.json:
-                    sys.stdout.write(json.dumps(record) + "\n")
-                else:
-                    sys.stdout.write(format_line(record) + "\n")
-                seen += 1
-                if args.count is not None and seen >= args.count:
-                    break
-            sys.stdout.flush()
-        finally:
-            subscriber.undeclare()
-    return 0

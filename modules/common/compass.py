@@ -18,7 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from modules.common.odometry import step_rate_hz
-from modules.common.robot import MOTOR_TICK_MS
+from modules.description.robot import MOTOR_TICK_MS
 from tokenring.protocol import default_protocol
 
 ADC_MID = 2048

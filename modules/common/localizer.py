@@ -48,6 +48,7 @@ import numpy as np
 
 from modules.common.ekf import EkfParams, PoseEKF
 from modules.common.locconfig import load_config
+from modules.common.logs import SENSOR_SOURCE, DataLog, ErrorLog
 from modules.common.sync import (
     SENSORS,
     CompassSync,
@@ -76,7 +77,6 @@ from modules.common.walls import (
     load_known_walls,
     wrap,
 )
-from tokenring.logs import SENSOR_SOURCE, DataLog, ErrorLog
 
 SOURCE_CODES = {"none": 0, "odometry": 1, "ekf": 2}
 #: data channels read for each sensor, and the field that numbers their samples
@@ -115,10 +115,10 @@ class LocalizedPose:
 
 
 def sonar_mounts(config: dict[str, Any]) -> list[SonarMount]:
-    """The sonar geometry: modules/common/robot.py, or the config's list of [x, y, angle_deg]."""
+    """The sonar geometry: modules/description/robot.py, or the config's list of [x, y, angle_deg]."""
     spec = config["robot"]["sonars"]
     if spec == "robot":
-        from modules.common.robot import SONAR_MOUNTS
+        from modules.description.robot import SONAR_MOUNTS
 
         return [SonarMount(m.x, m.y, m.angle) for m in SONAR_MOUNTS]
     return [SonarMount(float(x), float(y), math.radians(a)) for x, y, a in spec]
@@ -181,7 +181,7 @@ def start_pose_of(config: dict[str, Any]) -> tuple[float, float, float] | None:
     if isinstance(spec, dict):
         return float(spec["x_mm"]), float(spec["y_mm"]), math.radians(spec["heading_deg"])
     if spec == "world":
-        from tokenring.world import load_world
+        from modules.description import load_world
 
         start = load_world(config["walls"]["file"]).start
         return float(start.x), float(start.y), float(start.theta)
@@ -193,7 +193,7 @@ class LocalizationCore:
 
     Everything it computes depends only on the samples fed, the order they were fed in, the
     buffer generation each went into and the events (pose set, map walls) — all of which the
-    data log records, so :mod:`tokenring.replay` can run it again to the same bits.
+    data log records, so :mod:`modules.pc.replay` can run it again to the same bits.
     """
 
     def __init__(
@@ -659,7 +659,7 @@ class Localizer:
         config: str | Path | dict | None = None,
         *,
         log_dir: str | Path | None = None,
-        truth: bool = True,
+        truth: Any = None,
     ) -> None:
         if config is None:
             from modules.common.locconfig import default_config_path
@@ -672,7 +672,7 @@ class Localizer:
         self.config = load_config(config)
         # $TOKENRING_LOG_DIR overrides the config's logs.directory (tests, benches, `tokenring up`)
         self.log_dir = log_dir if log_dir is not None else _os.environ.get("TOKENRING_LOG_DIR") or None
-        self.want_truth = truth
+        self.truth_feed = truth  # the world's ground truth for the logs (copro's hardware), or None
         self.core: LocalizationCore | None = None
         self.buffers: dict[str, Any] = {}
         self.last_seen: dict[str, tuple[Any, ...]] = {}
@@ -688,26 +688,11 @@ class Localizer:
         for sensor, channel in CHANNELS.items():
             if sensor in self.core.sensors:
                 self.buffers[sensor] = self.os.subscribe(channel)
-        if self.want_truth and "truth" in self.core.sensors:
+        if self.truth_feed is not None and "truth" in self.core.sensors:
             self._subscribe_truth()
 
     def _subscribe_truth(self) -> None:
-        transport = getattr(self.os, "transport", None)
-        session, ring = getattr(transport, "session", None), getattr(transport, "ring", None)
-        if session is None or ring is None:
-            return
-        from tokenring import keys
-
-        self._truth_sub = session.declare_subscriber(keys.world(ring, "truth"), self._on_truth)
-
-    def _on_truth(self, sample: Any) -> None:
-        try:
-            import msgpack
-
-            msg = msgpack.unpackb(bytes(sample.payload.to_bytes()), raw=False)
-            self.feed_truth(int(msg["stamp_ms"]), float(msg["x"]), float(msg["y"]), float(msg["theta"]))
-        except Exception:  # a malformed truth message must not kill the subscriber thread
-            return
+        self._truth_sub = self.truth_feed.subscribe(self.feed_truth)
 
     def feed_truth(self, stamp_ms: int, x: float, y: float, theta: float) -> None:
         """Ground truth (mm, rad CCW) for the logs — the seed's LOPS role; never fused."""

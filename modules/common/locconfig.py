@@ -251,7 +251,7 @@ class _Checker:
             if sonars != "robot":
                 raise self.fail(
                     ("robot", "sonars"),
-                    "expected robot (modules/common/robot.py) or a list of [x_mm, y_mm, angle_deg]",
+                    "expected robot (modules/description/robot.py) or a list of [x_mm, y_mm, angle_deg]",
                 )
             count = 8
         else:

@@ -138,5 +138,5 @@ def score_map(vectors: Any, walls: Any) -> dict[str, Any]:
 
 
 def world_walls(world: Any) -> np.ndarray:
-    """The true walls of a :class:`tokenring.world.World` (round obstacles as polygons)."""
+    """The true walls of a :class:`modules.description.World` (round obstacles as polygons)."""
     return world.outline()

@@ -612,7 +612,7 @@ class ExploreLeftWall(Navigator):
     def _face_nearest(self, sensors: Sensors) -> list[Move]:
         """At the start: turn toward the nearest echo around (most likely a wall of the room, not
         an island in it), unless a front sonar has it already."""
-        from modules.common.robot import SONAR_MOUNTS
+        from modules.description.robot import SONAR_MOUNTS
 
         d = sensors.distances
         nearest = min(range(len(d)), key=lambda i: d[i])

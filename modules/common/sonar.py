@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from modules.common.robot import SONAR_NO_CONTACT
+from modules.description.robot import SONAR_NO_CONTACT
 
 DEFAULT_THRESHOLD = 40  # envelope counts (8-bit ADC)
 SAMPLES_PER_CM = 3  # the seed's "divide by 3"

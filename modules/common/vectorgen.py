@@ -122,8 +122,8 @@ class SonarLayout:
 
 
 def default_layout() -> SonarLayout:
-    """The robot's eight sonars as :mod:`modules.common.robot` mounts them."""
-    from modules.common import robot
+    """The robot's eight sonars as :mod:`modules.description.robot` mounts them."""
+    from modules.description import robot
 
     mounts = robot.SONAR_MOUNTS
 

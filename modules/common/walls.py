@@ -128,11 +128,11 @@ class KnownWall:
 def load_known_walls(name_or_path: str | Path) -> list[KnownWall]:
     """The known walls of a room: a bundled world name, a YAML world file or the seed's wall file.
 
-    Reads through :func:`tokenring.world.load_world`, so every format the simulator accepts works
+    Reads through :func:`modules.description.load_world`, so every format the simulator accepts works
     here too; the seed wall file's visibility boxes (table B.3) are kept. Errors name the file
     and line (exit code 2 on the command line).
     """
-    from tokenring.world import load_world
+    from modules.description import load_world
 
     world = load_world(name_or_path)
     if not world.walls:
@@ -370,7 +370,7 @@ def _extent(points: list, alpha: float, d: float, pose: tuple[float, float, floa
 class GaugeParams:
     """Which sonars look along the track and what a usable range series is (mm)."""
 
-    sensors: tuple[int, ...] = (1, 5)  # front and rear (modules/common/robot.py)
+    sensors: tuple[int, ...] = (1, 5)  # front and rear (modules/description/robot.py)
     min_range_mm: float = 150.0
     max_range_mm: float = 800.0  # farther, the first echo comes late (+6 mm at 1 m): a slope bias
     min_points: int = 12

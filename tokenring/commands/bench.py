@@ -1,5 +1,183 @@
-"""``tokenring bench``: token round trips against a bare Zenoh ring, measured in one run."""
+"""``tokenring bench``: token round trips against a bare Zenoh ring, measured in one run
+(the library: :mod:`tokenring.roundtrip`)."""
 
-from tokenring.bench import add_parser, run
+from __future__ import annotations
 
-__all__ = ["add_parser", "run"]
+import argparse
+import os
+import sys
+
+import numpy as np
+
+from tokenring import tokenpath
+from tokenring.cliutil import format_table, write_json
+from tokenring.errors import UsageError
+from tokenring.roundtrip import (
+    ROUTER_FROM,
+    generated_ids,
+    progress,
+    run_bare,
+    run_budget,
+    run_ring,
+    summarize,
+)
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "bench",
+        help="token round trip against a bare Zenoh ring, measured in the same run",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--nodes", type=int, default=8, help="ring size 2..255 (default %(default)s)")
+    p.add_argument("--rounds", type=int, default=2000, help="rounds measured per run (default %(default)s)")
+    p.add_argument("--warmup", type=int, default=300, help="rounds discarded first (default %(default)s)")
+    p.add_argument("--bitrate", default="max", help="emulated bitrate of the ring (default %(default)s)")
+    p.add_argument("--ack", default="adaptive", choices=("adaptive", "always", "never"))
+    p.add_argument("--repeat", type=int, default=1, help="alternate bare/ring runs this many times")
+    p.add_argument(
+        "--timeout",
+        type=float,
+        help="seconds allowed per run (default: 120 plus 1 ms per node and round, plus the wire time)",
+    )
+    p.add_argument("--json", metavar="FILE", help="write the results as JSON ('-' for stdout)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument(
+        "--topology",
+        default="auto",
+        choices=("auto", "peer", "router"),
+        help=f"Zenoh peers in a full mesh, or clients of a router (auto: router from {ROUTER_FROM} nodes on)",
+    )
+    p.add_argument(
+        "--transport",
+        default="zenoh",
+        choices=("zenoh", "udp", "zmq"),
+        help="what carries the ring's token (the baseline stays a bare Zenoh ring)",
+    )
+    p.add_argument("--profile", help="emulated hardware timing (arcnet: the seed robot; needs a bitrate)")
+
+
+def run(args: argparse.Namespace) -> int:
+    ids = generated_ids(args.nodes)
+    if not 10 <= args.rounds <= 16000:
+        raise UsageError("--rounds must be 10..16000")
+    if args.repeat < 1:
+        raise UsageError("--repeat must be at least 1")
+    from tokenring.ring import parse_bitrate
+
+    bitrate = parse_bitrate(args.bitrate)
+    if args.profile:
+        from tokenring.profile import get_profile
+
+        get_profile(args.profile)
+        if bitrate is None:
+            raise UsageError(
+                f"--profile {args.profile} emulates hardware timing: give a bitrate such as 2.5M, not max"
+            )
+    if args.timeout is None:
+        args.timeout = run_budget(args.nodes, args.rounds + args.warmup, bitrate)
+    router = args.topology == "router" or (args.topology == "auto" and args.nodes >= ROUTER_FROM)
+    topology = "router" if router else "peer"
+    bare: list[float] = []
+    ring: list[float] = []
+    rss: list[float] = []
+    cpu: list[float] = []
+    handler: list[dict[str, float]] = []
+    puts: list[float] = []  # per run: the median µs of the put that passes the token on
+    wall = 0.0
+    total = 2 * args.repeat
+    step = 0
+    for _ in range(args.repeat):
+        step += 1
+        progress(
+            f"[{step}/{total}] bare Zenoh ring, {args.nodes} processes ({topology}s), {args.rounds} rounds ...",
+            args.quiet,
+        )
+        part = run_bare(args.nodes, args.rounds, args.warmup, args.timeout, router=router)
+        bare += part
+        progress(f"        median {summarize(part)['median']:.3f} ms", args.quiet)
+        step += 1
+        progress(
+            f"[{step}/{total}] tokenring ring, {args.nodes} nodes over {args.transport} ({topology}s), "
+            f"bitrate {args.bitrate}, ack {args.ack} ...",
+            args.quiet,
+        )
+        result = run_ring(
+            args.nodes,
+            args.rounds,
+            args.warmup,
+            bitrate=args.bitrate,
+            ack_mode=args.ack,
+            timeout=args.timeout,
+            ids=ids,
+            router=router,
+            transport=args.transport,
+            profile=args.profile,
+        )
+        ring += result.rounds_s
+        rss += result.rss_mb
+        cpu += [c / result.wall_s for c in result.cpu_s]
+        handler.append(result.handler_us)
+        puts.append(result.stats.get("send_us", {}).get("median", float("nan")))
+        wall += result.wall_s
+        progress(f"        median {summarize(result.rounds_s)['median']:.3f} ms", args.quiet)
+    ring_s, bare_s = summarize(ring), summarize(bare)
+    report = {
+        "nodes": args.nodes,
+        "rounds": args.rounds * args.repeat,
+        "bitrate": args.bitrate,
+        "ack": args.ack,
+        "topology": topology,
+        "transport": args.transport,
+        "profile": args.profile,
+        "rtt_ms": ring_s,
+        "baseline_rtt_ms": bare_s,
+        "ratio_median": ring_s["median"] / bare_s["median"],
+        "ratio_p99": ring_s["p99"] / bare_s["p99"],
+        "per_hop_us": {
+            "ring": ring_s["median"] * 1e3 / args.nodes,
+            "baseline": bare_s["median"] * 1e3 / args.nodes,
+        },
+        "handler_us": {
+            "median": float(np.median([h["median"] for h in handler])),
+            "p99": float(np.median([h["p99"] for h in handler])),
+        },
+        "put_us": {"median": float(np.median(puts))},
+        "rss_mb": {"max": max(rss), "mean": float(np.mean(rss))},
+        "cpu_per_node_pct": {"mean": float(np.mean(cpu) * 100), "max": float(np.max(cpu) * 100)},
+        "machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]},
+        "token_path": "C" if tokenpath.NATIVE else "Python",
+    }
+    rows = [
+        [
+            f"tokenring ({args.transport})",
+            f"{ring_s['median']:.3f}",
+            f"{ring_s['p90']:.3f}",
+            f"{ring_s['p99']:.3f}",
+            f"{ring_s['max']:.3f}",
+            f"{report['per_hop_us']['ring']:.0f}",
+        ],
+        [
+            "bare Zenoh",
+            f"{bare_s['median']:.3f}",
+            f"{bare_s['p90']:.3f}",
+            f"{bare_s['p99']:.3f}",
+            f"{bare_s['max']:.3f}",
+            f"{report['per_hop_us']['baseline']:.0f}",
+        ],
+    ]
+    print(
+        f"token round trip, {args.nodes} nodes, {report['rounds']} rounds, bitrate {args.bitrate}, ack {args.ack}, "
+        f"{args.transport} ({topology}s){', profile ' + args.profile if args.profile else ''}"
+    )
+    print(format_table(rows, ["ring", "median ms", "p90 ms", "p99 ms", "max ms", "per hop us"]))
+    print(
+        f"ratio (median) {report['ratio_median']:.2f}x   ratio (p99) {report['ratio_p99']:.2f}x   "
+        f"handler median {report['handler_us']['median']:.1f} us (then the put {report['put_us']['median']:.0f} us)   "
+        f"RSS max {report['rss_mb']['max']:.0f} MB   CPU/node {report['cpu_per_node_pct']['mean']:.0f} %   "
+        f"token path in {report['token_path']}"
+    )
+    if args.json:
+        write_json(args.json, report)
+    return 0

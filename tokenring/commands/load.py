@@ -6,9 +6,8 @@
     tokenring load -s modules/motor.py  # one program (its node from ``module`` or the file name)
     tokenring load --stop [NODE]        # ARCNET_STOP_SYSTEM, or ARCNET_STOP_PROGRAM of one node
     tokenring load --start [NODE]       # ARCNET_START_SYSTEM, or ARCNET_START_PROGRAM of one node
-    tokenring load -u map.dxf           # upload the map (.dxf, .png or .json by the extension)
 
-Order within one call: scan, stop, downloads, start, map upload. A node whose program was running
+Order within one call: scan, stop, downloads, start. A node whose program was running
 is restarted with its new program (without ``--start``, nodes that were stopped stay stopped).
 Exit 0 when everything worked, 1 when a node failed (named with the reason), 2 on bad input.
 """
@@ -26,9 +25,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "load",
-        help="download programs over the ring (LOAD.EXE): -i, -a, -s FILE, --start, --stop, -u MAP",
+        help="download programs over the ring (LOAD.EXE): -i, -a, -s FILE, --start, --stop",
         description="Scan the ring through main's PC link (name, ID, time stamp of every node), "
-        "download programs through the token with a progress bar, start or stop them, upload the map.",
+        "download programs through the token with a progress bar, start or stop them. (The seed's map "
+        "upload, -u, is the robot's: tokenring map --out FILE.)",
     )
     what = p.add_mutually_exclusive_group()
     what.add_argument("-i", "--incremental", action="store_true", help="programs newer than the node's")
@@ -40,13 +40,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--stop", nargs="?", const=True, default=False, metavar="NODE", help="stop all programs, or NODE's"
     )
-    p.add_argument("-u", "--upload", metavar="FILE", help="upload the map into FILE (.dxf, .png, .json)")
     p.add_argument(
-        "--programs", metavar="DIR", help="program directory for -i/-a (default: the modules package)"
+        "--programs", metavar="DIR", help="program directory for -i/-a (default: the installed application's)"
     )
     p.add_argument("--no-compress", action="store_true", help="send programs as they are (not zlib)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--timeout", type=float, default=60.0, help="seconds to wait for the map (-u)")
     add_json_option(p)
     add_ring_options(p, listen=False)
 
@@ -64,15 +62,17 @@ def _node_arg(value: bool | str, option: str) -> bool | str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tokenring import extensions
     from tokenring.cliutil import print_json, tap_session
-    from tokenring.commands.explore import open_link
-    from tokenring.commands.map import check_out
-    from tokenring.commands.up import default_programs_dir
     from tokenring.loader import Loader, run_load
+    from tokenring.pclink import open_link
 
     mode = "incremental" if args.incremental else "all" if args.all else "single" if args.single else None
-    programs = Path(args.programs) if args.programs else default_programs_dir()
-    if mode in ("incremental", "all") and not programs.is_dir():
+    default = extensions.programs_dir()
+    programs = Path(args.programs) if args.programs else default
+    if mode in ("incremental", "all") and (programs is None or not programs.is_dir()):
+        if programs is None:
+            raise UsageError("-i/-a need --programs DIR (no installed application has programs)")
         raise UsageError(f"--programs {programs}: no such directory")
     file = Path(args.single) if args.single else None
     if file is not None:
@@ -80,8 +80,6 @@ def run(args: argparse.Namespace) -> int:
 
         check_program_file(file)  # a bad file is refused before anything is sent
     start, stop = _node_arg(args.start, "--start"), _node_arg(args.stop, "--stop")
-    if args.upload:
-        check_out(args.upload)
     with tap_session(args) as session:
         link = open_link(session, args.ring, wait=5.0)
         loader = Loader(
@@ -91,15 +89,6 @@ def run(args: argparse.Namespace) -> int:
             say=(lambda text: None) if args.json else None,
         )
         result = run_load(loader, mode=mode, programs_dir=programs, file=file, start=start, stop=stop)
-        if args.upload:
-            from tokenring.commands.map import fetch_map, live_world, truth_from_info, write_map
-
-            vectors = fetch_map(session, args.ring, args.timeout)
-            info = live_world(session, args.ring)
-            world, truth = truth_from_info(info) if info else (None, None)
-            write_map(vectors, args.upload, truth, world)
-            result["upload"] = {"file": args.upload, "vectors": len(vectors)}
-            loader.say(f"map: {len(vectors)} vectors written to {args.upload}")
     if args.json:
         result["outcomes"] = [o.as_dict() for o in result["outcomes"]]
         print_json(result)

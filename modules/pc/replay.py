@@ -18,8 +18,8 @@ from typing import Any
 
 from modules.common.localizer import LocalizationCore
 from modules.common.locconfig import load_config
+from modules.common.logs import SOURCE_SENSOR, DataLog, ErrorLog, LogError, LogFile, read_log
 from modules.common.sync import Sample
-from tokenring.logs import SOURCE_SENSOR, DataLog, ErrorLog, LogError, LogFile, read_log
 
 EVENT_KINDS = {("S", "E"), ("W", "W")}
 

@@ -34,8 +34,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from modules.common.logs import convert_csv, convert_text, read_log, sort_log, summary
     from tokenring.errors import UsageError
-    from tokenring.logs import convert_csv, convert_text, read_log, sort_log, summary
 
     if args.log_verb == "sort":
         count = sort_log(args.log, args.out)

@@ -16,9 +16,9 @@ import math
 
 import numpy as np
 
-from modules.common.robot import SONAR_BEAM_RAD, SONAR_SAMPLE_US, SONAR_SAMPLES, SPEED_OF_SOUND_M_S
-from tokenring.world.model import World
-from tokenring.world.physics import cast_rays
+from modules.description.robot import SONAR_BEAM_RAD, SONAR_SAMPLE_US, SONAR_SAMPLES, SPEED_OF_SOUND_M_S
+from modules.description.room import World
+from modules.world.physics import cast_rays
 
 MM_PER_SAMPLE = SPEED_OF_SOUND_M_S * 1000.0 * SONAR_SAMPLE_US * 1e-6 / 2  # one-way: 3.3 mm
 BEAM_SIGMA = SONAR_BEAM_RAD / 2 / math.sqrt(2 * math.log(2))  # Gaussian with half sensitivity at ±15°

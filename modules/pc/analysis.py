@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from tokenring.logs import SOURCE_SENSOR, LogError, LogFile, read_log
+from modules.common.logs import SOURCE_SENSOR, LogError, LogFile, read_log
 
 POSITION_NAMES = {"K": "filter (EKF)", "O": "dead reckoning", "G": "compass", "L": "truth", "W": "walls"}
 COLOURS = {"K": "tab:blue", "O": "tab:red", "G": "tab:green", "L": "black", "W": "tab:purple"}
@@ -146,7 +146,7 @@ def _known_walls(log: LogFile) -> np.ndarray:
     if not name:
         return np.zeros((0, 4))
     try:
-        from tokenring.world import load_world
+        from modules.description import load_world
 
         return load_world(name).segments()
     except Exception:  # the room is a decoration of the plot: a missing file must not stop it

@@ -16,8 +16,8 @@ import math
 
 import numpy as np
 
-from modules.common.robot import COMPASS_AXES
-from tokenring.world.model import World
+from modules.description.robot import COMPASS_AXES
+from modules.description.room import World
 
 ADC_MID = 2048
 ADC_MAX = 4095

@@ -49,10 +49,11 @@ from typing import Any
 import msgpack
 import zenoh
 
+from modules.description import keys as robot_keys
+from modules.world.sim import HardwareRequestError, Simulator
 from tokenring import keys
-from tokenring.world.sim import HardwareRequestError, Simulator
 
-log = logging.getLogger("tokenring.world")
+log = logging.getLogger("modules.world")
 TRUTH_PERIOD_SIM_S = 0.1
 TRUTH_MIN_REAL_S = 0.02
 
@@ -64,7 +65,7 @@ def hw_key(ring: str, what: str) -> str:
 
 def ready_key(ring: str) -> str:
     """The liveliness key the world holds while it serves (the launcher's ``ready_key``)."""
-    return keys.world(ring, "alive")
+    return robot_keys.world(ring, "alive")
 
 
 class WorldService:
@@ -87,13 +88,13 @@ class WorldService:
                 hw_key(self.ring, "**"), lambda q: self._answer(q, prefix, self._hardware)
             )
         )
-        world_prefix = keys.world(self.ring, "")
+        world_prefix = robot_keys.world(self.ring, "")
         self._declared.append(
             self.session.declare_queryable(
-                keys.world(self.ring, "**"), lambda q: self._answer(q, world_prefix, self._world)
+                robot_keys.world(self.ring, "**"), lambda q: self._answer(q, world_prefix, self._world)
             )
         )
-        self._publisher = self.session.declare_publisher(keys.world(self.ring, "truth"))
+        self._publisher = self.session.declare_publisher(robot_keys.world(self.ring, "truth"))
         self._thread = threading.Thread(target=self._publish_truth, name="world-truth", daemon=True)
         self._thread.start()
         self._declared.append(self.session.liveliness().declare_token(ready_key(self.ring)))

@@ -1,7 +1,7 @@
 """Hardware clients: how the motor, sonar, compass and charger programs reach their devices.
 
 Each client talks to the world simulator over ``tokenring/<ring>/hw/<module>/...`` (the key space
-is documented in :mod:`tokenring.world.service`) and shares the simulation clock (``.clock``,
+is documented in :mod:`modules.world.service`) and shares the simulation clock (``.clock``,
 synced once from ``hw/clock``). Clients connect lazily: a node whose program never touches its
 hardware never needs a world.
 """
@@ -16,9 +16,10 @@ import msgpack
 import numpy as np
 import zenoh
 
+from modules.description import keys as robot_keys
+from modules.world.clock import SimClock
+from modules.world.service import hw_key
 from tokenring.errors import TokenRingError
-from tokenring.world.clock import SimClock
-from tokenring.world.service import hw_key
 
 DEFAULT_TIMEOUT_S = 2.0
 WORLD_WAIT_S = 10.0  # how long the first request waits for a world that is still starting
@@ -44,7 +45,7 @@ class HardwareClient:
 
     @classmethod
     def local(cls, simulator: Any) -> HardwareClient:
-        """A client wired straight to an in-process :class:`~tokenring.world.sim.Simulator`
+        """A client wired straight to an in-process :class:`~modules.world.sim.Simulator`
         (fast tests): same requests, same answers, no Zenoh."""
         client = cls(None, "local")  # type: ignore[arg-type]
         client.simulator = simulator
@@ -54,7 +55,7 @@ class HardwareClient:
     def request(self, what: str, payload: dict[str, Any] | None = None, timeout: float | None = None) -> Any:
         """One hardware request (``what`` below ``hw/``); raises :class:`HardwareError`."""
         if self.simulator is not None:
-            from tokenring.world.sim import HardwareRequestError
+            from modules.world.sim import HardwareRequestError
 
             self.requests += 1
             try:
@@ -182,6 +183,34 @@ class ChargerHardware(HardwareClient):
     def relay(self, on: bool, reason: str = "") -> dict[str, Any]:
         """Hold (True) or drop (False) the power relays."""
         return self.request("charger/relay", {"on": bool(on), "reason": reason})
+
+
+class TruthFeed:
+    """Copro's outside observer: the world's ground truth, for its logs only (the seed's external
+    positioning system, LOPS, logged beside the sensors and never fused)."""
+
+    def __init__(self, session: zenoh.Session, ring: str) -> None:
+        self.session = session
+        self.ring = ring
+
+    def subscribe(self, callback: Any) -> Any:
+        """Call ``callback(stamp_ms, x_mm, y_mm, theta_rad)`` per truth message; returns the
+        subscription (``undeclare()`` ends it). Malformed messages are skipped."""
+
+        def on_sample(sample: Any) -> None:
+            try:
+                msg = msgpack.unpackb(bytes(sample.payload.to_bytes()), raw=False)
+                stamp, x, y, theta = (
+                    int(msg["stamp_ms"]),
+                    float(msg["x"]),
+                    float(msg["y"]),
+                    float(msg["theta"]),
+                )
+            except Exception:  # a malformed message must not kill the subscriber thread
+                return
+            callback(stamp, x, y, theta)
+
+        return self.session.declare_subscriber(robot_keys.world(self.ring, "truth"), on_sample)
 
 
 CLIENTS: dict[str, type[HardwareClient]] = {

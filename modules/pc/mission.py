@@ -1,52 +1,14 @@
-"""``tokenring explore 1|2|stop|calibrate|state``: start and stop the robot's exploration via the PC link.
-
-Explore 1 avoids obstacles (turning 90° toward the side with more room), Explore 2 follows the
-wall on the robot's left; ``calibrate`` is the seed's 360° calibration run. ``--wait`` follows
-the navigator until it finishes (or ``--timeout``), printing its progress.
-"""
+"""The robot's jobs through main's PC link: exploration requests, and the mission of
+``tokenring up --explore N --map-out FILE`` (explore, write the map, stop the ring)."""
 
 from __future__ import annotations
 
-import argparse
+import threading
 import time
 from typing import Any
 
 from tokenring.errors import UsageError
-
-ACTIONS = ("1", "2", "stop", "calibrate", "state")
-
-
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cliutil import add_json_option, add_ring_options
-
-    p = sub.add_parser(
-        "explore",
-        help="start (1 = avoid, 2 = left wall) or stop the exploration",
-        description="Start Explore 1 (avoid) or Explore 2 (left-wall following), the calibration run, "
-        "or stop — through main's PC link; 'state' prints the navigator's state.",
-    )
-    p.add_argument("action", help="1, 2, stop, calibrate or state")
-    p.add_argument("--wait", action="store_true", help="follow the navigator until it finishes")
-    p.add_argument("--timeout", type=float, default=600.0, help="with --wait: give up after S seconds")
-    add_json_option(p)
-    add_ring_options(p, listen=False)
-
-
-def open_link(session: Any, ring: str, wait: float = 3.0) -> Any:
-    """A PC link to main, once main answers (a fresh session needs a moment to find it)."""
-    from tokenring.errors import TransportError
-    from tokenring.pclink import PcLink
-
-    link = PcLink(session, ring)
-    deadline = time.monotonic() + wait
-    while True:
-        try:
-            link.call("status", timeout=1.0)
-            return link
-        except TransportError:
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.2)
+from tokenring.pclink import open_link
 
 
 def request(link: Any, action: str) -> dict[str, Any]:
@@ -58,35 +20,6 @@ def request(link: Any, action: str) -> dict[str, Any]:
     if action == "calibrate":
         return link.request("calibrate")
     return link.request("state")
-
-
-def run(args: argparse.Namespace) -> int:
-    from tokenring.cliutil import print_json, tap_session
-
-    if args.action not in ACTIONS:
-        raise UsageError(f"explore: {args.action!r} is not one of {', '.join(ACTIONS)}")
-    if args.timeout <= 0:
-        raise UsageError("--timeout must be positive")
-    with tap_session(args) as session:
-        link = open_link(session, args.ring)
-        state = request(link, args.action)
-        if args.wait and args.action in ("1", "2", "calibrate"):
-            deadline = time.monotonic() + args.timeout
-            last = None
-            while state.get("running") and time.monotonic() < deadline:
-                time.sleep(1.0)
-                state = link.request("state")
-                line = describe(state)
-                if line != last and not args.json:
-                    print(line, flush=True)
-                    last = line
-        if args.json:
-            print_json(state)
-        else:
-            print(describe(state))
-            if state.get("finished"):
-                print(f"finished: {state['finished']}")
-    return 0
 
 
 def describe(state: dict[str, Any]) -> str:
@@ -114,8 +47,6 @@ class Mission:
         duration: float | None,
         actions: tuple[str, str, int] | None = None,
     ) -> None:
-        import threading
-
         self.launcher = launcher
         self.mode = mode
         self.actions = actions  # (file name, text, speed %) for `up --actions`
@@ -211,7 +142,7 @@ class Mission:
                 link.request("stop")
                 self.say("exploration stopped (time is up)")
         if self.map_out and not self._stopping():
-            from tokenring.commands.map import live_world, truth_from_info, write_map
+            from modules.pc.mapfiles import live_world, truth_from_info, write_map
 
             got = link.request("get_map", timeout=60.0)
             import numpy as np

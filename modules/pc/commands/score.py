@@ -26,8 +26,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from modules.common.mapscore import score_map
+    from modules.pc.mapfiles import load_map_file, load_truth
     from tokenring.cliutil import print_json
-    from tokenring.commands.map import load_map_file, load_truth
 
     world, truth = load_truth(args.world)
     vectors = load_map_file(args.map)

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from modules.common.robot import MAX_STEP_RATE_HZ, STEP_MM
-from tokenring.world.model import Pose, World
+from modules.description.robot import MAX_STEP_RATE_HZ, STEP_MM
+from modules.description.room import Pose, World
 
 STALL_TOLERANCE = 1.02  # step rates up to 2 % above the start-stop limit still run
 

@@ -20,7 +20,7 @@ from typing import Any
 
 import zenoh
 
-from tokenring import keys
+from modules.description import keys as robot_keys
 
 SCREEN_BYTES = 1024
 KEYPAD = "0123456789ABCD*#"
@@ -31,13 +31,13 @@ class LcdHardware:
 
     def __init__(self, session: zenoh.Session, ring: str) -> None:
         self.session = session
-        self.screen_key = keys.lcd(ring, "screen")
+        self.screen_key = robot_keys.lcd(ring, "screen")
         self.frame = bytes(SCREEN_BYTES)
         self.lock = threading.Lock()
         self.pressed: queue.Queue[str] = queue.Queue()
         self.publisher = session.declare_publisher(self.screen_key)
         self.queryable = session.declare_queryable(self.screen_key, self._on_query)
-        self.subscriber = session.declare_subscriber(keys.lcd(ring, "key"), self._on_key)
+        self.subscriber = session.declare_subscriber(robot_keys.lcd(ring, "key"), self._on_key)
 
     def _on_query(self, query: zenoh.Query) -> None:
         with self.lock:
@@ -74,5 +74,5 @@ class LcdHardware:
 
 
 def open_lcd(session: zenoh.Session, ring: str) -> Any:
-    """The hardware factory ``tokenring.hardware`` registers for the lcd module."""
+    """The hardware factory ``modules.world.hardware`` registers for the lcd module."""
     return LcdHardware(session, ring)

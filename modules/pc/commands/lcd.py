@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from modules.description import keys as robot_keys
 from tokenring.errors import TransportError, UsageError
 
 KEYPAD = "0123456789ABCD*#"
@@ -60,11 +61,10 @@ def render(frame: bytes) -> str:
 
 def fetch_screen(session: Any, ring: str, timeout: float = 3.0) -> bytes:
     """The current screen; retried while a freshly opened session has not found the LCD yet."""
-    from tokenring import keys
 
     deadline = time.monotonic() + timeout
     while True:
-        for reply in session.get(keys.lcd(ring, "screen"), timeout=1.0):
+        for reply in session.get(robot_keys.lcd(ring, "screen"), timeout=1.0):
             if reply.ok is not None:
                 return reply.ok.payload.to_bytes()
         if time.monotonic() > deadline:
@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     pressed = parse_keys(args.keys) if args.keys else []
     ring = keys.check_ring_name(args.ring)
     with tap_session(args) as session:
-        key_pub = session.declare_publisher(keys.lcd(ring, "key"))
+        key_pub = session.declare_publisher(robot_keys.lcd(ring, "key"))
         fetch_screen(session, ring)  # fail early with a clear message if no LCD is there
         if pressed:
             for key in pressed:
@@ -128,8 +128,6 @@ def interactive(session: Any, ring: str, key_pub: Any) -> int:
     import termios
     import tty
 
-    from tokenring import keys
-
     latest = {"frame": fetch_screen(session, ring)}
     changed = threading.Event()
     changed.set()
@@ -138,7 +136,7 @@ def interactive(session: Any, ring: str, key_pub: Any) -> int:
         latest["frame"] = sample.payload.to_bytes()
         changed.set()
 
-    subscriber = session.declare_subscriber(keys.lcd(ring, "screen"), on_screen)
+    subscriber = session.declare_subscriber(robot_keys.lcd(ring, "screen"), on_screen)
     fd = sys.stdin.fileno()
     saved = termios.tcgetattr(fd)
     out = sys.stdout

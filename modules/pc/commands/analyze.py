@@ -23,7 +23,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tokenring.analysis import analyse
+    from modules.pc.analysis import analyse
     from tokenring.cliutil import print_json
 
     def progress(name: str) -> None:

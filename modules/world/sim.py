@@ -13,22 +13,22 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from modules.common.robot import (
+from modules.description.robot import (
     DEFAULT_MOTOR_CURRENT_MA,
     SONAR_COUNT,
     SONAR_SLOT_MS,
     sonar_world_pose,
 )
-from tokenring.world import echo
-from tokenring.world.battery import (
+from modules.description.room import Pose, World
+from modules.world import echo
+from modules.world.battery import (
     ELECTRONICS_CURRENT_A,
     MOTOR_PACK_A_PER_MOTOR_A,
     Battery,
 )
-from tokenring.world.clock import SimClock
-from tokenring.world.magnetics import CompassBridges
-from tokenring.world.model import Pose, World
-from tokenring.world.physics import TrackedRobot
+from modules.world.clock import SimClock
+from modules.world.magnetics import CompassBridges
+from modules.world.physics import TrackedRobot
 
 ADC_COUNTS = 1023  # the charger's 10-bit ADC
 ELECTRONICS_FULL_SCALE_V = 15.0  # voltage dividers in front of the ADC

@@ -35,8 +35,8 @@ from typing import Any
 
 import yaml
 
+from modules.description.room import Anomaly, Batteries, Circle, Floor, Pose, Wall, World
 from tokenring.errors import UsageError
-from tokenring.world.model import Anomaly, Batteries, Circle, Floor, Pose, Wall, World
 
 ROOMS_DIR = Path(__file__).resolve().parent / "rooms"
 DEFAULT_WORLD = "office"

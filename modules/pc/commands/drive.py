@@ -23,6 +23,7 @@ import sys
 import time
 from typing import Any
 
+from modules.description import keys as robot_keys
 from tokenring.errors import TokenRingError, UsageError
 
 MOVING, STALLED, COLLISION = 1, 2, 3
@@ -136,10 +137,9 @@ def expected_steps(name: str, args: dict[str, Any], glide_cfactor: int) -> int |
 
 def true_pose(session: Any, ring: str) -> dict[str, Any] | None:
     """The world simulator's ground truth, or None when no world runs."""
-    from tokenring import keys
     from tokenring.cliutil import query
 
-    replies = query(session, keys.world(ring, "state"), timeout=1.0)
+    replies = query(session, robot_keys.world(ring, "state"), timeout=1.0)
     for _, reply in replies:
         if reply.get("ok"):
             return reply["result"]

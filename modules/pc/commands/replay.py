@@ -36,8 +36,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from modules.pc.replay import replay
     from tokenring.cliutil import print_json
-    from tokenring.replay import replay
 
     def progress(done: int, total: int) -> None:
         if sys.stderr.isatty():

@@ -1,40 +1,20 @@
-"""``tokenring map --out FILE``: fetch the robot's vector map (GET_MAP through main) and write it.
+"""The robot's map as files: fetch it from the ring (GET_MAP through main), read the true walls
+of a room, write JSON / DXF / PNG (scored against the truth when it is known), read maps back.
 
-The format follows the file's extension: ``.json`` (vectors in mm, plus the score when the true
-walls are known), ``.dxf`` (ezdxf; layers MAP and TRUTH) or ``.png`` (matplotlib; the vectors
-bold, the true walls faint, a 1 m scale bar). Ground truth comes from ``--world`` or, when the
-ring runs a world simulator, from its ``world/info``; it is for comparison only. ``--from
-MAP.json`` converts a saved map instead of asking the ring.
-"""
+Used by ``tokenring map``, ``score`` and ``up --map-out``, and by the benchmarks."""
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from modules.description import keys as robot_keys
 from tokenring.errors import UsageError
 
 FORMATS = (".json", ".dxf", ".png")
-
-
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cliutil import add_ring_options
-
-    p = sub.add_parser(
-        "map",
-        help="fetch the robot's vector map and write it as DXF, PNG or JSON",
-        description="Ask main for the map (GET_MAP to the map module) and write it; the format "
-        "follows the extension of --out (.json, .dxf, .png).",
-    )
-    p.add_argument("--out", required=True, metavar="FILE", help="where to write the map (.json, .dxf, .png)")
-    p.add_argument("--world", metavar="NAME|FILE", help="the true room, drawn faintly for comparison")
-    p.add_argument("--from", dest="source", metavar="MAP", help="convert a saved map (.json or .dxf)")
-    p.add_argument("--timeout", type=float, default=60.0, help="seconds to wait for the map (default 60)")
-    add_ring_options(p, listen=False)
 
 
 def check_out(path: str) -> str:
@@ -46,7 +26,7 @@ def check_out(path: str) -> str:
 
 def fetch_map(session: Any, ring: str, timeout: float = 60.0) -> np.ndarray:
     """The ring's map in mm, via main's PC link."""
-    from tokenring.commands.explore import open_link
+    from tokenring.pclink import open_link
 
     link = open_link(session, ring)
     got = link.request("get_map", timeout=timeout)
@@ -55,10 +35,9 @@ def fetch_map(session: Any, ring: str, timeout: float = 60.0) -> np.ndarray:
 
 def live_world(session: Any, ring: str) -> dict[str, Any] | None:
     """The running simulator's room (``world/info``), or None without a simulator."""
-    from tokenring import keys
     from tokenring.cliutil import query
 
-    for _, reply in query(session, keys.world(ring, "info"), timeout=1.0):
+    for _, reply in query(session, robot_keys.world(ring, "info"), timeout=1.0):
         if reply.get("ok"):
             return reply["result"]
     return None
@@ -75,7 +54,7 @@ def truth_from_info(info: dict[str, Any]) -> tuple[str, np.ndarray]:
 
 def load_truth(world: str) -> tuple[str, np.ndarray]:
     """A world's name and true walls (mm); UsageError naming the world if it cannot be read."""
-    from tokenring.world import WorldError, load_world
+    from modules.description import WorldError, load_world
 
     try:
         room = load_world(world)
@@ -218,30 +197,3 @@ def write_png(
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
-
-
-def run(args: argparse.Namespace) -> int:
-    from tokenring.cliutil import tap_session
-
-    check_out(args.out)
-    if args.timeout <= 0:
-        raise UsageError("--timeout must be positive")
-    world_name, truth = load_truth(args.world) if args.world else (None, None)
-    if args.source:
-        vectors = load_map_file(args.source)
-    else:
-        with tap_session(args) as session:
-            print("fetching the map (GET_MAP through main) ...", flush=True)
-            vectors = fetch_map(session, args.ring, args.timeout)
-            if truth is None:
-                info = live_world(session, args.ring)
-                if info is not None:
-                    world_name, truth = truth_from_info(info)
-    score = write_map(vectors, args.out, truth, world_name)
-    line = f"wrote {len(vectors)} vectors to {args.out}"
-    if score is not None:
-        line += (
-            f" (coverage {score['coverage']:.0%}, precision {score['precision']:.0%} against {world_name})"
-        )
-    print(line)
-    return 0

@@ -1,4 +1,4 @@
-"""``python -m tokenring.world``: run the world simulator for one ring until SIGTERM/SIGINT.
+"""``python -m modules.world``: run the world simulator for one ring until SIGTERM/SIGINT.
 
 ``tokenring up`` starts it as a service before the nodes (``--world``, ``--speed``, ``--seed``).
 """
@@ -12,11 +12,12 @@ import sys
 import threading
 from typing import Any
 
+from modules.description import keys as robot_keys
+from modules.description.roomfile import DEFAULT_WORLD, load_world
+from modules.world.service import WorldService
+from modules.world.sim import Simulator
 from tokenring import keys
 from tokenring.errors import TokenRingError, UsageError
-from tokenring.world.loader import DEFAULT_WORLD, load_world
-from tokenring.world.service import WorldService
-from tokenring.world.sim import Simulator
 from tokenring.zconfig import make_config, open_session
 
 
@@ -33,7 +34,7 @@ def parse_speed(text: str) -> float:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
-        prog="python -m tokenring.world", description="The world simulator of one ring."
+        prog="python -m modules.world", description="The world simulator of one ring."
     )
     p.add_argument(
         "--world", default=DEFAULT_WORLD, help="bundled room name or world file (default %(default)s)"
@@ -71,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
             service.start()
             print(
                 f"world {world.name!r} ({len(world.walls)} walls, {len(world.circles)} obstacles), "
-                f"speed {speed:g}x, seed {args.seed}; truth on {keys.world(ring, 'truth')}",
+                f"speed {speed:g}x, seed {args.seed}; truth on {robot_keys.world(ring, 'truth')}",
                 flush=True,
             )
             try:

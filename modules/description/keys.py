@@ -1,0 +1,32 @@
+"""The robot's Zenoh keys, beside the ring's (:mod:`tokenring.keys`) under the same prefix.
+
+=======================================  ========================================================
+key                                      what travels on it
+=======================================  ========================================================
+``tokenring/<ring>/hw/<module>/<what>``  the simulated hardware of one module: ``hw/clock``,
+                                         ``hw/motor/steps``, ``hw/sonar/ping``,
+                                         ``hw/compass/measure``, ``hw/charger/adc``,
+                                         ``hw/charger/relay`` (see :mod:`modules.world.service`)
+``tokenring/<ring>/world/<what>``        world simulator: ``world/truth`` (msgpack ground truth:
+                                         pose mm/rad, batteries, time; logs/scoring only),
+                                         ``world/state``, ``world/info``, ``world/control/*``,
+                                         ``world/alive`` (liveliness: the world is up)
+``tokenring/<ring>/lcd/<what>``          the LCD's screen and keypad (hardware, not the ring)
+=======================================  ========================================================
+"""
+
+from __future__ import annotations
+
+from tokenring.keys import PREFIX
+
+
+def hardware(ring: str, module: str, what: str) -> str:
+    return f"{PREFIX}/{ring}/hw/{module}/{what}"
+
+
+def world(ring: str, what: str) -> str:
+    return f"{PREFIX}/{ring}/world/{what}"
+
+
+def lcd(ring: str, what: str) -> str:
+    return f"{PREFIX}/{ring}/lcd/{what}"

@@ -1,0 +1,154 @@
+"""How the robot plugs into the ring: its PC verbs, its programs, its world and hardware.
+
+Registered in ``pyproject.toml`` under the entry point group ``tokenring.extensions``; the ring
+(:mod:`tokenring.extensions`) asks it, and only it, for everything robot-specific:
+
+* the verbs ``drive``, ``explore``, ``map``, ``score``, ``lcd``, ``log``, ``replay``, ``analyze``
+  (:mod:`modules.pc.commands`);
+* the programs: this package's ``<node>.py`` files;
+* ``tokenring up``'s world (``--world``, ``--speed``, ``--seed``, ``--no-world``) and its jobs
+  (``--explore``, ``--map-out``, ``--actions``, ``--localizer``), all checked before anything
+  starts;
+* each program's hardware client (:mod:`modules.world.hardware`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
+
+from tokenring.errors import UsageError
+from tokenring.extensions import Extension, UpPlan
+
+if TYPE_CHECKING:
+    import zenoh
+
+    from tokenring.launcher import Launcher, ServicePlan
+    from tokenring.protocol import Protocol
+
+PROGRAMS_DIR = Path(__file__).resolve().parent
+
+
+class RobotExtension(Extension):
+    """The 2001 robot on the ring."""
+
+    name = "robot"
+
+    def commands(self) -> list[ModuleType]:
+        from modules.pc import commands
+
+        names = sorted(m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_"))
+        return [importlib.import_module(f"{commands.__name__}.{n}") for n in names]
+
+    def programs_dir(self) -> Path:
+        return PROGRAMS_DIR
+
+    def add_up_options(self, parser: argparse.ArgumentParser) -> None:
+        world = parser.add_argument_group("simulated world (the robot's hardware)")
+        world.add_argument(
+            "--world",
+            default="office",
+            metavar="NAME|FILE",
+            help="bundled room (empty, office, square, slanted) or world file (default %(default)s)",
+        )
+        world.add_argument(
+            "--speed",
+            default="1",
+            metavar="K",
+            help="simulation speed-up factor (default 1); the emulated wire runs K times faster too",
+        )
+        world.add_argument(
+            "--seed", type=int, default=1, help="the world's random seed (default %(default)s)"
+        )
+        world.add_argument("--no-world", action="store_true", help="start no world simulator (no hardware)")
+        mission = parser.add_argument_group("exploration")
+        mission.add_argument(
+            "--explore", type=int, choices=(1, 2), help="start Explore 1 (avoid) or 2 (left wall)"
+        )
+        mission.add_argument(
+            "--map-out", metavar="FILE", help="at the end write the map (.png, .dxf or .json)"
+        )
+        mission.add_argument(
+            "--actions",
+            metavar="FILE",
+            help="have main drive an action file (seed §6.7: e, s MM, r DEG, v L R MS, c R SPEED MS, #) "
+            "after the compass calibration, then stop the ring",
+        )
+        mission.add_argument(
+            "--action-speed", type=int, default=50, metavar="PCT", help="speed of the action file's moves"
+        )
+        mission.add_argument(
+            "--localizer",
+            metavar="YAML",
+            help="copro's sync + EKF configuration, e.g. config/localization.yaml (the Darmstadt "
+            "setup: compass + walls of the wall file, data and error logs); default: exploration "
+            "mode without logs",
+        )
+
+    def plan_up(self, args: argparse.Namespace, protocol: Protocol) -> UpPlan:
+        from modules.world.__main__ import parse_speed
+
+        plan = UpPlan()
+        speed = parse_speed(args.speed)
+        if not args.no_world:
+            plan.services.append(world_service(args))
+            plan.speedup = speed
+        if args.localizer:
+            from modules.common.locconfig import load_config
+
+            load_config(args.localizer)  # a bad file is refused (file:line, key) before anything starts
+            plan.env["TOKENRING_LOCALIZER_CONFIG"] = str(Path(args.localizer).resolve())
+        if args.explore and args.actions:
+            raise UsageError("--explore and --actions both drive the robot: give one of them")
+        if not (args.explore or args.map_out or args.actions):
+            return plan
+        if args.map_out:
+            from modules.pc.mapfiles import check_out
+
+            check_out(args.map_out)
+        actions = None
+        if args.actions:
+            from modules.common.actions import load_actions
+
+            load_actions(args.actions)  # a bad file is refused (file:line) before anything starts
+            text = Path(args.actions).read_text(encoding="utf-8")
+            actions = (Path(args.actions).name, text, args.action_speed)
+        missions: list[Any] = []
+
+        def start_mission(launcher: Launcher) -> None:
+            from modules.pc.mission import Mission
+
+            mission = Mission(launcher, args.explore, args.map_out, args.duration, actions=actions)
+            missions.append(mission)
+            mission.start()  # it follows the exploration, writes the map and stops the launcher
+
+        plan.on_started = start_mission
+        plan.failure = lambda: missions[0].error if missions else None
+        plan.grace_s = 30.0  # the mission stops the ring itself; this only caps a stuck map fetch
+        return plan
+
+    def open_hardware(self, module: str, session: zenoh.Session, ring: str) -> Any | None:
+        from modules.world.hardware import open_hardware
+
+        return open_hardware(module, session, ring)
+
+
+def world_service(args: argparse.Namespace) -> ServicePlan:
+    """The world simulator as a launcher service; the world file is checked here, before anything starts."""
+    from modules.description.roomfile import load_world, resolve_world
+    from modules.world.__main__ import parse_speed
+    from modules.world.service import ready_key
+    from tokenring.launcher import ServicePlan
+
+    load_world(args.world)
+    parse_speed(args.speed)
+    argv = ["modules.world", "--ring", "{ring}", "--connect", "{connect}", "--world"]
+    argv += [str(resolve_world(args.world).resolve()), "--speed", str(args.speed), "--seed", str(args.seed)]
+    argv += ["--log-level", args.log_level]
+    if args.zenoh_config:
+        argv += ["--zenoh-config", args.zenoh_config]
+    return ServicePlan("world", argv, ready_key=ready_key(args.ring))

@@ -1,0 +1,138 @@
+"""The one seam through which an application (the robot) plugs into the ring.
+
+The ring knows nothing of robots, worlds or maps. An application registers an :class:`Extension`
+under the entry point group ``tokenring.extensions`` (in its ``pyproject.toml``)::
+
+    [project.entry-points."tokenring.extensions"]
+    robot = "modules.plugin:RobotExtension"
+
+and the ring asks every registered extension, and nothing else, for
+
+* **verbs** — extra ``tokenring`` subcommands: modules with ``add_parser(sub)`` and ``run(args)``,
+  exactly like :mod:`tokenring.commands`;
+* **programs** — the directory holding the programs for protocol.yaml's nodes (``up``, ``load``);
+* **up** — options of ``tokenring up``, checked before anything starts, and an :class:`UpPlan`:
+  services started beside the nodes (a world simulator), how much faster emulated time runs,
+  environment for the nodes, work to do once the ring runs (a mission);
+* **hardware** — the client a node's program gets as ``self.hw``.
+
+``TOKENRING_EXTENSIONS`` limits which are loaded: a comma-separated list of names, empty for
+none (the bare ring: what the ring's own tests of a non-robot system run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cache
+from importlib.metadata import entry_points
+from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
+
+from tokenring.errors import UsageError
+
+if TYPE_CHECKING:
+    import zenoh
+
+    from tokenring.launcher import Launcher, ServicePlan
+    from tokenring.protocol import Protocol
+
+log = logging.getLogger("tokenring.extensions")
+
+GROUP = "tokenring.extensions"
+ENV = "TOKENRING_EXTENSIONS"
+
+
+@dataclass
+class UpPlan:
+    """What an extension adds to one ``tokenring up``."""
+
+    services: list[ServicePlan] = field(default_factory=list)
+    #: emulated time runs this many times faster; the emulated wire follows it
+    speedup: float = 1.0
+    #: environment for the node processes (set before the launcher starts them)
+    env: dict[str, str] = field(default_factory=dict)
+    #: called once the nodes run their programs; may stop the launcher itself
+    on_started: Callable[[Launcher], None] | None = None
+    #: asked at the end: a message if the application's job failed (exit code 1)
+    failure: Callable[[], str | None] | None = None
+    #: seconds past ``--duration`` before the launcher gives up (the job stops the ring itself)
+    grace_s: float = 0.0
+
+
+class Extension:
+    """An application on the ring; every method has a do-nothing default."""
+
+    name = ""
+
+    def commands(self) -> list[ModuleType]:
+        """Verb modules (``add_parser(sub)``, ``run(args)``) added to ``tokenring``."""
+        return []
+
+    def programs_dir(self) -> Path | None:
+        """Where the programs for protocol.yaml's nodes live (``<dir>/<node name>.py``)."""
+        return None
+
+    def add_up_options(self, parser: argparse.ArgumentParser) -> None:
+        """Options of ``tokenring up`` (in argument groups of their own)."""
+
+    def plan_up(self, args: argparse.Namespace, protocol: Protocol) -> UpPlan:
+        """Check this extension's ``up`` options (raise :class:`UsageError`) and plan its part."""
+        return UpPlan()
+
+    def open_hardware(self, module: str, session: zenoh.Session, ring: str) -> Any | None:
+        """The hardware client for ``module``'s program, or None if it has none here."""
+        return None
+
+
+def _wanted() -> set[str] | None:
+    value = os.environ.get(ENV)
+    if value is None:
+        return None
+    return {name.strip() for name in value.split(",") if name.strip()}
+
+
+@cache
+def loaded() -> tuple[Extension, ...]:
+    """The registered extensions (those ``TOKENRING_EXTENSIONS`` names, if set), loaded once."""
+    wanted = _wanted()
+    found: list[Extension] = []
+    for point in sorted(entry_points(group=GROUP), key=lambda p: p.name):
+        if wanted is not None and point.name not in wanted:
+            continue
+        try:
+            factory = point.load()
+            extension = factory()
+        except Exception as exc:  # a broken plugin must not take the ring's CLI with it
+            raise UsageError(f"extension {point.name!r} ({point.value}) failed to load: {exc}") from None
+        if not isinstance(extension, Extension):
+            raise UsageError(f"extension {point.name!r} ({point.value}) is not a tokenring Extension")
+        extension.name = extension.name or point.name
+        found.append(extension)
+    if wanted:
+        missing = wanted - {e.name for e in found}
+        if missing:
+            raise UsageError(f"{ENV}: no extension named {', '.join(sorted(missing))} is installed")
+    return tuple(found)
+
+
+def programs_dir() -> Path | None:
+    """The first extension's programs directory, or None (the bare ring has no programs)."""
+    for extension in loaded():
+        directory = extension.programs_dir()
+        if directory is not None:
+            return directory
+    return None
+
+
+def open_hardware(module: str, session: zenoh.Session, ring: str) -> Any | None:
+    """``module``'s hardware client from the first extension that has one, else None."""
+    for extension in loaded():
+        client = extension.open_hardware(module, session, ring)
+        if client is not None:
+            return client
+    return None
