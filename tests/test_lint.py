@@ -1,4 +1,4 @@
-"""The code base stays ruff-clean (lint and format), checked on every CI run."""
+"""The code base stays ruff-clean (lint and format) and the ring type-checks, on every CI run."""
 
 from __future__ import annotations
 
@@ -23,3 +23,12 @@ def test_ruff_check_is_clean():
 def test_ruff_format_is_clean():
     result = ruff("format", "--check", ".")
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_mypy_is_clean_on_the_ring():
+    """pyproject.toml's [tool.mypy]: all of tokenring/, its core strictly."""
+    result = subprocess.run(
+        [sys.executable, "-m", "mypy"], cwd=REPO, capture_output=True, text=True, timeout=600
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "Success: no issues found" in result.stdout, result.stdout

@@ -25,6 +25,7 @@ token circulates. Exit code 1 if any fault did not recover or an invariant broke
 
 from __future__ import annotations
 
+import functools
 import io
 import tempfile
 import threading
@@ -182,8 +183,9 @@ def load_scenario(path: str | Path, protocol: Protocol | None = None) -> Scenari
             elif kind in ("drop", "corrupt"):
                 request["p"] = raw["value"]
             elif kind == "partition":
+                where = f"{entry}.value"
                 request["groups"] = parse_partition(
-                    str(raw["value"]), lambda item, where=f"{entry}.value": resolve(item, where)
+                    str(raw["value"]), functools.partial(resolve, entry=where)
                 )
             elif kind == "lose":
                 request["count"] = raw.get("count", 1)

@@ -99,7 +99,7 @@ def validate(request: dict[str, Any]) -> dict[str, Any]:
     out = {"kind": kind}
     if kind == "delay":
         try:
-            out["ms"] = float(request.get("ms", request.get("value")))
+            out["ms"] = float(request.get("ms", request.get("value")))  # type: ignore[arg-type]  # None: TypeError below
             out["jitter_ms"] = float(request.get("jitter_ms") or 0.0)
         except (TypeError, ValueError):
             raise UsageError("delay needs a number of milliseconds, e.g. 'delay 5'") from None

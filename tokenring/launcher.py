@@ -175,7 +175,10 @@ class Launcher:
         self._queryable: Any = None
         self.shutdown_reason: str | None = None
         self.booting = False  # programs are being downloaded over the ring (``up``)
-        width = max((len(p.name) for p in [*self.plans, *self.services]), default=4)
+        width = max(
+            (len(name) for name in [*(p.name for p in self.plans), *(s.name for s in self.services)]),
+            default=4,
+        )
         self._width = max(width, 4)
 
     # -- output ---------------------------------------------------------------------------------

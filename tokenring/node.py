@@ -41,7 +41,7 @@ from tokenring.channels import (
 from tokenring.errors import ChannelError, TokenRingError
 from tokenring.protocol import Channel, CommandChannel, Protocol
 from tokenring.ring import EPOCH_MASK
-from tokenring.tokenpath import TokenPathBase
+from tokenring.tokenpath import TokenPathBase, TokenPathHost
 from tokenring.transport.base import Transport
 
 log = logging.getLogger("tokenring.node")
@@ -108,6 +108,38 @@ class NodeStats:
         "watchdog_wakes",  # its timer thread's loops: each costs a sleeping process CPU
     )
     __slots__ = FIELDS
+    frames_received: int
+    frames_sent: int
+    rejected_length: int
+    rejected_crc: int
+    rejected_marker: int
+    rejected_did: int
+    rejected_sid: int
+    duplicate_passes: int
+    stale_tokens: int
+    replayed_passes: int
+    rounds: int
+    rounds_missed: int
+    visits: int
+    passes_acked: int
+    pass_retries: int
+    unacked_passes: int
+    successors_declared_dead: int
+    successors_only_slow: int
+    successor_changes: int
+    reconfigurations: int
+    tokens_regenerated: int
+    epoch_changes: int
+    commands_sent: int
+    commands_acknowledged: int
+    commands_unacknowledged: int
+    commands_received: int
+    duplicate_commands: int
+    stale_commands_cleared: int
+    inbox_full: int
+    send_errors: int
+    system_commands: int
+    watchdog_wakes: int
 
     def __init__(self) -> None:
         for name in self.FIELDS:
@@ -117,7 +149,7 @@ class NodeStats:
         return {name: getattr(self, name) for name in self.FIELDS}
 
 
-class NodeOS(TokenPathBase):  # type: ignore[misc, valid-type]
+class NodeOS(TokenPathBase, TokenPathHost):
     """One node of the ring: the token handler, ring membership and the user-program API."""
 
     def __init__(
@@ -242,7 +274,7 @@ class NodeOS(TokenPathBase):  # type: ignore[misc, valid-type]
         # this node has one to send (system_busy): an idle visit costs no Python call for it
         self.system_handler: Callable[[bytearray], bool] | None = None
         self.system_busy = False
-        self.rx_fault: Callable[[bytes, bytes | None], bool] | None = None
+        self.rx_fault: Callable[[bytes], bool] | None = None
         self.tx_fault: Callable[[int, bytearray], bool] | None = None
         self.msg_fault: Callable[[bytes], bool] | None = None
         # --profile: seconds a pass may take after the token arrived (wire + emulated hardware)

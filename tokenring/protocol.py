@@ -345,7 +345,7 @@ class _Compiler:
         return ProtocolError(self.source, entry, problem)
 
     # -- small checked getters -----------------------------------------------------------------
-    def mapping(self, value: Any, entry: str) -> dict:
+    def mapping(self, value: Any, entry: str) -> dict[str, Any]:
         if not isinstance(value, dict):
             raise self.fail(entry, f"expected a mapping, found {type(value).__name__}")
         return value
@@ -357,12 +357,12 @@ class _Compiler:
             raise self.fail(entry, f"{value} is outside {lo}..{hi}")
         return value
 
-    def get(self, mapping: dict, key: str, entry: str) -> Any:
+    def get(self, mapping: dict[str, Any], key: str, entry: str) -> Any:
         if key not in mapping:
             raise self.fail(entry, f"missing key {key!r}")
         return mapping[key]
 
-    def only_keys(self, mapping: dict, allowed: Iterable[str], entry: str) -> None:
+    def only_keys(self, mapping: dict[str, Any], allowed: Iterable[str], entry: str) -> None:
         extra = set(mapping) - set(allowed)
         if extra:
             raise self.fail(
@@ -589,7 +589,7 @@ class _Compiler:
         size = max(f.offset + f.size for f in fields)
         return Header({f.name: f.offset for f in fields}, consts, tuple(fields)), size
 
-    def area(self, token: dict, key: str, header_size: int, token_size: int) -> tuple[int, int]:
+    def area(self, token: dict[str, Any], key: str, header_size: int, token_size: int) -> tuple[int, int]:
         where = f"token.{key}"
         spec = self.mapping(self.get(token, key, "token"), where)
         self.only_keys(spec, {"offset", "size"}, where)
@@ -602,7 +602,7 @@ class _Compiler:
         return offset, size
 
     def command_specs(
-        self, raw: dict, entry: str, enums: Mapping[str, Any]
+        self, raw: dict[str, Any], entry: str, enums: Mapping[str, Any]
     ) -> dict[str, tuple[int, Any, str]]:
         out: dict[str, tuple[int, Any, str]] = {}
         seen: dict[int, str] = {}
@@ -667,7 +667,7 @@ class _Compiler:
             by_id[node_id] = node
         return nodes, by_id, channels
 
-    def placement(self, spec: dict, where: str, user_area: tuple[int, int]) -> tuple[int, int]:
+    def placement(self, spec: dict[str, Any], where: str, user_area: tuple[int, int]) -> tuple[int, int]:
         address = self.integer(self.get(spec, "address", where), f"{where}.address", 0, 1 << 16)
         size = self.integer(self.get(spec, "size", where), f"{where}.size", 1, 1 << 16)
         lo, hi = user_area
@@ -681,7 +681,7 @@ class _Compiler:
         return address, size
 
     def data_channel(
-        self, spec: dict, node: str, seed: str, enums: Mapping[str, Any], user_area: tuple[int, int]
+        self, spec: dict[str, Any], node: str, seed: str, enums: Mapping[str, Any], user_area: tuple[int, int]
     ) -> Channel:
         where = f"nodes.{node}.data"
         raw = self.mapping(self.get(spec, "data", f"nodes.{node}"), where)
@@ -701,7 +701,7 @@ class _Compiler:
 
     def command_channel(
         self,
-        spec: dict,
+        spec: dict[str, Any],
         node: str,
         seed: str,
         enums: Mapping[str, Any],

@@ -29,7 +29,7 @@ def decode_frame(
         out["problem"] = problem
     if len(frame) != protocol.frame_size:
         return out
-    header = {name: frame[offset] for name, offset in protocol.header.offsets.items()}
+    header: dict[str, Any] = {name: frame[offset] for name, offset in protocol.header.offsets.items()}
     header["syscmd_code_name"] = protocol.system_command_name(header["syscmd_code"])
     out["header"] = header
     size = protocol.token_size

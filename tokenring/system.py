@@ -456,7 +456,7 @@ class SystemLayer:
         self._job: _Job | None = None
         self.installed: Installed | None = self.store.load()
         self._running_digest: bytes | None = None
-        self._error_parts: dict[int, dict[int, str]] = {}
+        self._error_parts: dict[int, dict[int, bytes]] = {}
         self.errors: deque[dict[str, Any]] = deque(maxlen=200)
         self._error_count = itertools.count(1)
         self.corrupt_chunk: int | None = None  # test hook: damage this chunk index once stored

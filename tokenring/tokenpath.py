@@ -41,32 +41,127 @@ log = logging.getLogger("tokenring.node")
 perf_counter = time.perf_counter
 
 
-class PyTokenPath:
+class TokenPathHost:
+    """The one contract between a token path (:class:`PyTokenPath` or the C type) and the node
+    it runs in (:class:`~tokenring.node.NodeOS`, which derives from both).
+
+    **State.** The fields below are the ring's state as the token path sees it. The node
+    initialises them (``NodeOS.__init__``); both paths read and write them under the same
+    names (the C type keeps the scalars in C members of these names), and the watchdog, the
+    acks and the programs' API read and write them alike under ``_token_lock``.
+
+    **Hooks.** The token path calls the node only through the methods below, and only off its
+    fast path (a stale or new epoch, a stranger's token, a command in the token, a visit
+    waited for, a failed send); the C path looks them up by these names. Timing sinks
+    (``_rounds_add``, ``_handler_add``, ``_send_add``) are plain callables the node supplies.
+    """
+
+    # --- set up by the node ------------------------------------------------------------------
+    node_id: int
+    stats: Any  # NodeStats: counters the path increments
+    membership: Any  # tokenring.ring.Membership: the successor
+    transport: Any  # tokenring.transport.base.Transport: how frames go out
+    system_handler: Any  # system commands in the token (the system layer), or None
+    rx_fault: Any  # fault hooks (tokenring.faults), None while no fault is active
+    tx_fault: Any
+    pacer: Any  # emulated hardware timing (tokenring.profile), or None
+    _token_lock: Any  # the node's lock around the token's state
+    _wake_lock: Any  # released to wake the watchdog
+    _live: Any  # set of live node IDs (membership's)
+    _excluded: Any  # set of excluded node IDs
+    _senders: dict[int, Any]  # successor ID -> transport sender
+    _active: tuple[Any, ...]  # the registered, unlocked channels visited in the token
+    _pending_outboxes: list[Any]
+    _outboxes: dict[str, Any]
+    _rounds_add: Any  # callable(seconds): one round's time
+    _handler_add: Any  # callable(seconds): one visit's time in the handler
+    _send_add: Any  # callable(seconds): one timed send
+    _defer: Any = None  # callable(frame): hand a frame to the node's token thread
+    # --- the token and its layout (protocol.yaml) ----------------------------------------------
+    _work: bytearray  # the working frame: token + CRC
+    _work_body: memoryview
+    _const_bytes: bytes  # the header's constant markers, from _const_lo
+    _token_size: int
+    _frame_size: int
+    _o_sid: int  # header offsets
+    _o_did: int
+    _o_counter: int
+    _o_issuer: int
+    _o_epoch: int
+    _o_origin: int
+    _const_lo: int
+    # --- the ring's state ----------------------------------------------------------------------
+    _epoch: int  # the epoch this node is in, and who started it
+    _origin: int
+    _accepted_crc: int  # the pass last taken (a retry of it is acknowledged, not visited)
+    _accepted_sid: int
+    _last_counter: int  # the round counter last visited in this epoch (-1: none yet)
+    _retries: int  # of the pass in flight
+    _last_sent_did: int
+    _last_sent_crc: int
+    _confirmed_did: int  # the successor whose ack last arrived, and when
+    _regeneration_streak: int
+    _visit_waiters: int  # programs waiting in wait_visit()
+    _deferred_pending: int = 0  # frames queued for the token thread
+    _last_seen: float  # perf_counter times
+    _last_visit: float
+    _last_sent_time: float
+    _confirmed_at: float
+    _recovery_until: float
+    _ack_interval: float
+    _hop: float  # emulated wire time per pass (0: none)
+    _paced: float
+    _ack_pending: bool
+    _has_sent: bool
+    _ack_adaptive: bool
+    _ack_always: bool
+    _closing: bool = False
+    _leaving: bool = False
+    _departed: bool = False
+
+    # --- hooks ------------------------------------------------------------------------------------
+    def _send_ack(self, did: int, crc: int) -> None:
+        """Acknowledge the pass ``crc`` that node ``did`` sent here."""
+        raise NotImplementedError
+
+    def _answer_stale(self, sid: int, crc: int) -> None:
+        """``sid`` passed a token of an older epoch: tell it (the frame was dropped)."""
+        raise NotImplementedError
+
+    def _adopt_epoch(self, epoch: int, origin: int, now: float) -> None:
+        """A token of a newer epoch arrived: join it (before the visit goes on)."""
+        raise NotImplementedError
+
+    def _include(self, node_id: int, tell: bool = False) -> None:
+        """A token came from a node this one had excluded: it is back in the ring."""
+        raise NotImplementedError
+
+    def _activate_outboxes(self) -> None:
+        """Commands queued by programs since the last visit join the visited channels."""
+        raise NotImplementedError
+
+    def _drop_outboxes(self, finished: list[Any]) -> None:
+        """Commands acknowledged (or given up) in this visit leave the visited channels."""
+        raise NotImplementedError
+
+    def _sweep_own_commands(self, work: bytearray) -> None:
+        """After a regeneration: clear this node's commands the old token left behind."""
+        raise NotImplementedError
+
+    def _notify_visit(self) -> None:
+        """Wake programs waiting for a visit (``wait_visit``)."""
+        raise NotImplementedError
+
+    def _send_failed(self, did: int, exc: BaseException) -> None:
+        """Sending the token to ``did`` raised ``exc``."""
+        raise NotImplementedError
+
+
+class PyTokenPath(TokenPathHost):
     """The token path in Python: the fallback where the C extension is missing, and the
     reference the native path is tested against."""
 
     system_busy = False  # a system command is queued or in flight here (set by the system layer)
-
-    # attributes the node sets up (declared for the type checker; NodeOS.__init__ assigns them)
-    node_id: int
-    stats: Any
-    membership: Any
-    transport: Any
-    system_handler: Any
-    rx_fault: Any
-    tx_fault: Any
-    pacer: Any
-    _work: bytearray
-    _work_body: memoryview
-    _token_lock: Any
-    _live: Any
-    _excluded: Any
-    _last_counter: int
-    _o_counter: int
-    _senders: dict[int, Any]
-    _active: tuple[Any, ...]
-    _pending_outboxes: list[Any]
-    _outboxes: dict[str, Any]
 
     def _on_frame(self, frame: bytes) -> None:
         """A frame received: visited here, or handed to the token thread when the visit may wait
@@ -283,13 +378,7 @@ class PyTokenPath:
         with contextlib.suppress(RuntimeError):  # already awake
             self._wake_lock.release()
 
-    # state the node initialises (class defaults keep the type checker and both paths alike)
-    _defer: Any = None
-    _deferred_pending = 0
     _defer_lock = threading.Lock()  # the fallback's counter; one lock for all nodes is enough
-    _departed = False
-    _leaving = False
-    _closing = False
 
 
 def _load_native() -> type | None:
@@ -310,7 +399,8 @@ def _load_native() -> type | None:
             library.name,
         )
         return None
-    return _tokenpath.TokenPath
+    native: type = _tokenpath.TokenPath
+    return native
 
 
 _native = _load_native()

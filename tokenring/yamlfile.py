@@ -30,11 +30,11 @@ def strict_loader(fail: type[Exception] = UsageError, source: str = "<yaml>") ->
                 message = f"duplicate key {key!r} (first at line {seen[key]})"
                 if fail is UsageError:
                     raise UsageError(f"{source}:{line}: {message}")
-                raise fail(source, f"line {line}", message)  # type: ignore[call-arg]
+                raise fail(source, f"line {line}", message)
             seen[key] = line
         return loader.construct_mapping(node)
 
-    StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, construct_mapping)  # type: ignore[arg-type]
+    StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, construct_mapping)
     return StrictLoader
 
 

@@ -130,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
     install_signal_handlers(launcher)
     launcher.start()
     boot_ok = True
-    if download:
+    if download and programs is not None:
         boot_ok = boot_load(launcher, Path(programs), {p.node_id for p in plans})
     for plan in plans_up:
         if plan.on_started is not None:

@@ -91,7 +91,7 @@ class ZenohTransport(Transport):
     def _send_frame(self, did: int, frame: bytes | bytearray) -> None:
         self._sender(did)(frame)
 
-    def _sender(self, did: int):  # type: ignore[no-untyped-def]
+    def _sender(self, did: int):
         publisher = self._publishers.get(did) or self._publisher(
             did, self._publishers, keys.token(self.ring, did)
         )
