@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import pkgutil
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
@@ -130,6 +131,32 @@ class RobotExtension(Extension):
         plan.failure = lambda: missions[0].error if missions else None
         plan.grace_s = 30.0  # the mission stops the ring itself; this only caps a stuck map fetch
         return plan
+
+    def add_load_options(self, parser: argparse.ArgumentParser) -> None:
+        parser.add_argument(
+            "-u", "--upload", metavar="FILE", help="upload the map into FILE (.dxf, .png, .json)"
+        )
+        parser.add_argument("--timeout", type=float, default=60.0, help="seconds to wait for the map (-u)")
+
+    def check_load(self, args: argparse.Namespace) -> None:
+        if args.upload:
+            from modules.pc.mapfiles import check_out
+
+            check_out(args.upload)
+
+    def after_load(
+        self, args: argparse.Namespace, session: zenoh.Session, say: Callable[[str], None]
+    ) -> dict[str, Any]:
+        if not args.upload:
+            return {}
+        from modules.pc.mapfiles import fetch_map, live_world, truth_from_info, write_map
+
+        vectors = fetch_map(session, args.ring, args.timeout)
+        info = live_world(session, args.ring)
+        world, truth = truth_from_info(info) if info else (None, None)
+        write_map(vectors, args.upload, truth, world)
+        say(f"map: {len(vectors)} vectors written to {args.upload}")
+        return {"upload": {"file": args.upload, "vectors": len(vectors)}}
 
     def open_hardware(self, module: str, session: zenoh.Session, ring: str) -> Any | None:
         from modules.world.hardware import open_hardware

@@ -23,7 +23,7 @@ from tokenring import keys
 from tokenring.cliutil import query_one
 from tokenring.errors import UsageError
 from tokenring.pclink import PcLink
-from tokenring.system import file_stamp
+from tokenring.programstore import file_stamp
 
 MODULES = Path(__file__).resolve().parent.parent / "modules"
 

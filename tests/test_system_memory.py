@@ -7,7 +7,9 @@ import hashlib
 import pytest
 from memring import MemoryRing, wait_for
 
-from tokenring.system import ProgramStore, State, Status, SystemCommandError, SystemLayer
+from tokenring.programstore import ProgramStore
+from tokenring.system import SystemLayer
+from tokenring.syswire import State, Status, SystemCommandError
 
 PROGRAM = """
 from tokenring.program import UserProgram

@@ -14,6 +14,8 @@ and the ring asks every registered extension, and nothing else, for
 * **up** — options of ``tokenring up``, checked before anything starts, and an :class:`UpPlan`:
   services started beside the nodes (a world simulator), how much faster emulated time runs,
   environment for the nodes, work to do once the ring runs (a mission);
+* **load** — options of ``tokenring load`` and a step after it (the robot's map upload, the
+  seed's ``LOAD.EXE -u``);
 * **hardware** — the client a node's program gets as ``self.hw``.
 
 ``TOKENRING_EXTENSIONS`` limits which are loaded: a comma-separated list of names, empty for
@@ -83,6 +85,18 @@ class Extension:
     def plan_up(self, args: argparse.Namespace, protocol: Protocol) -> UpPlan:
         """Check this extension's ``up`` options (raise :class:`UsageError`) and plan its part."""
         return UpPlan()
+
+    def add_load_options(self, parser: argparse.ArgumentParser) -> None:
+        """Options of ``tokenring load``."""
+
+    def check_load(self, args: argparse.Namespace) -> None:
+        """Refuse bad ``load`` options (raise :class:`UsageError`) before anything is sent."""
+
+    def after_load(
+        self, args: argparse.Namespace, session: zenoh.Session, say: Callable[[str], None]
+    ) -> dict[str, Any]:
+        """The extension's step after the programs are loaded; what it returns joins ``--json``."""
+        return {}
 
     def open_hardware(self, module: str, session: zenoh.Session, ring: str) -> Any | None:
         """The hardware client for ``module``'s program, or None if it has none here."""

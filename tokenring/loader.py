@@ -19,7 +19,7 @@ from typing import IO, Any
 from tokenring.cliutil import format_table
 from tokenring.errors import ProgramError, TransportError, UsageError
 from tokenring.program import load_program, program_digest
-from tokenring.system import file_stamp, format_stamp
+from tokenring.programstore import file_stamp, format_stamp
 
 
 @dataclass

@@ -28,20 +28,16 @@ from tokenring.errors import UsageError
 from tokenring.faults import FaultInjector
 from tokenring.node import NodeOS
 from tokenring.pclink import PcLinkServer
+from tokenring.pcverbs import PcSystemVerbs
 from tokenring.profile import PROFILES
 from tokenring.profile import install as install_profile
 from tokenring.program import load_program_file
+from tokenring.programstore import ProgramStore, default_store_root, file_stamp
 from tokenring.protocol import Protocol, load_protocol
 from tokenring.regeneration import RegenerationLedger
 from tokenring.ring import parse_bitrate
-from tokenring.system import (
-    DEFAULT_CAPACITY,
-    PcSystemVerbs,
-    ProgramStore,
-    SystemLayer,
-    default_store_root,
-    file_stamp,
-)
+from tokenring.system import SystemLayer
+from tokenring.syswire import DEFAULT_CAPACITY
 from tokenring.transport.factory import TRANSPORTS, make_transport
 from tokenring.zconfig import make_config, open_session
 

@@ -6,8 +6,10 @@
     tokenring load -s modules/motor.py  # one program (its node from ``module`` or the file name)
     tokenring load --stop [NODE]        # ARCNET_STOP_SYSTEM, or ARCNET_STOP_PROGRAM of one node
     tokenring load --start [NODE]       # ARCNET_START_SYSTEM, or ARCNET_START_PROGRAM of one node
+    tokenring load -u map.dxf           # the robot's: upload the map (.dxf, .png or .json)
 
-Order within one call: scan, stop, downloads, start. A node whose program was running
+Order within one call: scan, stop, downloads, start, then an application's step (the robot's
+map upload, ``-u``, added through :mod:`tokenring.extensions`). A node whose program was running
 is restarted with its new program (without ``--start``, nodes that were stopped stay stopped).
 Exit 0 when everything worked, 1 when a node failed (named with the reason), 2 on bad input.
 """
@@ -27,8 +29,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "load",
         help="download programs over the ring (LOAD.EXE): -i, -a, -s FILE, --start, --stop",
         description="Scan the ring through main's PC link (name, ID, time stamp of every node), "
-        "download programs through the token with a progress bar, start or stop them. (The seed's map "
-        "upload, -u, is the robot's: tokenring map --out FILE.)",
+        "download programs through the token with a progress bar, start or stop them (and what "
+        "an installed application adds, e.g. the robot's map upload -u).",
     )
     what = p.add_mutually_exclusive_group()
     what.add_argument("-i", "--incremental", action="store_true", help="programs newer than the node's")
@@ -45,6 +47,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--no-compress", action="store_true", help="send programs as they are (not zlib)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    from tokenring import extensions
+
+    for extension in extensions.loaded():
+        extension.add_load_options(p)
     add_json_option(p)
     add_ring_options(p, listen=False)
 
@@ -80,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
 
         check_program_file(file)  # a bad file is refused before anything is sent
     start, stop = _node_arg(args.start, "--start"), _node_arg(args.stop, "--stop")
+    for extension in extensions.loaded():
+        extension.check_load(args)
     with tap_session(args) as session:
         link = open_link(session, args.ring, wait=5.0)
         loader = Loader(
@@ -89,6 +97,8 @@ def run(args: argparse.Namespace) -> int:
             say=(lambda text: None) if args.json else None,
         )
         result = run_load(loader, mode=mode, programs_dir=programs, file=file, start=start, stop=stop)
+        for extension in extensions.loaded():
+            result.update(extension.after_load(args, session, loader.say))
     if args.json:
         result["outcomes"] = [o.as_dict() for o in result["outcomes"]]
         print_json(result)
