@@ -1,18 +1,35 @@
 """bench/RESULTS.md and its PNG plots, generated from one suite run (``bench/results/<date>.json``).
 
+The tables come from the run's summary alone (the committed ``<date>.json``); the plots of
+figures in the summary are drawn from it too, and those of per-round samples (the profile's
+histogram) from the run's raw record, ``bench/results/raw/<date>.json``, which only the machine
+that ran the suite has: without it (a fresh clone regenerating the report) the existing plot is
+kept, and the report says so on stderr.
+
 Sections the run did not include are filled from the latest earlier result file that has them,
-and say so with that file's date. Never edit RESULTS.md by hand: rerun ``python -m bench``.
+and say so with that file's date. Never edit RESULTS.md by hand: rerun ``python -m bench``, or
+``python -m bench.report`` to rebuild it from the latest result file. The exceptions are kept
+as they stand when it is rewritten: a hand-written Nemesis section (``## Nemesis...``, from
+``python -m bench.nemesis``) and anything between ``<!-- keep:NAME -->`` and
+``<!-- /keep:NAME -->``; without a hand-written Nemesis section one is rendered from
+``bench/results/nemesis-*.json``.
 """
 
 from __future__ import annotations
 
+import argparse
+import io
+import itertools
 import json
 import os
+import re
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from bench.sections import SECTIONS, has_samples, raw_path, summary_section
 from tokenring.roundtrip import ROUTER_FROM
 
 HERE = Path(__file__).resolve().parent
@@ -43,7 +60,13 @@ def previous_section(name: str, out_dir: Path, current: Path | None) -> tuple[di
 
     Latest by the date the run recorded, not by the file's time: a checkout gives every result
     file the same mtime, and the report would take an older run's figures at random."""
-    found: list[tuple[str, float, dict[str, Any], str]] = []
+    found = previous_run(name, out_dir, current)
+    return None if found is None else found[:2]
+
+
+def previous_run(name: str, out_dir: Path, current: Path | None) -> tuple[dict[str, Any], str, Path] | None:
+    """``previous_section`` and the file it comes from."""
+    found: list[tuple[str, float, dict[str, Any], str, Path]] = []
     for path in out_dir.glob("*.json"):
         if current is not None and path.resolve() == current.resolve():
             continue
@@ -55,13 +78,28 @@ def previous_section(name: str, out_dir: Path, current: Path | None) -> tuple[di
             continue
         order = (str(data.get("date", "")), path.stat().st_mtime)
         if name in data.get("sections", {}):
-            found.append((*order, data["sections"][name], f"{data['date']} ({path.name})"))
+            found.append((*order, data["sections"][name], f"{data['date']} ({path.name})", path))
         elif name == "recovery" and data.get("benchmark") == "recovery":
-            found.append((*order, data, f"{data['date']} ({path.name}, `python -m bench.recovery`)"))
+            found.append((*order, data, f"{data['date']} ({path.name}, `python -m bench.recovery`)", path))
     if not found:
         return None
-    _, _, section, source = max(found, key=lambda item: item[:2])
-    return section, source
+    _, _, section, source, path = max(found, key=lambda item: item[:2])
+    return section, source, path
+
+
+def raw_section(name: str, path: Path | None, section: dict[str, Any]) -> dict[str, Any] | None:
+    """Section ``name`` with its samples: ``section`` itself if it has them (an older result
+    file, written before summaries), else from the raw record beside ``path``; None if neither."""
+    if has_samples(name, section):
+        return section
+    if path is None:
+        return None
+    try:
+        data = json.loads(raw_path(path).read_text())
+    except (OSError, ValueError):
+        return None
+    found = data.get("sections", {}).get(name) if isinstance(data, dict) else None
+    return found if has_samples(name, found) else None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -75,6 +113,19 @@ def _plt() -> Any:
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def save_png(fig: Any, path: Path) -> None:
+    """``fig`` as a PNG of 256 colours (a third of the full-colour file's size, the same to the
+    eye: the plots are a few flat colours on white) and close it."""
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=110)
+    _plt().close(fig)
+    buffer.seek(0)
+    with Image.open(buffer) as image:
+        image.convert("RGB").quantize(256, method=Image.Quantize.MEDIANCUT).save(path, optimize=True)
 
 
 def plot_scaling(runs: list[dict[str, Any]], path: Path) -> None:
@@ -142,8 +193,7 @@ def plot_scaling(runs: list[dict[str, Any]], path: Path) -> None:
     ax2.set_ylabel("median round trip / N (µs per hop)")
     ax2.set_title("per-hop cost")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path)
 
 
 def plot_resources(runs: list[dict[str, Any]], path: Path) -> None:
@@ -179,8 +229,7 @@ def plot_resources(runs: list[dict[str, Any]], path: Path) -> None:
     ax1.set_title("memory per node process")
     ax2.set_title("CPU while circulating at bitrate max")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path)
 
 
 def plot_transports(runs: list[dict[str, Any]], path: Path) -> None:
@@ -205,11 +254,11 @@ def plot_transports(runs: list[dict[str, Any]], path: Path) -> None:
         ax.legend(fontsize=8)
         ax.grid(True, axis="y", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path)
 
 
 def plot_profile(section: dict[str, Any], path: Path) -> None:
+    """The round trips' histogram: ``section`` is the raw record's (with ``rounds_s``)."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(8, 4))
     lo, hi = section["seed_ms"]
@@ -229,8 +278,7 @@ def plot_profile(section: dict[str, Any], path: Path) -> None:
     ax.set_title("--profile arcnet, the seed's seven computers at 2.5 Mbit/s")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path)
 
 
 def label_transport(r: dict[str, Any]) -> str:
@@ -341,7 +389,7 @@ def aims(sections: dict[str, Any]) -> str:
             [
                 "--profile arcnet, 7 nodes with programs",
                 f"seed {lo:.0f}-{hi:.0f} ms",
-                f"median {f(med, 1)} ms (p10-p90 {f(np.percentile(np.array(busy['rounds_s']) * 1e3, 10), 1)}-{f(busy['rtt_ms']['p90'], 1)})",
+                f"median {f(med, 1)} ms (p10-p90 {f(busy['rounds_ms']['p10'], 1)}-{f(busy['rtt_ms']['p90'], 1)})",
                 verdict(lo <= med <= hi),
             ]
         )
@@ -677,13 +725,13 @@ def profile_md(section: dict[str, Any], plots: Path) -> str:
     lo, hi = section["seed_ms"]
     rows = [["seed robot (2001): 7 computers, 2.5 Mbit/s, 8051 at 16 MHz", f"{lo:.0f}-{hi:.0f}", "", ""]]
     for r in section["runs"]:
-        values = np.array(r["rounds_s"]) * 1e3
+        q = r["rounds_ms"]
         rows.append(
             [
                 f"tokenring `--profile arcnet`, {r['label']}",
-                f(np.median(values), 1),
-                f"{np.percentile(values, 10):.1f}-{np.percentile(values, 90):.1f}",
-                f(np.max(values), 1),
+                f(q["median"], 1),
+                f"{q['p10']:.1f}-{q['p90']:.1f}",
+                f(q["max"], 1),
             ]
         )
     return (
@@ -909,26 +957,127 @@ def robot_md(out_dir: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: hand-written sections of RESULTS.md, by the start of their heading: kept when it is rewritten,
+#: unless they carry ``GENERATED`` (the report's own rendering of them)
+HAND_WRITTEN = ("## Nemesis",)
+GENERATED = "<!-- generated by bench/report.py"
+KEEP = re.compile(r"<!-- keep:(?P<name>[\w.-]+) -->.*?<!-- /keep:(?P=name) -->", re.S)
+
+
+def kept_sections(text: str) -> list[str]:
+    """The parts of an existing RESULTS.md that a rewrite keeps, in their order: every
+    ``<!-- keep:NAME -->`` ... ``<!-- /keep:NAME -->`` block and every section (to the next
+    ``## `` heading) whose heading starts with one of ``HAND_WRITTEN`` and is not ``GENERATED``."""
+    found = [(m.start(), m.group(0).strip()) for m in KEEP.finditer(text)]
+    rest = KEEP.sub(lambda m: "\0" * len(m.group(0)), text)  # the same offsets, no blocks
+    starts = [m.start() for m in re.finditer(r"^## ", rest, re.M)] + [len(rest)]
+    for start, end in itertools.pairwise(starts):
+        part = rest[start:end].split("\0", 1)[0].strip()
+        if rest.startswith(HAND_WRITTEN, start) and GENERATED not in part:
+            found.append((start, part))
+    return [part + "\n" for _, part in sorted(found)]
+
+
+def seed_list(seeds: list[int]) -> str:
+    """``1-20`` for a run of consecutive seeds, else ``5, 10, 11``."""
+    if len(seeds) > 2 and seeds == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f"{seeds[0]}-{seeds[-1]}"
+    return ", ".join(map(str, seeds))
+
+
+def nemesis_md(out_dir: Path) -> str:
+    """The Nemesis section from ``nemesis-*.json`` (``python -m bench.nemesis``): per result file
+    its runs summed; empty without one."""
+    rows = []
+    for path in sorted(out_dir.glob("nemesis-*.json")):
+        try:
+            runs = json.loads(path.read_text())["runs"]
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        good = [r for r in runs if "error" not in r]
+        loads = [r["load_1min_at_start"] for r in good if r.get("load_1min_at_start") is not None]
+
+        def total(key: str, good: list[dict[str, Any]] = good) -> int:
+            return sum(r.get(key) or 0 for r in good)
+
+        rows.append(
+            [
+                f"[{path.name}](results/{path.name})",
+                len(runs),
+                seed_list([r["seed"] for r in runs]),
+                f"{sum(r['duration_s'] for r in runs):g}",
+                total("faults"),
+                total("regenerated"),
+                total("sent"),
+                total("acked"),
+                total("lost"),
+                total("duplicated"),
+                f"{sum(1 for r in good if r.get('one_token_at_end'))}/{len(runs)}",
+                f"{sum(1 for r in good if r.get('ok'))}/{len(runs)}",
+                f"{f(float(np.median(loads)), 0)} / {f(max(loads), 0)}" if loads else "-",
+            ]
+        )
+    if not rows:
+        return ""
+    return (
+        "## Nemesis: seeded random faults (`python -m bench.nemesis`)\n\n"
+        f"{GENERATED} from results/nemesis-*.json: delete this line to keep the section as edited -->\n\n"
+        "`tokenring chaos --random SEED` per seed, one run after the other, against the 8-node ring at "
+        "bitrate max with the probe workload; commands judged from the probes' ledgers, one token by the "
+        "wire once the ring converged. Per result file, its runs summed (load: the 1-minute load average "
+        "at the start of a run, median / max).\n\n"
+        + md_table(
+            rows,
+            [
+                "file",
+                "runs",
+                "seeds",
+                "s",
+                "faults",
+                "regenerated",
+                "sent",
+                "acked",
+                "lost",
+                "duplicated",
+                "one token at end",
+                "ok",
+                "load",
+            ],
+        )
+        + "\n"
+    )
+
+
 def write_report(
-    results: dict[str, Any], out_dir: Path, md_path: Path | None = None, current: Path | None = None
+    results: dict[str, Any],
+    out_dir: Path,
+    md_path: Path | None = None,
+    current: Path | None = None,
+    raw: dict[str, Any] | None = None,
 ) -> Path:
     """Write the PNGs under ``out_dir/plots`` and RESULTS.md beside ``out_dir``; returns its path.
 
-    Sections missing from ``results`` come from the latest other result file in ``out_dir``
-    (``current``: the file ``results`` was written to, never its own source)."""
+    ``results`` is a run's summary (a raw record is summarised first: the tables never see a
+    sample); ``raw`` its raw record, else ``raw/<name of current>`` if there is one. Sections
+    missing from ``results`` come from the latest other result file in ``out_dir`` (``current``:
+    the file ``results`` was written to, never its own source), their samples from its raw record.
+    A plot whose samples are in no raw record is left as it is, and stderr says so."""
     out_dir = Path(out_dir)
     md_path = md_path or out_dir.parent / "RESULTS.md"
     plots = out_dir / "plots"
     plots.mkdir(parents=True, exist_ok=True)
-    sections: dict[str, Any] = dict(results["sections"])
+    sections = {name: summary_section(name, s) for name, s in results["sections"].items()}
+    records: dict[str, Any] = dict(results["sections"])  # for the plots: with samples if any
+    if raw is not None:
+        records.update(raw.get("sections", {}))
+    sources: dict[str, Path | None] = dict.fromkeys(sections, current)
     borrowed: dict[str, str] = {}
-    from bench.sections import SECTIONS
-
     for name in SECTIONS:
         if name not in sections:
-            found = previous_section(name, out_dir, current)
+            found = previous_run(name, out_dir, current)
             if found is not None:
-                sections[name], borrowed[name] = found
+                records[name], borrowed[name], sources[name] = found
+                sections[name] = summary_section(name, records[name])
     m = results["machine"]
     head = [
         "# Benchmark results",
@@ -974,7 +1123,16 @@ def write_report(
     if "commands" in sections:
         parts.append(commands_md(sections["commands"], rel))
     if "profile" in sections:
-        plot_profile(sections["profile"], plots / "profile.png")
+        samples = raw_section("profile", sources["profile"], records["profile"])
+        if samples is not None:
+            plot_profile(samples, plots / "profile.png")
+        else:
+            where = sources["profile"]
+            sys.stderr.write(
+                f"{plots / 'profile.png'}: "
+                + ("kept as it is" if (plots / "profile.png").exists() else "not drawn")
+                + f": the profile's round trips are in no raw record ({raw_path(where) if where else 'none given'})\n"
+            )
         parts.append(profile_md(sections["profile"], rel))
     if "recovery" in sections:
         parts.append(recovery_md(sections["recovery"]))
@@ -982,6 +1140,47 @@ def write_report(
         parts.append(download_md(sections["download"]))
     if "spurious" in sections:
         parts.append(spurious_md(sections["spurious"]))
+    kept = kept_sections(md_path.read_text()) if md_path.exists() else []
+    parts += kept
+    if not any(k.startswith(HAND_WRITTEN) or "<!-- keep:nemesis -->" in k for k in kept):
+        parts.append(nemesis_md(out_dir))
     parts.append(robot_md(out_dir))
     md_path.write_text("\n".join(p for p in parts if p).rstrip() + "\n")
     return md_path
+
+
+def latest_result(out_dir: Path) -> Path | None:
+    """The suite's latest result file in ``out_dir``, by the date it recorded."""
+    found = []
+    for path in out_dir.glob("*.json"):
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+        if isinstance(data, dict) and "sections" in data and "machine" in data:
+            found.append((str(data.get("date", "")), path.name, path))
+    return max(found)[2] if found else None
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m bench.report",
+        description="Rebuild bench/RESULTS.md and its plots from a suite result file, running nothing.",
+    )
+    parser.add_argument("result", nargs="?", help="a suite result file (default: the latest in --out)")
+    parser.add_argument(
+        "--out", default=str(HERE / "results"), help="results directory (default bench/results)"
+    )
+    args = parser.parse_args(argv)
+    out_dir = Path(args.out)
+    path = Path(args.result) if args.result else latest_result(out_dir)
+    if path is None:
+        sys.stderr.write(f"python -m bench.report: no suite result file in {out_dir}\n")
+        return 2
+    md = write_report(json.loads(path.read_text()), out_dir, current=path)
+    sys.stderr.write(f"written {md} from {path}\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,5 +1,11 @@
 """The benchmark suite: ``python -m bench [--quick]`` writes bench/results/<date>.json and bench/RESULTS.md.
 
+Each run writes two files: ``bench/results/raw/<date>.json``, everything it recorded including the
+per-round round trips and per-command samples (megabytes; the directory is git-ignored), and
+``bench/results/<date>.json``, its summary (medians, percentiles, baselines, ratios, counts, the
+machine; kilobytes; committed). RESULTS.md's tables come from the summary alone; only the plots
+that show samples (the profile's histogram) need the raw file.
+
 Sections (``--sections``; all but the slow ``spurious`` by default):
 
 * ``scaling``    round trip vs ring size at ``--bitrate max``, each ring against a bare Zenoh
@@ -45,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.sections import QUICK_SECTIONS, SECTIONS, SLOW_SECTIONS
+from bench.sections import QUICK_SECTIONS, RAW_DIR, SECTIONS, SLOW_SECTIONS, raw_path, summary_of
 
 HERE = Path(__file__).resolve().parent
 RESULTS_DIR = HERE / "results"
@@ -137,6 +143,21 @@ def ring_record(run: Any, n: int) -> dict[str, Any]:
         "form_s": run.form_s,
         "rounds_s": [round(x, 7) for x in run.rounds_s],
     }
+
+
+# ---------------------------------------------------------------------------------------------
+# the raw record and its summary
+
+
+def write_results(results: dict[str, Any], path: Path) -> tuple[Path, Path]:
+    """The run's raw record to ``raw/<name>`` beside ``path``, its summary to ``path``; returns both."""
+    raw = raw_path(path)
+    raw.parent.mkdir(parents=True, exist_ok=True)
+    raw.write_text(json.dumps(results, indent=1) + "\n")
+    summary = summary_of(results)
+    summary["raw"] = f"{RAW_DIR}/{path.name}"  # where the samples are, on the machine that ran it
+    path.write_text(json.dumps(summary, indent=1) + "\n")
+    return path, raw
 
 
 # ---------------------------------------------------------------------------------------------
@@ -718,12 +739,12 @@ def main(argv: list[str] | None = None) -> int:
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     path = result_path(out_dir, started, args.quick, sections if args.sections else None)
-    path.write_text(json.dumps(results, indent=1) + "\n")
-    sys.stderr.write(f"written {path} ({results['seconds']:.0f} s)\n")
+    _, raw = write_results(results, path)
+    sys.stderr.write(f"written {path}, its samples in {raw} ({results['seconds']:.0f} s)\n")
     if not args.no_report:
         from bench.report import write_report
 
-        md = write_report(results, out_dir, current=path)
+        md = write_report(json.loads(path.read_text()), out_dir, current=path, raw=results)
         sys.stderr.write(f"written {md}\n")
     return 1 if results["errors"] else 0
 

@@ -1,11 +1,18 @@
-"""The generated report: the Zenoh runtime comparison and the aims it qualifies."""
+"""The generated report: the Zenoh runtime comparison and the aims it qualifies; its tables from a
+run's summary alone, its plots from the raw record, the hand-written sections it keeps."""
 
 from __future__ import annotations
 
 import datetime as dt
+import json
+from types import SimpleNamespace
 
-from bench.report import aims, runtime_md
-from bench.suite import result_path
+import numpy as np
+
+from bench.report import aims, kept_sections, nemesis_md, runtime_md, write_report
+from bench.sections import summary_of
+from bench.suite import FULL_SIZES, pairs_for, result_path, ring_record, rounds_for, write_results
+from tokenring.roundtrip import summarize
 
 
 def ring(nodes: int, topology: str, bare_ms: float, ring_ms: float, p99_ms: float) -> dict:
@@ -118,3 +125,256 @@ def test_a_bench_runs_default_time_budget_covers_a_255_node_ring_and_the_wire():
     assert run_budget(8, 2300, None) < 150  # a hung small ring still fails within minutes
     slow = parse_bitrate("2.5M")
     assert run_budget(7, 2300, slow) > 120 + 2300 * 7 * hop_time(slow)
+
+
+# ---------------------------------------------------------------------------------------------
+# a run's summary and raw record
+
+
+def round_trips(rng: np.random.Generator, median_ms: float, rounds: int) -> list[float]:
+    """Round trips (s) as the suite stores them: rounded to 0.1 µs, a long tail."""
+    return [round(x, 7) for x in median_ms / 1e3 * (0.8 + rng.gamma(2.0, 0.12, rounds))]
+
+
+def measured(rng: np.random.Generator, n: int, median_ms: float, rounds: int) -> dict:
+    """``ring_record`` of a made-up ring run of ``n`` nodes."""
+    run = SimpleNamespace(
+        rounds_s=round_trips(rng, median_ms, rounds),
+        rss_mb=[55.0 + i % 3 for i in range(n)],
+        cpu_s=[1.0 + 0.01 * i for i in range(n)],
+        wall_s=10.0,
+        handler_us={"median": 6.0, "p99": 9.0},
+        stats={"send_us": {"median": 3.0}},
+        launcher_cpu_s=0.5,
+        form_s=1.5,
+    )
+    return ring_record(run, n)
+
+
+def suite_run(seed: int = 1) -> dict:
+    """A full suite run's raw record, the size of a real one: every ring size of ``FULL_SIZES``
+    with its bare ring and as many rounds as the suite measures, two profile runs, the commands'
+    per-command samples."""
+    rng = np.random.default_rng(seed)
+    scaling = []
+    for topology, sizes in FULL_SIZES.items():
+        for n in sizes:
+            rounds, pairs = rounds_for(n, False)[0], pairs_for(n, False)  # small rings: pairs pooled
+            bare = round_trips(rng, 0.09 * n, rounds * pairs)
+            record = {
+                "topology": topology,
+                "nodes": n,
+                "rounds": rounds,
+                "pairs": pairs,
+                "load_before": [1.0],
+            }
+            record |= {
+                "bare_rtt_ms": summarize(bare),
+                "bare_rounds_s": bare,
+                **measured(rng, n, 0.1 * n, rounds * pairs),
+            }
+            record["ratio_median"] = record["rtt_ms"]["median"] / record["bare_rtt_ms"]["median"]
+            record["ratio_p99"] = record["rtt_ms"]["p99"] / record["bare_rtt_ms"]["p99"]
+            record["pair_ratios"] = [record["ratio_median"]]
+            record["load_after"] = [1.2, 1.0, 0.9]
+            scaling.append(record)
+    profile = {
+        "profile": "arcnet",
+        "nodes": ["main", "motor", "sonar", "compass", "copro", "map", "lcd"],
+        "bitrate": "2.5M",
+        "seed_ms": [30.0, 40.0],
+        "model": {
+            "wire_ms_per_hop": 2.286,
+            "visit_ms": 0.375,
+            "byte_us": 12.0,
+            "sonar_lock_ms": [15.0, 10.2],
+            "no_copy_ms": 22.1,
+            "sonar_mean_hold_ms": 3.5,
+        },
+        "runs": [
+            {"label": "idle (no programs)", **measured(rng, 7, 23.0, 600), "load": [1.0]},
+            {"label": "the seven programs running", **measured(rng, 7, 31.0, 600), "load": [1.0]},
+        ],
+    }
+    samples = [
+        {"ms": float(ms), "visits": 3, "waited": 0, "acked": True, "sender": "main"}
+        for ms in rng.uniform(2.0, 4.0, 280)
+    ]
+    commands = {
+        "nodes": 8,
+        "bitrate": "max",
+        "seed_worst_rounds": 6,
+        "scenarios": [
+            {
+                "label": "free inbox",
+                "senders": {"main": ["motor.command"]},
+                "commands": 280,
+                "lost": 0,
+                "acknowledged": 280,
+                "ms": {"median": 2.6, "p99": 3.2, "max": 4.0},
+                "rounds": {"median": 3.0, "max": 4.0},
+                "waited_rounds": {"median": 0.0, "max": 0.0},
+                "round_ms": {"median": 0.8},
+                "samples": samples,
+            }
+        ],
+    }
+    return {
+        "date": f"2026-11-2{seed}T10:00:00",
+        "command": "python -m bench",
+        "quick": False,
+        "machine": {
+            "cpus": 2,
+            "memory_gib": 23.5,
+            "python": "3.11.7",
+            "zenoh": "1.10.2",
+            "pyzmq": "26",
+            "kernel": "6.18",
+            "token_path": "C",
+        },
+        "load_start": [1.0, 1.0, 1.0],
+        "sections": {
+            "scaling": {"runs": scaling, "seconds": 600.0},
+            "commands": commands,
+            "profile": profile,
+        },
+        "errors": {},
+        "load_end": [2.0, 1.5, 1.0],
+        "seconds": 1800.0,
+    }
+
+
+def test_a_runs_summary_is_kilobytes_keeps_every_figure_and_drops_every_sample(tmp_path):
+    results = suite_run()
+    path, raw = write_results(results, tmp_path / "2026-11-21.json")
+    assert raw == tmp_path / "raw" / "2026-11-21.json"
+    assert json.loads(raw.read_text()) == results  # the raw record: everything, samples and all
+    assert raw.stat().st_size > 1_000_000  # as a real run's: megabytes
+    assert path.stat().st_size < 100_000, path.stat().st_size
+    summary = json.loads(path.read_text())
+    assert summary["raw"] == "raw/2026-11-21.json"
+    text = path.read_text()
+    assert "rounds_s" not in text and '"samples"' not in text
+    for full, slim in zip(
+        results["sections"]["scaling"]["runs"], summary["sections"]["scaling"]["runs"], strict=True
+    ):
+        assert slim["rtt_ms"] == full["rtt_ms"] and slim["bare_rtt_ms"] == full["bare_rtt_ms"]
+        assert slim["ratio_median"] == full["ratio_median"] and slim["rss_mb"] == full["rss_mb"]
+        values = np.array(full["rounds_s"]) * 1e3
+        assert slim["rounds_ms"]["p10"] == np.percentile(values, 10) and slim["rounds_ms"]["n"] == len(values)
+    assert summary["machine"] == results["machine"] and summary["load_end"] == results["load_end"]
+    assert summary_of(summary) == summary  # a summary is its own summary
+
+
+def test_the_tables_from_the_summary_alone_are_those_from_the_raw_record(tmp_path, capsys):
+    results = suite_run()
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    from_raw = write_report(results, tmp_path / "a" / "results", current=None).read_text()
+    from_summary = write_report(summary_of(results), tmp_path / "b" / "results").read_text()
+    assert from_summary == from_raw
+    # the profile's quantiles as the report once computed them from the samples
+    busy = np.array(results["sections"]["profile"]["runs"][1]["rounds_s"]) * 1e3
+    row = f"| {np.median(busy):.1f} | {np.percentile(busy, 10):.1f}-{np.percentile(busy, 90):.1f} | {busy.max():.1f} |"
+    assert row in from_summary
+    assert f"(p10-p90 {np.percentile(busy, 10):.1f}-" in from_summary
+    assert "| peer | 8 |" in from_summary and "| router | 255 |" in from_summary
+    # without a raw record the profile's histogram could not be drawn, and that is said
+    assert not (tmp_path / "b" / "results" / "plots" / "profile.png").exists()
+    assert "profile.png: not drawn" in capsys.readouterr().err
+
+
+def test_plots_are_drawn_from_the_raw_record_and_kept_without_it(tmp_path, capsys):
+    out = tmp_path / "results"
+    out.mkdir()
+    path, raw = write_results(suite_run(), out / "2026-11-21.json")
+    write_report(json.loads(path.read_text()), out, current=path)
+    plots = out / "plots"
+    for name in ("scaling", "resources", "profile"):
+        assert (plots / f"{name}.png").read_bytes().startswith(b"\x89PNG")
+        assert (plots / f"{name}.png").stat().st_size < 100_000
+    assert "profile.png" not in capsys.readouterr().err
+    md = (tmp_path / "RESULTS.md").read_text()
+    # a fresh clone: the summaries only; the histogram stays as committed, the tables are the same
+    raw.unlink()
+    (plots / "profile.png").write_bytes(b"the committed plot")
+    write_report(json.loads(path.read_text()), out, current=path)
+    assert (plots / "profile.png").read_bytes() == b"the committed plot"
+    assert (
+        f"profile.png: kept as it is: the profile's round trips are in no raw record ({raw})"
+        in capsys.readouterr().err
+    )
+    assert (tmp_path / "RESULTS.md").read_text() == md
+    # a later run without the profile takes it, and its samples, from the earlier run
+    later = suite_run(2)
+    del later["sections"]["profile"]
+    write_results(suite_run(3), out / "2026-11-23.json")  # the latest profile, with its raw record
+    (plots / "profile.png").unlink()
+    write_report(summary_of(later), out, current=out / "2026-11-22.json", raw=later)
+    assert (plots / "profile.png").exists()
+    assert "profile from 2026-11-23T10:00:00 (2026-11-23.json)" in (tmp_path / "RESULTS.md").read_text()
+
+
+NEMESIS = """## Nemesis: seeded random faults (`python -m bench.nemesis`)
+
+Hand-written: what seed 5 found, the commit that fixed it.
+
+| seed | s |
+|---|---|
+| 1 | 60 |
+"""
+
+
+def test_a_rewrite_keeps_the_hand_written_nemesis_section_and_marked_blocks(tmp_path):
+    out = tmp_path / "results"
+    out.mkdir()
+    md = tmp_path / "RESULTS.md"
+    block = "<!-- keep:notes -->\nA note by hand.\n\n## Not a section of its own\n<!-- /keep:notes -->"
+    md.write_text(
+        f"# old\n\n## Round trip vs ring size\n\nold table\n\n{NEMESIS}\n{block}\n\n## The robot's own benchmarks\n\nold\n"
+    )
+    assert kept_sections(md.read_text()) == [NEMESIS, block + "\n"]
+    write_report(summary_of(suite_run()), out)
+    text = md.read_text()
+    assert NEMESIS + "\n" + block + "\n\n## The robot's own benchmarks" in text
+    assert "old table" not in text and text.count("## Nemesis") == 1
+    write_report(summary_of(suite_run()), out)
+    assert md.read_text() == text  # and again
+
+
+def test_without_a_hand_written_one_the_nemesis_section_is_rendered_from_its_results(tmp_path):
+    out = tmp_path / "results"
+    out.mkdir()
+    run = {
+        "duration_s": 60,
+        "faults": 100,
+        "regenerated": 150,
+        "sent": 1000,
+        "acked": 900,
+        "lost": 0,
+        "duplicated": 0,
+        "one_token_at_end": True,
+        "ok": True,
+        "load_1min_at_start": 30.0,
+    }
+    runs = [
+        run | {"seed": 1},
+        run | {"seed": 2, "ok": False, "one_token_at_end": False, "load_1min_at_start": 50.0},
+        run | {"seed": 3, "lost": 1},
+        {"seed": 4, "duration_s": 60, "error": "no verdict within 480 s"},
+    ]
+    (out / "nemesis-20x60.json").write_text(json.dumps({"runs": runs}))
+    row = "| [nemesis-20x60.json](results/nemesis-20x60.json) | 4 | 1-4 | 240 | 300 | 450 | 3000 | 2700 | 1 | 0 | 2/4 | 2/4 | 30 / 50 |"
+    assert row in nemesis_md(out)
+    write_report(summary_of(suite_run()), out)
+    md = tmp_path / "RESULTS.md"
+    assert row in md.read_text()
+    (out / "nemesis-reruns.json").write_text(json.dumps({"runs": [run | {"seed": 5}, run | {"seed": 10}]}))
+    write_report(summary_of(suite_run()), out)  # its own rendering is not kept: the new file shows
+    text = md.read_text()
+    assert (
+        text.count("## Nemesis") == 1
+        and "| [nemesis-reruns.json](results/nemesis-reruns.json) | 2 | 5, 10 |" in text
+    )
+    assert text.index("## Nemesis") < text.index("## The robot's own benchmarks")
+    assert nemesis_md(tmp_path / "none") == ""

@@ -1,20 +1,65 @@
 """The suite's runs of `tokenring bench` in their own processes: a failed or overlong one is
-recorded as an error, and a killed benchmark leaves no ring process behind."""
+recorded as an error, and a killed benchmark leaves no ring process behind; what a run writes:
+its samples to the ignored raw/, its summary (kilobytes) beside them."""
 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import signal
 import subprocess
 import threading
 from pathlib import Path
 
-from conftest import wait_gone
+from conftest import REPO, wait_gone
 from ringutil import wait_until
+from test_bench_report import suite_run
 
+from bench import suite
 from bench.suite import bench_cli
+from tokenring import zconfig
 from tokenring.zconfig import NODE_RUNTIME
+
+
+def test_a_suite_run_writes_its_samples_to_raw_and_a_summary_of_kilobytes(tmp_path, monkeypatch, capsys):
+    """``python -m bench``'s own path, its sections replaced by made-up records of a real run's size."""
+    made_up = suite_run()
+    for name in ("scaling", "profile"):
+        monkeypatch.setitem(
+            suite.SECTION_FUNCTIONS,
+            name,
+            lambda ctx, name=name: json.loads(json.dumps(made_up["sections"][name])),
+        )
+    monkeypatch.setattr(zconfig, "use_node_runtime", lambda: None)
+    out = tmp_path / "results"
+    assert suite.main(["--sections", "scaling,profile", "--out", str(out)]) == 0
+    (summary,) = out.glob("*.json")
+    raw = out / "raw" / summary.name
+    assert raw.stat().st_size > 1_000_000 and summary.stat().st_size < 100_000
+    assert (
+        json.loads(raw.read_text())["sections"]["profile"]["runs"][0]["rounds_s"]
+        == made_up["sections"]["profile"]["runs"][0]["rounds_s"]
+    )
+    assert "rounds_s" not in summary.read_text()
+    assert f"written {summary}, its samples in {raw}" in capsys.readouterr().err
+    assert (out / "plots" / "profile.png").exists()  # drawn from the samples in memory
+    report = (tmp_path / "RESULTS.md").read_text()
+    assert "| router | 255 |" in report and "![profile arcnet](results/plots/profile.png)" in report
+
+
+def test_the_raw_records_are_ignored_and_no_committed_result_file_is_over_100_kb():
+    results = REPO / "bench" / "results"
+    ignored = subprocess.run(
+        ["git", "check-ignore", "-q", str(results / "raw" / "2026-11-21.json")], cwd=REPO, check=False
+    )
+    assert ignored.returncode == 0, "bench/results/raw/ is not ignored"
+    big = [
+        f"{p.relative_to(REPO)}: {p.stat().st_size} bytes"
+        for p in results.rglob("*")
+        if p.is_file() and "raw" not in p.relative_to(results).parts[:1] and p.stat().st_size > 100 * 1024
+    ]
+    assert not big, big
 
 
 def test_a_bench_run_that_fails_is_recorded_not_raised():
