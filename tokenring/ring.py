@@ -1,6 +1,6 @@
 """The logical ring's rules: membership and successor, epochs, pacing and timeouts.
 
-Timeouts (all derived, never guessed; see README "Timing"):
+Timeouts (all derived, never guessed; see docs/ring.md, "Timing"):
 
 * **hop time** — emulated ARCNET wire time of one pass: a 516-byte long packet at 11 bit times
   per byte plus the 15.6 µs token pass, scaled by ``2.5 Mbit/s / bitrate`` (2.286 ms at the
