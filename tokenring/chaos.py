@@ -53,7 +53,9 @@ LEDGER_ENV = "TOKENRING_PROBE_LEDGER"  # where the probe programs write their le
 INJECT_S = 5.0  # a starved node may take seconds to answer its fault query
 FORM_S = 90.0  # eight interpreters starting on a loaded machine can take a minute
 SETTLE_MAX_S = 30.0  # how much longer than the settle time a ring may take to converge
-EFFECT_S = 0.05  # after a crash or hang is acknowledged, until its node has surely stopped
+EFFECT_S = 0.25  # after a crash or hang is acknowledged, until its node has surely stopped
+#: faults that may be asked for twice with the effect of once: one lost answer is asked again
+IDEMPOTENT = frozenset({"delay", "drop", "corrupt", "duplicate", "partition", "heal", "clear"})
 STAT_KEYS = (
     "tokens_regenerated",
     "stale_tokens",
@@ -519,7 +521,12 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
             try:
                 client.inject(node_id, step.request)
             except TokenRingError as exc:
-                errors.append(f"{node_id}: {exc}")
+                try:
+                    if step.kind not in IDEMPOTENT:
+                        raise
+                    client.inject(node_id, step.request)  # its answer may have been lost
+                except TokenRingError:
+                    errors.append(f"{node_id}: {exc}")
             if step.kind == "crash" and scenario.respawn:
                 restarting.add(node_id)
             elif step.kind == "hang":

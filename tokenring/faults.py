@@ -37,6 +37,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from tokenring import keys
+from tokenring.control import AfterReply
 from tokenring.errors import UsageError
 from tokenring.launcher import CRASH_EXIT_CODE
 
@@ -44,6 +45,12 @@ if TYPE_CHECKING:
     from tokenring.node import NodeOS
 
 log = logging.getLogger("tokenring.faults")
+
+#: a crash or hard hang stops the process this long after its answer was handed to Zenoh: the
+#: answer's batch must leave before the process stops (it was 10 ms from *before* the reply,
+#: and on a loaded machine the stop won the race: chaos saw "nobody answered" for faults that
+#: had taken effect)
+AFTER_REPLY_S = 0.05
 
 KINDS = (
     "crash",
@@ -144,20 +151,21 @@ class FaultInjector:
         self.on_change: Callable[[dict[str, Any]], None] | None = None
 
     # -- control ----------------------------------------------------------------------------------
-    def handle(self, request: dict[str, Any]) -> dict[str, Any]:
-        """Apply one request; returns the active faults afterwards."""
+    def handle(self, request: dict[str, Any]) -> dict[str, Any] | AfterReply:
+        """Apply one request; returns the active faults afterwards (a crash or a hard hang takes
+        effect :data:`AFTER_REPLY_S` after the answer left, so the requester hears it)."""
         spec = validate(request)
         kind = spec["kind"]
         later: threading.Timer | None = None  # started after the ring was told
         with self._lock:
             if kind == "crash":
-                later = threading.Timer(0.01, self._exit, args=(CRASH_EXIT_CODE,))  # after the reply
+                later = threading.Timer(AFTER_REPLY_S, self._exit, args=(CRASH_EXIT_CODE,))
             elif kind == "hang":
                 if spec["soft"]:
                     self._thawed.clear()
                     self.os.paused = True
                 else:
-                    later = threading.Timer(0.01, os.kill, args=(os.getpid(), signal.SIGSTOP))
+                    later = threading.Timer(AFTER_REPLY_S, os.kill, args=(os.getpid(), signal.SIGSTOP))
                 self.active["hang"] = {"since": time.time(), **spec}
             elif kind == "resume":
                 self._resume()
@@ -179,7 +187,7 @@ class FaultInjector:
         if kind != "list":
             self._changed(listing)
         if later is not None:
-            later.start()
+            return AfterReply(listing, later.start)  # started once the answer is sent
         return listing
 
     def _changed(self, listing: dict[str, Any]) -> None:
