@@ -13,8 +13,6 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import os
-import queue
-import selectors
 import signal
 import subprocess
 import sys
@@ -30,6 +28,7 @@ import zenoh
 from tokenring import keys
 from tokenring.control import answer_query
 from tokenring.errors import TransportError, UsageError
+from tokenring.launchio import ExitWatch, PrefixedOutput
 from tokenring.ring import EVENT_RING_STOPPING, RING_EVENT
 from tokenring.zconfig import make_config, node_environment, open_session
 
@@ -144,7 +143,6 @@ class Launcher:
         self.protocol_path = protocol_path
         self.log_level = log_level
         self.respawn = respawn
-        self.output = output or sys.stdout
         self.extra_node_args = list(extra_node_args)
         self.session: zenoh.Session | None = None
         self.endpoint: str | None = None
@@ -158,20 +156,9 @@ class Launcher:
         self._children_gone = threading.Event()
         # children's exits wake the supervisor through their pidfds (readable once a process
         # exits); polling 255 children 20 times a second took CPU from the router in this process
-        self._exits = selectors.DefaultSelector()
-        self._exits_lock = threading.Lock()  # registering (boot waves) against closing (stop)
-        self._exits_wake_r, self._exits_wake_w = os.pipe()
-        self._exits.register(self._exits_wake_r, selectors.EVENT_READ, None)
-        self._pidfds_work = True
+        self._exits = ExitWatch()
         self._respawn_due: dict[int, float] = {}  # node ID -> when --respawn starts it again
         self._stop_signal: int | None = None
-        self._selector = selectors.DefaultSelector()
-        self._selector_lock = threading.Lock()
-        self._reader: threading.Thread | None = None
-        self._lines: queue.Queue[str | None] = queue.Queue(maxsize=20000)
-        self._dropped = 0
-        self._writer = threading.Thread(target=self._write_outputs, name="launcher-writer", daemon=True)
-        self._writer.start()
         self._queryable: Any = None
         self.shutdown_reason: str | None = None
         self.booting = False  # programs are being downloaded over the ring (``up``)
@@ -179,61 +166,21 @@ class Launcher:
             (len(name) for name in [*(p.name for p in self.plans), *(s.name for s in self.services)]),
             default=4,
         )
-        self._width = max(width, 4)
+        self.output = PrefixedOutput(output or sys.stdout, width)
 
     # -- output ---------------------------------------------------------------------------------
     def say(self, text: str, name: str = "up") -> None:
-        """Queue one prefixed line for the output. Never blocks: if whoever reads our output
-        stalls (a paused pager, an unread pipe), lines are dropped and counted — a stalled
-        log must not stall the nodes writing it, and so the ring."""
-        try:
-            self._lines.put_nowait(f"{name:>{self._width}} | {text}\n")
-        except queue.Full:
-            self._dropped += 1
-
-    def _write_outputs(self) -> None:
-        while True:
-            line = self._lines.get()
-            if line is None:
-                return
-            try:
-                if self._dropped:
-                    dropped, self._dropped = self._dropped, 0
-                    self.output.write(
-                        f"{'up':>{self._width}} | ({dropped} log lines dropped: output too slow)\n"
-                    )
-                self.output.write(line)
-                if self._lines.empty():
-                    self.output.flush()
-            except (OSError, ValueError):
-                pass  # the output went away; the ring goes on
+        """One prefixed line of output (never blocks: see :class:`PrefixedOutput`)."""
+        self.output.say(text, name)
 
     def flush_output(self, timeout: float = 1.0) -> None:
         """Wait until the queued lines are written (for a clean end of the run)."""
-        deadline = time.monotonic() + timeout
-        while not self._lines.empty() and time.monotonic() < deadline:
-            time.sleep(0.01)
-        with contextlib.suppress(OSError, ValueError):
-            self.output.flush()
+        self.output.flush(timeout)
 
-    def _read_outputs(self) -> None:
-        """Copy every child's output lines, prefixed with its name, until all pipes close."""
-        while True:
-            with self._selector_lock:
-                watching = bool(self._selector.get_map())
-            if not watching:
-                if self._stop.is_set():
-                    return
-                time.sleep(0.05)
-                continue
-            for key, _ in self._selector.select(timeout=0.1):
-                stream, name = key.fileobj, key.data
-                line = stream.readline()  # type: ignore[union-attr]
-                if line:
-                    self.say(line.rstrip("\n"), name)
-                    continue
-                with self._selector_lock, contextlib.suppress(KeyError, ValueError):
-                    self._selector.unregister(stream)
+    @property
+    def stopping(self) -> bool:
+        """A stop was requested (or is under way)."""
+        return self._stop.is_set()
 
     # -- session --------------------------------------------------------------------------------
     def _open_session(self) -> None:
@@ -324,8 +271,7 @@ class Launcher:
             preexec_fn=die_with_parent,  # only prctl in the child: async-signal-safe
         )
         assert process.stdout is not None
-        with self._selector_lock:
-            self._selector.register(process.stdout, selectors.EVENT_READ, name)
+        self.output.watch(process.stdout, name)
         return process
 
     def start_service(self, service: ServicePlan) -> subprocess.Popen:
@@ -364,27 +310,17 @@ class Launcher:
         if previous is not None:
             child.restarts = previous.restarts + 1
         self.children[plan.node_id] = child
-        self._watch_exit(child)
+        self._exits.add(child.process.pid, child)
         return child
-
-    def _watch_exit(self, child: Child) -> None:
-        try:
-            pidfd = os.pidfd_open(child.process.pid)
-        except (AttributeError, OSError):  # not Linux >= 5.3: the supervisor polls instead
-            self._pidfds_work = False
-            return
-        with self._exits_lock:
-            if self._exits.get_map() is None:  # stopped meanwhile
-                os.close(pidfd)
-                return
-            self._exits.register(pidfd, selectors.EVENT_READ, child)
 
     def start(self) -> None:
         """Open the tap session and start every node."""
         self._open_session()
         assert self.session is not None
+        verbs = LauncherVerbs(self)
         self._queryable = self.session.declare_queryable(
-            keys.control(self.ring, "launcher", "*"), self._on_query
+            keys.control(self.ring, "launcher", "*"),
+            lambda query: answer_query(query, verbs.handlers, "the launcher"),
         )
         where = self.endpoint or ", ".join(self.node_connect())
         self.say(
@@ -392,8 +328,7 @@ class Launcher:
             f"({', '.join(f'{p.name}={p.node_id}' for p in self.plans)}) on {where}, "
             f"bitrate {self.bitrate}"
         )
-        self._reader = threading.Thread(target=self._read_outputs, name="launcher-output", daemon=True)
-        self._reader.start()
+        self.output.start_reading(self._stop)
         for service in self.services:
             self.start_service(service)
         if self.transport != "zenoh":
@@ -454,17 +389,10 @@ class Launcher:
     def _supervise(self) -> None:
         try:
             while not self._stop.is_set():
-                timeout = EXIT_CHECK_S if self._pidfds_work else CHILD_POLL_S
+                timeout = EXIT_CHECK_S if self._exits.works else CHILD_POLL_S
                 if self._respawn_due:
                     timeout = max(0.0, min(timeout, min(self._respawn_due.values()) - time.monotonic()))
-                ready = self._exits.select(timeout)
-                exited = []
-                with self._exits_lock:
-                    for key, _ in ready:
-                        if key.data is not None:  # a child exited (else stop() woke us)
-                            self._exits.unregister(key.fileobj)
-                            os.close(key.fd)
-                            exited.append(key.data)
+                exited = self._exits.wait(timeout)
                 if self._stop.is_set():
                     break
                 for child in exited:
@@ -475,67 +403,7 @@ class Launcher:
                 with self._children_lock:
                     self.check_children()
         finally:
-            self._close_exit_watch()
-
-    def _close_exit_watch(self) -> None:
-        """Close the pidfds and the wake pipe's read end (stop() closes its write end)."""
-        with self._exits_lock:
-            for key in list((self._exits.get_map() or {}).values()):
-                self._exits.unregister(key.fileobj)
-                os.close(key.fd)
-            self._exits.close()
-
-    def status(self) -> dict[str, Any]:
-        return {
-            "ring": self.ring,
-            "endpoint": self.endpoint,
-            "booting": self.booting,
-            "nodes": [
-                {
-                    "id": c.plan.node_id,
-                    "name": c.plan.name,
-                    "pid": c.process.pid,
-                    "running": c.process.poll() is None,
-                    "exit": describe_exit(c.process.poll()) if c.process.poll() is not None else None,
-                    "restarts": c.restarts,
-                }
-                for c in self.child_list()
-            ],
-            "services": [
-                {"name": name, "pid": p.pid, "running": p.poll() is None}
-                for name, p in self.service_children.items()
-            ],
-        }
-
-    def _on_query(self, query: zenoh.Query) -> None:
-        handlers = {"status": lambda _: self.status(), "shutdown": self._shutdown, "signal": self._signal}
-        answer_query(query, handlers, "the launcher")
-
-    def _shutdown(self, request: dict[str, Any]) -> dict[str, Any]:
-        """Stop the whole ring cleanly (the charger's deep-discharge cut asks for it)."""
-        reason = str(request.get("reason", "asked to"))
-        self.say(f"ring shutdown requested: {reason}")
-        self.shutdown_reason = reason
-        self.request_stop()
-        return {"stopping": True}
-
-    def _signal(self, request: dict[str, Any]) -> dict[str, Any]:
-        """Send a signal (CONT, STOP, TERM, KILL) to one of our nodes: how a SIGSTOPped node
-        is resumed, since it can no longer answer anything itself."""
-        name = str(request.get("signal", "")).upper().removeprefix("SIG")
-        allowed = {
-            "CONT": signal.SIGCONT,
-            "STOP": signal.SIGSTOP,
-            "TERM": signal.SIGTERM,
-            "KILL": signal.SIGKILL,
-        }
-        if name not in allowed:
-            raise UsageError(f"signal must be one of {', '.join(allowed)}")
-        child = self.children.get(int(request.get("id", -1)))
-        if child is None or child.process.poll() is not None:
-            raise UsageError(f"node {request.get('id')} is not a running node of this launcher")
-        os.kill(child.process.pid, allowed[name])
-        return {"id": child.plan.node_id, "pid": child.process.pid, "signal": name}
+            self._exits.close_reading()
 
     def check_children(self) -> None:
         """Report nodes that died; with ``--respawn`` start them again RESPAWN_DELAY_S later."""
@@ -585,18 +453,13 @@ class Launcher:
     def stop(self) -> None:
         """Stop every child: SIGTERM (clean leave), then SIGKILL whatever is left after 1.5 s."""
         self._stop.set()
-        if self._exits_wake_w >= 0:  # the supervisor sleeps on its children's exits
-            with contextlib.suppress(OSError):  # it has ended already (its read end is closed)
-                os.write(self._exits_wake_w, b"x")
+        self._exits.wake()  # the supervisor sleeps on its children's exits
         if self._supervisor is None:
-            self._close_exit_watch()  # never started
+            self._exits.close_reading()  # never started
         elif self._supervisor is not threading.current_thread():
             self._supervisor.join(timeout=1.0)
         if self._supervisor is None or not self._supervisor.is_alive():
-            with contextlib.suppress(OSError):
-                if self._exits_wake_w >= 0:
-                    os.close(self._exits_wake_w)
-            self._exits_wake_w = -1
+            self._exits.close_waking()
         with self._children_lock:
             self.check_children()  # report what died before the stop
         running = [c for c in self.child_list() if c.process.poll() is None]
@@ -642,8 +505,7 @@ class Launcher:
                     self.say(f"{name} did not stop in {STOP_TIMEOUT_S} s: killing it")
                     process.kill()
                     process.wait(1.0)
-        if self._reader is not None:
-            self._reader.join(timeout=1.0)
+        self.output.join_reader(timeout=1.0)
         for process in [c.process for c in self.child_list()] + list(self.service_children.values()):
             if process.stdout is not None:
                 process.stdout.close()
@@ -658,6 +520,65 @@ class Launcher:
         if self.session is not None:
             self.session.close()
             self.session = None
+
+
+class LauncherVerbs:
+    """The launcher's control verbs on ``ctl/launcher/*``: ``status``, ``shutdown`` (the
+    charger's deep-discharge cut), ``signal`` (how a SIGSTOPped node is resumed)."""
+
+    def __init__(self, launcher: Launcher) -> None:
+        self.launcher = launcher
+        self.handlers = {"status": lambda _: self.status(), "shutdown": self.shutdown, "signal": self.signal}
+
+    def status(self) -> dict[str, Any]:
+        """The ring, its endpoint and every node and service process."""
+        launcher = self.launcher
+        return {
+            "ring": launcher.ring,
+            "endpoint": launcher.endpoint,
+            "booting": launcher.booting,
+            "nodes": [
+                {
+                    "id": c.plan.node_id,
+                    "name": c.plan.name,
+                    "pid": c.process.pid,
+                    "running": c.process.poll() is None,
+                    "exit": describe_exit(c.process.poll()) if c.process.poll() is not None else None,
+                    "restarts": c.restarts,
+                }
+                for c in launcher.child_list()
+            ],
+            "services": [
+                {"name": name, "pid": p.pid, "running": p.poll() is None}
+                for name, p in launcher.service_children.items()
+            ],
+        }
+
+    def shutdown(self, request: dict[str, Any]) -> dict[str, Any]:
+        """Stop the whole ring cleanly (the charger's deep-discharge cut asks for it)."""
+        reason = str(request.get("reason", "asked to"))
+        self.launcher.say(f"ring shutdown requested: {reason}")
+        self.launcher.shutdown_reason = reason
+        self.launcher.request_stop()
+        return {"stopping": True}
+
+    def signal(self, request: dict[str, Any]) -> dict[str, Any]:
+        """Send a signal (CONT, STOP, TERM, KILL) to one of our nodes: how a SIGSTOPped node
+        is resumed, since it can no longer answer anything itself."""
+        name = str(request.get("signal", "")).upper().removeprefix("SIG")
+        allowed = {
+            "CONT": signal.SIGCONT,
+            "STOP": signal.SIGSTOP,
+            "TERM": signal.SIGTERM,
+            "KILL": signal.SIGKILL,
+        }
+        if name not in allowed:
+            raise UsageError(f"signal must be one of {', '.join(allowed)}")
+        child = self.launcher.children.get(int(request.get("id", -1)))
+        if child is None or child.process.poll() is not None:
+            raise UsageError(f"node {request.get('id')} is not a running node of this launcher")
+        os.kill(child.process.pid, allowed[name])
+        return {"id": child.plan.node_id, "pid": child.process.pid, "signal": name}
 
 
 def plans_from_protocol(

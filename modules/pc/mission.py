@@ -64,7 +64,7 @@ class Mission:
         self.launcher.say(text, name="explore")
 
     def _stopping(self) -> bool:
-        return self.launcher._stop.is_set()
+        return self.launcher.stopping
 
     def _run(self) -> None:
         try:

@@ -166,7 +166,7 @@ def boot_load(launcher: Launcher, programs: Path, ids: set[int], wait: float = 3
             link,
             progress=False,
             say=lambda text: launcher.say(text, name="load"),
-            cancelled=launcher._stop.is_set,
+            cancelled=lambda: launcher.stopping,
         )
         result = run_load(
             loader, mode="incremental", programs_dir=programs, start=True, expect=ids, wait=wait

@@ -1,0 +1,157 @@
+"""The launcher's plumbing: its children's output, prefixed and never blocking, and their exits,
+watched through pidfds so that supervising 255 children costs no polling."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import queue
+import selectors
+import threading
+import time
+from typing import IO, Any
+
+
+class PrefixedOutput:
+    """Every child's output lines, and the launcher's own, each prefixed with its name.
+
+    Lines go through a bounded queue to one writer thread: if whoever reads the output stalls
+    (a paused pager, an unread pipe), lines are dropped and counted — a stalled log must not
+    stall the nodes writing it, and so the ring."""
+
+    def __init__(self, output: IO[str], width: int) -> None:
+        self.output = output
+        self.width = max(width, 4)
+        self._lines: queue.Queue[str | None] = queue.Queue(maxsize=20000)
+        self._dropped = 0
+        self._selector = selectors.DefaultSelector()
+        self._selector_lock = threading.Lock()
+        self._reader: threading.Thread | None = None
+        self._writer = threading.Thread(target=self._write, name="launcher-writer", daemon=True)
+        self._writer.start()
+
+    def say(self, text: str, name: str = "up") -> None:
+        """Queue one prefixed line; never blocks."""
+        try:
+            self._lines.put_nowait(f"{name:>{self.width}} | {text}\n")
+        except queue.Full:
+            self._dropped += 1
+
+    def watch(self, stream: IO[str], name: str) -> None:
+        """Copy ``stream``'s lines under ``name`` until it closes."""
+        with self._selector_lock:
+            self._selector.register(stream, selectors.EVENT_READ, name)
+
+    def start_reading(self, stopped: threading.Event) -> None:
+        """Start copying the watched streams; the reader ends once ``stopped`` is set and every
+        stream has closed."""
+        self._reader = threading.Thread(
+            target=self._read, args=(stopped,), name="launcher-output", daemon=True
+        )
+        self._reader.start()
+
+    def join_reader(self, timeout: float = 1.0) -> None:
+        if self._reader is not None:
+            self._reader.join(timeout=timeout)
+
+    def flush(self, timeout: float = 1.0) -> None:
+        """Wait until the queued lines are written (for a clean end of the run)."""
+        deadline = time.monotonic() + timeout
+        while not self._lines.empty() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        with contextlib.suppress(OSError, ValueError):
+            self.output.flush()
+
+    def _write(self) -> None:
+        while True:
+            line = self._lines.get()
+            if line is None:
+                return
+            try:
+                if self._dropped:
+                    dropped, self._dropped = self._dropped, 0
+                    self.output.write(
+                        f"{'up':>{self.width}} | ({dropped} log lines dropped: output too slow)\n"
+                    )
+                self.output.write(line)
+                if self._lines.empty():
+                    self.output.flush()
+            except (OSError, ValueError):
+                pass  # the output went away; the ring goes on
+
+    def _read(self, stopped: threading.Event) -> None:
+        while True:
+            with self._selector_lock:
+                watching = bool(self._selector.get_map())
+            if not watching:
+                if stopped.is_set():
+                    return
+                time.sleep(0.05)
+                continue
+            for key, _ in self._selector.select(timeout=0.1):
+                stream, name = key.fileobj, key.data
+                line = stream.readline()  # type: ignore[union-attr]
+                if line:
+                    self.say(line.rstrip("\n"), name)
+                    continue
+                with self._selector_lock, contextlib.suppress(KeyError, ValueError):
+                    self._selector.unregister(stream)
+
+
+class ExitWatch:
+    """Children's exits as readable pidfds (Linux ≥ 5.3), plus a pipe that wakes the waiter.
+
+    ``works`` turns False where pidfds are missing: the supervisor then polls instead."""
+
+    def __init__(self) -> None:
+        self._selector = selectors.DefaultSelector()
+        self._lock = threading.Lock()  # registering (boot waves) against closing (stop)
+        self._wake_r, self._wake_w = os.pipe()
+        self._selector.register(self._wake_r, selectors.EVENT_READ, None)
+        self.works = True
+
+    def add(self, pid: int, data: Any) -> None:
+        """Watch process ``pid``; its exit comes back from :meth:`wait` as ``data``."""
+        try:
+            pidfd = os.pidfd_open(pid)
+        except (AttributeError, OSError):
+            self.works = False
+            return
+        with self._lock:
+            if self._selector.get_map() is None:  # closed meanwhile
+                os.close(pidfd)
+                return
+            self._selector.register(pidfd, selectors.EVENT_READ, data)
+
+    def wait(self, timeout: float) -> list[Any]:
+        """The data of the children that exited within ``timeout`` (empty on a wake)."""
+        ready = self._selector.select(timeout)
+        exited = []
+        with self._lock:
+            for key, _ in ready:
+                if key.data is not None:  # a child exited (else we were woken)
+                    self._selector.unregister(key.fileobj)
+                    os.close(key.fd)
+                    exited.append(key.data)
+        return exited
+
+    def wake(self) -> None:
+        """Wake whoever waits (idempotent; harmless once closed)."""
+        if self._wake_w >= 0:
+            with contextlib.suppress(OSError):
+                os.write(self._wake_w, b"x")
+
+    def close_reading(self) -> None:
+        """Close the pidfds and the wake pipe's read end (the waiter's side)."""
+        with self._lock:
+            for key in list((self._selector.get_map() or {}).values()):
+                self._selector.unregister(key.fileobj)
+                os.close(key.fd)
+            self._selector.close()
+
+    def close_waking(self) -> None:
+        """Close the wake pipe's write end (once the waiter has ended)."""
+        if self._wake_w >= 0:
+            with contextlib.suppress(OSError):
+                os.close(self._wake_w)
+            self._wake_w = -1
