@@ -128,6 +128,10 @@ class Launcher:
         self.plans = list(plans)
         self.boot_concurrency = boot_concurrency
         self.extra_env = dict(env or {})  # added to every node's environment (chaos: the ledger)
+        if transport != "zenoh":
+            from tokenring.transport.factory import require_backend
+
+            require_backend(transport)  # before any node starts
         self.transport = transport  # udp/zmq: the token path over sockets, membership from our registry
         self.profile = profile  # tokenring.profile: emulated hardware timing on every node
         self.registry: Any = None

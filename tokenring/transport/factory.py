@@ -10,6 +10,22 @@ from tokenring.transport.base import Transport
 TRANSPORTS = ("zenoh", "udp", "zmq")
 
 
+#: socket backends and the optional package each needs (pyproject.toml's extras)
+EXTRAS = {"zmq": ("zmq", "pyzmq", "zmq")}
+
+
+def require_backend(kind: str) -> None:
+    """Refuse a backend whose optional package is missing, naming the extra that installs it."""
+    import importlib.util
+
+    if kind in EXTRAS:
+        module, package, extra = EXTRAS[kind]
+        if importlib.util.find_spec(module) is None:
+            raise UsageError(
+                f"--transport {kind} needs {package}, which is not installed: pip install 'tokenring[{extra}]'"
+            )
+
+
 def make_transport(
     kind: str, session: Any, ring: str, node_id: int, frame_size: int, registry: str | None = None
 ) -> Transport:
@@ -25,6 +41,7 @@ def make_transport(
         raise UsageError(
             f"--transport {kind} needs --registry HOST:PORT (the launcher's membership registry)"
         )
+    require_backend(kind)
     from tokenring.transport.registry import parse_address
     from tokenring.transport.sockets import BACKENDS
 
