@@ -325,6 +325,7 @@ def collect_stats(
         if reply.get("ok"):
             result = reply["result"]
             out[result["id"]] = {k: result["stats"].get(k, 0) for k in STAT_KEYS}
+            out[result["id"]]["pid"] = int(result.get("pid", 0))  # which process answered
     return out
 
 
@@ -493,6 +494,7 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
     t0 = time.perf_counter()
     steps: list[dict[str, Any]] = []
     restarting: set[int] = set()  # crashed, respawn on, its new process not heard from yet
+    crashed_pid: dict[int, int] = {}  # the process each crash was sent to
     hung: set[int] = set()
     for step in scenario.faults:
         wait = t0 + step.at - time.perf_counter()
@@ -503,7 +505,9 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
         # is restarting until its new process answers
         answering = membership.present - restarting
         fresh = collect_stats(session, ring, answering)
-        restarting -= set(fresh)
+        # back once a *new* process answers: the crashed one answers for a moment after its
+        # crash was acknowledged (it exits just after the answer left)
+        restarting -= {i for i in fresh if fresh[i]["pid"] != crashed_pid.get(i)}
         known.update(fresh)
         before = dict(known)
         targets = (
@@ -529,6 +533,7 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
                     errors.append(f"{node_id}: {exc}")
             if step.kind == "crash" and scenario.respawn:
                 restarting.add(node_id)
+                crashed_pid[node_id] = known.get(node_id, {}).get("pid", -1)
             elif step.kind == "hang":
                 hung.add(node_id)
             elif step.kind == "resume":
