@@ -495,6 +495,7 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
     steps: list[dict[str, Any]] = []
     restarting: set[int] = set()  # crashed, respawn on, its new process not heard from yet
     crashed_pid: dict[int, int] = {}  # the process each crash was sent to
+    owed: dict[int, list[dict[str, Any]]] = {}  # repairs a hung node missed, sent as it resumes
     hung: set[int] = set()
     for step in scenario.faults:
         wait = t0 + step.at - time.perf_counter()
@@ -517,6 +518,12 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
         )
         injected, wall = time.perf_counter(), time.time()
         errors, skipped = [], []
+        if step.node == "all" and step.kind in ("heal", "clear"):
+            # a hung node cannot take it now, but the network is healed for it too: it gets
+            # the repair as it resumes (else it stays partitioned for good and the ring, which
+            # sees it live, keeps trying to pass to it)
+            for node_id in hung:
+                owed.setdefault(node_id, []).append(step.request)
         for node_id in targets:
             if node_id in restarting:
                 # crashed and not back yet: its faults died with its process, and it answers nothing
@@ -538,8 +545,13 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
                 hung.add(node_id)
             elif step.kind == "resume":
                 hung.discard(node_id)
+                for request in owed.pop(node_id, []):
+                    try:
+                        client.inject(node_id, request)
+                    except TokenRingError as exc:
+                        errors.append(f"{node_id}: {request['kind']} owed since its hang: {exc}")
         # the wire may still carry passes of a node that was told to crash or hang until it
-        # acts (a hang stops the process 10 ms after it answers): recovery counts from then
+        # acts (a hang stops the process 50 ms after its answer left): recovery counts from then
         effective = time.perf_counter() + (EFFECT_S if step.kind in ("crash", "hang") else 0.0)
         membership.apply(step, targets, scenario.respawn)
         say(
