@@ -297,8 +297,9 @@ def test_a_booting_ring_told_its_size_starts_only_once_every_node_is_live():
 
 
 def test_only_an_excluded_nodes_neighbours_ping_it_often():
-    from tokenring.node import FAR_PROBE_S, PREPARED_NEIGHBOURS, NodeOS
+    from tokenring.node import NodeOS
     from tokenring.protocol import default_protocol
+    from tokenring.recovery import FAR_PROBE_S, PREPARED_NEIGHBOURS
     from tokenring.transport.memory import MemoryHub, MemoryTransport
 
     node = NodeOS(default_protocol(), 1, MemoryTransport(MemoryHub(), "mem", 1))
