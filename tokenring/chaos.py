@@ -53,7 +53,8 @@ LEDGER_ENV = "TOKENRING_PROBE_LEDGER"  # where the probe programs write their le
 INJECT_S = 5.0  # a starved node may take seconds to answer its fault query
 FORM_S = 90.0  # eight interpreters starting on a loaded machine can take a minute
 SETTLE_MAX_S = 30.0  # how much longer than the settle time a ring may take to converge
-EFFECT_S = 0.25  # after a crash or hang is acknowledged, until its node has surely stopped
+#: after a crash or hang takes effect (its answer says when), until its node has surely stopped
+EFFECT_MARGIN_S = 0.02
 #: faults that may be asked for twice with the effect of once: one lost answer is asked again
 IDEMPOTENT = frozenset({"delay", "drop", "corrupt", "duplicate", "partition", "heal", "clear"})
 STAT_KEYS = (
@@ -518,6 +519,7 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
         )
         injected, wall = time.perf_counter(), time.time()
         errors, skipped = [], []
+        effect_in = 0.0
         if step.node == "all" and step.kind in ("heal", "clear"):
             # a hung node cannot take it now, but the network is healed for it too: it gets
             # the repair as it resumes (else it stays partitioned for good and the ring, which
@@ -530,7 +532,8 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
                 skipped.append(f"{node_id}: still restarting after its crash")
                 continue
             try:
-                client.inject(node_id, step.request)
+                answer = client.inject(node_id, step.request)
+                effect_in = max(effect_in, float(answer.get("effective_in_s", 0.0)))
             except TokenRingError as exc:
                 try:
                     if step.kind not in IDEMPOTENT:
@@ -551,8 +554,9 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
                     except TokenRingError as exc:
                         errors.append(f"{node_id}: {request['kind']} owed since its hang: {exc}")
         # the wire may still carry passes of a node that was told to crash or hang until it
-        # acts (a hang stops the process 50 ms after its answer left): recovery counts from then
-        effective = time.perf_counter() + (EFFECT_S if step.kind in ("crash", "hang") else 0.0)
+        # acts (its answer says when: tokenring.faults.AFTER_REPLY_S): recovery counts from then
+        stops = step.kind in ("crash", "hang")
+        effective = time.perf_counter() + (effect_in + EFFECT_MARGIN_S if stops else 0.0)
         membership.apply(step, targets, scenario.respawn)
         say(
             f"{injected - t0:6.2f} s  {step.kind:9s} on {step.node}"

@@ -187,7 +187,8 @@ class FaultInjector:
         if kind != "list":
             self._changed(listing)
         if later is not None:
-            return AfterReply(listing, later.start)  # started once the answer is sent
+            # started once the answer is sent; the requester learns when the fault takes effect
+            return AfterReply({**listing, "effective_in_s": AFTER_REPLY_S}, later.start)
         return listing
 
     def _changed(self, listing: dict[str, Any]) -> None:
