@@ -68,12 +68,9 @@ def check_program_file(path: Path, node_name: str | None = None) -> tuple[bytes,
     """Read and compile a program file on the PC first; returns (source, module name).
 
     Raises :class:`UsageError` naming the file for a file that is missing or not a module."""
-    try:
-        source = path.read_bytes()
-    except FileNotFoundError:
-        raise UsageError(f"{path}: no such program file") from None
-    except OSError as exc:
-        raise UsageError(f"{path}: cannot read: {exc.strerror}") from None
+    from tokenring.inputfile import read_bytes
+
+    source = read_bytes(path, "program file")
     try:
         program_class = load_program(source, str(path))
     except ProgramError as exc:

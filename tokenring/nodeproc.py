@@ -23,6 +23,7 @@ import zenoh
 
 from tokenring import extensions, keys
 from tokenring.channels import CommandMemory
+from tokenring.cliutil import seconds
 from tokenring.control import answer_query
 from tokenring.errors import UsageError
 from tokenring.faults import FaultInjector
@@ -237,7 +238,7 @@ def add_node_arguments(parser: argparse.ArgumentParser) -> None:
         help="largest program this node accepts (default %(default)s, the 8051's code space)",
     )
     parser.add_argument("--autostart", action="store_true", help="start the stored program at boot")
-    parser.add_argument("--duration", type=float, help="leave after this many seconds")
+    parser.add_argument("--duration", type=seconds, help="leave after this many seconds")
     parser.add_argument(
         "--expect",
         type=int,

@@ -86,11 +86,8 @@ def load_program(source: bytes | str, filename: str = "<program>") -> type[UserP
 
 def load_program_file(path: str | Path) -> tuple[type[UserProgram], bytes]:
     """Read and load a program file; returns the class and the exact bytes read."""
+    from tokenring.inputfile import read_bytes
+
     file = Path(path)
-    try:
-        source = file.read_bytes()
-    except FileNotFoundError:
-        raise ProgramError(f"{file}: no such program file") from None
-    except OSError as exc:
-        raise ProgramError(f"{file}: cannot read: {exc.strerror}") from None
+    source = read_bytes(file, "program file", ProgramError)
     return load_program(source, str(file)), source

@@ -308,13 +308,12 @@ def default_protocol_path() -> Path:
 def load_protocol(path: str | os.PathLike[str] | None = None) -> Protocol:
     """Read and compile a protocol file; raises :class:`ProtocolError` naming what is wrong."""
     file = Path(path) if path is not None else default_protocol_path()
+    from tokenring.inputfile import read_text
+
     source = str(file)
-    try:
-        text = file.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ProtocolError(source, "", "file not found") from None
-    except OSError as exc:
-        raise ProtocolError(source, "", f"cannot read: {exc.strerror}") from None
+    text = read_text(
+        file, "protocol file", lambda message: ProtocolError(source, "", message.split(": ", 1)[1])
+    )
     return parse_protocol(text, source)
 
 

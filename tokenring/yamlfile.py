@@ -68,11 +68,7 @@ def load_yaml(text: str, source: str = "<yaml>") -> tuple[Any, dict[str, int]]:
 
 def read_yaml(path: str | Path) -> tuple[Any, dict[str, int]]:
     """Read and parse a YAML file; a missing or unreadable file is a clear :class:`UsageError`."""
+    from tokenring.inputfile import read_text
+
     file = Path(path)
-    try:
-        text = file.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise UsageError(f"{file}: no such file") from None
-    except OSError as exc:
-        raise UsageError(f"{file}: cannot read: {exc.strerror}") from None
-    return load_yaml(text, str(file))
+    return load_yaml(read_text(file, "YAML file"), str(file))

@@ -94,13 +94,10 @@ def load_config(source: str | Path | dict | None = None) -> dict[str, Any]:
         return copy.deepcopy(DEFAULTS)
     if isinstance(source, dict):
         return validate(source, "<config>", {})
+    from tokenring.inputfile import read_text
+
     path = Path(source)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such configuration file") from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
+    text = read_text(path, "configuration file", ConfigError)
     return parse_config(text, str(path))
 
 
@@ -114,7 +111,7 @@ def parse_config(text: str, source: str) -> dict[str, Any]:
         where = f"{source}:{mark.line + 1}" if mark is not None else source
         raise ConfigError(f"{where}: not valid YAML: {getattr(exc, 'problem', exc)}") from None
     if data is None:
-        data = {}
+        data = {}  # an empty configuration is the defaults (tests/test_localizer_config.py)
     lines: dict[tuple[str, ...], int] = {}
     _collect_lines(node, (), lines)
     return validate(data, source, lines)

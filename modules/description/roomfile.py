@@ -36,7 +36,7 @@ from typing import Any
 import yaml
 
 from modules.description.room import Anomaly, Batteries, Circle, Floor, Pose, Wall, World
-from tokenring.errors import UsageError
+from tokenring.errors import TokenRingError, UsageError
 
 ROOMS_DIR = Path(__file__).resolve().parent / "rooms"
 DEFAULT_WORLD = "office"
@@ -78,11 +78,10 @@ def resolve_world(name_or_path: str | Path) -> Path:
 
 def load_world(name_or_path: str | Path) -> World:
     """Load a bundled room by name (``office``) or a world file (YAML, or a seed wall file)."""
+    from tokenring.inputfile import read_text
+
     path = resolve_world(name_or_path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise WorldError(f"{path}: cannot read: {exc}") from None
+    text = read_text(path, "world file", WorldError)
     if _looks_like_wall_file(text):
         walls = parse_wall_file(text, str(path))
         return _finish(World(name=path.stem, walls=tuple(walls), start=Pose(0, 0, 0), source=str(path)), None)
@@ -234,6 +233,8 @@ def parse_world_yaml(text: str, source: str, default_name: str = "world", base: 
     """Parse our YAML world format (see the module docstring)."""
     doc = _compose(text, source)
     r = _Reader(source)
+    if doc is None:
+        raise WorldError(f"{source}: the file is empty (a world file has walls and a start pose)")
     if not isinstance(doc, dict):
         raise WorldError(
             f"{source}: a world file is a YAML mapping with walls and start, not {type(doc).__name__}"
@@ -251,10 +252,12 @@ def parse_world_yaml(text: str, source: str, default_name: str = "world", base: 
         wall_path = Path(str(doc["wall_file"]))
         if not wall_path.is_absolute() and base is not None:
             wall_path = base / wall_path
-        try:
-            walls.extend(parse_wall_file(wall_path.read_text(encoding="utf-8"), str(wall_path)))
-        except OSError as exc:
-            raise r.fail(top, f"wall_file {wall_path}: cannot read: {exc.strerror}") from None
+        from tokenring.inputfile import read_text
+
+        def unreadable(message: str) -> TokenRingError:
+            return r.fail(top, f"wall_file {message}")
+
+        walls.extend(parse_wall_file(read_text(wall_path, "wall file", unreadable), str(wall_path)))
 
     circles = []
     raw_circles = doc.get("circles", [])

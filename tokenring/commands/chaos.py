@@ -10,7 +10,7 @@ from typing import Any
 
 from tokenring import keys
 from tokenring.chaos import format_report, load_scenario, run_scenario
-from tokenring.cliutil import write_json
+from tokenring.cliutil import seconds, write_json
 from tokenring.errors import UsageError
 from tokenring.nemesis import OPERATIONS, Operation, generate, scenario_document, shrink
 from tokenring.protocol import default_protocol
@@ -42,7 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("scenario", nargs="?", help="scenario file (YAML); or use --random")
     p.add_argument("--random", metavar="SEED", type=int, help="draw the schedule from this seed")
     p.add_argument(
-        "--duration", type=float, default=60.0, help="--random: seconds of faults and settling (default 60)"
+        "--duration", type=seconds, default=60.0, help="--random: seconds of faults and settling (default 60)"
     )
     p.add_argument(
         "--kinds",

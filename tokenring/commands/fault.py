@@ -10,7 +10,16 @@ from typing import Any
 import zenoh
 
 from tokenring import keys
-from tokenring.cliutil import add_ring_options, discover, format_table, print_json, query, tap_session
+from tokenring.cliutil import (
+    add_ring_options,
+    discover,
+    format_table,
+    positive_int,
+    print_json,
+    query,
+    seconds,
+    tap_session,
+)
 from tokenring.errors import UsageError
 from tokenring.faults import KINDS, NEEDS_VALUE, FaultClient, parse_partition, parse_probability, validate
 from tokenring.protocol import default_protocol
@@ -29,11 +38,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("kind", nargs="?", choices=KINDS, metavar="KIND", help="fault kind: " + ", ".join(KINDS))
     p.add_argument("value", nargs="?", help="delay: ms; drop/corrupt: probability 0..1; partition: A,B|C,D")
     p.add_argument("--jitter", type=float, default=0.0, metavar="MS", help="delay jitter (± ms)")
-    p.add_argument("--count", type=int, default=1, metavar="N", help="lose: how many tokens")
+    p.add_argument("--count", type=positive_int, default=1, metavar="N", help="lose: how many tokens")
     p.add_argument("--soft", action="store_true", help="hang: freeze the node OS only (across hosts)")
     p.add_argument("--list", action="store_true", help="show the active faults of every node")
     p.add_argument("--json", action="store_true", help="machine-readable output")
-    p.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for answers")
+    p.add_argument("--timeout", type=seconds, default=2.0, help="seconds to wait for answers")
     add_ring_options(p, listen=False)
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from tokenring import extensions
+from tokenring.cliutil import seconds
 from tokenring.errors import UsageError
 
 if TYPE_CHECKING:
@@ -24,7 +25,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "and supervise them until Ctrl-C, SIGTERM or --duration.",
     )
     p.add_argument("--nodes", help="comma-separated subset of nodes (names or IDs); default all")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds")
     p.add_argument(
         "--bitrate",
         default="2.5M",
