@@ -9,7 +9,6 @@ import socket
 import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any, NoReturn
 
 import msgpack
@@ -203,11 +202,22 @@ def print_json(value: Any, stream: Any = None) -> None:
 
 def write_json(target: str, value: Any) -> None:
     """A ``--json TARGET`` report: ``-`` prints it, anything else is the file to write."""
+    from tokenring.inputfile import write_atomically
+
     text = json.dumps(value, indent=2, default=_default) + "\n"
     if target == "-":
         sys.stdout.write(text)
     else:
-        Path(target).write_text(text)
+        write_atomically(target, text)
+
+
+def check_json_target(target: str | None, force: bool = False) -> None:
+    """Refuse a ``--json FILE`` that cannot be written, or that exists (without ``--force``),
+    before the run whose results it is for."""
+    if target and target != "-":
+        from tokenring.inputfile import check_output
+
+        check_output(target, force=force, error=lambda message: UsageError(f"--json {message}"))
 
 
 def _default(value: Any) -> Any:

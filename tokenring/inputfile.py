@@ -9,8 +9,10 @@ sensibly have, and text that is not UTF-8. Nothing is parsed before these checks
 
 from __future__ import annotations
 
+import contextlib
 import os
 import stat
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -101,3 +103,53 @@ def read_text(
         raise error(
             f"{Path(path)}:{line}: not UTF-8 text (byte {exc.start}: 0x{data[exc.start]:02x})"
         ) from None
+
+
+def check_output(
+    path: str | os.PathLike[str],
+    inputs: tuple[str | os.PathLike[str], ...] = (),
+    *,
+    force: bool = False,
+    directory: bool = False,
+    error: ErrorFactory = UsageError,
+) -> Path:
+    """Check an output path before any work is done: never one of the ``inputs``, not an
+    existing file unless ``force``, its folder present and writable. ``directory``: the output
+    is a folder of files (it may exist; it must not be a file)."""
+    out = Path(path)
+    for source in inputs:
+        src = Path(source)
+        if src.exists() and out.exists() and os.path.samefile(src, out):
+            raise error(f"{out}: is the input {src}; write the output to another path")
+    if directory:
+        if out.exists() and not out.is_dir():
+            raise error(f"{out}: exists and is not a directory")
+        parent = out if out.exists() else out.parent
+    else:
+        if out.is_dir():
+            raise error(f"{out}: is a directory, not a file to write")
+        if out.exists() and not force:
+            raise error(f"{out}: exists; give --force to replace it, or another path")
+        parent = out.parent
+    parent = parent if str(parent) else Path(".")
+    if not parent.is_dir():
+        raise error(f"{out}: its folder {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise error(f"{out}: its folder {parent} is not writable")
+    return out
+
+
+def write_atomically(path: str | os.PathLike[str], data: bytes | str) -> None:
+    """Write ``data`` to ``path`` through a temporary file in its folder and a rename: a reader
+    (or a crash) never sees half a file, and a failed write leaves the old one."""
+    out = Path(path)
+    raw = data.encode("utf-8") if isinstance(data, str) else data
+    fd, temp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent if str(out.parent) else ".")
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(raw)
+        os.replace(temp, out)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(temp)
+        raise

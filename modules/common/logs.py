@@ -359,12 +359,18 @@ def sort_log(source: str | Path, target: str | Path) -> int:
     log = read_log(source)
     key = (lambda r: r[0]) if log.kind in ("data", "errors") else None
     records = sorted(log.records, key=key)
-    stream = _Stream(target, log.header)
+    out = Path(target)
+    temp = out.with_name(f".{out.name}.{os.getpid()}.partial")  # renamed over the target at the end
+    stream = _Stream(temp, log.header)
     try:
         for record in records:
             stream._write(record)
-    finally:
+    except BaseException:
         stream.close()
+        temp.unlink(missing_ok=True)
+        raise
+    stream.close()
+    os.replace(temp, out)
     return len(records)
 
 

@@ -70,6 +70,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help=f"endpoint of the running ring (default {keys.DEFAULT_ENDPOINT})",
     )
     p.add_argument("--json", metavar="FILE", help="write the full report as JSON ('-' for stdout)")
+    p.add_argument("--force", action="store_true", help="replace an existing --json or --logs file")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.add_argument("--logs", metavar="FILE", help="write the launched nodes' log lines to FILE")
     p.add_argument(
@@ -121,6 +122,12 @@ def _check(args: argparse.Namespace) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tokenring.cliutil import check_json_target
+    from tokenring.inputfile import check_output
+
+    check_json_target(args.json, args.force)
+    if args.logs:
+        check_output(args.logs, force=args.force, error=lambda message: UsageError(f"--logs {message}"))
     kinds = _check(args)
     ring = keys.check_ring_name(args.ring) if args.ring else None
 

@@ -25,6 +25,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from modules.pc.analysis import analyse
     from tokenring.cliutil import print_json
+    from tokenring.inputfile import check_output
+
+    if args.out:
+        check_output(args.out, (args.log,), directory=True)  # before the log is read and plotted
 
     def progress(name: str) -> None:
         if not args.json:
