@@ -22,7 +22,7 @@ from tokenring.cliutil import (
 )
 from tokenring.errors import UsageError
 from tokenring.faults import KINDS, NEEDS_VALUE, FaultClient, parse_partition, parse_probability, validate
-from tokenring.protocol import default_protocol
+from tokenring.protocol import default_protocol, load_protocol
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -65,13 +65,15 @@ def live_nodes(session: zenoh.Session, ring: str, timeout: float) -> dict[int, s
     return found
 
 
-def resolver(nodes: dict[int, str]):
+def resolver(nodes: dict[int, str], which: str = "live") -> Any:
+    """A function from a node's name or ID to its ID, refusing one not in ``nodes``."""
+
     def resolve(item: str) -> int:
         for node_id, name in nodes.items():
             if item == name or item == str(node_id):
                 return node_id
         known = ", ".join(f"{n}={i}" for i, n in sorted(nodes.items()))
-        raise UsageError(f"unknown node {item!r} (live: {known or 'none'})")
+        raise UsageError(f"unknown node {item!r} ({which}: {known or 'none'})")
 
     return resolve
 
@@ -104,6 +106,12 @@ def run(args: argparse.Namespace) -> int:
     ring = keys.check_ring_name(args.ring)
     if not args.list and (args.node is None or args.kind is None):
         raise UsageError("give a node and a fault kind (e.g. 'fault sonar crash'), or --list")
+    if not args.list:
+        # names and values that protocol.yaml alone can refuse are refused before any waiting
+        known = {spec.id: spec.name for spec in load_protocol(args.protocol).nodes.values()}
+        if args.node != "all":
+            resolver(known, "in protocol.yaml")(args.node)
+        build_request(args, resolver(known, "in protocol.yaml"))
     with tap_session(args) as session:
         nodes = live_nodes(session, ring, args.timeout)
         if not nodes:
