@@ -74,7 +74,10 @@ def add_ring_options(parser: argparse.ArgumentParser, *, listen: bool = True) ->
     """--ring, --connect, --listen, --mode, --zenoh-config, --protocol."""
     group = parser.add_argument_group("ring and Zenoh")
     group.add_argument(
-        "--ring", default=keys.DEFAULT_RING, help="ring name (a key namespace; default %(default)s)"
+        "--ring",
+        default=keys.DEFAULT_RING,
+        type=keys.check_ring_name_type,
+        help="ring name (a key namespace; default %(default)s)",
     )
     group.add_argument(
         "-e",

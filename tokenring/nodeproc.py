@@ -33,7 +33,7 @@ from tokenring.pcverbs import PcSystemVerbs
 from tokenring.profile import PROFILES
 from tokenring.profile import install as install_profile
 from tokenring.program import load_program_file
-from tokenring.programstore import ProgramStore, default_store_root, file_stamp
+from tokenring.programstore import ProgramStore, check_store_root, default_store_root, file_stamp
 from tokenring.protocol import Protocol, load_protocol
 from tokenring.regeneration import RegenerationLedger
 from tokenring.ring import parse_bitrate
@@ -288,6 +288,8 @@ def run_node(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
+    if not args.no_store:
+        check_store_root(Path(args.store) if args.store else default_store_root())
     with open_session(config) as session:
         node = NodeProcess(
             protocol,

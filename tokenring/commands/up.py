@@ -91,6 +91,10 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--profile {args.profile} emulates hardware timing: give a bitrate such as 2.5M, not max"
         )
+    if args.store:
+        from tokenring.programstore import check_store_root
+
+        check_store_root(Path(args.store))  # before any node starts (a node would fail mid-download)
     selection = [s.strip() for s in args.nodes.split(",") if s.strip()] if args.nodes else None
     programs = None if args.no_programs else (args.programs or extensions.programs_dir())
     if programs is not None and not Path(programs).is_dir():
