@@ -17,6 +17,7 @@ from typing import Any
 import yaml
 
 from tokenring.errors import UsageError
+from tokenring.yamlfile import NumberLoader
 
 SENSOR_NAMES = ("odometry", "compass", "sonar", "battery", "truth")
 
@@ -104,8 +105,8 @@ def load_config(source: str | Path | dict | None = None) -> dict[str, Any]:
 def parse_config(text: str, source: str) -> dict[str, Any]:
     """Parse and validate YAML text; errors carry ``source:line``."""
     try:
-        node = yaml.compose(text)
-        data = yaml.safe_load(text)
+        node = yaml.compose(text, Loader=NumberLoader)
+        data = yaml.load(text, Loader=NumberLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{source}:{mark.line + 1}" if mark is not None else source
