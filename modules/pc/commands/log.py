@@ -33,6 +33,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     info = verbs.add_parser("info", help="header, time range, counts per source and kind, torn tail")
     info.add_argument("log")
     add_json_option(info)
+    for verb in (convert, order, info):
+        verb.add_argument(
+            "--salvage",
+            action="store_true",
+            help="read the records around damage inside the log (else damage is an error)",
+        )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -51,10 +57,17 @@ def run(args: argparse.Namespace) -> int:
     elif args.log_verb == "convert" and args.to == "csv":
         raise UsageError("--to csv writes data.csv and sonar.csv: give the directory with --out")
     if args.log_verb == "sort":
-        count = sort_log(args.log, args.out)
+        count = sort_log(args.log, args.out, salvage=args.salvage)
         print(f"{args.out}: {count} records sorted by time stamp")
         return 0
-    log = read_log(args.log)
+    log = read_log(args.log, salvage=args.salvage)
+    if log.damaged:
+        lost = sum(b - a for a, b in log.damaged)
+        print(
+            f"{args.log}: {lost} damaged bytes skipped in {len(log.damaged)} place(s); "
+            f"{len(log.records)} records read around them",
+            file=sys.stderr,
+        )
     if log.truncated:
         print(f"{args.log}: the last record is torn (the writer was killed); read up to it", file=sys.stderr)
     if args.log_verb == "info":
