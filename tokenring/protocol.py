@@ -21,7 +21,7 @@ import numpy as np
 import yaml
 
 from tokenring.errors import ChannelError, ProtocolError
-from tokenring.yamlfile import strict_loader
+from tokenring.yamlfile import one_line, strict_loader
 
 SCALAR_TYPES: dict[str, str] = {
     "u8": "<u1",
@@ -332,7 +332,7 @@ def parse_protocol(text: str, source: str = "<protocol>") -> Protocol:
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         raise ProtocolError(source, where, f"YAML syntax error: {exc.problem}") from None
     except yaml.YAMLError as exc:
-        raise ProtocolError(source, "", f"YAML error: {exc}") from None
+        raise ProtocolError(source, "", f"not YAML text: {one_line(exc)}") from None
     return _Compiler(source).compile(doc)
 
 

@@ -16,6 +16,11 @@ import yaml
 from tokenring.errors import UsageError
 
 
+def one_line(exc: BaseException) -> str:
+    """An exception's text on one line (PyYAML's reader errors span several)."""
+    return " ".join(str(exc).split())
+
+
 class NumberLoader(yaml.SafeLoader):
     """SafeLoader reading numbers as YAML 1.2 does: PyYAML (YAML 1.1) takes ``1e9`` and
     ``1e300`` for text, because its floats need a dot; a user who writes them means numbers."""
@@ -81,6 +86,8 @@ def load_yaml(text: str, source: str = "<yaml>") -> tuple[Any, dict[str, int]]:
         mark = exc.problem_mark
         where = f":{mark.line + 1}:{mark.column + 1}" if mark else ""
         raise UsageError(f"{source}{where}: YAML syntax error: {exc.problem}") from None
+    except yaml.YAMLError as exc:  # e.g. a control character the YAML reader refuses
+        raise UsageError(f"{source}: not YAML text: {one_line(exc)}") from None
     lines: dict[str, int] = {}
     if root is not None:
         _lines(root, "", lines)

@@ -17,7 +17,7 @@ from typing import Any
 import yaml
 
 from tokenring.errors import UsageError
-from tokenring.yamlfile import NumberLoader
+from tokenring.yamlfile import NumberLoader, one_line
 
 SENSOR_NAMES = ("odometry", "compass", "sonar", "battery", "truth")
 
@@ -110,7 +110,9 @@ def parse_config(text: str, source: str) -> dict[str, Any]:
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{source}:{mark.line + 1}" if mark is not None else source
-        raise ConfigError(f"{where}: not valid YAML: {getattr(exc, 'problem', exc)}") from None
+        raise ConfigError(
+            f"{where}: not valid YAML: {one_line(getattr(exc, 'problem', None) or exc)}"
+        ) from None
     if data is None:
         data = {}  # an empty configuration is the defaults (tests/test_localizer_config.py)
     lines: dict[tuple[str, ...], int] = {}

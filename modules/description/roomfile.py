@@ -37,7 +37,7 @@ import yaml
 
 from modules.description.room import Anomaly, Batteries, Circle, Floor, Pose, Wall, World
 from tokenring.errors import TokenRingError, UsageError
-from tokenring.yamlfile import NumberLoader
+from tokenring.yamlfile import NumberLoader, one_line
 
 ROOMS_DIR = Path(__file__).resolve().parent / "rooms"
 DEFAULT_WORLD = "office"
@@ -163,7 +163,7 @@ def _compose(text: str, source: str) -> Any:
         where = f"{source}:{mark.line + 1}" if mark else source
         raise WorldError(f"{where}: YAML syntax error: {exc.problem or exc.context}") from None
     except yaml.YAMLError as exc:
-        raise WorldError(f"{source}: YAML error: {exc}") from None
+        raise WorldError(f"{source}: not YAML text: {one_line(exc)}") from None
     return _convert(node, source) if node is not None else None
 
 
