@@ -22,6 +22,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
+from tokenring.cliutil import seconds
 from tokenring.errors import UsageError
 from tokenring.extensions import Extension, UpPlan
 
@@ -136,7 +137,7 @@ class RobotExtension(Extension):
         parser.add_argument(
             "-u", "--upload", metavar="FILE", help="upload the map into FILE (.dxf, .png, .json)"
         )
-        parser.add_argument("--timeout", type=float, default=60.0, help="seconds to wait for the map (-u)")
+        parser.add_argument("--timeout", type=seconds, default=60.0, help="seconds to wait for the map (-u)")
 
     def check_load(self, args: argparse.Namespace) -> None:
         if args.upload:

@@ -96,6 +96,18 @@ def test_seed_wall_file_with_wrong_hessian_is_refused():
             r"room.yaml:2: floor glide_factor must be positive",
         ),
         ("- just a list\n", r"a world file is a YAML mapping"),
+        ("", r"room.yaml: the file is empty"),
+        ("start: {x: 1, y: 2}\n", r"room.yaml: the room has no walls"),
+        (
+            "walls:\n  - polygon: [[0, 0], [3000, 3000], [3000, 0], [0, 3000]]\nstart: {x: 100, y: 1500}\n",
+            r"room.yaml:2: wall 1 polygon crosses itself: side 1 and side 3 intersect",
+        ),
+        (
+            "walls:\n  - polygon: [[0, 0], [3000, 0], [3000, 3000], [0, 3000]]\nstart: {x: 5000, y: 1500}\n",
+            r"room.yaml:3: start pose \(5000, 1500\) is outside the room",
+        ),
+        ("walls:\n  - [0, 0, 1.0e+300, 0]\n", r"room.yaml:2: wall 1 must be within -1e\+08..1e\+08"),
+        ("walls:\n  - polygon: [[0, 0], [1e9, 0], [0, 5]]\n", r"room.yaml:2: .*must be within"),
     ],
 )
 def test_bad_world_files_name_file_and_line(tmp_path, text, message):

@@ -40,9 +40,10 @@ def version() -> str:
 
 def build_parser() -> tuple[argparse.ArgumentParser, dict[str, Runner]]:
     from tokenring import extensions
+    from tokenring.cliutil import OneLineParser
     from tokenring.commands import discover
 
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="tokenring",
         description="An emulated ARCNET token-ring robot: its modules pass one 512-byte token "
         "around a ring of OS processes over Zenoh.",

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import socket
 import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import msgpack
 import zenoh
@@ -19,11 +19,65 @@ from tokenring.errors import TransportError, UsageError
 from tokenring.zconfig import make_config, open_session
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse with its errors on one line (what is wrong, and where to read more), exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+#: the longest wait or run a number of seconds may ask for (a week): beyond it is a typo
+MAX_SECONDS = 7 * 24 * 3600.0
+
+
+def seconds(text: str) -> float:
+    """An argparse type: a positive, finite number of seconds up to :data:`MAX_SECONDS`."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not (math.isfinite(value) and 0 < value <= MAX_SECONDS):
+        raise argparse.ArgumentTypeError(
+            f"{text} seconds: give a number above 0 and at most {MAX_SECONDS:.0f}"
+        )
+    return value
+
+
+def non_negative_seconds(text: str) -> float:
+    """An argparse type: like :func:`seconds`, 0 allowed."""
+    return 0.0 if text.strip() in ("0", "0.0") else seconds(text)
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: a whole number of at least 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value}: give at least 1")
+    return value
+
+
+def node_id(text: str) -> int:
+    """An argparse type: a node ID, 1..255."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a node ID (1..255)") from None
+    if not 1 <= value <= 255:
+        raise argparse.ArgumentTypeError(f"{value} is not a node ID (1..255)")
+    return value
+
+
 def add_ring_options(parser: argparse.ArgumentParser, *, listen: bool = True) -> None:
     """--ring, --connect, --listen, --mode, --zenoh-config, --protocol."""
     group = parser.add_argument_group("ring and Zenoh")
     group.add_argument(
-        "--ring", default=keys.DEFAULT_RING, help="ring name (a key namespace; default %(default)s)"
+        "--ring",
+        default=keys.DEFAULT_RING,
+        type=keys.check_ring_name_type,
+        help="ring name (a key namespace; default %(default)s)",
     )
     group.add_argument(
         "-e",
@@ -151,11 +205,22 @@ def print_json(value: Any, stream: Any = None) -> None:
 
 def write_json(target: str, value: Any) -> None:
     """A ``--json TARGET`` report: ``-`` prints it, anything else is the file to write."""
+    from tokenring.inputfile import write_atomically
+
     text = json.dumps(value, indent=2, default=_default) + "\n"
     if target == "-":
         sys.stdout.write(text)
     else:
-        Path(target).write_text(text)
+        write_atomically(target, text)
+
+
+def check_json_target(target: str | None, force: bool = False) -> None:
+    """Refuse a ``--json FILE`` that cannot be written, or that exists (without ``--force``),
+    before the run whose results it is for."""
+    if target and target != "-":
+        from tokenring.inputfile import check_output
+
+        check_output(target, force=force, error=lambda message: UsageError(f"--json {message}"))
 
 
 def _default(value: Any) -> Any:

@@ -29,11 +29,16 @@ def default_endpoint() -> str:
 
 
 def check_ring_name(ring: str) -> str:
-    """Ring names become one key chunk: no slashes, wildcards or spaces."""
-    if not ring or any(c in ring for c in "/*$?# ") or ring.startswith("@"):
+    """Ring names become one key chunk and one folder of the program store: letters, digits,
+    ``_ - .``, starting with a letter or digit, at most 64 (so never ``..`` or ``/``)."""
+    import re
+
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}", ring or ""):
         from tokenring.errors import UsageError
 
-        raise UsageError(f"ring name {ring!r} must be one word without / * $ ? # or spaces")
+        raise UsageError(
+            f"ring name {ring!r}: letters, digits, _ - . only, starting with a letter or digit, at most 64"
+        )
     return ring
 
 
@@ -65,3 +70,15 @@ def id_from_key(key: str) -> int | None:
     """The trailing numeric chunk of a key (``.../node/20`` -> 20), or None."""
     tail = key.rsplit("/", 1)[-1]
     return int(tail) if tail.isdigit() else None
+
+
+def check_ring_name_type(ring: str) -> str:
+    """:func:`check_ring_name` as an argparse type (refused while the options are parsed)."""
+    import argparse
+
+    from tokenring.errors import UsageError
+
+    try:
+        return check_ring_name(ring)
+    except UsageError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None

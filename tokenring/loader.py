@@ -18,7 +18,7 @@ from typing import IO, Any
 
 from tokenring.cliutil import format_table
 from tokenring.errors import ProgramError, TransportError, UsageError
-from tokenring.program import load_program, program_digest
+from tokenring.program import inspect_program, program_digest
 from tokenring.programstore import file_stamp, format_stamp
 
 
@@ -65,20 +65,17 @@ class Outcome:
 
 
 def check_program_file(path: Path, node_name: str | None = None) -> tuple[bytes, str]:
-    """Read and compile a program file on the PC first; returns (source, module name).
+    """Read and check a program file on the PC first, without running it; returns (source,
+    module name). The node compiles and runs it (and reports what fails there).
 
     Raises :class:`UsageError` naming the file for a file that is missing or not a module."""
+    from tokenring.inputfile import read_bytes
+
+    source = read_bytes(path, "program file")
     try:
-        source = path.read_bytes()
-    except FileNotFoundError:
-        raise UsageError(f"{path}: no such program file") from None
-    except OSError as exc:
-        raise UsageError(f"{path}: cannot read: {exc.strerror}") from None
-    try:
-        program_class = load_program(source, str(path))
+        module = inspect_program(source, str(path)) or path.stem  # parsed, never run here
     except ProgramError as exc:
         raise UsageError(str(exc)) from None
-    module = getattr(program_class, "module", "") or path.stem
     if node_name is not None and module != node_name:
         raise UsageError(f"{path} is the program of {module!r}, not of node {node_name!r}")
     return source, module

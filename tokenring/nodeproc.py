@@ -23,6 +23,7 @@ import zenoh
 
 from tokenring import extensions, keys
 from tokenring.channels import CommandMemory
+from tokenring.cliutil import seconds
 from tokenring.control import answer_query
 from tokenring.errors import UsageError
 from tokenring.faults import FaultInjector
@@ -32,7 +33,7 @@ from tokenring.pcverbs import PcSystemVerbs
 from tokenring.profile import PROFILES
 from tokenring.profile import install as install_profile
 from tokenring.program import load_program_file
-from tokenring.programstore import ProgramStore, default_store_root, file_stamp
+from tokenring.programstore import ProgramStore, check_store_root, default_store_root, file_stamp
 from tokenring.protocol import Protocol, load_protocol
 from tokenring.regeneration import RegenerationLedger
 from tokenring.ring import parse_bitrate
@@ -237,7 +238,7 @@ def add_node_arguments(parser: argparse.ArgumentParser) -> None:
         help="largest program this node accepts (default %(default)s, the 8051's code space)",
     )
     parser.add_argument("--autostart", action="store_true", help="start the stored program at boot")
-    parser.add_argument("--duration", type=float, help="leave after this many seconds")
+    parser.add_argument("--duration", type=seconds, help="leave after this many seconds")
     parser.add_argument(
         "--expect",
         type=int,
@@ -287,6 +288,8 @@ def run_node(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
+    if not args.no_store:
+        check_store_root(Path(args.store) if args.store else default_store_root())
     with open_session(config) as session:
         node = NodeProcess(
             protocol,

@@ -84,13 +84,47 @@ def load_program(source: bytes | str, filename: str = "<program>") -> type[UserP
     return program
 
 
+def inspect_program(source: bytes | str, filename: str = "<program>") -> str:
+    """Check a program without running it (the PC side of ``load``: an operator's file must
+    not execute on the operator's machine): UTF-8, valid Python, a top-level
+    ``class Program`` with a base class. Returns its ``module = "..."`` (the node it is for),
+    or ``""``. Raises :class:`ProgramError` naming the file and line."""
+    import ast
+
+    if isinstance(source, bytes):
+        try:
+            text = source.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            line = source.count(b"\n", 0, exc.start) + 1
+            raise ProgramError(f"{filename}:{line}: not UTF-8 text (byte {exc.start})") from None
+    else:
+        text = source
+    try:
+        tree = ast.parse(text, filename)
+    except SyntaxError as exc:
+        raise ProgramError(f"{filename}:{exc.lineno}: syntax error: {exc.msg}") from None
+    except (ValueError, RecursionError, MemoryError) as exc:  # NUL bytes, absurd nesting
+        raise ProgramError(f"{filename}: not a Python program ({type(exc).__name__})") from None
+    program = next(
+        (node for node in tree.body if isinstance(node, ast.ClassDef) and node.name == "Program"), None
+    )
+    if program is None or not program.bases:
+        raise ProgramError(f"{filename}: no class Program(UserProgram) found; this is not a module program")
+    for statement in program.body:
+        if (
+            isinstance(statement, ast.Assign)
+            and any(isinstance(t, ast.Name) and t.id == "module" for t in statement.targets)
+            and isinstance(statement.value, ast.Constant)
+            and isinstance(statement.value.value, str)
+        ):
+            return statement.value.value
+    return ""
+
+
 def load_program_file(path: str | Path) -> tuple[type[UserProgram], bytes]:
     """Read and load a program file; returns the class and the exact bytes read."""
+    from tokenring.inputfile import read_bytes
+
     file = Path(path)
-    try:
-        source = file.read_bytes()
-    except FileNotFoundError:
-        raise ProgramError(f"{file}: no such program file") from None
-    except OSError as exc:
-        raise ProgramError(f"{file}: cannot read: {exc.strerror}") from None
+    source = read_bytes(file, "program file", ProgramError)
     return load_program(source, str(file)), source

@@ -122,3 +122,19 @@ class ProgramStore:
 
 # ---------------------------------------------------------------------------------------------
 # issuer side: transactions
+
+
+def check_store_root(root: Path) -> Path:
+    """Make sure the program store root can hold programs, before any node starts: it is
+    created if missing; a root that cannot be created or written is one clear error."""
+    from tokenring.errors import UsageError
+
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"--store {root}: cannot create it: {exc.strerror}") from None
+    if not root.is_dir():
+        raise UsageError(f"--store {root}: not a directory")
+    if not os.access(root, os.W_OK | os.X_OK):
+        raise UsageError(f"--store {root}: not writable")
+    return root

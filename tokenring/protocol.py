@@ -21,7 +21,7 @@ import numpy as np
 import yaml
 
 from tokenring.errors import ChannelError, ProtocolError
-from tokenring.yamlfile import strict_loader
+from tokenring.yamlfile import one_line, strict_loader
 
 SCALAR_TYPES: dict[str, str] = {
     "u8": "<u1",
@@ -308,13 +308,12 @@ def default_protocol_path() -> Path:
 def load_protocol(path: str | os.PathLike[str] | None = None) -> Protocol:
     """Read and compile a protocol file; raises :class:`ProtocolError` naming what is wrong."""
     file = Path(path) if path is not None else default_protocol_path()
+    from tokenring.inputfile import read_text
+
     source = str(file)
-    try:
-        text = file.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ProtocolError(source, "", "file not found") from None
-    except OSError as exc:
-        raise ProtocolError(source, "", f"cannot read: {exc.strerror}") from None
+    text = read_text(
+        file, "protocol file", lambda message: ProtocolError(source, "", message.split(": ", 1)[1])
+    )
     return parse_protocol(text, source)
 
 
@@ -333,7 +332,7 @@ def parse_protocol(text: str, source: str = "<protocol>") -> Protocol:
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         raise ProtocolError(source, where, f"YAML syntax error: {exc.problem}") from None
     except yaml.YAMLError as exc:
-        raise ProtocolError(source, "", f"YAML error: {exc}") from None
+        raise ProtocolError(source, "", f"not YAML text: {one_line(exc)}") from None
     return _Compiler(source).compile(doc)
 
 

@@ -246,6 +246,8 @@ class SystemReceiver(SystemParts):
             job.detail = f"store: {exc.strerror or exc}"
             job.status = Status.STORE_ERROR
             return
+        if self.installed is not None and self.installed.digest != program.digest:
+            self._previous = self.installed  # what runs again if this one fails to start
         self.installed = Installed(program.source, program.digest, stamp_ms, filename, program.program_class)
         if self._verified is program:
             self._verified = None
@@ -275,6 +277,7 @@ class SystemReceiver(SystemParts):
         except Exception as exc:
             line = str(exc) if isinstance(exc, ProgramError) else f"{type(exc).__name__}: {exc}"
             self._send_error(self.START_PROGRAM, line)
+            line += self._roll_back()
             if job is not None:
                 job.detail, job.status = line, Status.START_FAILED
             return
@@ -286,11 +289,36 @@ class SystemReceiver(SystemParts):
             time.sleep(0.02)
         if self.os.program_error is not None and self.os.program is program:
             self._report_program_error(program)
+            line = self.os.program_error + self._roll_back()
             if job is not None:
-                job.detail, job.status = self.os.program_error, Status.START_FAILED
+                job.detail, job.status = line, Status.START_FAILED
             return
+        self._previous = None  # started: no way back needed any more
         if job is not None:
             job.status = Status.OK
+
+    def _roll_back(self) -> str:
+        """A newly installed program failed to start: the one before it is installed and run
+        again (a failed load must not leave the node without its program). Returns what to
+        add to the failure's report."""
+        previous, self._previous = self._previous, None
+        if previous is None:
+            return ""
+        try:
+            self.store.save(previous.source, previous.digest, previous.stamp_ms)
+            self.installed = previous
+            if previous.program_class is None:
+                previous.program_class = load_program(previous.source, previous.filename)
+            self.starter(previous.program_class)
+        except Exception as exc:
+            log.error("the previous program could not be restored: %s", exc)
+            return "; the previous program could not be restored"
+        self._running_digest = previous.digest
+        log.warning(
+            "the new program failed to start: the previous one (sha256 %s) runs again",
+            previous.digest.hex()[:12],
+        )
+        return "; the previous program runs again"
 
     def _stop(self, job: _Job | None) -> None:
         if self.os.program is not None:

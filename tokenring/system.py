@@ -148,6 +148,7 @@ class SystemLayer(SystemIssuer, SystemReceiver):
         self._verified: Installed | None = None
         self._job: _Job | None = None
         self.installed: Installed | None = self.store.load()
+        self._previous: Installed | None = None
         self._running_digest: bytes | None = None
         self._error_parts: dict[int, dict[int, bytes]] = {}
         self.errors: deque[dict[str, Any]] = deque(maxlen=200)

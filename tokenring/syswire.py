@@ -278,6 +278,7 @@ class SystemParts:
     _verified: Installed | None
     _job: _Job | None
     installed: Installed | None
+    _previous: Installed | None  # the program before the installed one, until it has started
     _running_digest: bytes | None
     _error_parts: dict[int, dict[int, bytes]]
     errors: deque[dict[str, Any]]

@@ -7,6 +7,7 @@ by its dotted path (``faults.2.kind`` → 14).
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -15,10 +16,35 @@ import yaml
 from tokenring.errors import UsageError
 
 
-def strict_loader(fail: type[Exception] = UsageError, source: str = "<yaml>") -> type[yaml.SafeLoader]:
-    """A SafeLoader subclass that raises ``fail`` on duplicate keys, naming both lines."""
+def one_line(exc: BaseException) -> str:
+    """An exception's text on one line (PyYAML's reader errors span several)."""
+    return " ".join(str(exc).split())
 
-    class StrictLoader(yaml.SafeLoader):
+
+class NumberLoader(yaml.SafeLoader):
+    """SafeLoader reading numbers as YAML 1.2 does: PyYAML (YAML 1.1) takes ``1e9`` and
+    ``1e300`` for text, because its floats need a dot; a user who writes them means numbers."""
+
+
+NumberLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(
+        r"""^(?:[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+
+        |[-+]?(?:[0-9][0-9_]*)\.[0-9_]*
+        |[-+]?\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+        |[-+]?\.(?:inf|Inf|INF)
+        |\.(?:nan|NaN|NAN))$""",
+        re.X,
+    ),
+    list("-+0123456789."),
+)
+
+
+def strict_loader(fail: type[Exception] = UsageError, source: str = "<yaml>") -> type[yaml.SafeLoader]:
+    """A loader that reads numbers as YAML 1.2 (:class:`NumberLoader`) and raises ``fail`` on
+    duplicate keys, naming both lines."""
+
+    class StrictLoader(NumberLoader):
         pass
 
     def construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode) -> dict:
@@ -55,11 +81,13 @@ def load_yaml(text: str, source: str = "<yaml>") -> tuple[Any, dict[str, int]]:
     """Parse strictly; returns (data, line of every dotted path). Errors name file and line."""
     try:
         data = yaml.load(text, Loader=strict_loader(UsageError, source))
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
+        root = yaml.compose(text, Loader=NumberLoader)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark
         where = f":{mark.line + 1}:{mark.column + 1}" if mark else ""
         raise UsageError(f"{source}{where}: YAML syntax error: {exc.problem}") from None
+    except yaml.YAMLError as exc:  # e.g. a control character the YAML reader refuses
+        raise UsageError(f"{source}: not YAML text: {one_line(exc)}") from None
     lines: dict[str, int] = {}
     if root is not None:
         _lines(root, "", lines)
@@ -68,11 +96,7 @@ def load_yaml(text: str, source: str = "<yaml>") -> tuple[Any, dict[str, int]]:
 
 def read_yaml(path: str | Path) -> tuple[Any, dict[str, int]]:
     """Read and parse a YAML file; a missing or unreadable file is a clear :class:`UsageError`."""
+    from tokenring.inputfile import read_text
+
     file = Path(path)
-    try:
-        text = file.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise UsageError(f"{file}: no such file") from None
-    except OSError as exc:
-        raise UsageError(f"{file}: cannot read: {exc.strerror}") from None
-    return load_yaml(text, str(file))
+    return load_yaml(read_text(file, "YAML file"), str(file))

@@ -86,18 +86,17 @@ def parse_actions(text: str, source: str = "<actions>") -> list[Action]:
             raise UsageError(f"{where}: values must be finite numbers")
         _check(kind, args, where)
         actions.append(Action(kind, args, number, line))
+    if not actions:
+        raise UsageError(f"{source}: no actions (only blank lines and comments): nothing to drive")
     return actions
 
 
 def load_actions(path: str | Path) -> list[Action]:
     """Read and parse an action file."""
+    from tokenring.inputfile import read_text
+
     file = Path(path)
-    try:
-        text = file.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise UsageError(f"{file}: no such action file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UsageError(f"{file}: cannot read the action file: {exc}") from None
+    text = read_text(file, "action file")
     return parse_actions(text, str(file))
 
 

@@ -17,6 +17,7 @@ from typing import Any
 import yaml
 
 from tokenring.errors import UsageError
+from tokenring.yamlfile import NumberLoader, one_line
 
 SENSOR_NAMES = ("odometry", "compass", "sonar", "battery", "truth")
 
@@ -94,27 +95,26 @@ def load_config(source: str | Path | dict | None = None) -> dict[str, Any]:
         return copy.deepcopy(DEFAULTS)
     if isinstance(source, dict):
         return validate(source, "<config>", {})
+    from tokenring.inputfile import read_text
+
     path = Path(source)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such configuration file") from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
+    text = read_text(path, "configuration file", ConfigError)
     return parse_config(text, str(path))
 
 
 def parse_config(text: str, source: str) -> dict[str, Any]:
     """Parse and validate YAML text; errors carry ``source:line``."""
     try:
-        node = yaml.compose(text)
-        data = yaml.safe_load(text)
+        node = yaml.compose(text, Loader=NumberLoader)
+        data = yaml.load(text, Loader=NumberLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{source}:{mark.line + 1}" if mark is not None else source
-        raise ConfigError(f"{where}: not valid YAML: {getattr(exc, 'problem', exc)}") from None
+        raise ConfigError(
+            f"{where}: not valid YAML: {one_line(getattr(exc, 'problem', None) or exc)}"
+        ) from None
     if data is None:
-        data = {}
+        data = {}  # an empty configuration is the defaults (tests/test_localizer_config.py)
     lines: dict[tuple[str, ...], int] = {}
     _collect_lines(node, (), lines)
     return validate(data, source, lines)

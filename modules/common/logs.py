@@ -157,67 +157,127 @@ class LogFile:
     header: dict[str, Any]
     records: list[list[Any]] = field(default_factory=list)
     truncated: bool = False
+    #: byte ranges inside the log that could not be read (damage, not a torn tail)
+    damaged: list[tuple[int, int]] = field(default_factory=list)
 
     @property
     def kind(self) -> str:
         return str(self.header.get("tokenring_log"))
 
 
+#: a log read whole is at most this big (the localisation writes ~1 MB per simulated hour)
+MAX_LOG_BYTES = 1 << 30
+
+
+def _is_record(obj: Any, kind: str) -> bool:
+    """Whether ``obj`` has a record's shape: ``[stamp, source, kind, payload]`` with the
+    letters of the tables for a data log, ``[stamp, class, text]`` for an error log."""
+    if not isinstance(obj, list) or not obj or isinstance(obj[0], bool) or not isinstance(obj[0], int):
+        return False
+    if kind == "data":
+        return (
+            len(obj) == 4 and isinstance(obj[1], str) and isinstance(obj[2], str)
+            and obj[1] in SOURCES and obj[2] in KINDS
+        )  # fmt: skip
+    return len(obj) == 3 and isinstance(obj[1], str) and obj[1] in ERROR_CLASSES and isinstance(obj[2], str)
+
+
+#: a record is decoded from a window this big first (records are bytes to kilobytes; a window
+#: keeps the resynchronising scan linear in the damage, not in the file)
+RECORD_WINDOW = 1 << 18
+
+
+def _record_at(data: bytes, offset: int, kind: str) -> tuple[Any, int] | None:
+    """The record that starts at ``offset`` and where it ends, or None."""
+    window = RECORD_WINDOW
+    while True:
+        unpacker = msgpack.Unpacker(raw=False, strict_map_key=False, max_buffer_size=window + 1)
+        unpacker.feed(data[offset : offset + window])
+        try:
+            obj = next(unpacker)
+            break
+        except (StopIteration, msgpack.OutOfData):
+            if offset + window >= len(data):
+                return None
+            window *= 4  # a record longer than the window: look further
+        except Exception:  # garbage: msgpack raises ValueError, FormatError, UnicodeDecodeError ...
+            return None
+    if not _is_record(obj, kind):
+        return None
+    return obj, offset + unpacker.tell()
+
+
+def _resync(data: bytes, start: int, kind: str) -> int | None:
+    """The first offset after ``start`` where two records in a row (or one at the very end)
+    decode: where reading goes on after damage. None: nothing readable follows."""
+    for offset in range(start + 1, len(data)):
+        first = _record_at(data, offset, kind)
+        if first is None:
+            continue
+        end = first[1]
+        if end == len(data) or _record_at(data, end, kind) is not None:
+            return offset
+    return None
+
+
 def iter_log(path: str | Path) -> tuple[dict[str, Any], Iterator[list[Any]], list[bool]]:
-    """The header and an iterator over the records; the list gets ``True`` if the tail was torn."""
+    """The header and an iterator over the records; the list gets ``True`` if the tail was torn.
+    Damage in the middle is skipped (see :func:`read_log`); this iterator reports only the tail."""
+    log = read_log(path, salvage=True)
+    return log.header, iter(log.records), [log.truncated]
+
+
+def read_log(path: str | Path, expect: str | None = None, salvage: bool = False) -> LogFile:
+    """Read a whole log; ``expect`` (``data``/``errors``) refuses the other kind.
+
+    A torn last record (the writer was killed) is normal: reading stops before it and
+    ``truncated`` says so. Damage *inside* the log is not: every readable record is kept (reading
+    resynchronises past it: two records in a row decode again), ``damaged`` lists the byte
+    ranges skipped, and without ``salvage`` the read fails with one line saying where and how
+    much; with it the readable records are returned."""
+    from tokenring.inputfile import read_bytes
+
     file = Path(path)
-    try:
-        handle = file.open("rb")
-    except FileNotFoundError:
-        raise LogError(f"{file}: no such log file") from None
-    except OSError as exc:
-        raise LogError(f"{file}: cannot read: {exc.strerror}") from None
-    unpacker = msgpack.Unpacker(handle, raw=False, strict_map_key=False)
+    data = read_bytes(file, "log file", LogError, limit=MAX_LOG_BYTES)
+    unpacker = msgpack.Unpacker(raw=False, strict_map_key=False, max_buffer_size=len(data) + 1)
+    unpacker.feed(data)
     try:
         header = next(unpacker)
     except (StopIteration, msgpack.OutOfData):
-        handle.close()
         raise LogError(f"{file}: empty or torn before its header; not a tokenring log") from None
-    except (msgpack.ExtraData, msgpack.FormatError, msgpack.StackError, ValueError):
-        handle.close()
+    except Exception:
         raise LogError(f"{file}: not a tokenring log (no msgpack header)") from None
     if not isinstance(header, dict) or header.get("tokenring_log") not in ("data", "errors"):
-        handle.close()
         raise LogError(f"{file}: not a tokenring log (its first entry is not a log header)")
-    truncated = [False]
-
-    def records() -> Iterator[list[Any]]:
-        consumed = unpacker.tell()
-        try:
-            while True:
-                try:
-                    record = next(unpacker)
-                except StopIteration:
-                    # msgpack drops a torn tail silently: compare the last whole record's end with the size
-                    if consumed < file.stat().st_size:
-                        truncated[0] = True
-                    return
-                except (msgpack.OutOfData, ValueError, msgpack.FormatError, msgpack.StackError):
-                    truncated[0] = True
-                    return
-                if not isinstance(record, list):
-                    truncated[0] = True
-                    return
-                consumed = unpacker.tell()
-                yield record
-        finally:
-            handle.close()
-
-    return header, records(), truncated
-
-
-def read_log(path: str | Path, expect: str | None = None) -> LogFile:
-    """Read a whole log; ``expect`` (``data``/``errors``) refuses the other kind."""
-    header, records, truncated = iter_log(path)
-    if expect is not None and header.get("tokenring_log") != expect:
-        raise LogError(f"{path}: this is a {header.get('tokenring_log')} log, not a {expect} log")
-    out = LogFile(Path(path), header, list(records))
-    out.truncated = truncated[0]
+    kind = str(header["tokenring_log"])
+    if expect is not None and kind != expect:
+        raise LogError(f"{path}: this is a {kind} log, not a {expect} log")
+    records: list[list[Any]] = []
+    damaged: list[tuple[int, int]] = []
+    offset = unpacker.tell()
+    truncated = False
+    while offset < len(data):
+        found = _record_at(data, offset, kind)
+        if found is not None:
+            records.append(found[0])
+            offset = found[1]
+            continue
+        resume = _resync(data, offset, kind)
+        if resume is None:
+            truncated = True  # nothing readable after it: a torn tail (or damage up to the end)
+            break
+        damaged.append((offset, resume))
+        offset = resume
+    out = LogFile(file, header, records)
+    out.truncated = truncated
+    out.damaged = damaged
+    if damaged and not salvage:
+        skipped = sum(b - a for a, b in damaged)
+        first = ", ".join(f"{a}..{b}" for a, b in damaged[:3]) + (" ..." if len(damaged) > 3 else "")
+        raise LogError(
+            f"{file}: damaged inside: {skipped} bytes unreadable in {len(damaged)} place(s) at bytes "
+            f"{first}; {len(records)} records readable around them (--salvage reads those)"
+        )
     return out
 
 
@@ -352,19 +412,25 @@ def convert_csv(log: LogFile) -> tuple[str, str]:
     return data.getvalue(), sonar.getvalue()
 
 
-def sort_log(source: str | Path, target: str | Path) -> int:
+def sort_log(source: str | Path, target: str | Path, salvage: bool = False) -> int:
     """Write ``source`` sorted by time stamp (stable) to ``target``; returns the record count."""
     if Path(source).resolve() == Path(target).resolve():
         raise LogError(f"{target}: the sorted log must go to a new file (the seed's logfilesorter)")
-    log = read_log(source)
+    log = read_log(source, salvage=salvage)
     key = (lambda r: r[0]) if log.kind in ("data", "errors") else None
     records = sorted(log.records, key=key)
-    stream = _Stream(target, log.header)
+    out = Path(target)
+    temp = out.with_name(f".{out.name}.{os.getpid()}.partial")  # renamed over the target at the end
+    stream = _Stream(temp, log.header)
     try:
         for record in records:
             stream._write(record)
-    finally:
+    except BaseException:
         stream.close()
+        temp.unlink(missing_ok=True)
+        raise
+    stream.close()
+    os.replace(temp, out)
     return len(records)
 
 

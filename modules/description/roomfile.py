@@ -36,10 +36,14 @@ from typing import Any
 import yaml
 
 from modules.description.room import Anomaly, Batteries, Circle, Floor, Pose, Wall, World
-from tokenring.errors import UsageError
+from tokenring.errors import TokenRingError, UsageError
+from tokenring.yamlfile import NumberLoader, one_line
 
 ROOMS_DIR = Path(__file__).resolve().parent / "rooms"
 DEFAULT_WORLD = "office"
+#: coordinates beyond this (mm: 100 km) are no room
+MAX_COORDINATE_MM = 1e8
+
 _TOP_KEYS = {
     "name",
     "description",
@@ -78,11 +82,10 @@ def resolve_world(name_or_path: str | Path) -> Path:
 
 def load_world(name_or_path: str | Path) -> World:
     """Load a bundled room by name (``office``) or a world file (YAML, or a seed wall file)."""
+    from tokenring.inputfile import read_text
+
     path = resolve_world(name_or_path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise WorldError(f"{path}: cannot read: {exc}") from None
+    text = read_text(path, "world file", WorldError)
     if _looks_like_wall_file(text):
         walls = parse_wall_file(text, str(path))
         return _finish(World(name=path.stem, walls=tuple(walls), start=Pose(0, 0, 0), source=str(path)), None)
@@ -154,13 +157,13 @@ class _List(list):
 
 def _compose(text: str, source: str) -> Any:
     try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        node = yaml.compose(text, Loader=NumberLoader)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         where = f"{source}:{mark.line + 1}" if mark else source
         raise WorldError(f"{where}: YAML syntax error: {exc.problem or exc.context}") from None
     except yaml.YAMLError as exc:
-        raise WorldError(f"{source}: YAML error: {exc}") from None
+        raise WorldError(f"{source}: not YAML text: {one_line(exc)}") from None
     return _convert(node, source) if node is not None else None
 
 
@@ -216,7 +219,10 @@ class _Reader:
     def point(self, value: Any, line: int, what: str) -> tuple[float, float]:
         if not isinstance(value, list) or len(value) != 2:
             raise self.fail(getattr(value, "line", line), f"{what} must be a point [x, y], not {value!r}")
-        return (self.number(value[0], line, f"{what} x"), self.number(value[1], line, f"{what} y"))
+        return (
+            self.number(value[0], line, f"{what} x", lo=-MAX_COORDINATE_MM, hi=MAX_COORDINATE_MM),
+            self.number(value[1], line, f"{what} y", lo=-MAX_COORDINATE_MM, hi=MAX_COORDINATE_MM),
+        )
 
     def mapping(self, value: Any, line: int, what: str, keys: set[str]) -> _Map:
         if not isinstance(value, dict):
@@ -234,6 +240,8 @@ def parse_world_yaml(text: str, source: str, default_name: str = "world", base: 
     """Parse our YAML world format (see the module docstring)."""
     doc = _compose(text, source)
     r = _Reader(source)
+    if doc is None:
+        raise WorldError(f"{source}: the file is empty (a world file has walls and a start pose)")
     if not isinstance(doc, dict):
         raise WorldError(
             f"{source}: a world file is a YAML mapping with walls and start, not {type(doc).__name__}"
@@ -251,10 +259,12 @@ def parse_world_yaml(text: str, source: str, default_name: str = "world", base: 
         wall_path = Path(str(doc["wall_file"]))
         if not wall_path.is_absolute() and base is not None:
             wall_path = base / wall_path
-        try:
-            walls.extend(parse_wall_file(wall_path.read_text(encoding="utf-8"), str(wall_path)))
-        except OSError as exc:
-            raise r.fail(top, f"wall_file {wall_path}: cannot read: {exc.strerror}") from None
+        from tokenring.inputfile import read_text
+
+        def unreadable(message: str) -> TokenRingError:
+            return r.fail(top, f"wall_file {message}")
+
+        walls.extend(parse_wall_file(read_text(wall_path, "wall file", unreadable), str(wall_path)))
 
     circles = []
     raw_circles = doc.get("circles", [])
@@ -356,7 +366,7 @@ def _parse_wall_item(r: _Reader, item: Any, index: int, line: int) -> list[Wall]
     if isinstance(item, list):
         if len(item) != 4:
             raise r.fail(line, f"{what} must be [x1, y1, x2, y2], not {list(item)!r}")
-        coords = [r.number(v, line, what) for v in item]
+        coords = [r.number(v, line, what, lo=-MAX_COORDINATE_MM, hi=MAX_COORDINATE_MM) for v in item]
         return [_wall(r, *coords, None, line, what)]
     m = r.mapping(item, line, what, {"from", "to", "visible", "polygon", "polyline"})
     visible = None
@@ -379,7 +389,13 @@ def _parse_wall_item(r: _Reader, item: Any, index: int, line: int) -> list[Wall]
         raise r.fail(line, f"{what} {kind} needs at least two points")
     pts = [r.point(p, getattr(p, "line", line), f"{what} {kind} point") for p in points]
     if kind == "polygon":
+        if len(pts) < 3:
+            raise r.fail(line, f"{what} polygon needs at least three points")
         pts.append(pts[0])
+    crossing = _self_crossing(pts, closed=kind == "polygon")
+    if crossing is not None:
+        i, j = crossing
+        raise r.fail(line, f"{what} {kind} crosses itself: side {i} and side {j} intersect")
     return [
         _wall(r, *a, *b, visible, line, f"{what} ({kind} side {i})")
         for i, (a, b) in enumerate(itertools.pairwise(pts), start=1)
@@ -392,8 +408,62 @@ def _wall(r: _Reader, x1: float, y1: float, x2: float, y2: float, visible: Any, 
     return Wall(x1, y1, x2, y2, visible=visible, line=line)
 
 
+def _segments_cross(
+    a: tuple[float, float], b: tuple[float, float], c: tuple[float, float], d: tuple[float, float]
+) -> bool:
+    """Whether segments ab and cd properly intersect (touching at an end does not count)."""
+
+    def side(p: tuple[float, float], q: tuple[float, float], r: tuple[float, float]) -> float:
+        return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+
+    d1, d2 = side(c, d, a), side(c, d, b)
+    d3, d4 = side(a, b, c), side(a, b, d)
+    return d1 * d2 < 0 and d3 * d4 < 0
+
+
+def _self_crossing(pts: list[tuple[float, float]], closed: bool) -> tuple[int, int] | None:
+    """The first two sides (1-based) of a polyline or closed polygon that cross, or None."""
+    sides = list(itertools.pairwise(pts))
+    n = len(sides)
+    for i in range(n):
+        for j in range(i + 2, n):
+            if closed and i == 0 and j == n - 1:
+                continue  # the first and last side meet at the first point
+            if _segments_cross(*sides[i], *sides[j]):
+                return i + 1, j + 1
+    return None
+
+
+def _escapes(world: World, x: float, y: float) -> float | None:
+    """The first of 16 directions (degrees) in which a ray from (x, y) meets no wall, or None:
+    a start pose that can see out of the room in some direction is not inside it."""
+    reach = 4 * max(
+        (max(abs(w.x1 - x), abs(w.y1 - y), abs(w.x2 - x), abs(w.y2 - y)) for w in world.walls), default=1.0
+    )
+    for k in range(16):
+        angle = 2 * math.pi * (k + 0.1) / 16  # off the axes and diagonals, where corners sit
+        end = (x + reach * math.cos(angle), y + reach * math.sin(angle))
+        if not any(_segments_touch((x, y), end, (w.x1, w.y1), (w.x2, w.y2)) for w in world.walls):
+            return math.degrees(angle)
+    return None
+
+
+def _segments_touch(
+    a: tuple[float, float], b: tuple[float, float], c: tuple[float, float], d: tuple[float, float]
+) -> bool:
+    """Whether segments ab and cd meet, ends included (a ray through a corner meets the room)."""
+
+    def side(p: tuple[float, float], q: tuple[float, float], r: tuple[float, float]) -> float:
+        return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+
+    return side(c, d, a) * side(c, d, b) <= 0 and side(a, b, c) * side(a, b, d) <= 0
+
+
 def _finish(world: World, start_line: int | None) -> World:
-    """Place a missing start pose in the middle of the room; refuse one inside a wall or obstacle."""
+    """Place a missing start pose in the middle of the room; refuse a room without walls, and a
+    start inside a wall or obstacle or outside the room."""
+    if not world.walls:
+        raise WorldError(f"{world.source}: the room has no walls (a world needs at least its outline)")
     if start_line is None and world.start == Pose(0, 0, 0) and (world.walls or world.circles):
         xmin, ymin, xmax, ymax = world.bounds()
         world = _replace_start(world, Pose((xmin + xmax) / 2, (ymin + ymax) / 2, 0.0))
@@ -405,6 +475,13 @@ def _finish(world: World, start_line: int | None) -> World:
         raise WorldError(
             f"{where}: start pose ({world.start.x:g}, {world.start.y:g}) is inside {nearest}: "
             f"{clearance:.0f} mm from it, the robot needs {world.robot_radius:g} mm{hint}"
+        )
+    open_towards = _escapes(world, world.start.x, world.start.y)
+    if open_towards is not None:
+        where = f"{world.source}:{start_line}" if start_line else world.source
+        raise WorldError(
+            f"{where}: start pose ({world.start.x:g}, {world.start.y:g}) is outside the room "
+            f"(no wall towards {open_towards:.0f}°)"
         )
     return world
 

@@ -295,9 +295,14 @@ def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None =
     return written
 
 
-def analyse(path: str | Path, out: str | Path | None = None, progress: Callable[[str], None] | None = None):
+def analyse(
+    path: str | Path,
+    out: str | Path | None = None,
+    progress: Callable[[str], None] | None = None,
+    salvage: bool = False,
+):
     """Read a data log; write the plots into ``out`` (if given); return (summary, files)."""
-    log = read_log(path, expect="data")
+    log = read_log(path, expect="data", salvage=salvage)
     series = Series(log)
     if not series.positions and not series.raw_stamps:
         raise LogError(f"{path}: the log holds no samples and no positions")

@@ -65,33 +65,53 @@ def load_truth(world: str) -> tuple[str, np.ndarray]:
 
 def load_map_file(path: str) -> np.ndarray:
     """Vectors (mm) from a map written by ``tokenring map`` (.json) or any DXF's LINE entities."""
+    from tokenring.inputfile import read_bytes, read_text
+
     file = Path(path)
-    if not file.is_file():
-        raise UsageError(f"{path}: no such map file")
     if file.suffix.lower() == ".dxf":
         import ezdxf
 
+        read_bytes(file, "map file")  # a FIFO, a device or a huge file is refused before ezdxf
         try:
-            doc = ezdxf.readfile(file)
-        except (OSError, ezdxf.DXFError) as exc:
-            raise UsageError(f"{path}: not a readable DXF file: {exc}") from None
-        lines = [e for e in doc.modelspace().query("LINE") if e.dxf.layer != "TRUTH"]
-        return np.asarray(
-            [[e.dxf.start.x, e.dxf.start.y, e.dxf.end.x, e.dxf.end.y] for e in lines], dtype=float
-        ).reshape(-1, 4)
+            doc = ezdxf.readfile(file)  # DXF text may be in an older code page: ezdxf decodes it
+            lines = [e for e in doc.modelspace().query("LINE") if e.dxf.layer != "TRUTH"]
+        except Exception as exc:  # ezdxf raises more than DXFError on a damaged file (StopIteration)
+            raise UsageError(f"{path}: not a readable DXF file ({type(exc).__name__}: {exc})") from None
+        vectors = [[e.dxf.start.x, e.dxf.start.y, e.dxf.end.x, e.dxf.end.y] for e in lines]
+        return _checked(np.asarray(vectors, dtype=float).reshape(-1, 4), path)
+    text = read_text(file, "map file")
     try:
-        doc = json.loads(file.read_text(encoding="utf-8"))
+        doc = json.loads(text, parse_constant=_refuse_constant)
     except json.JSONDecodeError as exc:
         raise UsageError(f"{path}:{exc.lineno}: not valid JSON: {exc.msg}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UsageError(f"{path}: cannot read: {exc}") from None
+    except ValueError as exc:
+        raise UsageError(f"{path}: {exc}") from None
     vectors = doc.get("vectors") if isinstance(doc, dict) else None
     if not isinstance(vectors, list):
         raise UsageError(f"{path}: a map file has a 'vectors' list of [x1, y1, x2, y2] in mm")
     for i, v in enumerate(vectors):
         if not (isinstance(v, list) and len(v) == 4 and all(isinstance(c, int | float) for c in v)):
             raise UsageError(f"{path}: vectors[{i}] is not [x1, y1, x2, y2] (numbers, mm)")
-    return np.asarray(vectors, dtype=float).reshape(-1, 4)
+    return _checked(np.asarray(vectors, dtype=float).reshape(-1, 4), path)
+
+
+#: coordinates beyond this (mm: 1000 km) are no map of a room
+MAX_COORDINATE_MM = 1e9
+
+
+def _refuse_constant(name: str) -> float:
+    raise ValueError(f"{name} is not a coordinate (numbers in mm only)")
+
+
+def _checked(vectors: np.ndarray, path: str) -> np.ndarray:
+    """Refuse coordinates that are not finite or absurdly far (1e400 reads as inf)."""
+    bad = ~np.isfinite(vectors) | (np.abs(vectors) > MAX_COORDINATE_MM)
+    if bad.any():
+        row = int(np.argwhere(bad)[0][0])
+        raise UsageError(
+            f"{path}: vectors[{row}] has a coordinate that is not a finite number of mm within ±1e9"
+        )
+    return vectors
 
 
 def write_map(

@@ -45,11 +45,12 @@ def replay(
     mode: str = "raw",
     errors: str | Path | None = None,
     progress: Callable[[int, int], None] | None = None,
+    salvage: bool = False,
 ) -> ReplayResult:
     """Replay ``source`` into a new data log ``output``; ``mode`` is raw, sync or retrigger."""
     if mode not in ("raw", "sync", "retrigger"):
         raise LogError(f"replay mode {mode!r} is not one of raw, sync, retrigger")
-    log = read_log(source, expect="data")
+    log = read_log(source, expect="data", salvage=salvage)
     settings = load_config(config if config is not None else log.header.get("config") or None)
     if Path(output).resolve() == Path(source).resolve():
         raise LogError(f"{output}: the replay must write a new log, not overwrite its input")

@@ -28,7 +28,7 @@ def parse_speed(text: str) -> float:
     except ValueError:
         raise UsageError(f"--speed {text!r} is not a number") from None
     if not 0 < value <= 1000:
-        raise UsageError(f"--speed {text} must be within 0..1000 (1 = real time)")
+        raise UsageError(f"--speed {text}: give a factor above 0 and at most 1000 (1 = real time)")
     return value
 
 

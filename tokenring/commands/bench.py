@@ -10,7 +10,7 @@ import sys
 import numpy as np
 
 from tokenring import tokenpath
-from tokenring.cliutil import format_table, write_json
+from tokenring.cliutil import check_json_target, format_table, write_json
 from tokenring.errors import UsageError
 from tokenring.roundtrip import (
     ROUTER_FROM,
@@ -42,6 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="seconds allowed per run (default: 120 plus 1 ms per node and round, plus the wire time)",
     )
     p.add_argument("--json", metavar="FILE", help="write the results as JSON ('-' for stdout)")
+    p.add_argument("--force", action="store_true", help="replace an existing --json file")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.add_argument(
         "--topology",
@@ -59,6 +60,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_json_target(args.json, args.force)  # before minutes of measuring
     ids = generated_ids(args.nodes)
     if not 10 <= args.rounds <= 16000:
         raise UsageError("--rounds must be 10..16000")

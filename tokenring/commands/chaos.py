@@ -10,7 +10,7 @@ from typing import Any
 
 from tokenring import keys
 from tokenring.chaos import format_report, load_scenario, run_scenario
-from tokenring.cliutil import write_json
+from tokenring.cliutil import seconds, write_json
 from tokenring.errors import UsageError
 from tokenring.nemesis import OPERATIONS, Operation, generate, scenario_document, shrink
 from tokenring.protocol import default_protocol
@@ -42,7 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("scenario", nargs="?", help="scenario file (YAML); or use --random")
     p.add_argument("--random", metavar="SEED", type=int, help="draw the schedule from this seed")
     p.add_argument(
-        "--duration", type=float, default=60.0, help="--random: seconds of faults and settling (default 60)"
+        "--duration", type=seconds, default=60.0, help="--random: seconds of faults and settling (default 60)"
     )
     p.add_argument(
         "--kinds",
@@ -70,6 +70,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help=f"endpoint of the running ring (default {keys.DEFAULT_ENDPOINT})",
     )
     p.add_argument("--json", metavar="FILE", help="write the full report as JSON ('-' for stdout)")
+    p.add_argument("--force", action="store_true", help="replace an existing --json or --logs file")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.add_argument("--logs", metavar="FILE", help="write the launched nodes' log lines to FILE")
     p.add_argument(
@@ -121,6 +122,12 @@ def _check(args: argparse.Namespace) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tokenring.cliutil import check_json_target
+    from tokenring.inputfile import check_output
+
+    check_json_target(args.json, args.force)
+    if args.logs:
+        check_output(args.logs, force=args.force, error=lambda message: UsageError(f"--logs {message}"))
     kinds = _check(args)
     ring = keys.check_ring_name(args.ring) if args.ring else None
 

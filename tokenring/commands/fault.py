@@ -10,10 +10,19 @@ from typing import Any
 import zenoh
 
 from tokenring import keys
-from tokenring.cliutil import add_ring_options, discover, format_table, print_json, query, tap_session
+from tokenring.cliutil import (
+    add_ring_options,
+    discover,
+    format_table,
+    positive_int,
+    print_json,
+    query,
+    seconds,
+    tap_session,
+)
 from tokenring.errors import UsageError
 from tokenring.faults import KINDS, NEEDS_VALUE, FaultClient, parse_partition, parse_probability, validate
-from tokenring.protocol import default_protocol
+from tokenring.protocol import default_protocol, load_protocol
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -29,11 +38,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("kind", nargs="?", choices=KINDS, metavar="KIND", help="fault kind: " + ", ".join(KINDS))
     p.add_argument("value", nargs="?", help="delay: ms; drop/corrupt: probability 0..1; partition: A,B|C,D")
     p.add_argument("--jitter", type=float, default=0.0, metavar="MS", help="delay jitter (± ms)")
-    p.add_argument("--count", type=int, default=1, metavar="N", help="lose: how many tokens")
+    p.add_argument("--count", type=positive_int, default=1, metavar="N", help="lose: how many tokens")
     p.add_argument("--soft", action="store_true", help="hang: freeze the node OS only (across hosts)")
     p.add_argument("--list", action="store_true", help="show the active faults of every node")
     p.add_argument("--json", action="store_true", help="machine-readable output")
-    p.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for answers")
+    p.add_argument("--timeout", type=seconds, default=2.0, help="seconds to wait for answers")
     add_ring_options(p, listen=False)
 
 
@@ -56,13 +65,15 @@ def live_nodes(session: zenoh.Session, ring: str, timeout: float) -> dict[int, s
     return found
 
 
-def resolver(nodes: dict[int, str]):
+def resolver(nodes: dict[int, str], which: str = "live") -> Any:
+    """A function from a node's name or ID to its ID, refusing one not in ``nodes``."""
+
     def resolve(item: str) -> int:
         for node_id, name in nodes.items():
             if item == name or item == str(node_id):
                 return node_id
         known = ", ".join(f"{n}={i}" for i, n in sorted(nodes.items()))
-        raise UsageError(f"unknown node {item!r} (live: {known or 'none'})")
+        raise UsageError(f"unknown node {item!r} ({which}: {known or 'none'})")
 
     return resolve
 
@@ -95,6 +106,12 @@ def run(args: argparse.Namespace) -> int:
     ring = keys.check_ring_name(args.ring)
     if not args.list and (args.node is None or args.kind is None):
         raise UsageError("give a node and a fault kind (e.g. 'fault sonar crash'), or --list")
+    if not args.list:
+        # names and values that protocol.yaml alone can refuse are refused before any waiting
+        known = {spec.id: spec.name for spec in load_protocol(args.protocol).nodes.values()}
+        if args.node != "all":
+            resolver(known, "in protocol.yaml")(args.node)
+        build_request(args, resolver(known, "in protocol.yaml"))
     with tap_session(args) as session:
         nodes = live_nodes(session, ring, args.timeout)
         if not nodes:

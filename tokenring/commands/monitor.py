@@ -17,7 +17,15 @@ import time
 from typing import Any
 
 from tokenring import keys
-from tokenring.cliutil import add_ring_options, discover, format_table, query, tap_session
+from tokenring.cliutil import (
+    add_ring_options,
+    discover,
+    format_table,
+    positive_int,
+    query,
+    seconds,
+    tap_session,
+)
 from tokenring.regeneration import format_rates, ring_rates
 
 COUNTERS = (
@@ -33,9 +41,9 @@ COUNTERS = (
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("monitor", help="live terminal view of a running ring", description=__doc__)
-    p.add_argument("--interval", type=float, default=0.5, help="seconds between refreshes")
+    p.add_argument("--interval", type=seconds, default=0.5, help="seconds between refreshes")
     p.add_argument("--once", action="store_true", help="print one snapshot and exit")
-    p.add_argument("--count", type=int, help="stop after this many refreshes")
+    p.add_argument("--count", type=positive_int, help="stop after this many refreshes")
     p.add_argument("--json", action="store_true", help="one JSON object per refresh")
     add_ring_options(p, listen=False)
 

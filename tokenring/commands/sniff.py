@@ -11,8 +11,8 @@ import time
 import zenoh
 
 from tokenring import keys
-from tokenring.cliutil import add_ring_options, tap_session
-from tokenring.errors import UsageError
+from tokenring.cliutil import add_ring_options, node_id, positive_int, seconds, tap_session
+from tokenring.errors import TransportError, UsageError
 from tokenring.protocol import load_protocol
 from tokenring.sniff import decode_frame, format_line
 
@@ -24,9 +24,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Decode every token frame of a running ring with protocol.yaml.",
     )
     p.add_argument("--json", action="store_true", help="one JSON object per frame")
-    p.add_argument("-n", "--count", type=int, metavar="N", help="stop after N frames")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
-    p.add_argument("--to", type=int, metavar="ID", help="only frames addressed to node ID")
+    p.add_argument("-n", "--count", type=positive_int, metavar="N", help="stop after N frames")
+    p.add_argument(
+        "--wait",
+        type=seconds,
+        default=10.0,
+        metavar="S",
+        help="give up when no frame has come within S seconds of starting (default %(default)s)",
+    )
+    p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds")
+    p.add_argument("--to", type=node_id, metavar="ID", help="only frames addressed to node ID")
     p.add_argument(
         "--channels",
         metavar="LIST",
@@ -50,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
     key = keys.token(ring, args.to if args.to is not None else "*")
     seen = 0
     last_crc: dict[int | None, int] = {}
-    deadline = None if args.duration is None else time.monotonic() + args.duration
+    started = time.monotonic()
+    deadline = None if args.duration is None else started + args.duration
     with tap_session(args) as session:
         subscriber = session.declare_subscriber(key, zenoh.handlers.FifoChannel(8192))
         try:
@@ -59,6 +67,11 @@ def run(args: argparse.Namespace) -> int:
                     break
                 sample = subscriber.try_recv()
                 if sample is None:
+                    if not seen and time.monotonic() - started > args.wait:
+                        raise TransportError(
+                            f"no frame on {key} within {args.wait:g} s (is the ring running, and are "
+                            "--ring and --connect right?)"
+                        )
                     time.sleep(0.002)
                     continue
                 frame = sample.payload.to_bytes()

@@ -5,12 +5,14 @@ from __future__ import annotations
 import argparse
 import sys
 
+from tokenring.cliutil import seconds
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring.cliutil import add_json_option, add_ring_options
 
     p = sub.add_parser("status", help="membership and counters of a running ring")
-    p.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for answers")
+    p.add_argument("--timeout", type=seconds, default=2.0, help="seconds to wait for answers")
     add_json_option(p)
     add_ring_options(p, listen=False)
 

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from tokenring import extensions
+from tokenring.cliutil import seconds
 from tokenring.errors import UsageError
 
 if TYPE_CHECKING:
@@ -24,7 +25,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "and supervise them until Ctrl-C, SIGTERM or --duration.",
     )
     p.add_argument("--nodes", help="comma-separated subset of nodes (names or IDs); default all")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds")
     p.add_argument(
         "--bitrate",
         default="2.5M",
@@ -90,6 +91,10 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--profile {args.profile} emulates hardware timing: give a bitrate such as 2.5M, not max"
         )
+    if args.store:
+        from tokenring.programstore import check_store_root
+
+        check_store_root(Path(args.store))  # before any node starts (a node would fail mid-download)
     selection = [s.strip() for s in args.nodes.split(",") if s.strip()] if args.nodes else None
     programs = None if args.no_programs else (args.programs or extensions.programs_dir())
     if programs is not None and not Path(programs).is_dir():

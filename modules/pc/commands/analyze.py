@@ -19,18 +19,27 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("log", help="data log (.trlog)")
     p.add_argument("--out", metavar="DIR", help="directory for the PNGs (default: only the summary)")
+    p.add_argument(
+        "--salvage",
+        action="store_true",
+        help="read the records around damage inside the log (else damage is an error)",
+    )
     add_json_option(p)
 
 
 def run(args: argparse.Namespace) -> int:
     from modules.pc.analysis import analyse
     from tokenring.cliutil import print_json
+    from tokenring.inputfile import check_output
+
+    if args.out:
+        check_output(args.out, (args.log,), directory=True)  # before the log is read and plotted
 
     def progress(name: str) -> None:
         if not args.json:
             print(f"  wrote {name}", file=sys.stderr)
 
-    summary, files = analyse(args.log, args.out, progress)
+    summary, files = analyse(args.log, args.out, progress, salvage=args.salvage)
     if args.json:
         print_json({**summary, "files": [str(f) for f in files]})
         return 0

@@ -24,6 +24,7 @@ import time
 from typing import Any
 
 from modules.description import keys as robot_keys
+from tokenring.cliutil import seconds
 from tokenring.errors import TokenRingError, UsageError
 
 MOVING, STALLED, COLLISION = 1, 2, 3
@@ -48,7 +49,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("values", nargs="*", help="the action's arguments (see the examples)")
     p.add_argument("--speed", type=float, default=50.0, help="speed in %% of 10 cm/s, 1..100 (default 50)")
-    p.add_argument("--timeout", type=float, default=120.0, help="real seconds to wait for the move")
+    p.add_argument("--timeout", type=seconds, default=120.0, help="real seconds to wait for the move")
     p.add_argument("--no-wait", action="store_true", help="send the command and return at once")
     add_json_option(p)
     add_ring_options(p, listen=False)

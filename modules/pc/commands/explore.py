@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import time
 
+from tokenring.cliutil import seconds
 from tokenring.errors import UsageError
 
 ACTIONS = ("1", "2", "stop", "calibrate", "state")
@@ -26,7 +27,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("action", help="1, 2, stop, calibrate or state")
     p.add_argument("--wait", action="store_true", help="follow the navigator until it finishes")
-    p.add_argument("--timeout", type=float, default=600.0, help="with --wait: give up after S seconds")
+    p.add_argument("--timeout", type=seconds, default=600.0, help="with --wait: give up after S seconds")
     add_json_option(p)
     add_ring_options(p, listen=False)
 

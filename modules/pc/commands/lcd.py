@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from modules.description import keys as robot_keys
+from tokenring.cliutil import non_negative_seconds
 from tokenring.errors import TransportError, UsageError
 
 KEYPAD = "0123456789ABCD*#"
@@ -39,7 +40,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--keys", metavar="KEYS", help='press these keypad keys (e.g. "1 2"), print the screen, exit'
     )
     p.add_argument(
-        "--delay", type=float, default=0.3, help="seconds between --keys presses (default %(default)s)"
+        "--delay",
+        type=non_negative_seconds,
+        default=0.3,
+        help="seconds between --keys presses (default %(default)s)",
     )
     p.add_argument("--once", action="store_true", help="print the screen once and exit")
     add_ring_options(p, listen=False)

@@ -25,23 +25,49 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     convert.add_argument(
         "--out", metavar="PATH", help="text: a file (default: standard output); csv: a directory (required)"
     )
+    convert.add_argument("--force", action="store_true", help="replace an existing output")
     order = verbs.add_parser("sort", help="sort by time stamp into a new log")
     order.add_argument("log")
-    order.add_argument("--out", required=True, metavar="FILE", help="the sorted log (must be a new file)")
+    order.add_argument("--out", required=True, metavar="FILE", help="the sorted log (a new file)")
+    order.add_argument("--force", action="store_true", help="replace an existing output (never the input)")
     info = verbs.add_parser("info", help="header, time range, counts per source and kind, torn tail")
     info.add_argument("log")
     add_json_option(info)
+    for verb in (convert, order, info):
+        verb.add_argument(
+            "--salvage",
+            action="store_true",
+            help="read the records around damage inside the log (else damage is an error)",
+        )
 
 
 def run(args: argparse.Namespace) -> int:
     from modules.common.logs import convert_csv, convert_text, read_log, sort_log, summary
     from tokenring.errors import UsageError
+    from tokenring.inputfile import check_output, write_atomically
 
+    # outputs are checked before anything is read: never the input, never silently replaced
     if args.log_verb == "sort":
-        count = sort_log(args.log, args.out)
+        check_output(args.out, (args.log,), force=args.force)
+    elif args.log_verb == "convert" and args.out:
+        check_output(args.out, (args.log,), force=args.force, directory=args.to == "csv")
+        if args.to == "csv" and Path(args.out).is_dir():
+            for name in ("data.csv", "sonar.csv"):
+                check_output(Path(args.out) / name, (args.log,), force=args.force)
+    elif args.log_verb == "convert" and args.to == "csv":
+        raise UsageError("--to csv writes data.csv and sonar.csv: give the directory with --out")
+    if args.log_verb == "sort":
+        count = sort_log(args.log, args.out, salvage=args.salvage)
         print(f"{args.out}: {count} records sorted by time stamp")
         return 0
-    log = read_log(args.log)
+    log = read_log(args.log, salvage=args.salvage)
+    if log.damaged:
+        lost = sum(b - a for a, b in log.damaged)
+        print(
+            f"{args.log}: {lost} damaged bytes skipped in {len(log.damaged)} place(s); "
+            f"{len(log.records)} records read around them",
+            file=sys.stderr,
+        )
     if log.truncated:
         print(f"{args.log}: the last record is torn (the writer was killed); read up to it", file=sys.stderr)
     if args.log_verb == "info":
@@ -62,17 +88,15 @@ def run(args: argparse.Namespace) -> int:
     if args.to == "text":
         text = convert_text(log)
         if args.out:
-            Path(args.out).write_text(text, encoding="utf-8")
+            write_atomically(args.out, text)
             print(f"{args.out}: {len(log.records)} entries")
         else:
             sys.stdout.write(text)
         return 0
-    if not args.out:
-        raise UsageError("--to csv writes data.csv and sonar.csv: give the directory with --out")
     data, sonar = convert_csv(log)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "data.csv").write_text(data, encoding="utf-8")
-    (out / "sonar.csv").write_text(sonar, encoding="utf-8")
+    write_atomically(out / "data.csv", data)
+    write_atomically(out / "sonar.csv", sonar)
     print(f"{out}/data.csv: {data.count(chr(10)) - 1} synchronisations; {out}/sonar.csv")
     return 0

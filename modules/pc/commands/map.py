@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 
+from tokenring.cliutil import seconds
 from tokenring.errors import UsageError
 
 
@@ -26,7 +27,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, metavar="FILE", help="where to write the map (.json, .dxf, .png)")
     p.add_argument("--world", metavar="NAME|FILE", help="the true room, drawn faintly for comparison")
     p.add_argument("--from", dest="source", metavar="MAP", help="convert a saved map (.json or .dxf)")
-    p.add_argument("--timeout", type=float, default=60.0, help="seconds to wait for the map (default 60)")
+    p.add_argument("--timeout", type=seconds, default=60.0, help="seconds to wait for the map (default 60)")
     add_ring_options(p, listen=False)
 
 

@@ -31,6 +31,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "config's trigger (default %(default)s)",
     )
     p.add_argument("--errors", metavar="FILE", help="also write an error log")
+    p.add_argument(
+        "--salvage",
+        action="store_true",
+        help="read the records around damage inside the log (else damage is an error)",
+    )
     p.add_argument("--check", action="store_true", help="exit 1 unless the positions equal the input log's")
     add_json_option(p)
 
@@ -43,7 +48,15 @@ def run(args: argparse.Namespace) -> int:
         if sys.stderr.isatty():
             print(f"\rreplaying {done}/{total} records", end="", file=sys.stderr, flush=True)
 
-    result = replay(args.log, args.out, args.config, mode=args.mode, errors=args.errors, progress=progress)
+    result = replay(
+        args.log,
+        args.out,
+        args.config,
+        mode=args.mode,
+        errors=args.errors,
+        progress=progress,
+        salvage=args.salvage,
+    )
     if sys.stderr.isatty():
         print(file=sys.stderr)
     if args.json:
