@@ -193,8 +193,8 @@ def test_scan_incremental_all_corrupt_start_stop_upload_and_bad_input(procs, rin
         assert code == 1, text
         assert "ARCNET_ERROR from sonar (30, program): ZeroDivisionError: sonar divided by zero" in text, text
         assert "FAILED: sonar (30): installed, but its start failed" in text, text
-        # ... and the node is not left without a program: the one before runs again
-        assert "the previous program runs again" in text, text
+        # ... and the node is not left without a program: the one before runs again (the status
+        # window's 29 bytes cannot say so; the node's own report does)
         wait_until(lambda: version(session, ring_name, 30) == 1, 10, "sonar's previous program running again")
         assert [n["id"] for n in load_json(ring_name, endpoint)["scan"]] == ids
     launcher.send_signal(signal.SIGTERM)

@@ -73,7 +73,7 @@ def test_command_dtypes_overlay_the_header_and_arguments():
 
 
 def test_missing_file_is_named():
-    with pytest.raises(ProtocolError, match=r"nope\.yaml: file not found"):
+    with pytest.raises(ProtocolError, match=r"nope\.yaml: no such protocol file"):
         load_protocol("/tmp/nope.yaml")
 
 
