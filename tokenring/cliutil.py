@@ -220,7 +220,9 @@ def check_json_target(target: str | None, force: bool = False) -> None:
     if target and target != "-":
         from tokenring.inputfile import check_output
 
-        check_output(target, force=force, error=lambda message: UsageError(f"--json {message}"))
+        check_output(
+            target, force=force, error=lambda where, problem: UsageError(f"--json {where}: {problem}")
+        )
 
 
 def _default(value: Any) -> Any:

@@ -13,7 +13,7 @@ import contextlib
 import os
 import stat
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from tokenring.errors import TokenRingError, UsageError
@@ -29,7 +29,16 @@ LIMITS = {
     "file": 16 * MIB,
 }
 
-ErrorFactory = Callable[[str], TokenRingError]
+#: builds the error to raise: ``error(where, problem)``, ``where`` the path (or ``path:line``)
+ErrorFactory = Callable[[str, str], TokenRingError]
+
+
+def message_error(kind: Callable[[str], TokenRingError]) -> ErrorFactory:
+    """An :data:`ErrorFactory` for error classes built from one message: ``kind("where: problem")``."""
+    return lambda where, problem: kind(f"{where}: {problem}")
+
+
+USAGE_ERROR = message_error(UsageError)
 
 
 def _kind(mode: int) -> str:
@@ -44,45 +53,71 @@ def _kind(mode: int) -> str:
     return "not a regular file"
 
 
-def read_bytes(
-    path: str | os.PathLike[str],
-    what: str = "file",
-    error: ErrorFactory = UsageError,
-    limit: int | None = None,
-) -> bytes:
-    """The whole content of the regular file ``path`` (at most ``limit`` bytes, by default the
-    limit of ``what``); ``error(message)`` is raised with the path in front otherwise."""
-    file = Path(path)
-    limit = LIMITS.get(what, LIMITS["file"]) if limit is None else limit
+def _open_checked(file: Path, what: str, error: ErrorFactory, limit: int) -> int:
+    """A descriptor of ``file`` once it is known to be a regular file within ``limit`` bytes."""
     try:
         # O_NONBLOCK: opening a FIFO that nobody writes must not hang before we can look at it
         fd = os.open(file, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
-        raise error(f"{file}: no such {what}") from None
+        raise error(str(file), f"no such {what}") from None
     except IsADirectoryError:
-        raise error(f"{file}: is a directory, not a {what}") from None
+        raise error(str(file), f"is a directory, not a {what}") from None
     except OSError as exc:
-        raise error(f"{file}: cannot read: {exc.strerror}") from None
+        raise error(str(file), f"cannot read: {exc.strerror}") from None
     try:
         info = os.fstat(fd)
         if not stat.S_ISREG(info.st_mode):
-            raise error(f"{file}: is {_kind(info.st_mode)}, not a {what}")
+            raise error(str(file), f"is {_kind(info.st_mode)}, not a {what}")
         if info.st_size > limit:
-            raise error(f"{file}: {info.st_size} bytes; a {what} is at most {limit} bytes")
+            raise error(str(file), f"{info.st_size} bytes; a {what} is at most {limit} bytes")
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
+
+
+def _limit(what: str, limit: int | None) -> int:
+    return LIMITS.get(what, LIMITS["file"]) if limit is None else limit
+
+
+def check_input(
+    path: str | os.PathLike[str],
+    what: str = "file",
+    error: ErrorFactory = USAGE_ERROR,
+    limit: int | None = None,
+) -> Path:
+    """The checks of :func:`read_bytes` without reading (for a file a library reads itself)."""
+    file = Path(path)
+    os.close(_open_checked(file, what, error, _limit(what, limit)))
+    return file
+
+
+def read_bytes(
+    path: str | os.PathLike[str],
+    what: str = "file",
+    error: ErrorFactory = USAGE_ERROR,
+    limit: int | None = None,
+) -> bytes:
+    """The whole content of the regular file ``path`` (at most ``limit`` bytes, by default the
+    limit of ``what``); else ``error(path, problem)`` is raised."""
+    file = Path(path)
+    limit = _limit(what, limit)
+    fd = _open_checked(file, what, error, limit)
+    try:
         chunks = []
         left = limit + 1  # a file that grows while we read is cut here, and refused below
         while left > 0:
             try:
                 chunk = os.read(fd, min(left, MIB))
             except OSError as exc:
-                raise error(f"{file}: cannot read: {exc.strerror}") from None
+                raise error(str(file), f"cannot read: {exc.strerror}") from None
             if not chunk:
                 break
             chunks.append(chunk)
             left -= len(chunk)
         data = b"".join(chunks)
         if len(data) > limit:
-            raise error(f"{file}: over {limit} bytes; a {what} is at most {limit} bytes")
+            raise error(str(file), f"over {limit} bytes; a {what} is at most {limit} bytes")
         return data
     finally:
         os.close(fd)
@@ -91,7 +126,7 @@ def read_bytes(
 def read_text(
     path: str | os.PathLike[str],
     what: str = "file",
-    error: ErrorFactory = UsageError,
+    error: ErrorFactory = USAGE_ERROR,
     limit: int | None = None,
 ) -> str:
     """:func:`read_bytes`, decoded as UTF-8 (a byte that is not: the error says where)."""
@@ -101,7 +136,7 @@ def read_text(
     except UnicodeDecodeError as exc:
         line = data.count(b"\n", 0, exc.start) + 1
         raise error(
-            f"{Path(path)}:{line}: not UTF-8 text (byte {exc.start}: 0x{data[exc.start]:02x})"
+            f"{Path(path)}:{line}", f"not UTF-8 text (byte {exc.start}: 0x{data[exc.start]:02x})"
         ) from None
 
 
@@ -111,7 +146,7 @@ def check_output(
     *,
     force: bool = False,
     directory: bool = False,
-    error: ErrorFactory = UsageError,
+    error: ErrorFactory = USAGE_ERROR,
 ) -> Path:
     """Check an output path before any work is done: never one of the ``inputs``, not an
     existing file unless ``force``, its folder present and writable. ``directory``: the output
@@ -120,36 +155,44 @@ def check_output(
     for source in inputs:
         src = Path(source)
         if src.exists() and out.exists() and os.path.samefile(src, out):
-            raise error(f"{out}: is the input {src}; write the output to another path")
+            raise error(str(out), f"is the input {src}; write the output to another path")
     if directory:
         if out.exists() and not out.is_dir():
-            raise error(f"{out}: exists and is not a directory")
+            raise error(str(out), "exists and is not a directory")
         parent = out if out.exists() else out.parent
     else:
         if out.is_dir():
-            raise error(f"{out}: is a directory, not a file to write")
+            raise error(str(out), "is a directory, not a file to write")
         if out.exists() and not force:
-            raise error(f"{out}: exists; give --force to replace it, or another path")
+            raise error(str(out), "exists; give --force to replace it, or another path")
         parent = out.parent
     parent = parent if str(parent) else Path(".")
     if not parent.is_dir():
-        raise error(f"{out}: its folder {parent} does not exist")
+        raise error(str(out), f"its folder {parent} does not exist")
     if not os.access(parent, os.W_OK):
-        raise error(f"{out}: its folder {parent} is not writable")
+        raise error(str(out), f"its folder {parent} is not writable")
     return out
 
 
-def write_atomically(path: str | os.PathLike[str], data: bytes | str) -> None:
-    """Write ``data`` to ``path`` through a temporary file in its folder and a rename: a reader
-    (or a crash) never sees half a file, and a failed write leaves the old one."""
+@contextlib.contextmanager
+def replacing(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """A temporary path beside ``path`` to write; renamed over ``path`` when the block ends
+    normally, removed if it raises: a reader (or a crash) never sees half a file, and a failed
+    write leaves the old one."""
     out = Path(path)
-    raw = data.encode("utf-8") if isinstance(data, str) else data
-    fd, temp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent if str(out.parent) else ".")
+    fd, name = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent if str(out.parent) else ".")
+    os.close(fd)
+    temp = Path(name)
     try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(raw)
+        yield temp
         os.replace(temp, out)
     except BaseException:
         with contextlib.suppress(OSError):
-            os.unlink(temp)
+            temp.unlink()
         raise
+
+
+def write_atomically(path: str | os.PathLike[str], data: bytes | str) -> None:
+    """Write ``data`` to ``path`` through :func:`replacing`."""
+    with replacing(path) as temp:
+        temp.write_bytes(data.encode("utf-8") if isinstance(data, str) else data)

@@ -123,8 +123,8 @@ def inspect_program(source: bytes | str, filename: str = "<program>") -> str:
 
 def load_program_file(path: str | Path) -> tuple[type[UserProgram], bytes]:
     """Read and load a program file; returns the class and the exact bytes read."""
-    from tokenring.inputfile import read_bytes
+    from tokenring.inputfile import message_error, read_bytes
 
     file = Path(path)
-    source = read_bytes(file, "program file", ProgramError)
+    source = read_bytes(file, "program file", message_error(ProgramError))
     return load_program(source, str(file)), source

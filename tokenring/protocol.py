@@ -311,9 +311,7 @@ def load_protocol(path: str | os.PathLike[str] | None = None) -> Protocol:
     from tokenring.inputfile import read_text
 
     source = str(file)
-    text = read_text(
-        file, "protocol file", lambda message: ProtocolError(source, "", message.split(": ", 1)[1])
-    )
+    text = read_text(file, "protocol file", lambda where, problem: ProtocolError(where, "", problem))
     return parse_protocol(text, source)
 
 

@@ -95,10 +95,10 @@ def load_config(source: str | Path | dict | None = None) -> dict[str, Any]:
         return copy.deepcopy(DEFAULTS)
     if isinstance(source, dict):
         return validate(source, "<config>", {})
-    from tokenring.inputfile import read_text
+    from tokenring.inputfile import message_error, read_text
 
     path = Path(source)
-    text = read_text(path, "configuration file", ConfigError)
+    text = read_text(path, "configuration file", message_error(ConfigError))
     return parse_config(text, str(path))
 
 

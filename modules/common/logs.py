@@ -37,7 +37,6 @@ import io
 import math
 import os
 import threading
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -220,13 +219,6 @@ def _resync(data: bytes, start: int, kind: str) -> int | None:
     return None
 
 
-def iter_log(path: str | Path) -> tuple[dict[str, Any], Iterator[list[Any]], list[bool]]:
-    """The header and an iterator over the records; the list gets ``True`` if the tail was torn.
-    Damage in the middle is skipped (see :func:`read_log`); this iterator reports only the tail."""
-    log = read_log(path, salvage=True)
-    return log.header, iter(log.records), [log.truncated]
-
-
 def read_log(path: str | Path, expect: str | None = None, salvage: bool = False) -> LogFile:
     """Read a whole log; ``expect`` (``data``/``errors``) refuses the other kind.
 
@@ -235,10 +227,10 @@ def read_log(path: str | Path, expect: str | None = None, salvage: bool = False)
     resynchronises past it: two records in a row decode again), ``damaged`` lists the byte
     ranges skipped, and without ``salvage`` the read fails with one line saying where and how
     much; with it the readable records are returned."""
-    from tokenring.inputfile import read_bytes
+    from tokenring.inputfile import message_error, read_bytes
 
     file = Path(path)
-    data = read_bytes(file, "log file", LogError, limit=MAX_LOG_BYTES)
+    data = read_bytes(file, "log file", message_error(LogError), limit=MAX_LOG_BYTES)
     unpacker = msgpack.Unpacker(raw=False, strict_map_key=False, max_buffer_size=len(data) + 1)
     unpacker.feed(data)
     try:
@@ -419,18 +411,11 @@ def sort_log(source: str | Path, target: str | Path, salvage: bool = False) -> i
     log = read_log(source, salvage=salvage)
     key = (lambda r: r[0]) if log.kind in ("data", "errors") else None
     records = sorted(log.records, key=key)
-    out = Path(target)
-    temp = out.with_name(f".{out.name}.{os.getpid()}.partial")  # renamed over the target at the end
-    stream = _Stream(temp, log.header)
-    try:
+    from tokenring.inputfile import replacing
+
+    with replacing(target) as temp, _Stream(temp, log.header) as stream:
         for record in records:
             stream._write(record)
-    except BaseException:
-        stream.close()
-        temp.unlink(missing_ok=True)
-        raise
-    stream.close()
-    os.replace(temp, out)
     return len(records)
 
 

@@ -82,10 +82,10 @@ def resolve_world(name_or_path: str | Path) -> Path:
 
 def load_world(name_or_path: str | Path) -> World:
     """Load a bundled room by name (``office``) or a world file (YAML, or a seed wall file)."""
-    from tokenring.inputfile import read_text
+    from tokenring.inputfile import message_error, read_text
 
     path = resolve_world(name_or_path)
-    text = read_text(path, "world file", WorldError)
+    text = read_text(path, "world file", message_error(WorldError))
     if _looks_like_wall_file(text):
         walls = parse_wall_file(text, str(path))
         return _finish(World(name=path.stem, walls=tuple(walls), start=Pose(0, 0, 0), source=str(path)), None)
@@ -261,8 +261,8 @@ def parse_world_yaml(text: str, source: str, default_name: str = "world", base: 
             wall_path = base / wall_path
         from tokenring.inputfile import read_text
 
-        def unreadable(message: str) -> TokenRingError:
-            return r.fail(top, f"wall_file {message}")
+        def unreadable(where: str, problem: str) -> TokenRingError:
+            return r.fail(top, f"wall_file {where}: {problem}")
 
         walls.extend(parse_wall_file(read_text(wall_path, "wall file", unreadable), str(wall_path)))
 

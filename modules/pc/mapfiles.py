@@ -65,13 +65,13 @@ def load_truth(world: str) -> tuple[str, np.ndarray]:
 
 def load_map_file(path: str) -> np.ndarray:
     """Vectors (mm) from a map written by ``tokenring map`` (.json) or any DXF's LINE entities."""
-    from tokenring.inputfile import read_bytes, read_text
+    from tokenring.inputfile import check_input, read_text
 
     file = Path(path)
     if file.suffix.lower() == ".dxf":
         import ezdxf
 
-        read_bytes(file, "map file")  # a FIFO, a device or a huge file is refused before ezdxf
+        check_input(file, "map file")  # a FIFO, a device or a huge file is refused before ezdxf
         try:
             doc = ezdxf.readfile(file)  # DXF text may be in an older code page: ezdxf decodes it
             lines = [e for e in doc.modelspace().query("LINE") if e.dxf.layer != "TRUTH"]

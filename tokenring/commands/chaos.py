@@ -127,7 +127,9 @@ def run(args: argparse.Namespace) -> int:
 
     check_json_target(args.json, args.force)
     if args.logs:
-        check_output(args.logs, force=args.force, error=lambda message: UsageError(f"--logs {message}"))
+        check_output(
+            args.logs, force=args.force, error=lambda where, problem: UsageError(f"--logs {where}: {problem}")
+        )
     kinds = _check(args)
     ring = keys.check_ring_name(args.ring) if args.ring else None
 
