@@ -38,13 +38,16 @@ from typing import TYPE_CHECKING, Any
 
 from tokenring import keys
 from tokenring.control import AfterReply
-from tokenring.errors import UsageError
+from tokenring.errors import TokenRingError, UsageError
 from tokenring.launcher import CRASH_EXIT_CODE
 
 if TYPE_CHECKING:
     from tokenring.node import NodeOS
 
 log = logging.getLogger("tokenring.faults")
+
+#: faults that may be asked for twice with the effect of once: a lost answer is asked again
+IDEMPOTENT = frozenset({"delay", "drop", "corrupt", "duplicate", "partition", "heal", "clear", "list"})
 
 #: a crash or hard hang stops the process this long after its answer was handed to Zenoh: the
 #: answer's batch must leave before the process stops (it was 10 ms from *before* the reply,
@@ -309,9 +312,14 @@ class FaultClient:
 
         if request["kind"] == "resume" and not request.get("soft"):
             return self.resume(node_id)
-        return query_one(
-            self.session, keys.control(self.ring, node_id, "fault"), request, timeout=self.timeout
-        )
+        key = keys.control(self.ring, node_id, "fault")
+        try:
+            return query_one(self.session, key, request, timeout=self.timeout)
+        except TokenRingError:
+            if request["kind"] not in IDEMPOTENT:
+                raise
+            # its answer may have been lost on a busy machine: asking twice does no harm
+            return query_one(self.session, key, request, timeout=self.timeout)
 
     def resume(self, node_id: int) -> dict[str, Any]:
         """End a hang: SIGCONT through the launcher (a stopped node answers nothing), then clear."""

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -108,9 +107,10 @@ def run(args: argparse.Namespace) -> int:
     # every extension checks its options before anything starts
     plans_up = [extension.plan_up(args, protocol) for extension in extensions.loaded()]
     speedup = 1.0
+    node_env: dict[str, str] = {}
     for plan in plans_up:
         speedup *= plan.speedup
-        os.environ.update(plan.env)
+        node_env.update(plan.env)
     # everything emulated runs K times faster with a speed-up K, the wire included: a round
     # of the ring must stay as short in emulated time as it is on the real hardware
     wire = args.bitrate if bitrate is None or speedup == 1.0 else format_bitrate(bitrate * speedup)
@@ -131,6 +131,7 @@ def run(args: argparse.Namespace) -> int:
         services=services,
         extra_node_args=["--store", args.store] if args.store else [],
         boot_concurrency=BOOT_CONCURRENCY if args.boot_wave is None else args.boot_wave,
+        env=node_env,
     )
     install_signal_handlers(launcher)
     launcher.start()
