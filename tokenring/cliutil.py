@@ -30,22 +30,28 @@ class OneLineParser(argparse.ArgumentParser):
 MAX_SECONDS = 7 * 24 * 3600.0
 
 
-def seconds(text: str) -> float:
-    """An argparse type: a positive, finite number of seconds up to :data:`MAX_SECONDS`."""
+def _seconds(text: str, zero: bool) -> float:
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
-    if not (math.isfinite(value) and 0 < value <= MAX_SECONDS):
+    low_ok = value >= 0 if zero else value > 0
+    if not (math.isfinite(value) and low_ok and value <= MAX_SECONDS):
+        lowest = "0 or more" if zero else "above 0"
         raise argparse.ArgumentTypeError(
-            f"{text} seconds: give a number above 0 and at most {MAX_SECONDS:.0f}"
+            f"{text} seconds: give a number {lowest} and at most {MAX_SECONDS:.0f}"
         )
     return value
 
 
+def seconds(text: str) -> float:
+    """An argparse type: a positive, finite number of seconds up to :data:`MAX_SECONDS`."""
+    return _seconds(text, zero=False)
+
+
 def non_negative_seconds(text: str) -> float:
     """An argparse type: like :func:`seconds`, 0 allowed."""
-    return 0.0 if text.strip() in ("0", "0.0") else seconds(text)
+    return _seconds(text, zero=True)
 
 
 def positive_int(text: str) -> int:

@@ -408,17 +408,19 @@ def _wall(r: _Reader, x1: float, y1: float, x2: float, y2: float, visible: Any, 
     return Wall(x1, y1, x2, y2, visible=visible, line=line)
 
 
-def _segments_cross(
-    a: tuple[float, float], b: tuple[float, float], c: tuple[float, float], d: tuple[float, float]
-) -> bool:
-    """Whether segments ab and cd properly intersect (touching at an end does not count)."""
+Point = tuple[float, float]
 
-    def side(p: tuple[float, float], q: tuple[float, float], r: tuple[float, float]) -> float:
-        return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
 
-    d1, d2 = side(c, d, a), side(c, d, b)
-    d3, d4 = side(a, b, c), side(a, b, d)
-    return d1 * d2 < 0 and d3 * d4 < 0
+def _side(p: Point, q: Point, r: Point) -> float:
+    """Which side of the line pq the point r lies on (the sign), twice the triangle's area."""
+    return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+
+
+def _segments_meet(a: Point, b: Point, c: Point, d: Point, ends: bool) -> bool:
+    """Whether segments ab and cd intersect; with ``ends``, touching at an end counts too (a
+    ray through a corner meets the room), without it only a proper crossing does."""
+    first, second = _side(c, d, a) * _side(c, d, b), _side(a, b, c) * _side(a, b, d)
+    return first <= 0 and second <= 0 if ends else first < 0 and second < 0
 
 
 def _self_crossing(pts: list[tuple[float, float]], closed: bool) -> tuple[int, int] | None:
@@ -429,7 +431,7 @@ def _self_crossing(pts: list[tuple[float, float]], closed: bool) -> tuple[int, i
         for j in range(i + 2, n):
             if closed and i == 0 and j == n - 1:
                 continue  # the first and last side meet at the first point
-            if _segments_cross(*sides[i], *sides[j]):
+            if _segments_meet(*sides[i], *sides[j], ends=False):
                 return i + 1, j + 1
     return None
 
@@ -443,20 +445,9 @@ def _escapes(world: World, x: float, y: float) -> float | None:
     for k in range(16):
         angle = 2 * math.pi * (k + 0.1) / 16  # off the axes and diagonals, where corners sit
         end = (x + reach * math.cos(angle), y + reach * math.sin(angle))
-        if not any(_segments_touch((x, y), end, (w.x1, w.y1), (w.x2, w.y2)) for w in world.walls):
+        if not any(_segments_meet((x, y), end, (w.x1, w.y1), (w.x2, w.y2), ends=True) for w in world.walls):
             return math.degrees(angle)
     return None
-
-
-def _segments_touch(
-    a: tuple[float, float], b: tuple[float, float], c: tuple[float, float], d: tuple[float, float]
-) -> bool:
-    """Whether segments ab and cd meet, ends included (a ray through a corner meets the room)."""
-
-    def side(p: tuple[float, float], q: tuple[float, float], r: tuple[float, float]) -> float:
-        return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
-
-    return side(c, d, a) * side(c, d, b) <= 0 and side(a, b, c) * side(a, b, d) <= 0
 
 
 def _finish(world: World, start_line: int | None) -> World:

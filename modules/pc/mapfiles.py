@@ -95,21 +95,19 @@ def load_map_file(path: str) -> np.ndarray:
     return _checked(np.asarray(vectors, dtype=float).reshape(-1, 4), path)
 
 
-#: coordinates beyond this (mm: 1000 km) are no map of a room
-MAX_COORDINATE_MM = 1e9
-
-
 def _refuse_constant(name: str) -> float:
     raise ValueError(f"{name} is not a coordinate (numbers in mm only)")
 
 
 def _checked(vectors: np.ndarray, path: str) -> np.ndarray:
     """Refuse coordinates that are not finite or absurdly far (1e400 reads as inf)."""
+    from modules.description.roomfile import MAX_COORDINATE_MM  # what a room may span
+
     bad = ~np.isfinite(vectors) | (np.abs(vectors) > MAX_COORDINATE_MM)
     if bad.any():
         row = int(np.argwhere(bad)[0][0])
         raise UsageError(
-            f"{path}: vectors[{row}] has a coordinate that is not a finite number of mm within ±1e9"
+            f"{path}: vectors[{row}] has a coordinate that is not a finite number of mm within ±{MAX_COORDINATE_MM:g}"
         )
     return vectors
 
