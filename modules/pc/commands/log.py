@@ -41,21 +41,27 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         )
 
 
+def check_outputs(args: argparse.Namespace) -> None:
+    """Before anything is read: an output is never the input, never silently replaced."""
+    from tokenring.errors import UsageError
+    from tokenring.inputfile import check_output
+
+    if args.log_verb == "sort" or (args.log_verb == "convert" and args.to == "text" and args.out):
+        check_output(args.out, (args.log,), force=args.force)
+    elif args.log_verb == "convert" and args.to == "csv":
+        if not args.out:
+            raise UsageError("--to csv writes data.csv and sonar.csv: give the directory with --out")
+        check_output(args.out, (args.log,), directory=True)
+        for name in ("data.csv", "sonar.csv"):
+            if (Path(args.out) / name).exists():
+                check_output(Path(args.out) / name, (args.log,), force=args.force)
+
+
 def run(args: argparse.Namespace) -> int:
     from modules.common.logs import convert_csv, convert_text, read_log, sort_log, summary
-    from tokenring.errors import UsageError
-    from tokenring.inputfile import check_output, write_atomically
+    from tokenring.inputfile import write_atomically
 
-    # outputs are checked before anything is read: never the input, never silently replaced
-    if args.log_verb == "sort":
-        check_output(args.out, (args.log,), force=args.force)
-    elif args.log_verb == "convert" and args.out:
-        check_output(args.out, (args.log,), force=args.force, directory=args.to == "csv")
-        if args.to == "csv" and Path(args.out).is_dir():
-            for name in ("data.csv", "sonar.csv"):
-                check_output(Path(args.out) / name, (args.log,), force=args.force)
-    elif args.log_verb == "convert" and args.to == "csv":
-        raise UsageError("--to csv writes data.csv and sonar.csv: give the directory with --out")
+    check_outputs(args)
     if args.log_verb == "sort":
         count = sort_log(args.log, args.out, salvage=args.salvage)
         print(f"{args.out}: {count} records sorted by time stamp")
