@@ -8,6 +8,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 from conftest import REPO, run_tokenring
@@ -30,7 +31,8 @@ def test_the_wings_keep_their_contracts():
     assert result.returncode == 0, result.stdout + result.stderr
     assert "0 broken" in result.stdout, result.stdout
     # every contract of pyproject.toml was checked, none skipped
-    assert result.stdout.count(" KEPT") == 7, result.stdout
+    contracts = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["importlinter"]["contracts"]
+    assert len(contracts) >= 7 and result.stdout.count(" KEPT") == len(contracts), result.stdout
 
 
 def test_a_wrong_arrow_fails_the_contracts(tmp_path: Path):
