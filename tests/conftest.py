@@ -73,6 +73,22 @@ class Processes:
         """Also make sure these PIDs (e.g. a launcher's children) are gone at teardown."""
         self.extra_pids.update(pids)
 
+    def unread_output(self, limit: int = 16384) -> str:
+        """What the still-open pipes hold (without blocking): the story of a failed test."""
+        parts = []
+        for proc in self.started:
+            stream = proc.stdout
+            if stream is None or stream.closed:
+                continue
+            try:
+                os.set_blocking(stream.fileno(), False)
+                text = stream.read() or ""
+            except (OSError, ValueError, TypeError):
+                continue
+            if text:
+                parts.append(f"--- pid {proc.pid}: {' '.join(map(str, proc.args))[:100]}\n{text[-limit:]}")
+        return "\n".join(parts)
+
     def cleanup(self) -> list[str]:
         leaked: list[str] = []
         for proc in self.started:
@@ -104,12 +120,25 @@ def program_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return store
 
 
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Iterator[None]:
+    """Keep each phase's report on the item, so fixtures can tell whether the test failed."""
+    outcome = yield
+    report = outcome.get_result()
+    setattr(item, f"report_{report.when}", report)
+
+
 @pytest.fixture
-def procs() -> Iterator[Processes]:
+def procs(request: pytest.FixtureRequest) -> Iterator[Processes]:
     tracker = Processes()
     yield tracker
+    call = getattr(request.node, "report_call", None)
+    failed = call is not None and call.failed
+    if failed:
+        # shown under "Captured stdout teardown": what the ring said while the test failed
+        print(tracker.unread_output())
     leaked = tracker.cleanup()
-    if leaked:
+    if leaked and not failed:  # a failed test's processes are killed, not reported twice
         pytest.fail("test left processes running: " + "; ".join(leaked))
 
 

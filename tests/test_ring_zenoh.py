@@ -13,6 +13,7 @@ import threading
 import time
 from pathlib import Path
 
+import pytest
 import zenoh
 from conftest import REPO, pid_alive, run_tokenring, wait_gone
 from ringutil import control, launcher_pids, stats, tap, wait_ring, wait_until, write_probe_programs
@@ -114,6 +115,30 @@ def test_ring_of_eight_forms_counts_rounds_shares_data_and_delivers_commands(
     launcher.send_signal(signal.SIGTERM)
     assert launcher.wait(30) == 0
     assert wait_gone(pids, 30) == []
+
+
+@pytest.mark.parametrize("native", ["1", "0"], ids=["c-path", "python-path"])
+def test_a_lone_node_at_full_speed_passes_to_itself_for_good(procs, ring_name, endpoint, native):
+    # Zenoh delivers a pass to oneself inside the sender's own put: visited there, each pass
+    # nested one level deeper and the stack overflowed after ~1000 passes (about a second)
+    launcher = up(
+        procs, ring_name, endpoint, "--nodes", "main", "--bitrate", "max", "--no-programs",
+        env={"TOKENRING_NATIVE": native},
+    )  # fmt: skip
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10])
+        procs.watch(launcher_pids(session, ring_name))
+        wait_until(
+            lambda: stats(session, ring_name).get(10, {}).get("stats", {}).get("visits", 0) > 5000,
+            60,
+            "5000 passes of a lone node to itself",
+        )
+        node = stats(session, ring_name)[10]
+        assert node["stats"]["tokens_regenerated"] == 1 and node["active"] == [10]
+    launcher.send_signal(signal.SIGTERM)
+    assert launcher.wait(30) == 0
+    output = launcher.stdout.read()
+    assert "RecursionError" not in output and "panicked" not in output, output[-3000:]
 
 
 def test_late_joiner_is_inserted_and_a_leaver_removed_without_losing_the_token(procs, ring_name, endpoint):

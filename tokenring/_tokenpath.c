@@ -612,12 +612,20 @@ static int is_set(PyObject *hook)
 /* The receiving thread's entry. A visit that may wait (emulated wire time, a pacer, a fault
    hook: delay, soft hang) goes to the node's token thread instead, and so does every frame
    while one is queued there, to keep their order: Zenoh's receiving thread must never wait,
-   it also carries the node's acks, events and control queries. */
+   it also carries the node's acks, events and control queries. A lone node's pass to itself
+   is handed over too: Zenoh delivers it inside the sender's own put, so visiting it here would
+   recurse once per pass until the stack overflows. */
+static int from_itself(TokenPath *self, PyObject *frame_obj)
+{
+    return PyBytes_Check(frame_obj) && PyBytes_GET_SIZE(frame_obj) > self->o_sid &&
+           (unsigned char)PyBytes_AS_STRING(frame_obj)[self->o_sid] == self->node_id;
+}
+
 static PyObject *TokenPath_on_frame(TokenPath *self, PyObject *frame_obj)
 {
     if (is_set(self->defer) && (self->deferred_pending > 0 || self->hop != 0.0 ||
-                                is_set(self->pacer) || is_set(self->rx_fault) ||
-                                is_set(self->tx_fault))) {
+                                from_itself(self, frame_obj) || is_set(self->pacer) ||
+                                is_set(self->rx_fault) || is_set(self->tx_fault))) {
         self->deferred_pending += 1;
         PyObject *queued = PyObject_CallOneArg(self->defer, frame_obj);
         if (queued == NULL) {

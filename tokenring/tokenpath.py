@@ -167,12 +167,15 @@ class PyTokenPath(TokenPathHost):
         """A frame received: visited here, or handed to the token thread when the visit may wait
         (wire time, a pacer, a fault hook), and every frame while one is queued there, to keep
         their order — Zenoh's receiving thread must never wait: it also carries the node's
-        acks, events and control queries."""
+        acks, events and control queries. A lone node's pass to itself is handed over too:
+        Zenoh delivers it inside the sender's own put, so visiting it here would recurse
+        once per pass until the stack overflows."""
         if self._defer is not None:
             with self._defer_lock:
                 deferred = (
                     self._deferred_pending > 0
                     or self._hop != 0.0
+                    or (len(frame) > self._o_sid and frame[self._o_sid] == self.node_id)
                     or self.pacer is not None
                     or self.rx_fault is not None
                     or self.tx_fault is not None
