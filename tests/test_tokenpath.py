@@ -50,6 +50,15 @@ def test_c_and_python_paths_send_the_same_bytes_and_keep_the_same_state():
     assert steps["the successor is gone: passes to main"]["sent"][0][:2] == ["frame", 10]
     assert steps["alone: passes to itself"]["sent"] == [steps["alone: passes to itself"]["sent"][0]]
     assert steps["alone: passes to itself"]["sent"][0][:2] == ["frame", 20]
+    # a CRC-16 is no identity: a different pass that shares it is visited (it was taken for a
+    # retry and dropped: a lost token about 20 times an hour on the robot's ring)
+    before, twin = (
+        steps["a pass before a CRC twin"],
+        steps["the next round, other bytes, the same CRC: visited, not a retry"],
+    )
+    assert [entry[:2] for entry in twin["sent"]][:1] == [["frame", 30]]
+    assert twin["stats"]["visits"] == before["stats"]["visits"] + 1
+    assert twin["stats"]["duplicate_passes"] == before["stats"]["duplicate_passes"]
     assert python["calls"] == [10, 11]  # the hook ran while busy, not once idle
     for reference, candidate in zip(python["steps"], native["steps"], strict=True):
         assert candidate == reference, f"the C path differs at step {reference['step']!r}"

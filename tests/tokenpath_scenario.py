@@ -15,6 +15,8 @@ import threading
 import time
 from typing import Any
 
+import fastcrc
+
 from tokenring import tokenpath
 from tokenring.frame import Token
 from tokenring.node import NodeOS
@@ -71,6 +73,40 @@ class Recorder(Transport):
 
     def _close(self) -> None:
         pass
+
+
+def crc_twin(frame: bytes, target: bytes, token_size: int) -> bytes:
+    """``frame`` with three bytes before its CRC changed so that its CRC-16/ARC is ``target``'s.
+
+    CRC-16/ARC (init 0, no final XOR) is linear over GF(2): crc(a ^ d) = crc(a) ^ crc(d). The
+    24 single-bit changes of the window span all 16 CRC bits; elimination picks the ones that
+    XOR to the wanted difference."""
+    arc = fastcrc.crc16.arc
+    window = token_size - 3
+    wanted = arc(target[:token_size]) ^ arc(frame[:token_size])
+    basis: dict[int, tuple[int, int]] = {}  # leading CRC bit -> (syndrome, bits of the window)
+    for bit in range(24):
+        delta = bytearray(token_size)
+        delta[window + bit // 8] = 1 << (bit % 8)
+        syndrome, bits = arc(bytes(delta)), 1 << bit
+        for lead in sorted(basis, reverse=True):
+            if syndrome >> lead & 1:
+                syndrome, bits = syndrome ^ basis[lead][0], bits ^ basis[lead][1]
+        if syndrome:
+            basis[syndrome.bit_length() - 1] = (syndrome, bits)
+    bits = 0
+    for lead in sorted(basis, reverse=True):
+        if wanted >> lead & 1:
+            wanted, bits = wanted ^ basis[lead][0], bits ^ basis[lead][1]
+    assert wanted == 0
+    body = bytearray(frame[:token_size])
+    for bit in range(24):
+        if bits >> bit & 1:
+            body[window + bit // 8] ^= 1 << (bit % 8)
+    crc = arc(bytes(body))
+    twin = bytes(body) + bytes([crc & 0xFF, crc >> 8])
+    assert twin != target and twin[token_size:] == target[token_size:]
+    return twin
 
 
 def main() -> int:
@@ -156,6 +192,10 @@ def main() -> int:
         "the same round with other bytes: a second token, dropped",
         frame(epoch=3, origin=main_id, counter=36, fill=15),
     )
+    taken = frame(epoch=3, origin=main_id, counter=37, fill=16)
+    step("a pass before a CRC twin", taken)
+    twin = crc_twin(frame(epoch=3, origin=main_id, counter=38, fill=16), taken, protocol.token_size)
+    step("the next round, other bytes, the same CRC: visited, not a retry", twin)
     node.rx_fault = lambda data: data[protocol.header.offsets["counter"]] == 66
     step("rx fault drops it", frame(epoch=3, origin=main_id, counter=66))
     step("rx fault lets it pass", frame(epoch=3, origin=main_id, counter=67))

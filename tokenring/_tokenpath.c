@@ -52,7 +52,8 @@ static PyObject *s_frames_received, *s_frames_sent, *s_rejected_length, *s_rejec
     X("_rounds_add", rounds_add)                                                                  \
     X("_handler_add", handler_add)                                                                \
     X("_send_add", send_add)                                                                      \
-    X("_defer", defer)
+    X("_defer", defer)                                                                            \
+    X("_accepted_frame", accepted_frame)
 /* ... and the two whose type is checked where they are set (see TokenPath_getset) */
 #define CHECKED_OBJECTS(X) X("_work", work) X("_const_bytes", const_bytes)
 #define ALL_OBJECTS(X) OBJECT_MEMBERS(X) CHECKED_OBJECTS(X)
@@ -454,6 +455,16 @@ static int ready(TokenPath *self)
     return 0;
 }
 
+/* The pass last taken, byte for byte: a CRC-16 alone is no identity (two different frames from
+   one sender share it once in 65536 passes, and the second was dropped as a "retry" — a lost
+   token, about 20 an hour on the robot's ring, whose data changes every pass). */
+static int same_as_accepted(TokenPath *self, const unsigned char *frame, Py_ssize_t len)
+{
+    PyObject *accepted = self->accepted_frame;
+    return accepted != NULL && PyBytes_Check(accepted) && PyBytes_GET_SIZE(accepted) == len &&
+           memcmp(PyBytes_AS_STRING(accepted), frame, (size_t)len) == 0;
+}
+
 static PyObject *visit_frame(TokenPath *self, PyObject *frame_obj)
 {
     double t_in = now();
@@ -500,7 +511,8 @@ static PyObject *visit_frame(TokenPath *self, PyObject *frame_obj)
     }
     int crc = frame[size] | (frame[size + 1] << 8);
     int flags = frame[self->o_epoch];
-    if (crc == self->accepted_crc && sid == self->accepted_sid) { /* a retry of a pass we took */
+    if (crc == self->accepted_crc && sid == self->accepted_sid &&
+        same_as_accepted(self, frame, view.len)) { /* a retry of a pass we took */
         if (stats_add(self, s_duplicate_passes, 1) == 0 &&
             (!(flags & ack_requested) || send_ack(self, sid, crc) == 0))
             rc = Py_NewRef(Py_None);
@@ -544,7 +556,7 @@ static PyObject *visit_frame(TokenPath *self, PyObject *frame_obj)
         /* within one epoch every node gets each round once: an older round, or the same round
            with other bytes, is a replayed pass or a second token */
         int back = (self->last_counter - frame[self->o_counter]) & 0xFF;
-        if ((back > 0 && back < 128) || (back == 0 && crc != self->accepted_crc)) {
+        if ((back > 0 && back < 128) || (back == 0 && !same_as_accepted(self, frame, view.len))) {
             if (stats_add(self, s_replayed_passes, 1) == 0)
                 rc = Py_NewRef(Py_None);
             goto done;
@@ -552,6 +564,12 @@ static PyObject *visit_frame(TokenPath *self, PyObject *frame_obj)
     }
     self->accepted_crc = crc;
     self->accepted_sid = sid;
+    PyObject *accepted = PyBytes_CheckExact(frame_obj)
+                             ? Py_NewRef(frame_obj)
+                             : PyBytes_FromStringAndSize((const char *)frame, view.len);
+    if (accepted == NULL)
+        goto done;
+    Py_XSETREF(self->accepted_frame, accepted);
     py_sid = PyLong_FromLong(sid);
     int excluded = py_sid ? PySequence_Contains(self->excluded, py_sid) : -1;
     if (excluded > 0)

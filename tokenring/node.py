@@ -186,6 +186,7 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         self._origin = 0
         self._accepted_crc = -1
         self._accepted_sid = -1
+        self._accepted_frame = b""
         self._has_sent = False
         self._last_sent_did = 0
         self._last_sent_crc = 0
@@ -364,6 +365,7 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         self._last_visit = 0.0
         self._last_counter = -1  # rounds went on while we were away, maybe past 128
         self._accepted_crc = -1
+        self._accepted_frame = b""
         self.transport.announce()
         self._announce_rejoin()
         log.info("node %s (id %d) rejoined", self.name, self.node_id)

@@ -95,6 +95,10 @@ class TokenPathHost:
     _origin: int
     _accepted_crc: int  # the pass last taken (a retry of it is acknowledged, not visited)
     _accepted_sid: int
+    #: ... and its bytes: a CRC-16 alone is no identity (two different passes from one sender
+    #: share it once in 65536, and the second was dropped as a retry: a lost token, about 20
+    #: an hour on the robot's ring, whose data changes at every pass)
+    _accepted_frame: bytes
     _last_counter: int  # the round counter last visited in this epoch (-1: none yet)
     _retries: int  # of the pass in flight
     _last_sent_did: int
@@ -221,7 +225,8 @@ class PyTokenPath(TokenPathHost):
             stats.rejected_sid += 1
             return
         flags = frame[self._o_epoch]
-        if crc == self._accepted_crc and sid == self._accepted_sid:
+        # byte for byte: two different passes share a CRC-16 once in 65536 (see _accepted_frame)
+        if crc == self._accepted_crc and sid == self._accepted_sid and frame == self._accepted_frame:
             stats.duplicate_passes += 1  # a retry of a pass we already took
             if flags & ACK_REQUESTED:
                 self._send_ack(sid, crc)
@@ -237,10 +242,11 @@ class PyTokenPath(TokenPathHost):
             # round with other bytes (a retry repeats them all), is a replayed pass or a second
             # token — dropped, so its sender skips us into a new epoch that outlives the other
             back = (self._last_counter - frame[self._o_counter]) & 0xFF
-            if 0 < back < 128 or (back == 0 and crc != self._accepted_crc):
+            if 0 < back < 128 or (back == 0 and frame != self._accepted_frame):
                 stats.replayed_passes += 1
                 return
         self._accepted_crc, self._accepted_sid = crc, sid
+        self._accepted_frame = frame if type(frame) is bytes else bytes(frame)
         if sid in self._excluded:
             self._include(sid, True)
         with self._token_lock:
