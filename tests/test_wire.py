@@ -64,3 +64,15 @@ def test_full_round_needs_every_member_from_its_predecessor():
     assert first_full_round(seq, RING) is not None
     assert first_full_round(seq, [10, 20, 30, 40, 50]) is None  # 50 never got the token
     assert first_full_round(seq, [10, 30]) is None  # 30 gets it from 20, not from 10
+
+
+def test_a_different_pass_with_the_same_crc_is_a_pass_not_a_retransmission():
+    from tokenpath_scenario import crc_twin
+
+    frames = one_token(10)
+    # the next pass to the same receiver, other bytes, solved to the same CRC-16
+    twin = crc_twin(frames[8], frames[4], Token().protocol.token_size)
+    frames[8] = twin
+    seq, skipped = passes(timed(frames))
+    assert skipped == 0 and len(seq) == len(frames)
+    assert single_token(seq)

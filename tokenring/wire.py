@@ -40,7 +40,7 @@ def passes(
     h = protocol.header
     size = protocol.token_size
     out: list[Pass] = []
-    last_crc: dict[int, int] = {}
+    last_frame: dict[int, bytes] = {}  # per receiver: a retransmission repeats every byte
     newest: tuple[int, int] | None = None
     skipped = 0
     for t, frame in frames:
@@ -52,10 +52,10 @@ def passes(
             skipped += 1
             continue
         did = frame[h.did]
-        if last_crc.get(did) == crc:
+        if last_frame.get(did) == frame:  # not the CRC alone: one pass in 65536 shares it
             skipped += 1
             continue
-        last_crc[did] = crc
+        last_frame[did] = bytes(frame)
         epoch, origin = frame[h.epoch] & EPOCH_MASK, frame[h.epoch_origin]
         if newest is None or epoch_order(epoch, origin, *newest) > 0:
             newest = (epoch, origin)

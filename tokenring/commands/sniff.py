@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
                 raise UsageError(str(exc)) from None
     key = keys.token(ring, args.to if args.to is not None else "*")
     seen = 0
-    last_crc: dict[int | None, int] = {}
+    last_frame: dict[int | None, bytes] = {}
     started = time.monotonic()
     deadline = None if args.duration is None else started + args.duration
     with tap_session(args) as session:
@@ -78,9 +78,10 @@ def run(args: argparse.Namespace) -> int:
                 did = keys.id_from_key(str(sample.key_expr))
                 record = decode_frame(frame, did, protocol, channels, args.header_only)
                 # a pass repeated because its acknowledgement was late: same bytes, same receiver
-                record["retransmission"] = "crc" in record and last_crc.get(did) == record["crc"]
+                # (every byte: two different passes share a CRC-16 once in 65536)
+                record["retransmission"] = "crc" in record and last_frame.get(did) == frame
                 if "crc" in record:
-                    last_crc[did] = record["crc"]
+                    last_frame[did] = frame
                 if args.json:
                     sys.stdout.write(json.dumps(record) + "\n")
                 else:
