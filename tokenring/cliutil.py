@@ -16,7 +16,7 @@ import zenoh
 
 from tokenring import keys
 from tokenring.errors import TransportError, UsageError
-from tokenring.zconfig import make_config, open_session
+from tokenring.zconfig import make_config, open_session, unanswered_hint
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -191,7 +191,9 @@ def query_one(session: zenoh.Session, key: str, request: Any = None, timeout: fl
     """The result of one control request; raises if nobody answers or it failed."""
     replies = query(session, key, request, timeout)
     if not replies:
-        raise UsageError(f"nobody answered {key} (is the ring running, and is --ring right?)")
+        raise UsageError(
+            f"nobody answered {key} (is the ring running, and is --ring right{unanswered_hint()}?)"
+        )
     _, reply = replies[0]
     if not reply.get("ok"):
         raise UsageError(reply.get("error", "request failed"))

@@ -229,12 +229,14 @@ class Launcher:
     def node_listen(self) -> list[str]:
         if self.router:
             return []  # clients of this host's router listen nowhere
-        host = "127.0.0.1"
+        scheme, host = "tcp", "127.0.0.1"
         if self.endpoint:
-            host = self.endpoint.split("/", 1)[1].rsplit(":", 1)[0]
+            # the tap's scheme too: a secured ring (tls/) must not open plain TCP listeners
+            scheme, rest = self.endpoint.split("/", 1)
+            host = rest.rsplit(":", 1)[0]
             if host in ("0.0.0.0", "[::]"):
                 host = "0.0.0.0"
-        return [f"tcp/{host}:0"]
+        return [f"{scheme}/{host}:0"]
 
     # -- children -------------------------------------------------------------------------------
     def command_for(self, plan: NodePlan) -> list[str]:

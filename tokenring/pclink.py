@@ -36,6 +36,7 @@ import zenoh
 from tokenring import keys
 from tokenring.control import answer_query
 from tokenring.errors import ChannelError, TransportError, UsageError
+from tokenring.zconfig import unanswered_hint
 
 if TYPE_CHECKING:
     from tokenring.node import NodeOS
@@ -167,7 +168,7 @@ class PcLink:
             time.sleep(0.1)
         if not answers:
             raise TransportError(
-                f"main did not answer on the PC link of ring {self.ring!r} (is the ring up?)"
+                f"main did not answer on the PC link of ring {self.ring!r} (is the ring up{unanswered_hint()}?)"
             )
         self._connected = True
         reply = msgpack.unpackb(answers[0].payload.to_bytes())

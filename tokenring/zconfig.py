@@ -54,6 +54,17 @@ def check_endpoint(endpoint: str) -> str:
     return endpoint
 
 
+_config_in_use: str | None = None  # the Zenoh config file of this process's last session
+
+
+def unanswered_hint() -> str:
+    """What to add to "nobody answered": with a Zenoh config file, the ring may be a secured
+    one whose access rules drop this peer's request without a word (tokenring.secure)."""
+    if _config_in_use is None:
+        return ""
+    return f"; or does {_config_in_use}'s certificate lack the right on a secured ring"
+
+
 def make_config(
     *,
     mode: str = "peer",
@@ -63,6 +74,8 @@ def make_config(
 ) -> zenoh.Config:
     """A Zenoh config; peers listen on an ephemeral loopback port unless told otherwise."""
     path = config_file or os.environ.get("ZENOH_CONFIG")
+    global _config_in_use
+    _config_in_use = path or None
     try:
         config = zenoh.Config.from_file(path) if path else zenoh.Config()
     except zenoh.ZError as exc:

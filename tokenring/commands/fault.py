@@ -23,6 +23,7 @@ from tokenring.cliutil import (
 from tokenring.errors import UsageError
 from tokenring.faults import KINDS, NEEDS_VALUE, FaultClient, parse_partition, parse_probability, validate
 from tokenring.protocol import default_protocol, load_protocol
+from tokenring.zconfig import unanswered_hint
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -115,7 +116,9 @@ def run(args: argparse.Namespace) -> int:
     with tap_session(args) as session:
         nodes = live_nodes(session, ring, args.timeout)
         if not nodes:
-            raise UsageError(f"no node of ring {ring!r} answered (is it running, and is --ring right?)")
+            raise UsageError(
+                f"no node of ring {ring!r} answered (is it running, and is --ring right{unanswered_hint()}?)"
+            )
         if args.kind == "resume":
             # a SIGSTOPped node answers nothing and a fresh session cannot even see it: take
             # every node protocol.yaml knows (the launcher resolves the process)
