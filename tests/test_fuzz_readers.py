@@ -129,3 +129,54 @@ def test_extreme_but_valid_yaml_is_a_clean_error(name, tree, tmp_path_factory):
     path = tmp_path_factory.mktemp("fuzz") / f"input{suffix}"
     path.write_text(yaml.safe_dump(tree, allow_unicode=True))
     clean(reader, path)
+
+
+#: what a data log's records are made of, so that random records reach every reader's fields
+LOG_KEYS = ["gen", "n", "v", "dl", "dr", "count", "heading", "heading_cdeg", "distances", "distances_mm",
+            "walls", "x", "y", "psi", "theta", "valid", "steps_left", "steps_right", "period_ms",
+            "counts", "event", "start", "seq", "alpha", "d"]  # fmt: skip
+LOG_VALUES = st.recursive(
+    SCALARS,
+    lambda inner: st.one_of(
+        st.lists(inner, max_size=4), st.dictionaries(st.sampled_from(LOG_KEYS), inner, max_size=6)
+    ),
+    max_leaves=16,
+)
+RECORDS = st.lists(
+    st.tuples(
+        st.integers(min_value=0, max_value=2**31),
+        st.sampled_from(list("SOGWBLKC")),
+        st.sampled_from(list("RCPSTWE")),
+        st.dictionaries(st.sampled_from(LOG_KEYS), LOG_VALUES, max_size=6),
+    ),
+    min_size=1,
+    max_size=12,
+)
+
+
+@FUZZ
+@given(records=RECORDS)
+def test_records_of_the_right_shape_with_junk_inside_are_a_clean_error(records, tmp_path_factory):
+    """Junk with a record's shape (a stamp, known letters, a payload of the wrong fields or
+    types) is damage the reader reports; whatever it accepts, every converter takes."""
+    import msgpack
+
+    from modules.common.logs import DataLog, convert_csv, convert_text, summary
+    from modules.pc.analysis import Series, summarise
+
+    path = tmp_path_factory.mktemp("fuzz") / "junk.trlog"
+    with DataLog(path, "20260101-000000", {}) as log:
+        log.close()
+    with path.open("ab") as out:
+        for stamp, source, kind, payload in records:
+            out.write(msgpack.packb([stamp, source, kind, payload]))
+    for salvage in (False, True):
+        try:
+            log = read_log(path, salvage=salvage)
+        except TokenRingError as exc:
+            assert "\n" not in str(exc).strip()
+            continue
+        convert_text(log)
+        convert_csv(log)
+        summary(log)
+        summarise(Series(log))

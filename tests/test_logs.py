@@ -150,7 +150,7 @@ def realistic_log(path: Path, records: int = 4441) -> None:
             if i % 3 == 0:
                 log.write(i * 10, "O", "C", {"dl": i * 0.5, "dr": i * 0.5, "count": 2})
             elif i % 3 == 1:
-                log.write(i * 10, "G", "R", {"v": {"heading_cdeg": i % 36000, "state": 1}})
+                log.write(i * 10, "G", "R", {"gen": i, "n": 0, "v": {"heading_cdeg": i % 36000, "state": 1}})
             else:
                 log.write(i * 10, "K", "P", {"x": float(i), "y": 2.0 * i, "psi": 0.1, "valid": [True] * 3})
 
@@ -208,3 +208,31 @@ def test_junk_in_the_middle_neither_crashes_convert_nor_analyze(tmp_path: Path) 
         assert "Traceback" not in result.stderr
     log = read_log(path, salvage=True)
     assert len(log.records) >= 900 - 2 and log.damaged
+
+
+def test_a_record_with_a_payload_no_reader_can_take_is_damage_not_a_crash(tmp_path: Path) -> None:
+    """A record of the right shape with junk inside (odometry steps as text) crashed `log
+    convert` with a TypeError; now it is damage like unreadable bytes, in the middle or at the end."""
+    import msgpack
+
+    for where in ("middle", "end"):
+        path = tmp_path / f"{where}.trlog"
+        realistic_log(path, 30)
+        data = path.read_bytes()
+        junk = msgpack.packb([5, "O", "C", {"dl": "ten", "dr": [1], "count": 2}])
+        if where == "middle":
+            cut = data.index(msgpack.packb([150, "O", "C", {"dl": 7.5, "dr": 7.5, "count": 2}]))
+            data = data[:cut] + junk + data[cut:]
+        else:
+            data += junk
+        path.write_bytes(data)
+        with pytest.raises(LogError, match="damaged inside"):
+            read_log(path)
+        log = read_log(path, salvage=True)
+        assert len(log.records) == 30 and not log.truncated and log.damaged
+        convert = subprocess.run(
+            [sys.executable, "-m", "tokenring", "log", "convert", str(path), "--salvage",
+             "--out", str(tmp_path / f"{where}.txt")],
+            capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        assert convert.returncode == 0 and "Traceback" not in convert.stderr, convert.stderr

@@ -37,6 +37,7 @@ import io
 import math
 import os
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -168,17 +169,125 @@ class LogFile:
 MAX_LOG_BYTES = 1 << 30
 
 
+Check = Callable[[Any], bool]
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _integer(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _text(value: Any) -> bool:
+    return isinstance(value, str)
+
+
+def _mapping(value: Any) -> bool:
+    return isinstance(value, dict)
+
+
+def _numbers(value: Any) -> bool:
+    return isinstance(value, list) and all(_number(v) for v in value)
+
+
+def _integers(value: Any) -> bool:
+    return isinstance(value, list) and all(_integer(v) for v in value)
+
+
+def _numbers_or_none(value: Any) -> bool:
+    return isinstance(value, list) and all(v is None or _number(v) for v in value)
+
+
+def _flags(value: Any) -> bool:
+    return isinstance(value, list) and len(value) == 3 and all(isinstance(v, (bool, int)) for v in value)
+
+
+def _walls(value: Any) -> bool:
+    return isinstance(value, list) and all(
+        isinstance(w, dict) and _number(w.get("alpha")) and _number(w.get("d")) for w in value
+    )
+
+
+def _fields(**checks: Check) -> Check:
+    """A mapping with at least these fields, each passing its check (more fields may follow)."""
+    return lambda value: (
+        isinstance(value, dict)
+        and all(name in value and check(value[name]) for name, check in checks.items())
+    )
+
+
+def _odometry(values: Any) -> bool:
+    """Steps, and the motor's dead-reckoned pose with all three fields when it is there."""
+    steps = _fields(steps_left=_integer, steps_right=_integer)(values)
+    pose = _fields(x_mm=_integer, y_mm=_integer, angle_cdeg=_integer)
+    return steps and ("x_mm" not in values or pose(values))
+
+
+_RAW = {"gen": _integer, "n": _integer}
+#: what the readers (convert, analyse, replay) take from each kind of data record: a record
+#: whose payload lacks it is damage, reported like unreadable bytes, never a crash later
+PAYLOADS: dict[tuple[str, str], Check] = {
+    ("O", "R"): _fields(**_RAW, v=_odometry),
+    ("G", "R"): _fields(**_RAW, v=_fields(heading_cdeg=_number)),
+    ("W", "R"): _fields(**_RAW, v=_fields(distances=_integers)),
+    ("L", "R"): _fields(**_RAW, v=_fields(x=_number, y=_number, theta=_number)),
+    ("B", "R"): _fields(**_RAW, v=_mapping),
+    ("O", "C"): _fields(dl=_number, dr=_number, count=_integer),
+    ("G", "C"): _fields(heading=_number, count=_integer),
+    ("W", "C"): lambda p: (
+        _fields(distances_mm=_numbers_or_none, count=_integer)(p) and _walls(p.get("walls", []))
+    ),
+    ("L", "C"): _fields(x=_number, y=_number, theta=_number, count=_integer),
+    ("B", "C"): _mapping,
+    ("S", "S"): _fields(gen=_integer, period_ms=_number, counts=_mapping),
+    ("S", "E"): _fields(gen=_integer, event=_text),
+    ("W", "W"): _fields(gen=_integer, event=_text),
+    ("S", "T"): _fields(start=_text),
+}
+#: optional fields, checked when present
+OPTIONAL: dict[str, Check] = {"valid": _flags, "seq": _integer, "gen": _integer}
+_POSITION = _fields(x=_number, y=_number, psi=_number)
+
+
+def payload_ok(source: str, kind: str, payload: Any) -> bool:
+    """Whether a data record's payload has what the readers take from it (:data:`PAYLOADS`;
+    positions ``P`` of any source need x, y and psi)."""
+    check = _POSITION if kind == "P" else PAYLOADS.get((source, kind))
+    if check is None:
+        return True  # shown as it is (``key=value``), never read field by field
+    if not check(payload):
+        return False
+    return all(check(payload[name]) for name, check in OPTIONAL.items() if name in payload)
+
+
 def _is_record(obj: Any, kind: str) -> bool:
-    """Whether ``obj`` has a record's shape: ``[stamp, source, kind, payload]`` with the
-    letters of the tables for a data log, ``[stamp, class, text]`` for an error log."""
+    """Whether ``obj`` is a record: ``[stamp, source, kind, payload]`` with the letters of the
+    tables and a payload the readers can take (:func:`payload_ok`) for a data log,
+    ``[stamp, class, text]`` for an error log."""
     if not isinstance(obj, list) or not obj or isinstance(obj[0], bool) or not isinstance(obj[0], int):
         return False
     if kind == "data":
         return (
             len(obj) == 4 and isinstance(obj[1], str) and isinstance(obj[2], str)
-            and obj[1] in SOURCES and obj[2] in KINDS
+            and obj[1] in SOURCES and obj[2] in KINDS and payload_ok(obj[1], obj[2], obj[3])
         )  # fmt: skip
     return len(obj) == 3 and isinstance(obj[1], str) and obj[1] in ERROR_CLASSES and isinstance(obj[2], str)
+
+
+def _torn(data: bytes, offset: int) -> bool:
+    """Whether the bytes from ``offset`` are the start of an entry the writer did not finish
+    (a torn tail), not a whole entry that is no record (damage)."""
+    unpacker = msgpack.Unpacker(raw=False, strict_map_key=False, max_buffer_size=len(data) - offset + 1)
+    unpacker.feed(data[offset:])
+    try:
+        next(unpacker)
+    except (StopIteration, msgpack.OutOfData):
+        return True
+    except Exception:
+        return False
+    return False
 
 
 #: a record is decoded from a window this big first (records are bytes to kilobytes; a window
@@ -256,7 +365,10 @@ def read_log(path: str | Path, expect: str | None = None, salvage: bool = False)
             continue
         resume = _resync(data, offset, kind)
         if resume is None:
-            truncated = True  # nothing readable after it: a torn tail (or damage up to the end)
+            if _torn(data, offset):
+                truncated = True  # the writer was killed in the middle of its last record
+            else:
+                damaged.append((offset, len(data)))  # a whole entry there, but no record
             break
         damaged.append((offset, resume))
         offset = resume
