@@ -1,0 +1,72 @@
+"""``tokenring world generate``: a random but plausible room as a world file, one per seed."""
+
+from __future__ import annotations
+
+import argparse
+import re
+
+EXAMPLES = """\
+examples:
+  tokenring world generate --seed 7 --out room7.yaml
+  tokenring world generate --seed 7 --size 6200x4600 --out office.yaml
+  tokenring up --world room7.yaml --explore 2 --map-out m.json
+"""
+
+
+def size(text: str) -> tuple[int, int]:
+    """An argparse type: ``WIDTHxHEIGHT`` in mm, each 2000..20000."""
+    match = re.fullmatch(r"(\d{4,5})x(\d{4,5})", text.strip())
+    if not match:
+        raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT in mm (e.g. 6200x4600)")
+    width, height = int(match.group(1)), int(match.group(2))
+    if not (2000 <= width <= 20000 and 2000 <= height <= 20000):
+        raise argparse.ArgumentTypeError(f"{text!r}: width and height must be within 2000..20000 mm")
+    return width, height
+
+
+def seed(text: str) -> int:
+    """An argparse type: a seed, 0..2**32-1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if not 0 <= value < 2**32:
+        raise argparse.ArgumentTypeError(f"{value} is not within 0..{2**32 - 1}")
+    return value
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "world",
+        help="world files: generate a random room",
+        description="World files for the simulated robot.",
+        epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    verbs = p.add_subparsers(dest="world_verb", metavar="VERB", required=True)
+    generate = verbs.add_parser(
+        "generate",
+        help="a random but plausible room (5-14 walls, stubs, pillars), the same for the same seed",
+        epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    generate.add_argument("--seed", type=seed, required=True, help="which room")
+    generate.add_argument("--size", type=size, metavar="WxH", help="bounding box in mm (default: drawn)")
+    generate.add_argument("--out", metavar="FILE", help="write the world file here (default: print it)")
+    generate.add_argument("--force", action="store_true", help="replace an existing --out file")
+
+
+def run(args: argparse.Namespace) -> int:
+    from modules.description.generate import generate_room, room_yaml
+    from modules.description.roomfile import parse_world_yaml
+    from tokenring.inputfile import check_output, write_atomically
+
+    if args.out:
+        check_output(args.out, force=args.force)
+    text = room_yaml(generate_room(args.seed, args.size))
+    parse_world_yaml(text, f"generated room {args.seed}")  # the loader's checks, as for any file
+    if args.out:
+        write_atomically(args.out, text)
+    else:
+        print(text, end="")
+    return 0

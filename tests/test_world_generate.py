@@ -1,0 +1,95 @@
+"""``tokenring world generate``: random but plausible rooms, valid and the same for the same seed."""
+
+from __future__ import annotations
+
+import math
+
+import yaml
+from conftest import run_tokenring
+
+from modules.description import load_world
+
+SEEDS = range(40)
+
+
+def generated(seed: int, *args: str) -> str:
+    done = run_tokenring("world", "generate", "--seed", str(seed), *args)
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+def corner_angles(points: list[list[int]]) -> list[float]:
+    """Interior angles (degrees) of a polygon, whichever way round it goes."""
+    n = len(points)
+    area = sum(
+        points[i][0] * points[(i + 1) % n][1] - points[(i + 1) % n][0] * points[i][1] for i in range(n)
+    )
+    turn = 1 if area > 0 else -1
+    angles = []
+    for i in range(n):
+        (ax, ay), (bx, by), (cx, cy) = points[i - 1], points[i], points[(i + 1) % n]
+        heading_in, heading_out = math.atan2(by - ay, bx - ax), math.atan2(cy - by, cx - bx)
+        left = math.degrees(math.remainder(heading_out - heading_in, 2 * math.pi)) * turn
+        angles.append(180.0 - left)
+    return angles
+
+
+def test_every_generated_room_loads_and_is_plausible(tmp_path):
+    kinds = {"acute": 0, "obtuse": 0, "reflex": 0, "pillar": 0, "round": 0, "stub": 0}
+    for seed in SEEDS:
+        text = generated(seed)
+        path = tmp_path / f"room{seed}.yaml"
+        path.write_text(text)
+        world = load_world(path)  # the loader's own checks: closed, not crossing, start inside
+        data = yaml.safe_load(text)
+        outline = data["walls"][0]["polygon"]
+        assert 5 <= len(outline) <= 14, (seed, len(outline))
+        assert world.clearance(world.start.x, world.start.y) >= world.robot_radius + 200
+        angles = corner_angles(outline)
+        assert abs(sum(angles) - 180 * (len(outline) - 2)) < 1e-6  # a simple polygon
+        kinds["acute"] += any(a < 89 for a in angles)
+        kinds["obtuse"] += any(91 < a < 179 for a in angles)
+        kinds["reflex"] += any(a > 181 for a in angles)
+        kinds["pillar"] += any("polygon" in w for w in data["walls"][1:])
+        kinds["round"] += bool(data.get("circles"))
+        kinds["stub"] += any("from" in w for w in data["walls"])
+    # a mix, not one kind of room: every feature turns up in some of the 40
+    assert all(count >= 3 for count in kinds.values()), kinds
+
+
+def test_the_same_seed_gives_the_same_room_and_others_differ():
+    assert generated(11) == generated(11)
+    assert len({generated(seed) for seed in (1, 2, 3)}) == 3
+
+
+def test_size_fixes_the_bounding_box(tmp_path):
+    path = tmp_path / "office.yaml"
+    path.write_text(generated(5, "--size", "6200x4600"))
+    xmin, ymin, xmax, ymax = load_world(path).bounds()
+    assert (xmin, ymin) == (0, 0) and 6100 <= xmax <= 6200 and 4500 <= ymax <= 4600
+
+
+def test_out_writes_a_file_and_never_replaces_one_without_force(tmp_path):
+    out = tmp_path / "room.yaml"
+    assert generated(3, "--out", str(out)) == ""
+    first = out.read_text()
+    again = run_tokenring("world", "generate", "--seed", "4", "--out", str(out))
+    assert again.returncode == 2 and "exists" in again.stderr and "Traceback" not in again.stderr
+    assert out.read_text() == first
+    assert run_tokenring("world", "generate", "--seed", "4", "--out", str(out), "--force").returncode == 0
+    assert out.read_text() != first
+
+
+def test_bad_arguments_are_one_line_and_exit_2():
+    for args in (
+        ["--seed", "-1"],
+        ["--seed", "x"],
+        ["--seed", "1", "--size", "10x10"],
+        ["--seed", "1", "--size", "900000x3000"],
+    ):
+        done = run_tokenring("world", "generate", *args)
+        assert (
+            done.returncode == 2
+            and len(done.stderr.strip().splitlines()) == 1
+            and "Traceback" not in done.stderr
+        )
