@@ -188,10 +188,6 @@ def _mapping(value: Any) -> bool:
     return isinstance(value, dict)
 
 
-def _numbers(value: Any) -> bool:
-    return isinstance(value, list) and all(_number(v) for v in value)
-
-
 def _integers(value: Any) -> bool:
     return isinstance(value, list) and all(_integer(v) for v in value)
 
@@ -276,43 +272,37 @@ def _is_record(obj: Any, kind: str) -> bool:
     return len(obj) == 3 and isinstance(obj[1], str) and obj[1] in ERROR_CLASSES and isinstance(obj[2], str)
 
 
-def _torn(data: bytes, offset: int) -> bool:
-    """Whether the bytes from ``offset`` are the start of an entry the writer did not finish
-    (a torn tail), not a whole entry that is no record (damage)."""
-    unpacker = msgpack.Unpacker(raw=False, strict_map_key=False, max_buffer_size=len(data) - offset + 1)
-    unpacker.feed(data[offset:])
-    try:
-        next(unpacker)
-    except (StopIteration, msgpack.OutOfData):
-        return True
-    except Exception:
-        return False
-    return False
-
-
 #: a record is decoded from a window this big first (records are bytes to kilobytes; a window
 #: keeps the resynchronising scan linear in the damage, not in the file)
 RECORD_WINDOW = 1 << 18
 
 
-def _record_at(data: bytes, offset: int, kind: str) -> tuple[Any, int] | None:
-    """The record that starts at ``offset`` and where it ends, or None."""
+_TORN = "torn"  # what _entry_at says when the data ends inside an entry
+
+
+def _entry_at(data: bytes, offset: int) -> tuple[Any, int] | str | None:
+    """The msgpack entry that starts at ``offset`` and where it ends; :data:`_TORN` when the
+    data ends inside it (a writer killed in the middle), None for garbage."""
     window = RECORD_WINDOW
     while True:
         unpacker = msgpack.Unpacker(raw=False, strict_map_key=False, max_buffer_size=window + 1)
         unpacker.feed(data[offset : offset + window])
         try:
-            obj = next(unpacker)
-            break
+            return next(unpacker), offset + unpacker.tell()
         except (StopIteration, msgpack.OutOfData):
             if offset + window >= len(data):
-                return None
-            window *= 4  # a record longer than the window: look further
+                return _TORN
+            window *= 4  # an entry longer than the window: look further
         except Exception:  # garbage: msgpack raises ValueError, FormatError, UnicodeDecodeError ...
             return None
-    if not _is_record(obj, kind):
+
+
+def _record_at(data: bytes, offset: int, kind: str) -> tuple[Any, int] | None:
+    """The record that starts at ``offset`` and where it ends, or None."""
+    entry = _entry_at(data, offset)
+    if not isinstance(entry, tuple) or not _is_record(entry[0], kind):
         return None
-    return obj, offset + unpacker.tell()
+    return entry
 
 
 def _resync(data: bytes, start: int, kind: str) -> int | None:
@@ -365,7 +355,7 @@ def read_log(path: str | Path, expect: str | None = None, salvage: bool = False)
             continue
         resume = _resync(data, offset, kind)
         if resume is None:
-            if _torn(data, offset):
+            if _entry_at(data, offset) == _TORN:
                 truncated = True  # the writer was killed in the middle of its last record
             else:
                 damaged.append((offset, len(data)))  # a whole entry there, but no record
