@@ -44,34 +44,36 @@ def _outline(rng: np.random.Generator, width: float, height: float) -> Polygon:
         else:
             corners[i] = (x, y + shift if y == 0 else y - shift)
     room = Polygon(corners)
-    for _ in range(int(rng.integers(0, 3))):  # corners cut off at a slant
-        x0, y0, x1, y1 = room.bounds
-        cx, cy = (x0, x1)[int(rng.integers(2))], (y0, y1)[int(rng.integers(2))]
-        a, b = rng.uniform(500, 1400), rng.uniform(500, 1400)
-        sx, sy = (1 if cx == x0 else -1), (1 if cy == y0 else -1)
-        room = _cut(room, Polygon([(cx, cy), (cx + sx * a, cy), (cx, cy + sy * b)]))
-    for _ in range(int(rng.integers(0, 3))):  # rectangular notches out of a side
-        x0, y0, x1, y1 = room.bounds
-        depth, span = rng.uniform(400, 1200), rng.uniform(800, 1800)
-        side = int(rng.integers(4))
-        if side in (0, 2):
-            u = rng.uniform(x0 + 600, max(x0 + 600, x1 - 600 - span))
-            y = y0 if side == 0 else y1 - depth
-            notch = box(u, y - (1 if side == 0 else 0), u + span, y + depth + (0 if side == 0 else 1))
-        else:
-            v = rng.uniform(y0 + 600, max(y0 + 600, y1 - 600 - span))
-            x = x0 if side == 3 else x1 - depth
-            notch = box(x - (1 if side == 3 else 0), v, x + depth + (0 if side == 3 else 1), v + span)
-        room = _cut(room, notch)
+    for _ in range(int(rng.integers(0, 3))):
+        room = _cut(room, _slanted_corner(rng, room))
+    for _ in range(int(rng.integers(0, 3))):
+        room = _cut(room, _notch(rng, room))
     for _ in range(50):  # at least five walls: cut another corner off
         if len(room.exterior.coords) - 1 >= MIN_WALLS:
             break
-        x0, y0, x1, y1 = room.bounds
-        cx, cy = (x0, x1)[int(rng.integers(2))], (y0, y1)[int(rng.integers(2))]
-        a, b = rng.uniform(500, 1400), rng.uniform(500, 1400)
-        sx, sy = (1 if cx == x0 else -1), (1 if cy == y0 else -1)
-        room = _cut(room, Polygon([(cx, cy), (cx + sx * a, cy), (cx, cy + sy * b)]))
+        room = _cut(room, _slanted_corner(rng, room))
     return orient(room)
+
+
+def _slanted_corner(rng: np.random.Generator, room: Polygon) -> Polygon:
+    """A triangle at a corner of the room's bounding box: cut off, it leaves a slanted wall."""
+    x0, y0, x1, y1 = room.bounds
+    cx, cy = (x0, x1)[int(rng.integers(2))], (y0, y1)[int(rng.integers(2))]
+    a, b = rng.uniform(500, 1400), rng.uniform(500, 1400)
+    sx, sy = (1 if cx == x0 else -1), (1 if cy == y0 else -1)
+    return Polygon([(cx, cy), (cx + sx * a, cy), (cx, cy + sy * b)])
+
+
+def _notch(rng: np.random.Generator, room: Polygon) -> Polygon:
+    """A rectangle reaching 1 mm past one side of the bounding box: cut out, a notch."""
+    x0, y0, x1, y1 = room.bounds
+    depth, span = rng.uniform(400, 1200), rng.uniform(800, 1800)
+    side = int(rng.integers(4))  # bottom, right, top, left
+    if side in (0, 2):
+        u = rng.uniform(x0 + 600, max(x0 + 600, x1 - 600 - span))
+        return box(u, y0 - 1, u + span, y0 + depth) if side == 0 else box(u, y1 - depth, u + span, y1 + 1)
+    v = rng.uniform(y0 + 600, max(y0 + 600, y1 - 600 - span))
+    return box(x1 - depth, v, x1 + 1, v + span) if side == 1 else box(x0 - 1, v, x0 + depth, v + span)
 
 
 def _cut(room: Polygon, piece: Polygon) -> Polygon:
