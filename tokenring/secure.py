@@ -218,6 +218,44 @@ def _key_usage(authority: bool) -> Any:
     )
 
 
+def _pem_key(key: Any) -> bytes:
+    from cryptography.hazmat.primitives import serialization
+
+    return key.private_bytes(
+        serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
+    )
+
+
+def _certificate(
+    common_name: str,
+    key: Any,
+    issuer: tuple[Any, str],
+    validity: tuple[datetime.datetime, datetime.datetime],
+    extensions: list[tuple[Any, bool]],
+) -> bytes:
+    """A PEM certificate for ``key`` named ``common_name``, signed by ``issuer`` (its key and
+    name: the key's own for the authority), with a subject key identifier besides
+    ``extensions`` (each with whether it is critical)."""
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.x509.oid import NameOID
+
+    issuer_key, issuer_name = issuer
+    builder = (
+        x509.CertificateBuilder()
+        .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, common_name)]))
+        .issuer_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, issuer_name)]))
+        .public_key(key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(validity[0])
+        .not_valid_after(validity[1])
+        .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
+    )
+    for extension, critical in extensions:
+        builder = builder.add_extension(extension, critical=critical)
+    return builder.sign(issuer_key, hashes.SHA256()).public_bytes(serialization.Encoding.PEM)
+
+
 def create_deployment(
     directory: Path, hosts: tuple[str, ...] = DEFAULT_HOSTS, days: int = 365, force: bool = False
 ) -> Deployment:
@@ -227,9 +265,8 @@ def create_deployment(
     to one checks it). Refuses to replace existing files unless ``force``; keys and configs
     (which hold keys) are written readable by their owner only."""
     from cryptography import x509
-    from cryptography.hazmat.primitives import hashes, serialization
     from cryptography.hazmat.primitives.asymmetric import ec
-    from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+    from cryptography.x509.oid import ExtendedKeyUsageOID
 
     hosts = tuple(check_host(h) for h in hosts) or DEFAULT_HOSTS
     if days < 1 or days > 3650:
@@ -243,64 +280,38 @@ def create_deployment(
         check_output(target, force=force)
 
     now = datetime.datetime.now(datetime.UTC)
-    not_before, not_after = now - datetime.timedelta(minutes=5), now + datetime.timedelta(days=days)
-
-    def pem_key(key: ec.EllipticCurvePrivateKey) -> bytes:
-        return key.private_bytes(
-            serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
-        )
-
+    validity = (now - datetime.timedelta(minutes=5), now + datetime.timedelta(days=days))
     ca_key = ec.generate_private_key(ec.SECP256R1())
-    ca_subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, CA_NAME)])
-    ca_cert = (
-        x509.CertificateBuilder()
-        .subject_name(ca_subject)
-        .issuer_name(ca_subject)
-        .public_key(ca_key.public_key())
-        .serial_number(x509.random_serial_number())
-        .not_valid_before(not_before)
-        .not_valid_after(not_after)
-        .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
-        .add_extension(_key_usage(authority=True), critical=True)
-        .add_extension(x509.SubjectKeyIdentifier.from_public_key(ca_key.public_key()), critical=False)
-        .sign(ca_key, hashes.SHA256())
+    authority = (ca_key, CA_NAME)
+    ca_pem = _certificate(
+        CA_NAME,
+        ca_key,
+        authority,
+        validity,
+        [(x509.BasicConstraints(ca=True, path_length=0), True), (_key_usage(authority=True), True)],
     )
-    ca_pem = ca_cert.public_bytes(serialization.Encoding.PEM)
-
-    def issue(role: str) -> tuple[bytes, bytes]:
-        key = ec.generate_private_key(ec.SECP256R1())
-        names = _names(hosts) if role == "node" else []
-        names.append(x509.DNSName(COMMON_NAMES[role]))
-        cert = (
-            x509.CertificateBuilder()
-            .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, COMMON_NAMES[role])]))
-            .issuer_name(ca_subject)
-            .public_key(key.public_key())
-            .serial_number(x509.random_serial_number())
-            .not_valid_before(not_before)
-            .not_valid_after(not_after)
-            .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
-            .add_extension(_key_usage(authority=False), critical=True)
-            .add_extension(
-                x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]),
-                critical=False,
-            )
-            .add_extension(x509.SubjectAlternativeName(names), critical=False)
-            .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
-            .add_extension(
-                x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()), critical=False
-            )
-            .sign(ca_key, hashes.SHA256())
-        )
-        return cert.public_bytes(serialization.Encoding.PEM), pem_key(key)
-
     _write(targets["ca"], ca_pem, private=False)
-    _write(targets["ca-key"], pem_key(ca_key), private=True)
+    _write(targets["ca-key"], _pem_key(ca_key), private=True)
     for role in ROLES:
-        cert_pem, key_pem = issue(role)
-        text = json.dumps(zenoh_config(role, ca_pem, cert_pem, key_pem), indent=2) + "\n"
+        key = ec.generate_private_key(ec.SECP256R1())
+        names = [*(_names(hosts) if role == "node" else []), x509.DNSName(COMMON_NAMES[role])]
+        usage = [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]
+        cert_pem = _certificate(
+            COMMON_NAMES[role],
+            key,
+            authority,
+            validity,
+            [
+                (x509.BasicConstraints(ca=False, path_length=None), True),
+                (_key_usage(authority=False), True),
+                (x509.ExtendedKeyUsage(usage), False),
+                (x509.SubjectAlternativeName(names), False),
+                (x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()), False),
+            ],
+        )
+        text = json.dumps(zenoh_config(role, ca_pem, cert_pem, _pem_key(key)), indent=2) + "\n"
         _write(targets[role], text.encode(), private=True)
-    return Deployment(directory, targets, hosts, not_after)
+    return Deployment(directory, targets, hosts, validity[1])
 
 
 def _write(path: Path, data: bytes, private: bool) -> None:
