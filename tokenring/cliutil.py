@@ -222,15 +222,23 @@ def write_json(target: str, value: Any) -> None:
         write_atomically(target, text)
 
 
-def check_json_target(target: str | None, force: bool = False) -> None:
-    """Refuse a ``--json FILE`` that cannot be written, or that exists (without ``--force``),
-    before the run whose results it is for."""
-    if target and target != "-":
-        from tokenring.inputfile import check_output
+def check_option_output(option: str, target: str, force: bool = False) -> None:
+    """Refuse the output file of ``option`` (e.g. ``--logs FILE``) that cannot be written, or
+    that exists (without ``--force``), before the run whose results it is for."""
+    from tokenring.inputfile import check_output
 
-        check_output(
-            target, force=force, error=lambda where, problem: UsageError(f"--json {where}: {problem}")
-        )
+    check_output(target, force=force, error=lambda where, problem: UsageError(f"{option} {where}: {problem}"))
+
+
+def check_json_target(target: str | None, force: bool = False) -> None:
+    """:func:`check_option_output` for ``--json FILE`` (``-`` prints: nothing to check)."""
+    if target and target != "-":
+        check_option_output("--json", target, force)
+
+
+def with_examples(examples: str) -> dict[str, Any]:
+    """``add_parser`` keywords for a help that ends with ``examples`` as written."""
+    return {"epilog": examples, "formatter_class": argparse.RawDescriptionHelpFormatter}
 
 
 def _default(value: Any) -> Any:

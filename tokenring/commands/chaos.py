@@ -122,14 +122,11 @@ def _check(args: argparse.Namespace) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tokenring.cliutil import check_json_target
-    from tokenring.inputfile import check_output
+    from tokenring.cliutil import check_json_target, check_option_output
 
     check_json_target(args.json, args.force)
     if args.logs:
-        check_output(
-            args.logs, force=args.force, error=lambda where, problem: UsageError(f"--logs {where}: {problem}")
-        )
+        check_option_output("--logs", args.logs, args.force)
     kinds = _check(args)
     ring = keys.check_ring_name(args.ring) if args.ring else None
 

@@ -29,7 +29,7 @@ def host(text: str) -> str:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cliutil import add_json_option, positive_int
+    from tokenring.cliutil import add_json_option, positive_int, with_examples
 
     p = sub.add_parser(
         "secure",
@@ -40,15 +40,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "the ring) and observer (may only read). Peers without a certificate of this "
             "authority cannot connect at all."
         ),
-        epilog=EXAMPLES,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        **with_examples(EXAMPLES),
     )
     verbs = p.add_subparsers(dest="secure_verb", metavar="VERB", required=True)
     init = verbs.add_parser(
         "init",
         help="write ca.pem, ca-key.pem and node/operator/observer.json5 into DIR",
-        epilog=EXAMPLES,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        **with_examples(EXAMPLES),
     )
     init.add_argument("directory", metavar="DIR", help="where to write (created if missing)")
     init.add_argument(

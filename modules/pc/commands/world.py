@@ -36,19 +36,19 @@ def seed(text: str) -> int:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring.cliutil import with_examples
+
     p = sub.add_parser(
         "world",
         help="world files: generate a random room",
         description="World files for the simulated robot.",
-        epilog=EXAMPLES,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        **with_examples(EXAMPLES),
     )
     verbs = p.add_subparsers(dest="world_verb", metavar="VERB", required=True)
     generate = verbs.add_parser(
         "generate",
         help="a random but plausible room (5-14 walls, stubs, pillars), the same for the same seed",
-        epilog=EXAMPLES,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        **with_examples(EXAMPLES),
     )
     generate.add_argument("--seed", type=seed, required=True, help="which room")
     generate.add_argument("--size", type=size, metavar="WxH", help="bounding box in mm (default: drawn)")
