@@ -583,20 +583,20 @@ def explore(
     rows = []
     for (method, source), vectors in [(("as run", "as run"), run.vectors), *run.variants.items()]:
         score = score_map(vectors, truth)
-        rows.append({"room": world, "seed": seed, "method": method, "pose": source, **score})
+        rows.append({"room": name, "seed": seed, "method": method, "pose": source, **score})
         if out and (method == "as run" or variant_pngs):
             Path(out).mkdir(parents=True, exist_ok=True)
             tag = "" if method == "as run" else f"-{method}-{'ekf' if source == 'filter' else 'dr'}"
             write_map(
                 vectors,
-                str(Path(out) / f"{world}-seed{seed}{tag}.png"),
+                str(Path(out) / f"{name}-seed{seed}{tag}.png"),
                 truth,
                 name,
-                title=f"{world}, closed loop, seed {seed}, {method}, {source}",
+                title=f"{name}, closed loop, seed {seed}, {method}, {source}",
                 paths={"true": run.truth_path, "mapping pose": run.pose_path},
             )
     return {
-        "room": world,
+        "room": name,
         "seed": seed,
         "finished": run.finished,
         "sim_seconds": run.sim_seconds,
@@ -623,11 +623,32 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def summary(rows: list[dict[str, Any]]) -> str:
+    """Median and worst decile (10th percentile) of coverage and precision over the runs' maps."""
+    if not rows:
+        return "no maps"
+    coverage = np.array([r["coverage"] for r in rows])
+    precision = np.array([r["precision"] for r in rows])
+    closed = sum(r["corners_closed"] for r in rows)
+    corners = sum(r["corners_total"] for r in rows)
+    return (
+        f"{len(rows)} maps: coverage median {np.median(coverage):.1%}, worst decile "
+        f"{np.percentile(coverage, 10):.1%}, worst {coverage.min():.1%}; precision median "
+        f"{np.median(precision):.1%}, worst decile {np.percentile(precision, 10):.1%}, worst "
+        f"{precision.min():.1%}; corners closed {closed}/{corners}"
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     from concurrent.futures import ProcessPoolExecutor
 
     parser = argparse.ArgumentParser(prog="python -m bench.closedloop", description=__doc__.split("\n\n")[0])
     parser.add_argument("--world", default="office", help="room(s), comma-separated (default office)")
+    parser.add_argument(
+        "--generated",
+        metavar="ROOMS",
+        help="generated rooms instead: tuning, evaluation, evaluation:10 or seeds like 101-105 (bench.rooms)",
+    )
     parser.add_argument("--seed", default="1", help="noise seed(s): 1 or 1,2,3 or 1-3")
     parser.add_argument("--minutes", type=float, default=30.0, help="simulated minutes at most")
     parser.add_argument(
@@ -646,7 +667,13 @@ def main(argv: list[str] | None = None) -> int:
     for part in args.seed.split(","):
         lo, _, hi = part.partition("-")
         seeds += list(range(int(lo), int(hi or lo) + 1))
-    jobs = [(w.strip(), s) for w in args.world.split(",") if w.strip() for s in seeds]
+    worlds = [w.strip() for w in args.world.split(",") if w.strip()]
+    if args.generated:
+        from bench.rooms import generated_room, room_seeds
+
+        rooms_dir = Path(__file__).parent / "results" / "raw" / "rooms"
+        worlds = [str(generated_room(n, rooms_dir)) for n in room_seeds(args.generated)]
+    jobs = [(w, s) for w in worlds for s in seeds]
     options = dict(
         seed_method=args.seed_method,
         dead_reckoning=args.dead_reckoning,
@@ -677,6 +704,7 @@ def main(argv: list[str] | None = None) -> int:
     if len(rows) > 1:
         print()
         print(format_rows(rows))
+        print(summary([result["rows"][0] for result in results]))
     if args.json:
         import datetime as dt
 
