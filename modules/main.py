@@ -20,14 +20,25 @@ from typing import Any
 
 from modules.common.mapclient import MapCollector
 from modules.common.navigator import NAV, Calibrate, ExploreAvoid, ExploreLeftWall, Navigator
-from modules.common.pilot import REASON, REASON_NAMES, STOPPED, Outcome, Pilot, PilotSettings, Sensors
+from modules.common.pilot import (
+    MOTOR_STATE,
+    REASON,
+    REASON_NAMES,
+    STOPPED,
+    Outcome,
+    Pilot,
+    PilotSettings,
+    Sensors,
+)
 from modules.common.units import pose_from_wire
 from modules.common.vectorgen import default_layout
 from tokenring.errors import UsageError
 from tokenring.program import UserProgram
+from tokenring.protocol import default_protocol
 
 log = logging.getLogger("tokenring.main")
 NAV_NAMES = {v: k for k, v in NAV.items()}
+COMPASS_CALIBRATING = default_protocol().enums["compass_state"]["CALIBRATING"]
 
 
 class Program(UserProgram):
@@ -56,6 +67,10 @@ class Program(UserProgram):
         self.finished: dict[str, Any] | None = None
         self.started = time.monotonic()
         self.sensors = Sensors()
+        #: the fused heading at rest before the compass's calibration turn: where an action file
+        #: run after it should start from (the turn ends a few degrees off, up to 11° seen)
+        self.rest_heading: float | None = None
+        self.calibration_heading: float | None = None
         self._publish()
 
     # -- sending ------------------------------------------------------------------------------------
@@ -71,6 +86,7 @@ class Program(UserProgram):
             self._take_commands()
             self._take_requests()
             self.sensors = self._read_sensors()
+            self._note_calibration_turn()
             try:
                 self._cooperate()
             except Exception as exc:  # a strategy's bug stops the exploration, not main
@@ -111,7 +127,8 @@ class Program(UserProgram):
             pose = pose_from_wire(copro["pose_x_mm"], copro["pose_y_mm"], copro["pose_angle_cdeg"])
         elif self.motor.published:
             pose = pose_from_wire(motor["x_mm"], motor["y_mm"], motor["angle_cdeg"])
-        heading = compass["heading_cdeg"] if self.compass.visits and compass["state"] != 3 else None
+        calibrating = compass["state"] == COMPASS_CALIBRATING
+        heading = compass["heading_cdeg"] if self.compass.visits and not calibrating else None
         return Sensors(
             distances=list(sonar["distances"]) if self.sonar.visits else [255] * 8,
             sweep=sonar["sweep"],
@@ -129,6 +146,22 @@ class Program(UserProgram):
             pose_filtered=copro["pose_source"] == 2,
             ready=bool(self.sonar.visits and sonar["sweep"] and self.motor.visits and motor["stamp_ms"]),
         )
+
+    def _note_calibration_turn(self) -> None:
+        """Keep the heading at rest; while the compass calibrates, hold the one from before."""
+        sensors = self.sensors
+        calibrating = self.compass.visits and self.compass.read()["state"] == COMPASS_CALIBRATING
+        if calibrating:
+            if self.calibration_heading is None:
+                self.calibration_heading = self.rest_heading
+        elif (
+            self.navigator is None
+            and self.calibration_heading is None
+            and sensors.pose is not None
+            and sensors.pose_filtered
+            and sensors.motor_state == MOTOR_STATE["IDLE"]
+        ):
+            self.rest_heading = sensors.pose[2]
 
     def _cooperate(self) -> None:
         """One turn of the seed's cooperative multitasking: pilot step, then navigator if free."""
@@ -259,7 +292,8 @@ class Program(UserProgram):
 
             actions = parse_actions(str(payload.get("text", "")), str(payload.get("name", "<actions>")))
             speed = int(payload.get("speed_pct", 50))
-            self.start(ActionNavigator(self.layout, actions, speed_pct=speed), 1)
+            start_heading, self.calibration_heading = self.calibration_heading, None
+            self.start(ActionNavigator(self.layout, actions, speed_pct=speed, start_heading=start_heading), 1)
             return self.state()
         if verb == "clear_map":
             self._send("map", "CLEAR_MAP")

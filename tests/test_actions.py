@@ -104,6 +104,24 @@ def test_plan_closes_the_loop_on_turns_with_the_fused_heading() -> None:
     assert plan.finished and plan.progress()["corrections"] == 2
 
 
+def test_plan_squares_up_to_the_heading_before_the_calibration_turn() -> None:
+    """The compass's 360° calibration turn ended 11° short: the first leg would run 11° off
+    (the 158 mm run of issue 21); the plan turns back to where the robot faced first."""
+    before = math.radians(30.0)
+    plan = ActionPlan(parse_actions(SQUARE), speed_pct=60, settle_ms=300, start_heading=before)
+    heading = math.radians(19.0)
+    assert plan.next(heading, 0) == WAIT  # settle at rest first, as after an ``r``
+    step = plan.next(heading, 400)
+    assert step.direction == "left" and step.amount == 11
+    heading = math.radians(30.2)
+    assert plan.next(heading, 500) == WAIT
+    assert plan.next(heading, 900) == Drive("forward", 3000, 60, "line 3: s 3000")
+    # the first ``r 90`` aims at 120°, the start heading plus 90, not wherever the turn ended
+    assert plan.next(heading, 1000).amount == 90
+    plan.next(math.radians(118.0), 1100)
+    assert plan.next(math.radians(118.0), 1500) == Drive("left", 2, 60, "correct +2.0°")
+
+
 def test_plan_without_heading_is_open_loop_and_wheels_wait_for_their_time() -> None:
     plan = ActionPlan(parse_actions("r -45\nv 50 -50 70000\n"), speed_pct=50)
     assert plan.next(None, 0) == Drive("right", 45, 50, "line 1: r -45")

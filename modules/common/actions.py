@@ -172,7 +172,10 @@ class ActionPlan:
         turn_tolerance_deg: float = 0.6,
         max_corrections: int = 3,
         settle_ms: int = SETTLE_MS,
+        start_heading: float | None = None,
     ) -> None:
+        """``start_heading`` (rad, CCW): square up to it before the first action, as after an
+        ``r`` (the compass's calibration turn ends a few degrees off where it began)."""
         if not 1 <= speed_pct <= 100:
             raise UsageError(f"action speed must be 1..100 %, got {speed_pct}")
         self.actions = actions
@@ -181,8 +184,8 @@ class ActionPlan:
         self.max_corrections = max_corrections
         self.settle_ms = settle_ms
         self.index = 0
-        self.target: float | None = None  # the heading the actions so far meant (rad, CCW)
-        self.checking = False
+        self.target: float | None = start_heading  # the heading the actions so far meant (rad, CCW)
+        self.checking = start_heading is not None
         self.corrections = 0
         self.settle_until: int | None = None
         self.wheels_until: int | None = None
@@ -350,12 +353,17 @@ class ActionNavigator(_navigator_base()):  # type: ignore[misc]
     TURN_MM_PER_DEG = TRACK_HALF_WIDTH_MM * math.pi / 180.0  # track travel per degree turned
 
     def __init__(
-        self, layout: Any, actions: list[Action], speed_pct: int = 50, closed_loop: bool = True
+        self,
+        layout: Any,
+        actions: list[Action],
+        speed_pct: int = 50,
+        closed_loop: bool = True,
+        start_heading: float | None = None,
     ) -> None:
         from modules.common.navigator import NAV
 
         super().__init__(layout)
-        self.plan_steps = ActionPlan(actions, speed_pct)
+        self.plan_steps = ActionPlan(actions, speed_pct, start_heading=start_heading if closed_loop else None)
         self.closed_loop = closed_loop
         self.state = NAV["ACTIONS"]
         self._nav = NAV

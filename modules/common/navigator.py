@@ -22,6 +22,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from modules.common.pilot import (
     FORWARD,
     REASON,
@@ -147,7 +149,7 @@ class WallSettings:
     search_deg: int = 120  # a turn looking for the wall to become parallel on the left, at most
     search_speed_pct: int = 40  # slow: the pair reads every 120 ms
     # free-standing obstacles: after the lap, go round what the right side saw inside it
-    visit_islands: int = 2  # at most this many, nearest first (0: the lap ends the run)
+    visit_islands: int = 3  # at most this many, nearest first (0: the lap ends the run)
     #: a right-side reading this near on a follow segment marks an obstacle. Not farther: going
     #: round the slanted room's round obstacle (1.0-1.3 m from the lap) with straight segments and
     #: 90° turns mapped junk on the ring (coverage/precision 85/85 and 60/62 % against 90/100 and
@@ -164,6 +166,12 @@ class WallSettings:
     island_turn_deg: float = 405.0
     island_last_mm: int = 150
     island_budget_mm: int = 5000  # driven along it without closing the lap: give up
+    # the interior: after the lap and the islands it showed, drive through what no sonar came
+    # near (a pillar 1.8 m from every wall is out of the lap's sight), up to ``max_probes`` drives
+    max_probes: int = 8
+    probe_cell_mm: float = 250.0  # the interior's grid
+    probe_seen_mm: float = 900.0  # a cell this near a path driven counts as seen (sighting_cm)
+    probe_done_mm: float = 450.0  # a probe's end this near its goal reached it
 
 
 @dataclass
@@ -241,6 +249,9 @@ class ExploreLeftWall(Navigator):
         self.target: tuple[float, float] | None = None  # the island being approached or circled
         self.visits = 0
         self.unreached: list[tuple[float, float]] = []  # targets an approach did not run into
+        self.trail: list[tuple[float, float]] = []  # everywhere the robot went (seen from)
+        self.probes = 0
+        self.probe_goals: list[tuple[float, float]] = []  # interior goals driven to (or tried)
 
     # -- the moves ----------------------------------------------------------------------------
     def _front_stop(self) -> tuple[Abort, ...]:
@@ -410,6 +421,8 @@ class ExploreLeftWall(Navigator):
         if label == "follow":
             self.follow_mm += max(0, last.driven_mm)
             self.last_follow = last
+        if last is not None:
+            self.trail += [pose[:2] for pose in last.poses if pose is not None]
         if last is not None and self.lap_start is not None:
             self._record(last, label)
         if last is not None and last.reason == REASON["ALERT"]:
@@ -450,6 +463,22 @@ class ExploreLeftWall(Navigator):
             self.outer_path = self.path
             return self._next_island(sensors)
         blocked = last is not None and last.trigger in ("ahead_within", "front_within")
+
+        if self.phase == "probe":  # a drive into the interior: something in the way is an island
+            if label == "probe":
+                if blocked and self._island_ahead(sensors):
+                    self.target = self.probe_goals[-1]
+                    self.rotation, self.follow_mm, self.laps = 0.0, 0, 0
+                    self.lap_start, self.path = None, []
+                    self.visits += 1
+                    self.phase = "follow"
+                    self.state = NAV["TURN"]
+                    self.note = "found an island inside"
+                    self.commands.append(("copro", "FLUSH", {}))
+                    return self._turn(-90, "inner", sensors, align=True) or [self._segment()]
+                return self._next_island(sensors)
+            self.state = NAV["ENTRY"]
+            return [self._probe_move(sensors)]
 
         if self.phase == "approach":  # drive to the island chosen until it blocks the way
             if label == "approach":
@@ -531,12 +560,20 @@ class ExploreLeftWall(Navigator):
 
     # -- islands: free-standing obstacles seen on the right during the lap ---------------------
     def _record(self, last: Outcome, label: str) -> None:
-        """The lap's path, and on the room's lap the right side's echoes of follow segments."""
+        """The lap's path, and on the room's lap the right side's echoes of follow segments
+        (on a probe into the interior, every sonar's)."""
         lay = self.layout
         for (_, distances), pose in zip(last.samples, last.poses, strict=False):
             if pose is None:
                 continue
             self.path.append(pose[:2])
+            if label == "probe":
+                self.sightings += [
+                    sonar_point(pose, i, distances[i] * 10.0)
+                    for i in range(len(distances))
+                    if distances[i] <= self.s.sighting_cm
+                ]
+                continue
             if label != "follow" or self.target is not None:
                 continue
             for index, which in ((lay.right_front, "front"), (lay.right_rear, "rear")):
@@ -577,6 +614,9 @@ class ExploreLeftWall(Navigator):
         self.target = None
         islands = self._islands() if self.visits < s.visit_islands and sensors.pose is not None else []
         if not islands:
+            probe = self._next_probe(sensors)
+            if probe is not None:
+                return probe
             self.state = NAV["DONE"]
             gone_round = len(self.circled) - len(self.islands)
             self.note = f"lap closed, {gone_round} island(s) gone round" if self.visits else "lap closed"
@@ -591,6 +631,49 @@ class ExploreLeftWall(Navigator):
         self.state = NAV["TURN"]
         bearing = math.degrees(math.remainder(math.atan2(ty - y, tx - x) - heading, 2 * math.pi))
         return self._turn(bearing, "aim", sensors) or [self._approach(sensors)]
+
+    def _next_probe(self, sensors: Sensors) -> list[Move] | None:
+        """Turn toward the interior's largest stretch no path came near, or None: all seen."""
+        s = self.s
+        if self.probes >= s.max_probes or sensors.pose is None or len(self.outer_path) < 3:
+            return None
+        seen_from = self.trail + self.probe_goals
+        islands = [ring for ring in self.circled if len(ring) >= 3]
+        goal = interior_goal(self.outer_path, seen_from, islands, sensors.pose[:2], s)
+        if goal is None:
+            return None
+        self.probes += 1
+        self.probe_goals.append(goal)
+        self.phase, self.last_follow = "probe", None
+        x, y, heading = sensors.pose
+        self.state = NAV["TURN"]
+        self.note = f"probing the interior ({self.probes})"
+        bearing = math.degrees(math.remainder(math.atan2(goal[1] - y, goal[0] - x) - heading, 2 * math.pi))
+        return self._turn(bearing, "aim", sensors) or [self._probe_move(sensors)]
+
+    def _probe_move(self, sensors: Sensors) -> Move:
+        goal = self.probe_goals[-1]
+        distance = math.dist(sensors.pose[:2], goal) if sensors.pose is not None else self.s.find_mm
+        return self._forward(max(100, round(distance)), "probe")
+
+    def _island_ahead(self, sensors: Sensors) -> bool:
+        """What stopped a probe lies inside the room's lap, away from its walls and the islands
+        gone round: a free-standing obstacle nobody saw yet."""
+        if sensors.pose is None:
+            return False
+        ahead = min(sensors.distances[i] for i in self.layout.front)
+        index = min(self.layout.front, key=lambda i: sensors.distances[i])
+        point = sonar_point(sensors.pose, index, ahead * 10.0)
+        outer = self.outer_path
+        return (
+            point_in_polygon(point, outer)
+            and distance_to_path(point, outer) >= self.s.inside_margin_mm
+            and not any(
+                point_in_polygon(point, ring) or distance_to_path(point, ring) < self.s.inside_margin_mm
+                for ring in self.circled
+                if len(ring) >= 3
+            )
+        )
 
     def _approach(self, sensors: Sensors) -> Move:
         assert self.target is not None
@@ -657,6 +740,62 @@ class ExploreLeftWall(Navigator):
         self.laps += 1
         self.follow_mm = 0
         return self.laps >= self.s.max_laps
+
+
+def sonar_point(pose: tuple[float, float, float], index: int, distance_mm: float) -> tuple[float, float]:
+    """The world point a reading of sonar ``index`` marks, the robot at ``pose``."""
+    from modules.description.robot import sonar_world_pose
+
+    sx, sy, direction = sonar_world_pose(pose[0], pose[1], pose[2], index)
+    return (sx + distance_mm * math.cos(direction), sy + distance_mm * math.sin(direction))
+
+
+def interior_goal(
+    outer: list[tuple[float, float]],
+    seen_from: list[tuple[float, float]],
+    islands: list[list[tuple[float, float]]],
+    here: tuple[float, float],
+    s: WallSettings,
+) -> tuple[float, float] | None:
+    """Where to drive next to see the interior: the cell inside the room's lap with the most
+    unseen cells around it (nearer ones first among equals), or None when every cell lies within
+    ``probe_seen_mm`` of a path driven. Cells inside an island gone round do not count."""
+    poly = np.asarray(outer, dtype=float)
+    step = s.probe_cell_mm
+    (x0, y0), (x1, y1) = poly.min(axis=0), poly.max(axis=0)
+    gx, gy = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(y0 + step / 2, y1, step))
+    cells = np.column_stack([gx.ravel(), gy.ravel()])
+    inside = _inside(cells, poly)
+    for ring in islands:
+        inside &= ~_inside(cells, np.asarray(ring, dtype=float))
+    cells = cells[inside]
+    if len(cells) == 0:
+        return None
+    trail = np.asarray(seen_from[:: max(1, len(seen_from) // 4000)] or [here], dtype=float)
+    near = np.full(len(cells), np.inf)
+    for chunk in range(0, len(trail), 500):
+        part = trail[chunk : chunk + 500]
+        near = np.minimum(near, np.sqrt(((cells[:, None, :] - part[None, :, :]) ** 2).sum(-1)).min(axis=1))
+    unseen = cells[near > s.probe_seen_mm]
+    if len(unseen) == 0:
+        return None
+    around = (np.sqrt(((unseen[:, None, :] - unseen[None, :, :]) ** 2).sum(-1)) <= s.probe_seen_mm).sum(
+        axis=1
+    )
+    distance = np.sqrt(((unseen - np.asarray(here)) ** 2).sum(-1))
+    best = int(np.argmax(around - distance / 1000.0))
+    return float(unseen[best, 0]), float(unseen[best, 1])
+
+
+def _inside(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """Even-odd rule for many points at once (arrays (N, 2) and (M, 2))."""
+    x, y = points[:, 0][:, None], points[:, 1][:, None]
+    ax, ay = polygon[:, 0][None, :], polygon[:, 1][None, :]
+    bx, by = np.roll(polygon[:, 0], -1)[None, :], np.roll(polygon[:, 1], -1)[None, :]
+    crosses = (ay > y) != (by > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xint = ax + (y - ay) * (bx - ax) / np.where(by != ay, by - ay, 1.0)
+    return (crosses & (x < xint)).sum(axis=1) % 2 == 1
 
 
 def point_in_polygon(p: tuple[float, float], polygon: list[tuple[float, float]]) -> bool:
