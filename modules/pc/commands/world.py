@@ -1,4 +1,5 @@
-"""``tokenring world generate``: a random but plausible room as a world file, one per seed."""
+"""``tokenring world generate``: a random but plausible room as a world file, one per seed;
+``tokenring world drive``: a random action file that stays inside a room."""
 
 from __future__ import annotations
 
@@ -10,6 +11,8 @@ examples:
   tokenring world generate --seed 7 --out room7.yaml
   tokenring world generate --seed 7 --size 6200x4600 --out office.yaml
   tokenring up --world room7.yaml --explore 2 --map-out m.json
+  tokenring world drive --world room7.yaml --seed 3 --out drive3.txt
+  tokenring up --world room7.yaml --actions drive3.txt
 """
 
 
@@ -35,12 +38,23 @@ def seed(text: str) -> int:
     return value
 
 
+def legs(text: str) -> int:
+    """An argparse type: a number of legs, 1..100."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if not 1 <= value <= 100:
+        raise argparse.ArgumentTypeError(f"{value} is not within 1..100")
+    return value
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring.cliutil import with_examples
 
     p = sub.add_parser(
         "world",
-        help="world files: generate a random room",
+        help="world files: generate a random room, or a drive inside one",
         description="World files for the simulated robot.",
         **with_examples(EXAMPLES),
     )
@@ -54,9 +68,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     generate.add_argument("--size", type=size, metavar="WxH", help="bounding box in mm (default: drawn)")
     generate.add_argument("--out", metavar="FILE", help="write the world file here (default: print it)")
     generate.add_argument("--force", action="store_true", help="replace an existing --out file")
+    drive = verbs.add_parser(
+        "drive",
+        help="a random action file whose legs keep 450 mm from every wall, the same for the same seed",
+        **with_examples(EXAMPLES),
+    )
+    drive.add_argument("--world", required=True, help="bundled room or world file the drive stays in")
+    drive.add_argument("--seed", type=seed, required=True, help="which drive")
+    drive.add_argument("--legs", type=legs, default=8, help="turn-and-drive legs, 1..100 (default 8)")
+    drive.add_argument("--out", metavar="FILE", help="write the action file here (default: print it)")
+    drive.add_argument("--force", action="store_true", help="replace an existing --out file")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.world_verb == "drive":
+        return run_drive(args)
     from modules.description.generate import generate_room, room_yaml
     from modules.description.roomfile import parse_world_yaml
     from tokenring.inputfile import check_output, write_atomically
@@ -65,6 +91,29 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.out, force=args.force)
     text = room_yaml(generate_room(args.seed, args.size))
     parse_world_yaml(text, f"generated room {args.seed}")  # the loader's checks, as for any file
+    if args.out:
+        write_atomically(args.out, text)
+    else:
+        print(text, end="")
+    return 0
+
+
+def run_drive(args: argparse.Namespace) -> int:
+    from modules.description import WorldError, load_world
+    from modules.description.drives import DriveError, drive_text, generate_drive
+    from tokenring.errors import UsageError
+    from tokenring.inputfile import check_output, write_atomically
+
+    if args.out:
+        check_output(args.out, force=args.force)
+    try:
+        world = load_world(args.world)
+        moves = generate_drive(world, args.seed, legs=args.legs)
+    except WorldError as exc:
+        raise UsageError(f"--world {args.world}: {exc}") from None
+    except DriveError as exc:
+        raise UsageError(f"--world {args.world}: no drive fits: {exc}") from None
+    text = drive_text(moves, f"a random drive (seed {args.seed}, {args.legs} legs) in {world.name}")
     if args.out:
         write_atomically(args.out, text)
     else:
