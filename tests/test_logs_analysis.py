@@ -56,3 +56,25 @@ def test_analyze_command_line(log_path: Path, tmp_path: Path, capsys: pytest.Cap
     with pytest.raises(LogError, match="no samples"):
         analyse(empty)
     assert cli_main(["analyze", str(empty)]) == 2
+
+
+def test_the_filter_is_judged_by_its_own_three_sigma(log_path: Path, tmp_path: Path) -> None:
+    """``within_3sigma``: the share of filter positions within 3σ of the truth on both axes,
+    counted here straight from the log's records (truth at the same stamp, no interpolation)."""
+    from modules.common.logs import read_log
+
+    records = read_log(log_path).records
+    truth = {stamp: p for stamp, source, kind, p in records if kind == "P" and source == "L"}
+    filtered = [(stamp, p) for stamp, source, kind, p in records if kind == "P" and source == "K"]
+    inside = [
+        abs(p["x"] - truth[stamp]["x"]) <= 3 * p["sigma"][0]
+        and abs(p["y"] - truth[stamp]["y"]) <= 3 * p["sigma"][1]
+        for stamp, p in filtered
+        if stamp in truth
+    ]
+    assert len(inside) == len(filtered) > 50
+    summary, _ = analyse(log_path, tmp_path / "plots")
+    k = summary["sources"]["K"]
+    assert k["samples_3sigma"] == len(inside)
+    assert k["within_3sigma"] == pytest.approx(sum(inside) / len(inside))
+    assert k["within_3sigma"] > 0.9  # an honest filter on this short drive

@@ -44,11 +44,14 @@ class Series:
         self.compass_raw: list[tuple[int, float]] = []
         self.sonar: list[tuple[int, list[int]]] = []
         self.walls_fitted = 0
+        self.sigmas: dict[str, list[tuple[int, float, float, float]]] = {}  # (stamp, σx, σy, σψ)
         for stamp, source, kind, payload in log.records:
             if kind == "P":
                 valid = payload.get("valid", [True, True, True])
                 row = (stamp, payload["x"], payload["y"], payload["psi"], *map(bool, valid))
                 self.positions.setdefault(source, []).append(row)
+                if "sigma" in payload:
+                    self.sigmas.setdefault(source, []).append((stamp, *map(float, payload["sigma"])))
             elif kind == "R" and source in SOURCE_SENSOR:
                 sensor = SOURCE_SENSOR[source]
                 self.raw_stamps.setdefault(sensor, []).append(stamp)
@@ -99,6 +102,10 @@ def summarise(series: Series) -> dict[str, Any]:
                     max_error_mm=float(dist.max()),
                     end_pose=[float(a[-1, 1]), float(a[-1, 2]), math.degrees(a[-1, 3])],
                 )
+                sig = np.array(series.sigmas.get(source, []), dtype=float)
+                if len(sig) == len(a):  # the filter's own uncertainty: is it honest?
+                    inside = (np.abs(a[:, 1] - tx) <= 3 * sig[:, 1]) & (np.abs(a[:, 2] - ty) <= 3 * sig[:, 2])
+                    entry.update(within_3sigma=float(np.mean(inside)), samples_3sigma=len(inside))
             if a[:, 6].any():
                 dh = _wrap_deg(np.degrees(a[:, 3] - tp))
                 entry.update(
