@@ -229,6 +229,8 @@ class Program(UserProgram):
         }
         if isinstance(nav, Calibrate):
             self.finished["calibration"] = nav.result
+        if isinstance(nav, ExploreLeftWall):
+            self.finished["map"] = nav.completeness()
         self.history.append(self.finished)
         self.abort_reason = REASON["USER"] if aborted else REASON["DONE"]
         self.navigator = None

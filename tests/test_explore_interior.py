@@ -50,7 +50,8 @@ def test_a_pillar_out_of_the_laps_sight_is_mapped(tmp_path: Path) -> None:
     (pillar,) = [Polygon(w["polygon"]) for w in data["walls"][1:] if "polygon" in w]
     assert outline.exterior.distance(pillar) > 1500  # the room is what the test says it is
 
-    run = ClosedLoop(str(world), seed=1).run(30.0)
+    loop = ClosedLoop(str(world), seed=1)
+    run = loop.run(30.0)
 
     near = [
         LineString([v[:2], v[2:]]) for v in run.vectors if pillar.distance(LineString([v[:2], v[2:]])) < 100
@@ -61,3 +62,6 @@ def test_a_pillar_out_of_the_laps_sight_is_mapped(tmp_path: Path) -> None:
     seen = [any(LineString(face).distance(line) < 100 for line in near) for face in faces]
     assert all(seen), seen
     assert "island" in run.finished, run.finished
+    report = loop.navigator.completeness()
+    assert report["outline_closed"] and report["interior_seen"], report
+    assert report["islands_gone_round"] == 1 and report["probes"] >= 1, report

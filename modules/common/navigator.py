@@ -558,6 +558,24 @@ class ExploreLeftWall(Navigator):
             return [*turn, self._segment()]
         return [self._segment()]
 
+    def completeness(self) -> dict[str, object]:
+        """How complete the map is, as far as the robot can tell: the room's outline closed by a
+        lap, islands found and gone round, probes into the interior, and whether any of the
+        interior is still out of every sonar's sight (``interior_seen``)."""
+        outline = len(self.outer_path) >= 3
+        islands = [ring for ring in self.circled if len(ring) >= 3]
+        unseen = None
+        if outline:
+            here = self.trail[-1] if self.trail else self.outer_path[0]
+            unseen = interior_goal(self.outer_path, self.trail + self.probe_goals, islands, here, self.s)
+        return {
+            "outline_closed": outline,
+            "islands_found": len(self.circled),  # gone round, or lapped while looking for the room
+            "islands_gone_round": len(self.circled) - len(self.islands),
+            "probes": self.probes,
+            "interior_seen": outline and unseen is None,
+        }
+
     # -- islands: free-standing obstacles seen on the right during the lap ---------------------
     def _record(self, last: Outcome, label: str) -> None:
         """The lap's path, and on the room's lap the right side's echoes of follow segments

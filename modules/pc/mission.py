@@ -22,6 +22,17 @@ def request(link: Any, action: str) -> dict[str, Any]:
     return link.request("state")
 
 
+def describe_map(report: dict[str, Any] | None) -> str:
+    """Explore 2's own view of its map's completeness, for the run's last line."""
+    if not report:
+        return ""
+    return (
+        f"; outline {'closed' if report.get('outline_closed') else 'NOT closed'}, "
+        f"{report.get('islands_found', 0)} island(s), {report.get('probes', 0)} probe(s) into the interior, "
+        f"interior {'seen' if report.get('interior_seen') else 'NOT all seen'}"
+    )
+
+
 def describe(state: dict[str, Any]) -> str:
     pose = state.get("pose")
     where = f" at ({pose[0]:.0f}, {pose[1]:.0f}) mm" if pose else ""
@@ -131,7 +142,10 @@ class Mission:
                 time.sleep(0.5)
                 state = link.request("state")
                 if not state.get("running"):
-                    self.say(f"exploration finished: {(state.get('finished') or {}).get('why')}")
+                    finished = state.get("finished") or {}
+                    self.say(
+                        f"exploration finished: {finished.get('why')}{describe_map(finished.get('map'))}"
+                    )
                     break
                 if time.monotonic() - last_report > 10.0:
                     self.say(describe(state))
