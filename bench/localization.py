@@ -153,11 +153,14 @@ def run_actions(link: Any, text: str, name: str, speed_pct: int, timeout: float)
 
 
 def align(link: Any, speed_pct: int, timeout: float) -> None:
-    """Turn the robot to face +X by the fused heading (the compass calibration turn left it off)."""
+    """Turn the robot to face +X by the fused heading (the compass calibration turn left it off).
+    The first action file after the calibration squares up to the heading before it (main does
+    that, the hall's start faces +X): an empty one; then whatever is left, turned relatively."""
     import math
 
     from modules.common.units import cdeg_cw_to_rad_ccw
 
+    run_actions(link, "e\n", "square-up.act", speed_pct, timeout)
     copro = link.read("copro.data")
     heading = math.degrees(cdeg_cw_to_rad_ccw(copro["pose_angle_cdeg"]))
     if round(abs(heading)) >= 1:
