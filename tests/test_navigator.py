@@ -527,13 +527,37 @@ def test_explore2_goes_round_a_free_standing_obstacle_seen_on_the_right_after_th
 
 
 def test_explore2_ends_at_the_lap_when_nothing_stood_inside_it():
+    from modules.common.pilot import Outcome
+
     nav = ExploreLeftWall(LAYOUT)
     nav.phase = "follow"
     s = sensors_with(left_front=30, left_rear=30)
-    # one stray echo on the right is no island
-    assert _room_lap(nav, s, lambda x, y: 80 if 1950 <= x <= 2050 else FAR) is None
+    # one stray echo on the right is no island ...
+    plan = _room_lap(nav, s, lambda x, y: 80 if 1950 <= x <= 2050 else FAR)
     assert len(nav.sightings) == 4  # both ends of one sweep, on the way out and back
+    assert nav.target is None and nav.commands == []
+    # ... but the lap's middle lies over 900 mm from its path: one drive through it
+    (gx, gy), x, y = nav.probe_goals[-1], *s.pose[:2]
+    assert 1300 < gx < 2700 and 1300 < gy < 1700 and nav.probes == 1
+    assert plan[-1].label in ("aim", "probe")
+    heading = math.atan2(gy - y, gx - x)
+    s.pose = (x, y, heading)
+    s.distances = [FAR] * 8
+    if plan[-1].label == "aim":
+        plan = settle(nav, Outcome(REASON["DONE"], plan[-1]), s)
+    (probe,) = plan
+    assert probe.label == "probe" and probe.direction == FORWARD
+    assert abs(probe.amount - math.dist((x, y), (gx, gy))) < 2
+    steps = range(0, probe.amount + 1, 100)
+    poses = [(x + d * math.cos(heading), y + d * math.sin(heading), heading) for d in steps]
+    s.pose = poses[-1]
+    done = Outcome(
+        REASON["DONE"], probe, driven_mm=probe.amount, samples=[(d, [FAR] * 8) for d in steps], poses=poses
+    )
+    assert nav.plan(done, s, STOPPED) is None  # nothing in the way, all seen: the run ends
     assert nav.note == "lap closed" and nav.commands == [] and nav.target is None
+    report = nav.completeness()
+    assert report["outline_closed"] and report["interior_seen"] and report["islands_found"] == 0
 
 
 def test_explore2_does_not_visit_an_island_again_whose_echoes_lie_just_outside_its_path_round():
