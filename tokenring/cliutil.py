@@ -54,6 +54,21 @@ def non_negative_seconds(text: str) -> float:
     return _seconds(text, zero=True)
 
 
+def int_within(low: int, high: int) -> Callable[[str], int]:
+    """An argparse type: a whole number within ``low``..``high``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{value} is not within {low}..{high}")
+        return value
+
+    return parse
+
+
 def positive_int(text: str) -> int:
     """An argparse type: a whole number of at least 1."""
     try:

@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import re
 
+from tokenring.cliutil import int_within
+
 EXAMPLES = """\
 examples:
   tokenring world generate --seed 7 --out room7.yaml
@@ -27,26 +29,8 @@ def size(text: str) -> tuple[int, int]:
     return width, height
 
 
-def seed(text: str) -> int:
-    """An argparse type: a seed, 0..2**32-1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if not 0 <= value < 2**32:
-        raise argparse.ArgumentTypeError(f"{value} is not within 0..{2**32 - 1}")
-    return value
-
-
-def legs(text: str) -> int:
-    """An argparse type: a number of legs, 1..100."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if not 1 <= value <= 100:
-        raise argparse.ArgumentTypeError(f"{value} is not within 1..100")
-    return value
+seed = int_within(0, 2**32 - 1)  # argparse types
+legs = int_within(1, 100)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
