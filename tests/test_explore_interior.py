@@ -65,3 +65,7 @@ def test_a_pillar_out_of_the_laps_sight_is_mapped(tmp_path: Path) -> None:
     report = loop.navigator.completeness()
     assert report["outline_closed"] and report["interior_seen"], report
     assert report["islands_gone_round"] == 1 and report["probes"] >= 1, report
+    # done, it drove back to where it began and says so
+    assert report["returned_home"] and run.finished.endswith("back at the start"), run.finished
+    start = (data["start"]["x"], data["start"]["y"])
+    assert math.dist(run.truth_path[-1], start) < 300, (run.truth_path[-1], start)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from modules.common.navigator import NAV, Calibrate, ExploreAvoid, ExploreLeftWall
+from modules.common.navigator import NAV, Calibrate, ExploreAvoid, ExploreLeftWall, WallSettings
 from modules.common.pilot import (
     FORWARD,
     MOTOR_STATE,
@@ -491,7 +491,7 @@ def _room_lap(nav: ExploreLeftWall, s: Sensors, right_cm=None) -> list[Move] | N
 def test_explore2_goes_round_a_free_standing_obstacle_seen_on_the_right_after_the_lap():
     from modules.common.pilot import Outcome
 
-    nav = ExploreLeftWall(LAYOUT)
+    nav = ExploreLeftWall(LAYOUT, WallSettings(return_home=False))  # islands only: no way home
     nav.phase = "follow"
     s = sensors_with(left_front=30, left_rear=30)
     # on the first leg (west along y = 400) a pillar 80 cm to the right for x 1800..2200
@@ -554,16 +554,27 @@ def test_explore2_ends_at_the_lap_when_nothing_stood_inside_it():
     done = Outcome(
         REASON["DONE"], probe, driven_mm=probe.amount, samples=[(d, [FAR] * 8) for d in steps], poses=poses
     )
-    assert nav.plan(done, s, STOPPED) is None  # nothing in the way, all seen: the run ends
+    home = nav.plan(done, s, STOPPED)  # nothing in the way, all seen: back to the start
     assert nav.note == "lap closed" and nav.commands == [] and nav.target is None
+    assert home[-1].label in ("aim", "home")
+    x, y = s.pose[:2]
+    s.pose = (x, y, math.atan2(400.0 - y, 3600.0 - x))
+    if home[-1].label == "aim":
+        home = settle(nav, Outcome(REASON["DONE"], home[-1]), s)
+    (drive,) = home
+    assert drive.label == "home" and abs(drive.amount - math.dist((x, y), (3600.0, 400.0))) < 2
+    s.pose = (3590.0, 410.0, math.pi)  # arrived, facing as at the start
+    assert nav.plan(Outcome(REASON["DONE"], drive, driven_mm=drive.amount), s, STOPPED) is None
+    assert nav.note == "lap closed; back at the start"
     report = nav.completeness()
     assert report["outline_closed"] and report["interior_seen"] and report["islands_found"] == 0
+    assert report["returned_home"]
 
 
 def test_explore2_does_not_visit_an_island_again_whose_echoes_lie_just_outside_its_path_round():
     from modules.common.pilot import Outcome
 
-    nav = ExploreLeftWall(LAYOUT)
+    nav = ExploreLeftWall(LAYOUT, WallSettings(return_home=False))  # islands only: no way home
     nav.phase = "follow"
     s = sensors_with(left_front=30, left_rear=30)
     aim = _room_lap(nav, s, lambda x, y: 80 if 1600 <= x <= 2400 else FAR)

@@ -12,7 +12,9 @@ the next state — the seed's cooperative navigator/pilot alternation.
   the course is corrected from the slope of the left sonar's readings over the distance driven
   (the angle to the wall) and the distance error; inner corners (the front blocked) turn right,
   outer corners (the wall lost) drive past, turn left and pick the wall up again; one lap
-  (back near the start, judged by the best pose) ends the run.
+  (back near the start, judged by the best pose) closes the outline. Then the islands the lap
+  saw on its right are gone round, drives into the interior no path came near find the ones it
+  could not see, and the robot drives back to its start pose (``completeness()`` says how it went).
 * :class:`Calibrate` — the calibration run: a 360° turn, the compass tells the error, main sends
   RECALC_GLIDE_FACTOR.
 """
@@ -171,7 +173,11 @@ class WallSettings:
     max_probes: int = 8
     probe_cell_mm: float = 250.0  # the interior's grid
     probe_seen_mm: float = 900.0  # a cell this near a path driven counts as seen (sighting_cm)
-    probe_done_mm: float = 450.0  # a probe's end this near its goal reached it
+    # done: back to where the exploration began, facing as it did then
+    return_home: bool = True
+    home_tolerance_mm: float = 200.0
+    home_detours: int = 4  # something in the way home: turn right, drive on, aim again; this often
+    detour_mm: int = 500
 
 
 @dataclass
@@ -252,6 +258,11 @@ class ExploreLeftWall(Navigator):
         self.trail: list[tuple[float, float]] = []  # everywhere the robot went (seen from)
         self.probes = 0
         self.probe_goals: list[tuple[float, float]] = []  # interior goals driven to (or tried)
+        self.home: tuple[float, float, float] | None = None  # the pose the exploration began at
+        self.home_reached = False
+        self.detours = 0
+        self.detouring = False
+        self.done_note = ""
 
     # -- the moves ----------------------------------------------------------------------------
     def _front_stop(self) -> tuple[Abort, ...]:
@@ -418,6 +429,8 @@ class ExploreLeftWall(Navigator):
         self.steps += 1
         s = self.s
         label = last.move.label if last is not None and last.move is not None else ""
+        if self.home is None and sensors.pose is not None:
+            self.home = sensors.pose
         if label == "follow":
             self.follow_mm += max(0, last.driven_mm)
             self.last_follow = last
@@ -463,6 +476,9 @@ class ExploreLeftWall(Navigator):
             self.outer_path = self.path
             return self._next_island(sensors)
         blocked = last is not None and last.trigger in ("ahead_within", "front_within")
+
+        if self.phase in ("home", "home_turn"):
+            return self._homeward(label, blocked, sensors)
 
         if self.phase == "probe":  # a drive into the interior: something in the way is an island
             if label == "probe":
@@ -574,6 +590,7 @@ class ExploreLeftWall(Navigator):
             "islands_gone_round": len(self.circled) - len(self.islands),
             "probes": self.probes,
             "interior_seen": outline and unseen is None,
+            "returned_home": self.home_reached,
         }
 
     # -- islands: free-standing obstacles seen on the right during the lap ---------------------
@@ -635,9 +652,13 @@ class ExploreLeftWall(Navigator):
             probe = self._next_probe(sensors)
             if probe is not None:
                 return probe
-            self.state = NAV["DONE"]
             gone_round = len(self.circled) - len(self.islands)
-            self.note = f"lap closed, {gone_round} island(s) gone round" if self.visits else "lap closed"
+            self.done_note = f"lap closed, {gone_round} island(s) gone round" if self.visits else "lap closed"
+            self.note = self.done_note
+            if s.return_home and self.home is not None and sensors.pose is not None:
+                self.phase, self.last_follow, self.target = "home", None, None
+                return self._go_home(sensors)
+            self.state = NAV["DONE"]
             return None
         x, y, heading = sensors.pose
         tx, ty, _ = min(islands, key=lambda i: math.dist((x, y), i[:2]))
@@ -668,6 +689,49 @@ class ExploreLeftWall(Navigator):
         self.note = f"probing the interior ({self.probes})"
         bearing = math.degrees(math.remainder(math.atan2(goal[1] - y, goal[0] - x) - heading, 2 * math.pi))
         return self._turn(bearing, "aim", sensors) or [self._probe_move(sensors)]
+
+    # -- home: back to the start pose when done -------------------------------------------------
+    def _go_home(self, sensors: Sensors) -> list[Move] | None:
+        """Aim at the start and drive there; there already: turn to its heading; then done."""
+        assert self.home is not None and sensors.pose is not None
+        x, y, heading = sensors.pose
+        hx, hy, home_heading = self.home
+        self.state = NAV["HOME"]
+        if math.dist((x, y), (hx, hy)) <= self.s.home_tolerance_mm:
+            self.phase = "home_turn"
+            turn = math.degrees(math.remainder(home_heading - heading, 2 * math.pi))
+            return self._turn(turn, "home turn", sensors) or self._homeward("home turn", False, sensors)
+        bearing = math.degrees(math.remainder(math.atan2(hy - y, hx - x) - heading, 2 * math.pi))
+        return self._turn(bearing, "aim", sensors) or [self._home_move(sensors)]
+
+    def _home_move(self, sensors: Sensors) -> Move:
+        assert self.home is not None and sensors.pose is not None
+        return self._forward(max(50, round(math.dist(sensors.pose[:2], self.home[:2]))), "home")
+
+    def _homeward(self, label: str, blocked: bool, sensors: Sensors) -> list[Move] | None:
+        """The way home, one plan at a time: drive, go round what is in the way, the last turn."""
+        s = self.s
+        if self.phase == "home_turn" and label in ("home turn", "turned"):
+            self.home_reached = True
+            self.state = NAV["DONE"]
+            self.note = f"{self.done_note}; back at the start"
+            return None
+        if self.detouring:  # turned away from what blocked the way: drive on, then aim again
+            self.detouring = False
+            self.state = NAV["HOME"]
+            return [self._forward(s.detour_mm, "detour")]
+        if label == "home" and blocked:
+            self.detours += 1
+            if self.detours > s.home_detours:
+                self.state = NAV["DONE"]
+                self.note = f"{self.done_note}; could not get back to the start"
+                return None
+            self.detouring = True
+            return self._turn(-90, "detour", sensors) or self._homeward("detour", False, sensors)
+        if label in ("home", "detour") or sensors.pose is None:
+            return self._go_home(sensors) if sensors.pose is not None else None
+        self.state = NAV["HOME"]
+        return [self._home_move(sensors)]
 
     def _probe_move(self, sensors: Sensors) -> Move:
         goal = self.probe_goals[-1]
