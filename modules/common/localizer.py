@@ -79,6 +79,8 @@ from modules.common.walls import (
 )
 
 SOURCE_CODES = {"none": 0, "odometry": 1, "ekf": 2}
+#: a step-scale fit waits this long (sensor time) for the robot's own map to show its wall
+PENDING_TRAVEL_MS = 300_000
 #: data channels read for each sensor, and the field that numbers their samples
 CHANNELS = {
     "odometry": "motor.data",
@@ -259,7 +261,9 @@ class LocalizationCore:
         self.walls_unassociated = 0
         self.walls_associated = 0
         self.compass_skipped_turning = 0
-        self.travel = {"used": 0, "assumed_square": 0, "oblique": 0, "unknown": 0, "rejected": 0}
+        self.travel = {"used": 0, "assumed_square": 0, "oblique": 0, "unknown": 0, "rejected": 0, "waited": 0}
+        #: fits whose wall the robot's own map does not have yet: (stamp, beam origin, direction, fit)
+        self.pending_travel: list[tuple[int, tuple[float, float], float, dict[str, Any]]] = []
         self._last_loss_message = -1000
         self._feed_lock = threading.Lock()
         self._fed = 0
@@ -390,6 +394,8 @@ class LocalizationCore:
                         payload["x1"], payload["y1"], payload["x2"], payload["y2"], len(self.known_walls)
                     )
                 )
+                if self.pending_travel and self.ekf is not None:
+                    self._retry_pending_travel(self.known_walls[-1], stamp)
 
     def process_synchronised(
         self,
@@ -490,6 +496,32 @@ class LocalizationCore:
         origin = from_frame((mount.x, mount.y), end)
         settings = self.config["filter"]["travel"]
         incidence = _beam_hit(origin, end[2] + mount.angle, travel["range_end_mm"], self.known_walls)
+        if incidence is None and settings["wait_for_map"] and self.config["walls"]["mode"] == "exploration":
+            # the wall ahead is mapped once the robot has gone along it: its incidence then
+            self.pending_travel = [p for p in self.pending_travel if stamp - p[0] < PENDING_TRAVEL_MS]
+            self.pending_travel.append((stamp, origin, end[2] + mount.angle, travel))
+            return
+        self._use_travel(travel, incidence, stamp)
+
+    def _retry_pending_travel(self, wall: KnownWall, stamp: int) -> None:
+        """A wall new to the robot's own map: the waiting fits whose beam met it are used now."""
+        waiting = []
+        for pending in self.pending_travel:
+            taken, origin, direction, travel = pending
+            incidence = _beam_hit(origin, direction, travel["range_end_mm"], [wall])
+            if incidence is not None:
+                self.travel["waited"] += 1
+                self._use_travel(travel, incidence, stamp)
+            elif stamp - taken < PENDING_TRAVEL_MS:
+                waiting.append(pending)
+            else:
+                self.travel["unknown"] += 1
+        self.pending_travel = waiting
+
+    def _use_travel(self, travel: dict[str, Any], incidence: float | None, stamp: int) -> None:
+        ekf = self.ekf
+        assert ekf is not None
+        settings = self.config["filter"]["travel"]
         if incidence is None:
             if not settings["unknown_wall"]:
                 self.travel["unknown"] += 1
