@@ -48,7 +48,9 @@ EXPLORATION_CONFIG: dict[str, Any] = {
         "travel": {"enabled": True},
         "compass": {"settle_ms": 400},
     },
-    "walls": {"mode": "exploration", "association": {"min_wall_length_mm": 1000.0}},
+    # own-map walls: every fit used, as when this was tuned (repeat_after_mm was measured on
+    # the Darmstadt and generated drives only)
+    "walls": {"mode": "exploration", "association": {"min_wall_length_mm": 1000.0}, "repeat_after_mm": 0.0},
     "logs": {"enabled": False},
 }
 

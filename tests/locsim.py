@@ -38,6 +38,7 @@ def drive(
     heading: Callable[[], float | None] | None = None,
     turn_tolerance_deg: float = 0.5,
     sonar_sigma_mm: float = 20.0,
+    rest_ms: int = 500,
 ) -> Iterator[Sample]:
     """Samples in time order for ``moves`` (``s`` mm / ``r`` degrees CCW), sensor-stamped.
 
@@ -118,7 +119,7 @@ def drive(
                 break
             yield from move(move_id, "r", error)
             move_id += 1
-    for _ in range(5):  # stand still at the end
+    for _ in range(max(5, rest_ms // odo_period_ms)):  # stand still at the end
         yield from tick(-1, 0, 0)
 
 

@@ -260,6 +260,8 @@ class LocalizationCore:
         self.syncs = 0
         self.walls_unassociated = 0
         self.walls_associated = 0
+        self.walls_repeated = 0  # fits of a wall from where it was last corrected with: not used
+        self.wall_corrected_at: dict[int, tuple[float, float, float]] = {}
         self.compass_skipped_turning = 0
         self.travel = {"used": 0, "assumed_square": 0, "oblique": 0, "unknown": 0, "rejected": 0, "waited": 0}
         #: fits whose wall the robot's own map does not have yet: (stamp, beam origin, direction, fit)
@@ -470,7 +472,20 @@ class LocalizationCore:
             self.walls_unassociated += 1
             return [-1, 0]
         self.walls_associated += 1
+        repeat_mm = self.config["walls"]["repeat_after_mm"]
+        last = self.wall_corrected_at.get(best[1].index)
+        if (
+            repeat_mm > 0
+            and last is not None
+            and math.hypot(pose[0] - last[0], pose[1] - last[1]) < repeat_mm
+            and abs(wrap(pose[2] - last[2])) < math.radians(5.0)
+        ):
+            # the same sonar, range and incidence err alike: a second fit is no new information
+            self.walls_repeated += 1
+            return [best[1].index, 0]
         accepted = ekf.correct_line(wall["alpha"], wall["d"], cov, best[1], kind=f"wall_{wall['kind']}")
+        if accepted:
+            self.wall_corrected_at[best[1].index] = pose
         self.message(
             "D",
             stamp,

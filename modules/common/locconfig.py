@@ -70,6 +70,7 @@ DEFAULTS: dict[str, Any] = {
         "max_turn_deg": 0.5,
         "min_sigma_d_mm": 6.0,
         "min_sigma_alpha_deg": 0.7,
+        "repeat_after_mm": 100.0,
         "association": {"max_d_mm": 400.0, "max_alpha_deg": 20.0, "margin_mm": 150.0, "min_wall_length_mm": 500.0},
     },
     "robot": {"mm_per_step": 0.5419, "steps_per_degree": 6.5, "sonars": "robot"},
