@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"explore: {args.action!r} is not one of {', '.join(ACTIONS)}")
     if args.timeout <= 0:
         raise UsageError("--timeout must be positive")
-    from modules.pc.mission import describe, request
+    from modules.pc.mission import describe, describe_map, request
     from tokenring.pclink import open_link
 
     with tap_session(args) as session:
@@ -59,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
             print_json(state)
         else:
             print(describe(state))
-            if state.get("finished"):
-                print(f"finished: {state['finished']}")
+            finished = state.get("finished")
+            if finished:
+                print(f"finished: {finished.get('why')}{describe_map(finished.get('map'))}")
     return 0
