@@ -16,6 +16,8 @@ exploration ended and the map's score; ``--world empty,office,square,slanted --s
 --variants`` the table for several rooms and noise seeds, each drive's sweeps also mapped by the
 seed's method and ours on dead reckoning and on the filtered pose (what ``bench.mapping`` replays
 from the ring), ``--json FILE`` keeps it. The ring's own figures come from ``bench.mapping``.
+``--generated evaluation --seed 1-3 --plot FILE.png`` runs generated rooms (``bench/rooms.py``:
+tuning and evaluation rooms apart) and draws the maps' coverage and precision as histograms.
 """
 
 from __future__ import annotations
@@ -639,6 +641,34 @@ def summary(rows: list[dict[str, Any]]) -> str:
     )
 
 
+def plot_distribution(rows: list[dict[str, Any]], path: str, title: str) -> None:
+    """Histograms of the maps' coverage and precision, their median and worst decile beside
+    issue 21's aims (median 90 / 95 %, worst decile 80 / 90 %)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from PIL import Image
+
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.2))
+    for ax, name, aim, decile in ((axes[0], "coverage", 90, 80), (axes[1], "precision", 95, 90)):
+        values = np.array([r[name] for r in rows]) * 100
+        ax.hist(values, bins=np.arange(0, 102.5, 5), color="tab:blue")
+        ax.axvline(np.median(values), color="k", label=f"median {np.median(values):.1f} %")
+        worst = np.percentile(values, 10)
+        ax.axvline(worst, color="k", ls="--", label=f"worst decile {worst:.1f} %")
+        ax.axvline(aim, color="tab:green", label=f"aim: median {aim} %, decile {decile} %")
+        ax.axvline(decile, color="tab:green", ls="--")
+        ax.set_xlabel(f"{name} (%)")
+        ax.set_ylabel("maps")
+        ax.legend(fontsize=7, loc="upper left")
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    Image.open(path).convert("RGB").quantize(64).save(path, optimize=True)  # kilobytes, not 100s
+
+
 def main(argv: list[str] | None = None) -> int:
     from concurrent.futures import ProcessPoolExecutor
 
@@ -662,6 +692,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variants", action="store_true", help="also score seed/ours × DR/filter")
     parser.add_argument("--jobs", type=int, default=1, help="runs in parallel (default 1)")
     parser.add_argument("--json", metavar="FILE", help="write every run's rows as JSON")
+    parser.add_argument("--plot", metavar="PNG", help="the maps' coverage and precision as histograms")
     args = parser.parse_args(argv)
     seeds: list[int] = []
     for part in args.seed.split(","):
@@ -705,6 +736,13 @@ def main(argv: list[str] | None = None) -> int:
         print()
         print(format_rows(rows))
         print(summary([result["rows"][0] for result in results]))
+    if args.plot and results:
+        rooms = args.generated or args.world
+        plot_distribution(
+            [result["rows"][0] for result in results],
+            args.plot,
+            f"Explore 2, closed loop: {len(results)} maps ({rooms}; world seeds {args.seed})",
+        )
     if args.json:
         import datetime as dt
 
