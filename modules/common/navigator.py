@@ -41,6 +41,7 @@ from modules.common.pilot import (
     side_slope,
 )
 from modules.common.vectorgen import SonarLayout
+from modules.description.robot import sonar_world_pose
 from tokenring.protocol import default_protocol
 
 NAV = default_protocol().enums["navigator"]
@@ -583,7 +584,7 @@ class ExploreLeftWall(Navigator):
         unseen = None
         if outline:
             here = self.trail[-1] if self.trail else self.outer_path[0]
-            unseen = interior_goal(self.outer_path, self.trail + self.probe_goals, islands, here, self.s)
+            unseen = interior_goal(self.outer_path, self._seen_from(), islands, here, self.s)
         return {
             "outline_closed": outline,
             "islands_found": len(self.circled),  # gone round, or lapped while looking for the room
@@ -676,9 +677,8 @@ class ExploreLeftWall(Navigator):
         s = self.s
         if self.probes >= s.max_probes or sensors.pose is None or len(self.outer_path) < 3:
             return None
-        seen_from = self.trail + self.probe_goals
         islands = [ring for ring in self.circled if len(ring) >= 3]
-        goal = interior_goal(self.outer_path, seen_from, islands, sensors.pose[:2], s)
+        goal = interior_goal(self.outer_path, self._seen_from(), islands, sensors.pose[:2], s)
         if goal is None:
             return None
         self.probes += 1
@@ -732,6 +732,11 @@ class ExploreLeftWall(Navigator):
             return self._go_home(sensors) if sensors.pose is not None else None
         self.state = NAV["HOME"]
         return [self._home_move(sensors)]
+
+    def _seen_from(self) -> list[tuple[float, float]]:
+        """Where the sonars looked from: the trail (every few cm is plenty) and the probes' goals
+        (one that could not be reached is not tried again)."""
+        return self.trail[:: max(1, len(self.trail) // 4000)] + self.probe_goals
 
     def _probe_move(self, sensors: Sensors) -> Move:
         goal = self.probe_goals[-1]
@@ -826,8 +831,6 @@ class ExploreLeftWall(Navigator):
 
 def sonar_point(pose: tuple[float, float, float], index: int, distance_mm: float) -> tuple[float, float]:
     """The world point a reading of sonar ``index`` marks, the robot at ``pose``."""
-    from modules.description.robot import sonar_world_pose
-
     sx, sy, direction = sonar_world_pose(pose[0], pose[1], pose[2], index)
     return (sx + distance_mm * math.cos(direction), sy + distance_mm * math.sin(direction))
 
@@ -853,7 +856,7 @@ def interior_goal(
     cells = cells[inside]
     if len(cells) == 0:
         return None
-    trail = np.asarray(seen_from[:: max(1, len(seen_from) // 4000)] or [here], dtype=float)
+    trail = np.asarray(seen_from or [here], dtype=float)
     near = np.full(len(cells), np.inf)
     for chunk in range(0, len(trail), 500):
         part = trail[chunk : chunk + 500]
