@@ -602,3 +602,19 @@ def test_sightings_link_into_groups_through_their_neighbours():
     assert [sorted(g) for g in groups] == [sorted(apart), sorted(chain)]
     assert sorted(linked_groups([(0.0, 0.0), (400.0, 0.0)], 350.0)) == [[(0.0, 0.0)], [(400.0, 0.0)]]
     assert linked_groups([], 350.0) == []
+
+
+def test_explore2_calls_a_lap_round_once_it_turned_630_degrees_wherever_it_is():
+    """Round a turned pillar by outer corners (clear, turn, reacquire) the plans never fell near
+    where following began, and a generated room's run circled it until the time was up."""
+    nav = ExploreLeftWall(LAYOUT)
+    nav.phase = "follow"
+    nav.lap_start = (0.0, 0.0, 0.0)
+    nav.follow_mm = 3000
+    nav.rotation = math.radians(640.0)  # left all round, and more: an island
+    s = sensors_with(left_front=30, left_rear=30)
+    s.pose = (2000.0, 2000.0, 1.0)  # nowhere near the start
+    nav.last_heading = 1.0
+    moves = nav.plan(None, s, STOPPED)
+    assert nav.note == "left an island" and len(nav.islands) == 1
+    assert moves and moves[0].label in ("leave", "find")

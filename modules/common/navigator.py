@@ -141,6 +141,7 @@ class WallSettings:
     lap_radius_mm: float = 450.0
     lap_overlap_mm: float = 0.0  # a lap ends this far short of its start at the latest
     max_laps: int = 1
+    lap_fallback_deg: float = 630.0  # turned this far since following began: round it is, for sure
     max_islands: int = 3  # laps round an island (turning left all round) before giving up
     settle_ms: int = 1200  # at rest after a turn before it is judged by the fused heading
     check_min_deg: float = 10.0  # turns at least this big are checked (smaller ones slip < 1°)
@@ -446,7 +447,9 @@ class ExploreLeftWall(Navigator):
             return self.escape(alert_lock if alert_lock != STOPPED else REVERSE)
         if last is not None and last.reason in (REASON["STALL"], REASON["COLLISION"]):
             self.state = NAV["BACK_OFF"]
-            self.phase, self.last_follow = "follow", None
+            if self.phase not in ("home", "home_turn"):  # on the way home: aim again after it
+                self.phase = "follow"
+            self.last_follow = None
             return [Move(REVERSE, 80, s.speed_pct, label="back off"), *self._turn(-30, "away", sensors)]
         if self.check is not None:
             judged = self._judge(last, sensors)
@@ -728,10 +731,18 @@ class ExploreLeftWall(Navigator):
                 return None
             self.detouring = True
             return self._turn(-90, "detour", sensors) or self._homeward("detour", False, sensors)
-        if label in ("home", "detour") or sensors.pose is None:
-            return self._go_home(sensors) if sensors.pose is not None else None
-        self.state = NAV["HOME"]
-        return [self._home_move(sensors)]
+        if sensors.pose is None:
+            return None
+        if label in ("aim", "turned"):
+            self.state = NAV["HOME"]
+            return [self._home_move(sensors)]
+        if label in ("back off", "away"):  # ran into something on the way: a detour of sorts
+            self.detours += 1
+            if self.detours > s.home_detours:
+                self.state = NAV["DONE"]
+                self.note = f"{self.done_note}; could not get back to the start"
+                return None
+        return self._go_home(sensors)  # after a drive, a detour or an escape: aim again
 
     def _seen_from(self) -> list[tuple[float, float]]:
         """Where the sonars looked from: the trail (every few cm is plenty) and the probes' goals
@@ -814,6 +825,12 @@ class ExploreLeftWall(Navigator):
             )
         if self.follow_mm < self.s.lap_min_mm:
             return False
+        if abs(self.rotation) >= math.radians(self.s.lap_fallback_deg):
+            # turned once round and more without passing the start where a plan could see it
+            # (outer corners all the way round a pillar: clear, turn, reacquire): round it is
+            self.laps += 1
+            self.follow_mm = 0
+            return self.laps >= self.s.max_laps
         x0, y0, heading0 = self.lap_start
         x, y, heading = sensors.pose
         if math.hypot(x - x0, y - y0) > self.s.lap_radius_mm:
