@@ -71,6 +71,7 @@ class Program(UserProgram):
         #: run after it should start from (the turn ends a few degrees off, up to 11° seen)
         self.rest_heading: float | None = None
         self.calibration_heading: float | None = None
+        self.compass_calibrating = False  # compass.data says CALIBRATING (read with the sensors)
         self._publish()
 
     # -- sending ------------------------------------------------------------------------------------
@@ -127,8 +128,8 @@ class Program(UserProgram):
             pose = pose_from_wire(copro["pose_x_mm"], copro["pose_y_mm"], copro["pose_angle_cdeg"])
         elif self.motor.published:
             pose = pose_from_wire(motor["x_mm"], motor["y_mm"], motor["angle_cdeg"])
-        calibrating = compass["state"] == COMPASS_CALIBRATING
-        heading = compass["heading_cdeg"] if self.compass.visits and not calibrating else None
+        self.compass_calibrating = bool(self.compass.visits) and compass["state"] == COMPASS_CALIBRATING
+        heading = compass["heading_cdeg"] if self.compass.visits and not self.compass_calibrating else None
         return Sensors(
             distances=list(sonar["distances"]) if self.sonar.visits else [255] * 8,
             sweep=sonar["sweep"],
@@ -150,8 +151,7 @@ class Program(UserProgram):
     def _note_calibration_turn(self) -> None:
         """Keep the heading at rest; while the compass calibrates, hold the one from before."""
         sensors = self.sensors
-        calibrating = self.compass.visits and self.compass.read()["state"] == COMPASS_CALIBRATING
-        if calibrating:
+        if self.compass_calibrating:
             if self.calibration_heading is None:
                 self.calibration_heading = self.rest_heading
         elif (

@@ -513,25 +513,30 @@ class LocalizationCore:
         incidence = _beam_hit(origin, end[2] + mount.angle, travel["range_end_mm"], self.known_walls)
         if incidence is None and settings["wait_for_map"] and self.config["walls"]["mode"] == "exploration":
             # the wall ahead is mapped once the robot has gone along it: its incidence then
-            self.pending_travel = [p for p in self.pending_travel if stamp - p[0] < PENDING_TRAVEL_MS]
+            self._expire_pending_travel(stamp)
             self.pending_travel.append((stamp, origin, end[2] + mount.angle, travel))
             return
         self._use_travel(travel, incidence, stamp)
 
     def _retry_pending_travel(self, wall: KnownWall, stamp: int) -> None:
         """A wall new to the robot's own map: the waiting fits whose beam met it are used now."""
+        self._expire_pending_travel(stamp)
         waiting = []
         for pending in self.pending_travel:
-            taken, origin, direction, travel = pending
+            _, origin, direction, travel = pending
             incidence = _beam_hit(origin, direction, travel["range_end_mm"], [wall])
-            if incidence is not None:
-                self.travel["waited"] += 1
-                self._use_travel(travel, incidence, stamp)
-            elif stamp - taken < PENDING_TRAVEL_MS:
+            if incidence is None:
                 waiting.append(pending)
             else:
-                self.travel["unknown"] += 1
+                self.travel["waited"] += 1
+                self._use_travel(travel, incidence, stamp)
         self.pending_travel = waiting
+
+    def _expire_pending_travel(self, stamp: int) -> None:
+        """Fits that waited ``PENDING_TRAVEL_MS`` for their wall in vain: counted as unknown."""
+        kept = [p for p in self.pending_travel if stamp - p[0] < PENDING_TRAVEL_MS]
+        self.travel["unknown"] += len(self.pending_travel) - len(kept)
+        self.pending_travel = kept
 
     def _use_travel(self, travel: dict[str, Any], incidence: float | None, stamp: int) -> None:
         ekf = self.ekf

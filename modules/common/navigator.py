@@ -488,14 +488,10 @@ class ExploreLeftWall(Navigator):
             if label == "probe":
                 if blocked and self._island_ahead(sensors):
                     self.target = self.probe_goals[-1]
-                    self.rotation, self.follow_mm, self.laps = 0.0, 0, 0
-                    self.lap_start, self.path = None, []
                     self.visits += 1
-                    self.phase = "follow"
-                    self.state = NAV["TURN"]
                     self.note = "found an island inside"
                     self.commands.append(("copro", "FLUSH", {}))
-                    return self._turn(-90, "inner", sensors, align=True) or [self._segment()]
+                    return self._onto_island(sensors)
                 return self._next_island(sensors)
             self.state = NAV["ENTRY"]
             return [self._probe_move(sensors)]
@@ -503,11 +499,7 @@ class ExploreLeftWall(Navigator):
         if self.phase == "approach":  # drive to the island chosen until it blocks the way
             if label == "approach":
                 if blocked:  # it is ahead: put it on the left and go round it
-                    self.rotation, self.follow_mm, self.laps = 0.0, 0, 0
-                    self.lap_start, self.path = None, []
-                    self.phase = "follow"
-                    self.state = NAV["TURN"]
-                    return self._turn(-90, "inner", sensors, align=True) or [self._segment()]
+                    return self._onto_island(sensors)
                 assert self.target is not None
                 self.unreached.append(self.target)  # missed it (or it was not there)
                 return self._next_island(sensors)
@@ -724,10 +716,7 @@ class ExploreLeftWall(Navigator):
             self.state = NAV["HOME"]
             return [self._forward(s.detour_mm, "detour")]
         if label == "home" and blocked:
-            self.detours += 1
-            if self.detours > s.home_detours:
-                self.state = NAV["DONE"]
-                self.note = f"{self.done_note}; could not get back to the start"
+            if self._detours_used_up():
                 return None
             self.detouring = True
             return self._turn(-90, "detour", sensors) or self._homeward("detour", False, sensors)
@@ -736,13 +725,18 @@ class ExploreLeftWall(Navigator):
         if label in ("aim", "turned"):
             self.state = NAV["HOME"]
             return [self._home_move(sensors)]
-        if label in ("back off", "away"):  # ran into something on the way: a detour of sorts
-            self.detours += 1
-            if self.detours > s.home_detours:
-                self.state = NAV["DONE"]
-                self.note = f"{self.done_note}; could not get back to the start"
-                return None
+        if label in ("back off", "away") and self._detours_used_up():  # ran into something
+            return None
         return self._go_home(sensors)  # after a drive, a detour or an escape: aim again
+
+    def _detours_used_up(self) -> bool:
+        """One more detour on the way home; past ``home_detours`` the run ends where it is."""
+        self.detours += 1
+        if self.detours <= self.s.home_detours:
+            return False
+        self.state = NAV["DONE"]
+        self.note = f"{self.done_note}; could not get back to the start"
+        return True
 
     def _seen_from(self) -> list[tuple[float, float]]:
         """Where the sonars looked from: the trail (every few cm is plenty) and the probes' goals
@@ -772,6 +766,14 @@ class ExploreLeftWall(Navigator):
                 if len(ring) >= 3
             )
         )
+
+    def _onto_island(self, sensors: Sensors) -> list[Move]:
+        """An island blocks the way: turn so it is on the left and follow it, a lap of its own."""
+        self.rotation, self.follow_mm, self.laps = 0.0, 0, 0
+        self.lap_start, self.path = None, []
+        self.phase = "follow"
+        self.state = NAV["TURN"]
+        return self._turn(-90, "inner", sensors, align=True) or [self._segment()]
 
     def _approach(self, sensors: Sensors) -> Move:
         assert self.target is not None
@@ -902,12 +904,7 @@ def _inside(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
 
 def point_in_polygon(p: tuple[float, float], polygon: list[tuple[float, float]]) -> bool:
     """Whether ``p`` lies inside the closed path ``polygon`` (even-odd rule)."""
-    x, y = p
-    inside = False
-    for (x1, y1), (x2, y2) in zip(polygon, [*polygon[1:], polygon[0]], strict=True):
-        if (y1 > y) != (y2 > y) and x < x1 + (y - y1) * (x2 - x1) / (y2 - y1):
-            inside = not inside
-    return inside
+    return bool(_inside(np.array([p], dtype=float), np.asarray(polygon, dtype=float))[0])
 
 
 def linked_groups(points: list[tuple[float, float]], link: float) -> list[list[tuple[float, float]]]:
