@@ -16,7 +16,8 @@ and the ring asks every registered extension, and nothing else, for
   environment for the nodes, work to do once the ring runs (a mission);
 * **load** — options of ``tokenring load`` and a step after it (the robot's map upload, the
   seed's ``LOAD.EXE -u``);
-* **hardware** — the client a node's program gets as ``self.hw``.
+* **hardware** — the client a node's program gets as ``self.hw``;
+* **feed** — its own topics in a live feed (:mod:`tokenring.feed`).
 
 ``TOKENRING_EXTENSIONS`` limits which are loaded: a comma-separated list of names, empty for
 none (the bare ring: what the ring's own tests of a non-robot system run).
@@ -40,6 +41,7 @@ from tokenring.errors import UsageError
 if TYPE_CHECKING:
     import zenoh
 
+    from tokenring.feed import FeedSource
     from tokenring.launcher import Launcher, ServicePlan
     from tokenring.protocol import Protocol
 
@@ -102,6 +104,11 @@ class Extension:
         """The hardware client for ``module``'s program, or None if it has none here."""
         return None
 
+    def feed_sources(self, protocol: Protocol, ring: str) -> list[FeedSource]:
+        """The extension's topics in a live feed (:mod:`tokenring.feed`): ``record``, the web
+        view and the Foxglove bridge show them beside the ring's."""
+        return []
+
 
 def _wanted() -> set[str] | None:
     value = os.environ.get(ENV)
@@ -150,3 +157,13 @@ def open_hardware(module: str, session: zenoh.Session, ring: str) -> Any | None:
         if client is not None:
             return client
     return None
+
+
+def feed_sources(protocol: Protocol, ring: str) -> list[FeedSource]:
+    """The ring's own feed source followed by every extension's."""
+    from tokenring.feed import RingSource
+
+    sources: list[FeedSource] = [RingSource(protocol)]
+    for extension in loaded():
+        sources += extension.feed_sources(protocol, ring)
+    return sources
