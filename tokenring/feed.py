@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import msgpack
+import zenoh
 
 from tokenring import keys
 from tokenring.frame import frame_problem
@@ -308,7 +309,9 @@ class Feed:
         self._thread: threading.Thread | None = None
         self._poller: threading.Thread | None = None
         self._stop = threading.Event()
-        self._routes: list[tuple[Any, FeedSource]] = []
+        self._routes: list[tuple[Any, FeedSource]] = [
+            (zenoh.KeyExpr(expr), source) for source in self.sources for expr in source.keys(ring)
+        ]
 
     def topics(self) -> list[Topic]:
         """Every topic of every source (names are unique)."""
@@ -325,11 +328,6 @@ class Feed:
         self._raw_sinks.append(sink)
 
     def start(self) -> Feed:
-        import zenoh
-
-        for source in self.sources:
-            for expr in source.keys(self.ring):
-                self._routes.append((zenoh.KeyExpr(expr), source))
         for expr in {str(k) for k, _ in self._routes}:
             self._subscribers.append(self.session.declare_subscriber(expr, self._on_sample))
         self._thread = threading.Thread(target=self._run, name="tokenring-feed", daemon=True)
@@ -367,8 +365,6 @@ class Feed:
         """Hand one sample to the sources and sinks as if it had just arrived (``play``, tests)."""
         for sink in self._raw_sinks:
             sink(raw)
-        import zenoh
-
         key = zenoh.KeyExpr(raw.key)
         for expr, source in self._routes:
             if expr.intersects(key):
