@@ -167,3 +167,32 @@ def test_respawn_starts_a_dead_node_again_after_a_short_delay(
         # ... and it is its own timer that started it: the periodic check is an hour away
     finally:
         launcher.stop()
+
+
+def test_a_service_that_never_comes_up_leaves_nothing_running(ring_name: str, endpoint: str) -> None:
+    """``up`` whose world never appears ends with the error: the service is stopped and the
+    session closed, so no Zenoh callback thread keeps the process alive after it (it did)."""
+    from tokenring.errors import TransportError
+    from tokenring.launcher import ServicePlan
+
+    silent = ServicePlan(
+        "silent",
+        ["http.server", "0", "--bind", "127.0.0.1"],  # lives on, never declares the ready key
+        ready_key="tokenring/never/ready",
+        ready_timeout=1.0,
+    )
+    launcher = Launcher(
+        [NodePlan(1, "long", None)],
+        ring=ring_name,
+        listen=[endpoint],
+        services=[silent],
+        output=io.StringIO(),
+    )
+    before = {t.ident for t in threading.enumerate()}
+    with pytest.raises(TransportError, match="silent did not come up"):
+        launcher.start()
+    process = launcher.service_children["silent"]
+    assert process.poll() is not None, f"service pid {process.pid} left running"
+    assert launcher.session is None
+    left = [t for t in threading.enumerate() if t.ident not in before and not t.daemon and t.is_alive()]
+    assert wait_for(lambda: not [t for t in left if t.is_alive()], HANG_GUARD_S), left

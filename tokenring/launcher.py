@@ -320,7 +320,15 @@ class Launcher:
         return child
 
     def start(self) -> None:
-        """Open the tap session and start every node."""
+        """Open the tap session and start every node; if that fails, stop what did start (the
+        session's callback threads would otherwise keep the process alive after the error)."""
+        try:
+            self._start()
+        except BaseException:
+            self.stop()
+            raise
+
+    def _start(self) -> None:
         self._open_session()
         assert self.session is not None
         verbs = LauncherVerbs(self)
