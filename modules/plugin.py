@@ -9,7 +9,8 @@ Registered in ``pyproject.toml`` under the entry point group ``tokenring.extensi
 * ``tokenring up``'s world (``--world``, ``--speed``, ``--seed``, ``--no-world``) and its jobs
   (``--explore``, ``--map-out``, ``--actions``, ``--localizer``), all checked before anything
   starts;
-* each program's hardware client (:mod:`modules.world.hardware`).
+* each program's hardware client (:mod:`modules.world.hardware`);
+* its topics in a live feed (:mod:`modules.pc.feed`).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from tokenring.extensions import Extension, UpPlan
 if TYPE_CHECKING:
     import zenoh
 
+    from tokenring.feed import FeedSource
     from tokenring.launcher import Launcher, ServicePlan
     from tokenring.protocol import Protocol
 
@@ -163,6 +165,12 @@ class RobotExtension(Extension):
         from modules.world.hardware import open_hardware
 
         return open_hardware(module, session, ring)
+
+    def feed_sources(self, protocol: Protocol, ring: str) -> list[FeedSource]:
+        """The robot's topics in a live feed: poses, sonar, map, walls, LCD (:mod:`modules.pc.feed`)."""
+        from modules.pc.feed import robot_feed_sources
+
+        return robot_feed_sources(protocol, ring)
 
 
 def world_service(args: argparse.Namespace) -> ServicePlan:
