@@ -9,12 +9,14 @@ vectors go out on FLUSH).
 
 The pose: the filtered pose of :class:`modules.common.localizer.Localizer` when that module
 exists (hosted here, stepped every token visit), else dead reckoning from ``motor.data``; both
-are published in the ``pose_*`` fields (source 2 = EKF, 1 = dead reckoning).
+are published in the ``pose_*`` fields (source 2 = EKF, 1 = dead reckoning), and the filter's
+standard deviations in ``sigma_*`` (0 without a filter) so tools can draw its uncertainty.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import os as _os
 import queue
 import threading
@@ -76,8 +78,11 @@ def open_localizer(os: Any, truth: Any = None) -> Any | None:
     return localizer
 
 
-def localizer_pose(localizer: Any) -> tuple[tuple[float, float, float], int, int, int | None] | None:
-    """(pose, validity bits, source, stamp) from the localizer's ``pose()``, whatever its shape."""
+def localizer_pose(
+    localizer: Any,
+) -> tuple[tuple[float, float, float], int, int, int | None, tuple[float, float, float] | None] | None:
+    """(pose, validity bits, source, stamp, sigmas) from the localizer's ``pose()``, whatever its
+    shape; ``sigmas`` (x mm, y mm, heading rad) is the filter's, None if it gives none."""
     got = localizer.pose()
     if got is None:
         return None
@@ -100,7 +105,24 @@ def localizer_pose(localizer: Any) -> tuple[tuple[float, float, float], int, int
     if isinstance(source, str):
         source = POSE_EKF if source.lower() in ("ekf", "filter", "fused") else POSE_DEAD_RECKONING
     stamp = got.get("stamp_ms") if isinstance(got, dict) else getattr(got, "stamp_ms", None)
-    return (float(x), float(y), float(th)), int(valid), int(source), stamp
+    sigmas = got.get("sigmas") if isinstance(got, dict) else getattr(got, "sigmas", None)
+    return (float(x), float(y), float(th)), int(valid), int(source), stamp, sigmas
+
+
+def wire_sigmas(sigmas: tuple[float, float, float] | None) -> dict[str, int]:
+    """copro.data's ``sigma_*`` fields: mm and 1/100 degree, 0 = not known, saturating at 65535."""
+    if sigmas is None or not all(math.isfinite(v) for v in sigmas):
+        return {"sigma_x_mm": 0, "sigma_y_mm": 0, "sigma_angle_cdeg": 0}
+    sx, sy, spsi = sigmas
+
+    def clamp(value: float) -> int:
+        return max(1, min(0xFFFF, round(value)))
+
+    return {
+        "sigma_x_mm": clamp(sx),
+        "sigma_y_mm": clamp(sy),
+        "sigma_angle_cdeg": clamp(math.degrees(spsi) * 100.0),
+    }
 
 
 class Program(UserProgram):
@@ -122,6 +144,7 @@ class Program(UserProgram):
         self.stats = {"vectors_sent": 0, "vectors_refused": 0, "sweeps": 0, "sweeps_missed": 0}
         self.last_sweep: int | None = None
         self.pose_source = POSE_NONE
+        self.pose_sigmas: tuple[float, float, float] | None = None
         self._make_generators()
         self.localizer = open_localizer(os, self.hw)
         self.sender = threading.Thread(target=self._send_vectors, name="copro-vectors", daemon=True)
@@ -198,14 +221,16 @@ class Program(UserProgram):
                 self.localizer = None
                 got = None
             if got is not None:
-                pose, valid, source, stamp = got
+                pose, valid, source, stamp, sigmas = got
                 self.pose_valid, self.pose_source = valid, source
+                self.pose_sigmas = sigmas if source == POSE_EKF else None
                 self.pose_stamp = stamp if stamp is not None else motor["stamp_ms"]
                 self.best_pose = pose
                 return pose
         pose = self.history.latest()
         if pose is not None:
             self.pose_valid, self.pose_source, self.pose_stamp = 7, POSE_DEAD_RECKONING, motor["stamp_ms"]
+            self.pose_sigmas = None
             self.best_pose = pose
         return pose
 
@@ -243,6 +268,7 @@ class Program(UserProgram):
             "scanning": int(self.scanning),
             "vectors_sent": self.stats["vectors_sent"] & 0xFFFF,
             "pose_source": self.pose_source,
+            **wire_sigmas(self.pose_sigmas),
         }
         if self.pose_source != POSE_NONE:
             x, y, th = self.best_pose

@@ -109,6 +109,8 @@ class LocalizedPose:
     valid_heading: bool
     source: str
     stamp_ms: int
+    #: the filter's standard deviations (x mm, y mm, heading rad); None without a filter
+    sigmas: tuple[float, float, float] | None = None
 
     @property
     def valid_bits(self) -> int:
@@ -613,7 +615,7 @@ class LocalizationCore:
         if self.ekf is not None:
             x, y, psi = self.ekf.pose
             vx, vy, vpsi = self.ekf.validity()
-            return LocalizedPose(x, y, psi, vx, vy, vpsi, "ekf", stamp)
+            return LocalizedPose(x, y, psi, vx, vy, vpsi, "ekf", stamp, self.ekf.sigmas())
         if self.dead_reckoning is not None:
             x, y, psi = self.dead_reckoning
             return LocalizedPose(x, y, psi, True, True, True, "odometry", stamp)

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
 
-from modules.common.units import cdeg_cw_to_rad_ccw
+from modules.common.units import cdeg_cw_to_rad_ccw, wrap_angle
 from modules.description import keys as robot_keys
 from modules.description.robot import SONAR_MOUNTS, SONAR_NO_CONTACT, SONAR_RANGE_MM, sonar_world_pose
 from tokenring import keys
@@ -281,7 +281,8 @@ def navigator_schema(protocol: Protocol) -> dict[str, Any]:
     """``main.data`` with its enums as names (names from protocol.yaml)."""
 
     def names(enum: str) -> dict[str, Any]:
-        return {"type": "string", "description": f"enum {enum} (or the number as text if unknown)"}
+        known = ", ".join(protocol.enums.get(enum, {}))
+        return {"type": "string", "description": f"enum {enum}: {known} (else the number as text)"}
 
     return {
         "title": "robot.Navigator",
@@ -292,12 +293,7 @@ def navigator_schema(protocol: Protocol) -> dict[str, Any]:
             "abort_reason": names("abort_reason"),
             "alert_lock": names("direction"),
             "steps_done": {"type": "integer"},
-            "stamp_ms": {"type": "integer", "description": "simulated ms"},
-            "states": {
-                "type": "array",
-                "items": {"type": "string"},
-                "description": f"every navigator state: {sorted(protocol.enums.get('navigator', {}))}",
-            },
+            "stamp_ms": {"type": "integer", "description": "simulated ms of the change"},
         },
         "required": ["state", "explore_mode", "abort_reason", "alert_lock", "steps_done", "stamp_ms"],
     }
@@ -333,8 +329,10 @@ def stamp(time_ns: int) -> dict[str, int]:
 
 
 def yaw_quaternion(theta: float) -> dict[str, float]:
-    """A rotation of ``theta`` radians about +z (counter-clockwise seen from above)."""
-    return {"x": 0.0, "y": 0.0, "z": math.sin(theta / 2.0), "w": math.cos(theta / 2.0)}
+    """A rotation of ``theta`` radians about +z (counter-clockwise seen from above); the angle is
+    wrapped to (-pi, pi] first, so ``w`` >= 0 (one of the two equal quaternions, always the same)."""
+    half = wrap_angle(theta) / 2.0
+    return {"x": 0.0, "y": 0.0, "z": math.sin(half), "w": math.cos(half)}
 
 
 def pose_in_frame(time_ns: int, x_mm: float, y_mm: float, theta: float) -> dict[str, Any]:
@@ -429,6 +427,7 @@ class RobotSource(FeedSource):
     _filter_on: bool = False
     _map: list[list[float]] = field(default_factory=list)
     _map_seen: set[tuple[int, int, int]] = field(default_factory=set)
+    _navigator_state: tuple[Any, ...] = ()
 
     def topics(self) -> list[Topic]:
         return [t for t in robot_topics(self.protocol) if t.name not in WorldSource.NAMES + LcdSource.NAMES]
@@ -505,7 +504,7 @@ class RobotSource(FeedSource):
             Message("/robot/pose/filtered", time_ns, pose_in_frame(time_ns, *pose)),
             Message("/robot/tf", time_ns, frame_transform(time_ns, *pose)),
         ]
-        if data.get("sigma_x_mm"):
+        if data.get("sigma_x_mm"):  # 0: copro has no filter's uncertainty to give
             sigmas = {
                 "sigma_x_m": data["sigma_x_mm"] / 1000.0,
                 "sigma_y_m": data["sigma_y_mm"] / 1000.0,
@@ -594,6 +593,10 @@ class RobotSource(FeedSource):
             "steps_done": int(data["steps_done"]),
             "stamp_ms": int(data["stamp_ms"]),
         }
+        state = tuple(v for k, v in out.items() if k != "stamp_ms")
+        if state == self._navigator_state:
+            return []  # only main's time stamp moved on
+        self._navigator_state = state
         return [Message("/robot/navigator", time_ns, out)]
 
 
