@@ -7,21 +7,41 @@ import argparse
 import json
 import sys
 import time
+from typing import Any
 
 import zenoh
 
 from tokenring import keys
-from tokenring.cliutil import add_ring_options, node_id, positive_int, seconds, tap_session
+from tokenring.cliutil import (
+    add_ring_options,
+    check_option_output,
+    node_id,
+    positive_int,
+    seconds,
+    tap_session,
+    with_examples,
+)
 from tokenring.errors import TransportError, UsageError
-from tokenring.protocol import load_protocol
+from tokenring.feed import RawSample
+from tokenring.protocol import Protocol, load_protocol
 from tokenring.sniff import decode_frame, format_line
+
+EXAMPLES = """examples:
+  tokenring sniff --channels motor.data,sonar.data
+  tokenring sniff --json -n 100 --to 20
+  tokenring sniff --write frames.mcap --duration 30     # capture while showing
+  tokenring sniff --read frames.mcap --json             # decode a capture offline
+"""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "sniff",
-        help="decode every frame on the wire (read-only)",
-        description="Decode every token frame of a running ring with protocol.yaml.",
+        help="decode every frame on the wire (read-only), or of an MCAP recording",
+        description="Decode every token frame of a running ring with protocol.yaml; --write also "
+        "captures them to an MCAP file (raw and decoded), --read decodes such a file offline "
+        "(like candump -l and cantools decode).",
+        **with_examples(EXAMPLES),
     )
     p.add_argument("--json", action="store_true", help="one JSON object per frame")
     p.add_argument("-n", "--count", type=positive_int, metavar="N", help="stop after N frames")
@@ -40,10 +60,22 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="comma-separated channels to decode (e.g. sonar.data,motor.command); default: all non-empty",
     )
     p.add_argument("--header-only", action="store_true", help="decode only the header")
+    capture = p.add_mutually_exclusive_group()
+    capture.add_argument(
+        "--write", metavar="FILE.mcap", help="also capture the frames (raw and decoded) to an MCAP file"
+    )
+    capture.add_argument(
+        "--read", metavar="FILE.mcap", help="decode the frames of an MCAP recording instead of the wire"
+    )
+    p.add_argument("--force", action="store_true", help="replace an existing --write FILE")
     add_ring_options(p)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.read:
+        return read_file(args)
+    if args.write:
+        check_option_output("--write", args.write, force=args.force)
     protocol = load_protocol(args.protocol)
     ring = keys.check_ring_name(args.ring)
     channels = None
@@ -59,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
     last_frame: dict[int | None, bytes] = {}
     started = time.monotonic()
     deadline = None if args.duration is None else started + args.duration
+    capture = open_capture(args, protocol, ring)
     with tap_session(args) as session:
         subscriber = session.declare_subscriber(key, zenoh.handlers.FifoChannel(8192))
         try:
@@ -76,6 +109,8 @@ def run(args: argparse.Namespace) -> int:
                     continue
                 frame = sample.payload.to_bytes()
                 did = keys.id_from_key(str(sample.key_expr))
+                if capture is not None:
+                    capture.feed_raw(RawSample(str(sample.key_expr), time.time_ns(), frame))
                 record = decode_frame(frame, did, protocol, channels, args.header_only)
                 # a pass repeated because its acknowledgement was late: same bytes, same receiver
                 # (every byte: two different passes share a CRC-16 once in 65536)
@@ -92,4 +127,84 @@ def run(args: argparse.Namespace) -> int:
             sys.stdout.flush()
         finally:
             subscriber.undeclare()
+            if capture is not None:
+                path = capture.recorder.close()
+                print(f"{path}: {capture.recorder.messages} messages captured", file=sys.stderr)
+    return 0
+
+
+class Capture:
+    """``--write``: every frame raw and decoded (the feed's ring topics) into an MCAP file."""
+
+    def __init__(self, recorder: Any, source: Any) -> None:
+        self.recorder = recorder
+        self.source = source
+
+    def feed_raw(self, raw: Any) -> None:
+        self.recorder.on_raw(raw)
+        for message in self.source.translate(raw.key, raw.payload, raw.time_ns):
+            self.recorder.on_message(message)
+        self.recorder.tick()
+
+
+def open_capture(args: argparse.Namespace, protocol: Protocol, ring: str) -> Capture | None:
+    if not args.write:
+        return None
+    from pathlib import Path
+
+    from tokenring.feed import RingSource
+    from tokenring.protocol import default_protocol_path
+    from tokenring.recording import McapRecorder
+
+    source = RingSource(protocol)
+    text = Path(args.protocol or default_protocol_path()).read_text(encoding="utf-8")
+    recorder = McapRecorder(args.write, ring=ring, topics=source.topics(), protocol_text=text)
+    return Capture(recorder, source)
+
+
+def read_file(args: argparse.Namespace) -> int:
+    """``--read``: the recording's frames decoded as live, in log-time order (``t`` = log time)."""
+    import os
+
+    from tokenring.protocol import parse_protocol
+    from tokenring.recording import iter_raw, open_recording
+
+    recording = open_recording(args.read)
+    if args.protocol is None and not os.environ.get("TOKENRING_PROTOCOL") and recording.protocol_text:
+        protocol = parse_protocol(recording.protocol_text, f"{args.read} (its protocol.yaml)")
+    else:
+        protocol = load_protocol(args.protocol)
+    channels = None
+    if args.channels:
+        channels = [c.strip() for c in args.channels.split(",") if c.strip()]
+        for name in channels:
+            try:
+                protocol.channel(name)
+            except Exception as exc:
+                raise UsageError(str(exc)) from None
+    frames = [key for key in recording.raw_keys() if key.rsplit("/", 2)[-2:-1] == ["token"]]
+    if args.to is not None:
+        frames = [key for key in frames if keys.id_from_key(key) == args.to]
+    if not frames:
+        raise UsageError(f"{args.read}: no frames recorded" + (f" to node {args.to}" if args.to else ""))
+    first = None
+    seen = 0
+    last_frame: dict[int | None, bytes] = {}
+    for raw in iter_raw(recording, None, None, None):
+        if raw.key not in frames:
+            continue
+        first = raw.time_ns if first is None else first
+        if args.duration is not None and raw.time_ns - first > args.duration * 1e9:
+            break
+        did = keys.id_from_key(raw.key)
+        record = decode_frame(raw.payload, did, protocol, channels, args.header_only)
+        record["t"] = raw.time_ns / 1e9
+        record["retransmission"] = "crc" in record and last_frame.get(did) == raw.payload
+        if "crc" in record:
+            last_frame[did] = raw.payload
+        sys.stdout.write((json.dumps(record) if args.json else format_line(record)) + "\n")
+        seen += 1
+        if args.count is not None and seen >= args.count:
+            break
+    sys.stdout.flush()
     return 0
