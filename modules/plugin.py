@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 from tokenring.cliutil import seconds
 from tokenring.errors import UsageError
-from tokenring.extensions import Extension, UpPlan
+from tokenring.extensions import Extension, UpPlan, WebAction, WebPanel
 
 if TYPE_CHECKING:
     import zenoh
@@ -171,6 +171,18 @@ class RobotExtension(Extension):
         from modules.pc.feed import robot_feed_sources
 
         return robot_feed_sources(protocol, ring)
+
+    def web_panels(self) -> list[WebPanel]:
+        """The room, the map, the poses and the LCD in the web view (:mod:`modules.pc.web`)."""
+        from modules.pc.web import panels
+
+        return panels()
+
+    def web_actions(self) -> list[WebAction]:
+        """Explore 1, Explore 2 and stop as buttons of the web view."""
+        from modules.pc.web import actions
+
+        return actions()
 
 
 def world_service(args: argparse.Namespace) -> ServicePlan:

@@ -17,7 +17,9 @@ and the ring asks every registered extension, and nothing else, for
 * **load** — options of ``tokenring load`` and a step after it (the robot's map upload, the
   seed's ``LOAD.EXE -u``);
 * **hardware** — the client a node's program gets as ``self.hw``;
-* **feed** — its own topics in a live feed (:mod:`tokenring.feed`).
+* **feed** — its own topics in a live feed (:mod:`tokenring.feed`);
+* **web** — panels (static files, one ES module each) and buttons of the web view
+  (:mod:`tokenring.web`).
 
 ``TOKENRING_EXTENSIONS`` limits which are loaded: a comma-separated list of names, empty for
 none (the bare ring: what the ring's own tests of a non-robot system run).
@@ -68,6 +70,28 @@ class UpPlan:
     grace_s: float = 0.0
 
 
+@dataclass
+class WebPanel:
+    """An application's panel in the web view: ``directory``'s files are served under
+    ``/panels/<name>/`` and the page imports ``module`` from it, an ES module exporting
+    ``mount(element, view)`` (``view.on(topic, callback)``, ``view.action(name)``)."""
+
+    name: str
+    directory: Path
+    module: str = "panel.js"
+    title: str = ""
+
+
+@dataclass
+class WebAction:
+    """A button of the web view: ``run(session, ring)`` does it (on a worker thread) and
+    returns what the page shows (JSON-able); a :class:`UsageError` is shown as the answer."""
+
+    name: str
+    label: str
+    run: Callable[[zenoh.Session, str], dict[str, Any]]
+
+
 class Extension:
     """An application on the ring; every method has a do-nothing default."""
 
@@ -107,6 +131,14 @@ class Extension:
     def feed_sources(self, protocol: Protocol, ring: str) -> list[FeedSource]:
         """The extension's topics in a live feed (:mod:`tokenring.feed`): ``record``, the web
         view and the Foxglove bridge show them beside the ring's."""
+        return []
+
+    def web_panels(self) -> list[WebPanel]:
+        """The extension's panels in the web view (beside the ring's own)."""
+        return []
+
+    def web_actions(self) -> list[WebAction]:
+        """The extension's buttons in the web view (e.g. start and stop a job)."""
         return []
 
 
@@ -167,3 +199,17 @@ def feed_sources(protocol: Protocol, ring: str) -> list[FeedSource]:
     for extension in loaded():
         sources += extension.feed_sources(protocol, ring)
     return sources
+
+
+def web_panels() -> list[WebPanel]:
+    """Every extension's web panels, in extension order."""
+    return [panel for extension in loaded() for panel in extension.web_panels()]
+
+
+def web_actions() -> list[WebAction]:
+    """Every extension's web actions, in extension order (a name is taken by the first)."""
+    actions: dict[str, WebAction] = {}
+    for extension in loaded():
+        for action in extension.web_actions():
+            actions.setdefault(action.name, action)
+    return list(actions.values())

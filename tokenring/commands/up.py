@@ -7,11 +7,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from tokenring import extensions
-from tokenring.cliutil import seconds
+from tokenring.cliutil import int_within, seconds
 from tokenring.errors import UsageError
 
 if TYPE_CHECKING:
-    from tokenring.launcher import Launcher
+    from tokenring.launcher import Launcher, ServicePlan
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -72,6 +72,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="at most N nodes booting at a time; a bigger ring starts in waves, a new node as each "
         "booting one comes live (default: 8 per core)",
     )
+    web = p.add_argument_group("web view")
+    web.add_argument(
+        "--web", action="store_true", help="serve the live web view too (as 'tokenring web', its own process)"
+    )
+    web.add_argument(
+        "--web-port",
+        type=int_within(1, 65535),
+        default=8080,
+        metavar="N",
+        help="its port (default %(default)s)",
+    )
+    rec = p.add_argument_group("recording")
+    rec.add_argument(
+        "--record",
+        metavar="FILE.mcap",
+        help="record the whole run to a new MCAP file (as 'tokenring record', its own process)",
+    )
     for extension in extensions.loaded():
         extension.add_up_options(p)
     add_ring_options(p)
@@ -115,6 +132,10 @@ def run(args: argparse.Namespace) -> int:
     # of the ring must stay as short in emulated time as it is on the real hardware
     wire = args.bitrate if bitrate is None or speedup == 1.0 else format_bitrate(bitrate * speedup)
     services = [service for plan in plans_up for service in plan.services]
+    if args.web:
+        services.append(web_service(args))
+    if args.record:
+        services.append(record_service(args))
     launcher = Launcher(
         plans,
         ring=args.ring,
@@ -183,3 +204,47 @@ def boot_load(launcher: Launcher, programs: Path, ids: set[int], wait: float = 3
         return False
     finally:
         launcher.booting = False
+
+
+def web_service(args: argparse.Namespace) -> ServicePlan:
+    """``tokenring web`` as a launcher service: a process of its own, so serving browsers never
+    takes a core from the launcher (its port is checked here, before anything starts)."""
+    import socket
+
+    from tokenring.launcher import ServicePlan
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the server will
+        try:
+            probe.bind(("127.0.0.1", args.web_port))
+        except OSError as exc:
+            raise UsageError(
+                f"--web-port {args.web_port}: cannot listen on 127.0.0.1:{args.web_port} ({exc.strerror})"
+            ) from None
+    argv = ["tokenring", "web", "--ring", "{ring}", "--connect", "{connect}", "--port", str(args.web_port)]
+    if args.zenoh_config:
+        argv += ["--zenoh-config", args.zenoh_config]
+    if args.protocol:
+        argv += ["--protocol", args.protocol]
+    return ServicePlan("web", argv)
+
+
+def record_service(args: argparse.Namespace) -> ServicePlan:
+    """``tokenring record`` as a launcher service: its own process and Zenoh session, so writing
+    the file never slows the token path; up before the nodes, stopped (SIGTERM: it finalises the
+    file) after them. The file is checked here, before anything starts."""
+    import os
+
+    from tokenring import keys
+    from tokenring.cliutil import check_option_output
+    from tokenring.launcher import ServicePlan
+
+    check_option_output("--record", args.record)
+    tag = f"up{os.getpid()}"
+    argv = ["tokenring", "record", args.record, "--ring", "{ring}", "--connect", "{connect}"]
+    argv += ["--ready-token", tag]
+    if args.zenoh_config:
+        argv += ["--zenoh-config", args.zenoh_config]
+    if args.protocol:
+        argv += ["--protocol", args.protocol]
+    return ServicePlan("record", argv, ready_key=f"{keys.PREFIX}/{args.ring}/record/{tag}")

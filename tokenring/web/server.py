@@ -1,0 +1,275 @@
+"""The web view's server: the page, a WebSocket of coalesced topics, and the buttons' actions.
+
+::
+
+    Zenoh ──► Feed (its thread) ──► Hub (latest value per topic) ──► every 100 ms, what changed
+                                                                      ──► each browser's WebSocket
+    browser ──► POST /api/fault  ──► tokenring.faults.FaultClient (as ``tokenring fault``)
+            ──► POST /api/action/<name> ──► an extension's WebAction (e.g. Explore 2)
+
+It is a tool on the ring like ``monitor``: it subscribes to the token's key expressions and asks
+the nodes' control keys, and the token path never waits for it (a slow browser only delays its
+own updates; the feed's queue is bounded). aiohttp serves it all from one asyncio loop; Zenoh's
+blocking queries run on worker threads.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from aiohttp import WSMsgType, web
+
+from tokenring.errors import TokenRingError, UsageError
+from tokenring.extensions import WebAction, WebPanel
+from tokenring.faults import KINDS, NEEDS_VALUE, FaultClient, parse_partition, validate
+from tokenring.feed import Feed, FeedSource
+from tokenring.protocol import Protocol
+from tokenring.web.hub import Hub
+
+log = logging.getLogger("tokenring.web")
+
+STATIC = Path(__file__).resolve().parent / "static"
+#: a browser gets at most this many updates a second
+UPDATES_PER_S = 10.0
+#: the fault kinds the page offers (``partition`` needs two groups: ``tokenring fault``)
+PAGE_KINDS = ("delay", "drop", "corrupt", "duplicate", "lose", "hang", "resume", "crash", "clear")
+
+
+def _json_default(value: Any) -> Any:
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if isinstance(value, bytes):
+        return value.hex()
+    if isinstance(value, set | tuple):
+        return list(value)
+    return str(value)
+
+
+def dumps(value: Any) -> str:
+    """JSON for the browser (numpy values, bytes and sets included; NaN and infinities null)."""
+    try:
+        return json.dumps(value, default=_json_default, allow_nan=False)
+    except ValueError:
+        return json.dumps(_scrub(value), default=_json_default, allow_nan=False)
+
+
+def _scrub(value: Any) -> Any:
+    """NaN and infinities (a sonar's "no echo") as null: JSON has no word for them."""
+    if hasattr(value, "tolist"):
+        value = value.tolist()
+    if isinstance(value, float):
+        return value if value == value and abs(value) != float("inf") else None
+    if isinstance(value, dict):
+        return {k: _scrub(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_scrub(v) for v in value]
+    return value
+
+
+class WebView:
+    """One ring's web view: an aiohttp application over a :class:`Feed` and a :class:`Hub`."""
+
+    def __init__(
+        self,
+        session: Any,
+        ring: str,
+        protocol: Protocol,
+        sources: list[FeedSource],
+        *,
+        panels: list[WebPanel] | None = None,
+        actions: list[WebAction] | None = None,
+        fault_timeout: float = 3.0,
+    ) -> None:
+        self.session = session
+        self.ring = ring
+        self.protocol = protocol
+        self.hub = Hub()
+        self.feed = Feed(session, ring, sources)
+        self.feed.add_sink(self.hub.on_message)
+        self.panels = list(panels or [])
+        self.actions = {action.name: action for action in actions or []}
+        self.fault_timeout = fault_timeout
+        self.nodes = {spec.id: spec.name for spec in protocol.nodes.values()}
+        self._sockets: set[web.WebSocketResponse] = set()
+        self.app = self._build()
+
+    # -- the application --------------------------------------------------------------------
+    def _build(self) -> web.Application:
+        app = web.Application(middlewares=[same_origin_posts], client_max_size=64 * 1024)
+        app.router.add_get("/", self.index)
+        app.router.add_get("/api/config", self.config)
+        app.router.add_get("/api/state", self.state)
+        app.router.add_post("/api/fault", self.fault)
+        app.router.add_post("/api/action/{name}", self.action)
+        app.router.add_get("/ws", self.websocket)
+        app.router.add_static("/static/", STATIC)
+        for panel in self.panels:
+            app.router.add_static(f"/panels/{panel.name}/", panel.directory)
+        return app
+
+    async def index(self, request: web.Request) -> web.StreamResponse:
+        return web.FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-cache"})
+
+    async def config(self, request: web.Request) -> web.Response:
+        """What the page builds itself from: the ring, its nodes, the fault kinds, panels, buttons."""
+        return web.json_response(
+            {
+                "ring": self.ring,
+                "nodes": [{"id": i, "name": n} for i, n in sorted(self.nodes.items())],
+                "fault_kinds": list(PAGE_KINDS),
+                "needs_value": {k: v for k, v in NEEDS_VALUE.items() if k in PAGE_KINDS},
+                "panels": [
+                    {"name": p.name, "title": p.title or p.name, "url": f"/panels/{p.name}/{p.module}"}
+                    for p in self.panels
+                ],
+                "actions": [{"name": a.name, "label": a.label} for a in self.actions.values()],
+                "updates_per_s": UPDATES_PER_S,
+            }
+        )
+
+    async def state(self, request: web.Request) -> web.Response:
+        """Every topic's latest value at once (scripts; the page uses the WebSocket)."""
+        version, topics = self.hub.changes(0)
+        return web.Response(text=dumps({"v": version, "topics": topics}), content_type="application/json")
+
+    async def websocket(self, request: web.Request) -> web.StreamResponse:
+        """Everything once, then what changed, at most :data:`UPDATES_PER_S` times a second."""
+        ws = web.WebSocketResponse(heartbeat=20.0)
+        await ws.prepare(request)
+        self._sockets.add(ws)
+        reader = asyncio.create_task(_drain(ws))
+        since = 0
+        try:
+            while not ws.closed and not reader.done():
+                version, changed = self.hub.changes(since)
+                if changed:
+                    await ws.send_str(dumps({"v": version, "topics": changed}))
+                    since = version
+                await asyncio.sleep(1.0 / UPDATES_PER_S)
+        except (ConnectionResetError, RuntimeError):
+            pass  # the browser went away mid-send
+        finally:
+            reader.cancel()
+            self._sockets.discard(ws)
+            await ws.close()
+        return ws
+
+    async def fault(self, request: web.Request) -> web.Response:
+        """Inject or clear a fault, as ``tokenring fault NODE KIND [VALUE]`` does."""
+        try:
+            body = await request.json()
+        except ValueError:
+            return _error("the body is not JSON")
+        try:
+            targets, fault = self.fault_request(body)
+        except UsageError as exc:
+            return _error(str(exc))
+        loop = asyncio.get_running_loop()
+        try:
+            results = await loop.run_in_executor(None, self._inject, targets, fault)
+        except TokenRingError as exc:
+            return _error(str(exc), 502)
+        return web.json_response({"ok": True, "request": fault, "results": results})
+
+    def fault_request(self, body: Any) -> tuple[list[int], dict[str, Any]]:
+        """The nodes and the validated request of a page's fault (raises :class:`UsageError`)."""
+        if not isinstance(body, dict):
+            raise UsageError('a fault is a JSON object like {"node": "lcd", "kind": "delay", "value": 20}')
+        node, kind = body.get("node"), body.get("kind")
+        if kind not in KINDS or kind == "list":
+            raise UsageError(f"unknown fault kind {kind!r} (kinds: {', '.join(PAGE_KINDS)})")
+        request = {k: body[k] for k in ("kind", "value", "jitter_ms", "count", "soft") if k in body}
+        if kind in NEEDS_VALUE and body.get("value") in (None, ""):
+            raise UsageError(f"{kind} needs a value: {kind} {NEEDS_VALUE[kind]}")
+        if kind == "partition":
+            request["groups"] = parse_partition(str(body.get("value")), self.resolve)
+        fault = validate(request)
+        targets = sorted(self.nodes) if node == "all" else [self.resolve(node)]
+        return targets, fault
+
+    def resolve(self, item: Any) -> int:
+        """A node's ID from its name or ID (protocol.yaml's nodes only)."""
+        for node_id, name in self.nodes.items():
+            if item == name or str(item) == str(node_id):
+                return node_id
+        known = ", ".join(f"{n}={i}" for i, n in sorted(self.nodes.items()))
+        raise UsageError(f"unknown node {str(item)[:40]!r} (protocol.yaml: {known})")
+
+    def _inject(self, targets: list[int], fault: dict[str, Any]) -> list[dict[str, Any]]:
+        client = FaultClient(self.session, self.ring, self.fault_timeout)
+        results = []
+        for node_id in targets:
+            try:
+                results.append(client.inject(node_id, fault))
+            except UsageError as exc:  # this node did not answer: say so, try the others
+                results.append({"id": node_id, "node": self.nodes[node_id], "error": str(exc)})
+        return results
+
+    async def action(self, request: web.Request) -> web.Response:
+        """Run an extension's button (e.g. Explore 2) on a worker thread."""
+        name = request.match_info["name"]
+        action = self.actions.get(name)
+        if action is None:
+            return _error(f"no action {name[:40]!r} (actions: {', '.join(self.actions) or 'none'})", 404)
+        loop = asyncio.get_running_loop()
+        try:
+            result = await loop.run_in_executor(None, action.run, self.session, self.ring)
+        except TokenRingError as exc:
+            return _error(f"{action.label}: {exc}", 502)
+        return web.Response(text=dumps({"ok": True, "result": result}), content_type="application/json")
+
+    # -- running ------------------------------------------------------------------------------
+    async def serve(self, host: str, port: int, ready: Callable[[str], None], stop: asyncio.Event) -> None:
+        """Listen on ``host:port`` (0: any free port), call ``ready(url)``, serve until ``stop``."""
+        runner = web.AppRunner(self.app, handle_signals=False, access_log=None)
+        await runner.setup()
+        site = web.TCPSite(runner, host, port)
+        try:
+            await site.start()
+        except OSError as exc:
+            await runner.cleanup()
+            why = "in use" if exc.errno == 98 else exc.strerror or str(exc)
+            raise UsageError(f"--port {port}: cannot listen on {host}:{port} ({why})") from None
+        self.feed.start()
+        try:
+            bound = runner.addresses[0]
+            where = f"[{bound[0]}]" if ":" in str(bound[0]) else str(bound[0])
+            ready(f"http://{where}:{bound[1]}/")
+            await stop.wait()
+        finally:
+            for ws in list(self._sockets):
+                with contextlib.suppress(Exception):
+                    await ws.close()
+            await runner.cleanup()
+            await asyncio.get_running_loop().run_in_executor(None, self.feed.stop)
+
+
+@web.middleware
+async def same_origin_posts(request: web.Request, handler: Any) -> web.StreamResponse:
+    """A POST (a fault, an action) must come from the page itself: JSON, and from this origin
+    (another site open in the same browser cannot crash the ring)."""
+    if request.method == "POST":
+        origin = request.headers.get("Origin")
+        if origin is not None and origin.split("://", 1)[-1] != request.host:
+            return _error(f"a request from {origin[:80]} is not from this page", 403)
+        if request.content_type != "application/json":
+            return _error("send JSON (Content-Type: application/json)", 415)
+    response: web.StreamResponse = await handler(request)
+    return response
+
+
+async def _drain(ws: web.WebSocketResponse) -> None:
+    """Read what the browser sends (nothing but pings and the close) until it closes."""
+    async for message in ws:
+        if message.type == WSMsgType.ERROR:
+            return
+
+
+def _error(text: str, status: int = 400) -> web.Response:
+    return web.json_response({"ok": False, "error": text}, status=status)
