@@ -47,6 +47,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="chunk compression (default zstd)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress line")
+    # `up --record`: a liveliness token tokenring/<ring>/record/<TAG> once recording (the
+    # launcher waits for it before it starts the nodes, so the file holds the boot)
+    p.add_argument("--ready-token", metavar="TAG", help=argparse.SUPPRESS)
     p.add_argument("--json", action="store_true", help="print a JSON summary at the end")
     add_ring_options(p, listen=False)
 
@@ -88,8 +91,11 @@ def run(args: argparse.Namespace) -> int:
         progress = sys.stderr.isatty() and not args.quiet
         if not args.quiet:
             print(f"recording ring {ring!r} to {args.file} (Ctrl-C ends it)", file=sys.stderr, flush=True)
+        token = None
         try:
             feed.start()
+            if args.ready_token:
+                token = session.liveliness().declare_token(f"{keys.PREFIX}/{ring}/record/{args.ready_token}")
             while not stopper.event.wait(0.5):
                 recorder.tick()
                 elapsed = time.monotonic() - started
@@ -103,8 +109,11 @@ def run(args: argparse.Namespace) -> int:
                 if args.duration is not None and elapsed >= args.duration:
                     break
         finally:
-            feed.stop()
+            # the file first: a launcher stopping its services waits only a moment
             path = recorder.close()
+            feed.stop()
+            if token is not None:
+                token.undeclare()
     elapsed = time.monotonic() - started
     frames = sum(n for k, n in recorder.counts.items() if "/token/" in k)
     size = path.stat().st_size

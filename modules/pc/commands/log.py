@@ -15,15 +15,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="convert, sort or summarise a localisation data or error log",
         description="Data and error logs are msgpack streams (crash-safe, compact). 'convert' writes the "
         "seed's line-per-entry text (--to text) or, for a data log, data.csv and sonar.csv with one line "
-        "per synchronisation (--to csv, the seed's logfileconverter); 'sort' orders a log by time stamp "
+        "per synchronisation (--to csv, the seed's logfileconverter), or MCAP for Foxglove and "
+        "PlotJuggler (--to mcap); 'sort' orders a log by time stamp "
         "into a new file (the seed's logfilesorter); 'info' counts records per source and kind.",
     )
     verbs = p.add_subparsers(dest="log_verb", metavar="VERB", required=True)
     convert = verbs.add_parser("convert", help="to the seed's text format or CSV")
     convert.add_argument("log", help="a data (.trlog) or error (.trerr) log")
-    convert.add_argument("--to", choices=("text", "csv"), default="text", help="output format (default text)")
     convert.add_argument(
-        "--out", metavar="PATH", help="text: a file (default: standard output); csv: a directory (required)"
+        "--to", choices=("text", "csv", "mcap"), default="text", help="output format (default text)"
+    )
+    convert.add_argument(
+        "--out",
+        metavar="PATH",
+        help="text: a file (default: standard output); csv: a directory (required); mcap: a file "
+        "(required; Foxglove, PlotJuggler)",
     )
     convert.add_argument("--force", action="store_true", help="replace an existing output")
     order = verbs.add_parser("sort", help="sort by time stamp into a new log")
@@ -46,7 +52,9 @@ def check_outputs(args: argparse.Namespace) -> None:
     from tokenring.errors import UsageError
     from tokenring.inputfile import check_output
 
-    if args.log_verb == "sort" or (args.log_verb == "convert" and args.to == "text" and args.out):
+    if args.log_verb == "convert" and args.to == "mcap" and not args.out:
+        raise UsageError("--to mcap writes one file: give it with --out FILE.mcap")
+    if args.log_verb == "sort" or (args.log_verb == "convert" and args.to in ("text", "mcap") and args.out):
         check_output(args.out, (args.log,), force=args.force)
     elif args.log_verb == "convert" and args.to == "csv":
         if not args.out:
@@ -90,6 +98,12 @@ def run(args: argparse.Namespace) -> int:
             )
             for key, count in info["counts"].items():
                 print(f"  {key:4} {count}")
+        return 0
+    if args.to == "mcap":
+        from modules.pc.logmcap import convert_mcap
+
+        counts = convert_mcap(log, args.out)
+        print(f"{args.out}: {sum(counts.values())} messages on {len(counts)} topics")
         return 0
     if args.to == "text":
         text = convert_text(log)
