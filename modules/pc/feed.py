@@ -455,13 +455,16 @@ class RobotSource(FeedSource):
 
     # -- the token ----------------------------------------------------------------------------
 
-    def _changed(self, frame: bytes, name: str) -> bool:
+    def _changed(self, frame: bytes, name: str, written: bool = False) -> bool:
+        """Whether channel ``name`` differs from the last frame's; with ``written``, also whether
+        its module wrote it at all (a channel of only zero bytes is the fresh token's, e.g. the
+        motor's before it knows its start pose: not a pose at the room's origin)."""
         ch = self.protocol.channel(name)
         raw = frame[ch.address : ch.end]
         if self._last.get(name) == raw:
             return False
         self._last[name] = raw
-        return True
+        return not written or any(raw)
 
     def _on_frame(self, frame: bytes, time_ns: int) -> list[Message]:
         if frame == self._last_frame or frame_problem(frame, self.protocol):
@@ -470,9 +473,9 @@ class RobotSource(FeedSource):
         out: list[Message] = []
         if self._changed(frame, "copro.data"):
             out += self._copro(self.protocol.channel("copro.data").decode(frame), time_ns)
-        if self._changed(frame, "motor.data"):
+        if self._changed(frame, "motor.data", written=True):
             out += self._motor(self.protocol.channel("motor.data").decode(frame), time_ns)
-        if self._changed(frame, "sonar.data"):
+        if self._changed(frame, "sonar.data", written=True):
             out += self._sonar(self.protocol.channel("sonar.data").decode(frame), time_ns)
         if self._changed(frame, "map.command"):
             channel = self.protocol.channel("map.command")
