@@ -8,6 +8,7 @@ Foxglove's messages are written out here from Foxglove's documentation.
 
 from __future__ import annotations
 
+import base64
 import json
 import math
 import struct
@@ -286,11 +287,27 @@ def test_walls_and_obstacles_from_the_worlds_info() -> None:
         jsonschema.validate(data, schemas[topic])
 
 
+def test_the_lcd_screen_as_an_image(fed: Fed) -> None:
+    screen = bytearray(1024)  # 64 rows of 16 bytes, the leftmost pixel in the top bit
+    screen[0] = 0b1000_0001  # row 0: pixels 0 and 7 lit
+    screen[1023] = 0b0000_0001  # row 63: pixel 127 lit
+    fed.feed.feed_raw(RawSample("tokenring/t/lcd/screen", T0, bytes(screen)))
+    fed.feed.feed_raw(RawSample("tokenring/t/lcd/screen", T0, b"short"))  # not a screen
+    (image,) = fed.on("/robot/lcd/image")
+    assert (image["width"], image["height"], image["step"], image["encoding"]) == (128, 64, 128, "mono8")
+    pixels = base64.b64decode(image["data"])
+    assert len(pixels) == 128 * 64
+    dark = [i for i, p in enumerate(pixels) if p == 0]
+    assert dark == [0, 7, 64 * 128 - 1] and set(pixels) == {0, 255}
+    fed.all_valid()
+
+
 # Foxglove's messages as its documentation lists their fields
 FOXGLOVE_FIELDS = {
     "foxglove.PoseInFrame": {"timestamp", "frame_id", "pose"},
     "foxglove.FrameTransform": {"timestamp", "parent_frame_id", "child_frame_id", "translation", "rotation"},
     "foxglove.SceneUpdate": {"deletions", "entities"},
+    "foxglove.RawImage": {"timestamp", "frame_id", "width", "height", "encoding", "step", "data"},
 }
 SCENE_ENTITY_FIELDS = {
     "timestamp", "frame_id", "id", "lifetime", "frame_locked", "metadata", "arrows", "cubes",
@@ -307,6 +324,7 @@ def test_topics_carry_foxgloves_schemas_under_foxgloves_names() -> None:
     assert topics["/robot/tf"].schema_name == "foxglove.FrameTransform"
     for name in ("/robot/sonar", "/robot/map", "/robot/walls"):
         assert topics[name].schema_name == "foxglove.SceneUpdate"
+    assert topics["/robot/lcd/image"].schema_name == "foxglove.RawImage"
     for topic in topics.values():
         jsonschema.Draft202012Validator.check_schema(topic.schema)
         if topic.schema_name in FOXGLOVE_FIELDS:

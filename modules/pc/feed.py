@@ -22,6 +22,7 @@ topic                       schema                  from
 ``/robot/walls``            foxglove.SceneUpdate    the room's walls and obstacles (``world/info``)
 ``/robot/walls/vectors``    robot.MapVectors        the same walls in mm, circles as 32-gons
 ``/robot/lcd``              robot.Lcd               the LCD's text lines (the lcd program's report)
+``/robot/lcd/image``        foxglove.RawImage       the LCD's screen (``lcd/screen``), mono8
 ``/robot/navigator``        robot.Navigator         ``main.data`` with enum names
 ==========================  ======================  ============================================
 
@@ -39,6 +40,7 @@ echo came from.
 
 from __future__ import annotations
 
+import base64
 import math
 from dataclasses import dataclass, field
 from functools import cache
@@ -57,6 +59,7 @@ FRAME_ROBOT = "robot"
 POSE_SOURCE_EKF = 2  # copro.data pose_source: 0 none, 1 dead reckoning, 2 EKF
 VECTOR_CODE_NAME = "VECTOR"
 CIRCLE_SEGMENTS = 32
+LCD_WIDTH, LCD_HEIGHT = 128, 64  # the screen (modules/world/lcdpanel.py): 64 rows of 16 bytes
 
 # --------------------------------------------------------------------------------------------
 # Foxglove's JSON Schemas, from the protobuf descriptors foxglove-sdk ships
@@ -302,6 +305,7 @@ def navigator_schema(protocol: Protocol) -> dict[str, Any]:
 def robot_topics(protocol: Protocol) -> list[Topic]:
     """Every topic the robot's feed sources write."""
     pose, tf, scene = "foxglove.PoseInFrame", "foxglove.FrameTransform", "foxglove.SceneUpdate"
+    image = "foxglove.RawImage"
     return [
         Topic("/robot/pose/true", pose, foxglove_schema(pose), "ground truth (the simulator)"),
         Topic("/robot/pose/odometry", pose, foxglove_schema(pose), "the motor's dead reckoning"),
@@ -315,6 +319,7 @@ def robot_topics(protocol: Protocol) -> list[Topic]:
         Topic("/robot/walls", scene, foxglove_schema(scene), "the room's true walls and obstacles"),
         Topic("/robot/walls/vectors", "robot.MapVectors", MAP_VECTORS_SCHEMA, "the true walls, mm"),
         Topic("/robot/lcd", "robot.Lcd", LCD_SCHEMA, "the LCD's text lines"),
+        Topic("/robot/lcd/image", image, foxglove_schema(image), "the LCD's screen (128x64)"),
         Topic("/robot/navigator", "robot.Navigator", navigator_schema(protocol), "main's navigator"),
     ]
 
@@ -660,15 +665,23 @@ def walls_messages(info: dict[str, Any], time_ns: int) -> list[Message]:
 
 @dataclass
 class LcdSource(FeedSource):
-    """The LCD's text lines. The screen itself (``lcd/screen``) is a 128×64 bitmap; its text is
-    what the lcd program reports (``ctl/70/program``), asked once a second."""
+    """The LCD: its screen (``lcd/screen``, a 128×64 one-bit bitmap) as an image, and its text
+    lines, which only the lcd program knows (its report, ``ctl/70/program``, asked once a second)."""
 
     protocol: Protocol
     poll_interval_s: float = 1.0
-    NAMES = ("/robot/lcd",)
+    NAMES = ("/robot/lcd", "/robot/lcd/image")
 
     def topics(self) -> list[Topic]:
         return [t for t in robot_topics(self.protocol) if t.name in self.NAMES]
+
+    def keys(self, ring: str) -> list[str]:
+        return [robot_keys.lcd(ring, "screen")]
+
+    def translate(self, key: str, payload: bytes, time_ns: int) -> list[Message]:
+        if len(payload) != LCD_WIDTH * LCD_HEIGHT // 8:
+            return []
+        return [Message("/robot/lcd/image", time_ns, lcd_image(payload, time_ns))]
 
     def poll(self, session: Any, ring: str, time_ns: int) -> list[Message]:
         from tokenring.cliutil import query
@@ -684,6 +697,21 @@ class LcdSource(FeedSource):
                     }
                     return [Message("/robot/lcd", time_ns, data)]
         return []
+
+
+def lcd_image(screen: bytes, time_ns: int) -> dict[str, Any]:
+    """A ``foxglove.RawImage`` (mono8) of the screen: rows of 16 bytes, MSB the leftmost pixel;
+    a lit pixel is dark (0) on the pale background (255), as the display shows it."""
+    pixels = bytes(0 if byte & (0x80 >> bit) else 255 for byte in screen for bit in range(8))
+    return {
+        "timestamp": stamp(time_ns),
+        "frame_id": "lcd",
+        "width": LCD_WIDTH,
+        "height": LCD_HEIGHT,
+        "encoding": "mono8",
+        "step": LCD_WIDTH,
+        "data": base64.b64encode(pixels).decode("ascii"),
+    }
 
 
 def robot_feed_sources(protocol: Protocol, ring: str) -> list[FeedSource]:
