@@ -523,18 +523,14 @@ class RobotSource(FeedSource):
         return out
 
     def _sonar(self, data: dict[str, Any], time_ns: int) -> list[Message]:
-        placed = next(
-            (
-                (name, p)
-                for name, p in (
-                    ("true", self._truth),
-                    ("filtered", self._filtered if self._filter_on else None),
-                    ("odometry", self._odometry),
-                )
-                if p is not None
-            ),
-            None,
+        # where the echoes really came from (the simulator's truth, against the true walls);
+        # without a simulator, where the robot believes it is
+        candidates = (
+            ("true", self._truth),
+            ("filtered", self._filtered if self._filter_on else None),
+            ("odometry", self._odometry),
         )
+        placed = next(((name, pose) for name, pose in candidates if pose is not None), None)
         if placed is None:
             return []
         name, (x, y, theta) = placed
