@@ -538,9 +538,14 @@ class Player:
         self.start_s = start_s
         self.duration_s = duration_s
         self.selection = selection or Selection()
-        self.ring = ring or recording.ring
+        self.ring: str = ring or recording.ring or keys.DEFAULT_RING
         self.stats = PlayStats()
         self._publishers: dict[str, Any] = {}
+        self._tokens: list[Any] = []
+        self._queryables: list[Any] = []
+        #: the recorded /ring/nodes as play has reached it (node ID -> stats, -> faults)
+        self.nodes: dict[str, Any] = {}
+        self.faults: dict[str, Any] = {}
         self.keys = [k for k in recording.raw_keys() if self.selection.key(k)]
 
     def target_key(self, key: str) -> str:
@@ -569,15 +574,61 @@ class Player:
             stop.wait(0.05)
         return False
 
+    def serve_control(self) -> None:
+        """Answer ``monitor``: every recorded node's liveliness token and its ``stats`` and
+        ``fault`` queryables, answered with the recorded ``/ring/nodes`` as play reaches it."""
+        import msgpack
+
+        if "/ring/nodes" not in self.recording.channels:
+            return
+        ids: set[int] = set()
+        for message in iter_messages(self.recording, ["/ring/nodes"]):
+            if message.data.get("nodes") and not self.nodes:  # answered until play reaches more
+                self.nodes, self.faults = message.data["nodes"], message.data.get("faults", {})
+            ids.update(int(i) for i in message.data.get("nodes", {}))
+
+        def answerer(node: str, verb: str) -> Callable[[Any], None]:
+            def answer(query: Any) -> None:
+                if verb == "stats" and node not in self.nodes:
+                    return  # not live at this point of the recording: no answer, as live
+                result = (
+                    self.nodes[node]
+                    if verb == "stats"
+                    else {"id": int(node), "faults": self.faults.get(node, [])}
+                )
+                query.reply(
+                    keys.control(self.ring, node, verb), msgpack.packb({"ok": True, "result": result})
+                )
+
+            return answer
+
+        for node_id in sorted(ids):
+            self._tokens.append(self.session.liveliness().declare_token(keys.node(self.ring, node_id)))
+            for verb in ("stats", "fault"):
+                self._queryables.append(
+                    self.session.declare_queryable(
+                        keys.control(self.ring, node_id, verb), answerer(str(node_id), verb)
+                    )
+                )
+
     def play_once(self, stop: threading.Event, on_sample: Callable[[RawSample], None] | None = None) -> None:
         """One pass over the recording (from ``start_s``, for ``duration_s``)."""
         rec = self.recording
         first_ns = rec.start_ns + int(self.start_s * 1e9)
         end_ns = None if self.duration_s is None else first_ns + int(self.duration_s * 1e9) + 1
         began = time.monotonic()
-        for raw in iter_raw(rec, self.selection, first_ns, end_ns):
+        chosen = [k for k in rec.raw_keys() if self.selection.key(k)]
+        if self._queryables:
+            chosen.append("/ring/nodes")
+        for topic, encoding, time_ns, data in iter_records(rec, chosen, first_ns, end_ns):
             if stop.is_set():
                 return
+            if encoding != RAW_ENCODING:  # /ring/nodes: what monitor is answered from now on
+                with contextlib.suppress(ValueError, AttributeError):
+                    snapshot = json.loads(data)
+                    self.nodes, self.faults = snapshot["nodes"], snapshot["faults"]
+                continue
+            raw = RawSample(topic, time_ns, data)
             due = began + max(0, raw.time_ns - first_ns) / 1e9 / self.rate
             delay = due - time.monotonic()
             if delay > 0 and stop.wait(delay):
@@ -597,6 +648,9 @@ class Player:
                 on_sample(raw)
 
     def close(self) -> None:
+        for declared in [*self._queryables, *self._tokens]:
+            with contextlib.suppress(Exception):
+                declared.undeclare()
         for publisher in self._publishers.values():
             with contextlib.suppress(Exception):
                 publisher.undeclare()

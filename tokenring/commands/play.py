@@ -1,6 +1,7 @@
 """``tokenring play FILE.mcap``: put a recording's frames and samples back on Zenoh, in time.
 
-``sniff``, ``monitor``'s event log and the web view then see them as if the ring were live. The
+``sniff`` and the web view then see them as if the ring were live, and ``monitor`` the nodes'
+counters and faults as recorded (play answers its queries and holds the nodes' liveliness). The
 samples go back on the keys they were recorded on (the recorded ring's name) unless ``--ring``
 names another. Playing into a ring that is running under that name would inject old frames into
 it, so play refuses when it finds the ring's nodes live.
@@ -121,6 +122,7 @@ def run(args: argparse.Namespace) -> int:
         if not player.keys:
             raise UsageError(f"--topics {args.topics}: matches none of the recorded keys")
         player.declare()
+        player.serve_control()  # monitor sees the recorded nodes' counters
         if not args.quiet:
             print(
                 f"playing {args.file} ({recording.duration_s:.1f} s, ring {recording.ring!r}) as ring {ring!r} "
