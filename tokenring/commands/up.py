@@ -83,6 +83,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="its port (default %(default)s)",
     )
+    fox = p.add_argument_group("Foxglove")
+    fox.add_argument(
+        "--foxglove",
+        action="store_true",
+        help="serve the ring to Foxglove too (as 'tokenring foxglove', its own process)",
+    )
+    fox.add_argument(
+        "--foxglove-port",
+        type=int_within(1, 65535),
+        default=8765,
+        metavar="N",
+        help="its WebSocket port (default %(default)s)",
+    )
     rec = p.add_argument_group("recording")
     rec.add_argument(
         "--record",
@@ -136,6 +149,8 @@ def run(args: argparse.Namespace) -> int:
         services.append(web_service(args))
     if args.record:
         services.append(record_service(args))
+    if args.foxglove:
+        services.append(foxglove_service(args))
     launcher = Launcher(
         plans,
         ring=args.ring,
@@ -248,3 +263,32 @@ def record_service(args: argparse.Namespace) -> ServicePlan:
     if args.protocol:
         argv += ["--protocol", args.protocol]
     return ServicePlan("record", argv, ready_key=f"{keys.PREFIX}/{args.ring}/record/{tag}")
+
+
+def foxglove_service(args: argparse.Namespace) -> ServicePlan:
+    """``tokenring foxglove`` as a launcher service: its own process and Zenoh session, so
+    encoding and serving messages never slows the token path; the launcher waits for it to serve
+    (a port in use fails `up` before any node starts) and stops it by PID after the nodes."""
+    import os
+    import socket
+
+    from tokenring import keys
+    from tokenring.launcher import ServicePlan
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the server will
+        try:
+            probe.bind(("127.0.0.1", args.foxglove_port))
+        except OSError as exc:
+            raise UsageError(
+                f"--foxglove-port {args.foxglove_port}: cannot listen on 127.0.0.1:{args.foxglove_port} "
+                f"({exc.strerror})"
+            ) from None
+    tag = f"up{os.getpid()}"
+    argv = ["tokenring", "foxglove", "--ring", "{ring}", "--connect", "{connect}"]
+    argv += ["--port", str(args.foxglove_port), "--ready-token", tag]
+    if args.zenoh_config:
+        argv += ["--zenoh-config", args.zenoh_config]
+    if args.protocol:
+        argv += ["--protocol", args.protocol]
+    return ServicePlan("foxglove", argv, ready_key=f"{keys.PREFIX}/{args.ring}/foxglove/{tag}")
