@@ -11,6 +11,7 @@ node come or gone in the seconds before: tokenring/regeneration.py), head the vi
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import time
@@ -99,7 +100,8 @@ def diff_events(previous: dict[str, Any] | None, current: dict[str, Any]) -> lis
     return events
 
 
-def render(ring: str, snap: dict[str, Any], events: list[tuple[float, str]]) -> str:
+def header_lines(ring: str, snap: dict[str, Any]) -> list[str]:
+    """The view's head: who answers, the round trip, the successor chain, regeneration rates."""
     nodes = snap["nodes"]
     lines = [
         f"tokenring monitor - ring {ring!r} - {time.strftime('%H:%M:%S')} - {len(nodes)} nodes answering"
@@ -119,8 +121,26 @@ def render(ring: str, snap: dict[str, Any], events: list[tuple[float, str]]) -> 
         chain.append(f"{nodes[current]['name']}({current})" if current in nodes else f"?({current})")
         lines.append("ring: " + " -> ".join(chain))
         lines.append(format_rates(snap.get("regenerations") or ring_rates(nodes.values())))
+    return lines
+
+
+HEADERS = [
+    "id",
+    "name",
+    "next",
+    "counter",
+    "round ms",
+    "handler us",
+    *[label for _, label in COUNTERS],
+    "spurious",
+    "faults",
+]
+
+
+def table_rows(snap: dict[str, Any]) -> list[list[Any]]:
+    """One row per answering node, in the order of :data:`HEADERS`."""
     rows = []
-    for node_id, n in sorted(nodes.items()):
+    for node_id, n in sorted(snap["nodes"].items()):
         faults = snap["faults"].get(node_id)
         rows.append(
             [
@@ -135,25 +155,77 @@ def render(ring: str, snap: dict[str, Any], events: list[tuple[float, str]]) -> 
                 ",".join(sorted(faults)) if faults else "-",
             ]
         )
-    headers = [
-        "id",
-        "name",
-        "next",
-        "counter",
-        "round ms",
-        "handler us",
-        *[label for _, label in COUNTERS],
-        "spurious",
-        "faults",
-    ]
-    lines.append(format_table(rows, headers))
+    return rows
+
+
+def excluded_ids(snap: dict[str, Any]) -> set[int]:
+    """Nodes some answering node has excluded from the ring (they may still answer)."""
+    return {int(i) for n in snap["nodes"].values() for i in n.get("excluded") or ()}
+
+
+def event_stamp(t: float) -> str:
+    return time.strftime("%H:%M:%S", time.localtime(t)) + f".{int(t * 1000) % 1000:03d}"
+
+
+def render(ring: str, snap: dict[str, Any], events: list[tuple[float, str]]) -> str:
+    """The view as plain text (a pipe, a file, ``--once``)."""
+    lines = header_lines(ring, snap)
+    lines.append(format_table(table_rows(snap), HEADERS))
     lines.append("")
     lines.append("events:")
     for t, text in events[-12:]:
-        stamp = time.strftime("%H:%M:%S", time.localtime(t)) + f".{int(t * 1000) % 1000:03d}"
         marker = ">>" if text.startswith("FAULT") else "  "
-        lines.append(f" {marker} {stamp}  {text}")
+        lines.append(f" {marker} {event_stamp(t)}  {text}")
     return "\n".join(lines)
+
+
+#: an event line's colour by what it says (the first match wins)
+EVENT_STYLES = (
+    ("FAULT START", "bold red"),
+    ("FAULT END", "green"),
+    ("SPURIOUS", "bold red"),
+    ("stopped answering", "red"),
+    ("joined", "green"),
+    ("regen", "yellow"),
+)
+
+
+def render_rich(ring: str, snap: dict[str, Any], events: list[tuple[float, str]]) -> Any:
+    """The view as a ``rich`` renderable for a terminal: active faults and excluded nodes in red,
+    regenerations and growing error counters in yellow, spurious regenerations in bold red."""
+    from rich.console import Group
+    from rich.table import Table
+    from rich.text import Text
+
+    head = header_lines(ring, snap)
+    parts: list[Any] = [Text(head[0], style="bold")]
+    rates = snap.get("regenerations") or ring_rates(snap["nodes"].values())
+    for line in head[1:]:
+        style = ""
+        if line.startswith("regenerations:"):
+            style = "bold red" if rates["spurious"] else "yellow" if rates["regenerated"] else ""
+        parts.append(Text(line, style=style))
+    excluded = excluded_ids(snap)
+    if excluded:
+        parts.append(Text("excluded: " + ", ".join(str(i) for i in sorted(excluded)), style="bold red"))
+    table = Table(box=None, padding=(0, 1), header_style="bold")
+    counters = {label for _, label in COUNTERS}
+    for header in HEADERS:
+        table.add_column(header, justify="left" if header in ("name", "faults") else "right")
+    for row in table_rows(snap):
+        cells = []
+        for header, value in zip(HEADERS, row, strict=True):
+            alarm = (header == "faults" and value != "-") or (header == "spurious" and value not in (0, "?"))
+            warn = header in counters and header != "succ chg" and bool(value)
+            style = "bold red" if alarm else "yellow" if warn else ""
+            cells.append(Text(str(value), style=style))
+        table.add_row(*cells, style="red" if row[0] in excluded else None)
+    parts += [table, Text(""), Text("events:")]
+    for t, text in events[-12:]:
+        style = next((s for key, s in EVENT_STYLES if key in text), "")
+        marker = ">>" if text.startswith("FAULT") else "  "
+        parts.append(Text(f" {marker} {event_stamp(t)}  {text}", style=style))
+    return Group(*parts)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -161,9 +233,18 @@ def run(args: argparse.Namespace) -> int:
     events: list[tuple[float, str]] = []
     previous = None
     refreshes = 0
-    interactive = sys.stdout.isatty() and not args.once and not args.json
-    with tap_session(args) as session:
+    # a terminal gets a view redrawn in place, in colour; a pipe or a file plain snapshots
+    interactive = sys.stdout.isatty() and not args.json
+    live = None
+    with tap_session(args) as session, contextlib.ExitStack() as stack:
         discover(session, ring, timeout=5.0)
+        if interactive:
+            from rich.console import Console
+            from rich.live import Live
+
+            console = Console()
+            if not args.once:
+                live = stack.enter_context(Live(console=console, auto_refresh=False, transient=False))
         try:
             while True:
                 snap = snapshot(session, ring)
@@ -175,9 +256,12 @@ def run(args: argparse.Namespace) -> int:
                         json.dumps({**snap, "events": [e for t, e in events if t == snap["t"]]}, default=str),
                         flush=True,
                     )
+                elif live is not None:
+                    live.update(render_rich(ring, snap, events), refresh=True)
+                elif interactive:
+                    console.print(render_rich(ring, snap, events))
                 else:
-                    text = render(ring, snap, events)
-                    sys.stdout.write(("\x1b[H\x1b[2J" if interactive else "") + text + "\n")
+                    sys.stdout.write(render(ring, snap, events) + "\n")
                     sys.stdout.flush()
                 if args.once or (args.count and refreshes >= args.count):
                     break
