@@ -31,6 +31,7 @@ log = logging.getLogger("tokenring.copro")
 
 SEED, OURS = SEED_METHOD, OUR_METHOD
 POSE_NONE, POSE_DEAD_RECKONING, POSE_EKF = 0, 1, 2
+FLUSHED = object()  # in the vector queue: every vector before it has been delivered
 MIN_DRIVEN_MM = 10  # the seed: vectors only after more than 1 cm driven
 
 
@@ -140,8 +141,8 @@ class Program(UserProgram):
         self.method = int(_os.environ.get("TOKENRING_COPRO_METHOD", OURS))
         self.scanning = False
         self.history = PoseHistory()
-        self.outgoing: queue.Queue[Vector | None] = queue.Queue()
-        self.stats = {"vectors_sent": 0, "vectors_refused": 0, "sweeps": 0, "sweeps_missed": 0}
+        self.outgoing: queue.Queue[Vector | object | None] = queue.Queue()
+        self.stats = {"vectors_sent": 0, "vectors_refused": 0, "sweeps": 0, "sweeps_missed": 0, "flushes_done": 0}
         self.last_sweep: int | None = None
         self.pose_source = POSE_NONE
         self.pose_sigmas: tuple[float, float, float] | None = None
@@ -195,6 +196,7 @@ class Program(UserProgram):
         elif name == "FLUSH":
             self._end_scan()
             self.flush()
+            self.outgoing.put(FLUSHED)  # counted once the vectors queued before it are delivered
         elif name == "ERROR":
             self.stats["vectors_refused"] += 1
             log.warning("map refused a vector: %s", args)
@@ -267,6 +269,7 @@ class Program(UserProgram):
             "right_area": right.area,
             "scanning": int(self.scanning),
             "vectors_sent": self.stats["vectors_sent"] & 0xFFFF,
+            "flushes_done": self.stats["flushes_done"] & 0xFF,
             "pose_source": self.pose_source,
             **wire_sigmas(self.pose_sigmas),
         }
@@ -290,6 +293,10 @@ class Program(UserProgram):
                 continue
             if vector is None:
                 break
+            if vector is FLUSHED:
+                self.stats["flushes_done"] += 1
+                continue
+            assert isinstance(vector, tuple)
             if self.os.deliver("map", "VECTOR", timeout=5.0, **vector_to_wire(*vector)):
                 self.stats["vectors_sent"] += 1
             else:

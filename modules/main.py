@@ -304,7 +304,7 @@ class Program(UserProgram):
 
     def _get_map(self, timeout: float) -> list[list[int]]:
         """GET_MAP to the map module; the answer arrives through this loop's inbox."""
-        self._send("copro", "FLUSH")  # vectors copro still holds back belong in the answer
+        self._flush_copro(timeout)
         self.collector.begin()
         self._send("map", "GET_MAP")
         deadline = time.monotonic() + timeout
@@ -319,6 +319,19 @@ class Program(UserProgram):
                 raise UsageError(f"the map module did not answer GET_MAP within {timeout:.0f} s")
         vectors = self.collector.wait(0) or []
         return [list(v) for v in vectors]
+
+    def _flush_copro(self, timeout: float) -> None:
+        """FLUSH copro and wait until the vectors it still held are in the map's hands (its
+        ``flushes_done`` moves on): a GET_MAP sent at once would overtake them."""
+        before = self.copro.read()["flushes_done"]
+        self._send("copro", "FLUSH")
+        deadline = time.monotonic() + timeout
+        while self.copro.read()["flushes_done"] == before:
+            if time.monotonic() > deadline or self.os.stopping:
+                log.warning("copro did not report its flush within %.0f s", timeout)
+                return
+            self.os.wait_visit(0.2)
+            self._take_commands()
 
     # -- outputs ------------------------------------------------------------------------------------
     def state(self) -> dict[str, Any]:
