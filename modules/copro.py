@@ -142,7 +142,13 @@ class Program(UserProgram):
         self.scanning = False
         self.history = PoseHistory()
         self.outgoing: queue.Queue[Vector | object | None] = queue.Queue()
-        self.stats = {"vectors_sent": 0, "vectors_refused": 0, "sweeps": 0, "sweeps_missed": 0, "flushes_done": 0}
+        self.stats = {
+            "vectors_sent": 0,
+            "vectors_refused": 0,
+            "sweeps": 0,
+            "sweeps_missed": 0,
+            "flushes_done": 0,
+        }
         self.last_sweep: int | None = None
         self.pose_source = POSE_NONE
         self.pose_sigmas: tuple[float, float, float] | None = None
