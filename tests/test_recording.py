@@ -122,6 +122,20 @@ def test_up_record_holds_the_run_and_play_gives_sniff_the_same_frames(procs, rin
     for node in NODES:
         assert counts.get(f"/channel/{node}.data", 0) >= 1, node
     assert counts["/ring/roundtrip"] > 10 and counts["/ring/nodes"] >= 5
+    # /ring/nodes: the recorder, a service up before any node, reaches every node once they
+    # are up: while frames flowed, its polls name all eight (each under its own ID and name,
+    # its faults listed too) and main's visits advance from one poll to a later one
+    ids = {str(10 * (i + 1)): name for i, name in enumerate(NODES)}
+    frame_times = [t for t, _ in messages(recording, "/ring/frame")]
+    polled = [d for t, d in messages(recording, "/ring/nodes") if frame_times[0] <= t <= frame_times[-1]]
+    whole = [d for d in polled if set(d["nodes"]) == set(ids)]
+    assert len(whole) >= 10 and len(whole) >= len(polled) // 2, [sorted(d["nodes"]) for d in polled]
+    for poll in whole:
+        assert {i: (s["id"], s["name"]) for i, s in poll["nodes"].items()} == {
+            i: (int(i), name) for i, name in ids.items()
+        }
+    assert any(set(d["faults"]) == set(ids) for d in whole)
+    assert whole[-1]["nodes"]["10"]["stats"]["visits"] > whole[0]["nodes"]["10"]["stats"]["visits"]
     assert counts["/robot/pose/true"] > 10 and counts["/robot/pose/odometry"] > 10, counts
     assert channels["/robot/pose/true"]["schema"] == "foxglove.PoseInFrame"
     pose = messages(recording, "/robot/pose/true")[-1][1]
