@@ -277,6 +277,16 @@ class McapRecorder:
             os.replace(self.part, self.path)
         return self.path
 
+    def discard(self) -> None:
+        """Close without a recording: ``FILE.part`` is removed, ``FILE`` left as it was."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            self._file.close()
+            with contextlib.suppress(FileNotFoundError):
+                self.part.unlink()
+
     def __enter__(self) -> McapRecorder:
         return self
 

@@ -89,10 +89,12 @@ def run(args: argparse.Namespace) -> int:
     key = keys.token(ring, args.to if args.to is not None else "*")
     seen = 0
     last_frame: dict[int | None, bytes] = {}
+    ended = False
     started = time.monotonic()
     deadline = None if args.duration is None else started + args.duration
-    capture = open_capture(args, protocol, ring)
     with tap_session(args) as session:
+        # opened once the session is: a refused endpoint leaves no FILE.part behind
+        capture = open_capture(args, protocol, ring)
         subscriber = session.declare_subscriber(key, zenoh.handlers.FifoChannel(8192))
         try:
             while True:
@@ -125,11 +127,11 @@ def run(args: argparse.Namespace) -> int:
                 if args.count is not None and seen >= args.count:
                     break
             sys.stdout.flush()
+            ended = True
         finally:
             subscriber.undeclare()
             if capture is not None:
-                path = capture.recorder.close()
-                print(f"{path}: {capture.recorder.messages} messages captured", file=sys.stderr)
+                capture.finish(seen, ended)
     return 0
 
 
@@ -145,6 +147,18 @@ class Capture:
         for message in self.source.translate(raw.key, raw.payload, raw.time_ns):
             self.recorder.on_message(message)
         self.recorder.tick()
+
+    def finish(self, frames: int, ended: bool) -> None:
+        """Finalise the file (``ended``: the run was not cut short by an error or Ctrl-C). One
+        without a frame is not kept: a failed or empty run must not leave a FILE that a retry
+        without ``--force`` is refused over."""
+        if frames:
+            path = self.recorder.close()
+            print(f"{path}: {frames} frames, {self.recorder.messages} messages captured", file=sys.stderr)
+            return
+        self.recorder.discard()
+        if ended:
+            print(f"{self.recorder.path}: no frame came; nothing written", file=sys.stderr)
 
 
 def open_capture(args: argparse.Namespace, protocol: Protocol, ring: str) -> Capture | None:

@@ -1,0 +1,212 @@
+"""``sniff --write`` against a real ring.
+
+One capture per module: a three-node ring, ``sniff --json --write F --duration S``. The judges
+share no code with what they judge: the file is read with the ``mcap`` package's reader, frames are
+checked with protocol.yaml read as plain YAML and a bitwise CRC-16/ARC of the test's own.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass
+from itertools import pairwise
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+from conftest import Processes, run_tokenring
+from mcap.reader import make_reader
+from ringutil import launcher_pids, tap, wait_ring, wait_until
+
+from tokenring.cliutil import free_port
+from tokenring.protocol import default_protocol_path
+
+PROTOCOL_TEXT = Path(default_protocol_path()).read_text()
+PROTOCOL_YAML = yaml.safe_load(PROTOCOL_TEXT)
+TOKEN_SIZE = PROTOCOL_YAML["token"]["size"]
+HEADER = {name: spec["offset"] for name, spec in PROTOCOL_YAML["token"]["header"].items()}
+NODES = {"main": 10, "motor": 20, "sonar": 30}
+CAPTURE_S = 4.0  # seconds of a three-node ring (some hundreds of frames a second)
+
+
+def crc16_arc(data: bytes) -> int:
+    crc = 0
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
+    return crc
+
+
+@dataclass
+class Capture:
+    ring: str
+    path: Path
+    live: list[dict[str, Any]]  # what sniff --json printed while it wrote the file
+    stderr: str
+
+
+@dataclass
+class Frame:
+    time_ns: int
+    key: str
+    payload: bytes
+
+
+def without_time(line: str) -> dict[str, Any]:
+    record = json.loads(line)
+    record.pop("t")
+    return record
+
+
+def wait_port(port: int, timeout: float) -> None:
+    def accepting() -> bool:
+        with socket.socket() as probe:
+            probe.settimeout(1.0)
+            return probe.connect_ex(("127.0.0.1", port)) == 0
+
+    wait_until(accepting, timeout, f"a listener on port {port}", interval=0.1)
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Capture]:
+    """A three-node ring captured by ``sniff --json --write F --force --duration S`` over an old F."""
+    folder = tmp_path_factory.mktemp("capture")
+    ring = f"t{uuid.uuid4().hex[:10]}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    path = folder / "frames.mcap"
+    path.write_text("an older capture, replaced with --force\n")
+    tracker = Processes()
+    try:
+        launcher = tracker.tokenring(
+            "up", "--ring", ring, "--listen", endpoint, "--nodes", ",".join(NODES), "--no-world",
+            "--no-programs", "--duration", "150",
+        )  # fmt: skip
+        with tap(endpoint) as session:
+            wait_ring(session, ring, list(NODES.values()), timeout=120)
+            tracker.watch(launcher_pids(session, ring))
+        sniff = tracker.tokenring(
+            "sniff", "--ring", ring, "-e", endpoint, "--json", "--write", str(path), "--force",
+            "--duration", str(CAPTURE_S), stderr=subprocess.PIPE,
+        )  # fmt: skip
+        out, err = sniff.communicate(timeout=120)
+        assert sniff.returncode == 0, err
+        launcher.terminate()
+        launcher.communicate(timeout=60)
+        assert launcher.returncode == 0
+        yield Capture(ring, path, [without_time(line) for line in out.splitlines()], err)
+    finally:
+        leaked = tracker.cleanup()
+    assert not leaked, leaked
+
+
+def recorded_frames(path: Path) -> list[Frame]:
+    """The raw frames of the file, in log-time order, as the mcap package reads them."""
+    with open(path, "rb") as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        assert summary is not None
+        raw = [c.topic for c in summary.channels.values() if c.message_encoding == "tokenring.zenoh"]
+        return [
+            Frame(m.log_time, channel.topic, bytes(m.data))
+            for _, channel, m in reader.iter_messages(topics=raw)
+        ]
+
+
+def recording_start(path: Path) -> int:
+    with open(path, "rb") as stream:
+        summary = make_reader(stream).get_summary()
+        assert summary is not None and summary.statistics is not None
+        return summary.statistics.message_start_time
+
+
+# --------------------------------------------------------------------------------------------
+# sniff --write
+
+
+def test_sniff_write_holds_exactly_the_frames_sniff_printed(capture: Capture) -> None:
+    live = capture.live
+    assert len(live) > 100 * CAPTURE_S, len(live)
+    assert f"{capture.path}:" in capture.stderr and "captured" in capture.stderr
+
+    # the mcap package's reader: the raw frames, whole and sealed, on the ring's token keys
+    frames = recorded_frames(capture.path)
+    assert len(frames) == len(live)
+    for frame, printed in zip(frames, live, strict=True):
+        ring, kind, did = frame.key.split("/")[1:]
+        assert (ring, kind) == (capture.ring, "token") and int(did) in NODES.values(), frame.key
+        assert len(frame.payload) == TOKEN_SIZE + 2
+        crc = crc16_arc(frame.payload[:TOKEN_SIZE])
+        assert frame.payload[TOKEN_SIZE:] == bytes([crc & 0xFF, crc >> 8]), frame.key
+        assert frame.payload[HEADER["did"]] == int(did)
+        # the frame sniff printed at this point is the frame the file holds here
+        header = {name: frame.payload[offset] for name, offset in HEADER.items()}
+        assert printed["key_did"] == int(did) and printed["crc"] == crc and printed["crc_ok"]
+        assert {name: printed["header"][name] for name in HEADER} == header
+    # the round counter advances (main adds one per round): a step of 0 or 1 from one frame to
+    # the next, leaving aside a pass sent again (the same bytes to the same node: a late
+    # acknowledgement) and a new epoch (a regenerated token)
+    fresh, last_on_key = [], {}
+    for frame in frames:
+        if last_on_key.get(frame.key) != frame.payload:
+            fresh.append(frame.payload)
+        last_on_key[frame.key] = frame.payload
+    steps = [
+        (b[HEADER["counter"]] - a[HEADER["counter"]]) % 256
+        for a, b in pairwise(fresh)
+        if a[HEADER["epoch"]] == b[HEADER["epoch"]]
+    ]
+    assert set(steps) <= {0, 1} and steps.count(1) >= 50, sorted(set(steps))
+    assert {int(f.key.rsplit("/", 1)[1]) for f in frames} == set(NODES.values())
+
+    # the decoded topics and what makes the file stand alone
+    with open(capture.path, "rb") as stream:
+        reader = make_reader(stream)
+        headers = [json.loads(m.data) for _, _, m in reader.iter_messages(topics=["/ring/frame"])]
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        attachments = {a.name: bytes(a.data) for a in reader.iter_attachments()}
+    assert [(h["did"], h["counter"]) for h in headers] == [
+        (f.payload[HEADER["did"]], f.payload[HEADER["counter"]]) for f in frames
+    ]
+    assert metadata["tokenring"]["ring"] == capture.ring
+    assert attachments["protocol.yaml"].decode() == PROTOCOL_TEXT
+
+    # sniff --read decodes the file into exactly what sniff printed live
+    offline = run_tokenring("sniff", "--read", str(capture.path), "--json", timeout=120)
+    assert offline.returncode == 0, offline.stderr
+    assert [without_time(line) for line in offline.stdout.splitlines()] == live
+
+    # the file exists now: without --force it is kept, refused in one line, exit 2
+    before = capture.path.read_bytes()
+    again = run_tokenring("sniff", "--write", str(capture.path), "--ring", capture.ring, "-n", "1")
+    assert again.returncode == 2, (again.returncode, again.stderr)
+    lines = again.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--write" in lines[0] and "exists" in lines[0], again.stderr
+    assert "Traceback" not in again.stderr and capture.path.read_bytes() == before
+
+
+def test_a_capture_that_got_no_frame_leaves_no_file(tmp_path: Path) -> None:
+    """A refused endpoint, or a ring that sends nothing: one error line, and neither FILE nor
+    FILE.part (a retry without --force must not be refused over an empty capture); an older
+    FILE given with --force is left as it was."""
+    target = tmp_path / "none.mcap"
+    bad = run_tokenring("sniff", "--write", str(target), "-e", "bogus:1")
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1, bad.stderr
+    assert "bogus:1" in bad.stderr and list(tmp_path.iterdir()) == []
+    nobody = f"tcp/127.0.0.1:{free_port()}"
+    silent = run_tokenring("sniff", "--write", str(target), "--ring", "nobody", "-e", nobody, "--wait", "1")
+    lines = silent.stderr.strip().splitlines()
+    assert silent.returncode == 1 and len(lines) == 1 and "no frame" in lines[0], silent.stderr
+    assert "Traceback" not in silent.stderr and list(tmp_path.iterdir()) == []
+    older = tmp_path / "older.mcap"
+    older.write_text("an older capture\n")
+    forced = run_tokenring(
+        "sniff", "--write", str(older), "--force", "--ring", "nobody", "-e", nobody, "--wait", "1"
+    )
+    assert forced.returncode == 1 and older.read_text() == "an older capture\n", forced.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["older.mcap"]
