@@ -1,15 +1,20 @@
-"""``sniff --write`` against a real ring.
+"""``sniff --write`` against a real ring, and ``play``'s ``--start``, ``--topics``, ``--ring``
+and ``--loop`` on that capture.
 
 One capture per module: a three-node ring, ``sniff --json --write F --duration S``. The judges
 share no code with what they judge: the file is read with the ``mcap`` package's reader, frames are
-checked with protocol.yaml read as plain YAML and a bitwise CRC-16/ARC of the test's own.
+checked with protocol.yaml read as plain YAML and a bitwise CRC-16/ARC of the test's own, and
+what ``play`` puts on the wire is what a plain Zenoh subscriber (``tokenring/**``) on the other
+side receives, compared with the frames the ``mcap`` reader lists.
 """
 
 from __future__ import annotations
 
 import json
+import signal
 import socket
 import subprocess
+import time
 import uuid
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -129,6 +134,7 @@ def recording_start(path: Path) -> int:
 # sniff --write
 
 
+@pytest.mark.timeout(300)  # the module's ring and capture start in the first test
 def test_sniff_write_holds_exactly_the_frames_sniff_printed(capture: Capture) -> None:
     live = capture.live
     assert len(live) > 100 * CAPTURE_S, len(live)
@@ -210,3 +216,93 @@ def test_a_capture_that_got_no_frame_leaves_no_file(tmp_path: Path) -> None:
     )
     assert forced.returncode == 1 and older.read_text() == "an older capture\n", forced.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["older.mcap"]
+
+
+# --------------------------------------------------------------------------------------------
+# play's options, judged by a plain subscriber on the other side
+
+
+def play_watched(
+    path: Path, *options: str, expect: int, interrupt: bool = False
+) -> tuple[list[tuple[str, bytes]], dict[str, Any], int]:
+    """Play ``path`` into a fresh endpoint with ``options``; a subscriber to ``tokenring/**``
+    there collects (key, payload) until ``expect`` samples came (then play is interrupted with
+    SIGINT if ``interrupt``, else it runs to its end). Returns the samples, play's JSON summary
+    and its exit code."""
+    endpoint_port = free_port()
+    tracker = Processes()
+    got: list[tuple[str, bytes]] = []
+    try:
+        player = tracker.tokenring(
+            "play", str(path), "--listen", f"tcp/127.0.0.1:{endpoint_port}", "--wait", "60",
+            "--json", "--quiet", *options, stderr=subprocess.PIPE,
+        )  # fmt: skip
+        wait_port(endpoint_port, 60)
+        with tap(f"tcp/127.0.0.1:{endpoint_port}") as session:
+            subscriber = session.declare_subscriber(
+                "tokenring/**", lambda s: got.append((str(s.key_expr), s.payload.to_bytes()))
+            )
+            wait_until(lambda: len(got) >= expect or player.poll() not in (None, 0), 120, f"{expect} samples")
+            if interrupt:
+                player.send_signal(signal.SIGINT)
+            out, err = player.communicate(timeout=120)
+            if not interrupt:
+                time.sleep(0.5)  # a sample on its way in after play's end would be one too many
+            subscriber.undeclare()
+    finally:
+        leaked = tracker.cleanup()
+    assert not leaked, leaked
+    assert out.strip(), err
+    return list(got), json.loads(out.strip().splitlines()[-1]), player.returncode
+
+
+@pytest.mark.timeout(300)
+def test_play_start_topics_ring_and_loop_do_what_their_help_says(capture: Capture) -> None:
+    frames = recorded_frames(capture.path)
+    start = recording_start(capture.path)
+    span_s = (frames[-1].time_ns - start) / 1e9
+    assert span_s > 2.0, f"the capture lasts only {span_s:.2f} s"
+
+    # --start S: the frames recorded from S seconds in, and only those
+    skip_s = round(span_s / 2, 1)
+    wanted = [(f.key, f.payload) for f in frames if f.time_ns >= start + int(skip_s * 1e9)]
+    got, summary, code = play_watched(capture.path, "--start", str(skip_s), "--rate", "4", expect=len(wanted))
+    assert code == 0 and summary["frames"] == len(wanted)
+    assert got == wanted, (len(got), len(wanted))
+    assert 0 < len(got) < len(frames) - 100  # some seconds' frames left out at the start
+
+    # --topics token/ID: only the frames passed to that node
+    target = f"tokenring/{capture.ring}/token/{NODES['motor']}"
+    wanted = [(f.key, f.payload) for f in frames if f.key == target]
+    got, _, code = play_watched(
+        capture.path, "--topics", f"token/{NODES['motor']}", "--rate", "8", expect=len(wanted)
+    )
+    assert code == 0 and got == wanted and 0 < len(got) < len(frames)
+    assert {payload[HEADER["did"]] for _, payload in got} == {NODES["motor"]}
+
+    # --ring NAME: the same frames on the other ring's keys, none on the recorded ring's
+    other = f"{capture.ring}x"
+    wanted = [
+        (f.key.replace(f"tokenring/{capture.ring}/", f"tokenring/{other}/"), f.payload)
+        for f in frames
+        if f.time_ns <= start + 1_000_000_000
+    ]
+    got, summary, code = play_watched(capture.path, "--ring", other, "--duration", "1", expect=len(wanted))
+    assert code == 0 and summary["ring"] == other and summary["recorded_ring"] == capture.ring
+    assert got == wanted and all(key.startswith(f"tokenring/{other}/token/") for key, _ in got)
+
+    # --loop: the same stretch again and again until Ctrl-C
+    stretch = [(f.key, f.payload) for f in frames if f.time_ns <= start + 500_000_000]
+    got, summary, code = play_watched(
+        capture.path,
+        "--duration",
+        "0.5",
+        "--loop",
+        "--rate",
+        "2",
+        expect=2 * len(stretch) + 1,
+        interrupt=True,
+    )
+    assert code == 130 and summary["loops"] >= 2, summary
+    assert got[: len(stretch)] == stretch and got[len(stretch) : 2 * len(stretch)] == stretch
+    assert got[2 * len(stretch)] == stretch[0]
