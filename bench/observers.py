@@ -1,0 +1,353 @@
+"""What watching costs the ring: the round trip with the web view (a browser on it), an MCAP
+recording and the Foxglove bridge (a client subscribed to every topic) all running, against
+the same ring with none of them, in alternating windows of one run.
+
+One ``tokenring up`` (world and the eight programs, robot idle at its menu) runs throughout;
+the round master (main) times its rounds. Each window waits for ``--rounds`` new rounds and
+takes main's last ``--rounds`` round times; windows alternate ``none`` / ``all`` ``--repeat``
+times, so drift of the machine falls on both. The observers start before an ``all`` window
+(and are proved live: the page shows a moving token counter, the bridge's client has received
+messages, the recording grows) and stop, by PID, after it.
+
+    python -m bench.observers --repeat 3 --rounds 1500 [--json F] [--speed 1]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tokenring import keys
+from tokenring.cliutil import free_port, query
+from tokenring.zconfig import make_config, open_session
+
+REPO = Path(__file__).resolve().parent.parent
+MASTER = 10  # main: the round master times its rounds
+START_TIMEOUT_S = 120.0
+CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+OBSERVERS = ("web", "record", "foxglove")
+WINDOW_TIMEOUT_S = 300.0
+
+
+def tokenring(*args: str) -> list[str]:
+    return [sys.executable, "-m", "tokenring", *args]
+
+
+def spawn(argv: list[str], log: Path) -> subprocess.Popen:
+    """A child in its own process group, its output to ``log`` (stopped by PID in :func:`stop`)."""
+    return subprocess.Popen(
+        argv, stdout=log.open("w"), stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True
+    )
+
+
+def stop(process: subprocess.Popen, timeout: float = 10.0) -> None:
+    if process.poll() is not None:
+        return
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(process.pid, signal.SIGINT)
+    try:
+        process.wait(timeout)
+    except subprocess.TimeoutExpired:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(process.pid, signal.SIGKILL)
+        process.wait(5.0)
+
+
+def tree_cpu_s(root: int) -> float:
+    """CPU seconds (user + system) of ``root`` and all its descendants alive now."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError, IndexError, ValueError):
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+                children.setdefault(int(fields[1]), []).append(int(entry.name))
+    total, todo = 0.0, [root]
+    while todo:
+        pid = todo.pop()
+        todo += children.get(pid, [])
+        with contextlib.suppress(OSError, IndexError, ValueError):
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+            total += (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
+    return total
+
+
+def visits(session: Any, ring: str) -> int:
+    replies = query(session, keys.control(ring, MASTER, "visits"), timeout=1.0)
+    if replies and replies[0][1].get("ok"):
+        return int(replies[0][1]["result"])
+    return -1
+
+
+def measure_window(session: Any, ring: str, rounds: int) -> list[float]:
+    """Main's next ``rounds`` round times (seconds)."""
+    start = visits(session, ring)
+    deadline = time.monotonic() + WINDOW_TIMEOUT_S
+    while visits(session, ring) < start + rounds:
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"main made fewer than {rounds} rounds in {WINDOW_TIMEOUT_S:.0f} s")
+        time.sleep(0.25)
+    replies = query(session, keys.control(ring, MASTER, "rounds"), timeout=2.0)
+    values = list(replies[0][1]["result"])
+    return values[-rounds:]
+
+
+class BridgeClient:
+    """A Foxglove WebSocket client subscribed to every advertised channel, counting messages."""
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+        self.messages = 0
+        self.error: str | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        from websockets.sync.client import connect
+
+        try:
+            deadline = time.monotonic() + 30.0
+            while True:
+                try:
+                    ws = connect(self.url, subprotocols=["foxglove.sdk.v1", "foxglove.websocket.v1"])  # type: ignore[list-item]
+                    break
+                except OSError:
+                    if time.monotonic() > deadline:
+                        raise
+                    time.sleep(0.2)
+            with ws:
+                next_id = 1
+                while not self._stop.is_set():
+                    try:
+                        frame = ws.recv(timeout=0.2)
+                    except TimeoutError:
+                        continue
+                    if isinstance(frame, str):
+                        message = json.loads(frame)
+                        if message.get("op") == "advertise":
+                            subs = []
+                            for channel in message["channels"]:
+                                subs.append({"id": next_id, "channelId": channel["id"]})
+                                next_id += 1
+                            ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+                    elif frame[:1] == b"\x01":
+                        self.messages += 1
+        except Exception as exc:
+            self.error = f"{type(exc).__name__}: {exc}"
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(5.0)
+
+
+class Browser:
+    """Headless Chromium (the OS package) with the web view open."""
+
+    def __init__(self, url: str) -> None:
+        from selenium import webdriver
+        from selenium.webdriver.chrome.service import Service
+
+        options = webdriver.ChromeOptions()
+        options.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
+        for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1280,900"):
+            options.add_argument(flag)
+        driver_path = shutil.which("chromedriver") or "/usr/bin/chromedriver"
+        self.driver = webdriver.Chrome(service=Service(driver_path), options=options)
+        deadline = time.monotonic() + 30.0
+        while True:
+            try:
+                self.driver.get(url)
+                break
+            except Exception:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.5)
+
+    def close(self) -> None:
+        self.driver.quit()
+
+
+@contextlib.contextmanager
+def observers(ring: str, endpoint: str, folder: Path, which: tuple[str, ...]) -> Iterator[dict[str, Any]]:
+    """The web view with a browser on it, a recording, the bridge with a client (those in
+    ``which``): all live, their process trees' CPU seconds measured by ``cpu()``."""
+    web_port, bridge_port = free_port(), free_port()
+    ring_opts = ["--ring", ring, "-e", endpoint]
+    recording = folder / "observers.mcap"
+    commands = {
+        "web": tokenring("web", "--port", str(web_port), *ring_opts),
+        "record": tokenring("record", str(recording), "--force", "--quiet", *ring_opts),
+        "foxglove": tokenring("foxglove", "--port", str(bridge_port), *ring_opts),
+    }
+    children = {name: spawn(commands[name], folder / f"{name}.log") for name in which}
+    browser: Browser | None = None
+    client: BridgeClient | None = None
+    try:
+        if "web" in which:
+            browser = Browser(f"http://127.0.0.1:{web_port}/")
+        if "foxglove" in which:
+            client = BridgeClient(f"ws://127.0.0.1:{bridge_port}")
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while client is not None and client.messages < 100:
+            if client.error or time.monotonic() > deadline:
+                raise RuntimeError(f"the bridge's client got {client.messages} messages ({client.error})")
+            time.sleep(0.2)
+        dead = [name for name, c in children.items() if c.poll() is not None]
+        if dead:
+            raise RuntimeError(f"observer {dead[0]} exited: {(folder / f'{dead[0]}.log').read_text()[-500:]}")
+        roots = [c.pid for c in children.values()]
+        if browser is not None:
+            roots.append(browser.driver.service.process.pid)
+
+        def cpu() -> float:
+            return sum(tree_cpu_s(pid) for pid in roots)
+
+        yield {"bridge_messages": lambda: client.messages if client else 0, "cpu": cpu}
+    finally:
+        if client is not None:
+            client.close()
+        if browser is not None:
+            browser.close()
+        for child in children.values():
+            stop(child)
+
+
+def run(
+    repeat: int, rounds: int, speed: str, which: tuple[str, ...] = OBSERVERS, quiet: bool = False
+) -> dict[str, Any]:
+    port = free_port()
+    ring = f"obs{os.getpid()}"
+    endpoint = f"tcp/127.0.0.1:{port}"
+    windows: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory(prefix="tokenring-observers-") as tmp:
+        folder = Path(tmp)
+        up = spawn(
+            tokenring(
+                "up", "--ring", ring, "--listen", endpoint, "--speed", speed, "--store", str(folder / "store")
+            ),
+            folder / "up.log",
+        )
+        try:
+            with open_session(make_config(mode="peer", connect=[endpoint])) as session:
+                deadline = time.monotonic() + START_TIMEOUT_S
+                while visits(session, ring) < 2000:  # formed, booted, programs settled
+                    if up.poll() is not None or time.monotonic() > deadline:
+                        raise RuntimeError(
+                            f"the ring did not start: {(folder / 'up.log').read_text()[-800:]}"
+                        )
+                    time.sleep(0.5)
+                for i in range(repeat):
+                    for condition in ("none", "all"):
+                        if not quiet:
+                            print(f"  window {i + 1}/{repeat}: {condition}", file=sys.stderr, flush=True)
+                        if condition == "none":
+                            values = measure_window(session, ring, rounds)
+                            extra: dict[str, Any] = {}
+                        else:
+                            with observers(ring, endpoint, folder, which) as live:
+                                cpu0, t0 = live["cpu"](), time.monotonic()
+                                values = measure_window(session, ring, rounds)
+                                extra = {
+                                    "bridge_messages": live["bridge_messages"](),
+                                    "observer_cpu_pct": 100
+                                    * (live["cpu"]() - cpu0)
+                                    / (time.monotonic() - t0),
+                                }
+                        ms = np.asarray(values) * 1e3
+                        windows.append(
+                            {
+                                "condition": condition,
+                                "median_ms": float(np.median(ms)),
+                                "p99_ms": float(np.percentile(ms, 99)),
+                                "n": len(ms),
+                                **extra,
+                            }
+                        )
+        finally:
+            stop(up, 30.0)
+    return summarize(windows, repeat, rounds, speed, which)
+
+
+def summarize(
+    windows: list[dict[str, Any]], repeat: int, rounds: int, speed: str, which: tuple[str, ...]
+) -> dict[str, Any]:
+    out: dict[str, Any] = {"repeat": repeat, "rounds": rounds, "speed": speed, "observers": list(which)}
+    out["windows"] = windows
+    out["observer_cpu_pct"] = float(
+        np.median([w["observer_cpu_pct"] for w in windows if w["condition"] == "all"])
+    )
+    for condition in ("none", "all"):
+        mine = [w for w in windows if w["condition"] == condition]
+        out[condition] = {
+            "median_ms": float(np.median([w["median_ms"] for w in mine])),
+            "p99_ms": float(np.median([w["p99_ms"] for w in mine])),
+        }
+    out["ratio_median"] = out["all"]["median_ms"] / out["none"]["median_ms"]
+    out["ratio_p99"] = out["all"]["p99_ms"] / out["none"]["p99_ms"]
+    return out
+
+
+def format_summary(report: dict[str, Any]) -> str:
+    lines = [
+        f"round trip of the robot ring (--speed {report['speed']}), {report['repeat']} x {report['rounds']} rounds "
+        "per condition, windows alternating",
+        f"{'condition':<44} {'median ms':>10} {'p99 ms':>10}",
+    ]
+    names = {"web": "web view + browser", "record": "MCAP recording", "foxglove": "bridge + client"}
+    labels = {"none": "nobody watching (baseline)", "all": ", ".join(names[w] for w in report["observers"])}
+    for condition in ("none", "all"):
+        c = report[condition]
+        lines.append(f"{labels[condition]:<44} {c['median_ms']:>10.3f} {c['p99_ms']:>10.3f}")
+    lines.append(
+        f"ratio watched / baseline: median {report['ratio_median']:.3f}x, p99 {report['ratio_p99']:.3f}x"
+    )
+    lines.append(
+        f"the observers' processes (with the browser) used {report['observer_cpu_pct']:.0f} % of a core"
+    )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m bench.observers",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--repeat", type=int, default=3, help="window pairs (default %(default)s)")
+    parser.add_argument("--rounds", type=int, default=1000, help="rounds per window (default %(default)s)")
+    parser.add_argument("--speed", default="1", help="the world's speed-up (default %(default)s)")
+    parser.add_argument("--json", metavar="FILE", help="write the summary and every window as JSON")
+    parser.add_argument(
+        "--observers",
+        default=",".join(OBSERVERS),
+        help="which run in the watched windows (default %(default)s)",
+    )
+    parser.add_argument("--quiet", action="store_true")
+    args = parser.parse_args(argv)
+    which = tuple(w.strip() for w in args.observers.split(",") if w.strip())
+    unknown = set(which) - set(OBSERVERS)
+    if unknown or not which:
+        parser.error(f"--observers: choose from {', '.join(OBSERVERS)}")
+    report = run(args.repeat, min(args.rounds, 1024), args.speed, which, args.quiet)
+    print(format_summary(report))
+    if args.json:
+        Path(args.json).write_text(json.dumps(report, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
