@@ -223,14 +223,14 @@ def free_port() -> int:
 
 
 def print_json(value: Any, stream: Any = None) -> None:
-    (stream or sys.stdout).write(json.dumps(value, default=_default) + "\n")
+    (stream or sys.stdout).write(json.dumps(value, default=json_default) + "\n")
 
 
 def write_json(target: str, value: Any) -> None:
     """A ``--json TARGET`` report: ``-`` prints it, anything else is the file to write."""
     from tokenring.inputfile import write_atomically
 
-    text = json.dumps(value, indent=2, default=_default) + "\n"
+    text = json.dumps(value, indent=2, default=json_default) + "\n"
     if target == "-":
         sys.stdout.write(text)
     else:
@@ -256,7 +256,8 @@ def with_examples(examples: str) -> dict[str, Any]:
     return {"epilog": examples, "formatter_class": argparse.RawDescriptionHelpFormatter}
 
 
-def _default(value: Any) -> Any:
+def json_default(value: Any) -> Any:
+    """What ``json.dumps`` cannot write itself: numpy values and arrays, bytes (hex), sets."""
     if hasattr(value, "tolist"):
         return value.tolist()
     if isinstance(value, bytes):

@@ -29,6 +29,7 @@ from typing import Any
 import foxglove
 from foxglove.websocket import ChannelView, Client, ServerListener
 
+from tokenring.cliutil import json_default
 from tokenring.errors import UsageError
 from tokenring.feed import Message, Topic
 
@@ -37,20 +38,9 @@ log = logging.getLogger("tokenring.foxglove")
 DEFAULT_PORT = 8765
 
 
-def _jsonable(value: Any) -> Any:
-    """What ``json.dumps`` cannot write itself (numpy numbers and arrays, bytes, sets)."""
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    if isinstance(value, bytes):
-        return value.hex()
-    if isinstance(value, set | tuple):
-        return list(value)
-    return str(value)
-
-
 def encode(data: dict[str, Any]) -> bytes:
     """A message as the JSON bytes a Foxglove JSON channel carries."""
-    return json.dumps(data, default=_jsonable, separators=(",", ":")).encode("utf-8")
+    return json.dumps(data, default=json_default, separators=(",", ":")).encode("utf-8")
 
 
 class FoxgloveBridge:

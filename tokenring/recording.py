@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from tokenring import keys
+from tokenring.cliutil import json_default
 from tokenring.errors import UsageError
 from tokenring.feed import Message, RawSample, Topic
 
@@ -106,19 +107,9 @@ class Selection:
 # writing
 
 
-def _json_default(value: Any) -> Any:
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    if isinstance(value, bytes):
-        return value.hex()
-    if isinstance(value, set | tuple):
-        return list(value)
-    return str(value)
-
-
 def encode_json(data: Any) -> bytes:
     """A message's JSON bytes (compact; numpy values and bytes made plain)."""
-    return json.dumps(data, separators=(",", ":"), default=_json_default).encode()
+    return json.dumps(data, separators=(",", ":"), default=json_default).encode()
 
 
 class McapRecorder:

@@ -25,6 +25,7 @@ from typing import Any
 
 from aiohttp import WSMsgType, web
 
+from tokenring.cliutil import json_default
 from tokenring.errors import TokenRingError, UsageError
 from tokenring.extensions import WebAction, WebPanel
 from tokenring.faults import KINDS, NEEDS_VALUE, FaultClient, parse_partition, validate
@@ -41,22 +42,12 @@ UPDATES_PER_S = 10.0
 PAGE_KINDS = ("delay", "drop", "corrupt", "duplicate", "lose", "hang", "resume", "crash", "clear")
 
 
-def _json_default(value: Any) -> Any:
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    if isinstance(value, bytes):
-        return value.hex()
-    if isinstance(value, set | tuple):
-        return list(value)
-    return str(value)
-
-
 def dumps(value: Any) -> str:
     """JSON for the browser (numpy values, bytes and sets included; NaN and infinities null)."""
     try:
-        return json.dumps(value, default=_json_default, allow_nan=False)
+        return json.dumps(value, default=json_default, allow_nan=False)
     except ValueError:
-        return json.dumps(_scrub(value), default=_json_default, allow_nan=False)
+        return json.dumps(_scrub(value), default=json_default, allow_nan=False)
 
 
 def _scrub(value: Any) -> Any:
