@@ -269,6 +269,9 @@ class FaultInjector:
                     target=self._changed, args=(self.listing(),), name="fault-notice", daemon=True
                 ).start()
             self.counts["lost"] += 1
+            # the token is gone, not late: an acknowledged pass must not come back as the
+            # watchdog's retry (it did on a loaded machine, so no node ever regenerated)
+            self.os._ack_pending = False
             return True
         corrupt = active.get("corrupt")
         if corrupt and self.rng.random() < corrupt["p"]:
