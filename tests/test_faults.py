@@ -134,7 +134,7 @@ class Ring:
         pids = launcher_pids(self.session, self.name)
         self.session.close()
         self.launcher.send_signal(signal.SIGTERM)
-        self.launcher.wait(10)
+        self.launcher.wait(60)  # a hang guard: the launcher may take 1.5 s + 10 s to reap a stubborn node
         self.launcher_output = self.launcher.stdout.read() if self.launcher.stdout else ""
         self.procs.watch(pids)
 

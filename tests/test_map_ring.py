@@ -58,4 +58,4 @@ def test_get_map_round_trip_through_main_and_the_lcd_over_zenoh(procs, ring_name
         state = link.request("state")
         assert json.loads(json.dumps(state))["navigator"] == "IDLE"
     launcher.terminate()
-    assert launcher.wait(15) == 0
+    assert launcher.wait(60) == 0

@@ -52,7 +52,7 @@ def test_drive_moves_the_robot_and_prints_both_poses(procs, ring_name, endpoint,
     code, result = drive(endpoint, ring_name, "forward", "3000", "--speed", "100")
     assert code == 1 and result["status"] == "collision" and result["true"]["collisions"] == 1
     launcher.terminate()
-    assert launcher.wait(15) == 0
+    assert launcher.wait(60) == 0
 
 
 @pytest.mark.parametrize(

@@ -174,7 +174,7 @@ def test_commands_move_the_robot_dead_reckoning_glide_factor_and_sonar(procs, ri
         got = report()["got"]
         assert ["POSITION_REACHED", {"status": 0, "move_seq": before["move_seq"]}] in got
     launcher.terminate()
-    assert launcher.wait(15) == 0
+    assert launcher.wait(60) == 0
 
 
 def ringutil_control(session, ring, node):
