@@ -9,7 +9,10 @@ times, so drift of the machine falls on both. The observers start before an ``al
 (and are proved live: the page shows a moving token counter, the bridge's client has received
 messages, the recording grows) and stop, by PID, after it.
 
-    python -m bench.observers --repeat 3 --rounds 1500 [--json F] [--speed 1]
+    python -m bench.observers --repeat 3 --rounds 1000 [--json F] [--speed 1] [--separate]
+
+The observers run as ``tokenring up --web --record --foxglove`` runs them: one ``tokenring
+watch`` process; ``--separate`` runs ``web``, ``record`` and ``foxglove`` as three.
 """
 
 from __future__ import annotations
@@ -182,18 +185,31 @@ class Browser:
 
 
 @contextlib.contextmanager
-def observers(ring: str, endpoint: str, folder: Path, which: tuple[str, ...]) -> Iterator[dict[str, Any]]:
+def observers(
+    ring: str, endpoint: str, folder: Path, which: tuple[str, ...], separate: bool = False
+) -> Iterator[dict[str, Any]]:
     """The web view with a browser on it, a recording, the bridge with a client (those in
-    ``which``): all live, their process trees' CPU seconds measured by ``cpu()``."""
+    ``which``; one ``tokenring watch``, or a process each if ``separate``): all live, their
+    process trees' CPU seconds measured by ``cpu()``."""
     web_port, bridge_port = free_port(), free_port()
     ring_opts = ["--ring", ring, "-e", endpoint]
     recording = folder / "observers.mcap"
-    commands = {
-        "web": tokenring("web", "--port", str(web_port), *ring_opts),
-        "record": tokenring("record", str(recording), "--force", "--quiet", *ring_opts),
-        "foxglove": tokenring("foxglove", "--port", str(bridge_port), *ring_opts),
-    }
-    children = {name: spawn(commands[name], folder / f"{name}.log") for name in which}
+    if separate:  # a process of each, as three tools started by hand
+        commands = {
+            "web": tokenring("web", "--port", str(web_port), *ring_opts),
+            "record": tokenring("record", str(recording), "--force", "--quiet", *ring_opts),
+            "foxglove": tokenring("foxglove", "--port", str(bridge_port), *ring_opts),
+        }
+        children = {name: spawn(commands[name], folder / f"{name}.log") for name in which}
+    else:  # one watcher, as `up --web --record --foxglove` starts it
+        argv = ["watch", *ring_opts]
+        if "web" in which:
+            argv += ["--web", "--web-port", str(web_port)]
+        if "record" in which:
+            argv += ["--record", str(recording), "--force"]
+        if "foxglove" in which:
+            argv += ["--foxglove", "--foxglove-port", str(bridge_port)]
+        children = {"watch": spawn(tokenring(*argv), folder / "watch.log")}
     browser: Browser | None = None
     client: BridgeClient | None = None
     try:
@@ -227,7 +243,12 @@ def observers(ring: str, endpoint: str, folder: Path, which: tuple[str, ...]) ->
 
 
 def run(
-    repeat: int, rounds: int, speed: str, which: tuple[str, ...] = OBSERVERS, quiet: bool = False
+    repeat: int,
+    rounds: int,
+    speed: str,
+    which: tuple[str, ...] = OBSERVERS,
+    quiet: bool = False,
+    separate: bool = False,
 ) -> dict[str, Any]:
     port = free_port()
     ring = f"obs{os.getpid()}"
@@ -258,7 +279,7 @@ def run(
                             values = measure_window(session, ring, rounds)
                             extra: dict[str, Any] = {}
                         else:
-                            with observers(ring, endpoint, folder, which) as live:
+                            with observers(ring, endpoint, folder, which, separate) as live:
                                 cpu0, t0 = live["cpu"](), time.monotonic()
                                 values = measure_window(session, ring, rounds)
                                 extra = {
@@ -279,13 +300,19 @@ def run(
                         )
         finally:
             stop(up, 30.0)
-    return summarize(windows, repeat, rounds, speed, which)
+    return summarize(windows, repeat, rounds, speed, which, separate)
 
 
 def summarize(
-    windows: list[dict[str, Any]], repeat: int, rounds: int, speed: str, which: tuple[str, ...]
+    windows: list[dict[str, Any]],
+    repeat: int,
+    rounds: int,
+    speed: str,
+    which: tuple[str, ...],
+    separate: bool = False,
 ) -> dict[str, Any]:
     out: dict[str, Any] = {"repeat": repeat, "rounds": rounds, "speed": speed, "observers": list(which)}
+    out["processes"] = "separate" if separate else "one watcher"
     out["windows"] = windows
     out["observer_cpu_pct"] = float(
         np.median([w["observer_cpu_pct"] for w in windows if w["condition"] == "all"])
@@ -308,7 +335,10 @@ def format_summary(report: dict[str, Any]) -> str:
         f"{'condition':<44} {'median ms':>10} {'p99 ms':>10}",
     ]
     names = {"web": "web view + browser", "record": "MCAP recording", "foxglove": "bridge + client"}
-    labels = {"none": "nobody watching (baseline)", "all": ", ".join(names[w] for w in report["observers"])}
+    watched = ", ".join(names[w] for w in report["observers"])
+    if len(report["observers"]) > 1:
+        watched += f" ({report.get('processes', 'separate')})"
+    labels = {"none": "nobody watching (baseline)", "all": watched}
     for condition in ("none", "all"):
         c = report[condition]
         lines.append(f"{labels[condition]:<44} {c['median_ms']:>10.3f} {c['p99_ms']:>10.3f}")
@@ -336,13 +366,18 @@ def main(argv: list[str] | None = None) -> int:
         default=",".join(OBSERVERS),
         help="which run in the watched windows (default %(default)s)",
     )
+    parser.add_argument(
+        "--separate",
+        action="store_true",
+        help="a process per observer (three tools by hand) instead of one watcher as `up` starts",
+    )
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
     which = tuple(w.strip() for w in args.observers.split(",") if w.strip())
     unknown = set(which) - set(OBSERVERS)
     if unknown or not which:
         parser.error(f"--observers: choose from {', '.join(OBSERVERS)}")
-    report = run(args.repeat, min(args.rounds, 1024), args.speed, which, args.quiet)
+    report = run(args.repeat, min(args.rounds, 1024), args.speed, which, args.quiet, args.separate)
     print(format_summary(report))
     if args.json:
         Path(args.json).write_text(json.dumps(report, indent=2) + "\n")

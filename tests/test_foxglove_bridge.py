@@ -148,7 +148,7 @@ def test_a_foxglove_client_sees_poses_the_map_and_round_trips_of_an_exploring_ri
         wait_port(port, 90)  # a service: up before the nodes start
         status = wait_until(lambda: launcher_status(session, ring_name), 60, "the launcher's status")
         procs.watch([n["pid"] for n in status["nodes"]] + [s["pid"] for s in status["services"]])
-        bridge = next(s for s in status["services"] if s["name"] == "foxglove")
+        bridge = next(s for s in status["services"] if s["name"] == "watch")
         assert bridge["running"]
 
         def done(c: FoxgloveClient) -> bool:
@@ -203,7 +203,7 @@ def test_a_foxglove_client_sees_poses_the_map_and_round_trips_of_an_exploring_ri
     # stops its bridge by PID after the nodes, and the bridge ends cleanly
     launcher.terminate()
     output, _ = launcher.communicate(timeout=60)
-    assert "foxglove | stopped:" in output, output[-3000:]
+    assert "watch | Foxglove:" in output, output[-3000:]
     wait_until(lambda: not pid_alive(bridge["pid"]), 10, "the bridge process gone")
 
 

@@ -13,7 +13,7 @@ import urllib.request
 
 import pytest
 from conftest import run_tokenring
-from ringutil import launcher_pids, tap, wait_ring, wait_until
+from ringutil import control, launcher_pids, tap, wait_ring, wait_until
 
 from tokenring.cliutil import free_port
 from tokenring.feed import Message
@@ -126,15 +126,25 @@ def test_the_api_refuses_bad_and_hostile_requests_and_stops_cleanly(procs, ring_
     assert web2.wait(30) == 130
 
 
-def test_up_web_serves_the_live_ring(procs, ring_name, endpoint):
-    port = free_port()
+def test_up_web_record_and_foxglove_share_one_watcher_serving_the_live_ring(
+    procs, ring_name, endpoint, tmp_path
+):
+    """``up --web --record --foxglove``: one watcher process serves the page and the bridge and
+    writes the recording (three would each decode every frame on the nodes' cores)."""
+    from mcap.reader import make_reader
+
+    port, fox_port = free_port(), free_port()
+    recording = tmp_path / "run.mcap"
     launcher = procs.tokenring(
         "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor,sonar", "--no-world",
-        "--duration", "90", "--web", "--web-port", str(port),
+        "--duration", "90", "--web", "--web-port", str(port), "--record", str(recording),
+        "--foxglove", "--foxglove-port", str(fox_port),
     )  # fmt: skip
     with tap(endpoint) as session:
         wait_ring(session, ring_name, [10, 20, 30])
         procs.watch(launcher_pids(session, ring_name))
+        status = control(session, ring_name, "launcher", "status")
+        assert [s["name"] for s in status["services"]] == ["watch"], status["services"]
 
         def state() -> dict:
             try:
@@ -149,8 +159,19 @@ def test_up_web_serves_the_live_ring(procs, ring_name, endpoint):
         wait_until(lambda: state()["/web/token"]["frames"] > first + 50, 60, "the token to move on")
         nodes = wait_until(lambda: state().get("/ring/nodes", {}).get("nodes"), 60, "the nodes' stats")
         assert set(nodes) >= {"10", "20", "30"}
+        with socket.create_connection(("127.0.0.1", fox_port), timeout=5):
+            pass  # the bridge serves on its port (its messages: tests/test_foxglove_bridge.py)
     launcher.terminate()
-    assert launcher.wait(30) == 0
+    output, _ = launcher.communicate(timeout=60)
+    assert launcher.returncode == 0, output[-3000:]
+    assert "watch | Foxglove:" in output and f"watch | {recording}:" in output, output[-3000:]
+    with open(recording, "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None and summary.statistics is not None
+    topics = {
+        c.topic: summary.statistics.channel_message_counts.get(i, 0) for i, c in summary.channels.items()
+    }
+    assert topics["/ring/frame"] > 50 and topics["/ring/roundtrip"] > 0, topics
 
 
 @pytest.mark.parametrize("value", ["", " "])

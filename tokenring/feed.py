@@ -21,6 +21,8 @@ never in Zenoh's callback, so nothing here can slow the token path.
 from __future__ import annotations
 
 import contextlib
+import functools
+import json
 import logging
 import queue
 import threading
@@ -33,6 +35,7 @@ import msgpack
 import zenoh
 
 from tokenring import keys
+from tokenring.cliutil import json_default
 from tokenring.frame import frame_problem
 from tokenring.protocol import Channel, CommandChannel, Field, Protocol
 from tokenring.ring import RING_EVENT
@@ -57,6 +60,11 @@ class Message:
     topic: str
     time_ns: int
     data: dict[str, Any]
+
+    @functools.cached_property
+    def encoded(self) -> bytes:
+        """``data`` as compact JSON bytes, encoded once for every sink that sends or stores it."""
+        return json.dumps(self.data, separators=(",", ":"), default=json_default).encode()
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,6 @@ from typing import Any
 import foxglove
 from foxglove.websocket import ChannelView, Client, ServerListener
 
-from tokenring.cliutil import json_default
 from tokenring.errors import UsageError
 from tokenring.feed import Message, Topic
 
@@ -38,17 +37,18 @@ log = logging.getLogger("tokenring.foxglove")
 DEFAULT_PORT = 8765
 
 
-def encode(data: dict[str, Any]) -> bytes:
-    """A message as the JSON bytes a Foxglove JSON channel carries."""
-    return json.dumps(data, default=json_default, separators=(",", ":")).encode("utf-8")
-
-
 class FoxgloveBridge:
     """A :class:`tokenring.feed.Feed` sink serving every feed topic over the Foxglove WebSocket
     protocol (``foxglove-sdk``); call it with each :class:`~tokenring.feed.Message`."""
 
     def __init__(
-        self, topics: Iterable[Topic], *, host: str = "127.0.0.1", port: int = DEFAULT_PORT, name: str = ""
+        self,
+        topics: Iterable[Topic],
+        *,
+        host: str = "127.0.0.1",
+        port: int = DEFAULT_PORT,
+        name: str = "",
+        port_option: str = "--port",
     ) -> None:
         self.context = foxglove.Context()  # private: no MCAP sink of the global context sees us
         self.counts: dict[str, int] = {}
@@ -67,9 +67,16 @@ class FoxgloveBridge:
             )
         except RuntimeError as exc:  # the SDK's FoxgloveError: bind or address lookup failed
             reason = str(exc).removeprefix("FoxgloveError: ").removeprefix("Failed to bind port: ")
-            raise UsageError(f"--host {host} --port {port}: cannot serve Foxglove there ({reason})") from None
+            raise UsageError(
+                f"--host {host} {port_option} {port}: cannot serve Foxglove there ({reason})"
+            ) from None
         for topic in topics:
             self._channel(topic)
+
+    @property
+    def topics(self) -> list[str]:
+        """The topics served (one channel each)."""
+        return list(self._channels)
 
     @property
     def port(self) -> int:
@@ -97,7 +104,7 @@ class FoxgloveBridge:
         with self._lock:
             self._last[message.topic] = message
         if channel.has_sinks():
-            channel.log(encode(message.data), log_time=message.time_ns)
+            channel.log(message.encoded, log_time=message.time_ns)
             self.counts[message.topic] = self.counts.get(message.topic, 0) + 1
 
     def replay(self, channel_id: int) -> None:
@@ -109,7 +116,7 @@ class FoxgloveBridge:
         with self._lock:
             last = self._last.get(topic)
         if last is not None:
-            self._channels[topic].log(encode(last.data), log_time=last.time_ns)
+            self._channels[topic].log(last.encoded, log_time=last.time_ns)
 
     def close(self) -> None:
         """Stop the server (clients see the connection close) and close the channels."""

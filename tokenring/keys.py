@@ -66,6 +66,11 @@ def pc_link(ring: str, verb: str) -> str:
     return f"{PREFIX}/{ring}/pc/{verb}"
 
 
+def watch_ready(ring: str, tag: str) -> str:
+    """The liveliness token a watcher (``tokenring watch``) declares once it serves and records."""
+    return f"{PREFIX}/{ring}/watch/{tag}"
+
+
 def id_from_key(key: str) -> int | None:
     """The trailing numeric chunk of a key (``.../node/20`` -> 20), or None."""
     tail = key.rsplit("/", 1)[-1]

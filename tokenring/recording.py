@@ -180,7 +180,7 @@ class McapRecorder:
         """Write one topic message (a :class:`tokenring.feed.Feed` sink)."""
         if not self.selection.topic(message.topic):
             return
-        data = encode_json(message.data)
+        data = message.encoded
         with self._lock:
             if self._closed:
                 return

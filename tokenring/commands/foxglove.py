@@ -9,9 +9,6 @@ a WebSocket server; open Foxglove, "Open connection", Foxglove WebSocket, and gi
 from __future__ import annotations
 
 import argparse
-import signal
-import sys
-import time
 
 from tokenring.cliutil import int_within, seconds
 
@@ -44,66 +41,36 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--host", default="127.0.0.1", help="address to serve on (default %(default)s: this machine only)"
     )
     p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds")
-    # `up --foxglove`: a liveliness token tokenring/<ring>/foxglove/<TAG> once serving (the
-    # launcher waits for it, and a bridge that cannot start fails `up` before the nodes start)
-    p.add_argument("--ready-token", metavar="TAG", help=argparse.SUPPRESS)
     add_json_option(p)
     add_ring_options(p, listen=False)
 
 
 def run(args: argparse.Namespace) -> int:
-    from tokenring import extensions, keys
-    from tokenring.cliutil import print_json, tap_session
-    from tokenring.errors import UsageError
-    from tokenring.feed import Feed
-    from tokenring.foxglove import FoxgloveBridge
-    from tokenring.protocol import load_protocol
-    from tokenring.recording import Stopper
+    from tokenring import keys
+    from tokenring.cliutil import print_json
+    from tokenring.commands.watch import Watch, serve
 
-    ring = keys.check_ring_name(args.ring)
-    if not args.host.strip():
-        raise UsageError("--host: give an address to serve on, e.g. 127.0.0.1")
-    protocol = load_protocol(args.protocol)
-    sources = extensions.feed_sources(protocol, ring)
-    topics = Feed(None, ring, sources).topics()
-    # the server first: a port in use is refused before anything joins the ring
-    bridge = FoxgloveBridge(topics, host=args.host, port=args.port, name=f"tokenring {ring}")
-    host = f"[{args.host}]" if ":" in args.host else args.host
-    url = f"ws://{host}:{bridge.port}"
-    stopper = Stopper()
-    stopper.install()
-    started = time.monotonic()
-    dropped = 0
-    try:
-        with tap_session(args) as session:
-            feed = Feed(session, ring, sources)
-            feed.add_sink(bridge)
-            token = None
-            try:
-                feed.start()
-                if args.ready_token:
-                    token = session.liveliness().declare_token(
-                        f"{keys.PREFIX}/{ring}/foxglove/{args.ready_token}"
-                    )
-                if args.json:
-                    print_json({"ring": ring, "url": url, "topics": len(topics)})
-                else:
-                    print(f"Foxglove bridge of ring {ring!r}: {url}  (Ctrl-C stops)")
-                sys.stdout.flush()
-                while not stopper.event.wait(0.5):
-                    if args.duration is not None and time.monotonic() - started >= args.duration:
-                        break
-            finally:
-                feed.stop()
-                dropped = feed.dropped
-                if token is not None:
-                    token.undeclare()
-    finally:
-        bridge.close()
-    if not args.json:
-        sent = sum(bridge.counts.values())
+    def announce(watch: Watch) -> None:
+        assert watch.bridge is not None
+        if args.json:
+            print_json({"ring": watch.ring, "url": watch.foxglove_url, "topics": len(watch.bridge.topics)})
+        else:
+            print(f"Foxglove bridge of ring {watch.ring!r}: {watch.foxglove_url}  (Ctrl-C stops)")
+
+    watch = Watch(
+        ring=keys.check_ring_name(args.ring),
+        foxglove_port=args.port,
+        host=args.host,
+        foxglove_port_option="--port",
+        duration=args.duration,
+        on_ready=announce,
+    )
+    code = serve(args, watch)
+    if not args.json and watch.bridge is not None:
+        bridge = watch.bridge
         print(
-            f"stopped: {sent} messages sent on {len(bridge.counts)} topics, "
-            f"{bridge.subscriptions} subscriptions" + (f", {dropped} samples dropped" if dropped else "")
+            f"stopped: {sum(bridge.counts.values())} messages sent on {len(bridge.counts)} topics, "
+            f"{bridge.subscriptions} subscriptions"
+            + (f", {watch.dropped} samples dropped" if watch.dropped else "")
         )
-    return 130 if stopper.signal == signal.SIGINT else 0
+    return code

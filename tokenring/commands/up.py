@@ -73,9 +73,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "booting one comes live (default: 8 per core)",
     )
     web = p.add_argument_group("web view")
-    web.add_argument(
-        "--web", action="store_true", help="serve the live web view too (as 'tokenring web', its own process)"
-    )
+    web.add_argument("--web", action="store_true", help="serve the live web view too (as 'tokenring web')")
     web.add_argument(
         "--web-port",
         type=int_within(1, 65535),
@@ -87,7 +85,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     fox.add_argument(
         "--foxglove",
         action="store_true",
-        help="serve the ring to Foxglove too (as 'tokenring foxglove', its own process)",
+        help="serve the ring to Foxglove too (as 'tokenring foxglove')",
     )
     fox.add_argument(
         "--foxglove-port",
@@ -100,7 +98,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     rec.add_argument(
         "--record",
         metavar="FILE.mcap",
-        help="record the whole run to a new MCAP file (as 'tokenring record', its own process)",
+        help="record the whole run to a new MCAP file (as 'tokenring record'; one watcher process serves"
+        " --web, --record and --foxglove together)",
     )
     for extension in extensions.loaded():
         extension.add_up_options(p)
@@ -145,12 +144,8 @@ def run(args: argparse.Namespace) -> int:
     # of the ring must stay as short in emulated time as it is on the real hardware
     wire = args.bitrate if bitrate is None or speedup == 1.0 else format_bitrate(bitrate * speedup)
     services = [service for plan in plans_up for service in plan.services]
-    if args.web:
-        services.append(web_service(args))
-    if args.record:
-        services.append(record_service(args))
-    if args.foxglove:
-        services.append(foxglove_service(args))
+    if args.web or args.record or args.foxglove:
+        services.append(watch_service(args))
     launcher = Launcher(
         plans,
         ring=args.ring,
@@ -221,74 +216,44 @@ def boot_load(launcher: Launcher, programs: Path, ids: set[int], wait: float = 3
         launcher.booting = False
 
 
-def web_service(args: argparse.Namespace) -> ServicePlan:
-    """``tokenring web`` as a launcher service: a process of its own, so serving browsers never
-    takes a core from the launcher (its port is checked here, before anything starts)."""
+def check_port(option: str, port: int) -> None:
+    """Refuse ``option``'s port on 127.0.0.1 if it cannot be had, before anything starts."""
     import socket
 
-    from tokenring.launcher import ServicePlan
-
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the server will
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the servers will
         try:
-            probe.bind(("127.0.0.1", args.web_port))
+            probe.bind(("127.0.0.1", port))
         except OSError as exc:
-            raise UsageError(
-                f"--web-port {args.web_port}: cannot listen on 127.0.0.1:{args.web_port} ({exc.strerror})"
-            ) from None
-    argv = ["tokenring", "web", "--ring", "{ring}", "--connect", "{connect}", "--port", str(args.web_port)]
-    if args.zenoh_config:
-        argv += ["--zenoh-config", args.zenoh_config]
-    if args.protocol:
-        argv += ["--protocol", args.protocol]
-    return ServicePlan("web", argv)
+            raise UsageError(f"{option} {port}: cannot listen on 127.0.0.1:{port} ({exc.strerror})") from None
 
 
-def record_service(args: argparse.Namespace) -> ServicePlan:
-    """``tokenring record`` as a launcher service: its own process and Zenoh session, so writing
-    the file never slows the token path; up before the nodes, stopped (SIGTERM: it finalises the
-    file) after them. The file is checked here, before anything starts."""
+def watch_service(args: argparse.Namespace) -> ServicePlan:
+    """``--web``, ``--record`` and ``--foxglove`` as one launcher service, ``tokenring watch``:
+    one process, one Zenoh session and one feed for all three (three tools would each decode
+    every frame again, on the cores the nodes need). Ports and the file are checked here, before
+    anything starts; the launcher waits until it serves and records, so the file holds the boot,
+    and stops it (SIGTERM: the recording is finalised) after the nodes."""
     import os
 
     from tokenring import keys
     from tokenring.cliutil import check_option_output
     from tokenring.launcher import ServicePlan
 
-    check_option_output("--record", args.record)
+    argv = ["tokenring", "watch", "--ring", "{ring}", "--connect", "{connect}"]
+    if args.web:
+        check_port("--web-port", args.web_port)
+        argv += ["--web", "--web-port", str(args.web_port)]
+    if args.foxglove:
+        check_port("--foxglove-port", args.foxglove_port)
+        argv += ["--foxglove", "--foxglove-port", str(args.foxglove_port)]
+    if args.record:
+        check_option_output("--record", args.record)
+        argv += ["--record", args.record]
     tag = f"up{os.getpid()}"
-    argv = ["tokenring", "record", args.record, "--ring", "{ring}", "--connect", "{connect}"]
     argv += ["--ready-token", tag]
     if args.zenoh_config:
         argv += ["--zenoh-config", args.zenoh_config]
     if args.protocol:
         argv += ["--protocol", args.protocol]
-    return ServicePlan("record", argv, ready_key=f"{keys.PREFIX}/{args.ring}/record/{tag}")
-
-
-def foxglove_service(args: argparse.Namespace) -> ServicePlan:
-    """``tokenring foxglove`` as a launcher service: its own process and Zenoh session, so
-    encoding and serving messages never slows the token path; the launcher waits for it to serve
-    (a port in use fails `up` before any node starts) and stops it by PID after the nodes."""
-    import os
-    import socket
-
-    from tokenring import keys
-    from tokenring.launcher import ServicePlan
-
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the server will
-        try:
-            probe.bind(("127.0.0.1", args.foxglove_port))
-        except OSError as exc:
-            raise UsageError(
-                f"--foxglove-port {args.foxglove_port}: cannot listen on 127.0.0.1:{args.foxglove_port} "
-                f"({exc.strerror})"
-            ) from None
-    tag = f"up{os.getpid()}"
-    argv = ["tokenring", "foxglove", "--ring", "{ring}", "--connect", "{connect}"]
-    argv += ["--port", str(args.foxglove_port), "--ready-token", tag]
-    if args.zenoh_config:
-        argv += ["--zenoh-config", args.zenoh_config]
-    if args.protocol:
-        argv += ["--protocol", args.protocol]
-    return ServicePlan("foxglove", argv, ready_key=f"{keys.PREFIX}/{args.ring}/foxglove/{tag}")
+    return ServicePlan("watch", argv, ready_key=keys.watch_ready(args.ring, tag))

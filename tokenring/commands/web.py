@@ -9,9 +9,6 @@ its map and LCD, Explore 1/2). It joins the ring like any tool and never slows t
 from __future__ import annotations
 
 import argparse
-import asyncio
-import signal
-import sys
 
 from tokenring.cliutil import int_within
 
@@ -49,33 +46,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tokenring import extensions, keys
-    from tokenring.cliutil import print_json, tap_session
-    from tokenring.errors import UsageError
-    from tokenring.protocol import load_protocol
-    from tokenring.web.server import WebView
+    from tokenring import keys
+    from tokenring.cliutil import print_json
+    from tokenring.commands.watch import Watch, serve
 
-    ring = keys.check_ring_name(args.ring)
-    if not args.host.strip():
-        raise UsageError("--host: give an address to serve on, e.g. 127.0.0.1")
-    protocol = load_protocol(args.protocol)
-    sources = extensions.feed_sources(protocol, ring)
-    panels = extensions.web_panels()
-    actions = extensions.web_actions()
-
-    def ready(url: str) -> None:
+    def announce(watch: Watch) -> None:
         if args.json:
-            print_json({"ring": ring, "url": url})
+            print_json({"ring": watch.ring, "url": watch.web_url})
         else:
-            print(f"web view of ring {ring!r}: {url}  (Ctrl-C stops)")
-        sys.stdout.flush()
+            print(f"web view of ring {watch.ring!r}: {watch.web_url}  (Ctrl-C stops)")
 
-    async def main(view: WebView) -> None:
-        stop = asyncio.Event()
-        asyncio.get_running_loop().add_signal_handler(signal.SIGTERM, stop.set)
-        await view.serve(args.host, args.port, ready, stop)
-
-    with tap_session(args) as session:
-        view = WebView(session, ring, protocol, sources, panels=panels, actions=actions)
-        asyncio.run(main(view))
-    return 0
+    watch = Watch(
+        ring=keys.check_ring_name(args.ring),
+        web_port=args.port,
+        host=args.host,
+        web_port_option="--port",
+        on_ready=announce,
+    )
+    return serve(args, watch)

@@ -76,12 +76,15 @@ class WebView:
         panels: list[WebPanel] | None = None,
         actions: list[WebAction] | None = None,
         fault_timeout: float = 3.0,
+        feed: Feed | None = None,
     ) -> None:
         self.session = session
         self.ring = ring
         self.protocol = protocol
         self.hub = Hub()
-        self.feed = Feed(session, ring, sources)
+        #: a feed shared with other sinks (``tokenring watch``) is started and stopped by its owner
+        self._owns_feed = feed is None
+        self.feed = Feed(session, ring, sources) if feed is None else feed
         self.feed.add_sink(self.hub.on_message)
         self.panels = list(panels or [])
         self.actions = {action.name: action for action in actions or []}
@@ -216,8 +219,16 @@ class WebView:
         return web.Response(text=dumps({"ok": True, "result": result}), content_type="application/json")
 
     # -- running ------------------------------------------------------------------------------
-    async def serve(self, host: str, port: int, ready: Callable[[str], None], stop: asyncio.Event) -> None:
-        """Listen on ``host:port`` (0: any free port), call ``ready(url)``, serve until ``stop``."""
+    async def serve(
+        self,
+        host: str,
+        port: int,
+        ready: Callable[[str], None],
+        stop: asyncio.Event,
+        port_option: str = "--port",
+    ) -> None:
+        """Listen on ``host:port`` (0: any free port), call ``ready(url)``, serve until ``stop``
+        (``port_option`` names the port in the message if it cannot be had)."""
         runner = web.AppRunner(self.app, handle_signals=False, access_log=None)
         await runner.setup()
         site = web.TCPSite(runner, host, port)
@@ -226,8 +237,9 @@ class WebView:
         except OSError as exc:
             await runner.cleanup()
             why = "in use" if exc.errno == 98 else exc.strerror or str(exc)
-            raise UsageError(f"--port {port}: cannot listen on {host}:{port} ({why})") from None
-        self.feed.start()
+            raise UsageError(f"{port_option} {port}: cannot listen on {host}:{port} ({why})") from None
+        if self._owns_feed:
+            self.feed.start()
         try:
             bound = runner.addresses[0]
             where = f"[{bound[0]}]" if ":" in str(bound[0]) else str(bound[0])
@@ -238,7 +250,8 @@ class WebView:
                 with contextlib.suppress(Exception):
                     await ws.close()
             await runner.cleanup()
-            await asyncio.get_running_loop().run_in_executor(None, self.feed.stop)
+            if self._owns_feed:
+                await asyncio.get_running_loop().run_in_executor(None, self.feed.stop)
 
 
 @web.middleware
