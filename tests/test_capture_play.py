@@ -26,6 +26,7 @@ import pytest
 import yaml
 from conftest import Processes, run_tokenring
 from mcap.reader import make_reader
+from ringjudge import crc16_arc  # the judge's own CRC, not tokenring's
 from ringutil import launcher_pids, tap, wait_ring, wait_until
 
 from tokenring.cliutil import free_port
@@ -37,15 +38,6 @@ TOKEN_SIZE = PROTOCOL_YAML["token"]["size"]
 HEADER = {name: spec["offset"] for name, spec in PROTOCOL_YAML["token"]["header"].items()}
 NODES = {"main": 10, "motor": 20, "sonar": 30}
 CAPTURE_S = 4.0  # seconds of a three-node ring (some hundreds of frames a second)
-
-
-def crc16_arc(data: bytes) -> int:
-    crc = 0
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
-    return crc
 
 
 @dataclass

@@ -14,20 +14,12 @@ from typing import Any
 import jsonschema
 import pytest
 import yaml
+from ringjudge import crc16_arc  # the judge's own CRC, not tokenring's
 
 from tokenring.feed import Feed, Message, RawSample, RingSource
 from tokenring.protocol import default_protocol_path, load_protocol
 
 PROTOCOL_YAML = yaml.safe_load(Path(default_protocol_path()).read_text())
-
-
-def crc16_arc(data: bytes) -> int:
-    crc = 0
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
-    return crc
 
 
 def make_frame(sid: int, did: int, counter: int, motor_x_mm: int = 0, motor_y_mm: int = 0) -> bytes:

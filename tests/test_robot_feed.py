@@ -20,6 +20,7 @@ import jsonschema
 import msgpack
 import pytest
 import yaml
+from ringjudge import crc16_arc  # the judge's own CRC, not tokenring's
 
 from modules.pc.feed import LcdSource, RobotSource, WorldSource, robot_feed_sources, walls_messages
 from tests.ringutil import tap, wait_until
@@ -30,15 +31,6 @@ from tokenring.protocol import default_protocol_path, load_protocol
 PROTOCOL_YAML = yaml.safe_load(Path(default_protocol_path()).read_text())
 T0 = 1_700_000_000_123_456_789  # ns: sec 1700000000, nsec 123456789
 FORMATS = {"u8": "B", "i8": "b", "u16": "H", "i16": "h", "u32": "I", "i32": "i", "u64": "Q", "i64": "q"}
-
-
-def crc16_arc(data: bytes) -> int:
-    crc = 0
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
-    return crc
 
 
 def _type(spec: Any) -> str:
