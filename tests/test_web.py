@@ -110,6 +110,8 @@ def test_the_api_refuses_bad_and_hostile_requests_and_stops_cleanly(procs, ring_
         (b'{"node": "lcd", "kind": "delay"}', JSON, 400, "delay needs a value"),
         (b'{"node": "lcd", "kind": "delay", "value": "1e9"}', JSON, 400, "must be 0..60000"),
         (b'{"node": "lcd", "kind": "drop", "value": 7}', JSON, 400, "outside 0..1"),
+        (b'{"node": "all", "kind": "partition"}', JSON, 400, "partition needs a value"),
+        (b'{"node": "all", "kind": "partition", "value": "main|nemo"}', JSON, 400, "nemo"),
         (b'{"node": "lcd", "kind": "clear"}', {}, 415, "send JSON"),
         (b'{"node": "lcd", "kind": "clear"}', {**JSON, "Origin": "http://evil.example"}, 403, "not from this page"),
     ]  # fmt: skip
@@ -172,6 +174,44 @@ def test_up_web_record_and_foxglove_share_one_watcher_serving_the_live_ring(
         c.topic: summary.statistics.channel_message_counts.get(i, 0) for i, c in summary.channels.items()
     }
     assert topics["/ring/frame"] > 50 and topics["/ring/roundtrip"] > 0, topics
+
+
+def test_the_page_partitions_the_ring_and_heals_it(procs, ring_name, endpoint):
+    """The page's partition goes to every node through the fault control keys, as
+    ``tokenring fault all partition`` does; heal ends it."""
+    launcher = procs.tokenring(
+        "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor,sonar", "--no-world",
+        "--no-programs",
+    )  # fmt: skip
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10, 20, 30])
+        procs.watch(launcher_pids(session, ring_name))
+    web, url = start_web(procs, endpoint, ring_name)
+    with urllib.request.urlopen(url + "api/config", timeout=30) as answer:
+        assert {"partition", "heal"} <= set(json.loads(answer.read())["fault_kinds"])
+
+    def partitions() -> dict[int, object]:
+        listing = run_tokenring(
+            "fault", "all", "list", "--ring", ring_name, "-e", endpoint, "--json", timeout=60
+        )
+        assert listing.returncode == 0, listing.stderr
+        return {n["id"]: n["faults"].get("partition") for n in json.loads(listing.stdout)["results"]}
+
+    got, answer = post(
+        url + "api/fault", b'{"node": "all", "kind": "partition", "value": "main,motor|sonar"}', JSON
+    )
+    assert got == 200 and answer["ok"], answer
+    found = wait_until(
+        lambda: (p := partitions()) and all(p.get(i) for i in (10, 20, 30)) and p, 30, "the partition"
+    )
+    assert all(found[i]["groups"] == [[10, 20], [30]] for i in (10, 20, 30)), found
+    got, answer = post(url + "api/fault", b'{"node": "all", "kind": "heal"}', JSON)
+    assert got == 200 and answer["ok"], answer
+    wait_until(lambda: (p := partitions()) and not any(p.values()), 30, "the partition healed")
+    web.send_signal(signal.SIGTERM)
+    assert web.wait(30) == 0
+    launcher.send_signal(signal.SIGTERM)
+    launcher.wait(60)
 
 
 @pytest.mark.parametrize("value", ["", " "])

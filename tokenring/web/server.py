@@ -39,7 +39,9 @@ STATIC = Path(__file__).resolve().parent / "static"
 #: a browser gets at most this many updates a second
 UPDATES_PER_S = 10.0
 #: the fault kinds the page offers (``partition`` needs two groups: ``tokenring fault``)
-PAGE_KINDS = ("delay", "drop", "corrupt", "duplicate", "lose", "hang", "resume", "crash", "clear")
+PAGE_KINDS = (
+    "delay", "drop", "corrupt", "duplicate", "lose", "partition", "heal", "hang", "resume", "crash", "clear",
+)  # fmt: skip
 
 
 def dumps(value: Any) -> str:
