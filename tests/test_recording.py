@@ -75,12 +75,12 @@ def without_time(line: str) -> dict[str, Any]:
 
 @pytest.mark.timeout(420)
 def test_up_record_holds_the_run_and_play_gives_sniff_the_same_frames(procs, ring_name, endpoint, tmp_path):
-    """An exploring robot recorded by ``up --record`` for 45 s at speed 5: schemas, counts, the
+    """An exploring robot recorded by ``up --record`` for 60 s at speed 5: schemas, counts, the
     map as ``tokenring map`` fetched it; then played into a fresh endpoint, ``sniff --json`` sees
     exactly the frames ``sniff --read`` decodes from the file."""
     recording = tmp_path / "run.mcap"
     launcher = procs.tokenring(
-        "up", "--ring", ring_name, "--listen", endpoint, "--duration", "45", "--explore", "2",
+        "up", "--ring", ring_name, "--listen", endpoint, "--duration", "60", "--explore", "2",
         "--speed", "5", "--record", str(recording),
     )  # fmt: skip
     vectors = [(100 + 10 * i, -50 * i, 300 + 10 * i, 70) for i in range(5)]  # cm on the wire
