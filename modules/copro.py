@@ -22,6 +22,7 @@ import queue
 import threading
 from typing import Any
 
+from modules.common.algorithms import algorithm
 from modules.common.units import pose_from_wire, pose_to_wire
 from modules.common.vectorgen import OUR_METHOD, SEED_METHOD, PoseHistory, Vector, Vectorizer, default_layout
 from modules.common.vectormap import vector_to_wire
@@ -138,7 +139,9 @@ class Program(UserProgram):
         self.motor = os.subscribe("motor.data")
         os.set_own_input_id()
         self.layout = default_layout()
-        self.method = int(_os.environ.get("TOKENRING_COPRO_METHOD", OURS))
+        self.method = int(
+            _os.environ.get("TOKENRING_COPRO_METHOD", SEED if algorithm("copro") == "seed" else OURS)
+        )
         self.scanning = False
         self.history = PoseHistory()
         self.outgoing: queue.Queue[Vector | object | None] = queue.Queue()

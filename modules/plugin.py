@@ -69,6 +69,14 @@ class RobotExtension(Extension):
             "--seed", type=int, default=1, help="the world's random seed (default %(default)s)"
         )
         world.add_argument("--no-world", action="store_true", help="start no world simulator (no hardware)")
+        world.add_argument(
+            "--algorithms",
+            default="ours",
+            metavar="seed|ours|MODULE=seed,...",
+            help="the 2001 robot's algorithms ('seed': every module as it was, at the seed's wire pace "
+            "--profile arcnet unless --bitrate is given) or today's ('ours', default); per module, "
+            "e.g. 'sonar=seed' or 'seed,copro=ours' (modules: sonar, copro, main, motor)",
+        )
         mission = parser.add_argument_group("exploration")
         mission.add_argument(
             "--explore", type=int, choices=(1, 2), help="start Explore 1 (avoid) or 2 (left wall)"
@@ -94,9 +102,14 @@ class RobotExtension(Extension):
         )
 
     def plan_up(self, args: argparse.Namespace, protocol: Protocol) -> UpPlan:
+        from modules.common.algorithms import ENV, all_seed, format_algorithms, parse_algorithms
         from modules.world.__main__ import parse_speed
 
         plan = UpPlan()
+        choice = parse_algorithms(args.algorithms)  # a bad value is refused before anything starts
+        plan.env[ENV] = format_algorithms(choice)
+        if all_seed(choice):
+            plan.profile = "arcnet"
         speed = parse_speed(args.speed)
         if not args.no_world:
             plan.services.append(world_service(args))

@@ -68,6 +68,9 @@ class UpPlan:
     failure: Callable[[], str | None] | None = None
     #: seconds past ``--duration`` before the launcher gives up (the job stops the ring itself)
     grace_s: float = 0.0
+    #: a hardware timing profile (``--profile``) the application's options imply, used unless
+    #: the user gave ``--profile`` or ``--bitrate``
+    profile: str | None = None
 
 
 @dataclass

@@ -340,7 +340,7 @@ class Launcher:
         self.say(
             f"ring {self.ring!r}: starting {len(self.plans)} nodes "
             f"({', '.join(f'{p.name}={p.node_id}' for p in self.plans)}) on {where}, "
-            f"bitrate {self.bitrate}"
+            f"bitrate {self.bitrate}" + (f", profile {self.profile}" if self.profile else "")
         )
         self.output.start_reading(self._stop)
         for service in self.services:

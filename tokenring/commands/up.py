@@ -10,6 +10,8 @@ from tokenring import extensions
 from tokenring.cliutil import int_within, seconds
 from tokenring.errors import UsageError
 
+DEFAULT_BITRATE = "2.5M"
+
 if TYPE_CHECKING:
     from tokenring.launcher import Launcher, ServicePlan
 
@@ -27,8 +29,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds")
     p.add_argument(
         "--bitrate",
-        default="2.5M",
-        help="emulated ARCNET bitrate, e.g. 2.5M, 10M or max (default %(default)s)",
+        help=f"emulated ARCNET bitrate, e.g. 2.5M, 10M or max (default {DEFAULT_BITRATE})",
     )
     p.add_argument(
         "--ack",
@@ -112,6 +113,8 @@ def run(args: argparse.Namespace) -> int:
     from tokenring.ring import format_bitrate, parse_bitrate
 
     protocol = load_protocol(args.protocol)
+    bitrate_given = args.bitrate is not None
+    args.bitrate = args.bitrate or DEFAULT_BITRATE
     bitrate = parse_bitrate(args.bitrate)  # refuse a bad value before anything starts
     if args.duration is not None and args.duration <= 0:
         raise UsageError("--duration must be positive")
@@ -140,6 +143,8 @@ def run(args: argparse.Namespace) -> int:
     for plan in plans_up:
         speedup *= plan.speedup
         node_env.update(plan.env)
+        if plan.profile and not (args.profile or bitrate_given):
+            args.profile = plan.profile  # e.g. the seed's algorithms at the seed's pace
     # everything emulated runs K times faster with a speed-up K, the wire included: a round
     # of the ring must stay as short in emulated time as it is on the real hardware
     wire = args.bitrate if bitrate is None or speedup == 1.0 else format_bitrate(bitrate * speedup)

@@ -1,0 +1,62 @@
+"""``--algorithms seed|ours|MODULE=...`` (modules/common/algorithms.py): the grammar, what a
+program reads from its environment, and ``up``'s refusals and implied seed pace."""
+
+from __future__ import annotations
+
+import pytest
+from conftest import run_tokenring
+
+from modules.common.algorithms import ENV, algorithm, all_seed, format_algorithms, parse_algorithms
+from tokenring.errors import UsageError
+
+
+def test_the_grammar_sets_every_module_then_overrides_later_items():
+    assert parse_algorithms("ours") == {"sonar": "ours", "copro": "ours", "main": "ours", "motor": "ours"}
+    assert parse_algorithms("seed") == {"sonar": "seed", "copro": "seed", "main": "seed", "motor": "seed"}
+    assert parse_algorithms("sonar=seed") == {
+        "sonar": "seed",
+        "copro": "ours",
+        "main": "ours",
+        "motor": "ours",
+    }
+    mixed = parse_algorithms(" seed , copro = ours ")
+    assert mixed == {"sonar": "seed", "copro": "ours", "main": "seed", "motor": "seed"}
+    assert not all_seed(mixed) and all_seed(parse_algorithms("seed"))
+    assert parse_algorithms(format_algorithms(mixed)) == mixed
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [("", "give seed"), ("sonar=", "not seed or ours"), ("lcd=seed", "no module 'lcd'"), ("seed,,", "empty item"),
+     ("both", "'both' is not seed or ours")],
+)  # fmt: skip
+def test_bad_choices_are_named(text, needle):
+    with pytest.raises(UsageError, match=needle):
+        parse_algorithms(text)
+
+
+def test_a_program_reads_its_choice_from_the_environment():
+    assert algorithm("sonar", {}) == "ours"
+    env = {ENV: "sonar=seed,copro=ours,main=ours,motor=seed"}
+    assert [algorithm(m, env) for m in ("sonar", "copro", "motor")] == ["seed", "ours", "seed"]
+    assert algorithm("sonar", {ENV: "garbage"}) == "ours"  # a program started by hand with a bad one
+
+
+def test_up_refuses_a_bad_choice_before_anything_starts():
+    out = run_tokenring("up", "--algorithms", "lcd=seed", "--duration", "5", timeout=60)
+    assert out.returncode == 2 and "--algorithms 'lcd=seed'" in out.stderr, out.stderr
+    assert "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
+    assert "starting" not in out.stdout
+
+
+@pytest.mark.parametrize(
+    ("extra", "profile"), [((), True), (("--bitrate", "10M"), False), (("--algorithms", "sonar=seed"), False)]
+)
+def test_the_seed_robot_runs_at_the_seeds_pace_unless_a_bitrate_is_given(extra, profile, ring_name):
+    args = ["--algorithms", "seed", *extra] if "--algorithms" not in extra else list(extra)
+    out = run_tokenring(
+        "up", "--ring", ring_name, "--no-world", "--no-programs", "--nodes", "main", "--duration", "2", *args,
+        timeout=120,
+    )  # fmt: skip
+    starting = next(line for line in out.stdout.splitlines() if "starting 1 nodes" in line)
+    assert ("profile arcnet" in starting) == profile, starting
