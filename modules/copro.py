@@ -11,6 +11,10 @@ The pose: the filtered pose of :class:`modules.common.localizer.Localizer` when 
 exists (hosted here, stepped every token visit), else dead reckoning from ``motor.data``; both
 are published in the ``pose_*`` fields (source 2 = EKF, 1 = dead reckoning), and the filter's
 standard deviations in ``sigma_*`` (0 without a filter) so tools can draw its uncertainty.
+
+Seed mode (``--algorithms copro=seed``, seed §4.3.4): the seed's edge follower on the newest
+dead-reckoned pose from ``motor.data`` alone; no localizer runs, so no vector becomes a map wall
+for it, and nothing of ours (collinear merge, corner closing) touches the vectors.
 """
 
 from __future__ import annotations
@@ -139,9 +143,10 @@ class Program(UserProgram):
         self.motor = os.subscribe("motor.data")
         os.set_own_input_id()
         self.layout = default_layout()
-        self.method = int(
-            _os.environ.get("TOKENRING_COPRO_METHOD", SEED if algorithm("copro") == "seed" else OURS)
-        )
+        # seed mode (seed §4.3.4): the 2001 copro, its edge follower on the motor's dead
+        # reckoning alone: no filter, no walls handed to one, no post-processing of vectors
+        self.seed_mode = algorithm("copro") == "seed"
+        self.method = int(_os.environ.get("TOKENRING_COPRO_METHOD", SEED if self.seed_mode else OURS))
         self.scanning = False
         self.history = PoseHistory()
         self.outgoing: queue.Queue[Vector | object | None] = queue.Queue()
@@ -156,7 +161,7 @@ class Program(UserProgram):
         self.pose_source = POSE_NONE
         self.pose_sigmas: tuple[float, float, float] | None = None
         self._make_generators()
-        self.localizer = open_localizer(os, self.hw)
+        self.localizer = None if self.seed_mode else open_localizer(os, self.hw)
         self.sender = threading.Thread(target=self._send_vectors, name="copro-vectors", daemon=True)
         self.sender.start()
 
@@ -247,14 +252,18 @@ class Program(UserProgram):
 
     def process_sweep(self, sonar: dict[str, Any], motor: dict[str, Any], pose: Any) -> None:
         """One sweep: hypotheses for both sides, then vector generation where it applies."""
+        if self.method == OURS:
+            pose = self._pose_at(sonar["stamp_ms"], pose)
+        elif self.seed_mode:
+            # seed §4.3.4: "die aktuelle Position der Motorsteuerung", the newest motor.data pose
+            # as this sweep is processed (not interpolated to the sweep's time)
+            pose = self.history.latest()
         active = (
             self.scanning
             and motor["direction"] == self.forward
             and motor["distance_mm"] > MIN_DRIVEN_MM
             and pose is not None
         )
-        if self.method == OURS:
-            pose = self._pose_at(sonar["stamp_ms"], pose)
         self.vectorizer.sweep(sonar, pose, bool(active))
 
     def _pose_at(self, stamp_ms: int, pose: Any) -> Any:
