@@ -153,7 +153,7 @@ def test_scan_incremental_all_corrupt_start_stop_upload_and_bad_input(procs, rin
         assert code == 0 and "started: motor (20)" in text, text
         assert version(session, ring_name, 20) == 2
         assert control(session, ring_name, 30, "program")["program"] is None
-        code, text = load(ring_name, endpoint, "--start")
+        code, text = load(ring_name, endpoint, "-start")  # the seed's spelling of --start
         assert code == 0, text
         wait_until(
             lambda: all(control(session, ring_name, i, "program")["program"] for i in ids), 5, "all started"

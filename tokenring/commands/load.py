@@ -37,7 +37,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     what.add_argument("-a", "--all", action="store_true", help="every program, whatever its age")
     what.add_argument("-s", "--single", metavar="FILE", help="one program file")
     p.add_argument(
-        "--start", nargs="?", const=True, default=False, metavar="NODE", help="start all programs, or NODE's"
+        "--start",
+        "-start",  # as the seed's LOAD.EXE spelled it (seed 001 §3.5)
+        nargs="?",
+        const=True,
+        default=False,
+        metavar="NODE",
+        help="start all programs, or NODE's (also -start, the seed's spelling)",
     )
     p.add_argument(
         "--stop", nargs="?", const=True, default=False, metavar="NODE", help="stop all programs, or NODE's"
