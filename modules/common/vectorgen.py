@@ -8,8 +8,10 @@ Internal convention: millimetres, radians, counter-clockwise, robot frame x forw
   distance area is the nearer of the two.
 * :class:`SeedEdgeFollower` — the seed's vector generation: when WALL begins the **rear**
   sensor's reading and the current pose give the start point; when it ends the **front**
-  sensor's last reading gives the end point. (Ours: a vector also ends when the forward scan
-  ends, so that a vector never spans a turn.)
+  sensor's last reading gives the end point. Nothing merges or closes its vectors. A vector
+  also ends when vector generation stops (no forward move, scan off): the seed's copro only
+  clears a flag there, but its pilot stops the scan after every forward command and its maps
+  show the walls followed up to each turn, so a vector never spans a turn.
 * :class:`WallTracker` — ours: every valid side reading becomes a global point (pose
   interpolated at the sweep's time stamp); points are grouped into straight runs by their
   distance to a robust line fit, and a run becomes one least-squares vector whose ends are the
@@ -188,7 +190,15 @@ class SweepInput:
 
 
 class SeedEdgeFollower:
-    """The seed's method for one side: start at WALL's onset (rear), end at its end (front)."""
+    """The seed's method for one side (seed §4.3.4): start at WALL's onset (rear), end at its
+    end (front).
+
+    "Ist nun das Verhalten beider Sensoren linear, so definiert der Meßwert des hinteren Sensors
+    die Anfangsposition eines Vektors. Bei Änderung in nichtlineares Verhalten gibt der Meßwert
+    des vorderen Sensors den Endpunkt an": the end is the front reading (and pose) of the last
+    WALL sweep, the end of the steady run of readings; the reading that broke it lies past the
+    wall. Each point is the sensor's mount plus its reading along the beam's axis, placed with
+    the pose it is given (copro's seed mode: dead reckoning, seed §4.3.4)."""
 
     def __init__(self, sensors: SideSensors, emit: Callable[[Vector], None]) -> None:
         self.sensors = sensors
