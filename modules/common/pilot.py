@@ -9,6 +9,7 @@ until the navigator commands that one.
 Which sonars are relevant to ALERT: the three front ones for forward moves, the rear one for
 reverse moves, all of them for turns on the spot. An ALERT already present when an *escape*
 move (the direction the lock allows) starts does not abort that move — it is what it escapes.
+:class:`SeedPilot` (``--algorithms main=seed``) is the seed's rule instead: any sonar, any move.
 
 The pilot does no I/O itself: it is stepped with a :class:`Sensors` snapshot and sends through
 a callable, so it is unit-tested with synthetic data and driven by main's program on the ring.
@@ -197,10 +198,10 @@ class Pilot:
     def _begin(self, sensors: Sensors) -> None:
         move = self.moves[self.index]
         escape = self.alert_lock != STOPPED and move.direction == self.alert_lock
-        self._exempt = self._alerting(move.direction, sensors) if escape else set()
+        self._exempt = self._escape_exempt(move.direction, sensors) if escape else set()
         if escape:
             self.alert_lock = STOPPED  # the navigator commanded the opposite direction
-        if self._alerting(move.direction, sensors) - self._exempt:
+        if self._alert_at_start(move.direction, sensors):
             self._finish(REASON["ALERT"], "alert at start", lock=move.direction)
             return
         if move.scan and not self._scanning:
@@ -241,6 +242,14 @@ class Pilot:
                 free_mm = (ahead - condition.cm) * 10 + self.settings.ahead_slack_mm
                 amount = min(amount, max(free_mm, self.settings.min_forward_mm))
         return amount
+
+    def _escape_exempt(self, direction: int, sensors: Sensors) -> set[int]:
+        """The sonars in ALERT when an escape move starts: they do not abort it (what it escapes)."""
+        return self._alerting(direction, sensors)
+
+    def _alert_at_start(self, direction: int, sensors: Sensors) -> set[int]:
+        """The sonars that keep a move from being sent at all: in ALERT already, not exempt."""
+        return self._alerting(direction, sensors) - self._exempt
 
     def _alerting(self, direction: int, sensors: Sensors) -> set[int]:
         if direction == FORWARD:
@@ -409,6 +418,23 @@ class Pilot:
         if kind == "corner_right":
             return sensors.right_contact == CONTACT["CORNER"]
         raise ValueError(f"unknown abort condition {kind!r}")
+
+
+class SeedPilot(Pilot):
+    """The seed's pilot (seed §4.3.6 ``pilot_1``): "Meldet ein Sensor eine Bereichsunterschreitung
+    von 4cm ... so bricht er auf jeden Fall die Fahrt ab" — any of the eight sonars in ALERT aborts
+    any move, whatever its direction, escapes included; the move is sent first and the ALERT is
+    seen while it runs (the seed checks inside ``while(Position noch nicht erreicht)``). The
+    direction lock is the same as ours: only the opposite of the aborted move is accepted next."""
+
+    def _alerting(self, direction: int, sensors: Sensors) -> set[int]:
+        return {i for i, cm in enumerate(sensors.distances) if cm < ALERT_CM}
+
+    def _escape_exempt(self, direction: int, sensors: Sensors) -> set[int]:
+        return set()  # "auf jeden Fall": no sonar is exempt, not even on the escape
+
+    def _alert_at_start(self, direction: int, sensors: Sensors) -> set[int]:
+        return set()  # sent, then stopped at the first check of the running move
 
 
 def side_slope(
