@@ -17,6 +17,10 @@ the next state — the seed's cooperative navigator/pilot alternation.
   could not see, and the robot drives back to its start pose (``completeness()`` says how it went).
 * :class:`Calibrate` — the calibration run: a 360° turn, the compass tells the error, main sends
   RECALC_GLIDE_FACTOR.
+
+The seed's strategies as it built them (``--algorithms main=seed``): :class:`SeedExploreAvoid`
+(the turn aborts at the CLOSE area's edge), and Explore 2 as :class:`SeedCalibrated` round
+:class:`SeedLeftWall` (the calibration run first, then plain labyrinth-rule wall following).
 """
 
 from __future__ import annotations
@@ -78,6 +82,9 @@ class ExploreAvoid(Navigator):
     """Explore 1: drive until something is CLOSE, turn 90° toward the side with more room."""
 
     mode = 1
+    #: the turn stops when a front sonar reads this near. Ours: half the CLOSE area's edge, so that
+    #: the turn away from the wall the drive stopped at (front ≤ 12 cm) is not stopped at once
+    turn_close_cm = CLOSE_CM // 2
 
     def __init__(self, layout: SonarLayout, drive_mm: int = 3000, speed_pct: int = 100) -> None:
         super().__init__(layout)
@@ -118,7 +125,7 @@ class ExploreAvoid(Navigator):
                 direction,
                 90,
                 self.speed_pct,
-                abort=(Abort("front_within", CLOSE_CM // 2, "CLOSE"),),
+                abort=(Abort("front_within", self.turn_close_cm, "CLOSE"),),
                 label="turn",
             )
         ]
@@ -960,3 +967,171 @@ class Calibrate(Navigator):
             ("motor", "RECALC_GLIDE_FACTOR", {"target_deg": 360, "error_cdeg": int(error_cdeg)})
         )
         return None
+
+
+# -- the seed's strategies (``--algorithms main=seed``) ---------------------------------------------
+#: a locked-out plan this many times in a row: the strategy has no move the ALERT lock accepts
+SEED_STUCK_REFUSALS = 4
+NEAR_CM = 30  # the NEAR area's upper edge (seed §4.3.3: NEAR 10-30 cm)
+
+
+def _refused(last: Outcome | None) -> bool:
+    """The pilot refused the plan's first move: the ALERT lock allows another direction."""
+    return last is not None and last.reason == REASON["ALERT"] and last.trigger == "locked"
+
+
+class SeedExploreAvoid(ExploreAvoid):
+    """Explore 1 as the seed's ``navigator_1`` (seed §4.3.6): the turn, too, aborts "bei
+    Annaeherung im CLOSE-Bereich" — a front sonar at the CLOSE area's edge (12 cm). After a drive
+    stopped there the turn stops at once; the robot nibbles round until the front reads beyond.
+
+    With :class:`SeedPilot` an escape still in ALERT is aborted and locks the opposite of the
+    escape: neither "turn back" nor "drive back" is accepted any more. The seed's automaton would
+    plan refused moves forever; this one ends the run (``note``) after a few refusals in a row."""
+
+    turn_close_cm = CLOSE_CM
+
+    def __init__(self, layout: SonarLayout, drive_mm: int = 3000, speed_pct: int = 100) -> None:
+        super().__init__(layout, drive_mm, speed_pct)
+        self.refusals = 0
+
+    def plan(self, last: Outcome | None, sensors: Sensors, alert_lock: int) -> list[Move] | None:
+        self.refusals = self.refusals + 1 if _refused(last) else 0
+        if self.refusals >= SEED_STUCK_REFUSALS:
+            self.state = NAV["DONE"]
+            self.note = "stuck: the ALERT lock refuses every move the strategy makes"
+            return None
+        return super().plan(last, sensors, alert_lock)
+
+
+@dataclass
+class SeedWallSettings:
+    """The plain left-wall follower's distances: the seed's distance areas (seed §4.3.3)."""
+
+    close_cm: int = CLOSE_CM  # a front sonar in the CLOSE area: the way ahead is blocked
+    lost_cm: int = NEAR_CM  # the left front sonar beyond the NEAR area: the wall ended
+    segment_mm: int = 3000  # one follow move, as long as Explore 1's drive
+    find_mm: int = 3000
+    clear_mm: int = 400  # past the wall's end by about the robot's length (38 cm) before turning
+    reacquire_mm: int = 1000
+    speed_pct: int = 100
+
+
+class SeedLeftWall(Navigator):
+    """Explore 2 as the seed's test strategy (seed §4.4): "ein einfaches Wall-Following ..., das
+    versucht, immer der vom Roboter aus gesehenen linken Wand zu folgen. Im Grunde der
+    Algorithmus zum Verlassen eines Labyrinths." The labyrinth rule with straight moves and 90°
+    turns, nothing else: drive until blocked, turn right; follow (vectors on) until blocked (turn
+    right) or the wall is lost (drive past its end, turn left, drive until the left sees a wall;
+    none: turn left again). No course correction, no turn checks, no lap end (the seed's run
+    went on until stopped), no islands, no return home."""
+
+    mode = 2
+
+    def __init__(self, layout: SonarLayout, settings: SeedWallSettings | None = None) -> None:
+        super().__init__(layout)
+        self.s = settings or SeedWallSettings()
+        self.phase = "find"
+        self.refusals = 0
+
+    def _blocked(self) -> Abort:
+        return Abort("front_within", self.s.close_cm, "CLOSE")
+
+    def _follow(self) -> list[Move]:
+        s = self.s
+        self.phase = "follow"
+        self.state = NAV["FOLLOW_WALL"]
+        lost = Abort("left_beyond", s.lost_cm, "CORNER")
+        return [
+            Move(FORWARD, s.segment_mm, s.speed_pct, scan=True, abort=(self._blocked(), lost), label="follow")
+        ]
+
+    def _right_turn(self) -> list[Move]:
+        """Blocked ahead: turn right, the wall ahead is on the left now."""
+        self.phase = "follow"
+        self.state = NAV["TURN"]
+        return [Move(TURN_RIGHT, 90, self.s.speed_pct, label="inner")]
+
+    def _round_the_end(self, clear: bool) -> list[Move]:
+        """The wall on the left ended: (past its end,) turn left, drive until the left sees one."""
+        s = self.s
+        self.phase = "reacquire"
+        self.state = NAV["TURN"]
+        found = Abort("left_within", s.lost_cm, "NONE")
+        moves = (
+            [Move(FORWARD, s.clear_mm, s.speed_pct, abort=(self._blocked(),), label="clear")] if clear else []
+        )
+        return [
+            *moves,
+            Move(TURN_LEFT, 90, s.speed_pct, label="outer"),
+            Move(FORWARD, s.reacquire_mm, s.speed_pct, abort=(self._blocked(), found), label="reacquire"),
+        ]
+
+    def plan(self, last: Outcome | None, sensors: Sensors, alert_lock: int) -> list[Move] | None:
+        self.steps += 1
+        s = self.s
+        self.refusals = self.refusals + 1 if _refused(last) else 0
+        if self.refusals >= SEED_STUCK_REFUSALS:
+            self.state = NAV["DONE"]
+            self.note = "stuck: the ALERT lock refuses every move the strategy makes"
+            return None
+        if last is not None and last.reason == REASON["ALERT"]:
+            # seed §4.3.6: "Es ist dann Aufgabe des Navigators", the direction the lock allows
+            self.state = NAV["BACK_OFF"]
+            return self.escape(alert_lock if alert_lock != STOPPED else REVERSE)
+        label = last.move.label if last is not None and last.move is not None else ""
+        blocked = last is not None and (
+            last.trigger == "front_within" or last.reason in (REASON["STALL"], REASON["COLLISION"])
+        )
+        if self.phase == "find":
+            self.state = NAV["ENTRY"]
+            if label == "find" and blocked:
+                return self._right_turn()
+            return [Move(FORWARD, s.find_mm, s.speed_pct, abort=(self._blocked(),), label="find")]
+        if blocked:
+            return self._right_turn()
+        if self.phase == "reacquire" and label == "reacquire" and last is not None:
+            if last.trigger == "left_within":
+                return self._follow()
+            return self._round_the_end(clear=False)  # no wall: the end of a thin wall, round it
+        if label == "follow" and last is not None and last.trigger == "left_beyond":
+            return self._round_the_end(clear=True)
+        if self.phase == "reacquire" and label in ("clear", "outer"):  # a sequence cut short
+            return self._round_the_end(clear=False)
+        return self._follow()
+
+
+class SeedCalibrated(Navigator):
+    """A strategy begun with the calibration run, as the seed extended its test strategy (seed
+    §4.4: "um eine Kalibrierungsfahrt erweitert. Sie versucht am Anfang den Gleitfaktor durch
+    eine 360° Drehung zu bestimmen"): :class:`Calibrate` first, then ``strategy``."""
+
+    def __init__(self, layout: SonarLayout, strategy: Navigator) -> None:
+        super().__init__(layout)
+        self.calibration: Calibrate | None = Calibrate(layout)
+        self.strategy = strategy
+        self.mode = strategy.mode
+        self.state = NAV["CALIBRATE"]
+        self.result: dict[str, float] | None = None
+        self.calibration_steps = 0
+
+    def plan(self, last: Outcome | None, sensors: Sensors, alert_lock: int) -> list[Move] | None:
+        calibration = self.calibration
+        if calibration is not None:
+            moves = calibration.plan(last, sensors, alert_lock)
+            self.commands += calibration.commands
+            calibration.commands.clear()
+            self.steps = self.calibration_steps = calibration.steps
+            self.state = calibration.state
+            if moves is not None:
+                return moves
+            self.result, self.note, self.calibration = calibration.result, calibration.note, None
+            last = None  # the calibration turn is no outcome of the strategy's
+        strategy = self.strategy
+        moves = strategy.plan(last, sensors, alert_lock)
+        self.commands += strategy.commands
+        strategy.commands.clear()
+        self.steps = self.calibration_steps + strategy.steps
+        self.state = strategy.state
+        self.note = strategy.note or self.note
+        return moves
