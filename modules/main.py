@@ -9,6 +9,10 @@ Started and stopped by commands (EXPLORE mode, STOP_EXPLORE, CALIBRATE, CLEAR_MA
 LCD keypad) or over the PC link (``on_pc_request``: ``explore``, ``stop``, ``calibrate``,
 ``clear_map``, ``get_map``, ``actions`` (an action file's text), ``state``). ``main.data`` carries the navigator state, the mode,
 the pilot's last abort reason, the ALERT lock and the number of planned steps.
+
+``--algorithms main=seed`` (read once in :meth:`Program.setup`) runs the seed's strategies and
+pilot instead (:func:`explore_navigator`, :func:`make_pilots`): ALERT on any sonar, Explore 1's
+turn stopped at the CLOSE area, Explore 2 the calibration run then plain left-wall following.
 """
 
 from __future__ import annotations
@@ -18,8 +22,18 @@ import queue
 import time
 from typing import Any
 
+from modules.common.algorithms import algorithm
 from modules.common.mapclient import MapCollector
-from modules.common.navigator import NAV, Calibrate, ExploreAvoid, ExploreLeftWall, Navigator
+from modules.common.navigator import (
+    NAV,
+    Calibrate,
+    ExploreAvoid,
+    ExploreLeftWall,
+    Navigator,
+    SeedCalibrated,
+    SeedExploreAvoid,
+    SeedLeftWall,
+)
 from modules.common.pilot import (
     MOTOR_STATE,
     REASON,
@@ -28,10 +42,12 @@ from modules.common.pilot import (
     Outcome,
     Pilot,
     PilotSettings,
+    SeedPilot,
+    Send,
     Sensors,
 )
 from modules.common.units import pose_from_wire
-from modules.common.vectorgen import default_layout
+from modules.common.vectorgen import SonarLayout, default_layout
 from tokenring.errors import UsageError
 from tokenring.program import UserProgram
 from tokenring.protocol import default_protocol
@@ -39,6 +55,24 @@ from tokenring.protocol import default_protocol
 log = logging.getLogger("tokenring.main")
 NAV_NAMES = {v: k for k, v in NAV.items()}
 COMPASS_CALIBRATING = default_protocol().enums["compass_state"]["CALIBRATING"]
+
+
+def explore_navigator(mode: int, layout: SonarLayout, seed: bool) -> tuple[Navigator, int] | None:
+    """The navigator for EXPLORE ``mode`` and the pair that runs it (None: no such mode). The
+    seed's (seed §4.3.6, §4.4): Explore 1's turn stops at the CLOSE area; Explore 2 is the
+    calibration run and then plain left-wall following. Ours: :class:`ExploreAvoid`,
+    :class:`ExploreLeftWall`."""
+    if mode == 1:
+        return (SeedExploreAvoid(layout) if seed else ExploreAvoid(layout)), 1
+    if mode == 2:
+        return (SeedCalibrated(layout, SeedLeftWall(layout)) if seed else ExploreLeftWall(layout)), 2
+    return None
+
+
+def make_pilots(layout: SonarLayout, send: Send, seed: bool) -> dict[int, Pilot]:
+    """The two navigator/pilot pairs' pilots; the seed's watch every sonar for ALERT on every move."""
+    pilot = SeedPilot if seed else Pilot
+    return {1: pilot(layout, send), 2: pilot(layout, send, PilotSettings())}
 
 
 class Program(UserProgram):
@@ -53,8 +87,9 @@ class Program(UserProgram):
         self.copro = os.subscribe("copro.data")
         self.compass = os.subscribe("compass.data")
         self.layout = default_layout()
+        self.seed = algorithm("main") == "seed"  # the seed's strategies and pilot (issue 20)
         # two navigator/pilot pairs so that two strategies can be compared (the seed's design)
-        self.pilots = {1: Pilot(self.layout, self._send), 2: Pilot(self.layout, self._send, PilotSettings())}
+        self.pilots = make_pilots(self.layout, self._send, self.seed)
         self.navigator: Navigator | None = None
         self.pilot: Pilot | None = None
         self.pair = 0
@@ -197,12 +232,11 @@ class Program(UserProgram):
 
     # -- exploration control ---------------------------------------------------------------------
     def start_explore(self, mode: int) -> None:
-        if mode == 1:
-            self.start(ExploreAvoid(self.layout), 1)
-        elif mode == 2:
-            self.start(ExploreLeftWall(self.layout), 2)
-        else:
+        chosen = explore_navigator(mode, self.layout, self.seed)
+        if chosen is None:
             log.warning("EXPLORE mode %d unknown (1 = avoid, 2 = left wall)", mode)
+            return
+        self.start(*chosen)
 
     def start(self, navigator: Navigator, pair: int) -> None:
         if self.pilot is not None and self.pilot.busy:
@@ -227,7 +261,7 @@ class Program(UserProgram):
             "steps": nav.steps,
             "state": NAV_NAMES.get(nav.state, nav.state),
         }
-        if isinstance(nav, Calibrate):
+        if isinstance(nav, Calibrate | SeedCalibrated):
             self.finished["calibration"] = nav.result
         if isinstance(nav, ExploreLeftWall):
             self.finished["map"] = nav.completeness()
