@@ -5,12 +5,18 @@ Contact: the seed's threshold + tangent method — find the first sample above t
 tangent through it and the sample before (two consecutive samples on the rising edge), intersect
 it with the time axis, divide by 3 (three samples per cm) — and, for comparison, plain
 thresholding, which reads late because the edge is flat (25 cm reads as about 28 cm).
+
+Each step comes twice: the seed's as it was (:func:`contact_seed_tangent`,
+:func:`seed_distance_area`, :class:`SeedClassifier`; ``--algorithms sonar=seed``) and ours
+(:func:`contact_tangent`, :func:`distance_area`, :class:`TrendClassifier`);
+:func:`contact_method` and :func:`make_classifier` pick one.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -65,6 +71,41 @@ def contact_tangent(samples: Sequence[int] | np.ndarray, threshold: int = DEFAUL
     return min(round(start / SAMPLES_PER_CM), MAX_CONTACT_CM)
 
 
+def contact_seed_tangent(samples: Sequence[int] | np.ndarray, threshold: int = DEFAULT_THRESHOLD) -> int:
+    """The seed's ``calc_contact`` (seed §4.3.2) as it was: the first sample ``n`` above the
+    threshold, the tangent through the raw samples ``n - 1`` and ``n`` ("zweier
+    aufeinanderfolgender Meßwerte"), its zero crossing ``n - s[n] / (s[n] - s[n-1])``, ÷3 -> cm
+    (truncated, as the plain threshold's ÷3); 255 if no sample is above.
+
+    Noise on the edge goes straight into the slope: a couple of counts on ``s[n-1]`` move the
+    reading by centimetres. The seed leaves two cases open, read here as a byte distance must: a
+    tangent landing before the ping reads 0 cm, and an envelope above the threshold from its
+    first sample on (no sample before it) reads 0 cm. ``s[n-1] <= threshold < s[n]``, so the
+    slope is never zero."""
+    raw = np.asarray(samples, dtype=float)
+    n = _first_above(raw, threshold)
+    if n is None:
+        return SONAR_NO_CONTACT
+    if n == 0:
+        return 0
+    start = n - raw[n] / (raw[n] - raw[n - 1])
+    return min(int(max(0.0, start)) // SAMPLES_PER_CM, MAX_CONTACT_CM)
+
+
+class ContactMethod(Protocol):
+    """A contact function: echo envelope (and threshold) -> cm, 255 = no contact."""
+
+    def __call__(self, samples: Sequence[int] | np.ndarray, threshold: int = DEFAULT_THRESHOLD) -> int: ...
+
+
+def contact_method(tangent: bool, seed: bool) -> ContactMethod:
+    """The contact function: plain thresholding (``tangent=False``, the same in both modes), the
+    seed's two-sample tangent (``seed=True``) or ours."""
+    if not tangent:
+        return contact_threshold
+    return contact_seed_tangent if seed else contact_tangent
+
+
 def _last_quiet(smooth: np.ndarray, n: int) -> int | None:
     """The last sample before ``n`` at which the smoothed envelope was still at its noise floor."""
     lead = smooth[SMOOTH // 2 : n + 1]  # the running mean's first samples are padded with zeros
@@ -99,6 +140,18 @@ def distance_area(cm: int, previous: int | None = None) -> int:
     return FAR
 
 
+def seed_distance_area(cm: int) -> int:
+    """The seed's ``calc_distance_area(distance)`` (seed §4.3.2): the areas in the seed's order,
+    the first whose range holds the reading takes it (bounds inclusive: ALERT 0-4, CLOSE 5-12,
+    NEAR 13-30, MIDDLE 31-65, FAR 66-255). The seed's function sees only the distance, so the
+    overlaps cannot be hysteresis; FAR runs to 255, so no contact reads FAR (the seed has no
+    NO_CONTACT area)."""
+    for area, _lo, hi in SEED_AREAS[:-1]:
+        if cm <= hi:
+            return area
+    return FAR
+
+
 # -- behaviour --------------------------------------------------------------------------------------
 
 NONE, LINEAR, PROGRESSIVE, DEGRESSIVE = range(4)
@@ -107,11 +160,14 @@ BEHAVIOUR_NAMES = ("NONE", "LINEAR", "PROGRESSIVE", "DEGRESSIVE")
 
 @dataclass
 class SeedClassifier:
-    """The seed's ``observe_sensor``: first and second differences of consecutive readings.
+    """The seed's ``observe_sensor`` (seed §4.3.2): first and second differences of consecutive
+    readings.
 
     LINEAR if the second difference is 0 within ``tolerance``, DEGRESSIVE if it is larger,
     PROGRESSIVE if smaller; NONE without contact or history. It reproduces the seed's flaw: after
-    a jump the next steady reading has a large negative second difference and reads PROGRESSIVE."""
+    a jump the next steady reading has a large negative second difference and reads PROGRESSIVE.
+    The seed names no tolerance ("ein gewisser Fehler") and does not say whether a reading without
+    contact ends the history; here it does (the differences restart after it)."""
 
     tolerance: int = 3
     history: list[int] = field(default_factory=list)
