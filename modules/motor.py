@@ -14,6 +14,18 @@ Steps are issued on the simulation clock in small batches through the hardware c
 dead-reckoned pose is computed from the steps issued (no encoders) and starts where the robot
 was put down. The data channel carries the pose, direction, speed, distance driven since the last
 move command, the cumulative left/right half-step counters and the time stamp of that sample.
+
+Seed mode (``--algorithms motor=seed``, issue 20) keeps the 2001 command semantics of seed
+§4.3.3 (``move_forward``'s loop and the main loop's ``switch``): a command of the move's own kind
+during a move is ignored ("Befehl falsch"); any other command, SET_GLOBAL_POSITION and
+RECALC_GLIDE_FACTOR included, aborts it and is then carried out; POSITION_REACHED (always DONE)
+follows a completed move only and is sent once, lost if the commander's inbox does not take it;
+the motor never hears of a wall, a stall or lost power (no feedback: it issues every step and
+reports DONE); SET_WHEEL_SPEEDS, not a seed command, only aborts a move (both tracks always step
+together: straight moves and turns on the spot). Not the seed's: speed 0 and an undefined or
+implausible glide correction are still refused with ERROR (the seed text says nothing of them;
+a 0 % move would never end), and speeds above 100 % are accepted, as the seed had no check (the
+motor then stalls and loses its steps).
 """
 
 from __future__ import annotations
@@ -23,6 +35,7 @@ import math
 import time
 from collections import deque
 
+from modules.common.algorithms import algorithm
 from modules.common.odometry import (
     DeadReckoning,
     Move,
@@ -46,12 +59,20 @@ TICK_SIM_S = MOTOR_TICK_MS / 1000.0  # a batch of steps every 20 simulated ms ..
 TICK_MIN_REAL_S = 0.004  # ... but not more often than every 4 real ms
 IDLE_PUBLISH_SIM_S = 0.05  # the counters' sample rate while standing
 NOTICE_PATIENCE_S = 5.0  # real seconds a reply is offered to a target that does not take it
+#: the seed's move commands by the direction they drive (seed §4.3.3: a move ignores its own kind)
+SEED_MOVE_COMMANDS = {
+    FORWARD: "MOVE_FORWARD",
+    REVERSE: "MOVE_REVERSE",
+    TURN_LEFT: "TURN_LEFT",
+    TURN_RIGHT: "TURN_RIGHT",
+}
 
 
 class Program(UserProgram):
     module = "motor"
 
     def setup(self) -> None:
+        self.seed = algorithm("motor") == "seed"
         self.out = self.os.publish()
         self.os.set_own_input_id()
         self.clock = self.hw.clock
@@ -71,6 +92,8 @@ class Program(UserProgram):
         self.stamp_ms = self.clock.now_ms()
         self.moves = {"done": 0, "aborted": 0, "stalled": 0, "collision": 0}
         self.refused = 0
+        self.ignored = 0  # seed mode: commands the seed dropped ("Befehl falsch", unknown ones)
+        self.notices_lost = 0  # seed mode: replies the target did not take (sent once)
         self.last_move_ms = (0.0, 0.0)
         self.tick_real = max(TICK_MIN_REAL_S, self.clock.to_real(TICK_SIM_S))
         self._publish()
@@ -106,6 +129,8 @@ class Program(UserProgram):
     # -- commands -------------------------------------------------------------------------------
     def _handle(self, cmd) -> None:
         name, args = cmd.name, cmd.args
+        if self.seed and not self._seed_admit(cmd):
+            return
         if name in ("MOVE_FORWARD", "MOVE_REVERSE", "TURN_LEFT", "TURN_RIGHT", "SET_WHEEL_SPEEDS", "STOP"):
             problem = self._check(name, args)
             if problem:
@@ -132,10 +157,25 @@ class Program(UserProgram):
         else:
             log.info("motor: ignoring %s from node %d", name, cmd.sender)
 
+    def _seed_admit(self, cmd) -> bool:
+        """Seed §4.3.3: during a move, a command of the move's own kind is dropped and any other
+        aborts the move (silently) before the main loop carries it out; SET_WHEEL_SPEEDS is no
+        seed command (the main loop's ``default``). True: carry the command out."""
+        if self.move is not None:
+            if cmd.name == SEED_MOVE_COMMANDS.get(self.move.direction):
+                self.ignored += 1
+                log.info("motor (seed): %s during the same move ignored", cmd.name)
+                return False
+            self._finish(ABORTED)
+        if cmd.name == "SET_WHEEL_SPEEDS":
+            self.ignored += 1
+            log.info("motor (seed): %s is not a seed command, ignored", cmd.name)
+            return False
+        return True
+
     def _check(self, name: str, args: dict) -> str:
-        if (
-            name in ("MOVE_FORWARD", "MOVE_REVERSE", "TURN_LEFT", "TURN_RIGHT")
-            and not 1 <= args["speed_pct"] <= 100
+        if name in ("MOVE_FORWARD", "MOVE_REVERSE", "TURN_LEFT", "TURN_RIGHT") and (
+            args["speed_pct"] < 1 or (args["speed_pct"] > 100 and not self.seed)
         ):
             return f"speed {args['speed_pct']} % is outside 1..100 % (start-stop mode, no ramps)"
         if name == "SET_WHEEL_SPEEDS" and not (
@@ -205,19 +245,26 @@ class Program(UserProgram):
                 move.start_ms
                 + 1000.0 * max(t / r for t, r in zip(move.total, move.rate_hz, strict=True) if r > 0),
             )
-            if not result["power"]:
-                self._finish(ABORTED)
-                return
-            if result["blocked"]:
-                self._finish(COLLISION)
-                return
-            if result["stalled"]:
-                self._finish(STALLED)
+            # seed §4.3.3: no feedback from the motors, every step counts as made
+            status = None if self.seed else self._trouble(result)
+            if status is not None:
+                self._finish(status)
                 return
         else:
             self.stamp_ms = now
         if move.issued == move.total:
             self._finish(DONE)
+
+    @staticmethod
+    def _trouble(result: dict) -> int | None:
+        """What the power stage reported that ends a move: no power, a wall, a stall."""
+        if not result["power"]:
+            return ABORTED
+        if result["blocked"]:
+            return COLLISION
+        if result["stalled"]:
+            return STALLED
+        return None
 
     def _finish(self, status: int) -> None:
         move = self.move
@@ -229,6 +276,8 @@ class Program(UserProgram):
         self.direction, self.speed_pct = STOPPED, 0
         self.moves[("done", "aborted", "stalled", "collision")[status]] += 1
         commander = self.os.protocol.by_id.get(move.commander)
+        if self.seed and status != DONE:
+            return  # seed §4.3.3: POSITION_REACHED only after a completed move
         if commander is not None and commander.name != self.os.name:
             self.notices.append(
                 (commander.name, "POSITION_REACHED", {"status": status, "move_seq": move.seq})
@@ -237,8 +286,10 @@ class Program(UserProgram):
     def _flush_notices(self) -> None:
         """Send queued replies, one in flight per target (one inbox slot each). A reply the target
         did not take (its inbox was locked) is sent again, for up to ``NOTICE_PATIENCE_S``: the
-        seed sent POSITION_REACHED once and lost it whenever the commander was not listening."""
+        seed sent POSITION_REACHED once and lost it whenever the commander was not listening (seed
+        mode does the same: no patience)."""
         now = time.monotonic()
+        patience = 0.0 if self.seed else NOTICE_PATIENCE_S
         for target in list(self.in_flight):
             outbox, entry, deadline = self.in_flight[target]
             if not outbox.done.is_set():
@@ -247,11 +298,14 @@ class Program(UserProgram):
             if not outbox.acknowledged and now < deadline:
                 self.notices.appendleft(entry)
                 self.notice_deadlines[id(entry)] = deadline
+            elif not outbox.acknowledged and self.seed:
+                self.notices_lost += 1
+                log.info("motor: %s to %s not taken, given up", entry[1], entry[0])
         waiting = []
         while self.notices:
             entry = self.notices.popleft()
             target, name, args = entry
-            deadline = self.notice_deadlines.pop(id(entry), now + NOTICE_PATIENCE_S)
+            deadline = self.notice_deadlines.pop(id(entry), now + patience)
             if target in self.in_flight:
                 waiting.append(entry)
                 self.notice_deadlines[id(entry)] = deadline
@@ -264,7 +318,7 @@ class Program(UserProgram):
         self.notices.extend(waiting)
 
     def report(self) -> dict:
-        return {
+        report = {
             "pose": [self.odometry.x, self.odometry.y, self.odometry.theta],
             "glide_factor": self.odometry.glide,
             "state": self.state,
@@ -274,3 +328,6 @@ class Program(UserProgram):
             "last_move_ms": list(self.last_move_ms),
             "max_speed_mm_s": MAX_SPEED_MM_S,
         }
+        if self.seed:
+            report.update(algorithm="seed", ignored=self.ignored, notices_lost=self.notices_lost)
+        return report
