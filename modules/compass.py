@@ -7,6 +7,14 @@ static field is cancelled in the sensor by the compensation coils once CALIBRATE
 their running field (while motor.data says the robot moves) is subtracted in software; motor.data
 arrives a token round after a start or stop, so the short mean starts again when it changes.
 
+Seed §3.3.3's loop: the two readings of a flip pair should lie symmetric round zero; if their
+midpoint is off (the bridge's offset), the compensation coils cancel it and the pair is measured
+again, until symmetric — at start and after calibration up to eight pairs in a row (not getting
+there is logged and reported, not looped on), then one step on each sample as the offsets drift.
+The coils' offset part is driven with the flip (reversed in the reset phase): a field that stays
+is inverted with the bridge's response and cannot move the midpoint. The field itself is still
+taken from the pair's difference, which the coils' offset part does not enter.
+
 CALIBRATE: the compass turns the robot once round in eight 45° steps (it commands the motor
 itself and waits for each POSITION_REACHED), measuring at rest at each stop; a circle fit
 through the eight readings gives the static field (centre) and the Earth's field (radius); the
@@ -30,16 +38,21 @@ import numpy as np
 
 from modules.common.compass import (
     FLIP_SAMPLES,
+    MAX_COMPENSATION_ROUNDS,
     MEASUREMENT_MS,
     STOPPED,
     TURN_LEFT,
     TURN_RIGHT,
     RunningFieldLearner,
     circular_mean,
+    compensate_until_symmetric,
+    compensation_step,
     fit_circle,
     fit_circle_robust,
     flip_measurement,
     heading_from_bridges,
+    phase_compensation,
+    symmetric,
 )
 from modules.common.units import heading_to_cdeg
 from tokenring.program import UserProgram
@@ -70,6 +83,9 @@ class Program(UserProgram):
         self.motor = self.os.subscribe("motor.data")
         self.clock = self.hw.clock
         self.compensation = (0.0, 0.0)
+        self.offset_compensation = np.zeros(2)  # the coils' flip-synchronous part (seed §3.3.3)
+        self.asymmetric_rounds = 0  # flip measurements in a row not symmetric round zero
+        self.symmetry: dict = {}
         self.running_field = np.zeros(2)
         self.reference_ut: float | None = None
         self.state = UNCALIBRATED
@@ -91,11 +107,62 @@ class Program(UserProgram):
         return int(self.motor["direction"]) if self.motor.visits else STOPPED
 
     def read_field(self, compensation: tuple[float, float] | None = None) -> tuple[np.ndarray, float]:
-        """One flip measurement: the field both bridges see after compensation (µT), and its time."""
+        """One flip measurement: the field both bridges see after compensation (µT), and its time.
+        It is also a round of the seed's compensation loop: not symmetric, the coils move."""
         comp = self.compensation if compensation is None else compensation
-        adc, stamp = self.hw.measure([(1, comp), (-1, comp)], SAMPLES)
-        field, _offsets = flip_measurement(adc[0], adc[1], comp)
+        plus, minus = phase_compensation(comp, self.offset_compensation)
+        adc, stamp = self.hw.measure([(1, plus), (-1, minus)], SAMPLES)
+        field, midpoint = flip_measurement(adc[0], adc[1], plus, minus)
+        self._follow_offsets(comp, midpoint)
         return field, stamp
+
+    def _follow_offsets(self, static: tuple[float, float], midpoint: np.ndarray) -> None:
+        """Seed §3.3.3 on every sample: flip readings not symmetric round zero -> the coils cancel
+        the offset they show for the next one (the bridges' offsets drift with temperature)."""
+        if symmetric(static, self.offset_compensation, midpoint):
+            if self.asymmetric_rounds >= MAX_COMPENSATION_ROUNDS:
+                log.info("compass: flip readings symmetric again")
+            self.asymmetric_rounds = 0
+            return
+        self.asymmetric_rounds += 1
+        self.offset_compensation = compensation_step(static, self.offset_compensation, midpoint)
+        if self.asymmetric_rounds == MAX_COMPENSATION_ROUNDS:
+            log.warning(
+                "compass: flip readings not symmetric after %d compensations (midpoint %s counts)",
+                MAX_COMPENSATION_ROUNDS,
+                np.round(midpoint, 1).tolist(),
+            )
+
+    def settle_offsets(self) -> bool:
+        """The seed's loop before a heading is trusted: flip, compensate, measure again until
+        symmetric (at most :data:`MAX_COMPENSATION_ROUNDS` flip pairs); True if it got there."""
+
+        def pair(plus: tuple[float, float], minus: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+            adc, _stamp = self.hw.measure([(1, plus), (-1, minus)], SAMPLES)
+            return adc[0].mean(axis=1), adc[1].mean(axis=1)
+
+        result = compensate_until_symmetric(pair, self.compensation, self.offset_compensation)
+        self.offset_compensation = result.offset_ut
+        self.asymmetric_rounds = 0
+        self.symmetry = {
+            "converged": result.converged,
+            "measurements": result.measurements,
+            "offset_ut": result.offset_ut.tolist(),
+            "midpoint_counts": result.midpoint_counts.tolist(),
+        }
+        if result.converged:
+            log.info(
+                "compass: flip readings symmetric after %d measurements, coils' offset field %s µT",
+                result.measurements,
+                np.round(result.offset_ut, 2).tolist(),
+            )
+        else:
+            log.warning(
+                "compass: flip readings not symmetric after %d measurements (midpoint %s counts)",
+                result.measurements,
+                np.round(result.midpoint_counts, 1).tolist(),
+            )
+        return result.converged
 
     def sample(self) -> None:
         field, stamp = self.read_field()
@@ -143,6 +210,7 @@ class Program(UserProgram):
 
     # -- the loop -------------------------------------------------------------------------------
     def run(self) -> None:
+        self.settle_offsets()
         next_ms = self.clock.now_ms()
         while self.running:
             self.sample()
@@ -190,6 +258,7 @@ class Program(UserProgram):
         else:
             running = np.mean(turning, axis=0) - static if turning else np.zeros(2)
         self.compensation = (-cx, -cy)
+        self.settle_offsets()  # the new static field changes the coils' gains: symmetric again
         self.running_field = running
         self.learner.reset(running)
         self.reference_ut = radius
@@ -255,4 +324,7 @@ class Program(UserProgram):
             "running_ut": self.running_field.tolist(),
             "running_moves": {"learned": self.learner.moves, "rejected": self.learner.rejected},
             "compensation_ut": list(self.compensation),
+            "offset_compensation_ut": self.offset_compensation.tolist(),
+            "asymmetric_rounds": self.asymmetric_rounds,
+            "symmetry": dict(self.symmetry),
         }

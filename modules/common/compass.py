@@ -5,7 +5,9 @@ the difference is the field the bridge sees (its own electrical offset cancels),
 that offset. Averaging 20 samples at 1 kHz spans one 50 Hz period, so mains fields cancel too.
 The compensation coil cancels the motors' static field in the sensor (learned by calibration:
 a circle fit through readings taken at rest at eight headings); it lowers the bridge's gain a
-little, which is a known factor. Of the two bridges, the one within ±45° of its zero crossing
+little, which is a known factor. The seed's loop (§3.3.3) also cancels the offset with the coil:
+flip, measure, compensate, measure again until the pair is symmetric round zero
+(:func:`compensate_until_symmetric`). Of the two bridges, the one within ±45° of its zero crossing
 (the steep part of its sine) gives the angle by arccos; the other only says which side.
 Heading: navigation convention, radians from north, clockwise.
 """
@@ -13,7 +15,8 @@ Heading: navigation convention, radians from north, clockwise.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,13 +36,112 @@ def bridge_gain(compensation_ut: float) -> float:
 
 
 def flip_measurement(
-    plus: np.ndarray, minus: np.ndarray, compensation_ut: Sequence[float]
+    plus: np.ndarray,
+    minus: np.ndarray,
+    compensation_ut: Sequence[float],
+    minus_compensation_ut: Sequence[float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Samples (2 bridges x n) taken flipped and reset -> (field each bridge sees after
-    compensation in µT, each bridge's electrical offset in counts)."""
+    """Samples (2 bridges x n) taken flipped and reset -> (field each bridge sees after the
+    static compensation in µT, the midpoint of the two readings in counts: the bridge's offset
+    less what the coil's flip-synchronous part cancels). ``minus_compensation_ut``: the coils'
+    field in the reset phase when it differs (:func:`phase_compensation`)."""
     vp, vm = np.asarray(plus, float).mean(axis=1), np.asarray(minus, float).mean(axis=1)
-    gains = np.array([bridge_gain(c) for c in compensation_ut])
-    return (vp - vm) / (2 * gains), (vp + vm) / 2 - ADC_MID
+    midpoint = (vp + vm) / 2 - ADC_MID
+    if minus_compensation_ut is None:
+        gains = np.array([bridge_gain(c) for c in compensation_ut])
+        return (vp - vm) / (2 * gains), midpoint
+    # (V+ - mid)/g+ = H + s + k + o/g+ and (V- - mid)/g- = -(H + s) + k + o/g-: k drops out
+    gp = np.array([bridge_gain(c) for c in compensation_ut])
+    gm = np.array([bridge_gain(c) for c in minus_compensation_ut])
+    return ((vp - ADC_MID) / gp - (vm - ADC_MID) / gm) / 2, midpoint
+
+
+# -- the flip -> compensation coil -> re-measure loop (seed §3.3.3) -----------------------------
+SYMMETRY_TOLERANCE_UT = 0.25  # a flip pair's midpoint scatters by ~0.08 µT (20 samples each)
+MAX_COMPENSATION_ROUNDS = 8
+COIL_LIMIT_UT = 50.0  # the most field a compensation coil's driver makes (gain then -10 %)
+
+
+def phase_compensation(
+    static_ut: Sequence[float], offset_ut: Sequence[float]
+) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The coils' field with the flip coil set and reset: the static part (cancelling the motors'
+    field) stays, the offset part turns with the flip. A coil field that stays is inverted with
+    the bridge's response like the Earth's and cannot move the readings' midpoint; one reversed
+    with the flip adds to the bridge's offset, which is what the seed's coil cancels."""
+    s, k = np.asarray(static_ut, float), np.asarray(offset_ut, float)
+    plus, minus = s + k, s - k
+    return (float(plus[0]), float(plus[1])), (float(minus[0]), float(minus[1]))
+
+
+def coil_limited(static_ut: Sequence[float], offset_ut: np.ndarray) -> np.ndarray:
+    """``offset_ut`` cut so that neither phase's coil field exceeds :data:`COIL_LIMIT_UT`."""
+    reach = np.maximum(COIL_LIMIT_UT - np.abs(np.asarray(static_ut, float)), 0.0)
+    return np.clip(offset_ut, -reach, reach)
+
+
+def compensation_step(
+    static_ut: Sequence[float], offset_ut: Sequence[float], midpoint_counts: Sequence[float]
+) -> np.ndarray:
+    """The coils' next offset field: the last one less the midpoint the flip pair showed, in µT
+    at the two phases' mean gain (the coil's field lowers the gain: seed §3.3.3, so one step
+    leaves a little and the loop measures again)."""
+    plus, minus = phase_compensation(static_ut, offset_ut)
+    gains = np.array([(bridge_gain(p) + bridge_gain(m)) / 2 for p, m in zip(plus, minus, strict=True)])
+    step = np.asarray(offset_ut, float) - np.asarray(midpoint_counts, float) / gains
+    return coil_limited(static_ut, step)
+
+
+def symmetric(
+    static_ut: Sequence[float],
+    offset_ut: Sequence[float],
+    midpoint_counts: Sequence[float],
+    tolerance_ut: float = SYMMETRY_TOLERANCE_UT,
+) -> bool:
+    """Both bridges' flip readings lie symmetric round zero: their midpoint within ``tolerance_ut``."""
+    plus, minus = phase_compensation(static_ut, offset_ut)
+    gains = np.array([(bridge_gain(p) + bridge_gain(m)) / 2 for p, m in zip(plus, minus, strict=True)])
+    return bool(np.all(np.abs(np.asarray(midpoint_counts, float)) / gains <= tolerance_ut))
+
+
+@dataclass
+class Compensation:
+    """The loop's outcome: symmetric or not, after how many flip measurements, the coils' offset
+    field it left (µT per bridge) and the last midpoint (counts per bridge)."""
+
+    converged: bool
+    measurements: int
+    offset_ut: np.ndarray
+    midpoint_counts: np.ndarray
+
+
+#: (coil field flipped, coil field reset) -> the mean ADC counts of both bridges in each phase
+FlipPair = Callable[[tuple[float, float], tuple[float, float]], tuple[np.ndarray, np.ndarray]]
+
+
+def compensate_until_symmetric(
+    measure: FlipPair,
+    static_ut: Sequence[float],
+    offset_ut: Sequence[float] = (0.0, 0.0),
+    tolerance_ut: float = SYMMETRY_TOLERANCE_UT,
+    max_measurements: int = MAX_COMPENSATION_ROUNDS,
+) -> Compensation:
+    """Seed §3.3.3: measure, flip, measure; if the two readings are not symmetric round zero,
+    drive the compensation coil to cancel the offset and measure again, until they are — at most
+    ``max_measurements`` flip pairs (an offset beyond the coil's reach, or readings scattering
+    more than the tolerance, never get there: reported, not looped on)."""
+    if max_measurements < 1:
+        raise ValueError("the loop needs at least one flip measurement")
+    offset = coil_limited(static_ut, np.asarray(offset_ut, float))
+    midpoint = np.zeros(2)
+    for n in range(1, max_measurements + 1):
+        plus, minus = measure(*phase_compensation(static_ut, offset))
+        midpoint = (np.asarray(plus, float) + np.asarray(minus, float)) / 2 - ADC_MID
+        if symmetric(static_ut, offset, midpoint, tolerance_ut):
+            return Compensation(True, n, offset, midpoint)
+        if n < max_measurements:
+            offset = compensation_step(static_ut, offset, midpoint)
+    return Compensation(False, max_measurements, offset, midpoint)
 
 
 def heading_from_bridges(h0: float, h1: float) -> tuple[float, int]:
