@@ -46,6 +46,7 @@ from modules.common.pilot import (
     Send,
     Sensors,
 )
+from modules.common.poseupdate import CorrectionSettings, PoseCorrector
 from modules.common.units import pose_from_wire
 from modules.common.vectorgen import SonarLayout, default_layout
 from tokenring.errors import UsageError
@@ -107,6 +108,8 @@ class Program(UserProgram):
         self.rest_heading: float | None = None
         self.calibration_heading: float | None = None
         self.compass_calibrating = False  # compass.data says CALIBRATING (read with the sensors)
+        # self-localisation (seed §4.3 item 5): the filtered pose corrects the motor between moves
+        self.corrector = PoseCorrector(CorrectionSettings.from_env())
         self._publish()
 
     # -- sending ------------------------------------------------------------------------------------
@@ -123,6 +126,7 @@ class Program(UserProgram):
             self._take_requests()
             self.sensors = self._read_sensors()
             self._note_calibration_turn()
+            self._observe_poses()
             try:
                 self._cooperate()
             except Exception as exc:  # a strategy's bug stops the exploration, not main
@@ -229,6 +233,21 @@ class Program(UserProgram):
                 ", ".join(f"{m.label or m.direction} {m.amount}" for m in moves),
             )
         pilot.start(moves, self.sensors)
+
+    def _observe_poses(self) -> None:
+        """Feed motor.data and copro.data to the self-localisation (once both have spoken)."""
+        if self.motor.visits and self.copro.visits:
+            self.corrector.observe(self.motor.read(), self.copro.read())
+
+    def _correct_motor(self) -> bool:
+        """Between two pilot sequences: SET_GLOBAL_POSITION with the filtered pose when the
+        corrector asks for it (seed §4.3 item 5, §4.3.3). True while a correction holds."""
+        if not (self.motor.visits and self.copro.visits) or self.compass_calibrating:
+            return self.corrector.holding  # (the compass turns the robot itself while calibrating)
+        correction = self.corrector.correction(self.motor.read(), self.copro.read())
+        if correction is not None:
+            self._send("motor", "SET_GLOBAL_POSITION", **correction)
+        return self.corrector.holding
 
     # -- exploration control ---------------------------------------------------------------------
     def start_explore(self, mode: int) -> None:
