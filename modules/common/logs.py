@@ -26,8 +26,9 @@ lost), F (fatal), D (debug).
 
 Crash safety: every record is one ``write()`` on an unbuffered descriptor, so a killed process
 leaves every record written before the kill; a reader stops cleanly at a torn last record and
-says so. ``convert_*`` produce the seed's line-per-entry text and CSV (the seed's
-logfileconverter, one line per synchronisation); :func:`sort_log` is the seed's logfilesorter.
+says so. ``convert_*`` produce the seed's line-per-entry text (:func:`convert_seed_text`: exactly
+appendix B's line formats) and CSV (the seed's logfileconverter, one line per synchronisation);
+:func:`sort_log` is the seed's logfilesorter.
 """
 
 from __future__ import annotations
@@ -450,6 +451,161 @@ def convert_text(log: LogFile) -> str:
     out.write(f"S T {0:>8d} {log.header.get('start', '')}\n")
     for record in log.records:
         out.write(record_text(record) + "\n")
+    return out.getvalue()
+
+
+# ---------------------------------------------------------------------------------------------
+# the seed's exact text (seed 000, appendix B: figure B.3 for the widths, table B.7 for the fields)
+
+#: the wall blocks every sonar line carries (table B.7: "für alle 9 Wände")
+SEED_WALL_BLOCKS = 9
+#: an empty wall block: no wall (flag 0), no angle, no distance, no global wall
+SEED_NO_WALL = {"alpha": 0.0, "d": 0.0, "assoc": -1}
+
+
+def seed_start_time(start: str, path: str | Path = "") -> str:
+    """The header's start (``YYYYmmdd-HHMMSS``) as the seed's 19-character ``TT.MM.JJJJ
+    HH:MM:SS``, padded with blanks as figure B.3 shows it (``20. 1.2004 13: 5:35``)."""
+    from datetime import datetime
+
+    try:
+        t = datetime.strptime(start, "%Y%m%d-%H%M%S")
+    except (TypeError, ValueError):
+        raise LogError(f"{path}: start time {start!r} is not YYYYmmdd-HHMMSS; no seed S T line") from None
+    return f"{t.day:2d}.{t.month:2d}.{t.year:4d} {t.hour:2d}:{t.minute:2d}:{t.second:2d}"
+
+
+def _seed_int(value: Any, width: int) -> str:
+    """An integer field right-aligned in ``width`` (the seed's ``%6d``), rounded from mm floats."""
+    number = float(value)
+    return f"{round(number):{width}d}" if math.isfinite(number) else f"{'nan':>{width}}"
+
+
+def seed_position(p: dict[str, Any] | None) -> str:
+    """X, Y, rotation and the three valid flags (table B.7, ``x P`` and ``S S``); an unknown
+    value is written as ``0`` (figure B.3: ``      0      0      0 0 0 0``)."""
+    if p is None:
+        return f"{0:6d} {0:6d} {0:6d} 0 0 0"
+    vx, vy, vpsi = (bool(v) for v in p.get("valid", [True, True, True]))
+    x = _seed_int(p["x"], 6) if vx else f"{0:6d}"
+    y = _seed_int(p["y"], 6) if vy else f"{0:6d}"
+    psi = f"{float(p['psi']):7.5f}" if vpsi else f"{0:6d}"
+    return f"{x} {y} {psi} {int(vx)} {int(vy)} {int(vpsi)}"
+
+
+def _sonar_mounts(config: Any) -> list[tuple[float, float, float]]:
+    """Each sonar's (x mm, y mm, angle rad) on the robot: the log's config, else the robot's."""
+    sonars = config.get("robot", {}).get("sonars") if isinstance(config, dict) else None
+    if isinstance(sonars, list):
+        return [(float(x), float(y), math.radians(float(a))) for x, y, a in sonars]
+    from modules.description.robot import SONAR_MOUNTS
+
+    return [(m.x, m.y, m.angle) for m in SONAR_MOUNTS]
+
+
+def seed_sonar(
+    distances_mm: list[int | None],
+    previous: list[int | None] | None,
+    mounts: list[tuple[float, float, float]],
+    walls: list[dict[str, Any]],
+) -> str:
+    """A ``W R``/``W C`` body (table B.7): per sonar the new flag, then per sonar the obstacle's
+    x and y (robot coordinates, mm), then per sonar the distance (mm, ``0`` without contact),
+    then nine wall blocks ``flag α d association``. A value is new when it differs from the
+    previous line's (our sonar channel has no per-sensor flag; the first line is all new)."""
+    new = [
+        int(previous is None or i >= len(previous) or previous[i] != d) for i, d in enumerate(distances_mm)
+    ]
+    points: list[str] = []
+    for i, d in enumerate(distances_mm):
+        if d is None or i >= len(mounts):
+            points += [f"{0:5d}", f"{0:5d}"]
+            continue
+        mx, my, angle = mounts[i]
+        points += [_seed_int(mx + d * math.cos(angle), 5), _seed_int(my + d * math.sin(angle), 5)]
+    ranges = [f"{0:5d}" if d is None else _seed_int(d, 5) for d in distances_mm]
+    blocks = []
+    for k, wall in enumerate(walls + [SEED_NO_WALL] * max(0, SEED_WALL_BLOCKS - len(walls))):
+        found = int(k < len(walls))
+        blocks.append(f"{found} {float(wall['alpha']):.5f} {float(wall['d']):.1f} {int(wall['assoc']):2d}")
+    return " ".join([*(str(n) for n in new), *points, *ranges, *blocks])
+
+
+def _wall_associations(records: list[list[Any]]) -> dict[int, list[int]]:
+    """For each ``W C`` record (by index) the global wall each of its walls was matched to:
+    the ``K P`` of the same synchronisation lists them in order (``[wall, accepted]``)."""
+    out: dict[int, list[int]] = {}
+    matched: list[int] | None = None
+    for i in range(len(records) - 1, -1, -1):
+        _, source, kind, p = records[i]
+        if source == "S" and kind == "S":
+            matched = None  # going back: a synchronisation ends here, the one before starts
+        elif source == "K" and kind == "P":
+            walls = p.get("walls") if isinstance(p, dict) else None
+            matched = [int(w[0]) for w in walls] if isinstance(walls, list) else []
+        elif source == "W" and kind == "C":
+            out[i] = matched or []
+    return out
+
+
+def convert_seed_text(log: LogFile) -> str:
+    """The whole log exactly in the seed's line formats (seed 000, appendix B): the error log
+    as figure B.2, the data log as figure B.3 where it shows a line (``S T``, ``x P``, ``S S``,
+    ``G R/C``, ``O R/C``) and as table B.7 where it does not (the sonar's new flags, obstacle
+    points and wall blocks). ``S S`` carries the filter's position as the synchronisation began
+    (the ``K P`` of the one before; all unknown at the first, as in figure B.3)."""
+    if log.kind == "errors":
+        return convert_text(log)
+    out = io.StringIO()
+    out.write(f"S T {0:6d} {seed_start_time(log.header.get('start', ''), log.path)}\n")
+    mounts = _sonar_mounts(log.header.get("config"))
+    associations = _wall_associations(log.records)
+    previous: dict[str, list[int | None]] = {}
+    filter_now: dict[str, Any] | None = None
+    filter_at_sync: dict[str, Any] | None = None
+    for i, (stamp, source, kind, p) in enumerate(log.records):
+        if source == "S" and kind == "T":
+            out.write(f"S T {stamp:6d} {seed_start_time(p['start'], log.path)}\n")
+            continue
+        head = f"{source} {kind} {stamp:7d}"
+        if kind == "P":
+            body = seed_position(p)
+            if source == "K":
+                filter_now = p
+        elif source == "S" and kind == "S":
+            body = seed_position(filter_at_sync)
+            filter_at_sync = filter_now
+        elif source == "W" and kind in "RC":
+            if kind == "R":
+                distances = [None if d == 255 else int(d) * 10 for d in p["v"]["distances"]]
+                walls: list[dict[str, Any]] = []
+            else:
+                distances = [None if d is None else int(d) for d in p["distances_mm"]]
+                assoc = associations.get(i, [])
+                walls = [
+                    {**w, "assoc": assoc[k] if k < len(assoc) else w.get("assoc", -1)}
+                    for k, w in enumerate(p.get("walls", []))
+                ]
+            body = seed_sonar(distances, previous.get(kind), mounts, walls)
+            previous[kind] = distances
+            if kind == "C":
+                body += f" {p['count']}"
+        elif source == "O" and kind == "R":
+            body = f"{_seed_int(p['v']['steps_left'], 6)} {_seed_int(p['v']['steps_right'], 6)}"
+        elif source == "O" and kind == "C":
+            body = f"{_seed_int(p['dl'], 6)} {_seed_int(p['dr'], 6)} {p['count']}"
+        elif source == "G" and kind == "R":
+            body = f"{math.radians(float(p['v']['heading_cdeg']) / 100.0):15.12f}"
+        elif source == "G" and kind == "C":
+            body = f"{float(p['heading']):15.12f} {p['count']}"
+        elif source == "L" and kind in "RC":
+            v = p.get("v", p)
+            body = seed_position({"x": v["x"], "y": v["y"], "psi": v["theta"]})
+            if kind == "C":
+                body += f" {p['count']}"
+        else:
+            body = _record_body(source, kind, p)  # ours alone (events, battery): no seed format
+        out.write(f"{head} {body}".rstrip() + "\n")
     return out.getvalue()
 
 

@@ -14,21 +14,25 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "log",
         help="convert, sort or summarise a localisation data or error log",
         description="Data and error logs are msgpack streams (crash-safe, compact). 'convert' writes the "
-        "seed's line-per-entry text (--to text) or, for a data log, data.csv and sonar.csv with one line "
-        "per synchronisation (--to csv, the seed's logfileconverter), or MCAP for Foxglove and "
-        "PlotJuggler (--to mcap); 'sort' orders a log by time stamp "
+        "seed's line-per-entry text (--to text; --to seed: exactly the seed's appendix B line "
+        "formats) or, for a data log, data.csv and sonar.csv with one line per synchronisation "
+        "(--to csv, the seed's logfileconverter), or MCAP for Foxglove and PlotJuggler (--to mcap); "
+        "'sort' orders a log by time stamp "
         "into a new file (the seed's logfilesorter); 'info' counts records per source and kind.",
     )
     verbs = p.add_subparsers(dest="log_verb", metavar="VERB", required=True)
     convert = verbs.add_parser("convert", help="to the seed's text format or CSV")
     convert.add_argument("log", help="a data (.trlog) or error (.trerr) log")
     convert.add_argument(
-        "--to", choices=("text", "csv", "mcap"), default="text", help="output format (default text)"
+        "--to",
+        choices=("text", "seed", "csv", "mcap"),
+        default="text",
+        help="output format (default text; seed: the seed's exact line formats)",
     )
     convert.add_argument(
         "--out",
         metavar="PATH",
-        help="text: a file (default: standard output); csv: a directory (required); mcap: a file "
+        help="text, seed: a file (default: standard output); csv: a directory (required); mcap: a file "
         "(required; Foxglove, PlotJuggler)",
     )
     convert.add_argument("--force", action="store_true", help="replace an existing output")
@@ -54,7 +58,9 @@ def check_outputs(args: argparse.Namespace) -> None:
 
     if args.log_verb == "convert" and args.to == "mcap" and not args.out:
         raise UsageError("--to mcap writes one file: give it with --out FILE.mcap")
-    if args.log_verb == "sort" or (args.log_verb == "convert" and args.to in ("text", "mcap") and args.out):
+    if args.log_verb == "sort" or (
+        args.log_verb == "convert" and args.to in ("text", "seed", "mcap") and args.out
+    ):
         check_output(args.out, (args.log,), force=args.force)
     elif args.log_verb == "convert" and args.to == "csv":
         if not args.out:
@@ -66,7 +72,14 @@ def check_outputs(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from modules.common.logs import convert_csv, convert_text, read_log, sort_log, summary
+    from modules.common.logs import (
+        convert_csv,
+        convert_seed_text,
+        convert_text,
+        read_log,
+        sort_log,
+        summary,
+    )
     from tokenring.inputfile import write_atomically
 
     check_outputs(args)
@@ -105,8 +118,8 @@ def run(args: argparse.Namespace) -> int:
         counts = convert_mcap(log, args.out)
         print(f"{args.out}: {sum(counts.values())} messages on {len(counts)} topics")
         return 0
-    if args.to == "text":
-        text = convert_text(log)
+    if args.to in ("text", "seed"):
+        text = convert_text(log) if args.to == "text" else convert_seed_text(log)
         if args.out:
             write_atomically(args.out, text)
             print(f"{args.out}: {len(log.records)} entries")

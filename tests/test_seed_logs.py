@@ -1,0 +1,151 @@
+"""The logs in the seed's own text (seed 000, appendix B): ``tokenring log convert --to seed``.
+
+The expected lines are typed out by hand: where figure B.3 (the seed's data log) shows a line,
+the line is copied from the figure character for character; the sonar lines, which the figure
+shows only in an older eight-value form, are written from table B.7's fields.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from modules.common.logs import DataLog, ErrorLog, LogError, convert_seed_text, read_log
+from tokenring.cli import main as cli_main
+
+#: three sonars: ahead 150 mm in front, to the left 120 mm out, behind 150 mm back
+CONFIG = {"robot": {"sonars": [[150, 0, 0], [0, 120, 90], [-150, 0, 180]]}}
+GYRO_RAD = -0.000003835885  # figure B.3's gyro value
+NO_WALL = "0 0.00000 0.0 -1"
+
+
+def cdeg(rad: float) -> float:
+    """A heading in radians as the compass's centidegrees (the raw G R field)."""
+    return rad * 180.0 / math.pi * 100.0
+
+
+def position(x: float, y: float, psi: float, valid: tuple[bool, bool, bool]) -> dict:
+    return {"x": x, "y": y, "psi": psi, "valid": list(valid)}
+
+
+def figure_log(path: Path) -> None:
+    """Figure B.3's first two synchronisations in our record order (the positions, then S S),
+    a third with a wall-derived fix (y unknown), and sonar raw and synchronised data."""
+    with DataLog(path, "20040120-130535", CONFIG) as log:
+        log.write(3536, "G", "R", {"gen": 0, "n": 0, "v": {"heading_cdeg": cdeg(GYRO_RAD), "state": 1}})
+        log.write(3536, "G", "P", position(0.0, 0.0, -0.000004, (False, False, True)))
+        log.write(3542, "O", "R", {"gen": 0, "n": 1, "v": {"steps_left": 0, "steps_right": 0}})
+        log.write(3542, "O", "C", {"gen": 0, "dl": 0, "dr": 0, "count": 1})
+        log.write(3542, "G", "C", {"gen": 0, "heading": GYRO_RAD, "count": 1})
+        log.write(3542, "O", "P", position(0.0, 0.0, 0.0, (True, True, True)))
+        log.write(3542, "K", "P", position(0.0, 0.0, 0.0, (True, True, True)) | {"walls": []})
+        log.write(3542, "S", "S", {"gen": 0, "period_ms": 0, "counts": {"odometry": 1}})
+        log.write(3572, "L", "P", position(0.0, 0.0, 0.0, (False, False, False)))
+        log.write(3641, "W", "R", {"gen": 1, "n": 2, "v": {"distances": [100, 255, 50]}})
+        log.write(3645, "W", "R", {"gen": 1, "n": 3, "v": {"distances": [100, 60, 50]}})
+        log.write(3647, "G", "C", {"gen": 1, "heading": -0.000019179423, "count": 5})
+        wall = {"alpha": 1.5708, "d": 1200.0, "kind": "side"}
+        log.write(3647, "W", "C", {"gen": 1, "distances_mm": [1000, 600, None], "walls": [wall], "count": 2})
+        log.write(3647, "K", "P", position(0.0, 0.0, 0.0, (True, True, True)) | {"walls": [[3, 1]]})
+        log.write(3647, "S", "S", {"gen": 1, "period_ms": 105, "counts": {"odometry": 1}})
+        log.write(3747, "K", "P", position(1003.6, 998.1, 0.01, (True, False, True)) | {"walls": []})
+        log.write(3747, "S", "S", {"gen": 2, "period_ms": 100, "counts": {"odometry": 1}})
+
+
+EXPECTED = [
+    "S T      0 20. 1.2004 13: 5:35",  # figure B.3
+    "G R    3536 -0.000003835885",  # figure B.3
+    "G P    3536      0      0 -0.00000 0 0 1",  # figure B.3
+    "O R    3542      0      0",  # figure B.3
+    "O C    3542      0      0 1",  # figure B.3
+    "G C    3542 -0.000003835885 1",  # figure B.3
+    "O P    3542      0      0 0.00000 1 1 1",  # figure B.3
+    "K P    3542      0      0 0.00000 1 1 1",  # figure B.3
+    "S S    3542      0      0      0 0 0 0",  # figure B.3: nothing known when the first sync began
+    "L P    3572      0      0      0 0 0 0",  # figure B.3
+    # table B.7: new flags; obstacle x y per sonar (robot frame); distances; nine wall blocks
+    "W R    3641 1 1 1  1150     0     0     0  -650     0  1000     0   500 " + " ".join([NO_WALL] * 9),
+    "W R    3645 0 1 0  1150     0     0   720  -650     0  1000   600   500 " + " ".join([NO_WALL] * 9),
+    "G C    3647 -0.000019179423 5",  # figure B.3
+    "W C    3647 1 1 1  1150     0     0   720     0     0  1000   600     0 1 1.57080 1200.0  3 "
+    + " ".join([NO_WALL] * 8)
+    + " 2",
+    "K P    3647      0      0 0.00000 1 1 1",  # figure B.3
+    "S S    3647      0      0 0.00000 1 1 1",  # figure B.3: the filter's position of the sync before
+    "K P    3747   1004      0 0.01000 1 0 1",  # y unknown: written 0, its flag 0
+    "S S    3747      0      0 0.00000 1 1 1",
+]
+
+
+def test_a_data_log_in_the_seeds_line_formats(tmp_path: Path) -> None:
+    figure_log(tmp_path / "a.trlog")
+    assert convert_seed_text(read_log(tmp_path / "a.trlog")).splitlines() == EXPECTED
+
+
+def test_the_command_line_writes_the_same_lines(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    figure_log(tmp_path / "a.trlog")
+    assert cli_main(["log", "convert", str(tmp_path / "a.trlog"), "--to", "seed"]) == 0
+    assert capsys.readouterr().out.splitlines() == EXPECTED
+    out = tmp_path / "a.txt"
+    assert cli_main(["log", "convert", str(tmp_path / "a.trlog"), "--to", "seed", "--out", str(out)]) == 0
+    assert out.read_text().splitlines() == EXPECTED
+
+
+def test_an_error_log_as_figure_b2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with ErrorLog(tmp_path / "e.trerr", "20040120-130535", debug=True) as log:
+        log.message("I", 484, "Triggering Sensor: Odometry, Trigger count: 1")
+        log.message("D", 317467, "Gyroskop Thread beendet")
+    assert cli_main(["log", "convert", str(tmp_path / "e.trerr"), "--to", "seed"]) == 0
+    assert capsys.readouterr().out.splitlines() == [
+        "I      484 Triggering Sensor: Odometry, Trigger count: 1",  # figure B.2
+        "D   317467 Gyroskop Thread beendet",  # figure B.2
+    ]
+
+
+def test_a_start_time_is_padded_with_blanks_as_the_seed_wrote_it(tmp_path: Path) -> None:
+    with DataLog(tmp_path / "a.trlog", "20261124-090705", {}):
+        pass
+    assert convert_seed_text(read_log(tmp_path / "a.trlog")) == "S T      0 24.11.2026  9: 7: 5\n"
+
+
+def one_error_line(capsys: pytest.CaptureFixture[str], *words: str) -> None:
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in captured.err, captured.err
+    for word in words:
+        assert word in lines[0], (word, lines[0])
+    assert captured.out == ""
+
+
+def test_a_file_that_is_no_log_is_one_line_and_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = tmp_path / "bad.trlog"
+    bad.write_text("S T      0 20. 1.2004 13: 5:35\n")  # a text log is not the msgpack log
+    assert cli_main(["log", "convert", str(bad), "--to", "seed"]) == 2
+    one_error_line(capsys, "bad.trlog", "not a tokenring log")
+
+
+def test_damage_inside_a_log_is_one_line_and_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    figure_log(tmp_path / "a.trlog")
+    data = bytearray((tmp_path / "a.trlog").read_bytes())
+    middle = len(data) // 2
+    data[middle : middle + 8] = b"\xc1" * 8  # 0xc1: a byte msgpack never uses
+    (tmp_path / "a.trlog").write_bytes(bytes(data))
+    assert cli_main(["log", "convert", str(tmp_path / "a.trlog"), "--to", "seed"]) == 2
+    one_error_line(capsys, "a.trlog", "damaged")
+
+
+def test_a_start_time_the_seed_cannot_show_is_one_line_and_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with DataLog(tmp_path / "a.trlog", "yesterday", {}):
+        pass
+    with pytest.raises(LogError, match="yesterday"):
+        convert_seed_text(read_log(tmp_path / "a.trlog"))
+    assert cli_main(["log", "convert", str(tmp_path / "a.trlog"), "--to", "seed"]) == 2
+    one_error_line(capsys, "a.trlog", "'yesterday'", "YYYYmmdd-HHMMSS")
