@@ -60,10 +60,11 @@ def flip_measurement(
 SYMMETRY_TOLERANCE_UT = 0.25  # a flip pair's midpoint scatters by ~0.08 µT (20 samples each)
 MAX_COMPENSATION_ROUNDS = 8
 COIL_LIMIT_UT = 50.0  # the most field a compensation coil's driver makes (gain then -10 %)
+Vector = np.ndarray | Sequence[float]  # one value per bridge
 
 
 def phase_compensation(
-    static_ut: Sequence[float], offset_ut: Sequence[float]
+    static_ut: Vector, offset_ut: Vector
 ) -> tuple[tuple[float, float], tuple[float, float]]:
     """The coils' field with the flip coil set and reset: the static part (cancelling the motors'
     field) stays, the offset part turns with the flip. A coil field that stays is inverted with
@@ -74,15 +75,13 @@ def phase_compensation(
     return (float(plus[0]), float(plus[1])), (float(minus[0]), float(minus[1]))
 
 
-def coil_limited(static_ut: Sequence[float], offset_ut: np.ndarray) -> np.ndarray:
+def coil_limited(static_ut: Vector, offset_ut: np.ndarray) -> np.ndarray:
     """``offset_ut`` cut so that neither phase's coil field exceeds :data:`COIL_LIMIT_UT`."""
     reach = np.maximum(COIL_LIMIT_UT - np.abs(np.asarray(static_ut, float)), 0.0)
     return np.clip(offset_ut, -reach, reach)
 
 
-def compensation_step(
-    static_ut: Sequence[float], offset_ut: Sequence[float], midpoint_counts: Sequence[float]
-) -> np.ndarray:
+def compensation_step(static_ut: Vector, offset_ut: Vector, midpoint_counts: Vector) -> np.ndarray:
     """The coils' next offset field: the last one less the midpoint the flip pair showed, in µT
     at the two phases' mean gain (the coil's field lowers the gain: seed §3.3.3, so one step
     leaves a little and the loop measures again)."""
@@ -93,9 +92,9 @@ def compensation_step(
 
 
 def symmetric(
-    static_ut: Sequence[float],
-    offset_ut: Sequence[float],
-    midpoint_counts: Sequence[float],
+    static_ut: Vector,
+    offset_ut: Vector,
+    midpoint_counts: Vector,
     tolerance_ut: float = SYMMETRY_TOLERANCE_UT,
 ) -> bool:
     """Both bridges' flip readings lie symmetric round zero: their midpoint within ``tolerance_ut``."""
@@ -121,8 +120,8 @@ FlipPair = Callable[[tuple[float, float], tuple[float, float]], tuple[np.ndarray
 
 def compensate_until_symmetric(
     measure: FlipPair,
-    static_ut: Sequence[float],
-    offset_ut: Sequence[float] = (0.0, 0.0),
+    static_ut: Vector,
+    offset_ut: Vector = (0.0, 0.0),
     tolerance_ut: float = SYMMETRY_TOLERANCE_UT,
     max_measurements: int = MAX_COMPENSATION_ROUNDS,
 ) -> Compensation:
