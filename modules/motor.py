@@ -2,9 +2,10 @@
 
 Commands (protocol.yaml, ``motor``): MOVE_FORWARD / MOVE_REVERSE (mm, speed %), TURN_LEFT /
 TURN_RIGHT (degrees, speed %), STOP, SET_GLOBAL_POSITION (x, y, angle), RECALC_GLIDE_FACTOR
-(target angle, error), SET_WHEEL_SPEEDS (left %, right %, ms). A finished move sends
-POSITION_REACHED (status DONE, or COLLISION when the bumper hit, STALLED, ABORTED when a new
-motion command or STOP replaced it) with ``move_seq`` = the sequence number of the command that
+(target angle, error), SET_WHEEL_SPEEDS (left %, right %, ms), MOTORS_ON (the seed's action
+file ``e``: the drive has no off switch here, so it is counted and leaves a move alone). A
+finished move sends POSITION_REACHED (status DONE, or COLLISION when the bumper hit, STALLED,
+ABORTED when a new motion command or STOP replaced it) with ``move_seq`` = the sequence number of the command that
 started it, to the module that sent that command. SET_GLOBAL_POSITION and RECALC_GLIDE_FACTOR
 do not interrupt a move (the seed aborted on them, which made corrections while driving
 impossible). Bad arguments (speed 0 or above 100 %, an implausible glide correction) are
@@ -92,6 +93,7 @@ class Program(UserProgram):
         self.stamp_ms = self.clock.now_ms()
         self.moves = {"done": 0, "aborted": 0, "stalled": 0, "collision": 0}
         self.refused = 0
+        self.motors_on = 0  # MOTORS_ON commands taken (idempotent: the drive is always on)
         self.ignored = 0  # seed mode: commands the seed dropped ("Befehl falsch", unknown ones)
         self.notices_lost = 0  # seed mode: replies the target did not take (sent once)
         self.last_move_ms = (0.0, 0.0)
@@ -154,6 +156,9 @@ class Program(UserProgram):
                 log.info("glide factor now %.3f half-steps per degree", self.odometry.glide)
             except ValueError as exc:
                 self._refuse(cmd, str(exc))
+        elif name == "MOTORS_ON":
+            self.motors_on += 1
+            log.info("motor: motors on (they are: the drive has no off switch)")
         else:
             log.info("motor: ignoring %s from node %d", name, cmd.sender)
 
@@ -324,6 +329,7 @@ class Program(UserProgram):
             "state": self.state,
             "moves": dict(self.moves),
             "refused": self.refused,
+            "motors_on": self.motors_on,
             "steps": list(self.steps),
             "last_move_ms": list(self.last_move_ms),
             "max_speed_mm_s": MAX_SPEED_MM_S,
