@@ -273,6 +273,10 @@ class Program(UserProgram):
         if pilot is not None and pilot.busy:
             pilot.abort("USER")
             self._drain_pilot()
+        from modules.common.actions import ActionNavigator
+
+        if isinstance(nav, ActionNavigator) and nav.plan_steps.holding is not None:
+            self._send("motor", "STOP")  # the seed's non-queueing v/c runs until stopped (§6.7)
         self._send("copro", "FLUSH")  # vectors held back for merging go to the map now
         self.finished = {
             "navigator": type(nav).__name__,
@@ -345,10 +349,14 @@ class Program(UserProgram):
         if verb == "actions":  # an action file (seed 000 §6.7), run by pair 1's pilot
             from modules.common.actions import ActionNavigator, parse_actions
 
-            actions = parse_actions(str(payload.get("text", "")), str(payload.get("name", "<actions>")))
+            name = str(payload.get("name", "<actions>"))
+            actions = parse_actions(str(payload.get("text", "")), name, seed=self.seed)
             speed = int(payload.get("speed_pct", 50))
             start_heading, self.calibration_heading = self.calibration_heading, None
-            self.start(ActionNavigator(self.layout, actions, speed_pct=speed, start_heading=start_heading), 1)
+            navigator = ActionNavigator(
+                self.layout, actions, speed_pct=speed, start_heading=start_heading, seed=self.seed
+            )
+            self.start(navigator, 1)
             return self.state()
         if verb == "clear_map":
             self._send("map", "CLEAR_MAP")

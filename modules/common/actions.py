@@ -2,13 +2,17 @@
 
 One command per line, fields separated by blanks, ``#`` starts a comment::
 
-    e                      motors on (our motors are always powered: accepted, does nothing)
+    e                      motors on (seed mode: MOTORS_ON to the motor; ours: does nothing)
     s <mm>                 drive straight (negative: backwards)
     r <deg>                turn on the spot, counter-clockwise positive
     v <left> <right> <ms>  track speeds in mm/s for a time (100 mm/s = 100 %)
     c <radius> <speed> <ms>  drive a circle of radius mm (positive: to the left) at speed mm/s
 
-Every action is queued (the seed's queueing actions); ``v`` and ``c`` therefore need the time.
+By default every action is queued (the seed's queueing actions); ``v`` and ``c`` need the time.
+With ``seed=True`` (main's ``--algorithms main=seed``) the file is the seed's (seed 000 §6.7):
+``e`` sends MOTORS_ON ("Motoren an", non-queueing: the next action follows at once), and ``v``
+and ``c`` without the time are non-queueing: they run until the next driving action starts, which
+is at once (the file does not wait for them); the file's last one runs until main is stopped.
 Errors name the file and line. :class:`ActionPlan` turns the actions into steps one at a time;
 turns are closed-loop when a fused heading is available: ``r`` aims at the heading the previous
 actions meant plus the angle, and up to three correcting turns follow while the fused heading is
@@ -18,8 +22,9 @@ off by more than the tolerance (the turn itself is open-loop: the floor's slip m
 How main hosts it (``on_pc_request``)::
 
     if verb == "actions":
-        actions = parse_actions(payload["text"], payload.get("name", "<actions>"))
-        self.start(ActionNavigator(self.layout, actions, speed_pct=payload.get("speed_pct", 50)), 1)
+        actions = parse_actions(payload["text"], payload.get("name", "<actions>"), seed=self.seed)
+        navigator = ActionNavigator(self.layout, actions, speed_pct=50, seed=self.seed)
+        self.start(navigator, 1)  # stop_explore sends STOP while a non-queueing drive goes on
 """
 
 from __future__ import annotations
@@ -38,8 +43,18 @@ MAX_SPEED_MM_S = 100.0  # 100 % = 10 cm/s, the start-stop limit
 SETTLE_MS = 1200
 MAX_WHEELS_MS = 60_000  # one SET_WHEEL_SPEEDS lasts at most this long (duration_ms is u16)
 TRACK_HALF_WIDTH_MM = 6.5 * 0.5419 * 180.0 / math.pi  # track travel per radian of turn, glide 6.5
+#: after a non-queueing SET_WHEEL_SPEEDS the next action waits until motor.data shows it running,
+#: at most this long: the pilot takes the move number it sees as the old move's, and the wheels'
+#: ABORTED would end its move at once if that were an older one (the seed's motor ignores wheels)
+WHEELS_SEEN_MS = 1000
 
 ARITY = {"e": 0, "s": 1, "r": 1, "v": 3, "c": 3}
+#: seed 000 §6.7: ``v`` and ``c`` without the time are the non-queueing variants
+SEED_ARITIES = {"e": (0,), "s": (1,), "r": (1,), "v": (2, 3), "c": (2, 3)}
+SEED_USAGE = {
+    "v": "v <left mm/s> <right mm/s> [<ms>] (no time: until the next action)",
+    "c": "c <radius mm> <speed mm/s> [<ms>] (no time: until the next action)",
+}
 USAGE = {
     "e": "e",
     "s": "s <mm>",
@@ -58,9 +73,16 @@ class Action:
     line: int
     text: str
 
+    @property
+    def queued(self) -> bool:
+        """False for the seed's non-queueing ``v``/``c`` (no time): they do not hold the file."""
+        return not (self.kind in ("v", "c") and len(self.args) == 2)
 
-def parse_actions(text: str, source: str = "<actions>") -> list[Action]:
-    """Parse an action file's text; raises :class:`UsageError` naming ``source:line``."""
+
+def parse_actions(text: str, source: str = "<actions>", seed: bool = False) -> list[Action]:
+    """Parse an action file's text; raises :class:`UsageError` naming ``source:line``.
+
+    ``seed``: also accept the seed's non-queueing ``v``/``c`` without the time (seed 000 §6.7)."""
     actions: list[Action] = []
     for number, raw in enumerate(text.splitlines(), 1):
         line = raw.split("#", 1)[0].strip()
@@ -71,7 +93,11 @@ def parse_actions(text: str, source: str = "<actions>") -> list[Action]:
         where = f"{source}:{number}"
         if kind not in ARITY:
             raise UsageError(f"{where}: unknown action {kind!r} (known: e, s, r, v, c, # comment)")
-        if len(fields) - 1 != ARITY[kind]:
+        if seed and len(fields) - 1 not in SEED_ARITIES[kind]:
+            counts = " or ".join(str(n) for n in SEED_ARITIES[kind])
+            usage = SEED_USAGE.get(kind, USAGE[kind])
+            raise UsageError(f"{where}: {kind!r} takes {counts} values: {usage}")
+        if not seed and len(fields) - 1 != ARITY[kind]:
             hint = (
                 " (this runner queues every action: give the time)"
                 if kind in "vc" and len(fields) == 3
@@ -81,7 +107,8 @@ def parse_actions(text: str, source: str = "<actions>") -> list[Action]:
         try:
             args = tuple(float(v) for v in fields[1:])
         except ValueError:
-            raise UsageError(f"{where}: {USAGE[kind]}: values must be numbers, got {line!r}") from None
+            usage = SEED_USAGE.get(kind, USAGE[kind]) if seed else USAGE[kind]
+            raise UsageError(f"{where}: {usage}: values must be numbers, got {line!r}") from None
         if not all(math.isfinite(a) for a in args):
             raise UsageError(f"{where}: values must be finite numbers")
         _check(kind, args, where)
@@ -91,13 +118,13 @@ def parse_actions(text: str, source: str = "<actions>") -> list[Action]:
     return actions
 
 
-def load_actions(path: str | Path) -> list[Action]:
-    """Read and parse an action file."""
+def load_actions(path: str | Path, seed: bool = False) -> list[Action]:
+    """Read and parse an action file (``seed``: as :func:`parse_actions`)."""
     from tokenring.inputfile import read_text
 
     file = Path(path)
     text = read_text(file, "action file")
-    return parse_actions(text, str(file))
+    return parse_actions(text, str(file), seed)
 
 
 def _check(kind: str, args: tuple[float, ...], where: str) -> None:
@@ -105,7 +132,7 @@ def _check(kind: str, args: tuple[float, ...], where: str) -> None:
         raise UsageError(f"{where}: a straight move is 1..65535 mm (either sign), got {args[0]:g}")
     if kind == "r" and not 0 < abs(args[0]) <= 3600:
         raise UsageError(f"{where}: a turn is up to 3600 degrees (either sign, not 0), got {args[0]:g}")
-    if kind in "vc" and args[2] <= 0:
+    if kind in "vc" and len(args) == 3 and args[2] <= 0:
         raise UsageError(f"{where}: the time must be positive, got {args[2]:g} ms")
     if kind == "v":
         left, right = args[0], args[1]
@@ -159,6 +186,13 @@ class Wheels:
     label: str = ""
 
 
+@dataclass(frozen=True)
+class MotorsOn:
+    """The seed's ``e`` (seed 000 §6.7, "Motoren an"): MOTORS_ON to the motor."""
+
+    label: str = ""
+
+
 WAIT = "wait"  # nothing to start now: ask again at the next step
 
 
@@ -173,9 +207,11 @@ class ActionPlan:
         max_corrections: int = 3,
         settle_ms: int = SETTLE_MS,
         start_heading: float | None = None,
+        seed: bool = False,
     ) -> None:
         """``start_heading`` (rad, CCW): square up to it before the first action, as after an
-        ``r`` (the compass's calibration turn ends a few degrees off where it began)."""
+        ``r`` (the compass's calibration turn ends a few degrees off where it began); ``seed``:
+        ``e`` switches the motors on (:class:`MotorsOn`), as seed 000 §6.7 has it."""
         if not 1 <= speed_pct <= 100:
             raise UsageError(f"action speed must be 1..100 %, got {speed_pct}")
         self.actions = actions
@@ -196,6 +232,12 @@ class ActionPlan:
         self.active: Drive | None = None  # the drive handed out last
         self.resume: list[Drive] = []  # the rest of an interrupted drive, before anything else
         self.interruptions = 0
+        self.seed = seed
+        #: the seed's non-queueing ``v``/``c`` that runs until the next driving action, and when
+        #: its current piece ends (the last one of the file is renewed until main is stopped)
+        self.holding: Wheels | None = None
+        self.hold_until = 0
+        self.seen_until: int | None = None  # waiting for motor.data to show the held wheels
 
     @property
     def finished(self) -> bool:
@@ -205,15 +247,21 @@ class ActionPlan:
             and not self.resume
             and not self.pending_wheels
             and self.wheels_until is None
+            and self.holding is None
         )
 
     def next(
         self, heading: float | None, now_ms: int, motor_idle: bool = True
-    ) -> Drive | Wheels | str | None:
-        """The next step: a :class:`Drive`, :class:`Wheels`, :data:`WAIT`, or None when done.
+    ) -> Drive | Wheels | MotorsOn | str | None:
+        """The next step: a :class:`Drive`, :class:`Wheels`, :class:`MotorsOn`, :data:`WAIT`, or
+        None when done.
 
         ``heading``: the fused heading (rad, CCW; None: no closed loop); ``now_ms``: simulated
         time (the motor's stamp); ``motor_idle``: the motor stands still."""
+        if self.seen_until is not None:
+            if motor_idle and now_ms < self.seen_until:
+                return WAIT
+            self.seen_until = None
         if self.wheels_until is not None:
             if now_ms < self.wheels_until or not motor_idle:
                 return WAIT
@@ -236,6 +284,11 @@ class ActionPlan:
             step = self._start(action, heading, now_ms)
             if step is not None:
                 return self._hand_out(step) if isinstance(step, Drive) else step
+        if self.holding is not None:  # the file ended on a non-queueing drive: it goes on
+            if now_ms < self.hold_until or not motor_idle:
+                return WAIT
+            self.hold_until = now_ms + self.holding.duration_ms
+            return self.holding
         return None
 
     def _hand_out(self, step: Drive) -> Drive:
@@ -289,10 +342,11 @@ class ActionPlan:
             "left" if error > 0 else "right", degrees, self.speed_pct, label=f"correct {error:+.1f}°"
         )
 
-    def _start(self, action: Action, heading: float | None, now_ms: int) -> Drive | Wheels | None:
+    def _start(self, action: Action, heading: float | None, now_ms: int) -> Drive | Wheels | MotorsOn | None:
         label = f"line {action.line}: {action.text}"
         if action.kind == "e":
-            return None
+            return MotorsOn(label) if self.seed else None
+        self.holding = None  # seed §6.7: a non-queueing drive ends when the next one starts
         if action.kind == "s":
             mm = action.args[0]
             return Drive("forward" if mm > 0 else "reverse", round(abs(mm)), self.speed_pct, label)
@@ -304,11 +358,15 @@ class ActionPlan:
                 self.checking, self.corrections, self.settle_until = True, 0, None
             return Drive("left" if degrees > 0 else "right", round(abs(degrees)), self.speed_pct, label)
         if action.kind == "v":
-            left, right, ms = action.args
+            left, right = action.args[0], action.args[1]
         else:
             left, right = circle_speeds(action.args[0], action.args[1])
-            ms = action.args[2]
         self.target = None  # a free drive: the heading it ends in is whatever it is
+        if not action.queued:  # seed §6.7: started at once, the next action does not wait for it
+            self.holding = Wheels(round(left), round(right), MAX_WHEELS_MS, label)
+            self.hold_until, self.seen_until = now_ms + MAX_WHEELS_MS, now_ms + WHEELS_SEEN_MS
+            return self.holding
+        ms = action.args[2]
         total = round(ms)
         pieces = []
         while total > 0:
@@ -359,11 +417,14 @@ class ActionNavigator(_navigator_base()):  # type: ignore[misc]
         speed_pct: int = 50,
         closed_loop: bool = True,
         start_heading: float | None = None,
+        seed: bool = False,
     ) -> None:
         from modules.common.navigator import NAV
 
         super().__init__(layout)
-        self.plan_steps = ActionPlan(actions, speed_pct, start_heading=start_heading if closed_loop else None)
+        self.plan_steps = ActionPlan(
+            actions, speed_pct, start_heading=start_heading if closed_loop else None, seed=seed
+        )
         self.closed_loop = closed_loop
         self.state = NAV["ACTIONS"]
         self._nav = NAV
@@ -400,6 +461,9 @@ class ActionNavigator(_navigator_base()):  # type: ignore[misc]
         if step == WAIT:
             return []
         self.steps += 1
+        if isinstance(step, MotorsOn):
+            self.commands.append(("motor", "MOTORS_ON", {}))
+            return []
         if isinstance(step, Wheels):
             args = {"left_pct": step.left_pct, "right_pct": step.right_pct, "duration_ms": step.duration_ms}
             self.commands.append(("motor", "SET_WHEEL_SPEEDS", args))
