@@ -131,7 +131,9 @@ class RobotExtension(Extension):
         if args.actions:
             from modules.common.actions import load_actions
 
-            load_actions(args.actions)  # a bad file is refused (file:line) before anything starts
+            # a bad file is refused (file:line) before anything starts; the seed's main takes
+            # v/c without a time (non-queued)
+            load_actions(args.actions, seed=choice["main"] == "seed")
             text = Path(args.actions).read_text(encoding="utf-8")
             actions = (Path(args.actions).name, text, args.action_speed)
         missions: list[Any] = []
