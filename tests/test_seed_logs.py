@@ -149,3 +149,100 @@ def test_a_start_time_the_seed_cannot_show_is_one_line_and_exit_2(
         convert_seed_text(read_log(tmp_path / "a.trlog"))
     assert cli_main(["log", "convert", str(tmp_path / "a.trlog"), "--to", "seed"]) == 2
     one_error_line(capsys, "a.trlog", "'yesterday'", "YYYYmmdd-HHMMSS")
+
+
+# ---------------------------------------------------------------------------------------------
+# the wall-derived position in the store (seed 000 §6.2.4): one coordinate and the heading
+
+
+def test_a_wall_parallel_to_x_gives_y_and_the_heading_x_invalid() -> None:
+    from modules.common.walls import KnownWall, wall_position
+
+    # the robot is truly at (1000, 500) heading 0.1 rad; the filter believes (1030, 480, 0.08)
+    top = KnownWall.segment(0, 2000, 4000, 2000)  # y = 2000: 1500 mm above the robot
+    # seen from the robot: the wall's normal points up (π/2 in the world), 0.1 rad less in its frame
+    fit = (math.pi / 2 - 0.1, 1500.0, top)
+    fix = wall_position((1030.0, 480.0, 0.08), [fit])
+    assert fix is not None and fix["valid"] == [False, True, True]
+    assert fix["x"] == 1030.0  # uncorrected: the reference value, flagged invalid
+    assert fix["y"] == pytest.approx(500.0) and fix["psi"] == pytest.approx(0.1)
+
+
+def test_two_walls_in_a_corner_give_both_coordinates_errors_averaged() -> None:
+    from modules.common.walls import KnownWall, wall_position
+
+    top = KnownWall.segment(0, 2000, 4000, 2000)
+    right = KnownWall.segment(3000, 0, 3000, 4000)  # x = 3000: 2000 mm right of the robot
+    # heading errors of 0.02 and 0.04 rad against the reference 0.08: averaged to 0.03
+    fits = [(math.pi / 2 - 0.10, 1500.0, top), (0.0 - 0.12, 2000.0, right)]
+    fix = wall_position((1030.0, 480.0, 0.08), fits)
+    assert fix is not None and fix["valid"] == [True, True, True]
+    assert fix["x"] == pytest.approx(1000.0) and fix["y"] == pytest.approx(500.0)
+    assert fix["psi"] == pytest.approx(0.08 + (0.02 + 0.04) / 2)
+    assert wall_position((1030.0, 480.0, 0.08), []) is None
+
+
+def run_at_rest(tmp_path: Path, log_wall_position: bool) -> list:
+    """A short drive in the square room then rest beside its walls, logged."""
+    from locsim import drive
+
+    from modules.common.localizer import LocalizationCore
+    from modules.common.locconfig import load_config
+
+    config = load_config({"sensors": {"sonar": {"log_position": log_wall_position}}})
+    with DataLog(tmp_path / "w.trlog", "20261124-120000", config) as log:
+        core = LocalizationCore(config, data_log=log)
+        for sample in drive([("s", 300.0)], world="square", seed=2, rest_ms=8000):
+            core.feed(sample)
+            core.maybe_sync()
+    return read_log(tmp_path / "w.trlog").records
+
+
+def test_the_localizer_logs_the_wall_position_when_the_seeds_switch_says_so(tmp_path: Path) -> None:
+    """Each W P written by hand from its wall: an axis-parallel wall at c, seen d away, puts the
+    robot at c ∓ d across it; the heading is the world direction towards the wall minus the
+    direction the robot saw it in (its own frame). The coordinate along the wall stays unknown."""
+    from modules.description import load_world
+
+    records = run_at_rest(tmp_path, True)
+    segments = [(w.x1, w.y1, w.x2, w.y2) for w in load_world("square").walls]
+    truth = {r[0]: r[3] for r in records if r[1] == "L" and r[2] == "P"}
+    filtered = {r[0]: r[3] for r in records if r[1] == "K" and r[2] == "P"}
+    seen = {r[0]: r[3]["walls"] for r in records if r[1] == "W" and r[2] == "C"}
+    fixes = [r for r in records if r[1] == "W" and r[2] == "P"]
+    assert len(fixes) >= 5
+    for stamp, _, _, fix in fixes:
+        matched = [(w, i) for w, (i, _) in zip(seen[stamp], filtered[stamp]["walls"], strict=True) if i >= 0]
+        assert len(matched) == 1  # at rest beside one wall: one wall per synchronisation
+        wall, index = matched[0]
+        x1, y1, x2, y2 = segments[index]
+        k = filtered[stamp]
+        if y1 == y2:  # parallel to X: y and the heading
+            below = k["y"] < y1
+            expected_y = y1 - wall["d"] if below else y1 + wall["d"]
+            towards = math.pi / 2 if below else -math.pi / 2
+            assert fix["valid"] == [False, True, True]
+            assert fix["y"] == pytest.approx(expected_y) and abs(fix["y"] - truth[stamp]["y"]) < 100.0
+        else:  # parallel to Y: x and the heading
+            assert x1 == x2
+            left = k["x"] < x1
+            expected_x = x1 - wall["d"] if left else x1 + wall["d"]
+            towards = 0.0 if left else math.pi
+            assert fix["valid"] == [True, False, True]
+            assert fix["x"] == pytest.approx(expected_x) and abs(fix["x"] - truth[stamp]["x"]) < 100.0
+        assert math.remainder(fix["psi"] - (towards - wall["alpha"]), 2 * math.pi) == pytest.approx(
+            0, abs=1e-9
+        )
+    lines = convert_seed_text(read_log(tmp_path / "w.trlog")).splitlines()
+    for stamp, _, _, fix in fixes:
+        fields = next(line for line in lines if line.startswith(f"W P {stamp:7d}")).split()
+        flags = [int(v) for v in fix["valid"]]
+        assert [int(f) for f in fields[-3:]] == flags
+        for value, flag in zip(fields[3:5], flags[:2], strict=True):
+            assert flag or value == "0"  # an unknown coordinate is written 0 (table B.7)
+
+
+def test_by_default_the_wall_position_stays_out_of_the_log(tmp_path: Path) -> None:
+    records = run_at_rest(tmp_path, False)
+    assert not [r for r in records if r[1] == "W" and r[2] == "P"]
+    assert [r for r in records if r[1] == "K" and r[2] == "P" and any(w[0] >= 0 for w in r[3]["walls"])]

@@ -75,6 +75,7 @@ from modules.common.walls import (
     WallDetector,
     from_frame,
     load_known_walls,
+    wall_position,
     wrap,
 )
 
@@ -423,6 +424,7 @@ class LocalizationCore:
             x, y, psi = advance(self.dead_reckoning, s, omega)
             self.dead_reckoning = (x, y, wrap(psi))
         wall_results: list[list[int]] = []
+        wall_fix: dict[str, Any] | None = None
         if self.ekf is not None:
             if odo is not None and use.get("odometry"):
                 self.ekf.predict(odo["dl"], odo["dr"], dt_s)
@@ -435,11 +437,13 @@ class LocalizationCore:
                     self.message("W", stamp, f"compass rejected by the gate (NIS {self.ekf.last_nis:.1f})")
             sonar = data.get("sonar")
             if sonar is not None and use.get("sonar"):
+                reference = self.ekf.pose  # the seed's reference: the pose the walls were fitted at
                 for wall in sonar.get("walls", []):
                     wall_results.append(self._correct_wall(wall, stamp))
+                wall_fix = self._wall_fix(reference, sonar.get("walls", []), wall_results)
                 for travel in sonar.get("travel", []):
                     self._correct_travel(travel, stamp)
-        self._store_positions(stamp, data, wall_results)
+        self._store_positions(stamp, data, wall_results, wall_fix)
         self.last_sync_ms = stamp
         self.syncs += 1
         if self.data_log is not None:
@@ -563,7 +567,25 @@ class LocalizationCore:
         else:
             self.travel["rejected"] += 1
 
-    def _store_positions(self, stamp: int, data: dict[str, dict[str, Any]], walls: list[list[int]]) -> None:
+    def _wall_fix(
+        self, reference: tuple[float, float, float], walls: list[dict[str, Any]], results: list[list[int]]
+    ) -> dict[str, Any] | None:
+        """The position the associated walls give alone (seed 000 §6.2.4), for the store."""
+        known = {wall.index: wall for wall in self.known_walls}
+        fits = [
+            (wall["alpha"], wall["d"], known[index])
+            for wall, (index, _) in zip(walls, results, strict=False)
+            if index in known
+        ]
+        return wall_position(reference, fits)
+
+    def _store_positions(
+        self,
+        stamp: int,
+        data: dict[str, dict[str, Any]],
+        walls: list[list[int]],
+        wall_fix: dict[str, Any] | None = None,
+    ) -> None:
         log = self.data_log
         store: dict[str, dict[str, Any]] = {}
         if self.dead_reckoning is not None:
@@ -598,7 +620,9 @@ class LocalizationCore:
                 "step_scale": self.ekf.step_scale,
                 "walls": walls,
             }
-        letters = {"O": "odometry", "G": "compass", "L": "truth", "K": None}
+        if wall_fix is not None:
+            store["W"] = wall_fix  # one coordinate and the heading, the other invalid (seed §6.2.4)
+        letters = {"O": "odometry", "G": "compass", "L": "truth", "K": None, "W": "sonar"}
         for letter, position in store.items():
             position["stamp_ms"] = stamp
             self.positions[letter] = position

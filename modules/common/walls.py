@@ -149,6 +149,44 @@ def segments_to_walls(segments: Any) -> list[KnownWall]:
     return [KnownWall.segment(*map(float, seg[:4]), index=i) for i, seg in enumerate(segments)]
 
 
+#: a known wall within this of an axis counts as parallel to it (the seed's lab had no other)
+AXIS_TOLERANCE_RAD = math.radians(5.0)
+
+
+def wall_position(
+    reference: tuple[float, float, float], fits: list[tuple[float, float, KnownWall]]
+) -> dict[str, Any] | None:
+    """The seed's position from associated walls (seed 000 §6.2.4): each wall's heading error
+    (its measured against its known direction) and, for a wall parallel to an axis, the error
+    of the one coordinate across it (measured against computed distance); the errors averaged
+    and taken off the ``reference`` pose. A coordinate no wall corrected keeps the reference
+    value with its valid flag false. ``fits``: (α, d) measured in the robot frame and the known
+    wall each was associated with. None without walls."""
+    if not fits:
+        return None
+    x0, y0, psi0 = reference
+    headings: list[float] = []
+    dx: list[float] = []
+    dy: list[float] = []
+    limit = math.sin(AXIS_TOLERANCE_RAD)
+    for alpha_r, d_r, wall in fits:
+        alpha_known, d_known = line_in_frame(wall.alpha, wall.d, reference)
+        headings.append(wrap(alpha_known - alpha_r))
+        nx, ny = math.cos(wall.alpha), math.sin(wall.alpha)
+        side = 1.0 if wall.d - x0 * nx - y0 * ny >= 0 else -1.0
+        across = side * (d_known - d_r)  # how far the robot is along the wall's normal from reference
+        if abs(ny) <= limit:
+            dx.append(across / nx)
+        elif abs(nx) <= limit:
+            dy.append(across / ny)
+    return {
+        "x": x0 + sum(dx) / len(dx) if dx else x0,
+        "y": y0 + sum(dy) / len(dy) if dy else y0,
+        "psi": wrap(psi0 + sum(headings) / len(headings)),
+        "valid": [bool(dx), bool(dy), True],
+    }
+
+
 # =============================================================================================
 # the wall detector
 
