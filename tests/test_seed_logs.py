@@ -11,6 +11,8 @@ import math
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from modules.common.logs import DataLog, ErrorLog, LogError, convert_seed_text, read_log
 from tokenring.cli import main as cli_main
@@ -246,3 +248,46 @@ def test_by_default_the_wall_position_stays_out_of_the_log(tmp_path: Path) -> No
     records = run_at_rest(tmp_path, False)
     assert not [r for r in records if r[1] == "W" and r[2] == "P"]
     assert [r for r in records if r[1] == "K" and r[2] == "P" and any(w[0] >= 0 for w in r[3]["walls"])]
+
+
+NUMBERS = st.one_of(
+    st.integers(min_value=-(2**40), max_value=2**40), st.floats(allow_nan=True, allow_infinity=True)
+)
+JUNK = st.one_of(
+    st.none(), st.text(max_size=3), st.just("a\nb"), st.integers(), st.lists(st.integers(), max_size=2)
+)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    numbers=st.lists(NUMBERS, min_size=6, max_size=6),
+    sonar=st.lists(st.integers(min_value=0, max_value=255), min_size=1, max_size=10),
+    synced=st.lists(st.one_of(st.none(), NUMBERS), min_size=1, max_size=10),
+    junk=JUNK,
+)
+def test_any_readable_log_converts_to_one_line_per_record(
+    numbers: list, sonar: list[int], synced: list, junk: object, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    """Whatever the reader accepts (extreme numbers, junk in the fields it does not check), the
+    seed's text has a line for it: no crash, no line break inside a record."""
+    a, b, c, d, e, f = numbers
+    path = tmp_path_factory.mktemp("seed") / "x.trlog"
+    with DataLog(path, "20261124-120000", {"robot": {"sonars": junk}}) as log:
+        log.write(1, "O", "R", {"gen": 0, "n": 0, "v": {"steps_left": 2**40, "steps_right": -1}})
+        log.write(1, "O", "C", {"gen": 0, "dl": a, "dr": b, "count": 1})
+        log.write(1, "G", "R", {"gen": 0, "n": 1, "v": {"heading_cdeg": c}})
+        log.write(1, "G", "C", {"gen": 0, "heading": d, "count": 1})
+        log.write(1, "W", "R", {"gen": 0, "n": 2, "v": {"distances": sonar}})
+        wall = {"alpha": e, "d": f, "assoc": junk}
+        log.write(1, "W", "C", {"gen": 0, "distances_mm": synced, "walls": [wall] * 10, "count": 1})
+        log.write(1, "L", "C", {"gen": 0, "x": a, "y": b, "theta": c, "count": 1})
+        log.write(1, "K", "P", {"x": d, "y": e, "psi": f, "valid": [True, 0, 1], "walls": junk})
+        log.write(1, "S", "S", {"gen": 0, "period_ms": 0, "counts": {}})
+        log.write(1, "S", "E", {"gen": 0, "event": "set_pose", "x": junk})
+    text = convert_seed_text(read_log(path))
+    lines = text.split("\n")  # the seed's line ends only (splitlines would split at \x1e too)
+    assert (
+        lines.pop() == ""
+        and len(lines) == 11
+        and all(line[:2] in ("S ", "O ", "G ", "W ", "L ", "K ") for line in lines)
+    )

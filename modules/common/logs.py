@@ -495,8 +495,11 @@ def seed_position(p: dict[str, Any] | None) -> str:
 
 def _sonar_mounts(config: Any) -> list[tuple[float, float, float]]:
     """Each sonar's (x mm, y mm, angle rad) on the robot: the log's config, else the robot's."""
-    sonars = config.get("robot", {}).get("sonars") if isinstance(config, dict) else None
-    if isinstance(sonars, list):
+    robot = config.get("robot") if isinstance(config, dict) else None
+    sonars = robot.get("sonars") if isinstance(robot, dict) else None
+    if isinstance(sonars, list) and all(
+        isinstance(m, list) and len(m) == 3 and all(_number(v) for v in m) for m in sonars
+    ):
         return [(float(x), float(y), math.radians(float(a))) for x, y, a in sonars]
     from modules.description.robot import SONAR_MOUNTS
 
@@ -504,8 +507,8 @@ def _sonar_mounts(config: Any) -> list[tuple[float, float, float]]:
 
 
 def seed_sonar(
-    distances_mm: list[int | None],
-    previous: list[int | None] | None,
+    distances_mm: list[float | None],
+    previous: list[float | None] | None,
     mounts: list[tuple[float, float, float]],
     walls: list[dict[str, Any]],
 ) -> str:
@@ -527,7 +530,9 @@ def seed_sonar(
     blocks = []
     for k, wall in enumerate(walls + [SEED_NO_WALL] * max(0, SEED_WALL_BLOCKS - len(walls))):
         found = int(k < len(walls))
-        blocks.append(f"{found} {float(wall['alpha']):.5f} {float(wall['d']):.1f} {int(wall['assoc']):2d}")
+        assoc = wall.get("assoc", -1)
+        assoc = assoc if _integer(assoc) else -1
+        blocks.append(f"{found} {float(wall['alpha']):.5f} {float(wall['d']):.1f} {assoc:2d}")
     return " ".join([*(str(n) for n in new), *points, *ranges, *blocks])
 
 
@@ -542,7 +547,10 @@ def _wall_associations(records: list[list[Any]]) -> dict[int, list[int]]:
             matched = None  # going back: a synchronisation ends here, the one before starts
         elif source == "K" and kind == "P":
             walls = p.get("walls") if isinstance(p, dict) else None
-            matched = [int(w[0]) for w in walls] if isinstance(walls, list) else []
+            matched = [
+                w[0] if isinstance(w, list) and w and _integer(w[0]) else -1
+                for w in (walls if isinstance(walls, list) else [])
+            ]
         elif source == "W" and kind == "C":
             out[i] = matched or []
     return out
@@ -560,7 +568,7 @@ def convert_seed_text(log: LogFile) -> str:
     out.write(f"S T {0:6d} {seed_start_time(log.header.get('start', ''), log.path)}\n")
     mounts = _sonar_mounts(log.header.get("config"))
     associations = _wall_associations(log.records)
-    previous: dict[str, list[int | None]] = {}
+    previous: dict[str, list[float | None]] = {}
     filter_now: dict[str, Any] | None = None
     filter_at_sync: dict[str, Any] | None = None
     for i, (stamp, source, kind, p) in enumerate(log.records):
@@ -577,10 +585,12 @@ def convert_seed_text(log: LogFile) -> str:
             filter_at_sync = filter_now
         elif source == "W" and kind in "RC":
             if kind == "R":
-                distances = [None if d == 255 else int(d) * 10 for d in p["v"]["distances"]]
+                distances: list[float | None] = [
+                    None if d == 255 else int(d) * 10 for d in p["v"]["distances"]
+                ]
                 walls: list[dict[str, Any]] = []
             else:
-                distances = [None if d is None else int(d) for d in p["distances_mm"]]
+                distances = list(p["distances_mm"])
                 assoc = associations.get(i, [])
                 walls = [
                     {**w, "assoc": assoc[k] if k < len(assoc) else w.get("assoc", -1)}
@@ -604,7 +614,8 @@ def convert_seed_text(log: LogFile) -> str:
             if kind == "C":
                 body += f" {p['count']}"
         else:
-            body = _record_body(source, kind, p)  # ours alone (events, battery): no seed format
+            # ours alone (events, battery): no seed format; one line whatever text it holds
+            body = _record_body(source, kind, p).replace("\r", "\\r").replace("\n", "\\n")
         out.write(f"{head} {body}".rstrip() + "\n")
     return out.getvalue()
 
