@@ -216,6 +216,8 @@ class Program(UserProgram):
             )
         if pilot.busy or not self.sensors.ready:  # no plan before sonar and motor have spoken
             return
+        if self._correct_motor():  # a correction under way: no move until motor and filter show it
+            return
         moves = nav.plan(self.last_outcome, self.sensors, pilot.alert_lock)
         for target, command, args in nav.commands:
             self._send(target, command, **args)
