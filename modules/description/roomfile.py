@@ -185,6 +185,8 @@ def _convert(node: yaml.Node, source: str) -> Any:
     loader = yaml.SafeLoader("")
     try:
         return loader.construct_object(node, deep=True)
+    except yaml.YAMLError as exc:  # e.g. a bare '=' (YAML's value tag, which safe YAML refuses)
+        raise WorldError(f"{source}:{line}: not a plain value: {one_line(exc)}") from None
     finally:
         loader.dispose()
 
