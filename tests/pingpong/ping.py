@@ -18,10 +18,18 @@ class Program(UserProgram):
             if not self.os.deliver("pong", "BALL", n=n, timeout=2.0):
                 continue
             answer = self.os.receive_command(timeout=5.0)
+            # a ball served again after a timeout comes back twice: the late answer is stale
+            while answer is not None and answer.name == "BALL" and answer.args["n"] != n + 1:
+                self._note(f"stale {answer.args['n']}")
+                answer = self.os.receive_command(timeout=5.0)
             if answer is None or answer.name != "BALL":
+                self._note(f"again {n}")  # no answer in time (a loaded machine): serve n again
                 continue
-            with self.log.open("a") as out:
-                out.write(f"{n} {answer.args['n']}\n")
+            self._note(f"{n} {answer.args['n']}")
             rallies += 1
             self.score.write(rallies=rallies)
             n = answer.args["n"] + 1
+
+    def _note(self, line: str) -> None:
+        with self.log.open("a") as out:
+            out.write(line + "\n")
