@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
+from fakenode import FakeOS
 
 from modules import main as main_module
 from modules.common.algorithms import ENV as ALGORITHMS_ENV
@@ -209,51 +210,6 @@ def test_the_jump_is_no_motion_for_the_filters_odometry() -> None:
 
 
 # -- main's program: when it sends ------------------------------------------------------------
-
-
-class FakeBuffer:
-    def __init__(self) -> None:
-        self.values: dict[str, Any] = {}
-        self.visits = 0
-        self.published = False
-
-    def set(self, values: dict[str, Any]) -> None:
-        self.values, self.visits, self.published = dict(values), self.visits + 1, True
-
-    def read(self) -> dict[str, Any]:
-        return dict(self.values)
-
-
-class FakeOut:
-    def write(self, **fields: Any) -> None:
-        self.fields = fields
-
-
-class FakeOS:
-    """What main's setup and loop use; deliveries are recorded (and always taken)."""
-
-    protocol = default_protocol()
-    stopping = False
-
-    def __init__(self) -> None:
-        self.buffers: dict[str, FakeBuffer] = {}
-        self.delivered: list[tuple[str, str, dict[str, Any]]] = []
-
-    def publish(self) -> FakeOut:
-        return FakeOut()
-
-    def subscribe(self, name: str) -> FakeBuffer:
-        return self.buffers.setdefault(name, FakeBuffer())
-
-    def set_own_input_id(self) -> None:
-        pass
-
-    def receive_command(self, timeout: float = 0) -> None:
-        return None
-
-    def deliver(self, module: str, command: str, timeout: float = 0, **args: Any) -> bool:
-        self.delivered.append((module, command, args))
-        return True
 
 
 class Forward(Navigator):

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import pytest
+from fakenode import FakeOS
 
 import modules.copro as copro_module
 from modules.common.algorithms import ENV
@@ -243,48 +244,6 @@ def test_seed_angle_error_grows_with_the_distance_driven_on_a_drifting_heading()
 
 
 # -- the program --------------------------------------------------------------------------
-
-
-class FakeBuffer:
-    def __init__(self) -> None:
-        self.values: dict[str, Any] = {}
-        self.published = False
-        self.visits = 0
-
-    def read(self) -> dict[str, Any]:
-        return dict(self.values)
-
-
-class FakeOut:
-    def write(self, **fields: Any) -> None:
-        self.fields = fields
-
-
-class FakeOS:
-    """Just what copro's setup and vector sender use; VECTOR deliveries are recorded."""
-
-    protocol = default_protocol()
-    stopping = False
-
-    def __init__(self) -> None:
-        self.buffers: dict[str, FakeBuffer] = {}
-        self.delivered: list[tuple[str, str, dict[str, int]]] = []
-
-    def publish(self) -> FakeOut:
-        return FakeOut()
-
-    def subscribe(self, name: str) -> FakeBuffer:
-        return self.buffers.setdefault(name, FakeBuffer())
-
-    def set_own_input_id(self) -> None:
-        pass
-
-    def receive_command(self, timeout: float = 0) -> None:
-        return None
-
-    def deliver(self, module: str, command: str, timeout: float = 0, **args: int) -> bool:
-        self.delivered.append((module, command, args))
-        return True
 
 
 class FakeLocalizer:

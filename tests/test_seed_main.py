@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
+from fakenode import FakeOS
 
 from modules.common.navigator import (
     NAV,
@@ -344,36 +345,6 @@ def test_seed_left_wall_never_ends_by_itself() -> None:
 
 
 # -- main: the switch -------------------------------------------------------------------------------
-class _Channel:
-    published = False
-    visits = 0
-
-    def write(self, **fields: Any) -> None:
-        self.fields = fields
-
-
-class _FakeOS:
-    """What :meth:`Program.setup` and the exploration control touch of the node OS."""
-
-    stopping = False
-
-    def __init__(self) -> None:
-        self.delivered: list[tuple[str, str]] = []
-
-    def publish(self) -> _Channel:
-        return _Channel()
-
-    def set_own_input_id(self) -> None:
-        pass
-
-    def subscribe(self, name: str) -> _Channel:
-        return _Channel()
-
-    def deliver(self, target: str, command: str, **args: Any) -> bool:
-        self.delivered.append((target, command))
-        return True
-
-
 @pytest.mark.parametrize("choice", ["main=seed", "seed", "main=ours", ""])
 def test_main_reads_the_switch_once_and_builds_the_pairs_and_strategies(
     monkeypatch: pytest.MonkeyPatch, choice: str
@@ -381,7 +352,7 @@ def test_main_reads_the_switch_once_and_builds_the_pairs_and_strategies(
     from modules.main import Program
 
     monkeypatch.setenv("TOKENRING_ALGORITHMS", choice)
-    program = Program(_FakeOS())  # type: ignore[arg-type]
+    program = Program(FakeOS())  # type: ignore[arg-type]
     program.setup()
     monkeypatch.setenv("TOKENRING_ALGORITHMS", "ours" if "seed" in choice else "seed")  # read once
     seed = "seed" in choice
