@@ -669,6 +669,15 @@ def plot_distribution(rows: list[dict[str, Any]], path: str, title: str) -> None
     Image.open(path).convert("RGB").quantize(64).save(path, optimize=True)  # kilobytes, not 100s
 
 
+def parse_seeds(text: str) -> list[int]:
+    """World or noise seeds as the benches take them: ``1``, ``1,2,3``, ``1-3`` or ``1,4-6``."""
+    seeds: list[int] = []
+    for part in text.split(","):
+        lo, _, hi = part.partition("-")
+        seeds += list(range(int(lo), int(hi or lo) + 1))
+    return seeds
+
+
 def main(argv: list[str] | None = None) -> int:
     from concurrent.futures import ProcessPoolExecutor
 
@@ -694,10 +703,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", metavar="FILE", help="write every run's rows as JSON")
     parser.add_argument("--plot", metavar="PNG", help="the maps' coverage and precision as histograms")
     args = parser.parse_args(argv)
-    seeds: list[int] = []
-    for part in args.seed.split(","):
-        lo, _, hi = part.partition("-")
-        seeds += list(range(int(lo), int(hi or lo) + 1))
+    seeds = parse_seeds(args.seed)
     worlds = [w.strip() for w in args.world.split(",") if w.strip()]
     if args.generated:
         from bench.rooms import generated_room, room_seeds

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.closedloop import parse_seeds
 from modules.common.algorithms import MODULES
 from tokenring.cliutil import free_port
 
@@ -33,13 +34,6 @@ RUN_TIMEOUT_S = 1800.0
 
 def tokenring(*args: str) -> list[str]:
     return [sys.executable, "-m", "tokenring", *args]
-
-
-def parse_seeds(text: str) -> list[int]:
-    if "-" in text:
-        lo, hi = (int(x) for x in text.split("-", 1))
-        return list(range(lo, hi + 1))
-    return [int(x) for x in text.split(",") if x.strip()]
 
 
 def explore(
