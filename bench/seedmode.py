@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import subprocess
 import sys
@@ -67,35 +66,23 @@ def explore(
 def drift(map_file: Path, world: str) -> dict[str, Any]:
     """Orientation error (°, length-weighted) of the map's early and late thirds of vectors, in
     the order they were recorded: the seed's dead-reckoned heading error grows along the drive."""
-    from modules.common.mapscore import angle_diff, directions
+    from modules.common.mapscore import angle_diff, directions, point_segment_distance
     from modules.pc.mapfiles import load_map_file, load_truth
 
     vectors = np.asarray(load_map_file(str(map_file)), dtype=float).reshape(-1, 4)
     walls = np.asarray(load_truth(world)[1], dtype=float).reshape(-1, 4)
     if len(vectors) < 3 or not len(walls):
         return {}
-    errors = []
-    for v in vectors:
-        # the wall nearest the vector's middle, by its direction's difference
-        mid = (v[:2] + v[2:]) / 2
-        d = [point_to_segment(mid, w) for w in walls]
-        wall = walls[int(np.argmin(d))]
-        errors.append(math.degrees(float(angle_diff(directions(v[None, :]), directions(wall[None, :]))[0])))
+    middles = (vectors[:, :2] + vectors[:, 2:]) / 2
+    nearest = walls[point_segment_distance(middles, walls).argmin(axis=1)]  # each vector's wall
+    err = np.degrees(angle_diff(directions(vectors), directions(nearest)))
     lengths = np.hypot(vectors[:, 2] - vectors[:, 0], vectors[:, 3] - vectors[:, 1])
     third = len(vectors) // 3
     early, late = slice(0, third), slice(len(vectors) - third, len(vectors))
-    err = np.asarray(errors)
     return {
         "angle_early_deg": float((err[early] * lengths[early]).sum() / lengths[early].sum()),
         "angle_late_deg": float((err[late] * lengths[late]).sum() / lengths[late].sum()),
     }
-
-
-def point_to_segment(p: np.ndarray, w: np.ndarray) -> float:
-    a, b = w[:2], w[2:]
-    ab = b - a
-    t = float(np.clip(np.dot(p - a, ab) / max(float(np.dot(ab, ab)), 1e-9), 0.0, 1.0))
-    return float(np.hypot(*(a + t * ab - p)))
 
 
 def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
