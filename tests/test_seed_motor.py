@@ -170,6 +170,8 @@ def test_seed_ignores_a_command_of_the_moves_own_kind(benches):
     first = seed.start("MOVE_FORWARD", distance_mm=2000, speed_pct=20)
     seed.moving()
     seed.command("MOVE_FORWARD", distance_mm=100, speed_pct=100)
+    # acknowledged is in the inbox, not yet taken: wait until the motor has taken (and dropped) it
+    wait_for(lambda: seed.program.ignored, TIMEOUT, "the second MOVE_FORWARD taken")
     assert seed.program.ignored == 1 and seed.data.read()["move_seq"] == first
     assert seed.replies_until(first) == [(DONE, first)]
     d = seed.data.read()
