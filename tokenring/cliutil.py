@@ -5,10 +5,12 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import random
 import socket
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, NoReturn
 
 import msgpack
@@ -215,8 +217,30 @@ def query_one(session: zenoh.Session, key: str, request: Any = None, timeout: fl
     return reply.get("result")
 
 
+def _ephemeral_ports() -> tuple[int, int]:
+    """The kernel's range for outgoing connections' local ports (Linux; a common default elsewhere)."""
+    try:
+        low, high = Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()
+        return int(low), int(high)
+    except (OSError, ValueError):
+        return 32768, 60999
+
+
 def free_port() -> int:
-    """A TCP port on 127.0.0.1 that is free right now (tests and benchmarks)."""
+    """A TCP port on 127.0.0.1 that is free right now (tests and benchmarks).
+
+    Chosen below the ephemeral range: a port the kernel handed out (``bind(0)``) can be taken a
+    moment later by any process's outgoing connection, before the listener that asked for it binds.
+    """
+    low, _ = _ephemeral_ports()
+    candidates = range(max(1024, low - 12000), low) if low > 2048 else range(20000, 30000)
+    for port in random.SystemRandom().sample(candidates, min(200, len(candidates))):
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+            try:
+                sock.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
         sock.bind(("127.0.0.1", 0))
         return sock.getsockname()[1]
