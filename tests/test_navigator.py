@@ -410,8 +410,36 @@ def test_calibration_turns_360_and_asks_for_the_glide_factor_correction():
     turn = nav.plan(None, s, STOPPED)
     assert turn[0].direction == TURN_LEFT and turn[0].amount == 360
     s.heading_cdeg = 35500  # overturned by 15° (counter-clockwise lowers the clockwise heading)
-    assert nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED) is None
+    back = nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED)
     assert nav.commands == [("motor", "RECALC_GLIDE_FACTOR", {"target_deg": 360, "error_cdeg": 1500})]
+    assert back is not None and [(m.direction, m.amount) for m in back] == [(TURN_RIGHT, 15)]
+    assert nav.state == NAV["CALIBRATE"]
+    s.heading_cdeg = 1000
+    assert nav.plan(Outcome(REASON["DONE"], back[0]), s, STOPPED) is None
+    assert nav.state == NAV["DONE"] and len(nav.commands) == 1  # no pose known: nothing to tell
+
+
+def test_calibration_without_a_filter_tells_the_motor_the_heading_it_turned_back_to():
+    """Dead reckoning believes the 360° turn was exact; turned back by the error, the robot
+    faces its start heading while the motor's pose is off by the error: SET_GLOBAL_POSITION."""
+    from modules.common.pilot import Outcome
+
+    nav = Calibrate(LAYOUT)
+    s = Sensors(heading_cdeg=9000, pose=(800.0, 800.0, 0.0), pose_filtered=False)
+    turn = nav.plan(None, s, STOPPED)
+    s.heading_cdeg = 9000 + 1300  # came out 13° short: turn 13° more to the left
+    back = nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED)
+    assert back is not None and [(m.direction, m.amount) for m in back] == [(TURN_LEFT, 13)]
+    s.pose = (801.0, 799.0, math.radians(13.0))  # dead reckoning counted the extra 13°
+    assert nav.plan(Outcome(REASON["DONE"], back[0]), s, STOPPED) is None
+    assert nav.commands[-1] == ("motor", "SET_GLOBAL_POSITION", {"x_mm": 801, "y_mm": 799, "angle_cdeg": 0})
+    with_filter = Calibrate(LAYOUT)
+    s = Sensors(heading_cdeg=9000, pose=(800.0, 800.0, 0.0), pose_filtered=True)
+    turn = with_filter.plan(None, s, STOPPED)
+    s.heading_cdeg = 10300
+    back = with_filter.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED)
+    assert with_filter.plan(Outcome(REASON["DONE"], back[0]), s, STOPPED) is None
+    assert [c[1] for c in with_filter.commands] == ["RECALC_GLIDE_FACTOR"]  # the filter's job
 
 
 def test_a_move_is_not_finished_before_the_motor_was_seen_running_it():

@@ -228,8 +228,11 @@ def test_seed_explore2_begins_with_the_calibration_run_ours_does_not() -> None:
     assert nav.state == NAV["CALIBRATE"]
     # the turn came out 8.5° short: a left turn lowers the clockwise heading, so it reads 90 + 8.5
     s.heading_cdeg = 9850
-    find = nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED)
+    back = nav.plan(Outcome(REASON["DONE"], turn[0]), s, STOPPED)
     assert nav.commands == [("motor", "RECALC_GLIDE_FACTOR", {"target_deg": 360, "error_cdeg": -850})]
+    assert back is not None and [(m.direction, m.amount) for m in back] == [(TURN_LEFT, 9)]  # face 90° again
+    s.heading_cdeg = 9000
+    find = nav.plan(Outcome(REASON["DONE"], back[0]), s, STOPPED)
     assert nav.result == {"error_deg": -8.5}
     assert find is not None and find[0].direction == FORWARD and find[0].label == "find"
     ours = ExploreLeftWall(LAYOUT).plan(None, Sensors(distances=[FAR] * 8, heading_cdeg=9000), STOPPED)

@@ -44,6 +44,7 @@ from modules.common.pilot import (
     angle_of_slope,
     side_slope,
 )
+from modules.common.units import pose_to_wire
 from modules.common.vectorgen import SonarLayout
 from modules.description.robot import sonar_world_pose
 from tokenring.protocol import default_protocol
@@ -939,22 +940,46 @@ def distance_to_path(p: tuple[float, float], path: list[tuple[float, float]]) ->
 
 
 class Calibrate(Navigator):
-    """The calibration run: turn 360°, compare the compass, correct the glide factor."""
+    """The calibration run: turn 360°, compare the compass, correct the glide factor; then face
+    the start heading again.
+
+    The 360° turn runs at the old glide factor, so it ends off by the very error it measures
+    (13° on the office floor at world seed 1), and the motor, which counts its steps, believes
+    it faces the start heading. Left so, every move after it runs that far off and the map is
+    turned by it (the seed's robot measured no error: it had no compass fitted). So the run turns
+    back by the error at the new factor and — when no filter keeps the pose (``--algorithms
+    copro=seed``) — tells the motor its heading again with SET_GLOBAL_POSITION; with the filter
+    the compass already carries the heading and main's self-localisation corrects the motor."""
 
     mode = 3
+
+    #: an error under this is not turned back (the motor's step is 0.3°, the compass's noise 0.5°)
+    square_min_cdeg = 100
 
     def __init__(self, layout: SonarLayout, speed_pct: int = 50) -> None:
         super().__init__(layout)
         self.state = NAV["CALIBRATE"]
         self.speed_pct = speed_pct
         self.before: int | None = None
+        self.before_pose: tuple[float, float, float] | None = None
+        self.squaring = False
         self.result: dict[str, float] | None = None
 
     def plan(self, last: Outcome | None, sensors: Sensors, alert_lock: int) -> list[Move] | None:
         self.steps += 1
         if self.before is None and last is None:
             self.before = sensors.heading_cdeg
+            self.before_pose = None if sensors.pose_filtered else sensors.pose
             return [Move(TURN_LEFT, 360, self.speed_pct, label="calibrate")]
+        if self.squaring:
+            self.squaring = False
+            self.state = NAV["DONE"]
+            if self.before_pose is not None and sensors.pose is not None and last is not None and last.done:
+                x, y, _ = sensors.pose  # a turn on the spot: where it stands, as it faced first
+                self.commands.append(
+                    ("motor", "SET_GLOBAL_POSITION", pose_to_wire(x, y, self.before_pose[2]))
+                )
+            return None
         self.state = NAV["DONE"]
         if last is None or not last.done or self.before is None or sensors.heading_cdeg is None:
             self.note = "calibration needs a completed turn and a compass"
@@ -966,7 +991,12 @@ class Calibrate(Navigator):
         self.commands.append(
             ("motor", "RECALC_GLIDE_FACTOR", {"target_deg": 360, "error_cdeg": int(error_cdeg)})
         )
-        return None
+        if abs(error_cdeg) < self.square_min_cdeg:
+            return None
+        self.squaring = True
+        self.state = NAV["CALIBRATE"]
+        back = TURN_RIGHT if error_cdeg > 0 else TURN_LEFT  # overturned to the left: back to the right
+        return [Move(back, int(abs(error_cdeg) / 100.0 + 0.5), self.speed_pct, label="square")]
 
 
 # -- the seed's strategies (``--algorithms main=seed``) ---------------------------------------------
