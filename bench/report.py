@@ -957,6 +957,14 @@ def robot_md(out_dir: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+def seedtable_md(out_dir: Path) -> str:
+    """The 2001 robot beside ours, from the latest ``seedmode-*.json`` of each part; empty without."""
+    from bench.seedtable import latest, section_md
+
+    parts = latest(out_dir)
+    return section_md(parts) if parts else ""
+
+
 #: hand-written sections of RESULTS.md, by the start of their heading: kept when it is rewritten,
 #: unless they carry ``GENERATED`` (the report's own rendering of them)
 HAND_WRITTEN = ("## Nemesis",)
@@ -1144,6 +1152,7 @@ def write_report(
     parts += kept
     if not any(k.startswith(HAND_WRITTEN) or "<!-- keep:nemesis -->" in k for k in kept):
         parts.append(nemesis_md(out_dir))
+    parts.append(seedtable_md(out_dir))
     parts.append(robot_md(out_dir))
     md_path.write_text("\n".join(p for p in parts if p).rstrip() + "\n")
     return md_path
