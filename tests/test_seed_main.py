@@ -347,6 +347,30 @@ def test_seed_left_wall_never_ends_by_itself() -> None:
     assert plan is not None and nav.state != NAV["DONE"]
 
 
+@pytest.mark.parametrize("nav_class", [SeedLeftWall, SeedExploreAvoid])
+def test_seed_strategies_end_when_every_escape_is_aborted_by_another_alert(nav_class) -> None:
+    """Any sonar aborts any move: a robot within 4 cm of a wall rocks between the two directions
+    the lock allows in turn. The strategy gives up after a dozen ALERTs in a row, not forever."""
+    nav = nav_class(LAYOUT)
+    close = _sensors(left_front=2)
+    plan = nav.plan(None, close, STOPPED)
+    lock, plans = REVERSE, 0
+    while plan is not None and plans < 50:
+        last = Outcome(REASON["ALERT"], plan[0], trigger="alert on sonar [1]")
+        lock = FORWARD if lock == REVERSE else REVERSE  # the opposite of the aborted escape
+        plan = nav.plan(last, close, lock)
+        plans += 1
+    assert plan is None and nav.state == NAV["DONE"] and "ALERTs in a row" in nav.note
+    assert 10 <= plans <= 14
+    # one move that ends otherwise starts the count again
+    nav = nav_class(LAYOUT)
+    plan = nav.plan(None, close, STOPPED)
+    for k in range(30):
+        reason = REASON["DONE"] if k % 5 == 4 else REASON["ALERT"]
+        plan = nav.plan(Outcome(reason, plan[0], trigger="x"), close, REVERSE)
+        assert plan is not None
+
+
 # -- main: the switch -------------------------------------------------------------------------------
 @pytest.mark.parametrize("choice", ["main=seed", "seed", "main=ours", ""])
 def test_main_reads_the_switch_once_and_builds_the_pairs_and_strategies(

@@ -1010,6 +1010,31 @@ def _refused(last: Outcome | None) -> bool:
     return last is not None and last.reason == REASON["ALERT"] and last.trigger == "locked"
 
 
+#: ALERT outcomes in a row after which a seed strategy gives up: with any sonar aborting any
+#: move, escapes included, a robot within 4 cm of a wall rocks between the two directions the
+#: lock allows in turn (1766 escapes in 120 s on a loaded machine before this limit)
+SEED_STUCK_ALERTS = 12
+
+
+class _SeedStuck:
+    """Counts what ends a seed strategy: refused plans, or ALERT after ALERT."""
+
+    def __init__(self) -> None:
+        self.refusals = 0
+        self.alerts = 0
+
+    def stuck(self, last: Outcome | None) -> str:
+        """Why the strategy must end now ("" if it may go on)."""
+        self.refusals = self.refusals + 1 if _refused(last) else 0
+        alert = last is not None and last.reason == REASON["ALERT"]
+        self.alerts = self.alerts + 1 if alert else 0
+        if self.refusals >= SEED_STUCK_REFUSALS:
+            return "stuck: the ALERT lock refuses every move the strategy makes"
+        if self.alerts >= SEED_STUCK_ALERTS:
+            return f"stuck: {self.alerts} ALERTs in a row, every escape aborted by another sonar"
+        return ""
+
+
 class SeedExploreAvoid(ExploreAvoid):
     """Explore 1 as the seed's ``navigator_1`` (seed §4.3.6): the turn, too, aborts "bei
     Annaeherung im CLOSE-Bereich" — a front sonar at the CLOSE area's edge (12 cm). After a drive
@@ -1023,13 +1048,13 @@ class SeedExploreAvoid(ExploreAvoid):
 
     def __init__(self, layout: SonarLayout, drive_mm: int = 3000, speed_pct: int = 100) -> None:
         super().__init__(layout, drive_mm, speed_pct)
-        self.refusals = 0
+        self.ends = _SeedStuck()
 
     def plan(self, last: Outcome | None, sensors: Sensors, alert_lock: int) -> list[Move] | None:
-        self.refusals = self.refusals + 1 if _refused(last) else 0
-        if self.refusals >= SEED_STUCK_REFUSALS:
+        stuck = self.ends.stuck(last)
+        if stuck:
             self.state = NAV["DONE"]
-            self.note = "stuck: the ALERT lock refuses every move the strategy makes"
+            self.note = stuck
             return None
         return super().plan(last, sensors, alert_lock)
 
@@ -1062,7 +1087,7 @@ class SeedLeftWall(Navigator):
         super().__init__(layout)
         self.s = settings or SeedWallSettings()
         self.phase = "find"
-        self.refusals = 0
+        self.ends = _SeedStuck()
 
     def _blocked(self) -> Abort:
         return Abort("front_within", self.s.close_cm, "CLOSE")
@@ -1100,10 +1125,10 @@ class SeedLeftWall(Navigator):
     def plan(self, last: Outcome | None, sensors: Sensors, alert_lock: int) -> list[Move] | None:
         self.steps += 1
         s = self.s
-        self.refusals = self.refusals + 1 if _refused(last) else 0
-        if self.refusals >= SEED_STUCK_REFUSALS:
+        stuck = self.ends.stuck(last)
+        if stuck:
             self.state = NAV["DONE"]
-            self.note = "stuck: the ALERT lock refuses every move the strategy makes"
+            self.note = stuck
             return None
         if last is not None and last.reason == REASON["ALERT"]:
             # seed §4.3.6: "Es ist dann Aufgabe des Navigators", the direction the lock allows
