@@ -1,7 +1,9 @@
 """ROBLCD, the display module (seed §3.3.6, §4.3.7): menus on a 128×64 screen, a 4×4 keypad.
 
-Keys come from the keypad hardware (``self.hw``: ``tokenring lcd`` in a terminal presses them);
-the menus (:mod:`modules.common.lcdui`) start explorations and clear the map through main,
+Keys come from the keypad hardware (``self.hw``: ``tokenring lcd`` in a terminal presses them).
+Before this program runs, the LCD node's OS shows its "OS V2.0 Main Menu" on the same hardware
+(:mod:`modules.common.lcdos`); once it runs, its "Main Menu" takes over: the menus
+(:mod:`modules.common.lcdui`) start explorations and clear the map through main,
 show every module's live data decoded with protocol.yaml, and draw the map (GET_MAP to the map
 module) with pan and zoom. ``lcd.data`` carries the last key, a key counter, the menu and the
 selection. SHOW_TEXT puts a line of text under the menu.
@@ -150,9 +152,8 @@ class Program(UserProgram):
                 log.warning("%s did not take %s", target, command)
 
     def teardown(self) -> None:
+        # the display stays open: it is the node's, and its OS menu shows on it again
         self.outgoing.put(None)
-        if self.hw is not None:
-            self.hw.close()
 
     def report(self) -> dict[str, Any]:
         return {

@@ -10,6 +10,7 @@ Registered in ``pyproject.toml`` under the entry point group ``tokenring.extensi
   (``--explore``, ``--map-out``, ``--actions``, ``--localizer``), all checked before anything
   starts;
 * each program's hardware client (:mod:`modules.world.hardware`);
+* the LCD node's OS menu before the programs start (:mod:`modules.common.lcdos`);
 * its topics in a live feed (:mod:`modules.pc.feed`).
 """
 
@@ -33,6 +34,7 @@ if TYPE_CHECKING:
     from tokenring.feed import FeedSource
     from tokenring.launcher import Launcher, ServicePlan
     from tokenring.protocol import Protocol
+    from tokenring.resident import ResidentProgram
 
 PROGRAMS_DIR = Path(__file__).resolve().parent
 
@@ -76,6 +78,12 @@ class RobotExtension(Extension):
             help="the 2001 robot's algorithms ('seed': every module as it was, at the seed's wire pace "
             "--profile arcnet unless --bitrate is given) or today's ('ours', default); per module, "
             "e.g. 'sonar=seed' or 'seed,copro=ours' (modules: sonar, copro, main, motor)",
+        )
+        parser.add_argument_group(
+            "the LCD",
+            "From boot until the programs run (with --no-start: until you start them) the LCD shows\n"
+            "its OS V2.0 Main Menu: 1 Start Robbi starts the programs (tokenring lcd --keys 1),\n"
+            "2 Components lists every node with its program date (tokenring lcd --keys 2).",
         )
         mission = parser.add_argument_group("exploration")
         mission.add_argument(
@@ -121,8 +129,14 @@ class RobotExtension(Extension):
             plan.env["TOKENRING_LOCALIZER_CONFIG"] = str(Path(args.localizer).resolve())
         if args.explore and args.actions:
             raise UsageError("--explore and --actions both drive the robot: give one of them")
+        plan.start_hint = lcd_start_hint
         if not (args.explore or args.map_out or args.actions):
             return plan
+        if getattr(args, "no_start", False):
+            raise UsageError(
+                "--no-start leaves the programs waiting at the LCD's menu: --explore, --actions and "
+                "--map-out need them running (drop --no-start, or start them and run 'tokenring explore')"
+            )
         if args.map_out:
             from modules.pc.mapfiles import check_out
 
@@ -181,6 +195,14 @@ class RobotExtension(Extension):
 
         return open_hardware(module, session, ring)
 
+    def resident_program(self, module: str) -> type[ResidentProgram] | None:
+        """The LCD node's OS V2.0 Main Menu, shown from boot until the programs run."""
+        if module != "lcd":
+            return None
+        from modules.common.lcdos import LcdOs
+
+        return LcdOs
+
     def feed_sources(self, protocol: Protocol, ring: str) -> list[FeedSource]:
         """The robot's topics in a live feed: poses, sonar, map, walls, LCD (:mod:`modules.pc.feed`)."""
         from modules.pc.feed import robot_feed_sources
@@ -198,6 +220,14 @@ class RobotExtension(Extension):
         from modules.pc.web import actions
 
         return actions()
+
+
+def lcd_start_hint(launcher: Launcher) -> str | None:
+    """``up --no-start``: how to start the programs from the LCD's OS menu (if the lcd node runs)."""
+    if not any(plan.name == "lcd" for plan in launcher.plans):
+        return None
+    command = " ".join(["tokenring", "lcd", *launcher.tool_options(), "--keys", "1"])
+    return f"the LCD waits at its OS V2.0 Main Menu: 1 (Start Robbi) starts the programs: {command}"
 
 
 def world_service(args: argparse.Namespace) -> ServicePlan:

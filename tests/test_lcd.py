@@ -8,12 +8,10 @@ import numpy as np
 import pytest
 
 from modules.common.lcdui import (
-    BOOT,
     COMPONENT,
     COMPONENTS,
     HEIGHT,
     MAIN,
-    OS_COMPONENTS,
     ROBMAP,
     WIDTH,
     Menus,
@@ -91,21 +89,10 @@ def test_screen_packs_into_1024_bytes_and_back():
 
 
 def test_menu_walk_with_key_presses():
+    """The lcd program's menus start at its Main Menu (the OS V2.0 menu before it is the LCD
+    node's OS: tests/test_lcd_boot_menu.py)."""
     robot = FakeRobot()
     menus = Menus(robot)
-    boot = shown(menus)
-    assert menus.menu == BOOT
-    assert_shows(boot, ["OS V2.0 Main Menu", "1 Start Robbi", "2 Components"])
-
-    menus.press("2")  # OS components: every active module with name and ID
-    assert menus.menu == OS_COMPONENTS
-    assert_shows(
-        shown(menus), ["Components", "1 MAIN 10", "2 MOTOR 20", "3 SONAR 30", "4 MAP 60", "5 LCD 70"]
-    )
-    menus.press("*")  # Escape
-    assert menus.menu == BOOT and (shown(menus) == boot).all()
-
-    menus.press("1")  # Start Robbi
     assert menus.menu == MAIN
     main_lines = [
         "Main Menu",
@@ -117,7 +104,7 @@ def test_menu_walk_with_key_presses():
         "6 Stop",
     ]
     assert_shows(shown(menus), main_lines)
-    menus.press("*")  # Start Robbi cannot be undone
+    menus.press("*")  # no way back to the OS menu while the program runs
     assert menus.menu == MAIN
 
     menus.press("2")  # Explore 2
@@ -143,8 +130,7 @@ def test_robmap_draws_the_map_and_pans_and_zooms():
     robot.vectors = [(0, 0, 400, 0), (400, 0, 400, 300)]  # 4 m along x, then 3 m along y (cm)
     robot.robot_pose = (2000.0, 1500.0, 0.0)
     menus = Menus(robot)
-    for key in "14":
-        menus.press(key)
+    menus.press("4")  # Components
     menus.press("4")  # ROBMAP is the 4th module in FakeRobot's list
     assert menus.menu == ROBMAP and robot.fetches == 1
     px = shown(menus)

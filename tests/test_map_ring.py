@@ -31,9 +31,9 @@ def test_get_map_round_trip_through_main_and_the_lcd_over_zenoh(procs, ring_name
             lambda: control(session, ring_name, 60, "program")["report"]["maps_sent"] >= 1, 5, "map's count"
         )
 
-        # the keypad: Start Robbi, Components, map (3rd of main, copro, map, lcd) → ROBMAP fetches the map over the ring itself
+        # the keypad at the program's Main Menu: Components, map (3rd of main, copro, map, lcd) → ROBMAP fetches the map over the ring itself
         out = subprocess.run(
-            [sys.executable, "-m", "tokenring", "lcd", "--ring", ring_name, "-e", endpoint, "--keys", "1 4 3"],
+            [sys.executable, "-m", "tokenring", "lcd", "--ring", ring_name, "-e", endpoint, "--keys", "4 3"],
             capture_output=True, text=True, timeout=30,
         )  # fmt: skip
         assert out.returncode == 0, out.stderr

@@ -17,6 +17,8 @@ and the ring asks every registered extension, and nothing else, for
 * **load** — options of ``tokenring load`` and a step after it (the robot's map upload, the
   seed's ``LOAD.EXE -u``);
 * **hardware** — the client a node's program gets as ``self.hw``;
+* **resident program** — a node's own part of its OS, run from boot while no user program runs
+  (:mod:`tokenring.resident`; the robot's LCD menu before the programs start);
 * **feed** — its own topics in a live feed (:mod:`tokenring.feed`);
 * **web** — panels (static files, one ES module each) and buttons of the web view
   (:mod:`tokenring.web`).
@@ -46,6 +48,7 @@ if TYPE_CHECKING:
     from tokenring.feed import FeedSource
     from tokenring.launcher import Launcher, ServicePlan
     from tokenring.protocol import Protocol
+    from tokenring.resident import ResidentProgram
 
 log = logging.getLogger("tokenring.extensions")
 
@@ -71,6 +74,9 @@ class UpPlan:
     #: a hardware timing profile (``--profile``) the application's options imply, used unless
     #: the user gave ``--profile`` or ``--bitrate``
     profile: str | None = None
+    #: ``up --no-start``: a line saying how a user starts the programs on this application
+    #: (beside ``tokenring load --start``), given the launcher
+    start_hint: Callable[[Launcher], str | None] | None = None
 
 
 @dataclass
@@ -129,6 +135,11 @@ class Extension:
 
     def open_hardware(self, module: str, session: zenoh.Session, ring: str) -> Any | None:
         """The hardware client for ``module``'s program, or None if it has none here."""
+        return None
+
+    def resident_program(self, module: str) -> type[ResidentProgram] | None:
+        """The part of ``module``'s node OS this application adds (run from boot while no user
+        program runs, with the node's hardware client), or None."""
         return None
 
     def feed_sources(self, protocol: Protocol, ring: str) -> list[FeedSource]:
@@ -191,6 +202,15 @@ def open_hardware(module: str, session: zenoh.Session, ring: str) -> Any | None:
         client = extension.open_hardware(module, session, ring)
         if client is not None:
             return client
+    return None
+
+
+def resident_program(module: str) -> type[ResidentProgram] | None:
+    """``module``'s resident program from the first extension that has one, else None."""
+    for extension in loaded():
+        resident = extension.resident_program(module)
+        if resident is not None:
+            return resident
     return None
 
 

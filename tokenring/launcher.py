@@ -223,6 +223,13 @@ class Launcher:
             self.joined_existing = True
             self.say(f"{keys.default_endpoint()} is taken: joining that Zenoh network (ring {self.ring!r})")
 
+    def tool_options(self) -> list[str]:
+        """The options a tool (``tokenring load``, ...) needs to reach this ring: ``--ring`` and
+        ``-e`` where they differ from the tools' defaults."""
+        options = [] if self.ring == keys.DEFAULT_RING else ["--ring", self.ring]
+        endpoint = self.node_connect()[0]
+        return options if endpoint == keys.default_endpoint() else [*options, "-e", endpoint]
+
     def node_connect(self) -> list[str]:
         return [self.endpoint] if self.endpoint else list(self.connect or [keys.default_endpoint()])
 

@@ -1,4 +1,5 @@
-"""One node as an OS process: a Zenoh session, the node OS, its control queryable, its program.
+"""One node as an OS process: a Zenoh session, the node OS, its control queryable, its program
+(and an application's resident part of its OS, :mod:`tokenring.resident`).
 
 Started by ``tokenring up`` (one per module) or by hand with ``tokenring node``. SIGINT and
 SIGTERM make the node leave the ring cleanly and exit 0.
@@ -36,6 +37,7 @@ from tokenring.program import load_program_file
 from tokenring.programstore import ProgramStore, check_store_root, default_store_root, file_stamp
 from tokenring.protocol import Protocol, load_protocol
 from tokenring.regeneration import RegenerationLedger
+from tokenring.resident import ResidentHost
 from tokenring.ring import parse_bitrate
 from tokenring.system import SystemLayer
 from tokenring.syswire import DEFAULT_CAPACITY
@@ -113,6 +115,7 @@ class NodeProcess:
         self._queryable: Any = None
         self.hardware: Any = None
         self.pclink: PcLinkServer | None = None
+        self.resident: ResidentHost | None = None
 
     def _stats(self) -> dict[str, Any]:
         """The node's snapshot with its regenerations by cause and its uptime (``stats`` verb)."""
@@ -189,6 +192,13 @@ class NodeProcess:
             self.pclink = PcLinkServer(self.os, self.session, self.ring)
             PcSystemVerbs(self.system).register(self.pclink)
             self.pclink.start()
+        resident = extensions.resident_program(self.os.name)
+        if resident is not None:  # the application's part of this node's OS, from boot on
+            if self.hardware is None:
+                self.hardware = extensions.open_hardware(self.os.name, self.session, self.ring)
+            self.resident = ResidentHost(resident, self.os, self.system, self.hardware)
+            self.control["resident"] = self.resident.control
+            self.resident.start()
 
     def run_program(self, path: str | Path | None) -> None:
         if path is None:
@@ -210,6 +220,8 @@ class NodeProcess:
         self.stop_event.wait(duration)
 
     def shutdown(self) -> None:
+        if self.resident is not None:
+            self.resident.stop()
         if self.pclink is not None:
             self.pclink.close()
         self.os.leave(grace=1.0)

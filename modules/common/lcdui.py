@@ -4,19 +4,22 @@ The framebuffer is a luma.core ``dummy`` device (a real small-display library: m
 bitmap fonts); :class:`Screen` packs it into the 1024 bytes the display hardware takes.
 
 Keys: ``0``–``9``, ``A``–``D``, ``*`` (Escape: leave a menu) and ``#`` (Enter/refresh).
-Menus as in the seed's figure 4.8: after power-on "OS V2.0 Main Menu" (1 Start Robbi,
-2 Components); after start "Main Menu" (1 Explore 1, 2 Explore 2, 3 Clear Map, 4 Components,
-5 Debug-Info; ours: 6 Stop). Components lists the modules; picking one shows its live data
-decoded with protocol.yaml (2/8 scroll); ROBMAP shows the map: 2/4/6/8 pan, A zoom in,
+Menus as in the seed's figure 4.8. After power-on the LCD node's OS shows :class:`OsMenu`,
+"OS V2.0 Main Menu" (1 Start Robbi: ARCNET_START_SYSTEM; 2 Components: every node's name, ID and
+program date), before any program runs (:mod:`modules.common.lcdos`). Once the programs run, the
+lcd program shows :class:`Menus`, "Main Menu" (1 Explore 1, 2 Explore 2, 3 Clear Map,
+4 Components, 5 Debug-Info; ours: 6 Stop). Its Components lists the modules; picking one shows its
+live data decoded with protocol.yaml (2/8 scroll); ROBMAP shows the map: 2/4/6/8 pan, A zoom in,
 B zoom out, 5 fit, # fetch the map again.
 
-:class:`Menus` holds no I/O: it draws from and acts through a :class:`LcdContext`, so a test
-can walk the menus with simulated key presses and assert the framebuffer.
+The menus hold no I/O: they draw from and act through a :class:`LcdContext` (the OS menu: an
+:class:`OsContext`), so a test can walk them with simulated key presses and assert the framebuffer.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from typing import Any, Protocol
 
 import numpy as np
@@ -123,16 +126,92 @@ class LcdContext(Protocol):
         """Lines for Debug-Info."""
 
 
+#: the menus' numbers (``lcd.data``'s ``menu``): BOOT and OS_COMPONENTS are the OS's (:class:`OsMenu`)
 BOOT, MAIN, OS_COMPONENTS, COMPONENTS, COMPONENT, ROBMAP, DEBUG = range(7)
 MENU_NAMES = ["boot", "main", "os-components", "components", "component", "robmap", "debug"]
 
 
+class OsContext(Protocol):
+    """What the OS menu needs from the LCD node's OS."""
+
+    def start_system(self) -> str:
+        """Broadcast ARCNET_START_SYSTEM over the ring; a line saying what happened."""
+
+    def scan_components(self) -> list[tuple[str, int, int]] | None:
+        """Every node on the ring as (name, ID, program time stamp in ms since 1970, 0 = no
+        program), from ARCNET_SCAN and ARCNET_GET_CONFIG; None if the scan got no answer."""
+
+
+def program_date(stamp_ms: int) -> str:
+    """A program's date as the OS menu shows it, ``DD.MM.YYYY`` local time (the seed's date
+    format; a time of day would not fit beside the longer names), ``-`` for no program."""
+    if not stamp_ms:
+        return "-"
+    return time.strftime("%d.%m.%Y", time.localtime(stamp_ms / 1000))
+
+
+def component_row(name: str, node_id: int, stamp_ms: int) -> str:
+    """One node in the OS menu's Components: name, ID and program date."""
+    return f"{name.upper()} {node_id} {program_date(stamp_ms)}"
+
+
+class OsMenu:
+    """The LCD node's own menu from power-on until the programs run (seed §4.3.7, figure 4.8):
+    1 Start Robbi broadcasts ARCNET_START_SYSTEM; 2 Components scans the ring and lists every
+    node with name, ID and program date (2/8 scroll, # scans again, * back)."""
+
+    def __init__(self, context: OsContext) -> None:
+        self.ctx = context
+        self.menu = BOOT
+        self.scroll = 0
+        self.message = ""
+        self.components: list[tuple[str, int, int]] | None = []
+
+    def press(self, key: str) -> None:
+        key = key.upper()
+        if key not in KEYS:
+            return
+        if self.menu == BOOT:
+            if key == "1":
+                self.message = self.ctx.start_system()
+            elif key == "2":
+                self.menu, self.scroll, self.message = OS_COMPONENTS, 0, ""
+                self.components = self.ctx.scan_components()
+        elif key == ESCAPE:
+            self.menu = BOOT
+        elif key == ENTER:
+            self.components = self.ctx.scan_components()
+        elif key == "8":
+            self.scroll += 1
+        elif key == "2":
+            self.scroll = max(0, self.scroll - 1)
+
+    def lines(self) -> list[str]:
+        """The menu's text lines (what :meth:`draw` writes)."""
+        if self.menu == BOOT:
+            out = ["OS V2.0 Main Menu", "1 Start Robbi", "2 Components"]
+            return [*out, self.message] if self.message else out
+        if self.components is None:
+            rows = ["no answer (# again)"]
+        else:
+            rows = [component_row(*component) for component in self.components] or ["no nodes"]
+        size = LINES - 1
+        self.scroll = min(self.scroll, max(0, len(rows) - size))
+        return ["Components", *rows[self.scroll : self.scroll + size]]
+
+    def draw(self, screen: Screen) -> None:
+        with screen:
+            for row, value in enumerate(self.lines()[:LINES]):
+                screen.text(row, value, invert=(row == 0))
+
+
 class Menus:
-    """The menu state machine: :meth:`press` a key, :meth:`draw` the current screen."""
+    """The lcd program's menus, from its Main Menu on: :meth:`press` a key, :meth:`draw` the
+    current screen."""
 
     def __init__(self, context: LcdContext) -> None:
         self.ctx = context
-        self.menu = BOOT
+        self.menu = MAIN
         self.stack: list[int] = []
         self.selection = 0
         self.scroll = 0
@@ -154,9 +233,7 @@ class Menus:
                 self.scroll = 0
             return
         handler = {
-            BOOT: self._boot,
             MAIN: self._main,
-            OS_COMPONENTS: self._scroll_keys,
             COMPONENTS: self._components,
             COMPONENT: self._scroll_keys,
             ROBMAP: self._robmap,
@@ -168,12 +245,6 @@ class Menus:
         self.stack.append(self.menu)
         self.menu = menu
         self.scroll = 0
-
-    def _boot(self, key: str) -> None:
-        if key == "1":
-            self.menu, self.stack = MAIN, []  # Start Robbi: the user programs run; no way back
-        elif key == "2":
-            self._enter(OS_COMPONENTS)
 
     def _main(self, key: str) -> None:
         if key in ("1", "2"):
@@ -251,9 +322,7 @@ class Menus:
     def draw(self, screen: Screen) -> None:
         with screen:
             {
-                BOOT: self._draw_boot,
                 MAIN: self._draw_main,
-                OS_COMPONENTS: self._draw_modules,
                 COMPONENTS: self._draw_modules,
                 COMPONENT: self._draw_component,
                 ROBMAP: self._draw_map,
@@ -262,8 +331,6 @@ class Menus:
 
     def lines(self) -> list[str]:
         """The text lines of a text menu (what :meth:`draw` writes), for tests and the terminal."""
-        if self.menu == BOOT:
-            return ["OS V2.0 Main Menu", "1 Start Robbi", "2 Components"]
         if self.menu == MAIN:
             out = [
                 "Main Menu",
@@ -275,7 +342,7 @@ class Menus:
                 "6 Stop",
             ]
             return [*out, self.message] if self.message else out
-        if self.menu in (OS_COMPONENTS, COMPONENTS):
+        if self.menu == COMPONENTS:
             rows = [
                 f"{i + 1} {name.upper()} {node_id}{' ' + date if date else ''}"
                 for i, (name, node_id, date) in enumerate(self.ctx.modules())
@@ -297,7 +364,7 @@ class Menus:
         for row, value in enumerate(self.lines()[:LINES]):
             screen.text(row, value, invert=(row == 0))
 
-    _draw_boot = _draw_main = _draw_modules = _draw_component = _draw_debug = _draw_text_menu
+    _draw_main = _draw_modules = _draw_component = _draw_debug = _draw_text_menu
 
     def _draw_map(self, screen: Screen) -> None:
         vectors = self.ctx.map_vectors()

@@ -11,19 +11,26 @@ from tokenring.cliutil import int_within, seconds
 from tokenring.errors import UsageError
 
 DEFAULT_BITRATE = "2.5M"
+EXAMPLES = """examples:
+  tokenring up                     boot, download the programs over the ring, start them
+  tokenring up --no-start          boot and download; the programs wait for ARCNET_START_SYSTEM
+  tokenring load --start           ... which this sends (or the application's own way, said at boot)
+  tokenring up --no-download       every node starts its program from its file, no download
+"""
 
 if TYPE_CHECKING:
     from tokenring.launcher import Launcher, ServicePlan
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cliutil import add_ring_options
+    from tokenring.cliutil import add_ring_options, with_examples
 
     p = sub.add_parser(
         "up",
         help="launch the whole ring (every node its own process)",
         description="Launch every node of protocol.yaml as its own OS process on one Zenoh network "
         "and supervise them until Ctrl-C, SIGTERM or --duration.",
+        **with_examples(EXAMPLES),
     )
     p.add_argument("--nodes", help="comma-separated subset of nodes (names or IDs); default all")
     p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds")
@@ -47,6 +54,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--no-download",
         action="store_true",
         help="give each node its program file at start instead of booting bare and loading over the ring",
+    )
+    p.add_argument(
+        "--no-start",
+        action="store_true",
+        help="boot and download the programs but send no ARCNET_START_SYSTEM: the programs wait "
+        "until 'tokenring load --start' (or the application's own start) sends it",
     )
     p.add_argument(
         "--store",
@@ -136,6 +149,13 @@ def run(args: argparse.Namespace) -> int:
     if download and main_id not in {p.node_id for p in plans}:
         download = False  # no main, no PC link: the programs start from their files
         plans = plans_from_protocol(protocol, selection, programs)
+    if args.no_start and not download:
+        why = "main, the PC link, is not among --nodes"
+        if programs is None or args.no_download:
+            why = "--no-programs" if programs is None else "--no-download"
+        raise UsageError(
+            f"--no-start holds the programs downloaded over the ring, and there is no download ({why})"
+        )
     # every extension checks its options before anything starts
     plans_up = [extension.plan_up(args, protocol) for extension in extensions.loaded()]
     speedup = 1.0
@@ -173,9 +193,11 @@ def run(args: argparse.Namespace) -> int:
     launcher.start()
     boot_ok = True
     if download and programs is not None:
-        boot_ok = boot_load(launcher, Path(programs), {p.node_id for p in plans})
+        boot_ok = boot_load(launcher, Path(programs), {p.node_id for p in plans}, start=not args.no_start)
+    if args.no_start:
+        say_waiting(launcher, plans_up)
     for plan in plans_up:
-        if plan.on_started is not None:
+        if plan.on_started is not None and not args.no_start:
             plan.on_started(launcher)
     limit = args.duration
     grace = max((plan.grace_s for plan in plans_up), default=0.0)
@@ -192,10 +214,13 @@ def run(args: argparse.Namespace) -> int:
     return code
 
 
-def boot_load(launcher: Launcher, programs: Path, ids: set[int], wait: float = 30.0) -> bool:
+def boot_load(
+    launcher: Launcher, programs: Path, ids: set[int], wait: float = 30.0, start: bool = True
+) -> bool:
     """The seed's boot: the nodes run their OS only; scan them, load every program that is newer
     than the node's (``load -i``: a restarted ring finds them in its stores and sends nothing)
-    through main's PC link, then ARCNET_START_SYSTEM. False if a node failed (named in the output)."""
+    through main's PC link, then ARCNET_START_SYSTEM (unless not ``start``). False if a node
+    failed (named in the output)."""
     from tokenring.errors import TokenRingError
     from tokenring.loader import Loader, run_load
     from tokenring.pclink import open_link
@@ -211,7 +236,7 @@ def boot_load(launcher: Launcher, programs: Path, ids: set[int], wait: float = 3
             cancelled=lambda: launcher.stopping,
         )
         result = run_load(
-            loader, mode="incremental", programs_dir=programs, start=True, expect=ids, wait=wait
+            loader, mode="incremental", programs_dir=programs, start=start, expect=ids, wait=wait
         )
         return not result["failed"]
     except TokenRingError as exc:
@@ -219,6 +244,16 @@ def boot_load(launcher: Launcher, programs: Path, ids: set[int], wait: float = 3
         return False
     finally:
         launcher.booting = False
+
+
+def say_waiting(launcher: Launcher, plans_up: list[extensions.UpPlan]) -> None:
+    """``--no-start``: the programs are loaded and wait; say how to start them."""
+    command = " ".join(["tokenring", "load", *launcher.tool_options(), "--start"])
+    launcher.say(f"--no-start: the programs wait for ARCNET_START_SYSTEM; start them with: {command}")
+    for plan in plans_up:
+        hint = plan.start_hint(launcher) if plan.start_hint is not None else None
+        if hint:
+            launcher.say(hint)
 
 
 def check_port(option: str, port: int) -> None:
