@@ -959,7 +959,7 @@ def robot_md(out_dir: Path) -> str:
 
 def seedtable_md(out_dir: Path) -> str:
     """The 2001 robot beside ours, from the latest ``seedmode-*.json`` of each part; empty without."""
-    from bench.seedtable import latest, section_md
+    from bench.seedreport import latest, section_md
 
     parts = latest(out_dir)
     return section_md(parts) if parts else ""

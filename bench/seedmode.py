@@ -6,7 +6,7 @@ nodes, real Zenoh, the world simulator), then ``tokenring score``; rows are medi
 and world seeds. The seed's documented flaws show as missing corners and an orientation error
 that grows along the drive (the late third of the map's vectors against the early third).
 
-    python -m bench.seedmode [--world office,square] [--seed 1-3] [--speed 20] [--json FILE]
+    python -m bench.seedmode [--world office,square] [--seed 1-3] [--speed 10] [--json FILE]
 """
 
 from __future__ import annotations
@@ -36,16 +36,22 @@ def tokenring(*args: str) -> list[str]:
 
 
 def explore(
-    world: str, seed: int, algorithms: str, speed: str, minutes: float, folder: Path
+    world: str, seed: int, algorithms: str, speed: str, minutes: float, folder: Path, bitrate: str = "max"
 ) -> dict[str, Any]:
-    """One exploration on a fresh ring; its map's score, or the failure's last lines."""
+    """One exploration on a fresh ring; its map's score, or the failure's last lines.
+
+    ``bitrate`` max by default: the ring's round trip (3-4 ms with the world and programs) times
+    the speed-up is then about the seed's 30-40 ms of robot time at speed 10. At the seed's
+    pace (``--profile arcnet``, 31 ms) only speed 1 keeps that: at speed 10 the pilot would hear
+    of a wall 300 ms of robot time late and the seed's robot, which stops at 12 cm, drives into
+    ALERT."""
     name = f"{world}-{seed}-{algorithms.replace('=', '-')}"
     out = folder / f"{name}.json"
     ring = f"seed{os.getpid()}{abs(hash(name)) % 10**6}"
     argv = tokenring(
         "up", "--ring", ring, "--listen", f"tcp/127.0.0.1:{free_port()}", "--world", world, "--seed", str(seed),
         "--speed", speed, "--explore", "2", "--algorithms", algorithms, "--map-out", str(out),
-        "--duration", str(round(minutes * 60 / float(speed))),
+        "--duration", str(round(minutes * 60 / float(speed))), "--bitrate", bitrate,
     )  # fmt: skip
     done = subprocess.run(argv, capture_output=True, text=True, timeout=RUN_TIMEOUT_S, check=False)
     row: dict[str, Any] = {"world": world, "seed": seed, "algorithms": algorithms, "exit": done.returncode}
@@ -142,7 +148,8 @@ def main(argv: list[str] | None = None) -> int:
         "--world", default="office,square", help="rooms, comma-separated (default %(default)s)"
     )
     parser.add_argument("--seed", default="1-3", help="world seeds: 1 or 1,2 or 1-3 (default %(default)s)")
-    parser.add_argument("--speed", default="20", help="the world's speed-up (default %(default)s)")
+    parser.add_argument("--speed", default="10", help="the world's speed-up (default %(default)s)")
+    parser.add_argument("--bitrate", default="max", help="the ring's bitrate (default %(default)s)")
     parser.add_argument("--minutes", type=float, default=40.0, help="emulated minutes per run at most")
     parser.add_argument(
         "--configs",
@@ -159,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
             print(
                 f"  [{i}/{len(runs)}] {world} seed {seed} --algorithms {config}", file=sys.stderr, flush=True
             )
-            rows.append(explore(world, seed, config, args.speed, args.minutes, Path(tmp)))
+            rows.append(explore(world, seed, config, args.speed, args.minutes, Path(tmp), args.bitrate))
     table = summarize(rows)
     print(format_table(table))
     if args.json:

@@ -60,3 +60,18 @@ def test_the_seed_robot_runs_at_the_seeds_pace_unless_a_bitrate_is_given(extra, 
     )  # fmt: skip
     starting = next(line for line in out.stdout.splitlines() if "starting 1 nodes" in line)
     assert ("profile arcnet" in starting) == profile, starting
+
+
+def test_up_runs_the_seed_robot_exploring_and_draws_its_map(ring_name, endpoint, tmp_path):
+    """The issue's own command: ``up --algorithms seed --explore 2 --map-out m.png`` runs the seed's
+    robot (its Explore 2 begins with the calibration turn) and leaves the map as a PNG."""
+    png = tmp_path / "m.png"
+    out = run_tokenring(
+        "up", "--ring", ring_name, "--listen", endpoint, "--algorithms", "seed", "--explore", "2",
+        "--map-out", str(png), "--speed", "10", "--bitrate", "max", "--duration", "45",
+        timeout=240,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+    text = out.stdout + out.stderr
+    assert "navigator SeedCalibrated started" in text and "calibrate 360" in text, text[-3000:]
+    assert png.read_bytes().startswith(b"\x89PNG")

@@ -6,7 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
-from bench.seedtable import latest, part_classifier, section_md, sync_figures
+from bench.seedreport import latest, section_md
+from bench.seedtable import part_classifier, sync_figures
 
 
 def test_sync_regularity_is_counted_as_the_seed_states_it() -> None:
