@@ -15,12 +15,16 @@ The coils' offset part is driven with the flip (reversed in the reset phase): a 
 is inverted with the bridge's response and cannot move the midpoint. The field itself is still
 taken from the pair's difference, which the coils' offset part does not enter.
 
-CALIBRATE: the compass turns the robot once round in eight 45° steps (it commands the motor
-itself and waits for each POSITION_REACHED), measuring at rest at each stop; a circle fit
-through the eight readings gives the static field (centre) and the Earth's field (radius); the
-readings taken while turning lie on a circle round static + running field, which gives the
-running field; every straight move afterwards measures it again (the field driving minus the
-field at rest before and after: :class:`~modules.common.compass.RunningFieldLearner`). State:
+Calibration (seed 001 §4.3: the turn goes through main's pilot): CALIBRATE asks main for the
+turn (main's CALIBRATE_COMPASS); main tells the compass to listen (CALIBRATE_LISTEN, eight stops)
+and its pilot turns the robot once round in eight 45° turns on the spot, waiting at each stop
+for the compass's samples. The compass never commands the motor: it watches motor.data, takes
+its readings at rest at each stop and those taken while turning
+(:class:`~modules.common.compass.CalibrationListener`); a circle fit through the eight stops'
+readings gives the static field (centre) and the Earth's field (radius); the readings taken
+while turning lie on a circle round static + running field, which gives the running field;
+every straight move afterwards measures it again (the field driving minus the field at rest
+before and after: :class:`~modules.common.compass.RunningFieldLearner`). State:
 UNCALIBRATED, CALIBRATING, OK, DISTURBED (the field strength, averaged like the heading, is off
 by more than 0.8 % from the calibrated one: an anomaly, iron nearby; a flip measurement's strength
 scatters by about 0.5 %, the mean of three by 0.3 %, and an anomaly across the Earth's field bends
@@ -39,10 +43,10 @@ import numpy as np
 from modules.common.compass import (
     FLIP_SAMPLES,
     MAX_COMPENSATION_ROUNDS,
-    MEASUREMENT_MS,
     STOPPED,
     TURN_LEFT,
     TURN_RIGHT,
+    CalibrationListener,
     RunningFieldLearner,
     circular_mean,
     compensate_until_symmetric,
@@ -64,14 +68,8 @@ SAMPLE_PERIOD_SIM_S = 0.1
 MIN_PERIOD_REAL_S = 0.005
 SAMPLES = FLIP_SAMPLES  # one 50 Hz period at 1 kHz
 FILTER_LENGTH = 3
-CALIBRATION_STOPS = 8
-CALIBRATION_SPEED_PCT = 50
 DISTURBED_RATIO = 0.008
-
-
-def motor_steps(motor: Any) -> tuple[int, int]:
-    """The step counters of a motor.data snapshot (a channel buffer or a dict)."""
-    return int(motor["steps_left"]), int(motor["steps_right"])
+REQUEST_TIMEOUT_S = 5.0  # real seconds main's inbox may take to accept CALIBRATE_COMPASS
 
 
 class Program(UserProgram):
@@ -99,6 +97,8 @@ class Program(UserProgram):
         self.stamp_ms = 0.0
         self.calibration: dict = {}
         self.learner = RunningFieldLearner(self.running_field)
+        self.listener: CalibrationListener | None = None  # listening to a calibration turn
+        self._before: tuple[int, tuple[float, float]] = (self.state, self.compensation)
         self.period_real = max(MIN_PERIOD_REAL_S, self.clock.to_real(SAMPLE_PERIOD_SIM_S))
 
     # -- measuring ------------------------------------------------------------------------------
@@ -166,6 +166,10 @@ class Program(UserProgram):
 
     def sample(self) -> None:
         field, stamp = self.read_field()
+        if self.listener is not None:
+            self._listen(stamp, field)
+            if self.listener is None:  # done and published (this reading was uncompensated)
+                return
         direction = self.motors_moving()
         learning = self.state in (OK, DISTURBED) and self.motor.visits
         if learning and self.learner.add(stamp, field, self.motor.read()):
@@ -222,37 +226,59 @@ class Program(UserProgram):
                 command = self.os.receive_command(timeout=remaining)
                 if command is None:
                     break
-                if command.name == "CALIBRATE":
-                    self.calibrate()
-                else:
-                    log.info("compass: ignoring %s from node %d", command.name, command.sender)
+                self.handle_command(command.name, command.args, command.sender)
+
+    def handle_command(self, name: str, args: dict[str, Any], sender: int) -> None:
+        """CALIBRATE: ask main for the turn; CALIBRATE_LISTEN: listen to it (0 stops: stop)."""
+        if name == "CALIBRATE":
+            self.request_calibration(sender)
+        elif name == "CALIBRATE_LISTEN":
+            stops = int(args["stops"])
+            if stops:
+                self.listen(stops)
+            elif self.listener is not None:
+                self._calibration_failed(f"node {sender} stopped the calibration turn")
+        else:
+            log.info("compass: ignoring %s from node %d", name, sender)
 
     # -- calibration ----------------------------------------------------------------------------
-    def calibrate(self) -> None:
-        """Turn once round in eight steps; learn the motors' static and running fields."""
-        self._before = (self.state, self.compensation)
+    def request_calibration(self, sender: int) -> None:
+        """The compass's calibration turn is main's to drive (seed 001 §4.3): ask main for it."""
+        if self.listener is not None:
+            log.info("compass: already listening to a calibration turn (CALIBRATE from node %d)", sender)
+            return
+        if not self.os.deliver("main", "CALIBRATE_COMPASS", timeout=REQUEST_TIMEOUT_S):
+            log.warning("compass: main did not take CALIBRATE_COMPASS: no calibration turn")
+
+    def listen(self, stops: int) -> None:
+        """Learn the motors' fields while someone else turns the robot: compensation off, a
+        reading at rest at each of ``stops`` stops seen on motor.data, then the fits."""
+        if self.listener is None:
+            self._before = (self.state, self.compensation)
         self.state = CALIBRATING
         self.compensation = (0.0, 0.0)
+        motor = self.motor.read() if self.motor.visits else None
+        self.listener = CalibrationListener(stops, motor, self.clock.now_ms())
+        self.recent, self.strengths = [], []
+        log.info("compass: listening to a calibration turn of %d stops", stops)
         self.publish()
-        stops: list[np.ndarray] = []
-        turning: list[np.ndarray] = []
-        for _ in range(CALIBRATION_STOPS):
-            readings = [self.read_field()[0] for _ in range(3)]
-            stops.append(np.mean(readings, axis=0))
-            steps_before = motor_steps(self.motor) if self.motor.visits else None
-            if not self.os.deliver(
-                "motor",
-                "TURN_LEFT",
-                angle_deg=360 // CALIBRATION_STOPS,
-                speed_pct=CALIBRATION_SPEED_PCT,
-                timeout=5.0,
-            ):
-                return self._calibration_failed("the motor did not take the turn command")
-            if not self._turn_and_listen(turning, steps_before):
-                return self._calibration_failed("the motor did not report the turn done")
+
+    def _listen(self, stamp: float, field: np.ndarray) -> None:
+        listener = self.listener
+        assert listener is not None
+        listener.add(stamp, field, self.motor.read() if self.motor.visits else None)
+        if listener.error:
+            self._calibration_failed(listener.error)
+        elif listener.done:
+            self._calibrated(listener.stops, listener.turning)
+
+    def _calibrated(self, stops: list[np.ndarray], turning: list[np.ndarray]) -> None:
+        """The fits: the stops' circle gives the static field (centre) and the Earth's (radius);
+        the readings while turning lie on a circle round static + running field."""
+        self.listener = None
         cx, cy, radius = fit_circle(np.array(stops))
         static = np.array([cx, cy])
-        if len(turning) >= 8:  # the readings while turning lie on a circle round static + running
+        if len(turning) >= 8:
             rx, ry, _ = fit_circle_robust(np.array(turning))
             running = np.array([rx, ry]) - static
         else:
@@ -263,7 +289,7 @@ class Program(UserProgram):
         self.learner.reset(running)
         self.reference_ut = radius
         self.state = OK
-        self.recent = []
+        self.recent, self.strengths = [], []
         self.calibration = {
             "static_ut": static.tolist(),
             "running_ut": running.tolist(),
@@ -278,39 +304,12 @@ class Program(UserProgram):
             radius,
         )
         self.publish()
-        return None
-
-    def _turn_and_listen(
-        self, turning: list[np.ndarray], steps_before: tuple[int, int] | None = None
-    ) -> bool:
-        """Collect readings while the turn runs; True if it ended well. Only readings taken while
-        the motors surely ran count: from the first one taken after motor.data showed the step
-        counters moved (``steps_before``: theirs before the turn; it says "turning" before the
-        first batch of steps, and on a busy ring that batch can come 100 ms or more later) until
-        the last stamp it said "turning" (it tells of the stop a token round late). Readings at
-        rest lie on the static circle: they pulled the running field's estimate 3-15 % short,
-        bending every heading taken on the move by up to a degree."""
-        deadline_ms = self.clock.now_ms() + 60_000  # 45° at 50 % takes ~6 simulated seconds
-        readings: list[tuple[float, np.ndarray]] = []
-        last_moving_ms = -math.inf
-        stepped = False  # a snapshot of motor.data read before the reading showed steps made
-        while self.running and self.clock.now_ms() < deadline_ms:
-            field, stamp = self.read_field()
-            if self.motors_moving() != STOPPED:
-                if stepped:
-                    readings.append((stamp, field))
-                last_moving_ms = max(last_moving_ms, float(self.motor["stamp_ms"]))
-                stepped = stepped or steps_before is None or motor_steps(self.motor) != steps_before
-            command = self.os.receive_command(timeout=self.period_real)
-            if command is not None and command.name == "POSITION_REACHED":
-                end = last_moving_ms - MEASUREMENT_MS
-                turning.extend(field for stamp, field in readings if stamp <= end)
-                return command.args["status"] == 0
-        return False
 
     def _calibration_failed(self, why: str) -> None:
         log.warning("compass calibration failed: %s", why)
+        self.listener = None
         self.state, self.compensation = self._before
+        self.recent, self.strengths = [], []
         self.publish()
 
     def report(self) -> dict:

@@ -6,9 +6,14 @@ once per token visit: while the pilot has a sequence it is stepped with the sens
 the token; when it finished (done or aborted) the navigator plans the next sequence.
 
 Started and stopped by commands (EXPLORE mode, STOP_EXPLORE, CALIBRATE, CLEAR_MAP — from the
-LCD keypad) or over the PC link (``on_pc_request``: ``explore``, ``stop``, ``calibrate``,
-``clear_map``, ``get_map``, ``actions`` (an action file's text), ``state``). ``main.data`` carries the navigator state, the mode,
+LCD keypad; CALIBRATE_COMPASS — from the compass, asked to calibrate) or over the PC link
+(``on_pc_request``: ``explore``, ``stop``, ``calibrate``, ``calibrate_compass``, ``clear_map``,
+``get_map``, ``actions`` (an action file's text), ``state``). ``main.data`` carries the navigator state, the mode,
 the pilot's last abort reason, the ALERT lock and the number of planned steps.
+
+The compass's calibration turn is pair 1's (seed 001 §4.3): :class:`CompassCalibration` tells the
+compass to listen and has the pilot turn the robot once round in eight 45° stops, waiting at each
+for the compass's samples (the compass never commands the motor).
 
 ``--algorithms main=seed`` (read once in :meth:`Program.setup`) runs the seed's strategies and
 pilot instead (:func:`explore_navigator`, :func:`make_pilots`): ALERT on any sonar, Explore 1's
@@ -23,6 +28,7 @@ import time
 from typing import Any
 
 from modules.common.algorithms import algorithm
+from modules.common.compasscal import CompassCalibration
 from modules.common.mapclient import MapCollector
 from modules.common.navigator import (
     NAV,
@@ -150,6 +156,8 @@ class Program(UserProgram):
             self.stop_explore("stopped")
         elif name == "CALIBRATE":
             self.start(Calibrate(self.layout), 1)
+        elif name == "CALIBRATE_COMPASS":
+            self.start(CompassCalibration(self.layout), 1)
         elif name == "CLEAR_MAP":
             self._send("map", "CLEAR_MAP")
         elif name == "ERROR":
@@ -218,6 +226,8 @@ class Program(UserProgram):
             return
         if self._correct_motor():  # a correction under way: no move until motor and filter show it
             return
+        if isinstance(nav, CompassCalibration):  # it waits on the compass's samples
+            nav.observe_compass(self.compass.read() if self.compass.visits else None)
         moves = nav.plan(self.last_outcome, self.sensors, pilot.alert_lock)
         for target, command, args in nav.commands:
             self._send(target, command, **args)
@@ -245,7 +255,7 @@ class Program(UserProgram):
         """Between two pilot sequences: SET_GLOBAL_POSITION with the filtered pose when the
         corrector asks for it (seed §4.3 item 5, §4.3.3). True while a correction holds."""
         if not (self.motor.visits and self.copro.visits) or self.compass_calibrating:
-            return self.corrector.holding  # (the compass turns the robot itself while calibrating)
+            return self.corrector.holding  # (the calibration turn: the filter does not trust the compass)
         correction = self.corrector.correction(self.motor.read(), self.copro.read())
         if correction is not None:
             self._send("motor", "SET_GLOBAL_POSITION", **correction)
@@ -263,6 +273,7 @@ class Program(UserProgram):
         if self.pilot is not None and self.pilot.busy:
             self.pilot.abort("USER")
             self._drain_pilot()
+        self._leave_compass_calibration()
         self.navigator, self.pair, self.pilot = navigator, pair, self.pilots[pair]
         self.last_outcome = None
         self.finished = None
@@ -275,6 +286,7 @@ class Program(UserProgram):
         if pilot is not None and pilot.busy:
             pilot.abort("USER")
             self._drain_pilot()
+        self._leave_compass_calibration()
         from modules.common.actions import ActionNavigator
 
         if isinstance(nav, ActionNavigator) and nav.plan_steps.holding is not None:
@@ -286,7 +298,7 @@ class Program(UserProgram):
             "steps": nav.steps,
             "state": NAV_NAMES.get(nav.state, nav.state),
         }
-        if isinstance(nav, Calibrate | SeedCalibrated):
+        if isinstance(nav, Calibrate | SeedCalibrated | CompassCalibration):
             self.finished["calibration"] = nav.result
         if isinstance(nav, ExploreLeftWall):
             self.finished["map"] = nav.completeness()
@@ -294,6 +306,13 @@ class Program(UserProgram):
         self.abort_reason = REASON["USER"] if aborted else REASON["DONE"]
         self.navigator = None
         log.info("navigator stopped: %s", why)
+
+    def _leave_compass_calibration(self) -> None:
+        """A compass calibration ended early (another navigator, STOP_EXPLORE): the compass stops
+        listening, or it would take the next moves for its turn."""
+        if isinstance(self.navigator, CompassCalibration):
+            for target, command, args in self.navigator.cancel():
+                self._send(target, command, **args)
 
     def _drain_pilot(self, timeout: float = 5.0) -> None:
         """Step the pilot until its abort finished (the motor stands still)."""
@@ -309,10 +328,9 @@ class Program(UserProgram):
         """Called on the PC link's thread: hand the request to the program's loop and wait."""
         if verb == "state":
             return self.state()
-        if verb not in ("explore", "stop", "calibrate", "clear_map", "get_map", "actions"):
-            raise UsageError(
-                f"main takes explore, stop, calibrate, clear_map, get_map, actions, state — not {verb!r}"
-            )
+        verbs = ("explore", "stop", "calibrate", "calibrate_compass", "clear_map", "get_map", "actions")
+        if verb not in verbs:
+            raise UsageError(f"main takes {', '.join(verbs)}, state — not {verb!r}")
         answer: queue.Queue[Any] = queue.Queue()
         self.requests.put((verb, payload, answer))
         timeout = float(payload.get("timeout", 60.0))
@@ -347,6 +365,9 @@ class Program(UserProgram):
             return self.state()
         if verb == "calibrate":
             self.start(Calibrate(self.layout), 1)
+            return self.state()
+        if verb == "calibrate_compass":  # the compass's calibration turn, by pair 1's pilot
+            self.start(CompassCalibration(self.layout), 1)
             return self.state()
         if verb == "actions":  # an action file (seed 000 §6.7), run by pair 1's pilot
             from modules.common.actions import ActionNavigator, parse_actions

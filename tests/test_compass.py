@@ -1,5 +1,7 @@
 """The compass: heading from the two bridges over a full circle with the motors' field calibrated
-out (the seed's compass never worked), and the module calibrating itself on an in-process ring."""
+out (the seed's compass never worked), and the module calibrating on an in-process ring while the
+test, in main's part, turns the robot (seed 001 §4.3: the turn goes through main's pilot, the
+compass only listens on motor.data)."""
 
 from __future__ import annotations
 
@@ -13,7 +15,13 @@ import pytest
 from hwprograms import program
 from memring import MemoryRing, wait_for
 
-from modules.common.compass import angle_difference, fit_circle, flip_measurement, heading_from_bridges
+from modules.common.compass import (
+    CalibrationListener,
+    angle_difference,
+    fit_circle,
+    flip_measurement,
+    heading_from_bridges,
+)
 from modules.common.units import cdeg_to_heading
 from modules.description import load_world
 from modules.description.robot import MAX_STEP_RATE_HZ
@@ -95,14 +103,39 @@ def motor_and_compass_ring(seed: int) -> Iterator[tuple[Simulator, MemoryRing, A
         ring.close()
 
 
-def test_compass_module_calibrates_by_turning_and_then_follows_the_true_heading():
+CALIBRATING, OK = 3, 1  # compass_state
+TURN_LEFT = 3  # direction
+
+
+def turn_round_as_main(main: Any, data: Any, stops: int = 8, dwell_samples: int = 8) -> None:
+    """main's part, written out: the compass told to listen, then ``stops`` turns of 360/stops°
+    on the spot, each after the last one's POSITION_REACHED and ``dwell_samples`` compass samples."""
+    assert main.deliver("compass", "CALIBRATE_LISTEN", stops=stops, timeout=5)
+    wait_for(lambda: data.read()["state"] == CALIBRATING, 10, "the compass listening")
+    for stop in range(stops):
+        assert main.deliver("motor", "TURN_LEFT", angle_deg=360 // stops, speed_pct=50, timeout=5)
+        cmd = main.receive_command(timeout=30)
+        assert cmd is not None and cmd.name == "POSITION_REACHED" and cmd.args["status"] == 0, cmd
+        if stop < stops - 1:
+            mark = int(data.read()["sample"])
+
+            def rested(mark: int = mark) -> bool:
+                return (int(data.read()["sample"]) - mark) & 0xFFFF >= dwell_samples
+
+            wait_for(rested, 10, "samples at rest")
+
+
+def test_compass_module_calibrates_listening_to_a_turn_it_does_not_drive_then_follows_the_heading():
     with motor_and_compass_ring(seed=11) as (sim, ring, main, data):
         assert data.read()["state"] == 0  # UNCALIBRATED
-        assert main.deliver("compass", "CALIBRATE", timeout=5)
-        wait_for(lambda: data.read()["state"] == 1, 30, "calibration done")
+        turn_round_as_main(main, data)
+        wait_for(lambda: data.read()["state"] == OK, 30, "calibration done")
+        assert not ring.nodes[40].command_transmitted("motor")  # the compass never commanded it
         calibration = ring.nodes[40].program.report()["calibration"]
+        assert calibration["stops"] == 8
         assert calibration["static_ut"] == pytest.approx([6.0, -4.0], abs=0.5)
         assert calibration["running_ut"] == pytest.approx([2.0, 1.5], abs=0.7)
+        assert calibration["earth_ut"] == pytest.approx(18.0, rel=0.03)
         errors = []
         for _ in range(4):
             assert main.deliver("motor", "TURN_RIGHT", angle_deg=70, speed_pct=100, timeout=5)
@@ -115,10 +148,32 @@ def test_compass_module_calibrates_by_turning_and_then_follows_the_true_heading(
         assert max(errors) <= 2.5, errors
 
 
+def test_compass_calibrate_asks_main_for_the_turn_and_moves_nothing_itself():
+    """CALIBRATE (from the PC link, say) goes to main as CALIBRATE_COMPASS; the compass does not
+    start listening on its own and sends the motor nothing."""
+    with motor_and_compass_ring(seed=3) as (_sim, ring, main, data):
+        assert main.deliver("compass", "CALIBRATE", timeout=5)
+        cmd = main.receive_command(timeout=10)
+        assert cmd is not None and (cmd.name, cmd.sender) == ("CALIBRATE_COMPASS", 40), cmd
+        sample = data.read()["sample"]
+        wait_for(lambda: data.read()["sample"] >= sample + 3, 10, "samples after the request")
+        assert data.read()["state"] == 0  # still UNCALIBRATED: it listens only when main says so
+        assert not ring.nodes[40].command_transmitted("motor")
+
+
+def test_compass_stops_listening_when_told_and_keeps_its_state():
+    with motor_and_compass_ring(seed=4) as (_sim, ring, main, data):
+        assert main.deliver("compass", "CALIBRATE_LISTEN", stops=8, timeout=5)
+        wait_for(lambda: data.read()["state"] == CALIBRATING, 10, "the compass listening")
+        assert main.deliver("compass", "CALIBRATE_LISTEN", stops=0, timeout=5)
+        wait_for(lambda: data.read()["state"] == 0, 10, "UNCALIBRATED again")
+        assert ring.nodes[40].program.report()["calibration"] == {}
+
+
 def test_compass_module_learns_a_misjudged_running_field_again_on_straight_moves():
     with motor_and_compass_ring(seed=5) as (_sim, ring, main, data):
-        assert main.deliver("compass", "CALIBRATE", timeout=5)
-        wait_for(lambda: data.read()["state"] == 1, 30, "calibration done")
+        turn_round_as_main(main, data)
+        wait_for(lambda: data.read()["state"] == OK, 30, "calibration done")
         compass = ring.nodes[40].program
         compass.running_field = np.array([1.7, 1.2])  # as a busy ring's calibration left it
         compass.learner.reset(compass.running_field)
@@ -135,81 +190,123 @@ def test_compass_module_learns_a_misjudged_running_field_again_on_straight_moves
         assert report["running_ut"] == pytest.approx([2.0, 1.5], abs=0.12)  # MOTOR_RUNNING_UT
 
 
-class TurningCompassStub:
-    """What ``CompassProgram._turn_and_listen`` uses of a compass program, on a simulated clock:
-    a reading every 40 ms; ``read_field`` also updates motor.data as the scenario says."""
-
-    def __init__(self, motor: dict) -> None:
-        self.now = 0.0
-        self.running = True
-        self.period_real = 0.0
-        self.clock = self
-        self.os = self
-        self.motor = motor
-
-    def now_ms(self) -> float:
-        return self.now
-
-    def motors_moving(self) -> int:
-        return int(self.motor["direction"])
-
-    def receive_command(self, timeout=None):
-        if self.motor["direction"] == 0:
-            return type("Cmd", (), {"name": "POSITION_REACHED", "args": {"status": 0}})()
-        return None
+AT_START, RUNNING, AT_STOP, MIXED = (9.0, 0.0), (2.0, 1.5), (5.0, -3.0), (0.0, 0.0)
+AT_REST = {"direction": 0, "stamp_ms": 0.0, "steps_left": 0, "steps_right": 0}
 
 
-def test_calibration_leaves_out_readings_taken_after_the_motor_stopped() -> None:
+def one_turn(
+    first_step_ms: float,
+    stop_ms: float,
+    heard_stopped_ms: float,
+    until_ms: float = 2000.0,
+    straight: bool = False,
+) -> list[tuple[float, np.ndarray, dict]]:
+    """(stamp, field, motor.data as read just after the reading) every 40 simulated ms: a turn
+    left commanded at 0 (motor.data says "turning" from then), the motors running from
+    ``first_step_ms`` (a step a ms, left track back, right forward; ``straight``: both forward)
+    to ``stop_ms``, motor.data saying "stopped" from ``heard_stopped_ms``. The field is AT_START
+    before the steps, RUNNING while a whole reading lies in the turn, AT_STOP after it, MIXED
+    across an edge."""
+
+    def steps_at(t: float) -> dict:
+        n = int(min(max(t - first_step_ms, 0.0), stop_ms - first_step_ms))
+        return {"steps_left": n if straight else -n, "steps_right": n}
+
+    out = []
+    for stamp in np.arange(0.0, until_ms, 40.0):
+        now = stamp + 40.0
+        if now <= heard_stopped_ms:
+            motor = {"direction": TURN_LEFT, "stamp_ms": min(now, stop_ms), **steps_at(min(now, stop_ms))}
+        else:
+            motor = {"direction": 0, "stamp_ms": now, **steps_at(now)}
+        if now <= first_step_ms:
+            field = AT_START
+        elif first_step_ms <= stamp and now <= stop_ms:
+            field = RUNNING
+        elif stamp >= stop_ms:
+            field = AT_STOP
+        else:
+            field = MIXED
+        out.append((float(stamp), np.array(field), motor))
+    return out
+
+
+def listen(timeline: list[tuple[float, np.ndarray, dict]], stops: int = 1) -> CalibrationListener:
+    listener = CalibrationListener(stops, AT_REST, 0.0)
+    for stamp, field, motor in timeline:
+        listener.add(stamp, field, motor)
+    return listener
+
+
+def test_listening_leaves_out_readings_taken_after_the_motor_stopped() -> None:
     """motor.data tells the compass of the stop a token round late: readings taken at rest in
     that time lie on the static circle and would pull the running field's estimate short."""
-
-    class Stub(TurningCompassStub):
-        """The motor stops at 400 ms, motor.data says so at 560 ms."""
-
-        def read_field(self):
-            stamp = self.now
-            self.now += 40.0
-            moving = stamp < 400.0
-            field = np.array([2.0, 1.5]) if moving else np.zeros(2)  # running field or none
-            if self.now <= 560.0:
-                self.motor = {"stamp_ms": min(self.now, 400.0), "direction": 3}
-            else:
-                self.motor = {"stamp_ms": self.now, "direction": 0}
-            return field, stamp
-
-    turning: list[np.ndarray] = []
-    assert CompassProgram._turn_and_listen(Stub({"stamp_ms": 0.0, "direction": 3}), turning)
-    assert len(turning) >= 8
-    assert all(field[0] == 2.0 for field in turning)  # none taken at rest
+    listener = listen(one_turn(first_step_ms=100.0, stop_ms=400.0, heard_stopped_ms=560.0))
+    assert listener.done and not listener.error
+    assert len(listener.turning) >= 6  # 120 ... 360 ms
+    assert all(field.tolist() == list(RUNNING) for field in listener.turning)  # none taken at rest
+    assert listener.stops[0].tolist() == list(AT_STOP)
 
 
-def test_calibration_counts_readings_only_once_the_step_counters_moved() -> None:
+def test_listening_counts_readings_only_once_the_step_counters_moved() -> None:
     """motor.data says "turning" before the first batch of steps; on a busy ring that batch can
     come 100 ms or more later, and readings at rest in that time pulled the estimate short."""
+    listener = listen(one_turn(first_step_ms=300.0, stop_ms=1000.0, heard_stopped_ms=1100.0))
+    assert listener.done and not listener.error
+    assert len(listener.turning) >= 15  # 320 ... 960 ms
+    assert all(field.tolist() == list(RUNNING) for field in listener.turning)
+    assert listener.stops[0].tolist() == list(AT_STOP)
 
-    class Stub(TurningCompassStub):
-        """motor.data says turning from 0, the first steps come at 300 ms."""
 
-        def read_field(self):
-            stamp = self.now
-            self.now += 40.0
-            moving = 300.0 <= stamp < 1000.0
-            field = np.array([2.0, 1.5]) if moving else np.zeros(2)
-            steps = 0 if self.now < 300.0 else int(self.now - 300.0)
-            direction = 3 if self.now <= 1100.0 else 0
-            self.motor = {
-                "stamp_ms": min(self.now, 1000.0),
-                "direction": direction,
-                "steps_left": -steps,
-                "steps_right": steps,
-            }
-            return field, stamp
+def test_listening_takes_a_stop_only_from_readings_proven_at_rest() -> None:
+    """Three readings at the stop, each begun after motor.data said "stopped" and confirmed by a
+    later snapshot: none before the compass heard of the stop, whatever they read."""
+    timeline = one_turn(first_step_ms=100.0, stop_ms=400.0, heard_stopped_ms=560.0, until_ms=680.0)
+    elsewhere = np.array([7.0, 7.0])  # at rest, but motor.data did not say so yet: not the stop's
+    timeline = [(s, elsewhere if 400.0 <= s < 600.0 else f, m) for s, f, m in timeline]
+    listener = listen(timeline)
+    assert not listener.done  # heard after the reading at 560; those at 600 and 640 proven: two
+    listener.add(680.0, np.array(AT_STOP), {**timeline[-1][2], "stamp_ms": 720.0})
+    assert listener.done and listener.stops[0].tolist() == list(AT_STOP)
 
-    turning: list[np.ndarray] = []
-    motor = {"stamp_ms": 0.0, "direction": 3, "steps_left": 0, "steps_right": 0}
-    assert CompassProgram._turn_and_listen(Stub(motor), turning, (0, 0))
-    assert len(turning) >= 8
-    assert all(field[0] == 2.0 for field in turning)  # none taken at rest
+
+def test_listening_leaves_out_an_old_copy_of_motor_data() -> None:
+    """A token regenerated from an old copy brings back motor.data of the turn (older stamp): at
+    the stop that is no sign the robot moved on, and the reading it follows proves nothing."""
+    timeline = one_turn(first_step_ms=100.0, stop_ms=400.0, heard_stopped_ms=560.0, until_ms=640.0)
+    listener = listen(timeline, stops=2)
+    old_copy = timeline[5][2]  # "turning", stamped 240 ms
+    assert old_copy["direction"] == TURN_LEFT
+    listener.add(640.0, np.array([7.0, 7.0]), old_copy)
+    assert not listener.error and not listener.stops
+    stopped = timeline[-1][2]
+    for stamp in (680.0, 720.0, 760.0, 800.0):
+        listener.add(stamp, np.array(AT_STOP), {**stopped, "stamp_ms": stamp + 40.0})
+    assert not listener.error
+    assert [s.tolist() for s in listener.stops] == [list(AT_STOP)]  # the reading at 640 left out
+
+
+def test_listening_ends_on_a_straight_move() -> None:
+    listener = listen(one_turn(100.0, 400.0, 560.0, straight=True))
+    assert not listener.done
+    assert "did not turn on the spot" in listener.error
+
+
+def test_listening_ends_when_the_robot_moves_on_before_a_reading_at_rest() -> None:
+    """The stop is heard, and the next snapshot already shows the next turn: no reading at rest."""
+    timeline = one_turn(100.0, 400.0, 560.0, until_ms=600.0)  # the last one hears the stop
+    listener = listen(timeline, stops=2)
+    assert not listener.error
+    turning_again = {"direction": TURN_LEFT, "stamp_ms": 700.0, "steps_left": -310, "steps_right": 310}
+    listener.add(600.0, np.array(AT_STOP), turning_again)
+    assert "no reading at rest at stop 1" in listener.error
+
+
+def test_listening_gives_up_without_a_stop() -> None:
+    listener = CalibrationListener(8, AT_REST, 0.0, timeout_ms=5000.0)
+    for stamp in np.arange(0.0, 6000.0, 100.0):
+        listener.add(float(stamp), np.array(AT_START), {**AT_REST, "stamp_ms": float(stamp) + 40.0})
+    assert "no stop seen" in listener.error and not listener.stops
 
 
 def test_robust_circle_fit_leaves_out_readings_of_another_circle() -> None:
@@ -320,12 +417,13 @@ def test_a_field_strength_0_9_percent_off_the_calibrated_one_is_disturbed() -> N
     from modules.compass import DISTURBED, OK
 
     def compass_seeing(strength_ut: float):
-        program = object.__new__(CompassProgram)
+        program: Any = object.__new__(CompassProgram)
         program.state, program.reference_ut = OK, 18.0
         program.read_field = lambda: (np.array([0.0, strength_ut]), 1000.0)
         program.motors_moving = lambda: 0
         program.motor = type("Motor", (), {"visits": 0})()
         program.running_field = np.zeros(2)
+        program.listener = None  # not listening to a calibration turn
         program.last_direction, program.recent, program.strengths = 0, [], []
         program.samples, program.publish = 0, lambda: None
         for _ in range(3):

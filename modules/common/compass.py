@@ -15,8 +15,9 @@ Heading: navigation convention, radians from north, clockwise.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -349,3 +350,144 @@ class RunningFieldLearner:
         self.total += observed
         self.estimate = (self.prior_moves * self.prior + self.total) / (self.prior_moves + self.moves)
         return True
+
+
+def turned_on_the_spot(start: tuple[int, int], end: tuple[int, int]) -> bool:
+    """The step counters moved as a turn on the spot moves them: the two tracks in opposite senses."""
+    left, right = end[0] - start[0], end[1] - start[1]
+    return left * right < 0
+
+
+class CalibrationListener:
+    """The compass's calibration while someone else turns the robot (main's pilot, seed 001 §4.3).
+
+    Fed every flip measurement (after the static compensation, which is off while calibrating)
+    with motor.data as read just after it, it finds the stops on motor.data alone: the motor
+    stands again after its step counters moved as a turn on the spot moves them. At each stop it
+    keeps the first :attr:`REST_READINGS` readings proven at rest — the snapshot read before the
+    reading said "stopped" at the stop's counters and a later one still did, stamped at or after
+    the reading's end — and their mean is the stop's field. While the robot turns it keeps the
+    readings taken while the motors surely ran, for the running field: from the first one after
+    motor.data showed the counters moved (it says "turning" before the first batch of steps,
+    which on a busy ring comes 100 ms or more later) until the last stamp it said "turning" (it
+    tells of the stop a token round late). A snapshot older than one already heard (a token
+    regenerated from an old copy carries an old motor.data) tells nothing and its reading is left
+    out. A straight move, or a stop without a reading at rest before the robot moved again, ends
+    the listening with ``error``; so does no stop for ``timeout_ms``. ``done`` once ``stops``
+    stops have their readings."""
+
+    REST_READINGS = 3
+
+    def __init__(
+        self, stops: int, motor: Mapping[str, Any] | None, now_ms: float, timeout_ms: float = 300_000.0
+    ) -> None:
+        self.wanted = stops
+        self.timeout_ms = timeout_ms
+        self.progress_ms = now_ms
+        self.stops: list[np.ndarray] = []  # the mean field at rest at each stop
+        self.turning: list[np.ndarray] = []  # readings taken while the motors surely turned
+        self.error = ""
+        self.previous: Mapping[str, Any] | None = motor  # the snapshot read before the next reading
+        self.newest_ms = float(motor.get("stamp_ms", 0.0)) if motor is not None else -math.inf
+        self.stop_steps = _steps(motor) if motor is not None else None  # the counters standing
+        self.collecting = False  # standing at a stop that still wants its readings
+        self.rest: list[np.ndarray] = []
+        self.unconfirmed: list[tuple[float, np.ndarray]] = []
+        self.turn: dict[str, Any] | None = None
+
+    @property
+    def done(self) -> bool:
+        return len(self.stops) >= self.wanted
+
+    def add(self, stamp_ms: float, field: np.ndarray, motor: Mapping[str, Any] | None) -> None:
+        """One reading and motor.data as read just after it (None: the motor has not spoken)."""
+        if self.done or self.error or motor is None:
+            return
+        field = np.asarray(field, dtype=float)
+        steps, motor_ms = _steps(motor), float(motor.get("stamp_ms", 0.0))
+        if motor_ms < self.newest_ms:
+            return  # an old copy of motor.data: it cannot tell what the robot did during the reading
+        self.newest_ms = motor_ms
+        before, self.previous = self.previous, motor
+        if self.stop_steps is None:
+            self.stop_steps = steps
+        if int(motor.get("direction", STOPPED)) == STOPPED:
+            if self.turn is not None or steps != self.stop_steps:  # a move ended (seen or not)
+                self._end_move(steps, motor_ms)
+            elif self.collecting:
+                self._at_rest(stamp_ms, field, before, steps, motor_ms)
+        else:
+            self._moving(stamp_ms, field, steps, motor_ms)
+        if not self.done and not self.error and stamp_ms - self.progress_ms > self.timeout_ms:
+            self.error = f"no stop seen for {self.timeout_ms / 1000:.0f} s"
+
+    def _at_rest(
+        self,
+        stamp_ms: float,
+        field: np.ndarray,
+        before: Mapping[str, Any] | None,
+        steps: tuple[int, int],
+        motor_ms: float,
+    ) -> None:
+        if (
+            before is not None
+            and int(before.get("direction", STOPPED)) == STOPPED
+            and _steps(before) == steps
+        ):
+            self.unconfirmed.append((stamp_ms, field))
+        self.rest += [f for s, f in self.unconfirmed if s + MEASUREMENT_MS <= motor_ms]
+        self.unconfirmed = [(s, f) for s, f in self.unconfirmed if s + MEASUREMENT_MS > motor_ms]
+        if len(self.rest) >= self.REST_READINGS:
+            self._take_stop(motor_ms)
+
+    def _take_stop(self, now_ms: float) -> None:
+        self.stops.append(np.mean(self.rest[: self.REST_READINGS], axis=0))
+        self.collecting, self.rest, self.unconfirmed = False, [], []
+        self.progress_ms = now_ms
+
+    def _leave_stop(self, now_ms: float) -> bool:
+        """The robot moves on: a stop still collecting keeps the readings it has (False: none)."""
+        if not self.collecting:
+            return True
+        if not self.rest:
+            self.error = f"no reading at rest at stop {len(self.stops) + 1} before the robot moved on"
+            return False
+        self._take_stop(now_ms)
+        return True
+
+    def _moving(self, stamp_ms: float, field: np.ndarray, steps: tuple[int, int], motor_ms: float) -> None:
+        if not self._leave_stop(motor_ms):
+            return
+        self.unconfirmed = []
+        if self.turn is None:
+            self.turn = {"steps0": self.stop_steps, "stepped": False, "readings": [], "last_ms": -math.inf}
+        turn = self.turn
+        if turn["stepped"]:
+            turn["readings"].append((stamp_ms, field))
+        turn["stepped"] = turn["stepped"] or steps != turn["steps0"]
+        turn["last_ms"] = max(turn["last_ms"], motor_ms)
+
+    def _end_move(self, steps: tuple[int, int], motor_ms: float) -> None:
+        turn, self.turn = self.turn, None
+        start = self.stop_steps if turn is None else turn["steps0"]
+        assert start is not None
+        self.stop_steps = steps
+        if steps == start:
+            return  # the motor said it moved but made no step: still where it was
+        if not self._leave_stop(motor_ms) or self.done:  # (a whole turn between two readings)
+            return
+        if not turned_on_the_spot(start, steps):
+            self.error = (
+                f"the robot did not turn on the spot (step counters {start} -> {steps}): "
+                "not a calibration turn"
+            )
+            return
+        if turn is not None:
+            end = turn["last_ms"] - MEASUREMENT_MS
+            self.turning += [f for s, f in turn["readings"] if s <= end]
+        self.collecting, self.rest, self.unconfirmed = True, [], []
+        self.progress_ms = motor_ms
+
+
+def _steps(motor: Mapping[str, Any]) -> tuple[int, int]:
+    return int(motor.get("steps_left", 0)), int(motor.get("steps_right", 0))
