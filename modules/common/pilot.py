@@ -353,9 +353,10 @@ class Pilot:
     def _ours(self, move: Move, sensors: Sensors) -> bool:
         """The motor runs the move we sent: a new move number, or — the motor stood when we sent
         it — a move in our direction. Move numbers are the commanders' command sequence numbers,
-        so another commander's last move (the compass's calibration turns) can carry the number
-        ours gets: on the ring main's first turn once had the compass's last turn's 144, was never
-        taken for ours and the exploration waited 75 s for it (square, seed 2)."""
+        so another commander's last move (a PC's or a test's command; until issue 20 the
+        compass's calibration turns) can carry the number ours gets: on the ring main's first turn
+        once had the compass's last turn's 144, was never taken for ours and the exploration
+        waited 75 s for it (square, seed 2)."""
         if sensors.move_seq != self._seq_before:
             return True
         return self._idle_at_send and sensors.motor_direction == move.direction
