@@ -20,7 +20,14 @@ def test_shipped_file_spells_out_exactly_the_defaults() -> None:
 def test_partial_file_overrides_only_what_it_names() -> None:
     config = parse_config("filter:\n  odometry_model: straight\nsync:\n  trigger: {rounds: 4}\n", "x.yaml")
     assert config["filter"]["odometry_model"] == "straight"
-    assert config["sync"]["trigger"] == {"sensor": "odometry", "count": 1, "min_period_ms": 100, "rounds": 4}
+    assert config["sync"]["trigger"] == {
+        "mode": "period",
+        "sensor": "odometry",
+        "period_ms": 100,
+        "count": 1,
+        "min_period_ms": 100,
+        "rounds": 4,
+    }
     assert config["walls"] == DEFAULTS["walls"]
 
 

@@ -50,6 +50,7 @@ from modules.common.ekf import EkfParams, PoseEKF
 from modules.common.locconfig import load_config
 from modules.common.logs import SENSOR_SOURCE, DataLog, ErrorLog
 from modules.common.sync import (
+    CATCH_UP_PERIODS,
     SENSORS,
     CompassSync,
     NewestSync,
@@ -62,9 +63,9 @@ from modules.common.sync import (
     SonarSync,
     SyncResult,
     Trigger,
+    TruthSync,
     advance,
     step_motion,
-    sync_stamp,
 )
 from modules.common.walls import (
     DetectorParams,
@@ -180,6 +181,16 @@ def detector_params(config: dict[str, Any]) -> DetectorParams:
     )
 
 
+def trigger_of(config: dict[str, Any]) -> Trigger:
+    """The synchronisation trigger the config names (``sync.trigger``)."""
+    trig = config["sync"]["trigger"]
+    if trig["rounds"] > 0:
+        return Trigger(sensor=None, rounds=trig["rounds"])
+    if trig["mode"] == "period":
+        return Trigger(trig["sensor"], period_ms=trig["period_ms"])
+    return Trigger(trig["sensor"], trig["count"], min_period_ms=trig["min_period_ms"])
+
+
 def start_pose_of(config: dict[str, Any]) -> tuple[float, float, float] | None:
     """The initial pose the config names (None: wait for the motor's first pose)."""
     spec = config["filter"]["initial_pose"]
@@ -214,12 +225,8 @@ class LocalizationCore:
         self.data_log = data_log
         self.error_log = error_log
         self.sensors = {name: config["sensors"][name] for name in SENSORS if config["sensors"][name]["use"]}
-        trig = config["sync"]["trigger"]
-        self.trigger = (
-            Trigger(sensor=None, rounds=trig["rounds"])
-            if trig["rounds"] > 0
-            else Trigger(trig["sensor"], trig["count"], min_period_ms=trig["min_period_ms"])
-        )
+        self.trigger = trigger_of(config)
+        on_grid = self.trigger.period_ms > 0  # records stamped at grid times, before the newest samples
         self.buffer = ShadowBuffer()
         self.odometry = odometry_params(config)
         self.track = OdometryTrack(self.odometry)
@@ -230,7 +237,7 @@ class LocalizationCore:
             else None
         )
         odometry_sync = OdometrySync(
-            self.track, None if config["filter"]["initial_pose"] == "motor" else (0, 0)
+            self.track, None if config["filter"]["initial_pose"] == "motor" else (0, 0), split_at_sync=on_grid
         )
         compass = config["filter"]["compass"]
         self.synchronisers: dict[str, Any] = {
@@ -240,7 +247,7 @@ class LocalizationCore:
             ),
             "sonar": SonarSync(self.track, self.detector, self._travel_gauge(config)),
             "battery": NewestSync("battery"),
-            "truth": NewestSync("truth"),
+            "truth": TruthSync() if on_grid else NewestSync("truth"),
         }
         self.timing = {
             name: SampleTiming(name, float(config["sensors"][name]["period_ms"]) or None) for name in SENSORS
@@ -321,10 +328,19 @@ class LocalizationCore:
     # synchronisation
 
     def maybe_sync(self, counter: int | None = None) -> SyncResult | None:
-        """Synchronise if the trigger says so (``counter``: the token's round counter)."""
-        if not self.config["sync"]["enabled"] or not self.trigger.due(self.buffer, counter):
+        """Synchronise if the trigger says so (``counter``: the token's round counter); the
+        period trigger catches up on every grid time passed since the last visit. Returns the
+        last synchronisation run (None: none)."""
+        if not self.config["sync"]["enabled"]:
             return None
-        return self.synchronise()
+        result = None
+        for _ in range(CATCH_UP_PERIODS + 1):
+            if not self.trigger.due(self.buffer, counter):
+                break
+            result = self.synchronise()
+            if not self.trigger.period_ms:
+                break
+        return result
 
     def synchronise(self) -> SyncResult:
         """Swap the shadow buffer and process the half just closed."""
@@ -333,8 +349,7 @@ class LocalizationCore:
 
     def synchronise_half(self, generation: int, half: dict[str, list[Sample]]) -> SyncResult:
         """Run every synchroniser on one buffer half, then the filter (replay calls this too)."""
-        trigger_sensor = self.trigger.sensor
-        stamp = sync_stamp(half, trigger_sensor, self.last_sync_ms or 0)
+        stamp = self.trigger.stamp(half, self.last_sync_ms or 0)
         data: dict[str, dict[str, Any]] = {}
         lost: list[str] = []
         for name in SENSORS:
@@ -658,6 +673,7 @@ class LocalizationCore:
             "compass_skipped_turning": self.compass_skipped_turning,
             "compass_skipped_settling": self.synchronisers["compass"].settling,
             "travel": dict(self.travel),
+            "grid_skipped": self.trigger.skipped,
         }
         if self.ekf is not None:
             out["gates"] = self.ekf.gates.as_dict()

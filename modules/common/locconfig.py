@@ -1,10 +1,13 @@
 """The localisation's configuration: one commented YAML file, validated with clear errors.
 
 The seed's options (000, §5.1 and table B.1) in YAML: which sensors are used and what of each is
-logged, the trigger sensor and count (or every K token rounds), sync on/off, filter on/off, which
-data the filter uses, the odometry model, the wall file. ``config/localization.yaml`` in the
-repository is the commented default; every key may be left out (the default applies), an unknown
-key or a bad value is an error naming the file, line and key (exit code 2 on the command line).
+logged, the trigger (every ``period_ms`` of the trigger sensor's time on a fixed grid — ours, the
+default — or the seed's sensor and count, or every K token rounds), sync on/off, filter on/off,
+which data the filter uses, the odometry model, the wall file. ``config/localization.yaml`` in
+the repository is the commented default; every key may be left out (the default applies), an
+unknown key or a bad value is an error naming the file, line and key (exit code 2 on the command
+line). A ``sync.trigger`` that sets ``count`` or ``min_period_ms`` but no ``mode`` is the count
+trigger: what it meant before the period trigger existed (so older logs replay as they ran).
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ DEFAULTS: dict[str, Any] = {
         "battery":  {"use": True, "log_raw": True, "log_sync": True, "log_position": False, "filter": False, "period_ms": 0},
         "truth":    {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": False, "period_ms": 0},
     },
-    "sync": {"enabled": True, "trigger": {"sensor": "odometry", "count": 1, "min_period_ms": 100, "rounds": 0}},
+    "sync": {"enabled": True, "trigger": {"mode": "period", "sensor": "odometry", "period_ms": 100, "count": 1, "min_period_ms": 100, "rounds": 0}},
     "filter": {
         "enabled": True,
         "odometry_model": "arc",
@@ -79,6 +82,8 @@ DEFAULTS: dict[str, Any] = {
 # fmt: on
 
 ESTIMATES = ("glide", "compass_offset", "step_scale")
+#: sync.trigger.mode: every period_ms of the sensor's time on a fixed grid, or after count samples
+TRIGGER_MODES = ("period", "count")
 
 
 class ConfigError(UsageError):
@@ -133,6 +138,9 @@ def validate(data: Any, source: str, lines: dict[tuple[str, ...], int]) -> dict[
     """Merge ``data`` over the defaults, checking every key and value."""
     checker = _Checker(source, lines)
     config = checker.merge(DEFAULTS, data, ())
+    trigger = data.get("sync", {}).get("trigger", {}) if isinstance(data, dict) else {}
+    if isinstance(trigger, dict) and "mode" not in trigger and {"count", "min_period_ms"} & set(trigger):
+        config["sync"]["trigger"]["mode"] = "count"  # written for the count trigger
     checker.semantics(config)
     return config
 
@@ -206,8 +214,11 @@ class _Checker:
 
         trigger = c["sync"]["trigger"]
         if trigger["rounds"] == 0:
+            choice(("sync", "trigger", "mode"), TRIGGER_MODES)
             choice(("sync", "trigger", "sensor"), SENSOR_NAMES)
-            if trigger["count"] < 1:
+            if trigger["mode"] == "period" and trigger["period_ms"] < 1:
+                raise self.fail(("sync", "trigger", "period_ms"), "must be at least 1 (ms of sensor time)")
+            if trigger["mode"] == "count" and trigger["count"] < 1:
                 raise self.fail(("sync", "trigger", "count"), "must be at least 1")
             if not c["sensors"][trigger["sensor"]]["use"]:
                 raise self.fail(

@@ -2,9 +2,10 @@
 
 Raw samples from sensors that deliver at different rates go into a double ("shadow") buffer:
 writers append to the active half under a lock held only for the append, so they are never
-blocked by a synchronisation in progress. A :class:`Trigger` decides when to synchronise (after
-N samples of one sensor, or every K token rounds); the buffer halves swap and one synchroniser
-per sensor turns the swapped half into one synchronised record:
+blocked by a synchronisation in progress. A :class:`Trigger` decides when to synchronise (at fixed
+grid times of one sensor's time, after N samples of one sensor, or every K token rounds); the
+buffer halves swap and one synchroniser per sensor turns the swapped half into one synchronised
+record:
 
 ==========  ======================================================================  ==========
 sensor      synchronised as                                                         seed
@@ -21,6 +22,13 @@ the odometry track (dead-reckoned pose per step-counter sample) lets the compass
 synchronisers carry their samples to the exact sync time. :class:`SampleTiming` counts missed
 samples (gaps in a sensor's sequence number, or in its stamps) and late ones (stamped before the
 previous sync but arriving after it).
+
+The period trigger (ours, the default) holds the seed's 100 ms cycle whatever rate the sensors
+publish at or the token delivers: each synchronisation is stamped at a grid time ``k·period`` of
+the trigger sensor's time and runs once a sample at or past it has arrived. The odometry sum is
+then split at the grid time (the step counters interpolated there, whole half-steps; the rest
+goes to the next synchronisation), compass and sonar samples are carried to it along the track,
+and the ground truth is interpolated there (:class:`TruthSync`).
 """
 
 from __future__ import annotations
@@ -40,6 +48,9 @@ SENSORS = ("odometry", "compass", "sonar", "battery", "truth")
 NO_CONTACT_CM = 255
 #: a compass sample this much newer than the newest step-counter sample is not judged yet
 UNKNOWN_MOTION_MS = 60
+#: the period trigger catches up at most this many grid times behind its sensor's newest sample;
+#: after a longer silence it jumps to the newest grid time (the grid times between are skipped)
+CATCH_UP_PERIODS = 10
 
 
 @dataclass(frozen=True)
@@ -93,6 +104,12 @@ class ShadowBuffer:
             samples = self._halves[self._active].get(sensor)
             return samples[-1].stamp_ms if samples else None
 
+    def oldest_stamp(self, sensor: str) -> int | None:
+        """The earliest stamp of a ``sensor`` sample in the active half (None: none yet)."""
+        with self._lock:
+            samples = self._halves[self._active].get(sensor)
+            return min(s.stamp_ms for s in samples) if samples else None
+
     def swap(self) -> tuple[int, dict[str, list[Sample]]]:
         """Flip the halves; returns the generation and the samples of the half just closed."""
         with self._lock:
@@ -105,11 +122,16 @@ class ShadowBuffer:
 
 
 class Trigger:
-    """When to synchronise: after ``count`` samples of ``sensor``, or every ``rounds`` token rounds.
+    """When to synchronise, and the time a synchronisation is stamped with.
 
-    ``min_period_ms`` (ours) also asks that the trigger sensor's newest sample be at least that
-    much sensor time after the previous synchronisation: a steady cycle (the seed's 100 ms)
-    whatever rate the sensor publishes at or the token happens to deliver.
+    Three kinds: ``period_ms`` > 0 (ours, the default) synchronises at the grid times
+    ``k·period_ms`` of ``sensor``'s time, as soon as a sample of it at or past the next grid time
+    has arrived, and stamps the synchronisation with that grid time: exactly ``period_ms`` apart
+    in sensor time, whatever rate the sensor publishes at or the token delivers (a late token
+    delivery catches up one grid time per synchronisation, at most :data:`CATCH_UP_PERIODS`).
+    Else after ``count`` samples of ``sensor`` (the seed's), ``min_period_ms`` also asking that
+    the newest be that much sensor time after the previous synchronisation; or every ``rounds``
+    token rounds. These two stamp a synchronisation with the newest sample's time.
     """
 
     def __init__(
@@ -118,18 +140,31 @@ class Trigger:
         count: int = 1,
         rounds: int | None = None,
         min_period_ms: int = 0,
+        period_ms: int = 0,
     ) -> None:
         if (sensor is None) == (rounds is None):
             raise ValueError("a trigger needs exactly one of sensor or rounds")
+        if period_ms < 0 or (period_ms and sensor is None):
+            raise ValueError("a period trigger needs a sensor and a positive period")
         self.sensor = sensor
         self.count = count
         self.rounds = rounds
         self.min_period_ms = min_period_ms
+        self.period_ms = period_ms
         self.last_sync_ms: int | None = None
+        #: the period trigger: earliest and newest stamp of the sensor in the halves synchronised
+        self.first_ms: int | None = None
+        self.newest_ms: int | None = None
+        self.skipped = 0  # grid times jumped over after a silence of the sensor
         self._last_counter: int | None = None
 
     def due(self, buffer: ShadowBuffer, counter: int | None = None) -> bool:
         """True when the synchronisation should run now (``counter``: the token's round counter)."""
+        if self.sensor is not None and self.period_ms:
+            newest = _newest(self.newest_ms, buffer.newest_stamp(self.sensor))
+            first = buffer.oldest_stamp(self.sensor) if self.last_sync_ms is None else None
+            grid = self.next_grid_ms(first)
+            return newest is not None and grid is not None and newest >= grid
         if self.sensor is not None:
             if buffer.count(self.sensor) < self.count:
                 return False
@@ -137,7 +172,7 @@ class Trigger:
                 newest = buffer.newest_stamp(self.sensor)
                 return newest is not None and newest - self.last_sync_ms >= self.min_period_ms
             return True
-        if counter is None:
+        if counter is None or self.rounds is None:
             return False
         if self._last_counter is None:
             self._last_counter = counter
@@ -146,6 +181,44 @@ class Trigger:
             self._last_counter = counter
             return True
         return False
+
+    def next_grid_ms(self, first_candidate: int | None = None) -> int | None:
+        """The period trigger's next grid time: the first after the last synchronisation, or
+        at or after the sensor's first sample (``first_candidate``: one not synchronised yet)."""
+        period = self.period_ms
+        if self.last_sync_ms is not None:
+            return (self.last_sync_ms // period + 1) * period
+        first = self.first_ms
+        if first_candidate is not None:
+            first = first_candidate if first is None else min(first, first_candidate)
+        return None if first is None else -(-first // period) * period
+
+    def stamp(self, half: dict[str, list[Sample]], fallback: int) -> int:
+        """The time of the synchronisation of ``half`` (called once per synchronisation, online
+        and in a replay: the period trigger's state follows the halves it stamps)."""
+        if not self.period_ms:
+            return sync_stamp(half, self.sensor, fallback)
+        stamps = [s.stamp_ms for s in half.get(self.sensor or "", [])]
+        if stamps:
+            self.first_ms = _oldest(self.first_ms, min(stamps))
+            self.newest_ms = _newest(self.newest_ms, max(stamps))
+        grid = self.next_grid_ms()
+        if grid is None or self.newest_ms is None or self.newest_ms < grid:
+            # asked for before the grid time (not by due()): at the newest sample, as the count trigger
+            return sync_stamp(half, self.sensor, fallback)
+        behind = (self.newest_ms - grid) // self.period_ms
+        if behind > CATCH_UP_PERIODS:
+            self.skipped += behind
+            grid += behind * self.period_ms
+        return grid
+
+
+def _newest(a: int | None, b: int | None) -> int | None:
+    return b if a is None else a if b is None else max(a, b)
+
+
+def _oldest(a: int | None, b: int) -> int:
+    return b if a is None else min(a, b)
 
 
 # =============================================================================================
@@ -269,11 +342,23 @@ class OdometryTrack:
 
 
 class OdometrySync:
-    """Sum of the step increments since the last sync, from cumulative half-step counters."""
+    """Sum of the step increments since the last sync, from cumulative half-step counters.
+
+    ``split_at_sync`` (the period trigger): the sum runs exactly to the sync time, not to the
+    newest sample: the counters are interpolated linearly between the samples around the sync
+    time, to whole half-steps (rounded half away from zero, so equal or opposite increments stay
+    equal or opposite: a straight move stays straight, a turn on the spot a turn), and what lies
+    after it goes to the next synchronisation. The sums add up to the counters' total exactly.
+    """
 
     sensor = "odometry"
 
-    def __init__(self, track: OdometryTrack, baseline: tuple[int, int] | None = (0, 0)) -> None:
+    def __init__(
+        self,
+        track: OdometryTrack,
+        baseline: tuple[int, int] | None = (0, 0),
+        split_at_sync: bool = False,
+    ) -> None:
         # the counters the start pose belongs to: (0, 0) when the robot was put down at a known pose
         # as the motor started (its counters start at 0); None: the first sample's (pose from the motor)
         self.track = track
@@ -285,6 +370,10 @@ class OdometrySync:
         self.changes: deque[int] = deque(maxlen=8)
         self.newest_ms: int | None = None
         self._previous_ms: int | None = None
+        self.split_at_sync = split_at_sync
+        #: split_at_sync: (stamp, left, right) half-steps counted since the baseline, per sample
+        self.totals: deque[tuple[int, int, int]] = deque()
+        self.counted = (0, 0)  # the totals at the last sync time (what earlier syncs summed)
 
     def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any]:
         dl_total = dr_total = 0
@@ -294,6 +383,7 @@ class OdometrySync:
             if self.last is None:
                 self.last = (left, right)
                 self.track.append(sample.stamp_ms, self.pose)
+                self._note_total(sample.stamp_ms, 0, 0)
                 continue
             if not self.track.stamps:
                 self.track.append(sample.stamp_ms, self.pose)
@@ -305,8 +395,38 @@ class OdometrySync:
             s, omega = step_motion(dl, dr, self.track.params)
             self.pose = advance(self.pose, s, omega)
             self.track.append(sample.stamp_ms, self.pose)
+            self._note_total(sample.stamp_ms, dl, dr)
+        if self.split_at_sync:
+            at_sync = self.totals_at(sync_ms)
+            dl_total, dr_total = at_sync[0] - self.counted[0], at_sync[1] - self.counted[1]
+            self.counted = at_sync
+            while len(self.totals) > 1 and self.totals[1][0] <= sync_ms:
+                self.totals.popleft()  # keep the last sample at or before the sync time
         stamp = samples[-1].stamp_ms if samples else sync_ms
         return {"dl": dl_total, "dr": dr_total, "count": len(samples), "stamp_ms": stamp}
+
+    def _note_total(self, stamp_ms: int, dl: int, dr: int) -> None:
+        if not self.split_at_sync:
+            return
+        left, right = (self.totals[-1][1], self.totals[-1][2]) if self.totals else self.counted
+        if self.totals and stamp_ms < self.totals[-1][0]:
+            stamp_ms = self.totals[-1][0]  # a late counter sample: counted from the newest time on
+        self.totals.append((stamp_ms, left + dl, right + dr))
+
+    def totals_at(self, stamp_ms: int) -> tuple[int, int]:
+        """The half-steps counted since the baseline at ``stamp_ms``: interpolated between the
+        samples around it, held after the newest (whole half-steps, see the class)."""
+        totals = self.totals
+        if not totals:
+            return self.counted
+        if stamp_ms >= totals[-1][0]:
+            return totals[-1][1], totals[-1][2]
+        i = bisect_left([t[0] for t in totals], stamp_ms)
+        if i == 0:
+            return totals[0][1], totals[0][2]
+        (t0, l0, r0), (t1, l1, r1) = totals[i - 1], totals[i]
+        f = (stamp_ms - t0) / (t1 - t0)
+        return l0 + _round_away(f * (l1 - l0)), r0 + _round_away(f * (r1 - r0))
 
     def _note_motion(self, sample: Sample, left: int, right: int) -> None:
         """Record a start or stop of the motors (motor state MOVING, else steps made)."""
@@ -448,6 +568,41 @@ class NewestSync:
         return {**newest.values, "count": len(samples), "stamp_ms": newest.stamp_ms}
 
 
+class TruthSync:
+    """The ground truth at the sync time: interpolated between the samples around it (the
+    period trigger stamps a synchronisation before the newest samples), else the nearest one.
+
+    A reference for the logs only (the seed's LOPS); its time must match the other records'.
+    """
+
+    sensor = "truth"
+
+    def __init__(self) -> None:
+        self.recent: list[Sample] = []  # the newest samples of earlier halves
+
+    def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any] | None:
+        if not samples:
+            return None
+        known = sorted(self.recent + samples, key=lambda s: s.stamp_ms)
+        self.recent = known[-4:]
+        after = next((i for i, s in enumerate(known) if s.stamp_ms >= sync_ms), None)
+        if after is None or after == 0:
+            nearest = known[-1] if after is None else known[0]
+            return {**nearest.values, "count": len(samples), "stamp_ms": nearest.stamp_ms}
+        a, b = known[after - 1], known[after]
+        if b.stamp_ms == sync_ms:
+            return {**b.values, "count": len(samples), "stamp_ms": sync_ms}
+        f = (sync_ms - a.stamp_ms) / (b.stamp_ms - a.stamp_ms)
+        va, vb = a.values, b.values
+        return {
+            "x": va["x"] + f * (vb["x"] - va["x"]),
+            "y": va["y"] + f * (vb["y"] - va["y"]),
+            "theta": wrap(va["theta"] + f * wrap(vb["theta"] - va["theta"])),
+            "count": len(samples),
+            "stamp_ms": sync_ms,
+        }
+
+
 @dataclass
 class SyncResult:
     """One synchronisation: its generation, time (sensor time, ms) and one record per sensor."""
@@ -463,6 +618,11 @@ def sync_stamp(samples: dict[str, list[Sample]], trigger_sensor: str | None, fal
         return max(s.stamp_ms for s in samples[trigger_sensor])
     stamps = [s.stamp_ms for group in samples.values() for s in group]
     return max(stamps) if stamps else fallback
+
+
+def _round_away(value: float) -> int:
+    """To the nearest whole number, halves away from zero (symmetric: -x gives -(x))."""
+    return int(math.copysign(math.floor(abs(value) + 0.5), value))
 
 
 def _wrap_i32(value: int) -> int:
