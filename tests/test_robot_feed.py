@@ -175,21 +175,21 @@ def test_sonar_beams_start_at_their_mounts_and_end_at_the_echo(fed: Fed) -> None
     assert beams["pose"] == "true" and beams["distances_cm"] == distances
     assert beams["contact"] == [d != 255 for d in distances]
     c45 = math.sqrt(0.5)
-    # pair 0, front-left: 140 mm forward, 90 mm left, looking 45 degrees left of forward
-    start = (1000.0 - 90.0, 2000.0 + 140.0)
+    # pair 0, front-left: 133 mm forward, 133 mm left, looking 45 degrees left of forward
+    start = (1000.0 - 133.0, 2000.0 + 133.0)
     end = (start[0] - 500.0 * c45, start[1] + 500.0 * c45)
     assert beams["segments_m"][0] == pytest.approx([v / 1000 for v in (*start, *end)])
-    # pair 5, rear: 150 mm behind, looking backwards (-y), echo at 80 cm
-    assert beams["segments_m"][5] == pytest.approx([1.0, 1.85, 1.0, 1.85 - 0.8])
+    # pair 5, rear: 188 mm behind, looking backwards (-y), echo at 80 cm
+    assert beams["segments_m"][5] == pytest.approx([1.0, 1.812, 1.0, 1.812 - 0.8])
     # pair 1, front, no contact: drawn to the 1.5 m range limit
-    assert beams["segments_m"][1] == pytest.approx([1.0, 2.15, 1.0, 2.15 + 1.5])
+    assert beams["segments_m"][1] == pytest.approx([1.0, 2.188, 1.0, 2.188 + 1.5])
     (update,) = fed.on("/robot/sonar")
     (entity,) = update["entities"]
     assert entity["frame_id"] == "room" and entity["id"] == "sonar"
     hits = entity["lines"][0]
     assert hits["type"] == 2  # LINE_LIST: each pair of points is one segment
     assert len(hits["points"]) == 4  # two beams with an echo
-    assert hits["points"][3] == pytest.approx({"x": 1.0, "y": 1.05, "z": 0.0})
+    assert hits["points"][3] == pytest.approx({"x": 1.0, "y": 1.012, "z": 0.0})
     fed.all_valid()
 
 

@@ -48,16 +48,30 @@ class SonarMount:
     angle: float  # radians CCW from forward
 
 
-#: the eight pairs in sweep order: three to the front (+45°, 0°, -45°), two on each side, one rear
+#: the transducers' faces sit on the body's outline, a hair inside it (their holders' rim): this
+#: far from the reference point, in whole millimetres (188 mm on the 190 mm collision circle)
+SONAR_OUTLINE_MM = 188.0
+SONAR_DIAGONAL_MM = 133.0  # the ±45° pairs, forward and to the side: 188.1 mm out
+SIDE_PAIR_X_MM = 80.0  # each side's two pairs are 160 mm apart, symmetric about the reference point
+SIDE_PAIR_Y_MM = 170.0  # ... and 187.9 mm out
+
+#: the eight pairs in sweep order: three to the front (+45°, 0°, -45°), two on each side, one rear.
+#: Every transducer sits on the body's outline (2 mm inside the collision circle), so an object the
+#: body touches is 0-3 cm from the nearest pair facing it: what the seed calls ALERT (seed §4.3.2
+#: "ALERT 0cm bis 4cm"; §4.3.6: the pilot aborts any move when a sensor reads under 4 cm) is what
+#: a sonar reads just before the robot touches. The seed's pairs are separate transmitters and
+#: receivers, so that they measure while sending (§3.3.2: "Dies ermöglicht eine Messung auch
+#: während des Sendens"): no blind zone, a touched wall reads 0-3 cm. Mounted 40-70 mm inside the
+#: body, a touched wall read 4-7 cm and ALERT was out of reach.
 SONAR_MOUNTS = (
-    SonarMount(0, "front-left", 140.0, 90.0, math.radians(45)),
-    SonarMount(1, "front", 150.0, 0.0, 0.0),
-    SonarMount(2, "front-right", 140.0, -90.0, math.radians(-45)),
-    SonarMount(3, "right-front", 80.0, -120.0, math.radians(-90)),
-    SonarMount(4, "right-rear", -80.0, -120.0, math.radians(-90)),
-    SonarMount(5, "rear", -150.0, 0.0, math.pi),
-    SonarMount(6, "left-rear", -80.0, 120.0, math.radians(90)),
-    SonarMount(7, "left-front", 80.0, 120.0, math.radians(90)),
+    SonarMount(0, "front-left", SONAR_DIAGONAL_MM, SONAR_DIAGONAL_MM, math.radians(45)),
+    SonarMount(1, "front", SONAR_OUTLINE_MM, 0.0, 0.0),
+    SonarMount(2, "front-right", SONAR_DIAGONAL_MM, -SONAR_DIAGONAL_MM, math.radians(-45)),
+    SonarMount(3, "right-front", SIDE_PAIR_X_MM, -SIDE_PAIR_Y_MM, math.radians(-90)),
+    SonarMount(4, "right-rear", -SIDE_PAIR_X_MM, -SIDE_PAIR_Y_MM, math.radians(-90)),
+    SonarMount(5, "rear", -SONAR_OUTLINE_MM, 0.0, math.pi),
+    SonarMount(6, "left-rear", -SIDE_PAIR_X_MM, SIDE_PAIR_Y_MM, math.radians(90)),
+    SonarMount(7, "left-front", SIDE_PAIR_X_MM, SIDE_PAIR_Y_MM, math.radians(90)),
 )
 SONAR_BY_NAME = {m.name: m.index for m in SONAR_MOUNTS}
 FRONT_LEFT, FRONT, FRONT_RIGHT, RIGHT_FRONT, RIGHT_REAR, REAR, LEFT_REAR, LEFT_FRONT = range(8)
