@@ -89,14 +89,14 @@ def part_roundtrip(args: argparse.Namespace, say: Say) -> dict[str, Any]:
                 plans=robot_plans(SEED_NODES, True), services=[world_plan(ring)], ring=ring,
                 extra_node_args=store,
             )  # fmt: skip
-        rtt = summarize(run.rounds_s)
+        rtt = summarize(run.rounds_s)  # (in ms)
         record = {
             "algorithms": config,
             "rounds": len(run.rounds_s),
-            "median_ms": rtt["median"] * 1e3,
+            "median_ms": rtt["median"],
             "p10_ms": float(np.percentile(run.rounds_s, 10)) * 1e3,
-            "p90_ms": float(np.percentile(run.rounds_s, 90)) * 1e3,
-            "p99_ms": rtt["p99"] * 1e3,
+            "p90_ms": rtt["p90"],
+            "p99_ms": rtt["p99"],
             "load": load_avg(),
         }
         say(f"  median {record['median_ms']:.1f} ms, p90 {record['p90_ms']:.1f} ms")
@@ -159,14 +159,15 @@ def part_darmstadt(args: argparse.Namespace, say: Say) -> dict[str, Any]:
             say(f"darmstadt: 3 laps of the 3 m square, world seed {seed}, --algorithms {config}")
             with tempfile.TemporaryDirectory(prefix="tokenring-seedtable-") as tmp, algorithms_env(config):
                 result = run_experiment(seed, workdir=Path(tmp), say=lambda _m: None)
+                sources = result.get("sources", {})  # the analysis of the Localizer's data log
                 logs = sorted(Path(tmp).rglob("*.trlog"))
                 periods = sync_periods(max(logs, key=lambda p: p.stat().st_size)) if logs else []
             record: dict[str, Any] = {
                 "algorithms": config,
                 "seed": seed,
-                "dead_reckoning_mm": result.get("dead_reckoning_mm"),
-                "filter_mm": result.get("filter_mm"),
-                "finished": result.get("finished"),
+                "dead_reckoning_mm": sources.get("O", {}).get("end_error_mm"),
+                "filter_mm": sources.get("K", {}).get("end_error_mm"),
+                "filter_rmse_mm": sources.get("K", {}).get("rmse_mm"),
                 "sync": sync_figures(periods),
             }
             say(
