@@ -48,6 +48,20 @@ def wait_until(condition: Callable[[], Any], timeout: float, what: str, interval
     raise AssertionError(f"timed out after {timeout} s waiting for {what} (last: {last!r})")
 
 
+def wait_main_answers(link: Any, timeout: float = 120.0) -> None:
+    """Wait until main's program answers its PC link (a ``state`` request)."""
+    from tokenring.errors import UsageError
+
+    def answers() -> bool:
+        try:
+            link.request("state")
+            return True
+        except UsageError:
+            return False
+
+    wait_until(answers, timeout, "main's program")
+
+
 def wait_ring(
     session: zenoh.Session, ring: str, ids: list[int], timeout: float = 60.0, visits: int = 5
 ) -> dict:

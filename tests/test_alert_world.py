@@ -35,7 +35,7 @@ import numpy as np
 import pytest
 import yaml
 from ringjudge import Header
-from ringutil import tap, wait_until
+from ringutil import tap, wait_main_answers, wait_until
 
 from modules.common.sonar import contact_seed_tangent, contact_tangent
 from modules.description import keys as robot_keys
@@ -43,7 +43,6 @@ from modules.description import load_world
 from modules.description.robot import FRONT, FRONT_LEFT, FRONT_RIGHT, MAX_STEP_RATE_HZ, REAR
 from modules.world.sim import Simulator
 from tokenring.cliutil import query
-from tokenring.errors import UsageError
 from tokenring.pclink import PcLink, open_link
 
 PROTOCOL_YAML = Path(__file__).resolve().parent.parent / "protocol.yaml"
@@ -286,14 +285,7 @@ def test_driving_into_a_wall_alerts_locks_and_escapes(procs, ring_name, endpoint
             try:
                 link = open_link(session, ring_name, wait=60.0)
 
-                def main_answers() -> bool:
-                    try:
-                        link.request("state")
-                        return True
-                    except UsageError:
-                        return False
-
-                wait_until(main_answers, 120, "main's program")
+                wait_main_answers(link)
                 wait_until(lambda: (s := timeline.last()) and s.sweep > 3, 60, "sonar sweeps")
                 start = truth.now()
                 assert start is not None and front_gap_mm(start) == pytest.approx(300.0, abs=1.0)

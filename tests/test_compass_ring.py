@@ -19,11 +19,10 @@ from typing import Any
 
 import yaml
 from ringjudge import Header
-from ringutil import control, tap, wait_until
+from ringutil import control, tap, wait_main_answers, wait_until
 
 from modules.description import keys as robot_keys
 from tokenring.cliutil import query
-from tokenring.errors import UsageError
 from tokenring.pclink import open_link
 
 PROTOCOL = yaml.safe_load((Path(__file__).resolve().parent.parent / "protocol.yaml").read_text())
@@ -90,14 +89,7 @@ def test_the_compass_calibration_turn_is_mains_pilot_and_the_compass_only_listen
             sniffer = InboxSniffer(session, ring_name, ("main", "motor", "compass"))
             link = open_link(session, ring_name, wait=60.0)
 
-            def main_answers() -> bool:
-                try:
-                    link.request("state")
-                    return True
-                except UsageError:
-                    return False
-
-            wait_until(main_answers, 120, "main's program")
+            wait_main_answers(link)
             wait_until(lambda: sniffer.frames > 100, 30, "frames on the tap")
             before = truth_heading(session, ring_name)
             # the entry point as the PC side has used it: CALIBRATE into the compass's inbox

@@ -8,7 +8,7 @@ import signal
 import time
 
 import yaml
-from ringutil import tap, wait_until
+from ringutil import tap, wait_main_answers
 
 from bench.localization import run_actions, wait_for_compass, world_now
 from modules.common.logs import read_log
@@ -16,7 +16,6 @@ from modules.description import keys as robot_keys
 from modules.pc.analysis import analyse
 from modules.pc.replay import replay
 from tokenring.cliutil import query
-from tokenring.errors import UsageError
 from tokenring.pclink import open_link
 
 
@@ -33,14 +32,7 @@ def test_action_file_drive_with_the_localizer_on_copro(procs, ring_name, endpoin
         with tap(endpoint) as session:
             link = open_link(session, ring_name, wait=60.0)
 
-            def main_answers() -> bool:
-                try:
-                    link.request("state")
-                    return True
-                except UsageError:
-                    return False
-
-            wait_until(main_answers, 120, "main's program")
+            wait_main_answers(link)
             link.command("compass", "CALIBRATE", timeout=10.0)
             wait_for_compass(link, 90.0)
             time.sleep(1.0)
