@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from bench.closedloop import parse_seeds
+from bench.seedreport import maps_table
 from modules.common.algorithms import MODULES
 from tokenring.cliutil import free_port
 
@@ -117,27 +118,6 @@ def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return table
 
 
-def format_table(table: list[dict[str, Any]]) -> str:
-    def pct(x: float | None) -> str:
-        return "–" if x is None else f"{100 * x:.1f} %"
-
-    def num(x: float | None, fmt: str = ".1f") -> str:
-        return "–" if x is None else format(x, fmt)
-
-    lines = [
-        "| algorithms | runs | coverage | precision | orientation error ° | corners closed | angle early → late ° |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for t in table:
-        lines.append(
-            f"| {t['algorithms']} | {t['runs']}" + (f" ({t['failed']} failed)" if t["failed"] else "")
-            + f" | {pct(t['coverage'])} | {pct(t['precision'])} | {num(t['orientation_error_deg'])} "
-            f"| {num(t['corners_closed'], '.0f')}/{num(t['corners_total'], '.0f')} "
-            f"| {num(t['angle_early_deg'])} → {num(t['angle_late_deg'])} |"
-        )  # fmt: skip
-    return "\n".join(lines)
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m bench.seedmode",
@@ -168,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
             )
             rows.append(explore(world, seed, config, args.speed, args.minutes, Path(tmp), args.bitrate))
     table = summarize(rows)
-    print(format_table(table))
+    print(maps_table(table))
     if args.json:
         Path(args.json).write_text(json.dumps({"table": table, "runs": rows}, indent=1) + "\n")
     return 0

@@ -45,6 +45,25 @@ def _median(values: list[float | None]) -> float | None:
     return float(np.median(real)) if real else None
 
 
+def maps_table(table: list[dict[str, Any]]) -> str:
+    """One room's map scores, a row per ``--algorithms`` choice (medians over its runs)."""
+    lines = [
+        "| `--algorithms` | runs | coverage | precision | orientation ° | corners closed | angle early → late ° |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for t in table:
+        failed = f" ({t['failed']} failed)" if t["failed"] else ""
+        corners = (
+            "–" if t["corners_closed"] is None else f"{t['corners_closed']:.0f}/{t['corners_total']:.0f}"
+        )
+        lines.append(
+            f"| {t['algorithms']} | {t['runs']}{failed} | {_pct(t['coverage'])} | {_pct(t['precision'])} "
+            f"| {fmt(t['orientation_error_deg'])} | {corners} "
+            f"| {fmt(t['angle_early_deg'])} → {fmt(t['angle_late_deg'])} |"
+        )
+    return "\n".join(lines)
+
+
 def section_md(parts: dict[str, Any]) -> str:
     """The "2001 robot beside ours" section of RESULTS.md from a result file's parts."""
     out = [
@@ -105,25 +124,7 @@ def section_md(parts: dict[str, Any]) -> str:
                 "",
             ]
         for room, table in m["tables"].items():
-            out += [
-                f"*{room}*",
-                "",
-                "| `--algorithms` | runs | coverage | precision | orientation ° | corners closed | angle early → late ° |",
-                "|---|---|---|---|---|---|---|",
-            ]
-            for t in table:
-                failed = f" ({t['failed']} failed)" if t["failed"] else ""
-                corners = (
-                    "–"
-                    if t["corners_closed"] is None
-                    else f"{t['corners_closed']:.0f}/{t['corners_total']:.0f}"
-                )
-                out.append(
-                    f"| {t['algorithms']} | {t['runs']}{failed} | {_pct(t['coverage'])} | {_pct(t['precision'])} "
-                    f"| {fmt(t['orientation_error_deg'])} | {corners} "
-                    f"| {fmt(t['angle_early_deg'])} → {fmt(t['angle_late_deg'])} |"
-                )
-            out.append("")
+            out += [f"*{room}*", "", maps_table(table), ""]
     d = parts.get("darmstadt")
     if d:
         out += [

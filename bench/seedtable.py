@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import datetime
-import itertools
 import json
 import os
 import subprocess
@@ -127,28 +126,6 @@ def part_maps(args: argparse.Namespace, say: Say) -> dict[str, Any]:
     }
 
 
-def sync_figures(periods_ms: list[float]) -> dict[str, float | None]:
-    """The synchronisation's regularity as the seed states it: median, p99 and the share of
-    cycles within 98-102 ms and within 95-105 ms."""
-    p = np.asarray(periods_ms, float)
-    if not len(p):
-        return {"median_ms": None, "p99_ms": None, "within_98_102": None, "within_95_105": None}
-    return {
-        "median_ms": float(np.median(p)),
-        "p99_ms": float(np.percentile(p, 99)),
-        "within_98_102": float(np.mean((p >= 98) & (p <= 102))),
-        "within_95_105": float(np.mean((p >= 95) & (p <= 105))),
-    }
-
-
-def sync_periods(log_path: Path) -> list[float]:
-    """The periods (ms of sensor time) between the synchronisations a data log recorded."""
-    from modules.common.logs import read_log
-
-    stamps = [int(r[0]) for r in read_log(log_path).records if r[1] == "S" and r[2] == "S"]
-    return [float(b - a) for a, b in itertools.pairwise(stamps)]
-
-
 def part_darmstadt(args: argparse.Namespace, say: Say) -> dict[str, Any]:
     from bench.closedloop import parse_seeds
     from bench.localization import run_experiment
@@ -159,16 +136,20 @@ def part_darmstadt(args: argparse.Namespace, say: Say) -> dict[str, Any]:
             say(f"darmstadt: 3 laps of the 3 m square, world seed {seed}, --algorithms {config}")
             with tempfile.TemporaryDirectory(prefix="tokenring-seedtable-") as tmp, algorithms_env(config):
                 result = run_experiment(seed, workdir=Path(tmp), say=lambda _m: None)
-                sources = result.get("sources", {})  # the analysis of the Localizer's data log
-                logs = sorted(Path(tmp).rglob("*.trlog"))
-                periods = sync_periods(max(logs, key=lambda p: p.stat().st_size)) if logs else []
+            sources = result.get("sources", {})  # `tokenring analyze` of the Localizer's data log
+            sync = result.get("sync", {})
             record: dict[str, Any] = {
                 "algorithms": config,
                 "seed": seed,
                 "dead_reckoning_mm": sources.get("O", {}).get("end_error_mm"),
                 "filter_mm": sources.get("K", {}).get("end_error_mm"),
                 "filter_rmse_mm": sources.get("K", {}).get("rmse_mm"),
-                "sync": sync_figures(periods),
+                "sync": {  # (analyze counts the shares as the seed states them, seed 000 §10)
+                    "median_ms": sync.get("median_period_ms"),
+                    "p99_ms": sync.get("p99_period_ms"),
+                    "within_98_102": sync.get("within_98_102ms"),
+                    "within_95_105": sync.get("within_95_105ms"),
+                },
             }
             say(
                 f"  dead reckoning {fmt(record['dead_reckoning_mm'], 0)} mm, filter {fmt(record['filter_mm'])} mm, "

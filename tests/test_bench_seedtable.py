@@ -7,17 +7,7 @@ import json
 from pathlib import Path
 
 from bench.seedreport import latest, section_md
-from bench.seedtable import part_classifier, sync_figures
-
-
-def test_sync_regularity_is_counted_as_the_seed_states_it() -> None:
-    periods = [100.0] * 80 + [98.0] * 3 + [102.0] * 2 + [96.0] * 5 + [104.0] * 5 + [130.0] * 5
-    figures = sync_figures(periods)
-    assert figures["median_ms"] == 100.0
-    assert abs(figures["within_98_102"] - 0.85) < 1e-9  # 80 + 3 + 2 of 100
-    assert abs(figures["within_95_105"] - 0.95) < 1e-9
-    assert figures["p99_ms"] == 130.0
-    assert sync_figures([])["median_ms"] is None
+from bench.seedtable import part_classifier
 
 
 def test_the_classifier_part_reproduces_the_seeds_table_and_ours_does_not_jump() -> None:
