@@ -33,6 +33,7 @@ from typing import Any
 
 import yaml
 
+from modules.common.algorithms import algorithm
 from modules.description import keys as robot_keys
 
 
@@ -88,7 +89,7 @@ def run_experiment(
         ring=ring,
         bitrate="max",
         log_level="warning",
-        services=[world_service(world_args)],
+        services=[world_service(world_args, algorithm("body"))],  # the body seedtable's env chose
     )
     outcome: dict[str, Any] = {}
 

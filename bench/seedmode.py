@@ -24,11 +24,11 @@ import numpy as np
 
 from bench.closedloop import parse_seeds
 from bench.seedreport import maps_table
-from modules.common.algorithms import MODULES
+from modules.common.algorithms import PARTS
 from tokenring.cliutil import free_port
 
 #: every configuration a table row is about: the two robots, then each module seed alone
-CONFIGS = ("ours", "seed", *(f"{m}=seed" for m in MODULES))
+CONFIGS = ("ours", "seed", *(f"{part}=seed" for part in PARTS))
 RUN_TIMEOUT_S = 1800.0
 
 
@@ -67,6 +67,8 @@ def explore(
         return row
     row.update(json.loads(scored.stdout))
     row.update(drift(out, world))
+    end = json.loads(out.read_text()).get("end_pose") or {}  # main's pose against the truth
+    row["end_error_mm"] = end.get("error_mm")
     return row
 
 
@@ -113,6 +115,7 @@ def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 "corners_total": median("corners_total"),
                 "angle_early_deg": median("angle_early_deg"),
                 "angle_late_deg": median("angle_late_deg"),
+                "end_error_mm": median("end_error_mm"),
             }
         )
     return table

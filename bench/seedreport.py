@@ -48,8 +48,9 @@ def _median(values: list[float | None]) -> float | None:
 def maps_table(table: list[dict[str, Any]]) -> str:
     """One room's map scores, a row per ``--algorithms`` choice (medians over its runs)."""
     lines = [
-        "| `--algorithms` | runs | coverage | precision | orientation ° | corners closed | angle early → late ° |",
-        "|---|---|---|---|---|---|---|",
+        "| `--algorithms` | runs | coverage | precision | orientation ° | corners closed | angle early → late ° "
+        "| end error mm |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for t in table:
         failed = f" ({t['failed']} failed)" if t["failed"] else ""
@@ -59,7 +60,7 @@ def maps_table(table: list[dict[str, Any]]) -> str:
         lines.append(
             f"| {t['algorithms']} | {t['runs']}{failed} | {_pct(t['coverage'])} | {_pct(t['precision'])} "
             f"| {fmt(t['orientation_error_deg'])} | {corners} "
-            f"| {fmt(t['angle_early_deg'])} → {fmt(t['angle_late_deg'])} |"
+            f"| {fmt(t['angle_early_deg'])} → {fmt(t['angle_late_deg'])} | {fmt(t.get('end_error_mm'), 0)} |"
         )
     return "\n".join(lines)
 

@@ -142,7 +142,7 @@ class Program(UserProgram):
         self.sonar = os.subscribe("sonar.data")
         self.motor = os.subscribe("motor.data")
         os.set_own_input_id()
-        self.layout = default_layout()
+        self.layout = default_layout(algorithm("body"))
         # seed mode (seed §4.3.4): the 2001 copro, its edge follower on the motor's dead
         # reckoning alone: no filter, no walls handed to one, no post-processing of vectors
         self.seed_mode = algorithm("copro") == "seed"

@@ -93,7 +93,7 @@ class Program(UserProgram):
         self.motor = os.subscribe("motor.data")
         self.copro = os.subscribe("copro.data")
         self.compass = os.subscribe("compass.data")
-        self.layout = default_layout()
+        self.layout = default_layout(algorithm("body"))
         self.seed = algorithm("main") == "seed"  # the seed's strategies and pilot (issue 20)
         # two navigator/pilot pairs so that two strategies can be compared (the seed's design)
         self.pilots = make_pilots(self.layout, self._send, self.seed)

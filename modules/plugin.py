@@ -74,10 +74,11 @@ class RobotExtension(Extension):
         world.add_argument(
             "--algorithms",
             default="ours",
-            metavar="seed|ours|MODULE=seed,...",
-            help="the 2001 robot's algorithms ('seed': every module as it was, at the seed's wire pace "
-            "--profile arcnet unless --bitrate is given) or today's ('ours', default); per module, "
-            "e.g. 'sonar=seed' or 'seed,copro=ours' (modules: sonar, copro, main, motor)",
+            metavar="seed|ours|PART=seed,...",
+            help="the 2001 robot's algorithms and body ('seed': every module as it was, side sonars "
+            "10 cm apart, at the seed's wire pace --profile arcnet unless --bitrate is given) or "
+            "today's ('ours', default); per part, e.g. 'sonar=seed' or 'seed,copro=ours' (parts: "
+            "sonar, copro, main, motor, body)",
         )
         parser.add_argument_group(
             "the LCD",
@@ -120,7 +121,7 @@ class RobotExtension(Extension):
             plan.profile = "arcnet"
         speed = parse_speed(args.speed)
         if not args.no_world:
-            plan.services.append(world_service(args))
+            plan.services.append(world_service(args, choice["body"]))
             plan.speedup = speed
         if args.localizer:
             from modules.common.locconfig import load_config
@@ -230,7 +231,7 @@ def lcd_start_hint(launcher: Launcher) -> str | None:
     return f"the LCD waits at its OS V2.0 Main Menu: 1 (Start Robbi) starts the programs: {command}"
 
 
-def world_service(args: argparse.Namespace) -> ServicePlan:
+def world_service(args: argparse.Namespace, body: str = "ours") -> ServicePlan:
     """The world simulator as a launcher service; the world file is checked here, before anything starts."""
     from modules.description.roomfile import load_world, resolve_world
     from modules.world.__main__ import parse_speed
@@ -241,6 +242,7 @@ def world_service(args: argparse.Namespace) -> ServicePlan:
     parse_speed(args.speed)
     argv = ["modules.world", "--ring", "{ring}", "--connect", "{connect}", "--world"]
     argv += [str(resolve_world(args.world).resolve()), "--speed", str(args.speed), "--seed", str(args.seed)]
+    argv += ["--body", body]
     argv += ["--log-level", args.log_level]
     if args.zenoh_config:
         argv += ["--zenoh-config", args.zenoh_config]

@@ -6,28 +6,42 @@ from __future__ import annotations
 import pytest
 from conftest import run_tokenring
 
-from modules.common.algorithms import ENV, algorithm, all_seed, format_algorithms, parse_algorithms
+from modules.common.algorithms import (
+    ENV,
+    algorithm,
+    all_seed,
+    body_mounts,
+    format_algorithms,
+    parse_algorithms,
+)
 from tokenring.errors import UsageError
 
 
-def test_the_grammar_sets_every_module_then_overrides_later_items():
-    assert parse_algorithms("ours") == {"sonar": "ours", "copro": "ours", "main": "ours", "motor": "ours"}
-    assert parse_algorithms("seed") == {"sonar": "seed", "copro": "seed", "main": "seed", "motor": "seed"}
-    assert parse_algorithms("sonar=seed") == {
-        "sonar": "seed",
-        "copro": "ours",
-        "main": "ours",
-        "motor": "ours",
-    }
+def test_the_grammar_sets_every_part_then_overrides_later_items():
+    parts = ("sonar", "copro", "main", "motor", "body")
+    assert parse_algorithms("ours") == dict.fromkeys(parts, "ours")
+    assert parse_algorithms("seed") == dict.fromkeys(parts, "seed")
+    assert parse_algorithms("sonar=seed") == {**dict.fromkeys(parts, "ours"), "sonar": "seed"}
+    assert parse_algorithms("body=seed") == {**dict.fromkeys(parts, "ours"), "body": "seed"}
     mixed = parse_algorithms(" seed , copro = ours ")
-    assert mixed == {"sonar": "seed", "copro": "ours", "main": "seed", "motor": "seed"}
+    assert mixed == {**dict.fromkeys(parts, "seed"), "copro": "ours"}
     assert not all_seed(mixed) and all_seed(parse_algorithms("seed"))
+    assert not all_seed(parse_algorithms("seed,body=ours"))
     assert parse_algorithms(format_algorithms(mixed)) == mixed
+
+
+def test_a_program_finds_its_bodys_sonar_mounts_in_the_environment():
+    """The body is hardware: the modules that place sonar readings take the mounts the world
+    simulator was built with (``up`` passes it ``--body``, see test_the_seed_body_*)."""
+    seed = body_mounts({ENV: "seed"})
+    ours = body_mounts({})
+    assert seed[7].x - seed[6].x == 100.0 and ours[7].x - ours[6].x == 160.0
+    assert [m.angle for m in seed] == [m.angle for m in ours]
 
 
 @pytest.mark.parametrize(
     ("text", "needle"),
-    [("", "give seed"), ("sonar=", "not seed or ours"), ("lcd=seed", "no module 'lcd'"), ("seed,,", "empty item"),
+    [("", "give seed"), ("sonar=", "not seed or ours"), ("lcd=seed", "no part 'lcd'"), ("seed,,", "empty item"),
      ("both", "'both' is not seed or ours")],
 )  # fmt: skip
 def test_bad_choices_are_named(text, needle):
@@ -74,4 +88,5 @@ def test_up_runs_the_seed_robot_exploring_and_draws_its_map(ring_name, endpoint,
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
     text = out.stdout + out.stderr
     assert "navigator SeedCalibrated started" in text and "calibrate 360" in text, text[-3000:]
+    assert "body seed" in text, text[-3000:]  # the world built the 2001 body (side pairs 10 cm apart)
     assert png.read_bytes().startswith(b"\x89PNG")

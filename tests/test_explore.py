@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import math
+
+import pytest
 
 from modules.common.mapscore import score_map
 from modules.description import load_world
@@ -26,3 +29,10 @@ def test_up_explores_with_explore_2_and_writes_the_scored_map(procs, ring_name, 
     assert score == doc["score"]
     # the robot found walls: some of what it mapped lies on them
     assert score["precision"] > 0.2, (score, output[-3000:])
+    # the robot's end pose against the world's truth, as the simulator reported it
+    end = doc["end_pose"]
+    (ex, ey, _), (tx, ty, _) = end["estimate"], end["truth"]
+    assert end["error_mm"] == pytest.approx(math.hypot(ex - tx, ey - ty), abs=0.2)  # (rounded to 0.1 mm)
+    assert f"the robot's pose ends {end['error_mm']:.0f} mm" in output
+    xs = [v for w in walls for v in (w[0], w[2])]
+    assert min(xs) < tx < max(xs)  # the truth is inside the room

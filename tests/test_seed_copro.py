@@ -34,18 +34,25 @@ STEP_MM = 12.0  # 10 cm/s, one sweep every 120 ms
 SWEEP_MS = 120
 LF, LR = robot.LEFT_FRONT, robot.LEFT_REAR
 FRONT_MOUNT, REAR_MOUNT = robot.SONAR_MOUNTS[LF], robot.SONAR_MOUNTS[LR]
+#: each body's left pair (front, rear): today's 160 mm apart, the 2001 robot's 100 mm
+LEFT_PAIR = {body: (robot.sonar_mounts(body)[LF], robot.sonar_mounts(body)[LR]) for body in ("ours", "seed")}
 
 Pose = tuple[float, float, float]
 Wall = tuple[float, float, float, float]
 
 
-def test_the_side_pair_is_mounted_as_the_robot_description_says():
-    """The seed follower computes with the mounts the world also uses (160 mm apart here; the
-    seed gives no spacing, only the ~10 cm minimum object size it implies)."""
-    assert default_layout().left.front_xy == (FRONT_MOUNT.x, FRONT_MOUNT.y)
-    assert default_layout().left.rear_xy == (REAR_MOUNT.x, REAR_MOUNT.y)
-    assert FRONT_MOUNT.x - REAR_MOUNT.x == pytest.approx(160.0)
-    assert FRONT_MOUNT.angle == REAR_MOUNT.angle == pytest.approx(math.pi / 2)
+@pytest.mark.parametrize(("body", "apart_mm"), [("ours", 160.0), ("seed", 100.0)])
+def test_the_side_pair_is_mounted_as_the_robot_description_says(body: str, apart_mm: float):
+    """The follower computes with the mounts the world also uses: today's body has its side
+    pairs 160 mm apart, the seed's ~10 cm (the minimum object size seed §4.3.4 gives), both on
+    the body's outline."""
+    front, rear = LEFT_PAIR[body]
+    assert default_layout(body).left.front_xy == (front.x, front.y)
+    assert default_layout(body).left.rear_xy == (rear.x, rear.y)
+    assert front.x - rear.x == pytest.approx(apart_mm)
+    assert front.angle == rear.angle == pytest.approx(math.pi / 2)
+    assert math.hypot(front.x, front.y) == pytest.approx(188.0, abs=0.5)
+    assert default_layout(body).mounts == robot.sonar_mounts(body)
 
 
 # -- the test's own world ----------------------------------------------------------------------
@@ -105,9 +112,12 @@ class Sweep:
         return self.direction == FORWARD and self.driven_mm > 10.0
 
 
-def plan(moves: list[tuple[str, float]], walls: list[Wall], drift_rad_per_mm: float = 0.0) -> list[Sweep]:
+def plan(
+    moves: list[tuple[str, float]], walls: list[Wall], drift_rad_per_mm: float = 0.0, body: str = "ours"
+) -> list[Sweep]:
     """Sweeps of a drive: ``("forward", mm)`` and ``("right", rad)`` moves from the origin along
     +X; the dead-reckoned heading drifts by ``drift_rad_per_mm`` of the way driven."""
+    front_mount, rear_mount = LEFT_PAIR[body]
     sweeps: list[Sweep] = []
     truth = [0.0, 0.0, 0.0]
     dr = [0.0, 0.0, 0.0]
@@ -123,7 +133,7 @@ def plan(moves: list[tuple[str, float]], walls: list[Wall], drift_rad_per_mm: fl
                         pose[1] += STEP_MM * math.sin(heading)
                     dr[2] += drift_rad_per_mm * STEP_MM
                 t = (truth[0], truth[1], truth[2])
-                front, rear = reading_cm(t, FRONT_MOUNT, walls), reading_cm(t, REAR_MOUNT, walls)
+                front, rear = reading_cm(t, front_mount, walls), reading_cm(t, rear_mount, walls)
                 history.append((front, rear))
                 last3 = history[-3:]
                 linear = (
@@ -145,18 +155,19 @@ def plan(moves: list[tuple[str, float]], walls: list[Wall], drift_rad_per_mm: fl
     return sweeps
 
 
-def expected_seed_vectors(sweeps: list[Sweep]) -> list[tuple[float, float, float, float]]:
+def expected_seed_vectors(sweeps: list[Sweep], body: str = "ours") -> list[tuple[float, float, float, float]]:
     """Seed §4.3.4 written out: the rear reading at the first WALL sweep starts a vector, the
     front reading at the last WALL sweep before it ends (or generation stops) ends it."""
+    front_mount, rear_mount = LEFT_PAIR[body]
     vectors = []
     start: tuple[float, float] | None = None
     end: tuple[float, float] | None = None
     for sweep in sweeps:
         wall = sweep.active and sweep.linear
         if wall and start is None:
-            start = seed_point(sweep.dead_reckoned, REAR_MOUNT, sweep.rear_cm)
+            start = seed_point(sweep.dead_reckoned, rear_mount, sweep.rear_cm)
         if wall:
-            end = seed_point(sweep.dead_reckoned, FRONT_MOUNT, sweep.front_cm)
+            end = seed_point(sweep.dead_reckoned, front_mount, sweep.front_cm)
         elif start is not None and end is not None:
             vectors.append((*start, *end))
             start = end = None
@@ -176,10 +187,12 @@ def sonar_data(sweep: Sweep) -> dict[str, Any]:
     return {"stamp_ms": sweep.stamp_ms, "distances": distances, "behaviours": behaviours, "areas": areas}
 
 
-def vectorize(sweeps: list[Sweep], method: int) -> tuple[list[tuple[float, float, float, float]], Vectorizer]:
+def vectorize(
+    sweeps: list[Sweep], method: int, body: str = "ours"
+) -> tuple[list[tuple[float, float, float, float]], Vectorizer]:
     """The sweeps through copro's vectorizer on the dead-reckoned poses, then FLUSH."""
     vectors: list[tuple[float, float, float, float]] = []
-    vectorizer = Vectorizer(default_layout(), method, vectors.append)
+    vectorizer = Vectorizer(default_layout(body), method, vectors.append)
     for sweep in sweeps:
         vectorizer.sweep(sonar_data(sweep), sweep.dead_reckoned, sweep.active)
     vectorizer.flush()
@@ -215,6 +228,37 @@ def test_seed_rear_starts_front_ends_and_the_corner_stays_open():
     # the corner is not recorded: both vectors stop short of it (seed §4.3.6 results)
     assert math.dist(first[2:], CORNER) > 100.0 and math.dist(second[:2], CORNER) > 100.0
     assert vectorizer.corners_closed == 0 and vectorizer.merged == 0
+
+
+def test_the_seed_body_follows_the_corner_with_its_own_side_pair():
+    """On the 2001 robot's body the same rule holds with its pairs 100 mm apart: the start lies
+    the seed rear pair's 50 mm behind the reference point, the end 50 mm ahead of it."""
+    sweeps = plan(TO_THE_CORNER, ROOM_CORNER, body="seed")
+    expected = expected_seed_vectors(sweeps, "seed")
+    vectors, _ = vectorize(sweeps, SEED_METHOD, "seed")
+    assert len(vectors) == len(expected) == 2
+    for got, want in zip(vectors, expected, strict=True):
+        assert got == pytest.approx(want, abs=1e-6)
+    onset = next(s for s in sweeps if s.active and s.linear)
+    assert vectors[0][0] == pytest.approx(onset.dead_reckoned[0] - 50.0)
+
+
+BOX_BESIDE_THE_PATH = [(1000.0, 400.0, 1150.0, 400.0)]  # 15 cm long, 40 cm to the left
+
+
+@pytest.mark.parametrize(("body", "mapped"), [("seed", True), ("ours", False)])
+def test_an_object_must_span_both_side_pairs_to_be_mapped(body: str, mapped: bool):
+    """Seed §4.3.4: an object is mapped only while both side sensors see it, so the objects the
+    follower maps are at least about as long as the pairs are apart ("etwa 10cm"). A 15 cm box
+    beside the path is a vector on the seed's 10 cm body and nothing on today's 16 cm body."""
+    sweeps = plan([("forward", 2000.0)], BOX_BESIDE_THE_PATH, body=body)
+    vectors, _ = vectorize(sweeps, SEED_METHOD, body)
+    assert [v[1] for v in vectors] == pytest.approx([400.0] * len(vectors), abs=1.0)
+    assert bool(vectors) is mapped
+    expected = expected_seed_vectors(sweeps, body)
+    assert len(vectors) == len(expected)
+    for got, want in zip(vectors, expected, strict=True):
+        assert got == pytest.approx(want, abs=1e-6)
 
 
 def test_ours_closes_the_same_corner_the_seed_leaves_open():

@@ -13,7 +13,7 @@ import math
 import pytest
 
 from modules.description import load_world
-from modules.description.robot import STEP_MM
+from modules.description.robot import SONAR_MOUNTS, STEP_MM
 from modules.world.clock import ManualClock
 from modules.world.sim import VELOCITY_HOLD_MS, Simulator
 
@@ -50,9 +50,9 @@ def test_a_sweep_between_batches_pings_from_where_the_robot_is_at_each_pairs_sta
     used: list[float] = []
     real = sim_module.sonar_world_pose
 
-    def recording(x: float, y: float, theta: float, sensor: int):
+    def recording(x: float, y: float, theta: float, sensor: int, mounts=SONAR_MOUNTS):
         used.append(x)
-        return real(x, y, theta, sensor)
+        return real(x, y, theta, sensor, mounts)
 
     monkeypatch.setattr(sim_module, "sonar_world_pose", recording)
     clock.t += 70.0

@@ -15,7 +15,7 @@ from ringutil import tap, wait_until
 
 from modules.description import Floor, Pose, Wall, World, load_world
 from modules.description import keys as robot_keys
-from modules.description.robot import MAX_STEP_RATE_HZ, STEP_MM
+from modules.description.robot import MAX_STEP_RATE_HZ, SONAR_MOUNTS, STEP_MM
 from modules.world.clients import HardwareError, MotorHardware, SonarHardware
 from modules.world.clock import ManualClock, SimClock
 from modules.world.physics import TrackedRobot, cast_rays
@@ -154,7 +154,7 @@ def test_floor_parameters_come_from_the_world():
 def test_world_process_serves_hardware_truth_and_info_over_zenoh(procs, ring_name, endpoint, tmp_path):
     world = procs.start(
         [sys.executable, "-m", "modules.world", "--ring", ring_name, "--listen", endpoint, "--world", "square",
-         "--speed", "20", "--seed", "3"]
+         "--speed", "20", "--seed", "3", "--body", "seed"]
     )  # fmt: skip
     with tap(endpoint) as session:
         wait_until(
@@ -194,6 +194,7 @@ def test_world_process_serves_hardware_truth_and_info_over_zenoh(procs, ring_nam
         info = next(iter(session.get(robot_keys.world(ring_name, "info"), timeout=2))).ok
         info = msgpack.unpackb(info.payload.to_bytes())["result"]
         assert info["name"] == "square" and len(info["walls"]) == 8 and info["speed"] == 20.0
+        assert info["body"] == "seed"  # the 2001 robot's body, as `up --algorithms seed` asks
         sub.undeclare()
     world.terminate()
     assert world.wait(30) == 0
@@ -208,6 +209,29 @@ def test_world_process_refuses_a_bad_world_file(procs, tmp_path):
     assert f"{bad}:3: wall 2 has zero length" in out
 
 
+@pytest.mark.parametrize(("body", "side_x"), [("ours", 80.0), ("seed", 50.0)])
+def test_the_simulator_pings_from_its_bodys_mounts(monkeypatch, body: str, side_x: float):
+    """The simulator builds the body it is given (``up`` passes ``--body`` from ``--algorithms``):
+    every pair is pinged from that body's mount, the side pairs 2 x side_x apart."""
+    import modules.world.sim as sim_module
+
+    sim = Simulator(load_world("empty"), seed=1, clock=ManualClock(0.0), body=body)
+    real = sim_module.sonar_world_pose
+    used: list[tuple[float, float]] = []
+
+    def recording(x: float, y: float, theta: float, sensor: int, mounts=SONAR_MOUNTS):
+        sx, sy, direction = real(x, y, theta, sensor, mounts)
+        used.append((sx - x, sy - y))
+        return sx, sy, direction
+
+    monkeypatch.setattr(sim_module, "sonar_world_pose", recording)
+    start = sim.robot.pose
+    assert start.theta == 0.0  # the offsets below are in the robot frame
+    sim.sonar_ping({"sensors": list(range(8)), "slot_ms": 0.0})
+    assert [round(dx, 6) for dx, _ in used][3:8] == [side_x, -side_x, -188.0, -side_x, side_x]
+    assert all(math.hypot(dx, dy) == pytest.approx(188.0, abs=0.5) for dx, dy in used)
+
+
 def test_a_sweep_pings_each_pair_from_where_the_driving_robot_is_by_then(monkeypatch):
     import modules.world.sim as sim_module
 
@@ -216,9 +240,9 @@ def test_a_sweep_pings_each_pair_from_where_the_driving_robot_is_by_then(monkeyp
     used: list[tuple[float, float, float]] = []
     real = sim_module.sonar_world_pose
 
-    def recording(x: float, y: float, theta: float, sensor: int):
+    def recording(x: float, y: float, theta: float, sensor: int, mounts=SONAR_MOUNTS):
         used.append((x, y, theta))
-        return real(x, y, theta, sensor)
+        return real(x, y, theta, sensor, mounts)
 
     monkeypatch.setattr(sim_module, "sonar_world_pose", recording)
     rate = 200.0  # half-steps per second: 50 steps are 250 ms of driving

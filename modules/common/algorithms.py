@@ -5,18 +5,24 @@
 choice reaches every program through its environment (:data:`ENV`), so a program reads it
 once at start with :func:`algorithm`; nothing else in the ring knows of it.
 
-Grammar: comma-separated items, each ``seed``/``ours`` (every module) or ``MODULE=seed|ours``;
-later items override earlier ones (``seed,copro=ours``: the seed's robot with our copro).
+Grammar: comma-separated items, each ``seed``/``ours`` (every part) or ``PART=seed|ours``;
+later items override earlier ones (``seed,copro=ours``: the seed's robot with our copro). The
+parts are the modules with two algorithms and the robot's ``body``: the seed's has its side sonar
+pairs 10 cm apart, ours 16 cm (:func:`modules.description.robot.sonar_mounts`); the world
+simulator builds the chosen body and the modules that place sonar readings use its mounts.
 """
 
 from __future__ import annotations
 
 import os
 
+from modules.description.robot import SonarMount, sonar_mounts
 from tokenring.errors import UsageError
 
 #: the modules that have both the seed's algorithm and ours
 MODULES = ("sonar", "copro", "main", "motor")
+#: what ``--algorithms`` chooses for: those modules and the robot's body
+PARTS = (*MODULES, "body")
 CHOICES = ("seed", "ours")
 ENV = "TOKENRING_ALGORITHMS"
 OPTION = "--algorithms"
@@ -25,10 +31,10 @@ OPTION = "--algorithms"
 def parse_algorithms(text: str) -> dict[str, str]:
     """``seed``, ``ours`` or ``MODULE=seed|ours`` items as a choice per module (one clear
     :class:`UsageError` naming the bad item otherwise)."""
-    choice = dict.fromkeys(MODULES, "ours")
+    choice = dict.fromkeys(PARTS, "ours")
     items = [item.strip() for item in text.split(",")]
     if not any(items):
-        raise UsageError(f"{OPTION}: give seed, ours or MODULE=seed|ours (modules: {', '.join(MODULES)})")
+        raise UsageError(f"{OPTION}: give seed, ours or PART=seed|ours (parts: {', '.join(PARTS)})")
     for item in items:
         if not item:
             raise UsageError(f"{OPTION} {text!r}: an empty item")
@@ -39,29 +45,30 @@ def parse_algorithms(text: str) -> dict[str, str]:
         if value not in CHOICES:
             raise UsageError(f"{OPTION} {item!r}: {value!r} is not seed or ours")
         if not module:
-            choice = dict.fromkeys(MODULES, value)
-        elif module in MODULES:
+            choice = dict.fromkeys(PARTS, value)
+        elif module in PARTS:
             choice[module] = value
         else:
             raise UsageError(
-                f"{OPTION} {item!r}: no module {module!r} with a seed algorithm (modules: {', '.join(MODULES)})"
+                f"{OPTION} {item!r}: no part {module!r} with a seed version (parts: {', '.join(PARTS)})"
             )
     return choice
 
 
 def format_algorithms(choice: dict[str, str]) -> str:
     """The canonical text of a choice (``sonar=seed,copro=ours,...``), as :data:`ENV` carries it."""
-    return ",".join(f"{module}={choice[module]}" for module in MODULES)
+    return ",".join(f"{part}={choice[part]}" for part in PARTS)
 
 
 def all_seed(choice: dict[str, str]) -> bool:
-    """Every module runs the seed's algorithm: the 2001 robot as it was."""
-    return all(choice[module] == "seed" for module in MODULES)
+    """Every part is the seed's: the 2001 robot as it was."""
+    return all(choice[part] == "seed" for part in PARTS)
 
 
 def algorithm(module: str, environ: dict[str, str] | None = None) -> str:
-    """``seed`` or ``ours`` for ``module`` in this program (``ours`` unless the ring chose the
-    seed's). The launcher checked the text; a program started by hand with a bad one runs ours."""
+    """``seed`` or ``ours`` for ``module`` (or ``body``) in this program (``ours`` unless the ring
+    chose the seed's). The launcher checked the text; a program started by hand with a bad one
+    runs ours."""
     text = (os.environ if environ is None else environ).get(ENV, "")
     if not text:
         return "ours"
@@ -69,3 +76,8 @@ def algorithm(module: str, environ: dict[str, str] | None = None) -> str:
         return parse_algorithms(text)[module]
     except (UsageError, KeyError):
         return "ours"
+
+
+def body_mounts(environ: dict[str, str] | None = None) -> tuple[SonarMount, ...]:
+    """The sonar mounts of the body this ring's robot has (``--algorithms body=seed|ours``)."""
+    return sonar_mounts(algorithm("body", environ))

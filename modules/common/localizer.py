@@ -46,6 +46,7 @@ from typing import Any
 
 import numpy as np
 
+from modules.common.algorithms import algorithm
 from modules.common.ekf import EkfParams, PoseEKF
 from modules.common.locconfig import load_config
 from modules.common.logs import SENSOR_SOURCE, DataLog, ErrorLog
@@ -118,6 +119,18 @@ class LocalizedPose:
     def valid_bits(self) -> int:
         """The ``pose_valid`` byte of copro.data: bit 0 x, bit 1 y, bit 2 heading."""
         return int(self.valid_x) | int(self.valid_y) << 1 | int(self.valid_heading) << 2
+
+
+def with_body(config: dict[str, Any], body: str) -> dict[str, Any]:
+    """``config`` with ``robot.sonars: robot`` spelled out as ``body``'s mounts when the ring's
+    robot is not today's, so the filter and the data log place readings where this robot has its
+    sonars (``robot`` alone means today's body, :data:`modules.description.robot.SONAR_MOUNTS`)."""
+    if config["robot"]["sonars"] != "robot" or body == "ours":
+        return config
+    from modules.description.robot import sonar_mounts as body_mounts
+
+    mounts = [[m.x, m.y, math.degrees(m.angle)] for m in body_mounts(body)]
+    return {**config, "robot": {**config["robot"], "sonars": mounts}}
 
 
 def sonar_mounts(config: dict[str, Any]) -> list[SonarMount]:
@@ -763,7 +776,7 @@ class Localizer:
         import os as _os
 
         self.os = os
-        self.config = load_config(config)
+        self.config = with_body(load_config(config), algorithm("body"))
         # $TOKENRING_LOG_DIR overrides the config's logs.directory (tests, benches, `tokenring up`)
         self.log_dir = log_dir if log_dir is not None else _os.environ.get("TOKENRING_LOG_DIR") or None
         self.truth_feed = truth  # the world's ground truth for the logs (copro's hardware), or None

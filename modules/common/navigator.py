@@ -46,7 +46,7 @@ from modules.common.pilot import (
 )
 from modules.common.units import pose_to_wire
 from modules.common.vectorgen import SonarLayout
-from modules.description.robot import sonar_world_pose
+from modules.description.robot import SONAR_MOUNTS, SonarMount, sonar_world_pose
 from tokenring.protocol import default_protocol
 
 NAV = default_protocol().enums["navigator"]
@@ -608,7 +608,7 @@ class ExploreLeftWall(Navigator):
             self.path.append(pose[:2])
             if label == "probe":
                 self.sightings += [
-                    sonar_point(pose, i, distances[i] * 10.0)
+                    sonar_point(pose, i, distances[i] * 10.0, lay.mounts)
                     for i in range(len(distances))
                     if distances[i] <= self.s.sighting_cm
                 ]
@@ -763,7 +763,7 @@ class ExploreLeftWall(Navigator):
             return False
         ahead = min(sensors.distances[i] for i in self.layout.front)
         index = min(self.layout.front, key=lambda i: sensors.distances[i])
-        point = sonar_point(sensors.pose, index, ahead * 10.0)
+        point = sonar_point(sensors.pose, index, ahead * 10.0, self.layout.mounts)
         outer = self.outer_path
         return (
             point_in_polygon(point, outer)
@@ -803,13 +803,11 @@ class ExploreLeftWall(Navigator):
     def _face_nearest(self, sensors: Sensors) -> list[Move]:
         """At the start: turn toward the nearest echo around (most likely a wall of the room, not
         an island in it), unless a front sonar has it already."""
-        from modules.description.robot import SONAR_MOUNTS
-
         d = sensors.distances
         nearest = min(range(len(d)), key=lambda i: d[i])
         if d[nearest] > self.s.face_cm or nearest in self.layout.front:
             return []
-        return self._turn(math.degrees(SONAR_MOUNTS[nearest].angle), "face", sensors)
+        return self._turn(math.degrees(self.layout.mounts[nearest].angle), "face", sensors)
 
     def _count_rotation(self, sensors: Sensors) -> None:
         """The heading turned through since following began (positive: left), for telling a
@@ -856,9 +854,14 @@ class ExploreLeftWall(Navigator):
         return self.laps >= self.s.max_laps
 
 
-def sonar_point(pose: tuple[float, float, float], index: int, distance_mm: float) -> tuple[float, float]:
-    """The world point a reading of sonar ``index`` marks, the robot at ``pose``."""
-    sx, sy, direction = sonar_world_pose(pose[0], pose[1], pose[2], index)
+def sonar_point(
+    pose: tuple[float, float, float],
+    index: int,
+    distance_mm: float,
+    mounts: tuple[SonarMount, ...] = SONAR_MOUNTS,
+) -> tuple[float, float]:
+    """The world point a reading of sonar ``index`` (on ``mounts``) marks, the robot at ``pose``."""
+    sx, sy, direction = sonar_world_pose(pose[0], pose[1], pose[2], index, mounts)
     return (sx + distance_mm * math.cos(direction), sy + distance_mm * math.sin(direction))
 
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from modules.description.robot import SONAR_MOUNTS, SonarMount
 from tokenring.protocol import default_protocol
 
 _ENUMS = default_protocol().enums
@@ -116,6 +117,8 @@ class SonarLayout:
     left: SideSensors
     right: SideSensors
     max_range_mm: float = 1500.0
+    #: every pair's mounting (modules/description/robot.py's, of the ring's body)
+    mounts: tuple[SonarMount, ...] = SONAR_MOUNTS
 
     def side(self, name: str) -> tuple[int, int, SideSensors]:
         if name == "left":
@@ -123,11 +126,11 @@ class SonarLayout:
         return self.right_front, self.right_rear, self.right
 
 
-def default_layout() -> SonarLayout:
-    """The robot's eight sonars as :mod:`modules.description.robot` mounts them."""
+def default_layout(body: str = "ours") -> SonarLayout:
+    """The robot's eight sonars as :mod:`modules.description.robot` mounts them on ``body``."""
     from modules.description import robot
 
-    mounts = robot.SONAR_MOUNTS
+    mounts = robot.sonar_mounts(body)
 
     def side(front: int, rear: int) -> SideSensors:
         f, r = mounts[front], mounts[rear]
@@ -143,6 +146,7 @@ def default_layout() -> SonarLayout:
         left=side(robot.LEFT_FRONT, robot.LEFT_REAR),
         right=side(robot.RIGHT_FRONT, robot.RIGHT_REAR),
         max_range_mm=robot.SONAR_RANGE_MM,
+        mounts=mounts,
     )
 
 

@@ -54,31 +54,52 @@ SONAR_OUTLINE_MM = 188.0
 SONAR_DIAGONAL_MM = 133.0  # the ±45° pairs, forward and to the side: 188.1 mm out
 SIDE_PAIR_X_MM = 80.0  # each side's two pairs are 160 mm apart, symmetric about the reference point
 SIDE_PAIR_Y_MM = 170.0  # ... and 187.9 mm out
+#: the 2001 robot's side pairs were about 10 cm apart: seed 001 §4.3.4 gives the smallest object
+#: its edge follower maps as "etwa 10cm", the span both side sensors of a side must see
+SEED_SIDE_PAIR_X_MM = 50.0
+SEED_SIDE_PAIR_Y_MM = 181.0  # ... 187.8 mm out, on the same outline
+#: the bodies a ring can run: today's (side pairs 160 mm apart) and the 2001 robot's (100 mm)
+BODIES = ("ours", "seed")
 
-#: the eight pairs in sweep order: three to the front (+45°, 0°, -45°), two on each side, one rear.
-#: Every transducer sits on the body's outline (2 mm inside the collision circle), so an object the
-#: body touches is 0-3 cm from the nearest pair facing it: what the seed calls ALERT (seed §4.3.2
-#: "ALERT 0cm bis 4cm"; §4.3.6: the pilot aborts any move when a sensor reads under 4 cm) is what
-#: a sonar reads just before the robot touches. The seed's pairs are separate transmitters and
-#: receivers, so that they measure while sending (§3.3.2: "Dies ermöglicht eine Messung auch
-#: während des Sendens"): no blind zone, a touched wall reads 0-3 cm. Mounted 40-70 mm inside the
-#: body, a touched wall read 4-7 cm and ALERT was out of reach.
-SONAR_MOUNTS = (
-    SonarMount(0, "front-left", SONAR_DIAGONAL_MM, SONAR_DIAGONAL_MM, math.radians(45)),
-    SonarMount(1, "front", SONAR_OUTLINE_MM, 0.0, 0.0),
-    SonarMount(2, "front-right", SONAR_DIAGONAL_MM, -SONAR_DIAGONAL_MM, math.radians(-45)),
-    SonarMount(3, "right-front", SIDE_PAIR_X_MM, -SIDE_PAIR_Y_MM, math.radians(-90)),
-    SonarMount(4, "right-rear", -SIDE_PAIR_X_MM, -SIDE_PAIR_Y_MM, math.radians(-90)),
-    SonarMount(5, "rear", -SONAR_OUTLINE_MM, 0.0, math.pi),
-    SonarMount(6, "left-rear", -SIDE_PAIR_X_MM, SIDE_PAIR_Y_MM, math.radians(90)),
-    SonarMount(7, "left-front", SIDE_PAIR_X_MM, SIDE_PAIR_Y_MM, math.radians(90)),
-)
+
+def sonar_mounts(body: str = "ours") -> tuple[SonarMount, ...]:
+    """The eight pairs in sweep order on ``body``: three to the front (+45°, 0°, -45°), two on
+    each side, one rear. The bodies differ only in how far apart each side's two pairs sit.
+
+    Every transducer sits on the body's outline (2 mm inside the collision circle), so an object
+    the body touches is 0-3 cm from the nearest pair facing it: what the seed calls ALERT (seed
+    §4.3.2 "ALERT 0cm bis 4cm"; §4.3.6: the pilot aborts any move when a sensor reads under
+    4 cm) is what a sonar reads just before the robot touches. The seed's pairs are separate
+    transmitters and receivers, so that they measure while sending (§3.3.2: "Dies ermöglicht eine
+    Messung auch während des Sendens"): no blind zone, a touched wall reads 0-3 cm. Mounted
+    40-70 mm inside the body, a touched wall read 4-7 cm and ALERT was out of reach."""
+    if body not in BODIES:
+        raise ValueError(f"no robot body {body!r} (bodies: {', '.join(BODIES)})")
+    side_x, side_y = (
+        (SEED_SIDE_PAIR_X_MM, SEED_SIDE_PAIR_Y_MM) if body == "seed" else (SIDE_PAIR_X_MM, SIDE_PAIR_Y_MM)
+    )
+    return (
+        SonarMount(0, "front-left", SONAR_DIAGONAL_MM, SONAR_DIAGONAL_MM, math.radians(45)),
+        SonarMount(1, "front", SONAR_OUTLINE_MM, 0.0, 0.0),
+        SonarMount(2, "front-right", SONAR_DIAGONAL_MM, -SONAR_DIAGONAL_MM, math.radians(-45)),
+        SonarMount(3, "right-front", side_x, -side_y, math.radians(-90)),
+        SonarMount(4, "right-rear", -side_x, -side_y, math.radians(-90)),
+        SonarMount(5, "rear", -SONAR_OUTLINE_MM, 0.0, math.pi),
+        SonarMount(6, "left-rear", -side_x, side_y, math.radians(90)),
+        SonarMount(7, "left-front", side_x, side_y, math.radians(90)),
+    )
+
+
+#: today's body, the default everywhere a body is not chosen
+SONAR_MOUNTS = sonar_mounts("ours")
 SONAR_BY_NAME = {m.name: m.index for m in SONAR_MOUNTS}
 FRONT_LEFT, FRONT, FRONT_RIGHT, RIGHT_FRONT, RIGHT_REAR, REAR, LEFT_REAR, LEFT_FRONT = range(8)
 
 
-def sonar_world_pose(x: float, y: float, theta: float, index: int) -> tuple[float, float, float]:
+def sonar_world_pose(
+    x: float, y: float, theta: float, index: int, mounts: tuple[SonarMount, ...] = SONAR_MOUNTS
+) -> tuple[float, float, float]:
     """Where sonar pair ``index`` sits and looks in world coordinates, for a robot at (x, y, theta)."""
-    m = SONAR_MOUNTS[index]
+    m = mounts[index]
     c, s = math.cos(theta), math.sin(theta)
     return (x + c * m.x - s * m.y, y + s * m.x + c * m.y, theta + m.angle)

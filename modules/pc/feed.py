@@ -46,9 +46,10 @@ from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
 
+from modules.common.algorithms import body_mounts
 from modules.common.units import cdeg_cw_to_rad_ccw, wrap_angle
 from modules.description import keys as robot_keys
-from modules.description.robot import SONAR_MOUNTS, SONAR_NO_CONTACT, SONAR_RANGE_MM, sonar_world_pose
+from modules.description.robot import SONAR_NO_CONTACT, SONAR_RANGE_MM, SonarMount, sonar_world_pose
 from tokenring import keys
 from tokenring.feed import FeedSource, Message, Topic, decode_msgpack
 from tokenring.frame import frame_problem
@@ -433,6 +434,8 @@ class RobotSource(FeedSource):
     _map: list[list[float]] = field(default_factory=list)
     _map_seen: set[tuple[int, int, int]] = field(default_factory=set)
     _navigator_state: tuple[Any, ...] = ()
+    #: the sonar pairs of the ring's body (``up`` gives its watcher the ring's ``--algorithms``)
+    mounts: tuple[SonarMount, ...] = field(default_factory=body_mounts)
 
     def topics(self) -> list[Topic]:
         return [t for t in robot_topics(self.protocol) if t.name not in WorldSource.NAMES + LcdSource.NAMES]
@@ -537,11 +540,11 @@ class RobotSource(FeedSource):
         segments: list[list[float]] = []
         contact: list[bool] = []
         distances = [int(d) for d in data["distances"]]
-        for mount in SONAR_MOUNTS:
+        for mount in self.mounts:
             d = distances[mount.index]
             hit = d != SONAR_NO_CONTACT
             reach = d * 10.0 if hit else SONAR_RANGE_MM
-            sx, sy, angle = sonar_world_pose(x, y, theta, mount.index)
+            sx, sy, angle = sonar_world_pose(x, y, theta, mount.index, self.mounts)
             ex, ey = sx + reach * math.cos(angle), sy + reach * math.sin(angle)
             segments.append([sx / 1000.0, sy / 1000.0, ex / 1000.0, ey / 1000.0])
             contact.append(hit)

@@ -6,6 +6,7 @@ Used by ``tokenring map``, ``score`` and ``up --map-out``, and by the benchmarks
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +41,27 @@ def live_world(session: Any, ring: str) -> dict[str, Any] | None:
     for _, reply in query(session, robot_keys.world(ring, "info"), timeout=1.0):
         if reply.get("ok"):
             return reply["result"]
+    return None
+
+
+def end_pose(session: Any, ring: str, estimate: list[float] | None) -> dict[str, Any] | None:
+    """How far main's pose ``estimate`` (x mm, y mm, theta rad: the filter's, else dead
+    reckoning) is from the simulator's ground truth now; None without either."""
+    from tokenring.cliutil import query
+
+    if estimate is None:
+        return None
+    for _, reply in query(session, robot_keys.world(ring, "state"), timeout=1.0):
+        if reply.get("ok"):
+            truth = reply["result"]
+            x, y, theta = (float(v) for v in estimate[:3])
+            turned = math.remainder(theta - float(truth["theta_rad"]), math.tau)
+            return {
+                "estimate": [round(x, 1), round(y, 1), round(theta, 5)],
+                "truth": [round(truth["x_mm"], 1), round(truth["y_mm"], 1), round(truth["theta_rad"], 5)],
+                "error_mm": round(math.hypot(x - truth["x_mm"], y - truth["y_mm"]), 1),
+                "heading_error_deg": round(math.degrees(turned), 2),
+            }
     return None
 
 
@@ -119,9 +141,11 @@ def write_map(
     world: str | None = None,
     title: str = "",
     paths: dict[str, np.ndarray] | None = None,
+    end: dict[str, Any] | None = None,
 ) -> dict[str, Any] | None:
     """Write ``vectors`` (mm) in the format of ``path``'s extension; returns the score if known.
-    ``paths``: robot paths (name -> N×2 mm) drawn thinly in a PNG (the true one, the mapping pose)."""
+    ``paths``: robot paths (name -> N×2 mm) drawn thinly in a PNG (the true one, the mapping pose);
+    ``end``: the robot's end pose against the truth (:func:`end_pose`), kept in a .json map."""
     from modules.common.mapscore import score_map
 
     suffix = check_out(path)
@@ -129,6 +153,8 @@ def write_map(
     try:
         if suffix == ".json":
             doc = {"units": "mm", "world": world, "vectors": np.round(vectors, 1).tolist(), "score": score}
+            if end is not None:
+                doc["end_pose"] = end
             Path(path).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
         elif suffix == ".dxf":
             write_dxf(vectors, path, truth)

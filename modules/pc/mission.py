@@ -156,7 +156,7 @@ class Mission:
                 link.request("stop")
                 self.say("exploration stopped (time is up)")
         if self.map_out and not self._stopping():
-            from modules.pc.mapfiles import live_world, truth_from_info, write_map
+            from modules.pc.mapfiles import end_pose, live_world, truth_from_info, write_map
 
             got = link.request("get_map", timeout=60.0)
             import numpy as np
@@ -164,7 +164,8 @@ class Mission:
             vectors = np.asarray(got["vectors"], dtype=float).reshape(-1, 4) * 10.0
             info = live_world(self.launcher.session, self.launcher.ring)
             world, truth = truth_from_info(info) if info is not None else (None, None)
-            self.score = write_map(vectors, self.map_out, truth, world)
+            end = end_pose(self.launcher.session, self.launcher.ring, link.request("state").get("pose"))
+            self.score = write_map(vectors, self.map_out, truth, world, end=end)
             line = f"wrote {len(vectors)} vectors to {self.map_out}"
             if self.score is not None:
                 s = self.score
@@ -173,4 +174,6 @@ class Mission:
                     f"orientation error {s['orientation_error_deg'] or 0:.1f}°, "
                     f"corners {s['corners_closed']}/{s['corners_total']} ({world})"
                 )
+            if end is not None:
+                line += f"; the robot's pose ends {end['error_mm']:.0f} mm, {end['heading_error_deg']:+.1f}° off the truth"
             self.say(line)

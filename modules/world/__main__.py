@@ -13,6 +13,7 @@ import threading
 from typing import Any
 
 from modules.description import keys as robot_keys
+from modules.description.robot import BODIES
 from modules.description.roomfile import DEFAULT_WORLD, load_world
 from modules.world.service import WorldService
 from modules.world.sim import Simulator
@@ -41,6 +42,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--speed", default="1", help="simulated seconds per real second (default %(default)s)")
     p.add_argument("--seed", type=int, default=1, help="random seed (default %(default)s)")
+    p.add_argument(
+        "--body",
+        choices=BODIES,
+        default="ours",
+        help="the robot's body: today's (side sonars 16 cm apart) or the 2001 robot's (10 cm)",
+    )
     p.add_argument("--ring", default=keys.DEFAULT_RING)
     p.add_argument("-e", "--connect", action="append", default=[], metavar="ENDPOINT")
     p.add_argument("-l", "--listen", action="append", default=[], metavar="ENDPOINT")
@@ -68,11 +75,13 @@ def main(argv: list[str] | None = None) -> int:
             connect=[c for c in args.connect if c], listen=args.listen, config_file=args.zenoh_config
         )
         with open_session(config) as session:
-            service = WorldService(Simulator(world, seed=args.seed, speed=speed), session, ring)
+            service = WorldService(
+                Simulator(world, seed=args.seed, speed=speed, body=args.body), session, ring
+            )
             service.start()
             print(
                 f"world {world.name!r} ({len(world.walls)} walls, {len(world.circles)} obstacles), "
-                f"speed {speed:g}x, seed {args.seed}; truth on {robot_keys.world(ring, 'truth')}",
+                f"speed {speed:g}x, seed {args.seed}, body {args.body}; truth on {robot_keys.world(ring, 'truth')}",
                 flush=True,
             )
             try:

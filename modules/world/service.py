@@ -119,7 +119,12 @@ class WorldService:
         if what in ("state", "truth"):
             return self.sim.truth()
         if what == "info":
-            return {**self.sim.world.to_dict(), "seed": self.sim.seed, "speed": self.sim.clock.speed}
+            return {
+                **self.sim.world.to_dict(),
+                "seed": self.sim.seed,
+                "speed": self.sim.clock.speed,
+                "body": self.sim.body,
+            }
         if what == "control/pose":
             return self.sim.set_pose(request)
         if what == "control/batteries":

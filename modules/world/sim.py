@@ -17,6 +17,7 @@ from modules.description.robot import (
     DEFAULT_MOTOR_CURRENT_MA,
     SONAR_COUNT,
     SONAR_SLOT_MS,
+    sonar_mounts,
     sonar_world_pose,
 )
 from modules.description.room import Pose, World
@@ -75,10 +76,17 @@ class Simulator:
     """The robot's hardware and its room."""
 
     def __init__(
-        self, world: World, seed: int = 0, speed: float = 1.0, clock: SimClock | None = None
+        self,
+        world: World,
+        seed: int = 0,
+        speed: float = 1.0,
+        clock: SimClock | None = None,
+        body: str = "ours",
     ) -> None:
         self.world = world
         self.seed = seed
+        self.body = body
+        self.mounts = sonar_mounts(body)  # where the chosen body carries its sonar pairs
         self.clock = clock or SimClock(speed)
         streams = np.random.SeedSequence(seed).spawn(4)
         self.robot = TrackedRobot(world, np.random.default_rng(streams[0]))
@@ -221,7 +229,7 @@ class Simulator:
             for i, sensor in enumerate(sensors):
                 # pair i is pinged i slots later, from where the driving robot is by then
                 pose = self.pose_at(now + i * slot, now)
-                sx, sy, direction = sonar_world_pose(pose.x, pose.y, pose.theta, sensor)
+                sx, sy, direction = sonar_world_pose(pose.x, pose.y, pose.theta, sensor, self.mounts)
                 if self.powered:
                     samples = echo.envelope(self.world, sx, sy, direction, self.sonar_rng, ping)
                 else:
