@@ -51,6 +51,8 @@ def test_analyze_command_line(log_path: Path, tmp_path: Path, capsys: pytest.Cap
     assert cli_main(["analyze", str(log_path)]) == 0
     out = capsys.readouterr().out
     assert "filter (EKF)" in out and "end error" in out
+    share = summary["sync"]["within_98_102ms"]  # the seed's figure, in the text too
+    assert f"{100 * share:.0f} % within 98-102 ms" in out
     empty = tmp_path / "empty.trlog"
     DataLog(empty, "now", {}).close()
     with pytest.raises(LogError, match="no samples"):

@@ -52,6 +52,11 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"sync period: median {sync['median_period_ms']:.0f} ms, p99 {sync['p99_period_ms']:.0f} ms, "
             f"{100 * sync['within_2pct']:.0f} % within ±2 %"
+            + (
+                f", {100 * sync['within_98_102ms']:.0f} % within 98-102 ms (the seed: > 85 %)"
+                if sync.get("within_98_102ms") is not None
+                else ""
+            )
         )
     for entry in summary["sources"].values():
         parts = [f"{entry['name']:>15}"]
