@@ -33,6 +33,8 @@ from ringutil import control, launcher_pids, tap, wait_until
 
 from modules.common.lcdos import LcdOs
 from modules.common.lcdui import OsMenu, Screen
+from modules.pc.feed import LcdSource
+from tokenring.protocol import default_protocol
 from tokenring.resident import ResidentHost
 from tokenring.syswire import State
 
@@ -292,6 +294,9 @@ def test_up_no_start_waits_at_the_lcd_os_menu_until_start_robbi(procs, ring_name
         # downloaded, not started: no program runs, the LCD shows its OS menu
         assert programs_by_node(ring_name, endpoint) == {"main": None, "map": None, "lcd": None}
         wait_until(lambda: screen_shows(ring_name, endpoint, OS_MENU), 60, "the OS V2.0 Main Menu")
+        # ... and the web view's and Foxglove's /robot/lcd topic carries the OS menu's lines
+        feed_lines = LcdSource(default_protocol()).poll(session, ring_name, 0)
+        assert [m.data["lines"][:3] for m in feed_lines] == [OS_MENU], feed_lines
 
         # 2 Components: every node with its name, ID and program date
         tokenring_lcd(ring_name, endpoint, "--keys", "2")

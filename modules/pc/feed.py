@@ -665,7 +665,8 @@ def walls_messages(info: dict[str, Any], time_ns: int) -> list[Message]:
 @dataclass
 class LcdSource(FeedSource):
     """The LCD: its screen (``lcd/screen``, a 128×64 one-bit bitmap) as an image, and its text
-    lines, which only the lcd program knows (its report, ``ctl/70/program``, asked once a second)."""
+    lines, which only what draws them knows: the lcd program's report (``ctl/70/program``), or
+    before any program runs the OS menu's (``ctl/70/resident``), asked once a second."""
 
     protocol: Protocol
     poll_interval_s: float = 1.0
@@ -686,9 +687,13 @@ class LcdSource(FeedSource):
         from tokenring.cliutil import query
 
         node = self.protocol.node("lcd").id
-        for _, reply in query(session, keys.control(ring, node, "program"), timeout=1.0):
-            if reply.get("ok"):
+        for verb in ("program", "resident"):
+            for _, reply in query(session, keys.control(ring, node, verb), timeout=1.0):
+                if not reply.get("ok"):
+                    continue
                 report = (reply.get("result") or {}).get("report") or {}
+                if verb == "resident" and not report.get("showing"):
+                    continue  # the OS menu is not on the display: a program's screen is
                 if isinstance(report.get("lines"), list):
                     data = {
                         "lines": [str(line) for line in report["lines"]],
