@@ -148,6 +148,15 @@ def test_late_joiner_is_inserted_and_a_leaver_removed_without_losing_the_token(p
     with tap(endpoint) as session:
         wait_ring(session, ring_name, [10, 30, 50])
         procs.watch(launcher_pids(session, ring_name))
+        # the join and the leave are judged, not the ring's forming: on a loaded machine a late
+        # token while the three nodes first agree is regenerated (CI saw 6 in its first 0.4 s)
+        formed = stats(session, ring_name)[10]["stats"]["visits"]
+        wait_until(
+            lambda: stats(session, ring_name)[10]["stats"]["visits"] > formed + 100, 30, "the ring to run"
+        )
+        settled = stats(session, ring_name)
+        regenerated = sum(n["stats"]["tokens_regenerated"] for n in settled.values())
+        stale = sum(n["stats"]["stale_tokens"] for n in settled.values())
         joiner = procs.tokenring(
             "node", "--id", "40", "--ring", ring_name, "--connect", endpoint, "--bitrate", "max"
         )
@@ -165,8 +174,8 @@ def test_late_joiner_is_inserted_and_a_leaver_removed_without_losing_the_token(p
         )
         totals = stats(session, ring_name)
         assert set(totals) == {10, 30, 50}
-        assert sum(n["stats"]["tokens_regenerated"] for n in totals.values()) == 1  # never lost
-        assert sum(n["stats"]["stale_tokens"] for n in totals.values()) == 0  # never duplicated
+        assert sum(n["stats"]["tokens_regenerated"] for n in totals.values()) == regenerated  # never lost
+        assert sum(n["stats"]["stale_tokens"] for n in totals.values()) == stale  # never duplicated
     launcher.send_signal(signal.SIGTERM)
     assert launcher.wait(30) == 0
 
