@@ -1,6 +1,6 @@
 """The 2001 robot beside ours: the seeds' documented figures reproduced on the emulator, in one run.
 
-    python -m bench.seedtable            # about 40 minutes; writes bench/results/seedmode-DATE.json
+    python -m bench.seedtable            # about 2 hours; writes bench/results/seedmode-DATE.json
                                          # and rebuilds bench/RESULTS.md's section from it
 
 Parts (``--parts``; a part not run is carried over from the latest earlier result file):
@@ -8,9 +8,10 @@ Parts (``--parts``; a part not run is carried over from the latest earlier resul
 * ``classifier`` — seed 001 §4.3.2's behaviour table through the seed's classifier and ours;
 * ``roundtrip``  — the seed's seven computers at its pace (``--profile arcnet``), programs
   running with ``--algorithms seed`` and ``ours`` (seed: 30-40 ms);
-* ``maps``       — ``tokenring up --explore 2`` with the two robots and each module switched to
-  the seed's alone (:mod:`bench.seedmode`): coverage, precision, corners closed and the map's
-  orientation error early and late in the drive (seed: corners missing, a growing angle error);
+* ``maps``       — ``tokenring up --explore 2`` with the two robots and each part (module or
+  body) switched to the seed's alone (:mod:`bench.seedmode`), world seeds 1-3: coverage,
+  precision, corners closed, the map's orientation error early and late in the drive (seed:
+  corners missing, a growing angle error) and the robot's end pose error;
 * ``darmstadt``  — seed 000's experiment (3 laps of the 3 m square, :mod:`bench.localization`)
   with ``ours`` and with the seed's robot carrying the Darmstadt filter (``seed,copro=ours``):
   dead reckoning and filter end errors (seed: > 1500 mm and ≈ 300 mm) and the synchronisation's
@@ -176,7 +177,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--parts", default=",".join(PARTS), help="comma-separated (default: all)")
     parser.add_argument("--rooms", default="square,office", help="rooms for the maps (default %(default)s)")
-    parser.add_argument("--seeds", default="1", help="world seeds for the maps: 1 or 1,2 or 1-3 (default 1)")
+    parser.add_argument(
+        "--seeds", default="1-3", help="world seeds for the maps: 1 or 1,2 or 1-3 (default 1-3)"
+    )
     parser.add_argument("--speed", default="10", help="the world's speed-up for the maps (default 10)")
     parser.add_argument("--bitrate", default="max", help="the ring's bitrate for the maps (default max)")
     parser.add_argument("--minutes", type=float, default=20.0, help="emulated minutes per map (default 20)")
