@@ -65,6 +65,32 @@ def maps_table(table: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def _gain(better: dict[str, Any], worse: dict[str, Any], key: str, scale: float) -> str:
+    """``better[key] - worse[key]`` scaled, signed; a dash when either is unknown."""
+    if better.get(key) is None or worse.get(key) is None:
+        return "–"
+    return f"{scale * (better[key] - worse[key]):+.0f}"
+
+
+def buys_table(tables: dict[str, list[dict[str, Any]]]) -> str:
+    """Per part and room: what ``ours`` gains over the same robot with that part the seed's."""
+    lines = ["| part | room | coverage | precision | end error |", "|---|---|---|---|---|"]
+    for room, table in tables.items():
+        rows = {t["algorithms"]: t for t in table}
+        ours = rows.get("ours")
+        if ours is None:
+            continue
+        for config, row in rows.items():
+            if not config.endswith("=seed"):
+                continue
+
+            lines.append(
+                f"| {config.split('=')[0]} | {room} | {_gain(ours, row, 'coverage', 100)} "
+                f"| {_gain(ours, row, 'precision', 100)} | {_gain(row, ours, 'end_error_mm', 1)} |"
+            )
+    return "\n".join(lines) if len(lines) > 2 else ""
+
+
 def section_md(parts: dict[str, Any]) -> str:
     """The "2001 robot beside ours" section of RESULTS.md from a result file's parts."""
     out = [
@@ -112,9 +138,11 @@ def section_md(parts: dict[str, Any]) -> str:
         out += [
             f"**Maps**: `tokenring up --explore 2` for {m['minutes']:g} emulated minutes at speed {m['speed']}, "
             f"bitrate {m.get('bitrate', '2.5M')} (the round trip in robot time about the seed's), "
-            f"world seeds {', '.join(map(str, m['seeds']))}; medians. Each row switches the named module "
-            "to the seed's alone; `angle early → late` is the map's orientation error over its first and "
-            "last third of vectors (the seed: corners not recorded, an angle error growing with the drive).",
+            f"world seeds {', '.join(map(str, m['seeds']))}; medians. Each `PART=seed` row switches one part "
+            "to the seed's alone (a module, or `body`: the side sonar pairs 10 cm apart instead of 16); "
+            "`angle early → late` is the map's orientation error over its first and last third of vectors "
+            "(the seed: corners not recorded, an angle error growing with the drive); `end error` is how far "
+            "main's pose (the filter's, else dead reckoning) ends from the truth.",
             "",
         ]
         if len(m["seeds"]) < 3:
@@ -126,6 +154,15 @@ def section_md(parts: dict[str, Any]) -> str:
             ]
         for room, table in m["tables"].items():
             out += [f"*{room}*", "", maps_table(table), ""]
+        bought = buys_table(m["tables"])
+        if bought:
+            out += [
+                "**What each part of ours buys**: `ours` minus the row with that part the seed's "
+                "(coverage and precision in points, end error in mm: positive = ours is better).",
+                "",
+                bought,
+                "",
+            ]
     d = parts.get("darmstadt")
     if d:
         out += [

@@ -48,3 +48,20 @@ def test_each_part_comes_from_the_latest_file_that_has_it(tmp_path: Path) -> Non
     assert "| ours | 3 | 540 | 4.5 | 100.0 | 104.0 | 80 % | 100 % |" in text  # medians over the seeds
     assert "| ours | NONE | Y |" in text
     assert "seedmode-2026-11-20.json" in text and "seedmode-2026-11-25.json" in text
+
+
+def test_what_each_part_buys_is_ours_minus_that_part_the_seeds() -> None:
+    def row(config: str, coverage: float, precision: float, end: float | None) -> dict:
+        return {"algorithms": config, "runs": 3, "failed": 0, "coverage": coverage, "precision": precision,
+                "orientation_error_deg": 1.0, "corners_closed": 4, "corners_total": 8,
+                "angle_early_deg": 0.1, "angle_late_deg": 0.2, "end_error_mm": end}  # fmt: skip
+
+    maps = {
+        "minutes": 20, "speed": "10", "bitrate": "max", "seeds": [1, 2, 3],
+        "tables": {"square": [row("ours", 0.90, 0.95, 20.0), row("copro=seed", 0.30, 0.40, 250.0),
+                              row("body=seed", 0.93, 0.94, None)]},
+    }  # fmt: skip
+    text = section_md({"maps": maps})
+    assert "| body=seed | 3 | 93 % | 94 % | 1.0 | 4/8 | 0.1 → 0.2 | – |" in text
+    assert "| copro | square | +60 | +55 | +230 |" in text  # ours better everywhere
+    assert "| body | square | -3 | +1 | – |" in text  # the seed's body maps 3 points more here
