@@ -25,12 +25,16 @@ import time
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from tokenring.errors import ChannelError
 from tokenring.protocol import Channel, Command, CommandChannel, Protocol
+
+if TYPE_CHECKING:
+    import numpy as np
+
+# numpy is imported where a program's channel is built or read, never at import: a node that
+# runs no program only passes the token on and needs none of it
 
 log = logging.getLogger("tokenring.channels")
 
@@ -43,6 +47,8 @@ class ChannelBuffer:
     """
 
     def __init__(self, channel: Channel) -> None:
+        import numpy as np
+
         self.channel = channel
         self.raw = bytearray(channel.size)
         self.fields = np.ndarray((), dtype=channel.dtype, buffer=self.raw)
@@ -90,6 +96,8 @@ class ChannelBuffer:
 
 
 def _check_value(where: str, field: Any, value: Any) -> None:
+    import numpy as np
+
     dtype = field.dtype.base if field.dtype.shape else field.dtype
     if field.is_text:
         if not isinstance(value, str | bytes) or len(value) > field.size:
@@ -368,6 +376,8 @@ class Inbox:
             command = self.channel.command(code)
         except ChannelError:
             return ReceivedCommand(raw[off.sender], f"UNKNOWN_{code}", code, seq, {}, incarnation)
+        import numpy as np
+
         view = np.ndarray((), dtype=command.dtype, buffer=raw)
         args = {f.name: f.to_python(view[f.name]) for f in command.args}
         return ReceivedCommand(raw[off.sender], command.name, code, seq, args, incarnation)
@@ -488,6 +498,8 @@ def encode_command(
     missing = [n for n in names if n not in args]
     if missing:
         raise ChannelError(f"{channel.name} {command.name}: missing argument(s) {', '.join(missing)}")
+    import numpy as np
+
     raw = bytearray(channel.size)
     view = np.ndarray((), dtype=command.dtype, buffer=raw)
     view["sender"] = sender

@@ -8,14 +8,21 @@ Exit codes: 0 success; 1 the run failed (a node died, an invariant broke, nobody
 from __future__ import annotations
 
 import argparse
+import importlib
 import logging
 import sys
 from collections.abc import Callable
+from typing import Any
 
 from tokenring.errors import TokenRingError
 from tokenring.zconfig import use_node_runtime
 
 Runner = Callable[[argparse.Namespace], int]
+
+#: verbs parsed without the other verbs or any extension loaded: ``node`` is the process ``up``
+#: starts per module, which should import what a node needs and nothing else (no plotting, no
+#: other verbs, no package metadata): 25 MB less per node process
+LEAN_VERBS = ("node",)
 
 
 def _setup_logging(level: str) -> None:
@@ -38,10 +45,36 @@ def version() -> str:
         return "unknown (not installed)"
 
 
-def build_parser() -> tuple[argparse.ArgumentParser, dict[str, Runner]]:
-    from tokenring import extensions
+class _VersionAction(argparse.Action):
+    """``--version``, asking the package metadata only when given (importlib.metadata is heavy)."""
+
+    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, **kwargs: Any) -> None:
+        kwargs.setdefault("help", "show the version and exit")
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, *_: Any) -> None:
+        print(f"{parser.prog} {version()}")
+        parser.exit()
+
+
+def requested_verb(argv: list[str]) -> str | None:
+    """The verb ``argv`` names: its first word past the global options (None for none, or when
+    help or the version is asked for first)."""
+    words = iter(argv)
+    for word in words:
+        if word == "--log-level":
+            next(words, None)
+        elif word in ("-h", "--help", "--version"):
+            return None
+        elif not word.startswith("-"):
+            return word
+    return None
+
+
+def build_parser(verb: str | None = None) -> tuple[argparse.ArgumentParser, dict[str, Runner]]:
+    """The parser and each verb's runner: every verb, or only ``verb`` if it is a lean one
+    (:data:`LEAN_VERBS`), which then needs neither the other verbs nor the extensions."""
     from tokenring.cliutil import OneLineParser
-    from tokenring.commands import discover
 
     parser = OneLineParser(
         prog="tokenring",
@@ -49,11 +82,17 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, Runner]]:
         "around a ring of OS processes over Zenoh.",
         epilog="Run 'tokenring COMMAND --help' for a command's options.",
     )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
+    parser.add_argument("--version", action=_VersionAction)
     parser.add_argument("--log-level", default="info", choices=("debug", "info", "warning", "error"))
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     runners: dict[str, Runner] = {}
-    verbs = discover() + [module for extension in extensions.loaded() for module in extension.commands()]
+    if verb in LEAN_VERBS:
+        verbs = [importlib.import_module(f"tokenring.commands.{verb.replace('-', '_')}")]
+    else:
+        from tokenring import extensions
+        from tokenring.commands import discover
+
+        verbs = discover() + [module for extension in extensions.loaded() for module in extension.commands()]
     for module in verbs:
         name = module.__name__.rsplit(".", 1)[-1].replace("_", "-")
         before = set(sub.choices)
@@ -66,7 +105,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict[str, Runner]]:
 
 def main(argv: list[str] | None = None) -> int:
     try:
-        parser, runners = build_parser()
+        parser, runners = build_parser(requested_verb(sys.argv[1:] if argv is None else argv))
     except TokenRingError as exc:  # an application (extension) that fails to load
         print(f"tokenring: error: {exc}", file=sys.stderr)
         return exc.exit_code

@@ -35,7 +35,6 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cache
-from importlib.metadata import entry_points
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
@@ -167,6 +166,12 @@ def _wanted() -> set[str] | None:
 def loaded() -> tuple[Extension, ...]:
     """The registered extensions (those ``TOKENRING_EXTENSIONS`` names, if set), loaded once."""
     wanted = _wanted()
+    if wanted == set():
+        return ()  # the bare ring: not even the installed packages' metadata is read
+    # imported here: importlib.metadata (email, zipfile, csv) is most of the weight of finding
+    # extensions, which a node only pays for when it needs one (a program's hardware)
+    from importlib.metadata import entry_points
+
     found: list[Extension] = []
     for point in sorted(entry_points(group=GROUP), key=lambda p: p.name):
         if wanted is not None and point.name not in wanted:

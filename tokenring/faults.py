@@ -39,7 +39,6 @@ from typing import TYPE_CHECKING, Any
 from tokenring import keys
 from tokenring.control import AfterReply
 from tokenring.errors import TokenRingError, UsageError
-from tokenring.launcher import CRASH_EXIT_CODE
 
 if TYPE_CHECKING:
     from tokenring.node import NodeOS
@@ -162,6 +161,8 @@ class FaultInjector:
         later: threading.Timer | None = None  # started after the ring was told
         with self._lock:
             if kind == "crash":
+                from tokenring.launcher import CRASH_EXIT_CODE  # the launcher's, not a node's, module
+
                 later = threading.Timer(AFTER_REPLY_S, self._exit, args=(CRASH_EXIT_CODE,))
             elif kind == "hang":
                 if spec["soft"]:

@@ -113,10 +113,8 @@ class ProgramHost(TokenPathHost):
         handler = timing.handler.recent(512)
         send = timing.send.recent(512)
 
-        def pct(values: Any, q: float) -> float:
-            import numpy as np
-
-            return float(np.percentile(values, q) * 1e3) if len(values) else 0.0
+        def pct(values: list[float], q: float) -> float:
+            return R.percentiles(values, (q,))[0] * 1e3  # plain Python: no numpy in a node
 
         return {
             "id": self.node_id,
@@ -153,4 +151,4 @@ class ProgramHost(TokenPathHost):
 
     def round_times(self) -> list[float]:
         """Seconds between this node's last visits (up to 1024)."""
-        return self.timing.rounds.values().tolist()
+        return self.timing.rounds.as_list()

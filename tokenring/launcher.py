@@ -145,6 +145,7 @@ class Launcher:
         self.listen = list(listen)
         self.zenoh_config = zenoh_config
         self.protocol_path = protocol_path
+        self._protocol_cache: Any = None
         self.log_level = log_level
         self.respawn = respawn
         self.extra_node_args = list(extra_node_args)
@@ -268,7 +269,31 @@ class Launcher:
             cmd += ["--transport", self.transport, "--registry", self.registry.address]
         if self.profile:
             cmd += ["--profile", self.profile]
+        if not self.has_resident(plan):
+            cmd += ["--no-resident"]  # the node then loads no application before a program starts
         return cmd + self.extra_node_args + plan.extra_args
+
+    def has_resident(self, plan: NodePlan) -> bool:
+        """Whether an application adds a resident program to this node's OS (asked here, once
+        per ring, so that the other nodes need not load the applications at boot)."""
+        if "TOKENRING_EXTENSIONS" in self.extra_env:
+            return True  # the nodes have their own choice of applications: let them look
+        from tokenring import extensions
+
+        name = plan.name
+        if name.startswith("node"):  # a generated plan: the node takes protocol.yaml's name
+            spec = self._protocol().by_id.get(plan.node_id)
+            name = spec.name if spec is not None else name
+        return extensions.resident_program(name) is not None
+
+    def _protocol(self) -> Any:
+        if self._protocol_cache is None:
+            from tokenring.protocol import default_protocol, load_protocol
+
+            self._protocol_cache = (
+                load_protocol(self.protocol_path) if self.protocol_path else default_protocol()
+            )
+        return self._protocol_cache
 
     def _popen(self, argv: list[str], name: str) -> subprocess.Popen:
         env = node_environment()

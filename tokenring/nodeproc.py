@@ -17,7 +17,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import msgpack
 import zenoh
@@ -29,20 +29,21 @@ from tokenring.control import answer_query
 from tokenring.errors import UsageError
 from tokenring.faults import FaultInjector
 from tokenring.node import NodeOS
-from tokenring.pclink import PcLinkServer
-from tokenring.pcverbs import PcSystemVerbs
+from tokenring.procmem import memory_report
 from tokenring.profile import PROFILES
 from tokenring.profile import install as install_profile
-from tokenring.program import load_program_file
 from tokenring.programstore import ProgramStore, check_store_root, default_store_root, file_stamp
 from tokenring.protocol import Protocol, load_protocol
 from tokenring.regeneration import RegenerationLedger
-from tokenring.resident import ResidentHost
 from tokenring.ring import parse_bitrate
 from tokenring.system import SystemLayer
 from tokenring.syswire import DEFAULT_CAPACITY
 from tokenring.transport.factory import TRANSPORTS, make_transport
 from tokenring.zconfig import make_config, open_session
+
+if TYPE_CHECKING:  # imported where used: main's PC link, an application's resident program
+    from tokenring.pclink import PcLinkServer
+    from tokenring.resident import ResidentHost
 
 log = logging.getLogger("tokenring.nodeproc")
 
@@ -68,8 +69,12 @@ class NodeProcess:
         registry: str | None = None,
         profile: str | None = None,
         expected_nodes: int | None = None,
+        resident: bool = True,
     ) -> None:
         self.protocol = protocol
+        #: look for an application's resident program at boot (``--no-resident``: the launcher
+        #: found none, and the node loads no application before a program needs its hardware)
+        self.look_for_resident = resident
         self.ring = ring
         self.session = session
         # the token path's transport; the control plane below stays on the Zenoh session
@@ -93,6 +98,7 @@ class NodeProcess:
             "program": self._program_report,
             "fault": lambda request: self.faults.handle(request),
             "peers": lambda _: self._peers(),
+            "memory": lambda _: memory_report(),  # RSS, USS and what this process imported
         }
         self.faults = FaultInjector(self.os)
         # every regeneration counted by cause (spurious: no fault, no membership change); the
@@ -189,13 +195,18 @@ class NodeProcess:
         self.system.install()
         self.os.start()
         if self.os.node_id == self.os.preferred_master:  # main holds the PC's serial line
+            from tokenring.pclink import PcLinkServer
+            from tokenring.pcverbs import PcSystemVerbs
+
             self.pclink = PcLinkServer(self.os, self.session, self.ring)
             PcSystemVerbs(self.system).register(self.pclink)
             self.pclink.start()
-        resident = extensions.resident_program(self.os.name)
+        resident = extensions.resident_program(self.os.name) if self.look_for_resident else None
         if resident is not None:  # the application's part of this node's OS, from boot on
             if self.hardware is None:
                 self.hardware = extensions.open_hardware(self.os.name, self.session, self.ring)
+            from tokenring.resident import ResidentHost
+
             self.resident = ResidentHost(resident, self.os, self.system, self.hardware)
             self.control["resident"] = self.resident.control
             self.resident.start()
@@ -203,6 +214,8 @@ class NodeProcess:
     def run_program(self, path: str | Path | None) -> None:
         if path is None:
             return
+        from tokenring.program import load_program_file
+
         program_class, source = load_program_file(path)
         wanted = getattr(program_class, "module", "")
         if wanted and wanted != self.os.name:
@@ -272,6 +285,12 @@ def add_node_arguments(parser: argparse.ArgumentParser) -> None:
         choices=sorted(PROFILES),
         help="emulate a hardware's timing on top of the wire (arcnet: the seed robot)",
     )
+    parser.add_argument(
+        "--no-resident",
+        action="store_true",
+        help="no application adds to this node's OS (the launcher asked): load none at boot, "
+        "only when a program starts",
+    )
 
 
 def run_node(args: argparse.Namespace) -> int:
@@ -317,6 +336,7 @@ def run_node(args: argparse.Namespace) -> int:
             registry=args.registry,
             profile=args.profile,
             expected_nodes=args.expect,
+            resident=not args.no_resident,
         )
         node.stop_event = stop
         node.start()

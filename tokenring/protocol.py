@@ -8,20 +8,22 @@ naming the entry. After compilation every channel offers a zero-copy view over a
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import json
 import os
 import re
 import struct
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from functools import cache
+from functools import cache, cached_property
 from pathlib import Path
-from typing import Any
-
-import numpy as np
-import yaml
+from typing import TYPE_CHECKING, Any
 
 from tokenring.errors import ChannelError, ProtocolError
-from tokenring.yamlfile import one_line, strict_loader
+
+if TYPE_CHECKING:
+    import numpy as np
 
 SCALAR_TYPES: dict[str, str] = {
     "u8": "<u1",
@@ -65,15 +67,17 @@ class Field:
 
     name: str
     type_name: str
-    dtype: np.dtype
+    size: int
     offset: int
     unit: str = ""
     enum: str = ""
     doc: str = ""
 
-    @property
-    def size(self) -> int:
-        return self.dtype.itemsize
+    @cached_property
+    def dtype(self) -> np.dtype:
+        """The field's numpy dtype, built on first use: a node that only passes the token on
+        never imports numpy (what a node process imports is what it needs)."""
+        return type_dtype(self.type_name)
 
     @property
     def is_text(self) -> bool:
@@ -83,9 +87,7 @@ class Field:
         """Turn a numpy value of this field into plain Python (int, float, list or str)."""
         if self.is_text:
             return bytes(value).rstrip(b"\0").decode("ascii", "replace")
-        if isinstance(value, np.ndarray):
-            return value.tolist()
-        return value.item() if hasattr(value, "item") else value
+        return value.tolist() if hasattr(value, "tolist") else value  # numpy arrays and scalars
 
 
 @dataclass(frozen=True)
@@ -99,7 +101,11 @@ class Channel:
     address: int
     size: int
     fields: tuple[Field, ...]
-    dtype: np.dtype
+
+    @cached_property
+    def dtype(self) -> np.dtype:
+        """The channel's structured dtype (its fields over ``size`` bytes), built on first use."""
+        return struct_dtype(self.fields, self.size)
 
     @property
     def end(self) -> int:
@@ -107,6 +113,8 @@ class Channel:
 
     def view(self, buffer: bytearray | memoryview | bytes) -> np.ndarray:
         """A zero-copy 0-d structured view of this channel inside a token (or frame) buffer."""
+        import numpy as np
+
         return np.ndarray((), dtype=self.dtype, buffer=buffer, offset=self.address)
 
     def decode(self, buffer: bytes | bytearray | memoryview) -> dict[str, Any]:
@@ -122,9 +130,16 @@ class Command:
     name: str
     code: int
     args: tuple[Field, ...]
-    dtype: np.dtype
+    #: the inbox's command header and the arguments, over the inbox's ``size`` bytes
+    layout: tuple[Field, ...]
+    size: int
     doc: str = ""
     common: bool = False
+
+    @cached_property
+    def dtype(self) -> np.dtype:
+        """Header and arguments as one structured dtype over the inbox, built on first use."""
+        return struct_dtype(self.layout, self.size)
 
     def arg_names(self) -> tuple[str, ...]:
         return tuple(a.name for a in self.args)
@@ -155,6 +170,8 @@ class CommandChannel(Channel):
         out: dict[str, Any] = {f.name: f.to_python(head[f.name]) for f in self.fields}
         cmd = self.by_code.get(out["code"])
         if cmd is not None and out["state"] != 0:
+            import numpy as np
+
             view = np.ndarray((), dtype=cmd.dtype, buffer=buffer, offset=self.address)
             out["command"] = cmd.name
             out["args"] = {a.name: a.to_python(view[a.name]) for a in cmd.args}
@@ -282,15 +299,56 @@ def fields_struct(fields: Iterable[Field]) -> struct.Struct:
     for f in fields:
         if f.offset != offset:
             raise ProtocolError("<protocol>", f.name, "fields of a struct must be packed without gaps")
-        base = f.dtype.base if f.dtype.shape else f.dtype
-        count = int(np.prod(f.dtype.shape)) if f.dtype.shape else 1
-        if f.is_text or (base.kind == "u" and base.itemsize == 1 and f.dtype.shape):
+        base, count = split_type(f.type_name)
+        if f.is_text or (base == "u8" and count is not None):
             codes.append(f"{f.size}s")
         else:
-            key = f"{base.kind}{base.itemsize}"
-            codes.append((str(count) if count > 1 else "") + _STRUCT_CODES[key])
+            n = count or 1
+            codes.append((str(n) if n > 1 else "") + _STRUCT_CODES[SCALAR_TYPES[base][1:]])
         offset += f.size
     return struct.Struct("<" + "".join(codes))
+
+
+def split_type(type_name: str) -> tuple[str, int | None]:
+    """``("i16", 4)`` for ``i16[4]``, ``("u8", None)`` for ``u8``: a checked field type's parts."""
+    match = _TYPE_RE.match(type_name.strip())
+    assert match is not None, type_name  # the compiler checked it
+    count = match.group("count")
+    return match.group("base"), int(count) if count is not None else None
+
+
+def type_size(type_name: str) -> int:
+    """Bytes of a checked field type (``str[12]``: 12, ``i16[4]``: 8), without numpy."""
+    base, count = split_type(type_name)
+    one = 1 if base == "str" else int(SCALAR_TYPES[base][2:])
+    return one * (count or 1)
+
+
+def type_dtype(type_name: str) -> np.dtype:
+    """The numpy dtype of a checked field type."""
+    import numpy as np
+
+    base, count = split_type(type_name)
+    if base == "str":
+        return np.dtype(f"S{count}")
+    if count is None:
+        return np.dtype(SCALAR_TYPES[base])
+    return np.dtype((SCALAR_TYPES[base], (count,)))
+
+
+def struct_dtype(fields: Iterable[Field], itemsize: int) -> np.dtype:
+    """Packed (or placed) fields as one numpy structured dtype of ``itemsize`` bytes."""
+    import numpy as np
+
+    fields = list(fields)
+    return np.dtype(
+        {
+            "names": [f.name for f in fields],
+            "formats": [f.dtype for f in fields],
+            "offsets": [f.offset for f in fields],
+            "itemsize": itemsize,
+        }
+    )
 
 
 def default_protocol_path() -> Path:
@@ -312,7 +370,7 @@ def load_protocol(path: str | os.PathLike[str] | None = None) -> Protocol:
 
     source = str(file)
     text = read_text(file, "protocol file", lambda where, problem: ProtocolError(where, "", problem))
-    return parse_protocol(text, source)
+    return parse_protocol(text, source, cache=True)
 
 
 @cache
@@ -321,17 +379,76 @@ def default_protocol() -> Protocol:
     return load_protocol()
 
 
-def parse_protocol(text: str, source: str = "<protocol>") -> Protocol:
-    """Compile protocol text (YAML); raises :class:`ProtocolError`."""
+def parse_protocol(text: str, source: str = "<protocol>", *, cache: bool = False) -> Protocol:
+    """Compile protocol text (YAML); raises :class:`ProtocolError`. ``cache``: read the text's
+    document from, and keep a valid one in, :func:`document_cache_dir` (protocol files)."""
+    if not cache:
+        return _Compiler(source).compile(_read_yaml(text, source))
+    path = cached_document_path(text)
     try:
-        doc = yaml.load(text, Loader=strict_loader(ProtocolError, source))
+        return _Compiler(source).compile(json.loads(path.read_text()))
+    except (OSError, ValueError, ProtocolError):
+        pass  # none yet, damaged, or not what this compiler accepts: read the YAML
+    doc = _read_yaml(text, source)
+    protocol = _Compiler(source).compile(doc)
+    keep_document(doc, path)
+    return protocol
+
+
+#: bump when the YAML reading changes what a text means (tokenring.yamlfile's loader)
+DOCUMENT_CACHE_VERSION = 1
+#: parsed documents kept (the newest; one per protocol text in use)
+DOCUMENT_CACHE_SIZE = 16
+
+
+def document_cache_dir() -> Path:
+    """Where parsed protocol documents are kept: ``$XDG_CACHE_HOME/tokenring`` (``~/.cache``)."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "tokenring"
+
+
+def cached_document_path(text: str) -> Path:
+    """Where the parsed document of protocol ``text`` is kept (named by the text's hash).
+
+    A protocol file's YAML is read once; later readings of the same text (every node of a ring
+    booting) take its document from this JSON copy and import no YAML parser: 1-2 MB of each
+    node process's memory. A text JSON cannot hold exactly, or a cache that cannot be written,
+    is simply read as YAML each time."""
+    digest = hashlib.sha256(f"{DOCUMENT_CACHE_VERSION}\0{text}".encode()).hexdigest()
+    return document_cache_dir() / f"protocol-{digest[:32]}.json"
+
+
+def keep_document(doc: Any, path: Path) -> None:
+    """Write ``doc`` to ``path`` if JSON gives it back as it was; keep the newest few."""
+    partial = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    try:
+        copy = json.dumps(doc)
+        if json.loads(copy) != doc:  # e.g. keys that are numbers
+            return
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial.write_text(copy)
+        os.replace(partial, path)  # whole or not at all, for nodes booting together
+        kept = sorted(path.parent.glob("protocol-*.json"), key=lambda p: p.stat().st_mtime, reverse=True)
+        for old in kept[DOCUMENT_CACHE_SIZE:]:
+            old.unlink(missing_ok=True)
+    except (OSError, TypeError, ValueError):
+        with contextlib.suppress(OSError):
+            partial.unlink(missing_ok=True)
+
+
+def _read_yaml(text: str, source: str) -> Any:
+    import yaml
+
+    from tokenring.yamlfile import one_line, strict_loader
+
+    try:
+        return yaml.load(text, Loader=strict_loader(ProtocolError, source))
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         raise ProtocolError(source, where, f"YAML syntax error: {exc.problem}") from None
     except yaml.YAMLError as exc:
         raise ProtocolError(source, "", f"not YAML text: {one_line(exc)}") from None
-    return _Compiler(source).compile(doc)
 
 
 class _Compiler:
@@ -369,7 +486,8 @@ class _Compiler:
             )
 
     # -- types and fields ----------------------------------------------------------------------
-    def field_dtype(self, type_name: Any, entry: str) -> np.dtype:
+    def field_size(self, type_name: Any, entry: str) -> int:
+        """Check a field's type; its size in bytes."""
         if not isinstance(type_name, str):
             raise self.fail(entry, f"type must be text such as 'u8' or 'i16[4]', got {type_name!r}")
         match = _TYPE_RE.match(type_name.strip())
@@ -379,15 +497,13 @@ class _Compiler:
         if base == "str":
             if count is None or int(count) < 1:
                 raise self.fail(entry, f"text type needs a length, e.g. 'str[12]', got {type_name!r}")
-            return np.dtype(f"S{int(count)}")
+            return type_size(type_name)
         if base not in SCALAR_TYPES:
             known = ", ".join([*SCALAR_TYPES, "str[N]"])
             raise self.fail(entry, f"unknown type {base!r} (known: {known})")
-        if count is None:
-            return np.dtype(SCALAR_TYPES[base])
-        if int(count) < 1:
+        if count is not None and int(count) < 1:
             raise self.fail(entry, f"array length must be at least 1 in {type_name!r}")
-        return np.dtype((SCALAR_TYPES[base], (int(count),)))
+        return type_size(type_name)
 
     def fields(self, spec: Any, entry: str, start: int, limit: int, enums: Mapping[str, Any]) -> list[Field]:
         """Fields packed from ``start``; each must end at or before ``limit`` (channel size)."""
@@ -413,31 +529,19 @@ class _Compiler:
                     offset = self.integer(raw["offset"], f"{where}.offset", 0, limit)
             else:
                 type_name = raw
-            dtype = self.field_dtype(type_name, where)
-            if offset + dtype.itemsize > limit:
+            size = self.field_size(type_name, where)
+            if offset + size > limit:
                 raise self.fail(
                     where,
-                    f"field {name!r} ({type_name}, {dtype.itemsize} bytes at offset {offset}) "
-                    f"overflows the {limit}-byte channel by {offset + dtype.itemsize - limit} bytes",
+                    f"field {name!r} ({type_name}, {size} bytes at offset {offset}) "
+                    f"overflows the {limit}-byte channel by {offset + size - limit} bytes",
                 )
             for other in out:
-                if offset < other.offset + other.size and other.offset < offset + dtype.itemsize:
+                if offset < other.offset + other.size and other.offset < offset + size:
                     raise self.fail(where, f"field {name!r} overlaps field {other.name!r}")
-            out.append(Field(name, str(type_name), dtype, offset, unit, enum, doc))
-            offset += dtype.itemsize
+            out.append(Field(name, str(type_name), size, offset, unit, enum, doc))
+            offset += size
         return out
-
-    @staticmethod
-    def struct(fields: Iterable[Field], itemsize: int) -> np.dtype:
-        fields = list(fields)
-        return np.dtype(
-            {
-                "names": [f.name for f in fields],
-                "formats": [f.dtype for f in fields],
-                "offsets": [f.offset for f in fields],
-                "itemsize": itemsize,
-            }
-        )
 
     # -- sections ------------------------------------------------------------------------------
     def compile(self, doc: Any) -> Protocol:
@@ -573,13 +677,13 @@ class _Compiler:
             spec = self.mapping(spec, where)
             self.only_keys(spec, _FIELD_KEYS, where)
             offset = self.integer(self.get(spec, "offset", where), f"{where}.offset", 0, 511)
-            dtype = self.field_dtype(self.get(spec, "type", where), where)
+            size = self.field_size(self.get(spec, "type", where), where)
             for other in fields:
-                if offset < other.offset + other.size and other.offset < offset + dtype.itemsize:
+                if offset < other.offset + other.size and other.offset < offset + size:
                     raise self.fail(where, f"overlaps header field {other.name!r}")
             if "const" in spec:
                 consts[name] = self.integer(spec["const"], f"{where}.const", 0, 255)
-            fields.append(Field(name, str(spec["type"]), dtype, offset, "", str(spec.get("enum", ""))))
+            fields.append(Field(name, str(spec["type"]), size, offset, "", str(spec.get("enum", ""))))
         if any(f.size != 1 for f in fields if f.name in HEADER_FIELDS):
             bad = next(f for f in fields if f.name in HEADER_FIELDS and f.size != 1)
             raise self.fail(f"token.header.{bad.name}", "the seed's header fields are one byte")
@@ -693,7 +797,6 @@ class _Compiler:
             address,
             size,
             tuple(fields),
-            self.struct(fields, size),
         )
 
     def command_channel(
@@ -733,9 +836,7 @@ class _Compiler:
                     entry,
                     f"argument name(s) {', '.join(sorted(clash))} clash with the command header",
                 )
-            cmd = Command(
-                cmd_name, code, tuple(args), self.struct([*cmd_header, *args], size), doc, is_common
-            )
+            cmd = Command(cmd_name, code, tuple(args), (*cmd_header, *args), size, doc, is_common)
             commands[cmd_name] = cmd
             by_code[code] = cmd
         return CommandChannel(
@@ -746,7 +847,6 @@ class _Compiler:
             address,
             size,
             tuple(cmd_header),
-            self.struct(cmd_header, size),
             commands,
             by_code,
         )

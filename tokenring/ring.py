@@ -27,8 +27,10 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 ARCNET_BITRATE = 2_500_000
 ARCNET_PACKET_BYTES = 516
@@ -145,8 +147,14 @@ class RollingStats:
         return len(self._samples)
 
     def values(self) -> np.ndarray:
-        """Samples oldest first."""
+        """Samples oldest first (numpy imported here: a node's runtime needs none of it)."""
+        import numpy as np
+
         return np.array(list(self._samples))
+
+    def as_list(self) -> list[float]:
+        """Samples oldest first, as plain floats."""
+        return list(self._samples)
 
     def recent(self, count: int) -> list[float]:
         """The last ``count`` samples (newest first). ``list`` copies the deque in one C call,
@@ -162,17 +170,23 @@ class RollingStats:
         default. Plain Python: every node's watchdog calls this twice a second, and numpy's
         machinery, cold in a process that mostly sleeps, cost ~0.5 ms a call - at 255 nodes a
         quarter of a core, on a ring whose round time is bound by the machine's CPU."""
-        values = sorted(self.recent(last))
-        if not values:
-            return [default for _ in qs]
-        top = len(values) - 1
-        out = []
-        for q in qs:
-            position = q / 100 * top
-            below = int(position)
-            above = min(below + 1, top)
-            out.append(values[below] + (values[above] - values[below]) * (position - below))
-        return out
+        return percentiles(self.recent(last), qs, default)
+
+
+def percentiles(samples: list[float], qs: tuple[float, ...], default: float = 0.0) -> list[float]:
+    """Percentiles ``qs`` (0..100) of ``samples`` from one sort, linearly interpolated as numpy's
+    default; ``default`` for each when there are none. Plain Python: no numpy in a node."""
+    values = sorted(samples)
+    if not values:
+        return [default for _ in qs]
+    top = len(values) - 1
+    out = []
+    for q in qs:
+        position = q / 100 * top
+        below = int(position)
+        above = min(below + 1, top)
+        out.append(values[below] + (values[above] - values[below]) * (position - below))
+    return out
 
 
 @dataclass

@@ -1,0 +1,100 @@
+"""A node process imports what a node needs and nothing else (issue 23): no numpy, no plotting,
+no package metadata, no robot code and none of the other CLI verbs while it runs no program;
+its ``memory`` control verb says so. The 40 MB aim itself is the benchmark's (bench/suite.py):
+tests hold no absolute sizes."""
+
+from __future__ import annotations
+
+import os
+import signal
+from pathlib import Path
+
+from ringutil import control, launcher_pids, tap, wait_ring
+
+from tokenring.protocol import Protocol, load_protocol, parse_protocol
+
+#: what a node that runs no program must not have imported (the test's own list)
+NOT_IN_A_BARE_NODE = ("numpy", "matplotlib", "scipy", "ezdxf", "PIL", "importlib.metadata", "modules")
+
+
+def unwanted(modules: list[str]) -> list[str]:
+    """The modules of ``modules`` a bare node must not hold: the list above (and submodules),
+    and every CLI verb but ``node``."""
+    bad = [m for m in modules if any(m == n or m.startswith(n + ".") for n in NOT_IN_A_BARE_NODE)]
+    verbs = [m for m in modules if m.startswith("tokenring.commands.") and m != "tokenring.commands.node"]
+    return bad + verbs
+
+
+def test_nodes_without_programs_import_no_numpy_metadata_robot_code_or_other_verbs(
+    procs, ring_name, endpoint
+):
+    # the robot's extension is installed: only lcd, which it gives a resident menu, loads it
+    launcher = procs.tokenring(
+        "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor,lcd",
+        "--no-programs", "--no-world", "--bitrate", "max",
+    )  # fmt: skip
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10, 20, 70], timeout=120)
+        pids = launcher_pids(session, ring_name)
+        procs.watch(pids)
+        reports = {node: control(session, ring_name, node, "memory") for node in (10, 20, 70)}
+        resident = control(session, ring_name, 70, "resident")
+    launcher.send_signal(signal.SIGINT)
+    assert launcher.wait(60) == 130
+    assert resident["error"] is None  # lcd's menu runs: the launcher let it load the extension
+    for node in (10, 20):
+        report = reports[node]
+        assert unwanted(report["modules"]) == [], (node, unwanted(report["modules"]))
+        assert report["heavy"] == [], (node, report["heavy"])
+        assert "tokenring.nodeproc" in report["modules"] and report["modules_count"] == len(report["modules"])
+    assert "modules" in reports[70]["modules"]  # the robot's resident menu is robot code
+    for node, report in reports.items():
+        # read from the kernel: a node's private pages are part of its resident ones, never all
+        # of them (the interpreter's and Zenoh's code is shared with the other nodes)
+        assert 0 < report["uss_kb"] < report["rss_kb"], (node, report)
+
+
+def test_a_node_started_by_hand_loads_only_the_node_verb(procs, ring_name, endpoint):
+    node = procs.tokenring(
+        "--log-level", "warning", "node", "--id", "37", "--ring", ring_name, "--no-store",
+        "--listen", endpoint,
+        env={"TOKENRING_EXTENSIONS": ""},  # as the ring's own tests of a non-robot system run
+    )  # fmt: skip
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [37], timeout=120)
+        report = control(session, ring_name, 37, "memory")
+    node.send_signal(signal.SIGTERM)
+    assert node.wait(30) == 0
+    assert unwanted(report["modules"]) == [], unwanted(report["modules"])
+    assert "tokenring.commands.node" in report["modules"]
+
+
+def test_the_protocol_is_read_as_yaml_once_then_from_its_cached_document(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    source = Path(__file__).resolve().parent.parent / "protocol.yaml"
+    first = load_protocol(source)
+    cached = list((tmp_path / "tokenring").glob("protocol-*.json"))
+    assert len(cached) == 1, cached
+    again = load_protocol(source)
+    assert isinstance(again, Protocol) and again == first
+    assert again.channel("sonar.data").dtype == first.channel("sonar.data").dtype
+    # a damaged copy is read past, and the text read as YAML again
+    cached[0].write_text("{not json")
+    assert load_protocol(source) == first
+    # an edited file is a new document, not the cached one
+    edited = tmp_path / "edited.yaml"
+    edited.write_text(source.read_text().replace("id: 80", "id: 81", 1))
+    assert 81 in load_protocol(edited).by_id and 81 not in first.by_id
+    assert len(list((tmp_path / "tokenring").glob("protocol-*.json"))) == 2
+    # text compiled from elsewhere (a recording's protocol, a test's) leaves nothing behind
+    parse_protocol(edited.read_text().replace("id: 81", "id: 82", 1))
+    assert len(list((tmp_path / "tokenring").glob("protocol-*.json"))) == 2
+
+
+def test_a_cache_that_cannot_be_written_costs_nothing_but_the_yaml(tmp_path, monkeypatch):
+    blocked = tmp_path / "file"
+    blocked.write_text("")  # a file where the cache directory would be
+    monkeypatch.setenv("XDG_CACHE_HOME", str(blocked))
+    source = Path(__file__).resolve().parent.parent / "protocol.yaml"
+    assert load_protocol(source).by_id[10].name == "main"
+    assert not os.path.isdir(blocked)
