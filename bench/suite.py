@@ -11,7 +11,8 @@ Sections (``--sections``; all but the slow ``spurious`` by default):
 * ``scaling``    round trip vs ring size at ``--bitrate max``, each ring against a bare Zenoh
                  ring of the same size and topology measured in the same run (ratio, per hop),
                  both topologies: a full mesh of peers and clients of a Zenoh router;
-                 RSS and CPU per node, the launcher's (router's) CPU, a fit of the cost in N;
+                 RSS and USS (private memory) and CPU per node, the launcher's (router's)
+                 CPU, a fit of the cost in N;
 * ``transports`` the same ring over Zenoh (peers, router), plain UDP sockets and ZeroMQ;
 * ``runtime``    Zenoh's async runtime as tokenring sets it (one worker thread for rx and tx)
                  against Zenoh's defaults, both rings (bare and tokenring) under each;
@@ -55,6 +56,8 @@ from bench.sections import QUICK_SECTIONS, RAW_DIR, SECTIONS, SLOW_SECTIONS, raw
 
 HERE = Path(__file__).resolve().parent
 RESULTS_DIR = HERE / "results"
+#: issue 23's aim for one node process's RSS, printed beside the measured figure
+RSS_AIM_MB = 40.0
 FULL_SIZES = {"peer": [2, 4, 8, 16, 32, 64], "router": [8, 16, 32, 64, 128, 255]}
 QUICK_SIZES = {"peer": [2, 4, 8], "router": [8]}
 SEED_NODES = ["main", "motor", "sonar", "compass", "copro", "map", "lcd"]  # the seed's 7 computers
@@ -92,6 +95,7 @@ def pool_runs(runs: list[Any]) -> Any:
         middle.stats,
         launcher_cpu_s=sum(r.launcher_cpu_s for r in runs),
         form_s=float(np.median([r.form_s for r in runs])),
+        uss_mb=[x for r in runs for x in getattr(r, "uss_mb", [])],
     )
 
 
@@ -128,15 +132,33 @@ def stats_ms(seconds: list[float]) -> dict[str, float]:
     return summarize(seconds)
 
 
+def uss_values(run: Any) -> list[float]:
+    """The run's USS figures per node that could be read (none from a record without them)."""
+    return [x for x in getattr(run, "uss_mb", []) if not np.isnan(x)]
+
+
+def memory_line(run: Any) -> str:
+    """One node process's memory in a run, beside the aim: ``RSS 38.2 MB (aim <= 40), USS 16.1 MB``."""
+    rss = float(np.mean(run.rss_mb))
+    text = f"per node: RSS {rss:.1f} MB (aim <= {RSS_AIM_MB:.0f} MB{', met' if rss <= RSS_AIM_MB else ', missed'})"
+    uss = uss_values(run)
+    return text + (f", USS {np.mean(uss):.1f} MB" if uss else "")
+
+
 def ring_record(run: Any, n: int) -> dict[str, Any]:
     """The figures of one ``run_ring`` result that the report needs."""
     rtt = stats_ms(run.rounds_s)
+    uss = uss_values(run)
     return {
         "rtt_ms": rtt,
         "per_hop_us": rtt["median"] * 1e3 / n,
         "handler_us": run.handler_us,
         "send_us": run.stats.get("send_us", {}),
         "rss_mb": {"mean": float(np.mean(run.rss_mb)), "max": float(np.max(run.rss_mb))},
+        # USS: the pages only this node holds (RSS counts the interpreter's and Zenoh's shared
+        # code in every process); N x USS + one RSS is what a ring of N needs
+        "uss_mb": {"mean": float(np.mean(uss)), "max": float(np.max(uss))} if uss else {},
+        "rss_aim_mb": RSS_AIM_MB,
         "cpu_per_node_pct": float(np.mean(run.cpu_s) / run.wall_s * 100),
         "cpu_all_nodes_pct": float(np.sum(run.cpu_s) / run.wall_s * 100),
         "launcher_cpu_pct": float(run.launcher_cpu_s / run.wall_s * 100),
@@ -203,6 +225,7 @@ def section_scaling(ctx: Context) -> dict[str, Any]:
                     ctx.progress.note(
                         f"median {np.median(run.rounds_s) * 1e3:.3f} ms, p99 {np.percentile(run.rounds_s, 99) * 1e3:.3f} ms"
                     )
+                    ctx.progress.note(memory_line(run))
                     if bare:
                         pair_ratios.append(float(np.median(run.rounds_s) / np.median(bare)))
                 except Exception as exc:
@@ -255,6 +278,9 @@ def fit_costs(runs: list[dict[str, Any]]) -> dict[str, Any]:
             "r2": float(r2),
             "power_law_exponent": k,
             "rss_mb_per_node": float(np.mean([r["rss_mb"]["mean"] for r in good])),
+            "uss_mb_per_node": float(np.mean([r["uss_mb"]["mean"] for r in good if r.get("uss_mb")]))
+            if any(r.get("uss_mb") for r in good)
+            else float("nan"),
             "sizes": [int(x) for x in n],
         }
     return fits

@@ -74,6 +74,14 @@ def proc_rss_mb(pid: int) -> float:
     return float("nan")
 
 
+def proc_uss_mb(pid: int) -> float:
+    """The process's unique set size in MB (its private pages: what stopping it gives back)."""
+    from tokenring.procmem import memory_kb
+
+    uss = memory_kb(pid)["uss_kb"]
+    return uss / 1024 if uss >= 0 else float("nan")
+
+
 def proc_cpu_s(pid: int) -> float:
     try:
         fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
@@ -151,6 +159,7 @@ class RingRun:
     stats: dict[str, Any] = field(default_factory=dict)
     launcher_cpu_s: float = 0.0  # the launcher process: the Zenoh router, the registry
     form_s: float = 0.0  # from the first process started to the ring circulating through all
+    uss_mb: list[float] = field(default_factory=list)  # per node, beside ``rss_mb``
 
 
 def run_ring(
@@ -249,6 +258,7 @@ def run_ring(
             launcher_cpu = time.process_time() - own_cpu
             cpu = [proc_cpu_s(c.process.pid) - cpu0[c.process.pid] for c in launcher.child_list()]
             rss = [proc_rss_mb(c.process.pid) for c in launcher.child_list()]
+            uss = [proc_uss_mb(c.process.pid) for c in launcher.child_list()]
             stats = query(session, key, timeout=2.0)[0][1]["result"]
             round_list = query(session, keys.control(ring, master, "rounds"), timeout=2.0)[0][1]["result"]
             return RingRun(
@@ -260,6 +270,7 @@ def run_ring(
                 stats,
                 launcher_cpu_s=launcher_cpu,
                 form_s=formed - t_start if formed else float("nan"),
+                uss_mb=uss,
             )
     finally:
         launcher.stop()
