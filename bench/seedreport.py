@@ -69,7 +69,8 @@ def _gain(better: dict[str, Any], worse: dict[str, Any], key: str, scale: float)
     """``better[key] - worse[key]`` scaled, signed; a dash when either is unknown."""
     if better.get(key) is None or worse.get(key) is None:
         return "–"
-    return f"{scale * (better[key] - worse[key]):+.0f}"
+    delta = round(scale * (better[key] - worse[key]))
+    return f"{delta:+d}" if delta else "0"
 
 
 def buys_table(tables: dict[str, list[dict[str, Any]]]) -> str:

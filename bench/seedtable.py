@@ -1,6 +1,6 @@
 """The 2001 robot beside ours: the seeds' documented figures reproduced on the emulator, in one run.
 
-    python -m bench.seedtable            # about 2 hours; writes bench/results/seedmode-DATE.json
+    python -m bench.seedtable            # about an hour; writes bench/results/seedmode-DATE.json
                                          # and rebuilds bench/RESULTS.md's section from it
 
 Parts (``--parts``; a part not run is carried over from the latest earlier result file):

@@ -65,3 +65,5 @@ def test_what_each_part_buys_is_ours_minus_that_part_the_seeds() -> None:
     assert "| body=seed | 3 | 93 % | 94 % | 1.0 | 4/8 | 0.1 → 0.2 | – |" in text
     assert "| copro | square | +60 | +55 | +230 |" in text  # ours better everywhere
     assert "| body | square | -3 | +1 | – |" in text  # the seed's body maps 3 points more here
+    maps["tables"]["square"][1] = row("copro=seed", 0.899, 0.95, 20.2)
+    assert "| copro | square | 0 | 0 | 0 |" in section_md({"maps": maps})  # no "-0"
