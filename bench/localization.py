@@ -74,9 +74,10 @@ def run_experiment(
     tag = f"{Path(world).stem}-seed{seed}"
     logs = workdir / tag
     logs.mkdir(parents=True, exist_ok=True)
-    config: dict[str, Any] = {"logs": {"directory": str(logs)}}
+    config = repository_config()
+    config["logs"] = {**config.get("logs", {}), "directory": str(logs)}
     if world != "square":
-        config["walls"] = {"file": world}
+        config["walls"] = {**config.get("walls", {}), "file": world}
     config_path = workdir / f"localization-{tag}.yaml"
     config_path.write_text(yaml.safe_dump(config))
     os.environ["TOKENRING_LOCALIZER_CONFIG"] = str(config_path)
@@ -141,6 +142,14 @@ def run_experiment(
     summary["finished"] = outcome.get("finished")
     summary["drive_seconds"] = outcome.get("seconds")
     return summary
+
+
+def repository_config() -> dict[str, Any]:
+    """config/localization.yaml as a plain dict: the runs use its settings (the sonar model and
+    noise it turns on beyond the built-in defaults), with the log directory and walls set per run."""
+    from modules.common.locconfig import default_config_path
+
+    return yaml.safe_load(default_config_path().read_text()) or {}
 
 
 def run_actions(link: Any, text: str, name: str, speed_pct: int, timeout: float) -> dict[str, Any]:

@@ -7,12 +7,23 @@ from pathlib import Path
 import pytest
 from conftest import run_tokenring
 
-from modules.common.locconfig import DEFAULTS, ConfigError, default_config_path, load_config, parse_config
+from modules.common.locconfig import (
+    DEFAULTS,
+    REPOSITORY_SETTINGS,
+    ConfigError,
+    default_config_path,
+    load_config,
+    parse_config,
+)
 
 
 def test_shipped_file_spells_out_exactly_the_defaults() -> None:
     assert default_config_path().exists()
-    assert load_config(default_config_path()) == DEFAULTS
+    # the built-in defaults, and where the file turns on issue 21's sonar model and noise
+    assert load_config(default_config_path()) == load_config(REPOSITORY_SETTINGS)
+    for section, keys in REPOSITORY_SETTINGS.items():
+        for key in keys:
+            assert DEFAULTS[section][key] != load_config(default_config_path())[section][key]
     assert load_config(None) == DEFAULTS
     assert parse_config("", "empty.yaml") == DEFAULTS
 

@@ -191,6 +191,12 @@ def detector_params(config: dict[str, Any]) -> DetectorParams:
         max_turn_deg=w["max_turn_deg"],
         min_sigma_d_mm=w["min_sigma_d_mm"],
         min_sigma_alpha_deg=w["min_sigma_alpha_deg"],
+        range_model=w["range_model"],
+        max_beam_off_deg=w["max_beam_off_deg"],
+        late_from_mm=w["sonar_late"]["from_mm"],
+        late_mm_per_m=w["sonar_late"]["mm_per_m"],
+        late_mm_per_deg2=w["sonar_late"]["mm_per_deg2"],
+        shared_sigma_mm=w["shared_sigma_mm"],
     )
 
 
@@ -300,7 +306,13 @@ class LocalizationCore:
         travel = config["filter"]["travel"]
         if not travel["enabled"] or "sonar" not in self.sensors:
             return None
-        return TravelGauge(sonar_mounts(config), GaugeParams(max_range_mm=travel["max_range_mm"]))
+        late = config["walls"]["sonar_late"] if config["walls"]["range_model"] == "tangent" else None
+        params = GaugeParams(
+            max_range_mm=travel["max_range_mm"],
+            late_from_mm=late["from_mm"] if late else 0.0,
+            late_mm_per_m=late["mm_per_m"] if late else 0.0,
+        )
+        return TravelGauge(sonar_mounts(config), params)
 
     # ---------------------------------------------------------------------------------------
     # input

@@ -73,6 +73,10 @@ DEFAULTS: dict[str, Any] = {
         "max_turn_deg": 0.5,
         "min_sigma_d_mm": 6.0,
         "min_sigma_alpha_deg": 0.7,
+        "range_model": "axis",
+        "max_beam_off_deg": 25.0,
+        "sonar_late": {"from_mm": 700.0, "mm_per_m": 25.0, "mm_per_deg2": 0.055},
+        "shared_sigma_mm": 0.0,
         "repeat_after_mm": 100.0,
         "association": {"max_d_mm": 400.0, "max_alpha_deg": 20.0, "margin_mm": 150.0, "min_wall_length_mm": 500.0},
     },
@@ -80,6 +84,20 @@ DEFAULTS: dict[str, Any] = {
     "logs": {"enabled": True, "directory": "logs", "data": "localization-{start}.trlog", "errors": "localization-{start}.trerr", "debug": False},
 }
 # fmt: on
+
+#: what config/localization.yaml sets beyond the built-in defaults (issue 21): the sonar's
+#: tangent range model with its late echo, the error a fit's points share, longer side lines, the
+#: travel gauge out to 1.4 m on known walls only, and the compass's measured accuracy. The built-in
+#: defaults keep the earlier values: exploration mode builds on them, and old logs replay as they ran
+REPOSITORY_SETTINGS: dict[str, Any] = {
+    "filter": {
+        "compass": {"sigma_deg": 0.5},
+        "travel": {"enabled": True, "max_range_mm": 1400.0, "unknown_wall": False},
+        "noise": {"compass_offset_walk_deg_per_s": 0.01},
+        "initial": {"compass_offset_sigma_deg": 0.5},
+    },
+    "walls": {"range_model": "tangent", "shared_sigma_mm": 8.0, "min_span_side_mm": 220.0},
+}
 
 ESTIMATES = ("glide", "compass_offset", "step_scale")
 #: sync.trigger.mode: every period_ms of the sensor's time on a fixed grid, or after count samples
@@ -228,6 +246,7 @@ class _Checker:
         choice(("filter", "odometry_model"), ("arc", "straight"))
         choice(("filter", "compass", "mode"), ("newest", "mean"))
         choice(("walls", "mode"), ("darmstadt", "exploration", "off"))
+        choice(("walls", "range_model"), ("tangent", "axis"))
         for name in c["filter"]["estimate"]:
             if name not in ESTIMATES:
                 raise self.fail(

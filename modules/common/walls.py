@@ -218,15 +218,35 @@ class DetectorParams:
     max_turn_deg: float = 0.5  # more rotation than this between two sonar samples: not driving past
     min_sigma_d_mm: float = 6.0  # the least uncertainty a fitted line may claim (beam, mounting)
     min_sigma_alpha_deg: float = 0.7
+    #: tangent: a range is the perpendicular distance from the sensor to the wall (the nearest
+    #: point in the beam echoes first); axis: the seed's point on the beam's axis
+    range_model: str = "axis"
+    max_beam_off_deg: float = 25.0  # tangent: a wall whose normal is farther off the beam axis is not used
+    #: tangent: how late an echo reads (mm), taken off each range: beyond ``late_from_mm`` by
+    #: ``late_mm_per_m``, and by ``late_mm_per_deg2`` times the square of the wall's angle off the
+    #: beam axis (a weaker echo crosses the threshold later). Measured on recorded drives.
+    late_from_mm: float = 700.0
+    late_mm_per_m: float = 25.0
+    late_mm_per_deg2: float = 0.055
+    #: an error all points of one fit share (the late-echo model's residue, a wall not quite flat):
+    #: it does not average out over the points, so it adds its variance to d and (2σ/span)² to α
+    shared_sigma_mm: float = 0.0
 
 
 class WallDetector:
-    """Collects sonar points in the odometry frame and fits wall lines (side regression, pairs)."""
+    """Collects sonar readings in the odometry frame and fits wall lines (side regression, pairs).
+
+    A reading is kept as the sensor's position, its beam direction and the range. With the
+    tangent range model (the default) the range is the perpendicular distance from the sensor
+    to the wall — a beam 30° wide meets a wall up to 25° off square at its nearest point first —
+    so a line is fitted as the common tangent of the range circles: ``n·S + r = d``. The seed put
+    each point on the beam's axis instead, which puts a wall met 20° off square 6 % too close
+    (60 mm at 1 m) and turns it by the difference between sin and tan of its angle."""
 
     def __init__(self, mounts: list[SonarMount], params: DetectorParams) -> None:
         self.mounts = mounts
         self.params = params
-        self.points: dict[int, deque[tuple[float, float]]] = {
+        self.points: dict[int, deque[tuple[float, float, float, float]]] = {
             i: deque(maxlen=params.history) for i in params.side_sensors
         }
         self.pair_lines: dict[
@@ -234,11 +254,29 @@ class WallDetector:
         ] = {pair: deque(maxlen=params.history) for pair in params.pairs}
         self.fitted = 0
         self.last_heading: float | None = None
+        self.tangent = params.range_model == "tangent"
+        self.max_off = math.radians(params.max_beam_off_deg)
 
     def point(self, index: int, distance: float, pose: tuple[float, float, float]) -> tuple[float, float]:
+        """Where the reading lies on the beam's axis (odometry frame)."""
         mount = self.mounts[index]
         local = (mount.x + distance * math.cos(mount.angle), mount.y + distance * math.sin(mount.angle))
         return from_frame(local, pose)
+
+    def reading(
+        self, index: int, distance: float, pose: tuple[float, float, float]
+    ) -> tuple[float, float, float, float]:
+        """The sensor's position, its beam direction and the range (odometry frame)."""
+        mount = self.mounts[index]
+        sx, sy = from_frame((mount.x, mount.y), pose)
+        if self.tangent:
+            p = self.params
+            distance -= max(0.0, distance - p.late_from_mm) * p.late_mm_per_m / 1000.0
+        return sx, sy, wrap(pose[2] + mount.angle), distance
+
+    def late_off_axis(self, normal: float, beam: float) -> float:
+        """How much later (mm) an echo from a wall whose normal is ``normal`` reads in ``beam``."""
+        return self.params.late_mm_per_deg2 * math.degrees(wrap(normal - beam)) ** 2
 
     def add(self, stamp_ms: int, pose: tuple[float, float, float], distances: list[int | None]) -> None:
         """One sonar sample (distances in mm, None = no contact) taken at odometry-frame ``pose``."""
@@ -249,24 +287,48 @@ class WallDetector:
         )
         self.last_heading = pose[2]
         if turning:  # a wall is fitted while driving past it, never while turning on the spot
-            for history in (*self.points.values(), *self.pair_lines.values()):
-                history.clear()
+            for readings in self.points.values():
+                readings.clear()
+            for lines in self.pair_lines.values():
+                lines.clear()
             return
-        usable = {
-            i: d for i, d in enumerate(distances) if d is not None and 0 < d <= limit and i < len(self.mounts)
+        usable: dict[int, float] = {
+            i: float(d)
+            for i, d in enumerate(distances)
+            if d is not None and 0 < d <= limit and i < len(self.mounts)
         }
         for i, history in self.points.items():
             if i in usable:
-                history.append(self.point(i, usable[i], pose))
+                history.append(self.reading(i, usable[i], pose))
             else:
                 history.clear()  # the wall ended (or never was): a fit must not bridge a gap
-        for (i, j), history in self.pair_lines.items():
-            if i in usable and j in usable:
-                p, q = self.point(i, usable[i], pose), self.point(j, usable[j], pose)
-                alpha, d = hessian(*p, *q)
-                history.append((alpha, d, p, q))
+        for (i, j), lines in self.pair_lines.items():
+            line = self._pair_line(i, j, usable, pose) if i in usable and j in usable else None
+            if line is not None:
+                lines.append(line)
             else:
-                history.clear()
+                lines.clear()
+
+    def _pair_line(
+        self, i: int, j: int, usable: dict[int, float], pose: tuple[float, float, float]
+    ) -> tuple[float, float, tuple[float, float], tuple[float, float]] | None:
+        """One sample's line of a pair: (α, d, foot i, foot j); None if no wall fits the beams."""
+        if not self.tangent:
+            p, q = self.point(i, usable[i], pose), self.point(j, usable[j], pose)
+            alpha, d = hessian(*p, *q)
+            return alpha, d, p, q
+        si, sj = self.reading(i, usable[i], pose), self.reading(j, usable[j], pose)
+        n = _tangent_normal(si, sj)
+        if n is None:
+            return None
+        if any(abs(wrap(n - s[2])) > self.max_off for s in (si, sj)):
+            return None  # the wall's nearest point lies outside a beam: the range is not to it
+        si, sj = ((s[0], s[1], s[2], s[3] - self.late_off_axis(n, s[2])) for s in (si, sj))
+        n = _tangent_normal(si, sj)
+        if n is None:
+            return None
+        alpha, d, feet = _tangent_line(n, [si, sj])
+        return alpha, d, feet[0], feet[1]
 
     def detect(self, pose: tuple[float, float, float]) -> list[dict[str, Any]]:
         """Walls fitted from the points collected so far, in the frame of ``pose`` (odometry frame).
@@ -281,23 +343,34 @@ class WallDetector:
                 wall["sensors"] = [i]
                 walls.append(wall)
                 history.clear()
-        for pair, history in self.pair_lines.items():
-            wall = self._fit_pairs(list(history), pose)
+        for pair, lines in self.pair_lines.items():
+            wall = self._fit_pairs(list(lines), pose)
             if wall is not None:
                 wall["sensors"] = list(pair)
                 walls.append(wall)
-                history.clear()
+                lines.clear()
         self.fitted += len(walls)
         return walls
 
-    def _fit_side(self, points: list[tuple[float, float]], pose: tuple[float, float, float]) -> dict | None:
+    def _side_fit(self, readings: list[tuple[float, float, float, float]]) -> dict | None:
+        if not self.tangent:
+            return _orthogonal_fit([_on_axis(r) for r in readings])
+        fit = _tangent_fit(readings)
+        if fit is None or abs(wrap(fit["normal"] - readings[-1][2])) > self.max_off:
+            return None
+        late = [self.late_off_axis(fit["normal"], r[2]) for r in readings]
+        return _tangent_fit([(*r[:3], r[3] - dl) for r, dl in zip(readings, late, strict=True)])
+
+    def _fit_side(
+        self, readings: list[tuple[float, float, float, float]], pose: tuple[float, float, float]
+    ) -> dict | None:
         p = self.params
         n = p.min_points_side
-        if len(points) < n:
+        if len(readings) < n:
             return None
         best = None
-        while n <= len(points):
-            fit = _orthogonal_fit(points[-n:])
+        while n <= len(readings):
+            fit = self._side_fit(readings[-n:])
             if fit is None or fit["sigma"] > p.max_sigma_side_mm:
                 break
             if fit["span"] >= p.min_span_side_mm:
@@ -332,6 +405,7 @@ class WallDetector:
         var_a = max(best["sd_a"] ** 2 / best["n"], math.radians(p.min_sigma_alpha_deg) ** 2)
         var_d = max(max(best["sd_d"], p.noise_floor_mm) ** 2 / best["n"], p.min_sigma_d_mm**2)
         p1, p2 = _extent(best["points"], best["alpha"], best["d"], pose)
+        var_a, var_d = _shared(var_a, var_d, math.dist(p1, p2), p)
         return {
             "kind": "pair",
             "alpha": alpha,
@@ -341,6 +415,90 @@ class WallDetector:
             "p1": p1,
             "p2": p2,
         }
+
+
+def _on_axis(reading: tuple[float, float, float, float]) -> tuple[float, float]:
+    """The seed's point of a reading: on the beam's axis at the range."""
+    sx, sy, beam, r = reading
+    return sx + r * math.cos(beam), sy + r * math.sin(beam)
+
+
+def _tangent_normal(
+    a: tuple[float, float, float, float], b: tuple[float, float, float, float]
+) -> float | None:
+    """The direction of the wall normal (rad, from the sensors to the wall) tangent to the range
+    circles of two readings, on the side their beams look; None if the ranges cannot both hold."""
+    dx, dy = a[0] - b[0], a[1] - b[1]
+    baseline = math.hypot(dx, dy)
+    if baseline < 1e-6:
+        return None
+    c = (b[3] - a[3]) / baseline  # n·(Sa − Sb) = rb − ra
+    if abs(c) >= 1.0:
+        return None
+    along = math.atan2(dy, dx)
+    off = math.acos(c)
+    candidates = (wrap(along + off), wrap(along - off))
+    return min(candidates, key=lambda n: abs(wrap(n - a[2])))
+
+
+def _tangent_line(
+    normal: float, readings: list[tuple[float, float, float, float]]
+) -> tuple[float, float, list[tuple[float, float]]]:
+    """Hessian form (α, d ≥ 0) of the line with ``normal`` tangent to the readings' range circles
+    (least squares in d) and the feet of the readings on it."""
+    nx, ny = math.cos(normal), math.sin(normal)
+    d = sum(nx * sx + ny * sy + r for sx, sy, _, r in readings) / len(readings)
+    feet = []
+    for sx, sy, _, _ in readings:
+        gap = d - (nx * sx + ny * sy)
+        feet.append((sx + gap * nx, sy + gap * ny))
+    alpha = normal
+    if d < 0:
+        alpha, d = normal + math.pi, -d
+    return wrap(alpha), d, feet
+
+
+def _tangent_fit(readings: list[tuple[float, float, float, float]]) -> dict | None:
+    """The line tangent to the range circles of one sensor's readings (``n·S_i + r_i = d`` in
+    least squares, Gauss-Newton on the normal's angle from the beam's direction): Hessian form,
+    residual std, span, centroid — what :func:`_report` needs, like :func:`_orthogonal_fit`."""
+    n = len(readings)
+    sx = np.array([r[0] for r in readings])
+    sy = np.array([r[1] for r in readings])
+    rr = np.array([r[3] for r in readings])
+    normal = readings[-1][2]
+    cx, cy, cr = float(sx.mean()), float(sy.mean()), float(rr.mean())
+    for _ in range(8):
+        c, s = math.cos(normal), math.sin(normal)
+        e = c * (sx - cx) + s * (sy - cy) + (rr - cr)
+        g = -s * (sx - cx) + c * (sy - cy)
+        gg = float(g @ g)
+        if gg <= 1e-9:
+            return None
+        step = -float(e @ g) / gg
+        normal = wrap(normal + step)
+        if abs(step) < 1e-9:
+            break
+    c, s = math.cos(normal), math.sin(normal)
+    e = c * (sx - cx) + s * (sy - cy) + (rr - cr)
+    t = -s * sx + c * sy  # along the line
+    span = float(np.ptp(t))
+    if span <= 0:
+        return None
+    alpha, d, feet = _tangent_line(normal, list(readings))
+    fx = sum(p[0] for p in feet) / n
+    fy = sum(p[1] for p in feet) / n
+    return {
+        "alpha": alpha,
+        "d": d,
+        "normal": normal,
+        "sigma": math.sqrt(float(e @ e) / max(n - 2, 1)),
+        "span": span,
+        "n": n,
+        "centroid": (fx, fy),
+        "stt": float(((t - t.mean()) ** 2).sum()),
+        "points": feet,
+    }
 
 
 def _orthogonal_fit(points: list[tuple[float, float]]) -> dict | None:
@@ -375,6 +533,13 @@ def _orthogonal_fit(points: list[tuple[float, float]]) -> dict | None:
     }
 
 
+def _shared(var_a: float, var_d: float, span: float, p: DetectorParams) -> tuple[float, float]:
+    """A fit's variances of α and d with the error its points share (``shared_sigma_mm``) added:
+    it tilts a line by up to twice itself over the span, and shifts it by itself."""
+    shared = p.shared_sigma_mm
+    return var_a + (2.0 * shared / max(span, 1.0)) ** 2, var_d + shared**2
+
+
 def _report(
     kind: str, fit: dict, pose: tuple[float, float, float], sigma: float, p: DetectorParams
 ) -> dict[str, Any]:
@@ -382,8 +547,9 @@ def _report(
     alpha, d = line_in_frame(fit["alpha"], fit["d"], pose)
     cx, cy = to_frame(fit["centroid"], pose)
     var_a = max(sigma**2 / fit["stt"], math.radians(p.min_sigma_alpha_deg) ** 2)
-    tangential = -math.sin(alpha) * cx + math.cos(alpha) * cy  # the centroid's position along the line
     var_d = max(sigma**2 / fit["n"], p.min_sigma_d_mm**2)
+    var_a, var_d = _shared(var_a, var_d, fit["span"], p)
+    tangential = -math.sin(alpha) * cx + math.cos(alpha) * cy  # the centroid's position along the line
     cov = [var_a, var_a * tangential, var_a * tangential**2 + var_d]
     p1, p2 = _extent(fit["points"], fit["alpha"], fit["d"], pose)
     return {"kind": kind, "alpha": alpha, "d": d, "cov": cov, "n": fit["n"], "p1": p1, "p2": p2}
@@ -416,6 +582,10 @@ class GaugeParams:
     max_sigma_mm: float = 15.0  # residual scatter of a plane ahead or behind (a post: larger)
     outlier_mm: float = 30.0
     min_sigma_scale: float = 0.002  # the least uncertainty a measured scale may claim
+    #: how late an echo reads beyond ``late_from_mm`` (mm per m, :class:`DetectorParams`): taken
+    #: off each range, else the range falls 2.5 % faster than the robot drives out there
+    late_from_mm: float = 700.0
+    late_mm_per_m: float = 0.0
 
 
 class TravelGauge:
@@ -454,7 +624,8 @@ class TravelGauge:
             if i < len(distances):
                 r = distances[i]
                 if r is not None and p.min_range_mm <= r <= p.max_range_mm:
-                    self.points[i].append((travel, float(r), moving))
+                    late = max(0.0, r - p.late_from_mm) * p.late_mm_per_m / 1000.0
+                    self.points[i].append((travel, float(r) - late, moving))
         return done
 
     def finish(self) -> list[dict[str, Any]]:
@@ -468,6 +639,13 @@ class TravelGauge:
         self.points = {i: [] for i in self.params.sensors}
         self.measured += len(out)
         return out
+
+    def _travel_at_end(self) -> float:
+        """The nominal travel of the run's last pose along its heading."""
+        if self.origin is None:
+            return 0.0
+        ox, oy, heading = self.origin
+        return (self.end[0] - ox) * math.cos(heading) + (self.end[1] - oy) * math.sin(heading)
 
     def _fit(self, sensor: int, pts: list[tuple[float, float, bool]]) -> dict[str, Any] | None:
         p = self.params
@@ -513,7 +691,9 @@ class TravelGauge:
             "n": n,
             "span_mm": float(np.ptp(u[keep])),
             "range_mm": float(np.mean(r[keep])),
-            "range_end_mm": float(slope * u[-1] + intercept + offset * moving[-1]),  # where the run ended
+            # where the run ended — past the last point in range (a rear sonar's wall drops out of
+            # range long before a run ends): the pose there is the one the beam is checked from
+            "range_end_mm": float(slope * self._travel_at_end() + intercept + offset * moving[-1]),
             "end_pose": list(self.end),
             "residual_mm": sigma,
         }
