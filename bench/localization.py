@@ -35,6 +35,7 @@ import yaml
 
 from modules.common.algorithms import algorithm
 from modules.description import keys as robot_keys
+from tokenring.cliutil import free_port
 
 
 def square_actions(laps: int, side_mm: int) -> str:
@@ -91,6 +92,7 @@ def run_experiment(
         bitrate="max",
         log_level="warning",
         services=[world_service(world_args, algorithm("body"))],  # the body seedtable's env chose
+        listen=[f"tcp/127.0.0.1:{free_port()}"],  # its own network: two benches at once stay apart
     )
     outcome: dict[str, Any] = {}
 
