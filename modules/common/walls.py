@@ -237,7 +237,7 @@ class WallDetector:
     """Collects sonar readings in the odometry frame and fits wall lines (side regression, pairs).
 
     A reading is kept as the sensor's position, its beam direction and the range. With the
-    tangent range model (the default) the range is the perpendicular distance from the sensor
+    tangent range model (``range_model: tangent``, as config/localization.yaml sets it) the range is the perpendicular distance from the sensor
     to the wall — a beam 30° wide meets a wall up to 25° off square at its nearest point first —
     so a line is fitted as the common tangent of the range circles: ``n·S + r = d``. The seed put
     each point on the beam's axis instead, which puts a wall met 20° off square 6 % too close
