@@ -64,22 +64,14 @@ def summarize(seconds: list[float] | np.ndarray) -> dict[str, float]:
     }
 
 
-def proc_rss_mb(pid: int) -> float:
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    except OSError:
-        pass
-    return float("nan")
-
-
-def proc_uss_mb(pid: int) -> float:
-    """The process's unique set size in MB (its private pages: what stopping it gives back)."""
+def proc_memory_mb(pid: int) -> tuple[float, float]:
+    """The process's RSS and USS in MB (USS: its private pages, what stopping it gives back);
+    NaN for a figure that cannot be read."""
     from tokenring.procmem import memory_kb
 
-    uss = memory_kb(pid)["uss_kb"]
-    return uss / 1024 if uss >= 0 else float("nan")
+    kb = memory_kb(pid)
+    rss, uss = (kb[k] / 1024 if kb[k] >= 0 else float("nan") for k in ("rss_kb", "uss_kb"))
+    return rss, uss
 
 
 def proc_cpu_s(pid: int) -> float:
@@ -257,8 +249,8 @@ def run_ring(
                 on_ready(session, ring)
             launcher_cpu = time.process_time() - own_cpu
             cpu = [proc_cpu_s(c.process.pid) - cpu0[c.process.pid] for c in launcher.child_list()]
-            rss = [proc_rss_mb(c.process.pid) for c in launcher.child_list()]
-            uss = [proc_uss_mb(c.process.pid) for c in launcher.child_list()]
+            memory = [proc_memory_mb(c.process.pid) for c in launcher.child_list()]
+            rss, uss = [m[0] for m in memory], [m[1] for m in memory]
             stats = query(session, key, timeout=2.0)[0][1]["result"]
             round_list = query(session, keys.control(ring, master, "rounds"), timeout=2.0)[0][1]["result"]
             return RingRun(
