@@ -44,25 +44,30 @@ def live_world(session: Any, ring: str) -> dict[str, Any] | None:
     return None
 
 
+def true_pose(session: Any, ring: str) -> dict[str, Any] | None:
+    """The world simulator's ground truth (``world/state``), or None when no world runs."""
+    from tokenring.cliutil import query
+
+    for _, reply in query(session, robot_keys.world(ring, "state"), timeout=1.0):
+        if reply.get("ok"):
+            return reply["result"]
+    return None
+
+
 def end_pose(session: Any, ring: str, estimate: list[float] | None) -> dict[str, Any] | None:
     """How far main's pose ``estimate`` (x mm, y mm, theta rad: the filter's, else dead
     reckoning) is from the simulator's ground truth now; None without either."""
-    from tokenring.cliutil import query
-
-    if estimate is None:
+    truth = true_pose(session, ring) if estimate is not None else None
+    if estimate is None or truth is None:
         return None
-    for _, reply in query(session, robot_keys.world(ring, "state"), timeout=1.0):
-        if reply.get("ok"):
-            truth = reply["result"]
-            x, y, theta = (float(v) for v in estimate[:3])
-            turned = math.remainder(theta - float(truth["theta_rad"]), math.tau)
-            return {
-                "estimate": [round(x, 1), round(y, 1), round(theta, 5)],
-                "truth": [round(truth["x_mm"], 1), round(truth["y_mm"], 1), round(truth["theta_rad"], 5)],
-                "error_mm": round(math.hypot(x - truth["x_mm"], y - truth["y_mm"]), 1),
-                "heading_error_deg": round(math.degrees(turned), 2),
-            }
-    return None
+    x, y, theta = (float(v) for v in estimate[:3])
+    turned = math.remainder(theta - float(truth["theta_rad"]), math.tau)
+    return {
+        "estimate": [round(x, 1), round(y, 1), round(theta, 5)],
+        "truth": [round(truth["x_mm"], 1), round(truth["y_mm"], 1), round(truth["theta_rad"], 5)],
+        "error_mm": round(math.hypot(x - truth["x_mm"], y - truth["y_mm"]), 1),
+        "heading_error_deg": round(math.degrees(turned), 2),
+    }
 
 
 def truth_from_info(info: dict[str, Any]) -> tuple[str, np.ndarray]:

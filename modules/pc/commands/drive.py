@@ -23,7 +23,6 @@ import sys
 import time
 from typing import Any
 
-from modules.description import keys as robot_keys
 from tokenring.cliutil import seconds
 from tokenring.errors import TokenRingError, UsageError
 
@@ -136,17 +135,6 @@ def expected_steps(name: str, args: dict[str, Any], glide_cfactor: int) -> int |
     return None
 
 
-def true_pose(session: Any, ring: str) -> dict[str, Any] | None:
-    """The world simulator's ground truth, or None when no world runs."""
-    from tokenring.cliutil import query
-
-    replies = query(session, robot_keys.world(ring, "state"), timeout=1.0)
-    for _, reply in replies:
-        if reply.get("ok"):
-            return reply["result"]
-    return None
-
-
 def run(args: argparse.Namespace) -> int:
     from modules.common.units import pose_from_wire
     from tokenring.cliutil import print_json, tap_session
@@ -176,6 +164,8 @@ def run(args: argparse.Namespace) -> int:
             time.sleep(0.2)
             after = link.read("motor.data")
             status = "done"
+        from modules.pc.mapfiles import true_pose
+
         truth = true_pose(session, args.ring)
     x, y, theta = pose_from_wire(after["x_mm"], after["y_mm"], after["angle_cdeg"])
     result: dict[str, Any] = {
