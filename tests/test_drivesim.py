@@ -1,0 +1,84 @@
+"""bench.drivesim: an action-file drive in one process, judged against the simulator's truth."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from bench.drivesim import DriveSim, judge, repository_config, summarise
+from bench.rooms import generated_room
+from modules.description import load_world
+from modules.description.drives import drive_text, generate_drive
+
+
+def test_short_drive_is_judged_against_the_simulators_truth(tmp_path):
+    path = generated_room(101, tmp_path)
+    world = load_world(str(path))
+    moves = generate_drive(world, 101)[:3]  # a turn, a leg, a turn
+    moves.append(("s", 700))
+    sim = DriveSim(str(path), 1, drive_text(moves, "short"), repository_config(str(path)))
+    result = sim.drive(max_minutes=10)
+    assert result["finished"] == "action file done"
+
+    # the robot drove the file: the legs' length, as the robot's own truth says (slip ±1 %)
+    start, end = world.start, sim.robot.pose
+    straight = sum(amount for kind, amount in moves if kind == "s")
+    assert math.hypot(end.x - start.x, end.y - start.y) > 0.3 * straight
+    # the file's turns add up to the truth's heading change, within the closed loop's tolerance
+    meant = math.radians(sum(amount for kind, amount in moves if kind == "r"))
+    assert abs(math.remainder(end.theta - start.theta - meant, 2 * math.pi)) < math.radians(3)
+
+    # the judge's end error is the distance between the filter's last pose and the robot itself
+    pose = sim.core.pose()
+    own = math.hypot(pose.x_mm - end.x, pose.y_mm - end.y)
+    figures = judge(result["positions"], result["truth"])
+    assert abs(figures["K"]["end_error_mm"] - own) < 2.0
+    assert figures["K"]["max_error_mm"] >= figures["K"]["end_error_mm"]
+    assert 0.0 <= figures["K"]["within_3sigma"] <= 1.0
+    assert figures["K"]["samples_3sigma"] == len(result["positions"]["K"])
+    assert own < 60.0  # the walls are known: the filter holds the pose
+
+
+def test_judge_on_hand_made_records():
+    truth = np.array([[0.0, 0.0, 0.0, 0.0], [1000.0, 100.0, 0.0, 0.0]])
+    k = [
+        (0, {"x": 3.0, "y": 4.0, "psi": 0.0, "sigma": [2.0, 2.0, 0.01]}),  # 5 mm off, inside 3σ
+        (500, {"x": 50.0, "y": 10.0, "psi": 0.0, "sigma": [1.0, 1.0, 0.01]}),  # truth (50, 0): outside
+    ]
+    o = [(0, {"x": 0.0, "y": 0.0, "psi": 0.0}), (1000, {"x": 130.0, "y": 40.0, "psi": 0.0})]
+    figures = judge({"K": k, "O": o}, truth)
+    assert figures["K"]["end_error_mm"] == 10.0
+    assert figures["K"]["max_error_mm"] == 10.0
+    assert abs(figures["K"]["rmse_mm"] - math.sqrt((25 + 100) / 2)) < 1e-9
+    assert figures["K"]["within_3sigma"] == 0.5
+    assert figures["O"]["end_error_mm"] == 50.0
+    s = summarise(
+        [
+            {
+                "room": 1,
+                "seed": 1,
+                "filter_mm": 10.0,
+                "filter_rmse_mm": 8.0,
+                "filter_max_mm": 12.0,
+                "within_3sigma": 0.5,
+                "samples_3sigma": 2,
+                "dead_reckoning_mm": 50.0,
+                "finished": "action file done",
+            },
+            {
+                "room": 2,
+                "seed": 1,
+                "filter_mm": 30.0,
+                "filter_rmse_mm": 9.0,
+                "filter_max_mm": 40.0,
+                "within_3sigma": 1.0,
+                "samples_3sigma": 6,
+                "dead_reckoning_mm": 70.0,
+                "finished": "time is up",
+            },
+        ]
+    )
+    assert s["end_median_mm"] == 20.0 and s["end_worst_mm"] == 30.0
+    assert s["within_3sigma"] == 0.875 and s["synchronisations"] == 8
+    assert s["not_done"] == ["2/1"]
