@@ -322,6 +322,42 @@ def defaults_growth_note(runtime: dict[str, Any], topology: str) -> str:
     )
 
 
+#: issue 23: a 255-node ring's p99 round trip on the 2-core machine (issue 8's aim was 100 ms)
+BIG_RING_P99_AIM_MS = 80.0
+
+
+def own_share_aims(runs: list[dict[str, Any]]) -> list[list[Any]]:
+    """Rows for tokenring's own share per hop (its 95 % interval's top against the aim) and for
+    the outside tap's round trip against the ring's own, per ring size that measured them."""
+    from bench.ownshare import OWN_SHARE_AIM_US, describe
+
+    rows: list[list[Any]] = []
+    for r in runs:
+        share = r.get("own_share_us")
+        if share and r["nodes"] in (8, 64, 255):
+            load = r.get("load_before", [float("nan")])[0]
+            rows.append(
+                [
+                    f"tokenring's own share per hop, {r['nodes']} nodes ({r['topology']}s)",
+                    f"≤ {OWN_SHARE_AIM_US:.0f} µs (top of the 95 % interval)",
+                    f"{describe(share)}; load {load:.1f}",
+                    verdict(bool(share["met"])),
+                ]
+            )
+        tap = r.get("tap")
+        if tap:
+            rows.append(
+                [
+                    f"outside tap vs the ring's own round trip, {r['nodes']} nodes ({r['topology']}s)",
+                    f"within {tap['aim_pct']:.0f} %",
+                    f"{tap['difference_pct']:+.1f} % ({f(tap['tap_rtt_ms']['median'], 3)} vs "
+                    f"{f(tap['ring_rtt_ms']['median'], 3)} ms)",
+                    verdict(abs(tap["difference_pct"]) <= tap["aim_pct"]),
+                ]
+            )
+    return rows
+
+
 def aims(sections: dict[str, Any]) -> str:
     rows: list[list[Any]] = []
     runs = sections.get("scaling", {}).get("runs", [])
@@ -365,19 +401,20 @@ def aims(sections: dict[str, Any]) -> str:
                     verdict(growth <= 1.5),
                 ]
             )
+    rows += own_share_aims(runs)
     big = max((r for r in runs if "rtt_ms" in r), key=lambda r: r["nodes"], default=None)
     if big and big["nodes"] >= 128:
         rows.append(
             [
                 f"{big['nodes']} nodes circulate, p99 round trip ({big['topology']}s)",
-                "< 100 ms",
+                f"≤ {BIG_RING_P99_AIM_MS:.0f} ms",
                 f"{f(big['rtt_ms']['p99'], 1)} ms (median {f(big['rtt_ms']['median'], 1)})"
                 + (
                     f"; bare Zenoh ring p99 {f(big['bare_rtt_ms']['p99'], 1)} (median {f(big['bare_rtt_ms']['median'], 1)})"
                     if "bare_rtt_ms" in big
                     else ""
                 ),
-                verdict(big["rtt_ms"]["p99"] < 100 and big["nodes"] == 255),
+                verdict(big["rtt_ms"]["p99"] <= BIG_RING_P99_AIM_MS and big["nodes"] == 255),
             ]
         )
     prof = sections.get("profile")

@@ -52,12 +52,15 @@ from typing import Any
 
 import numpy as np
 
+from bench.ownshare import describe, own_share
 from bench.sections import QUICK_SECTIONS, RAW_DIR, SECTIONS, SLOW_SECTIONS, raw_path, summary_of
 
 HERE = Path(__file__).resolve().parent
 RESULTS_DIR = HERE / "results"
 #: issue 23's aim for one node process's RSS, printed beside the measured figure
 RSS_AIM_MB = 40.0
+#: issue 23's aim: the outside tap's median round trip within this many % of the ring's own
+TAP_AIM_PCT = 5.0
 FULL_SIZES = {"peer": [2, 4, 8, 16, 32, 64], "router": [8, 16, 32, 64, 128, 255]}
 QUICK_SIZES = {"peer": [2, 4, 8], "router": [8]}
 SEED_NODES = ["main", "motor", "sonar", "compass", "copro", "map", "lcd"]  # the seed's 7 computers
@@ -71,11 +74,14 @@ def rounds_for(n: int, quick: bool) -> tuple[int, int]:
 
 
 def pairs_for(n: int, quick: bool) -> int:
-    """Alternating bare/ring pairs per size: small rings take seconds, and on two shared cores a
-    single pair can land in a fast or a slow mode (the bare 8-node ring's median moves between
-    0.6 and 0.8 ms from run to run: fast while other work keeps both virtual CPUs busy, slow when
-    they halt between hops), so they are measured three times and pooled."""
-    return 1 if quick or n > 16 else 3
+    """Alternating bare/ring pairs per size: on two shared cores a single pair can land in a fast
+    or a slow mode (the bare 8-node ring's median moves between 0.6 and 0.8 ms from run to run:
+    fast while other work keeps both virtual CPUs busy, slow when they halt between hops), so the
+    own share per hop is a mean over pairs with its 95 % interval (bench/ownshare.py). Small rings
+    take seconds a pair, big ones minutes (255 processes form twice)."""
+    if quick:
+        return 2 if n <= 8 else 1
+    return 8 if n <= 16 else 4 if n <= 64 else 3
 
 
 def pool_runs(runs: list[Any]) -> Any:
@@ -145,6 +151,19 @@ def memory_line(run: Any) -> str:
     return text + (f", USS {np.mean(uss):.1f} MB" if uss else "")
 
 
+def tap_record(run: Any) -> dict[str, Any]:
+    """The outside tap's round trips (a subscriber of the round master's token key, timing the
+    frames' arrival) against the master's own figure over the same window."""
+    tap = stats_ms(run.tap_rounds_s)
+    own = stats_ms(run.rounds_s)
+    return {
+        "tap_rtt_ms": tap,
+        "ring_rtt_ms": own,
+        "difference_pct": (tap["median"] / own["median"] - 1) * 100,
+        "aim_pct": TAP_AIM_PCT,
+    }
+
+
 def ring_record(run: Any, n: int) -> dict[str, Any]:
     """The figures of one ``run_ring`` result that the report needs."""
     rtt = stats_ms(run.rounds_s)
@@ -205,6 +224,7 @@ def section_scaling(ctx: Context) -> dict[str, Any]:
             bare_rounds: list[float] = []
             ring_runs: list[Any] = []
             pair_ratios: list[float] = []
+            pair_medians: list[tuple[float, float]] = []  # (ring, bare) ms, for the own share
             bare_errors: list[str] = []
             ring_errors: list[str] = []
             for pair in range(pairs):
@@ -219,15 +239,25 @@ def section_scaling(ctx: Context) -> dict[str, Any]:
                     bare_errors.append(str(exc))
                     ctx.progress.note(f"failed: {exc}")
                 ctx.progress.say(f"scaling: tokenring ring, {n} nodes, {topology}{of}")
+                tapped = pair == pairs - 1  # the outside tap watches the last pair's ring only
                 try:
-                    run = run_ring(n, rounds, warmup, timeout=timeout_for(n), router=router)
+                    run = run_ring(n, rounds, warmup, timeout=timeout_for(n), router=router, tap=tapped)
                     ring_runs.append(run)
                     ctx.progress.note(
                         f"median {np.median(run.rounds_s) * 1e3:.3f} ms, p99 {np.percentile(run.rounds_s, 99) * 1e3:.3f} ms"
                     )
                     ctx.progress.note(memory_line(run))
+                    if tapped and run.tap_rounds_s:
+                        record["tap"] = tap_record(run)
+                        ctx.progress.note(
+                            f"outside tap: median {record['tap']['tap_rtt_ms']['median']:.3f} ms, "
+                            f"{record['tap']['difference_pct']:+.1f} % against the ring's own"
+                        )
                     if bare:
                         pair_ratios.append(float(np.median(run.rounds_s) / np.median(bare)))
+                        pair_medians.append(
+                            (float(np.median(run.rounds_s)) * 1e3, float(np.median(bare)) * 1e3)
+                        )
                 except Exception as exc:
                     ring_errors.append(str(exc))
                     ctx.progress.note(f"failed: {exc}")
@@ -246,6 +276,9 @@ def section_scaling(ctx: Context) -> dict[str, Any]:
                     record["ratio_median"] = record["rtt_ms"]["median"] / record["bare_rtt_ms"]["median"]
                     record["ratio_p99"] = record["rtt_ms"]["p99"] / record["bare_rtt_ms"]["p99"]
                     record["pair_ratios"] = pair_ratios
+                if pair_medians:
+                    record["own_share_us"] = own_share(pair_medians, n)
+                    ctx.progress.note(f"tokenring's own share: {describe(record['own_share_us'])}")
                 if pairs > 1:
                     ctx.progress.note(
                         f"pooled: median {record['rtt_ms']['median']:.3f} ms"

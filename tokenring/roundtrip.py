@@ -10,6 +10,7 @@ arrival to the put that passes it on), RSS and CPU.
 from __future__ import annotations
 
 import io
+import itertools
 import json
 import os
 import subprocess
@@ -26,7 +27,7 @@ from tokenring import keys
 from tokenring.cliutil import free_port, query
 from tokenring.errors import TokenRingError, UsageError
 from tokenring.launcher import Launcher, NodePlan, die_with_parent
-from tokenring.zconfig import make_config, node_environment, open_session
+from tokenring.zconfig import hop_callback, make_config, node_environment, open_session
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 #: from this ring size on, ``--topology auto`` makes the nodes clients of a Zenoh router: a full
@@ -152,6 +153,9 @@ class RingRun:
     launcher_cpu_s: float = 0.0  # the launcher process: the Zenoh router, the registry
     form_s: float = 0.0  # from the first process started to the ring circulating through all
     uss_mb: list[float] = field(default_factory=list)  # per node, beside ``rss_mb``
+    #: round times (s) seen from outside: the arrivals of the frames sent to the round master at
+    #: a subscriber in this process, over the same window (empty unless ``run_ring(tap=True)``)
+    tap_rounds_s: list[float] = field(default_factory=list)
 
 
 def run_ring(
@@ -173,13 +177,15 @@ def run_ring(
     master: int | None = None,
     ring: str | None = None,
     on_ready: Callable[[Any, str], None] | None = None,
+    tap: bool = False,
 ) -> RingRun:
     """Round times (s) of the real ring of ``n`` node processes, with RSS and CPU per node.
 
     ``router``: the launcher's session is a Zenoh router and the nodes its clients (else a full
     mesh of peers); ``transport``: what carries the token (zenoh, udp, zmq); ``profile``: an
     emulated hardware timing; ``plans``/``services``: named nodes with programs and helper
-    processes (the robot), instead of ``n`` generated IDs.
+    processes (the robot), instead of ``n`` generated IDs; ``tap``: also time the rounds from
+    outside, by the arrivals of the master's frames at a subscriber of this process.
     """
     if plans is None:
         ids = ids or generated_ids(n)
@@ -232,6 +238,15 @@ def run_ring(
                     f"ring of {n} did not form in {timeout:.0f} s "
                     f"(active {len(stats.get('active', []))}, visits {stats.get('stats', {}).get('visits', 0)})"
                 )
+            arrivals: list[float] = []
+            tap_subscriber = (
+                session.declare_subscriber(
+                    keys.token(ring, master),
+                    hop_callback(lambda _sample: arrivals.append(time.perf_counter())),
+                )
+                if tap
+                else None
+            )
             cpu0 = {c.process.pid: proc_cpu_s(c.process.pid) for c in launcher.child_list()}
             own_cpu = time.process_time()
             t0 = time.monotonic()
@@ -245,6 +260,8 @@ def run_ring(
             else:
                 raise TokenRingError(f"ring of {n}: measurement did not finish in {timeout:.0f} s")
             wall = time.monotonic() - t0
+            if tap_subscriber is not None:
+                tap_subscriber.undeclare()
             if on_ready is not None:  # e.g. collect what programs measured, while the ring runs
                 on_ready(session, ring)
             launcher_cpu = time.process_time() - own_cpu
@@ -263,6 +280,7 @@ def run_ring(
                 launcher_cpu_s=launcher_cpu,
                 form_s=formed - t_start if formed else float("nan"),
                 uss_mb=uss,
+                tap_rounds_s=[b - a for a, b in itertools.pairwise(arrivals)][-rounds:],
             )
     finally:
         launcher.stop()

@@ -1,0 +1,91 @@
+"""tokenring's own share of a hop: what a node adds per hop on top of a bare Zenoh forwarder.
+
+One run of a ring and one of the bare ring of the same size and topology make a pair; its own
+share per hop is ``(ring median - bare median) / N``. On two shared cores one pair can land in a
+fast or a slow mode of the machine, so a single ratio says little: the suite alternates pairs and
+reports the mean of their shares with a 95 % confidence interval (Student's t over the pairs, as
+the pairs are independent runs), and the load average beside it.
+
+``python -m bench.ownshare FILE.json`` prints the intervals of a suite result file.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+import sys
+from pathlib import Path
+from typing import Any
+
+#: issue 23's aim: the interval's upper end at most this many µs per hop
+OWN_SHARE_AIM_US = 10.0
+
+
+def pair_share_us(ring_median_ms: float, bare_median_ms: float, nodes: int) -> float:
+    """One pair's own share per hop in µs: the ring's median round trip above the bare ring's, per node."""
+    return (ring_median_ms - bare_median_ms) * 1e3 / nodes
+
+
+def interval(values: list[float], confidence: float = 0.95) -> dict[str, Any]:
+    """Mean of ``values`` with its two-sided Student-t confidence interval (NaN bounds for fewer
+    than two values: one pair gives no spread)."""
+    from scipy.stats import t  # the t quantile; scipy comes with the test/bench install
+
+    n = len(values)
+    if n == 0:
+        return {"mean": math.nan, "lo": math.nan, "hi": math.nan, "sd": math.nan, "n": 0}
+    mean = statistics.fmean(values)
+    if n == 1:
+        return {"mean": mean, "lo": math.nan, "hi": math.nan, "sd": math.nan, "n": 1}
+    sd = statistics.stdev(values)
+    half = float(t.ppf(0.5 + confidence / 2, n - 1)) * sd / math.sqrt(n)
+    return {"mean": mean, "lo": mean - half, "hi": mean + half, "sd": sd, "n": n}
+
+
+def own_share(pairs: list[tuple[float, float]], nodes: int) -> dict[str, Any]:
+    """The own share per hop (µs) over alternating pairs of (ring, bare) median round trips in ms:
+    each pair's share, their mean and 95 % interval, and whether the interval's top meets the aim."""
+    shares = [pair_share_us(ring, bare, nodes) for ring, bare in pairs]
+    out = interval(shares)
+    out["pairs_us"] = [round(x, 2) for x in shares]
+    out["aim_us"] = OWN_SHARE_AIM_US
+    out["met"] = bool(out["n"] >= 2 and out["hi"] <= OWN_SHARE_AIM_US)
+    return out
+
+
+def describe(share: dict[str, Any]) -> str:
+    """``12.3 µs per hop (95 % CI 8.1 to 16.5, 6 pairs)``; one pair: no interval."""
+    if share["n"] < 2:
+        return f"{share['mean']:.1f} µs per hop (1 pair: no interval)"
+    return (
+        f"{share['mean']:.1f} µs per hop (95 % CI {share['lo']:.1f} to {share['hi']:.1f}, {share['n']} pairs)"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else argv
+    if len(args) != 1:
+        sys.stderr.write("usage: python -m bench.ownshare RESULT.json\n")
+        return 2
+    try:
+        data = json.loads(Path(args[0]).read_text())
+    except (OSError, ValueError) as exc:
+        sys.stderr.write(f"{args[0]}: cannot read a suite result: {exc}\n")
+        return 2
+    runs = data.get("sections", {}).get("scaling", {}).get("runs", [])
+    shown = 0
+    for record in runs:
+        share = record.get("own_share_us")
+        if share:
+            load = record.get("load_before", [None])[0]
+            print(f"{record['topology']:6} {record['nodes']:3} nodes: {describe(share)}, load {load}")
+            shown += 1
+    if not shown:
+        sys.stderr.write(f"{args[0]}: no own share per hop in its scaling section\n")
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
