@@ -1,0 +1,383 @@
+"""Where a hop's CPU goes: a tokenring node against a bare Zenoh forwarder, thread by thread.
+
+Alternating pairs of one bare Zenoh ring (``tokenring.roundtrip_bare``) and one tokenring ring of
+the same size and topology; in each, once the token circulates, a window of ``--window`` seconds:
+
+* every node's threads' CPU time (``/proc/PID/task/TID/stat``) before and after, grouped by what
+  the thread does — the token's receiving thread (Zenoh's ``rx-*``, where the visit runs), Zenoh's
+  sending and timer threads (``tx-*``, ``net-*``, ``acc-*``, ``app-*``), the Python threads (the
+  node's watchdog, token and system threads; the bare forwarder has only its idle main thread) —
+  and their context switches, each divided by the visits in the window;
+* with ``--perf``, ``perf record`` of one node (the second) over the window, its samples split by
+  thread and library (``_tokenpath`` is the visit in C, ``libpython`` the Python it calls,
+  ``zenoh`` the transport, the kernel the syscalls and wake-ups), in µs per visit.
+
+The visits in the window are counted, not estimated: the ring's master answers ``visits``, the bare
+ring's process 0 prints each round's arrival time. Each row's ring - bare difference is given as
+the mean over pairs with its 95 % interval (bench/ownshare.py).
+
+    python -m bench.hopcost --nodes 8 --pairs 3 --window 5 --perf [--json F]
+    python -m bench.hopcost --nodes 64 --topology router --pairs 2 --perf
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from bench.ownshare import interval
+
+CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+PERF_HZ = 1999
+THREAD_GROUPS = (
+    ("token receive (Zenoh rx, the visit)", re.compile(r"^rx-")),
+    ("Zenoh send and links (tx, net)", re.compile(r"^(tx|net)-")),
+    ("Zenoh accept and timers (acc)", re.compile(r"^acc-")),
+    ("Zenoh app (app)", re.compile(r"^app-")),
+)
+PYTHON_THREADS = "Python threads (watchdog, token, system; main)"
+OTHER = "other threads"
+
+
+def thread_group(name: str, is_main: bool) -> str:
+    """The row a thread's CPU is counted in, by its OS name (Zenoh names its threads)."""
+    if is_main or name.startswith("python"):
+        return PYTHON_THREADS
+    for group, pattern in THREAD_GROUPS:
+        if pattern.match(name):
+            return group
+    return OTHER
+
+
+def sample_threads(pids: list[int]) -> dict[tuple[int, int], tuple[str, float, int]]:
+    """(pid, tid) -> (group, CPU seconds, context switches) of every thread of ``pids``."""
+    out: dict[tuple[int, int], tuple[str, float, int]] = {}
+    for pid in pids:
+        with contextlib.suppress(OSError):
+            for tid_text in os.listdir(f"/proc/{pid}/task"):
+                tid = int(tid_text)
+                try:
+                    stat = Path(f"/proc/{pid}/task/{tid}/stat").read_text()
+                    status = Path(f"/proc/{pid}/task/{tid}/status").read_text()
+                except OSError:
+                    continue
+                name = stat[stat.index("(") + 1 : stat.rindex(")")]
+                fields = stat.rsplit(")", 1)[1].split()
+                cpu = (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
+                switches = sum(
+                    int(line.split()[1]) for line in status.splitlines() if "ctxt_switches:" in line
+                )
+                out[(pid, tid)] = (thread_group(name, tid == pid), cpu, switches)
+    return out
+
+
+def per_visit(
+    before: dict[tuple[int, int], tuple[str, float, int]],
+    after: dict[tuple[int, int], tuple[str, float, int]],
+    visits: int,
+    nodes: int,
+) -> dict[str, float]:
+    """µs of CPU per visit per node by thread group, plus ``context switches`` per visit per node."""
+    cpu: dict[str, float] = {}
+    switches = 0
+    for key, (group, seconds, count) in after.items():
+        _, seconds0, count0 = before.get(key, (group, 0.0, 0))
+        cpu[group] = cpu.get(group, 0.0) + seconds - seconds0
+        switches += count - count0
+    per = visits * nodes
+    out = {group: value / per * 1e6 for group, value in cpu.items()}
+    out["total"] = sum(cpu.values()) / per * 1e6
+    out["context switches"] = switches / per
+    return out
+
+
+def perf_split(data: Path, visits: int) -> dict[str, float]:
+    """µs per visit of one node's ``perf record`` samples, by ``thread group / library``."""
+    report = subprocess.run(
+        ["perf", "report", "-i", str(data), "--sort", "comm,dso", "-n", "--stdio", "-g", "none"],
+        capture_output=True,
+        text=True,
+        check=False,
+    ).stdout
+    out: dict[str, float] = {}
+    for line in report.splitlines():
+        parts = line.split()
+        if len(parts) < 4 or not parts[0].endswith("%") or line.lstrip().startswith("#"):
+            continue
+        samples, comm, dso = int(parts[1]), parts[2], parts[3]
+        group = thread_group(comm, comm.startswith("python")).split(" (")[0]
+        library = dso.strip("[]").split(".")[0].split("-")[0]
+        us = samples / PERF_HZ / visits * 1e6
+        # Zenoh's threads do each other's work from run to run: the library totals compare better
+        for key in (f"{group} / {library}", f"all threads / {library}"):
+            out[key] = out.get(key, 0.0) + us
+    return out
+
+
+class BareRing:
+    """A bare Zenoh ring that runs until told to stop, then reports each round's arrival time."""
+
+    def __init__(self, nodes: int, router: bool) -> None:
+        from tokenring.cliutil import free_port
+        from tokenring.launcher import die_with_parent
+        from tokenring.zconfig import make_config, node_environment, open_session
+
+        port = free_port()
+        self.prefix = f"tokenring-bare/h{os.getpid()}x{port}"
+        base = [sys.executable, "-m", "tokenring.roundtrip_bare", "--count", str(nodes), "--port", str(port)]
+        base += ["--rounds", "10000000", "--warmup", "50", "--ring", self.prefix.split("/")[1]]
+        base += ["--timeout", "600", "--mode", "client" if router else "peer", "--stamps"]
+        env = node_environment()
+        self.router = (
+            open_session(make_config(mode="router", listen=[f"tcp/127.0.0.1:{port}"])) if router else None
+        )
+        connect = make_config(mode="client" if router else "peer", connect=[f"tcp/127.0.0.1:{port}"])
+        self.first = subprocess.Popen(
+            [*base, "--index", "0"], stdout=subprocess.PIPE, text=True, env=env, preexec_fn=die_with_parent
+        )
+        self.others = [
+            subprocess.Popen([*base, "--index", str(i)], env=env, preexec_fn=die_with_parent)
+            for i in range(1, nodes)
+        ]
+        self.session = open_session(connect)
+        self.pids = [self.first.pid] + [p.pid for p in self.others]
+
+    def wait_circulating(self, timeout: float) -> None:
+        """Until the token has gone round (process 0 has the ring formed and passes it)."""
+        deadline = time.monotonic() + timeout
+        key = f"{self.prefix}/hop/0"
+        seen: list[float] = []
+        subscriber = self.session.declare_subscriber(key, lambda _s: seen.append(time.monotonic()))
+        try:
+            while len(seen) < 100:
+                if time.monotonic() > deadline or self.first.poll() is not None:
+                    raise RuntimeError("the bare ring did not circulate")
+                time.sleep(0.05)
+        finally:
+            subscriber.undeclare()
+
+    def stop(self) -> list[float]:
+        """Stop every process; the arrival times process 0 recorded."""
+        self.session.put(f"{self.prefix}/stop", b"")
+        try:
+            out, _ = self.first.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            self.first.kill()
+            out, _ = self.first.communicate()
+        for proc in self.others:
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(5)
+        self.session.close()
+        if self.router is not None:
+            self.router.close()
+        lines = [line for line in out.splitlines() if line.startswith("{")]
+        return json.loads(lines[-1]).get("stamps_s", []) if lines else []
+
+
+def measure(kind: str, nodes: int, router: bool, window: float, perf: bool, out_dir: Path) -> dict[str, Any]:
+    """One ring (``bare`` or ``ring``) of ``nodes``: its CPU per visit over one window."""
+    perf_data = out_dir / f"{kind}-{nodes}-{time.monotonic_ns()}.data"
+    perf_proc: subprocess.Popen | None = None
+    if kind == "bare":
+        bare = BareRing(nodes, router)
+        try:
+            bare.wait_circulating(60 + nodes)
+            pids = bare.pids
+            time.sleep(1.0)
+            t0, before = time.monotonic(), sample_threads(pids)
+            if perf:
+                perf_proc = start_perf(pids[1], window, perf_data)
+            time.sleep(window)
+            t1, after = time.monotonic(), sample_threads(pids)
+            if perf_proc is not None:
+                perf_proc.wait()
+        finally:
+            stamps = bare.stop()
+        visits = sum(1 for s in stamps if t0 <= s <= t1)
+    else:
+        visits, before, after, t0, t1, pids = ring_window(nodes, router, window, perf, perf_data)
+    if visits < 10:
+        raise RuntimeError(f"{kind} ring of {nodes}: only {visits} rounds in the window")
+    result = {
+        "kind": kind,
+        "pids": pids,
+        "visits": visits,
+        "round_ms": (t1 - t0) / visits * 1e3,
+        "per_visit_us": per_visit(before, after, visits, nodes),
+        "load": [round(x, 2) for x in os.getloadavg()],
+    }
+    if perf and perf_data.exists():
+        result["perf_us"] = perf_split(perf_data, visits)
+        perf_data.unlink()
+    return result
+
+
+def start_perf(pid: int, window: float, data: Path) -> subprocess.Popen:
+    record = ["perf", "record", "-e", "cpu-clock", "-F", str(PERF_HZ), "-o", str(data), "-p", str(pid)]
+    return subprocess.Popen(
+        [*record, "--", "sleep", str(window)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+
+
+def ring_window(
+    nodes: int, router: bool, window: float, perf: bool, perf_data: Path
+) -> tuple[int, Any, Any, float, float, list[int]]:
+    """A tokenring ring of ``nodes`` (as ``tokenring bench`` runs it): visits and thread samples."""
+    from tokenring import keys
+    from tokenring.cliutil import free_port, query
+    from tokenring.launcher import Launcher, NodePlan
+    from tokenring.roundtrip import generated_ids
+    from tokenring.zconfig import make_config, open_session
+
+    ids = generated_ids(nodes)
+    port = free_port()
+    ring = f"h{os.getpid()}x{port}"
+    launcher = Launcher(
+        [NodePlan(i, f"node{i}", None) for i in ids],
+        ring=ring,
+        bitrate="max",
+        ack_mode="adaptive",
+        listen=[f"tcp/127.0.0.1:{port}"],
+        log_level="warning",
+        output=io.StringIO(),
+        router=router,
+    )
+    launcher.start()
+    try:
+        config = make_config(mode="client" if router else "peer", connect=[f"tcp/127.0.0.1:{port}"])
+        with open_session(config) as session:
+            master = min(ids)
+
+            def visits() -> int:
+                replies = query(session, keys.control(ring, master, "visits"), timeout=2.0)
+                return int(replies[0][1]["result"]) if replies and replies[0][1].get("ok") else -1
+
+            deadline = time.monotonic() + 60 + nodes
+            while visits() < 100:
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"the ring of {nodes} did not circulate")
+                time.sleep(0.1)
+            time.sleep(1.0)
+            pids = [c.process.pid for c in launcher.child_list()]
+            v0, t0, before = visits(), time.monotonic(), sample_threads(pids)
+            perf_proc = start_perf(pids[1], window, perf_data) if perf else None
+            time.sleep(window)
+            v1, t1, after = visits(), time.monotonic(), sample_threads(pids)
+            if perf_proc is not None:
+                perf_proc.wait()
+            return v1 - v0, before, after, t0, t1, pids
+    finally:
+        launcher.stop()
+
+
+def table(pairs: list[tuple[dict[str, Any], dict[str, Any]]], key: str) -> list[dict[str, Any]]:
+    """Rows of ``key`` (per_visit_us or perf_us): ring, bare and their difference over the pairs."""
+    names = sorted({name for ring, bare in pairs for name in (*ring.get(key, {}), *bare.get(key, {}))})
+    rows = []
+    for name in names:
+        ring_values = [ring.get(key, {}).get(name, 0.0) for ring, _ in pairs]
+        bare_values = [bare.get(key, {}).get(name, 0.0) for _, bare in pairs]
+        diff = interval([r - b for r, b in zip(ring_values, bare_values, strict=True)])
+        rows.append(
+            {
+                "part": name,
+                "ring": sum(ring_values) / len(pairs),
+                "bare": sum(bare_values) / len(pairs),
+                "difference": diff,
+            }
+        )
+    return sorted(rows, key=lambda row: -abs(row["difference"]["mean"]))
+
+
+def format_rows(rows: list[dict[str, Any]], unit: str) -> str:
+    lines = [f"{'':52} {'ring':>8} {'bare':>8} {'ring - bare':>12}  95 % interval"]
+    for row in rows:
+        d = row["difference"]
+        ci = f"{d['lo']:+.1f} .. {d['hi']:+.1f}" if d["n"] > 1 else "(1 pair)"
+        lines.append(
+            f"{row['part'][:52]:52} {row['ring']:8.1f} {row['bare']:8.1f} {d['mean']:+12.1f}  {ci} {unit}"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m bench.hopcost",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--nodes", type=int, default=8, help="ring size (default 8)")
+    parser.add_argument("--topology", choices=("peer", "router"), default="peer")
+    parser.add_argument("--pairs", type=int, default=3, help="alternating bare/ring pairs (default 3)")
+    parser.add_argument("--window", type=float, default=5.0, help="seconds measured per ring (default 5)")
+    parser.add_argument("--perf", action="store_true", help="also perf-record one node per ring")
+    parser.add_argument("--json", metavar="FILE", help="write the pairs and tables as JSON")
+    args = parser.parse_args(argv)
+    if not 2 <= args.nodes <= 255 or args.pairs < 1 or args.window <= 0:
+        sys.stderr.write("hopcost: --nodes 2..255, --pairs >= 1, --window > 0\n")
+        return 2
+    if args.json and Path(args.json).exists():
+        sys.stderr.write(f"hopcost: {args.json} exists; not overwritten\n")
+        return 2
+    if args.perf and shutil.which("perf") is None:
+        sys.stderr.write("hopcost: --perf needs perf (Debian: linux-perf)\n")
+        return 2
+    from tokenring.zconfig import use_node_runtime
+
+    use_node_runtime()
+    router = args.topology == "router"
+    pairs: list[tuple[dict[str, Any], dict[str, Any]]] = []
+    with tempfile.TemporaryDirectory(prefix="hopcost-") as tmp:
+        for pair in range(args.pairs):
+            got: dict[str, dict[str, Any]] = {}
+            for kind in ("bare", "ring"):
+                sys.stderr.write(
+                    f"[pair {pair + 1}/{args.pairs}] {kind} ring of {args.nodes} ({args.topology}s) ...\n"
+                )
+                got[kind] = measure(kind, args.nodes, router, args.window, args.perf, Path(tmp))
+                sys.stderr.write(
+                    f"    {got[kind]['visits']} rounds, {got[kind]['round_ms']:.3f} ms each, "
+                    f"{got[kind]['per_visit_us']['total']:.1f} µs CPU per visit per node, load {got[kind]['load'][0]}\n"
+                )
+            pairs.append((got["ring"], got["bare"]))
+    threads = table(pairs, "per_visit_us")
+    print(
+        f"CPU per visit per node, {args.nodes} nodes ({args.topology}s), {args.pairs} pairs of {args.window:g} s:"
+    )
+    print(format_rows(threads, "µs"))
+    result: dict[str, Any] = {
+        "nodes": args.nodes,
+        "topology": args.topology,
+        "pairs": pairs,
+        "threads": threads,
+    }
+    if args.perf:
+        split = table(pairs, "perf_us")
+        print("\none node's perf samples (thread / library), per visit:")
+        print(format_rows([row for row in split if abs(row["ring"]) + abs(row["bare"]) >= 0.5], "µs"))
+        result["perf"] = split
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    with contextlib.suppress(KeyboardInterrupt):
+        sys.exit(main())
+    sys.exit(130)

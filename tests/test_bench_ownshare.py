@@ -1,0 +1,83 @@
+"""The own share per hop's interval, and the hop-cost profiler on real rings."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bench.ownshare import interval, own_share
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_the_interval_is_students_t_over_the_pairs():
+    # 1..5: mean 3, sd sqrt(2.5) = 1.5811; t(0.975, 4) = 2.7764 from a printed t table
+    got = interval([1.0, 2.0, 3.0, 4.0, 5.0])
+    half = 2.7764 * 1.5811 / 5**0.5
+    assert got["mean"] == pytest.approx(3.0)
+    assert got["lo"] == pytest.approx(3.0 - half, abs=1e-3) and got["hi"] == pytest.approx(
+        3.0 + half, abs=1e-3
+    )
+    assert got["n"] == 5
+
+
+def test_one_pair_gives_a_share_but_no_interval_and_never_meets_the_aim():
+    share = own_share([(0.808, 0.800)], 8)  # 8 µs over 8 hops: 1 µs per hop
+    assert share["mean"] == pytest.approx(1.0) and share["pairs_us"] == [1.0]
+    assert share["n"] == 1 and share["met"] is False
+
+
+def test_the_aim_is_judged_on_the_top_of_the_interval():
+    close = own_share([(0.80 + d, 0.80) for d in (0.008, 0.010, 0.012, 0.009)], 8)  # ~1.2 µs/hop
+    wide = own_share([(0.80 + d, 0.80) for d in (0.0, 0.4, -0.2, 0.1)], 8)  # mean 9 µs, sd ~25
+    assert close["met"] is True and close["hi"] < 10
+    assert wide["mean"] < 10 and wide["hi"] > 10 and wide["met"] is False
+
+
+def test_hopcost_counts_each_rings_visits_and_leaves_no_process(tmp_path):
+    out = tmp_path / "hopcost.json"
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "bench.hopcost",
+            "--nodes",
+            "3",
+            "--pairs",
+            "1",
+            "--window",
+            "1.5",
+            "--json",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=REPO,
+    )
+    assert result.returncode == 0, result.stderr
+    data = json.loads(out.read_text())
+    ((ring, bare),) = data["pairs"]
+    for run in (ring, bare):
+        # every hop runs on some thread: the round's CPU is more than nothing, the visits were counted
+        assert run["visits"] >= 10 and run["per_visit_us"]["total"] > 0
+        assert run["round_ms"] == pytest.approx(1.5e3 / run["visits"], rel=0.5)
+        for pid in run["pids"]:
+            assert not os.path.exists(f"/proc/{pid}") or "zombie" in Path(f"/proc/{pid}/status").read_text()
+    # the node's own Python threads (watchdog, token thread) exist only in the ring
+    assert any(row["part"].startswith("Python threads") for row in data["threads"])
+    assert "CPU per visit per node" in result.stdout
+
+
+def test_hopcost_refuses_an_existing_output_file(tmp_path):
+    out = tmp_path / "kept.json"
+    out.write_text("{}")
+    result = subprocess.run(
+        [sys.executable, "-m", "bench.hopcost", "--json", str(out)], capture_output=True, text=True, cwd=REPO
+    )
+    assert result.returncode == 2 and "exists" in result.stderr and out.read_text() == "{}"
