@@ -536,6 +536,14 @@ class ClosedLoop:
                 "heading_median_deg": float(np.median(np.abs(errs[:, 1]))),
                 "heading_p95_deg": float(np.percentile(np.abs(errs[:, 1]), 95)),
             }
+        if (
+            self.core is not None
+            and self.core.ekf is not None
+            and "step_scale" in self.core.ekf_params.estimate
+        ):
+            # the filter's step scale at the end beside the floor's (each move draws its own about it)
+            pose_errors["step_scale_end"] = float(self.core.ekf.step_scale)
+            pose_errors["floor_step_scale"] = float(self.world.floor.step_scale)
         return Run(
             vectors=np.asarray(self.vectors, dtype=float).reshape(-1, 4),
             variants={
@@ -561,17 +569,21 @@ def explore(
     start_deg: float | None = None,
     out: str | None = None,
     variant_pngs: bool = False,
+    overrides: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """One closed-loop exploration, scored: the map as the robot made it and the four variants
-    (seed/ours × dead reckoning/filter) of the same drive; PNGs to ``out``."""
+    (seed/ours × dead reckoning/filter) of the same drive; PNGs to ``out``. ``overrides`` are
+    Localizer settings laid over exploration mode's (copro's ``EXPLORATION_CONFIG``)."""
     from modules.common.mapscore import score_map
     from modules.pc.mapfiles import load_truth, write_map
 
     config = None
-    if walls:
+    if walls or overrides:
         from modules.copro import EXPLORATION_CONFIG
 
-        config = {**EXPLORATION_CONFIG, "walls": {**EXPLORATION_CONFIG["walls"], "mode": walls}}
+        config = merged(EXPLORATION_CONFIG, overrides or {})
+        if walls:
+            config = merged(config, {"walls": {"mode": walls}})
     loop = ClosedLoop(
         world,
         seed,
@@ -607,6 +619,17 @@ def explore(
         "log": run.log,
         "rows": rows,
     }
+
+
+def merged(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    """``base`` with ``over`` laid on it key by key (nested mappings merged, not replaced)."""
+    out = dict(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = merged(out[key], value)
+        else:
+            out[key] = value
+    return out
 
 
 def format_rows(rows: list[dict[str, Any]]) -> str:
@@ -669,6 +692,19 @@ def plot_distribution(rows: list[dict[str, Any]], path: str, title: str) -> None
     Image.open(path).convert("RGB").quantize(64).save(path, optimize=True)  # kilobytes, not 100s
 
 
+def write_json(path: str, results: list[dict[str, Any]], argv: list[str] | None) -> None:
+    """The runs so far, without their move logs, with the command that made them."""
+    import datetime as dt
+
+    document = {
+        "benchmark": "closedloop",
+        "date": dt.datetime.now().isoformat(timespec="seconds"),
+        "command": "python -m bench.closedloop " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "runs": [{k: v for k, v in r.items() if k != "log"} for r in results],
+    }
+    Path(path).write_text(json.dumps(document, indent=1) + "\n")
+
+
 def parse_seeds(text: str) -> list[int]:
     """World or noise seeds as the benches take them: ``1``, ``1,2,3``, ``1-3`` or ``1,4-6``."""
     seeds: list[int] = []
@@ -695,6 +731,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--dead-reckoning", action="store_true", help="no Localizer")
     parser.add_argument("--walls", choices=("exploration", "off"), help="the Localizer's walls mode")
+    parser.add_argument(
+        "--localizer",
+        metavar="YAML",
+        help="Localizer settings laid over exploration mode's, a file or inline YAML "
+        "(e.g. '{walls: {range_model: tangent}}')",
+    )
     parser.add_argument("--start-deg", type=float, help="the robot's start heading (default: the room's)")
     parser.add_argument("--out", metavar="DIR", help="write the maps' PNGs here")
     parser.add_argument("--moves", action="store_true", help="print the navigator's moves")
@@ -711,6 +753,12 @@ def main(argv: list[str] | None = None) -> int:
         rooms_dir = Path(__file__).parent / "results" / "raw" / "rooms"
         worlds = [str(generated_room(n, rooms_dir)) for n in room_seeds(args.generated)]
     jobs = [(w, s) for w in worlds for s in seeds]
+    overrides = None
+    if args.localizer:
+        import yaml
+
+        text = Path(args.localizer).read_text() if Path(args.localizer).is_file() else args.localizer
+        overrides = yaml.safe_load(text) or {}
     options = dict(
         seed_method=args.seed_method,
         dead_reckoning=args.dead_reckoning,
@@ -719,6 +767,7 @@ def main(argv: list[str] | None = None) -> int:
         start_deg=args.start_deg,
         out=args.out,
         variant_pngs=args.variants,
+        overrides=overrides,
     )
     results: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
@@ -726,6 +775,8 @@ def main(argv: list[str] | None = None) -> int:
         for future in futures:
             result = future.result()
             results.append(result)
+            if args.json:  # after each run: a long set interrupted keeps what it measured
+                write_json(args.json, results, argv)
             r = result["rows"][0]
             if args.moves:
                 print("\n".join(result["log"]))
@@ -734,7 +785,10 @@ def main(argv: list[str] | None = None) -> int:
                 f"{result['sim_seconds']:.0f} s simulated; moves {result['moves']}; {r['vectors']} vectors, "
                 f"coverage {r['coverage']:.1%}, precision {r['precision']:.1%}, "
                 f"orientation {r['orientation_error_deg'] or 0:.1f}°, corners {r['corners_closed']}/{r['corners_total']}; "
-                + ", ".join(f"{k} {v:.1f}" for k, v in result["pose_errors"].items()),
+                + ", ".join(
+                    f"{k} {v:.4f}" if "scale" in k else f"{k} {v:.1f}"
+                    for k, v in result["pose_errors"].items()
+                ),
                 flush=True,
             )
     rows = [r for result in results for r in (result["rows"] if args.variants else result["rows"][:1])]
@@ -749,16 +803,6 @@ def main(argv: list[str] | None = None) -> int:
             args.plot,
             f"Explore 2, closed loop: {len(results)} maps ({rooms}; world seeds {args.seed})",
         )
-    if args.json:
-        import datetime as dt
-
-        document = {
-            "benchmark": "closedloop",
-            "date": dt.datetime.now().isoformat(timespec="seconds"),
-            "command": "python -m bench.closedloop " + " ".join(argv if argv is not None else sys.argv[1:]),
-            "runs": [{k: v for k, v in r.items() if k != "log"} for r in results],
-        }
-        Path(args.json).write_text(json.dumps(document, indent=1) + "\n")
     return 0
 
 
