@@ -90,15 +90,17 @@ def per_visit(
 ) -> dict[str, float]:
     """µs of CPU per visit per node by thread group, plus ``context switches`` per visit per node."""
     cpu: dict[str, float] = {}
-    switches = 0
+    switches: dict[str, int] = {}
     for key, (group, seconds, count) in after.items():
         _, seconds0, count0 = before.get(key, (group, 0.0, 0))
         cpu[group] = cpu.get(group, 0.0) + seconds - seconds0
-        switches += count - count0
+        switches[group] = switches.get(group, 0) + count - count0
     per = visits * nodes
     out = {group: value / per * 1e6 for group, value in cpu.items()}
     out["total"] = sum(cpu.values()) / per * 1e6
-    out["context switches"] = switches / per
+    out["context switches"] = sum(switches.values()) / per
+    for group, count in switches.items():  # which threads are woken per hop
+        out[f"context switches: {group}"] = count / per
     return out
 
 
@@ -122,6 +124,26 @@ def perf_split(data: Path, visits: int) -> dict[str, float]:
         # Zenoh's threads do each other's work from run to run: the library totals compare better
         for key in (f"{group} / {library}", f"all threads / {library}"):
             out[key] = out.get(key, 0.0) + us
+    return out
+
+
+def perf_symbols(data: Path, visits: int) -> dict[str, float]:
+    """µs per visit of the token's receiving thread in one node's ``perf record``, by function."""
+    report = subprocess.run(
+        ["perf", "report", "-i", str(data), "--sort", "comm,dso,sym", "-n", "--stdio", "-g", "none"],
+        capture_output=True,
+        text=True,
+        check=False,
+    ).stdout
+    out: dict[str, float] = {}
+    for line in report.splitlines():
+        parts = line.split(None, 5)
+        if len(parts) < 6 or not parts[0].endswith("%") or not parts[2].startswith("rx-"):
+            continue
+        library = parts[3].strip("[]").split(".")[0].split("-")[0]
+        symbol = parts[5].split("] ", 1)[-1][:60]
+        key = f"{library}: {symbol}"
+        out[key] = out.get(key, 0.0) + int(parts[1]) / PERF_HZ / visits * 1e6
     return out
 
 
@@ -222,6 +244,7 @@ def measure(kind: str, nodes: int, router: bool, window: float, perf: bool, out_
     }
     if perf and perf_data.exists():
         result["perf_us"] = perf_split(perf_data, visits)
+        result["perf_rx_symbols_us"] = perf_symbols(perf_data, visits)
         perf_data.unlink()
     return result
 
@@ -372,8 +395,16 @@ def main(argv: list[str] | None = None) -> int:
         print("\none node's perf samples (thread / library), per visit:")
         print(format_rows([row for row in split if abs(row["ring"]) + abs(row["bare"]) >= 0.5], "µs"))
         result["perf"] = split
-    if args.json:
-        Path(args.json).write_text(json.dumps(result, indent=1) + "\n")
+        symbols = table(pairs, "perf_rx_symbols_us")[:30]
+        print("\nthe token's receiving thread of that node, by function (the 30 largest differences):")
+        print(format_rows(symbols, "µs"))
+        result["perf_rx_symbols"] = symbols
+    if args.json:  # the tables and each run's thread figures; the perf samples' dicts stay out
+        slim = [
+            tuple({k: v for k, v in run.items() if not k.startswith("perf")} for run in pair)
+            for pair in pairs
+        ]
+        Path(args.json).write_text(json.dumps({**result, "pairs": slim}, indent=1) + "\n")
     return 0
 
 
