@@ -9,7 +9,7 @@ import os
 import signal
 from pathlib import Path
 
-from ringutil import control, launcher_pids, tap, wait_ring
+from ringutil import control, launcher_pids, tap, wait_ring, wait_until
 
 from tokenring.protocol import Protocol, load_protocol, parse_protocol
 
@@ -98,3 +98,34 @@ def test_a_cache_that_cannot_be_written_costs_nothing_but_the_yaml(tmp_path, mon
     source = Path(__file__).resolve().parent.parent / "protocol.yaml"
     assert load_protocol(source).by_id[10].name == "main"
     assert not os.path.isdir(blocked)
+
+
+def minor_faults(pid: int) -> int:
+    """The process's minor page faults so far (/proc/PID/stat, field 10)."""
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[7])
+
+
+def test_a_visit_maps_no_memory_the_receiving_thread_keeps_its_python_state(procs, ring_name, endpoint):
+    # Zenoh calls the token's callback on a thread Python does not know; were its Python thread
+    # state made and deleted per call, CPython would map and unmap a 16 KB frame stack each
+    # time and fault its pages in anew: a page fault or more per visit
+    launcher = procs.tokenring(
+        "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor,sonar",
+        "--no-programs", "--no-world", "--bitrate", "max",
+    )  # fmt: skip
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10, 20, 30], timeout=120)
+        pids = launcher_pids(session, ring_name)
+        procs.watch(pids)
+        motor = next(
+            p for p in pids if "--id 20 " in Path(f"/proc/{p}/cmdline").read_text().replace("\0", " ")
+        )
+        first_visits = control(session, ring_name, 20, "visits")
+        wait_until(lambda: control(session, ring_name, 20, "visits") >= first_visits + 300, 120, "300 visits")
+        faults0, visits0 = minor_faults(motor), control(session, ring_name, 20, "visits")
+        wait_until(lambda: control(session, ring_name, 20, "visits") >= visits0 + 3000, 180, "3000 visits")
+        faults1, visits1 = minor_faults(motor), control(session, ring_name, 20, "visits")
+    launcher.send_signal(signal.SIGINT)
+    assert launcher.wait(60) == 130
+    per_visit = (faults1 - faults0) / (visits1 - visits0)
+    assert per_visit < 0.2, f"{faults1 - faults0} page faults in {visits1 - visits0} visits"

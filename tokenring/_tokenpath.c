@@ -639,8 +639,25 @@ static int from_itself(TokenPath *self, PyObject *frame_obj)
            (unsigned char)PyBytes_AS_STRING(frame_obj)[self->o_sid] == self->node_id;
 }
 
+/* Zenoh calls the token's callback on its own receiving thread, which Python does not know:
+   pyo3 makes a Python thread state for each call and deletes it after, and with it CPython 3.11
+   maps and unmaps the state's 16 KB frame stack - an mmap/munmap pair, four page faults and a
+   thread state's set-up per hop. One more PyGILState_Ensure on that thread, never released,
+   keeps its state (and stack) for good; pyo3's own Ensure/Release then only take and drop the
+   GIL. Threads Python started already have a state: for them this only raises its counter. */
+static _Thread_local int thread_state_kept = 0;
+
+static void keep_thread_state(void)
+{
+    if (!thread_state_kept) {
+        (void)PyGILState_Ensure(); /* the GIL is held here, so this cannot block */
+        thread_state_kept = 1;
+    }
+}
+
 static PyObject *TokenPath_on_frame(TokenPath *self, PyObject *frame_obj)
 {
+    keep_thread_state();
     if (is_set(self->defer) && (self->deferred_pending > 0 || self->hop != 0.0 ||
                                 from_itself(self, frame_obj) || is_set(self->pacer) ||
                                 is_set(self->rx_fault) || is_set(self->tx_fault))) {
