@@ -5,7 +5,7 @@ from __future__ import annotations
 import signal
 
 import pytest
-from ringutil import tap, wait_ring
+from ringutil import tap, wait_ring, wait_until
 
 from tokenring.errors import UsageError
 from tokenring.pclink import PcLink
@@ -78,3 +78,50 @@ def test_pc_link_relays_commands_reads_data_and_program_requests(procs, ring_nam
         assert result["transmitted"] and not result["acknowledged"]
     launcher.send_signal(signal.SIGTERM)
     assert launcher.wait(5) == 0
+
+
+SLOW_MAIN = """
+import os, time
+from tokenring.program import UserProgram
+
+
+class Program(UserProgram):
+    def setup(self):
+        while not os.path.exists({gate!r}):  # the test opens the gate
+            time.sleep(0.05)
+        self.answer = "set up"
+
+    def on_pc_request(self, verb, payload):
+        return {{"state": self.answer}}
+"""
+
+
+def test_a_request_before_the_program_is_set_up_is_refused_not_crashed_into(
+    procs, ring_name, endpoint, tmp_path
+):
+    gate = tmp_path / "gate"
+    programs = tmp_path / "programs"
+    programs.mkdir()
+    (programs / "main.py").write_text(SLOW_MAIN.format(gate=str(gate)))
+    launcher = procs.tokenring(
+        "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor",
+        "--bitrate", "max", "--programs", str(programs),
+    )  # fmt: skip
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10, 20])
+        link = PcLink(session, ring_name)
+        with pytest.raises(UsageError, match="still setting up"):
+            link.request("state")
+        gate.write_text("")
+        answered = wait_until(lambda: _answer(link), 60, "main's program set up")
+        assert answered == {"state": "set up"}
+    launcher.send_signal(signal.SIGTERM)
+    assert launcher.wait(5) == 0
+
+
+def _answer(link: PcLink) -> dict | None:
+    try:
+        return link.request("state")
+    except UsageError as exc:
+        assert "still setting up" in str(exc)
+        return None

@@ -32,6 +32,7 @@ class ProgramHost(TokenPathHost):
     _halt: threading.Event
     _program: Any
     _program_thread: threading.Thread | None
+    _program_set_up: bool  # the current program's setup() has returned
     _regs: dict[str, DataRegistration]
     _inbox: Inbox | None
     _regs_lock: threading.Lock
@@ -51,10 +52,12 @@ class ProgramHost(TokenPathHost):
         self.program_error = None
         program = program_class(self, *args)
         self._program = program
+        self._program_set_up = False
 
         def runner() -> None:
             try:
                 program.setup()
+                self._program_set_up = program is self._program
                 program.run()
             except Exception as exc:  # a user program's bug must not take the node down
                 last = traceback.format_exception_only(type(exc), exc)[-1].strip()
@@ -101,6 +104,12 @@ class ProgramHost(TokenPathHost):
     @property
     def program(self) -> Any:
         return self._program
+
+    @property
+    def program_set_up(self) -> bool:
+        """The current program's ``setup()`` has returned: requests to it (the PC link's) may
+        use what it set up."""
+        return self._program is not None and self._program_set_up
 
     # =========================================================================================
     # introspection

@@ -277,6 +277,7 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         self._watchdog: threading.Thread | None = None
         self._program: Any = None
         self._program_thread: threading.Thread | None = None
+        self._program_set_up = False
         self.program_error: str | None = None
 
     # =========================================================================================

@@ -127,6 +127,8 @@ class PcLinkServer:
             raise UsageError(
                 f"main's program ({type(program).__name__ if program else 'none'}) takes no PC requests"
             )
+        if not self.os.program_set_up:  # its handler would meet half-built state
+            raise UsageError(f"main's program ({type(program).__name__}) is still setting up; ask again")
         return handler(str(request.get("verb", "")), request.get("payload") or {})
 
 
