@@ -71,10 +71,22 @@ def test_ring_forms_in_id_order_and_counts_rounds(ring):
     assert successors == {10: 20, 20: 30, 30: 40, 40: 10}
     main = ring.by_name("main")
     before = main.stats.rounds
+
+    def counts() -> tuple[int, int, int]:
+        nodes = ring.nodes.values()
+        return (
+            sum(n.stats.tokens_regenerated for n in nodes),
+            sum(n.stats.rejected_crc for n in nodes),
+            sum(n.stats.send_errors for n in nodes),
+        )
+
+    # main started the ring; on two loaded cores a first pass may meet a peer whose socket is
+    # not connected yet (zmq: EAGAIN) and the token is regenerated once more while it forms
+    formed = counts()
+    assert formed[0] >= 1 and formed[1] == 0
     ring.wait_rounds(50)
     assert main.stats.rounds >= before + 50
-    assert sum(n.stats.tokens_regenerated for n in ring.nodes.values()) == 1  # main started it
-    assert all(n.stats.rejected_crc == 0 and n.stats.send_errors == 0 for n in ring.nodes.values())
+    assert counts() == formed  # once circulating: no regeneration, no bad frame, no failed send
 
 
 def test_data_and_commands_keep_the_seed_semantics(ring):
