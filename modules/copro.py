@@ -53,12 +53,22 @@ EXPLORATION_CONFIG: dict[str, Any] = {
         "estimate": ["glide", "step_scale"],
         "noise": {"rotation_rad_per_mm": 0.00002, "step_scale_per_move": 0.001},
         "initial": {"step_scale_sigma": 0.01},
-        "travel": {"enabled": True},
+        # out to 1.4 m: the late echo (walls.sonar_late) is taken off each range
+        "travel": {"enabled": True, "max_range_mm": 1400.0},
         "compass": {"settle_ms": 400},
     },
     # own-map walls: every fit used, as when this was tuned (repeat_after_mm was measured on
-    # the Darmstadt and generated drives only)
-    "walls": {"mode": "exploration", "association": {"min_wall_length_mm": 1000.0}, "repeat_after_mm": 0.0},
+    # the Darmstadt and generated drives only). The sonar model is the localisation's (issue 21,
+    # config/localization.yaml): ranges as tangents with the late echo taken off, the error a
+    # fit's points share, side lines of 220 mm at least
+    "walls": {
+        "mode": "exploration",
+        "association": {"min_wall_length_mm": 1000.0},
+        "repeat_after_mm": 0.0,
+        "range_model": "tangent",
+        "shared_sigma_mm": 8.0,
+        "min_span_side_mm": 220.0,
+    },
     "logs": {"enabled": False},
 }
 

@@ -5,6 +5,7 @@ else can see it — the robot's own map was drawn with the same scale."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 
 import numpy as np
@@ -166,3 +167,42 @@ def test_a_fit_with_no_wall_known_yet_waits_for_the_robots_own_map() -> None:
         core.maybe_sync()
     assert core.travel["waited"] == 1 and core.travel["used"] == 1 and not core.pending_travel, core.travel
     assert core.ekf.step_scale > 1.003  # the room's floor: steps 1 % long
+
+
+def front_series_toward_a_wall(true_scale: float, start_mm: float, end_mm: float) -> list[tuple[float, int]]:
+    """(nominal travel, front range mm) of the simulated sonar (echo envelopes, threshold and
+    tangent contact) while the robot drives square on toward the wall x = 0 of the empty room."""
+    from modules.common.sonar import contact_tangent
+    from modules.description import load_world
+    from modules.description.robot import sonar_world_pose
+    from modules.world import echo
+
+    world = load_world("empty")
+    rng = np.random.default_rng(4)
+    series = []
+    for u in np.arange(0.0, (start_mm - end_mm) / true_scale, 10.0):
+        x = start_mm + MOUNTS[FRONT].x - true_scale * u  # the front sonar start_mm from the wall
+        sx, sy, direction = sonar_world_pose(x, 1500.0, math.pi, FRONT)
+        series.append((float(u), 10 * contact_tangent(echo.envelope(world, sx, sy, direction, rng))))
+    return series
+
+
+def test_exploration_reads_the_step_scale_from_far_with_the_late_echo_taken_off() -> None:
+    """From 1.35 m the simulated echo reads late by ~2.5 % of the range beyond 0.7 m, so the range
+    falls faster than the robot drives; exploration's gauge takes that off as the localisation's
+    does, where the gauge without it reads the steps ~1.7 % too long."""
+    config = load_config(EXPLORATION_CONFIG)
+    gauge = LocalizationCore(config).synchronisers["sonar"].gauge
+    assert gauge is not None
+    uncorrected = TravelGauge(MOUNTS, dataclasses.replace(gauge.params, late_mm_per_m=0.0))
+    true_scale = 1.01
+    series = front_series_toward_a_wall(true_scale, 1350.0, 250.0)
+    scales = []
+    for g in (gauge, uncorrected):
+        for u, front in series:
+            g.add((-u, 0.0, math.pi), ranges(front))
+        (fit,) = g.add((-series[-1][0], 0.0, 0.0), ranges())
+        assert fit["span_mm"] > 900  # the whole series, not only the near part
+        scales.append(fit["scale"])
+    assert scales[0] == pytest.approx(true_scale, abs=0.004)
+    assert scales[1] - true_scale > 0.008
