@@ -208,10 +208,13 @@ def run_drive(
     """Generated room ``room_seed``'s random drive (drive seed = room seed) at noise ``seed``."""
     from bench.rooms import generated_room
     from modules.description import load_world
-    from modules.description.drives import drive_text, generate_drive
+    from modules.description.drives import DriveError, drive_text, generate_drive
 
     path = generated_room(room_seed, Path(rooms_dir))
-    moves = generate_drive(load_world(str(path)), room_seed)
+    try:
+        moves = generate_drive(load_world(str(path)), room_seed)
+    except DriveError as exc:  # (the room leaves no free leg: no drive to judge)
+        return {"room": room_seed, "seed": seed, "error": f"no drive: {exc}"}
     text = drive_text(moves, f"random drive {room_seed} in generated room {room_seed}")
     sim = DriveSim(str(path), seed, text, repository_config(str(path), overrides))
     result = sim.drive()
@@ -254,6 +257,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "synchronisations": samples,
         "dead_reckoning_median_mm": round(statistics.median(r["dead_reckoning_mm"] for r in done)),
         "not_done": [f"{r['room']}/{r['seed']}" for r in done if r["finished"] != "action file done"],
+        "no_drive": sorted({r["room"] for r in rows if "error" in r}),
     }
 
 
@@ -289,6 +293,9 @@ def main(argv: list[str] | None = None) -> int:
         for future in futures:
             r = future.result()
             rows.append(r)
+            if "error" in r:
+                print(f"room {r['room']:3d} seed {r['seed']}: {r['error']}", flush=True)
+                continue
             print(
                 f"room {r['room']:3d} seed {r['seed']}: filter {r['filter_mm']:5.1f} mm (RMSE "
                 f"{r['filter_rmse_mm']:5.1f}, worst {r['filter_max_mm']:5.1f} at {r['worst_at_s']:4.0f} s, "
@@ -304,6 +311,7 @@ def main(argv: list[str] | None = None) -> int:
             f"{s['max_worst_mm']} mm; within 3σ {s['within_3sigma']:.2%} of {s['synchronisations']} "
             f"synchronisations; dead reckoning median {s['dead_reckoning_median_mm']} mm"
             + (f"; not done: {', '.join(s['not_done'])}" if s["not_done"] else "")
+            + (f"; rooms without a drive: {s['no_drive']}" if s["no_drive"] else "")
         )
         print("aims (issue 21): median ≤ 20 mm, worst ≤ 50 mm, within 3σ ≥ 99 %")
     if args.json:
