@@ -554,9 +554,16 @@ class LocalizationCore:
         pose = ekf.pose
         ex, ey, eh = travel.get("end", (0.0, 0.0, 0.0))
         end = (*from_frame((ex, ey), pose), pose[2] + eh)  # the robot where the run ended
-        origin = from_frame((mount.x, mount.y), end)
         settings = self.config["filter"]["travel"]
-        incidence = _beam_hit(origin, end[2] + mount.angle, travel["range_end_mm"], self.known_walls)
+        range_mm = travel["range_end_mm"]
+        if settings["check_at"] == "points" and "back_mm" in travel:
+            # the wall the ranges came from, seen from the middle of its points: extrapolated to the
+            # run's end a rear beam's range can reach another wall, met squarely, far beyond them
+            back = travel["back_mm"]
+            end = (end[0] - back * math.cos(end[2]), end[1] - back * math.sin(end[2]), end[2])
+            range_mm = travel["range_mm"]
+        origin = from_frame((mount.x, mount.y), end)
+        incidence = _beam_hit(origin, end[2] + mount.angle, range_mm, self.known_walls)
         if incidence is None and settings["wait_for_map"] and self.config["walls"]["mode"] == "exploration":
             # the wall ahead is mapped once the robot has gone along it: its incidence then
             self._expire_pending_travel(stamp)

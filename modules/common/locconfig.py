@@ -40,7 +40,7 @@ DEFAULTS: dict[str, Any] = {
         "estimate": ["glide", "compass_offset", "step_scale"],
         "initial_pose": "world",
         "compass": {"mode": "newest", "sigma_deg": 1.5, "north_deg": 90.0, "max_turn_rate_deg_s": 2.0, "settle_ms": 0},
-        "travel": {"enabled": False, "max_incidence_deg": 8.0, "max_range_mm": 800.0, "model_sigma": 0.005, "unknown_wall": True, "wait_for_map": False},
+        "travel": {"enabled": False, "max_incidence_deg": 8.0, "max_range_mm": 800.0, "model_sigma": 0.005, "unknown_wall": True, "wait_for_map": False, "check_at": "end"},
         "noise": {
             "distance_rel": 0.01,
             "rotation_rel": 0.02,
@@ -87,12 +87,13 @@ DEFAULTS: dict[str, Any] = {
 
 #: what config/localization.yaml sets beyond the built-in defaults (issue 21): the sonar's
 #: tangent range model with its late echo, the error a fit's points share, longer side lines, the
-#: travel gauge out to 1.4 m on known walls only, and the compass's measured accuracy. The built-in
+#: travel gauge's settings (out to 1.4 m, known walls only, checked where its ranges were read; off),
+#: the compass's measured accuracy and no compass reading bent by the motors' start or stop. The built-in
 #: defaults keep the earlier values: exploration mode builds on them, and old logs replay as they ran
 REPOSITORY_SETTINGS: dict[str, Any] = {
     "filter": {
-        "compass": {"sigma_deg": 0.5},
-        "travel": {"enabled": True, "max_range_mm": 1400.0, "unknown_wall": False},
+        "compass": {"sigma_deg": 0.5, "settle_ms": 400},
+        "travel": {"enabled": False, "max_range_mm": 1400.0, "unknown_wall": False, "check_at": "points"},
         "noise": {"compass_offset_walk_deg_per_s": 0.01},
         "initial": {"compass_offset_sigma_deg": 0.5},
     },
@@ -247,6 +248,7 @@ class _Checker:
         choice(("filter", "compass", "mode"), ("newest", "mean"))
         choice(("walls", "mode"), ("darmstadt", "exploration", "off"))
         choice(("walls", "range_model"), ("tangent", "axis"))
+        choice(("filter", "travel", "check_at"), ("end", "points"))
         for name in c["filter"]["estimate"]:
             if name not in ESTIMATES:
                 raise self.fail(

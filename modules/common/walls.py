@@ -695,5 +695,7 @@ class TravelGauge:
             # range long before a run ends): the pose there is the one the beam is checked from
             "range_end_mm": float(slope * self._travel_at_end() + intercept + offset * moving[-1]),
             "end_pose": list(self.end),
+            # how far (nominal) the run went on past its points' middle: where the ranges were read
+            "back_mm": float(self._travel_at_end() - np.mean(u[keep])),
             "residual_mm": sigma,
         }
