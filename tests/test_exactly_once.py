@@ -280,7 +280,7 @@ def test_the_reproduction_on_real_processes_delivers_six_of_six(tmp_path, procs,
         str(programs),
     )
     with tap(endpoint) as session:
-        wait_ring(session, ring_name, [MAIN, MOTOR, SONAR], timeout=40)
+        wait_ring(session, ring_name, [MAIN, MOTOR, SONAR], timeout=120)
         procs.watch(launcher_pids(session, ring_name))
 
         def main_report() -> dict:

@@ -57,7 +57,7 @@ class Ring:
             env={LEDGER_ENV: str(self.ledger)},
         )
         self.session = tap(self.endpoint)
-        wait_ring(self.session, self.name, IDS, timeout=40)
+        wait_ring(self.session, self.name, IDS, timeout=120)
         self.tap = FrameTap(self.session, self.name)
 
     def fault(self, *args: str, check: bool = True) -> subprocess.CompletedProcess:

@@ -147,7 +147,7 @@ def test_a_lost_token_regenerates_as_a_fault_not_spuriously_and_status_shows_it(
     )
     ring = ["--ring", ring_name, "-e", endpoint]
     with tap(endpoint) as session:
-        wait_ring(session, ring_name, IDS, timeout=40)
+        wait_ring(session, ring_name, IDS, timeout=120)
         pids = launcher_pids(session, ring_name)
         procs.watch(pids)
 

@@ -334,7 +334,7 @@ def test_a_ring_bigger_than_the_boot_wave_starts_in_waves_and_stops_cleanly(proc
         procs, ring_name, endpoint, "--bitrate", "max", "--no-programs", "--no-world", "--boot-wave", "3"
     )
     with tap(endpoint) as session:
-        wait_ring(session, ring_name, ALL_IDS, timeout=40)
+        wait_ring(session, ring_name, ALL_IDS, timeout=120)
         pids = launcher_pids(session, ring_name)
         procs.watch(pids)
         assert len(pids) == len(ALL_IDS)

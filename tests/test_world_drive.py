@@ -35,7 +35,7 @@ def test_drive_moves_the_robot_and_prints_both_poses(procs, ring_name, endpoint,
         "--duration", "60",
     )  # fmt: skip
     with tap(endpoint) as session:
-        wait_ring(session, ring_name, [10, 20], timeout=30)
+        wait_ring(session, ring_name, [10, 20], timeout=120)
         procs.watch(launcher_pids(session, ring_name))
     code, result = drive(endpoint, ring_name, "forward", "300", "--speed", "100")
     assert code == 0, result

@@ -112,7 +112,7 @@ def test_commands_move_the_robot_dead_reckoning_glide_factor_and_sonar(procs, ri
         "--bitrate", "max", "--duration", "90",
     )  # fmt: skip
     with tap(endpoint) as session:
-        wait_ring(session, ring_name, [10, 20, 30, 40, 80], timeout=30)
+        wait_ring(session, ring_name, [10, 20, 30, 40, 80], timeout=120)
         procs.watch(launcher_pids(session, ring_name))
         link = PcLink(session, ring_name)
         start = wait_until(
@@ -193,7 +193,7 @@ def test_the_charger_stops_the_ring_on_a_nearly_empty_battery(procs, ring_name, 
         "--duration", "60",
     )  # fmt: skip
     with tap(endpoint) as session:
-        wait_ring(session, ring_name, [10, 20, 80], timeout=30)
+        wait_ring(session, ring_name, [10, 20, 80], timeout=120)
         procs.watch(launcher_pids(session, ring_name))
         link = PcLink(session, ring_name)
         wait_until(lambda: read(link, "charger.data")["stamp_ms"] > 0, 10, "charger data")
