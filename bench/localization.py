@@ -329,7 +329,7 @@ def run_generated(args: argparse.Namespace, seeds: list[int], workdir: Path) -> 
     from modules.description import load_world
     from modules.description.drives import DriveError, drive_text, generate_drive
 
-    rows = []
+    rows: list[dict[str, Any]] = []
     for room_seed in room_seeds(args.generated):
         path = generated_room(room_seed, workdir / "rooms")
         try:
@@ -356,7 +356,7 @@ def run_generated(args: argparse.Namespace, seeds: list[int], workdir: Path) -> 
                 rows.append({"room": room_seed, "seed": seed, "error": str(exc)})
                 continue
             k, o = summary["sources"]["K"], summary["sources"]["O"]
-            row = {
+            row: dict[str, Any] = {
                 "room": room_seed,
                 "seed": seed,
                 "filter_mm": k["end_error_mm"],
@@ -365,6 +365,9 @@ def run_generated(args: argparse.Namespace, seeds: list[int], workdir: Path) -> 
                 "within_3sigma": k.get("within_3sigma"),
                 "samples_3sigma": k.get("samples_3sigma"),
                 "dead_reckoning_mm": o["end_error_mm"],
+                "sync_median_ms": summary["sync"].get("median_period_ms"),
+                "sync_p99_ms": summary["sync"].get("p99_period_ms"),
+                "missed": {s: t["missed"] for s, t in summary["timing"].items()},
                 "finished": summary.get("finished"),
                 "real_seconds": time.monotonic() - t0,
             }
@@ -373,7 +376,9 @@ def run_generated(args: argparse.Namespace, seeds: list[int], workdir: Path) -> 
                 f"room {room_seed}, seed {seed}: filter {row['filter_mm']:.1f} mm (RMSE "
                 f"{row['filter_rmse_mm']:.1f}, worst {row['filter_max_mm']:.1f}, within 3σ "
                 f"{(row['within_3sigma'] or 0):.1%}) | dead reckoning {row['dead_reckoning_mm']:.0f} mm | "
-                f"{row['real_seconds']:.0f} s | {(row['finished'] or {}).get('why', 'not finished')}",
+                f"sync {row['sync_median_ms'] or 0:.0f}/{row['sync_p99_ms'] or 0:.0f} ms, missed "
+                f"{sum(row['missed'].values())} | {row['real_seconds']:.0f} s | "
+                f"{(row['finished'] or {}).get('why', 'not finished')}",
                 flush=True,
             )
     done = [r for r in rows if "error" not in r]
