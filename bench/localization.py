@@ -59,6 +59,7 @@ def run_experiment(
     say: Any = print,
     world: str = "square",
     actions: tuple[str, str] | None = None,
+    overrides: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """One run on a fresh ring; returns the analysis summary of the Localizer's data log.
 
@@ -76,6 +77,12 @@ def run_experiment(
     logs = workdir / tag
     logs.mkdir(parents=True, exist_ok=True)
     config = repository_config()
+    for key, value in (overrides or {}).items():  # dotted keys, e.g. filter.travel.enabled
+        node = config
+        *parents, last = key.split(".")
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[last] = value
     config["logs"] = {**config.get("logs", {}), "directory": str(logs)}
     if world != "square":
         config["walls"] = {**config.get("walls", {}), "file": world}
@@ -259,7 +266,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--out", metavar="DIR", help="keep the logs and plots here (default: a temp dir)")
     parser.add_argument("--json", metavar="FILE", help="also write the figures as JSON")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="override config/localization.yaml"
+    )
     args = parser.parse_args(argv)
+    args.overrides = {k.strip(): yaml.safe_load(v) for k, _, v in (item.partition("=") for item in args.set)}
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     workdir = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bench-localization-"))
     if args.generated:
@@ -276,6 +287,7 @@ def main(argv: list[str] | None = None) -> int:
             speed_pct=args.speed_pct,
             workdir=workdir,
             timeout=args.timeout,
+            overrides=args.overrides,
         )
         k, o = summary["sources"]["K"], summary["sources"]["O"]
         drive = summary.get("drive", {})
@@ -289,6 +301,8 @@ def main(argv: list[str] | None = None) -> int:
             "filter_heading_deg": k["end_heading_error_deg"],
             "dead_reckoning_heading_deg": o["end_heading_error_deg"],
             "filter_rmse_mm": k["rmse_mm"],
+            "filter_max_mm": k["max_error_mm"],
+            "within_3sigma": k.get("within_3sigma"),
             "sync_median_ms": summary["sync"].get("median_period_ms"),
             "sync_p99_ms": summary["sync"].get("p99_period_ms"),
             "missed": {s: t["missed"] for s, t in summary["timing"].items()},
@@ -298,7 +312,8 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(row)
         print(
             f"seed {seed}: dead reckoning {row['dead_reckoning_mm']:7.0f} mm ({row['dead_reckoning_heading_deg']:+.1f}°)"
-            f" | filter {row['filter_mm']:5.1f} mm ({row['filter_heading_deg']:+.2f}°, RMSE {row['filter_rmse_mm']:.1f} mm)"
+            f" | filter {row['filter_mm']:5.1f} mm ({row['filter_heading_deg']:+.2f}°, RMSE {row['filter_rmse_mm']:.1f}, "
+            f"worst {row['filter_max_mm']:.1f} mm, within 3σ {row['within_3sigma'] or 0:.1%})"
             f" | ratio 1/{1 / row['ratio']:.0f} | drive alone: dead reckoning {row['dead_reckoning_drive_mm'] or 0:.0f} mm"
             f" | sync {row['sync_median_ms']:.0f}/{row['sync_p99_ms']:.0f} ms"
             f" | {row['real_seconds']:.0f} s | {(row['finished'] or {}).get('why', 'not finished')}",
@@ -350,6 +365,7 @@ def run_generated(args: argparse.Namespace, seeds: list[int], workdir: Path) -> 
                     timeout=args.timeout,
                     world=str(path),
                     actions=(f"drive{room_seed}.act", text),
+                    overrides=args.overrides,
                 )
             except RuntimeError as exc:
                 print(f"room {room_seed}, seed {seed}: failed: {exc}", flush=True)
