@@ -9,6 +9,7 @@ test tells it to (a trigger file), not after a time that a loaded machine may ov
 from __future__ import annotations
 
 import io
+import subprocess
 import sys
 import threading
 import time
@@ -196,3 +197,38 @@ def test_a_service_that_never_comes_up_leaves_nothing_running(ring_name: str, en
     assert launcher.session is None
     left = [t for t in threading.enumerate() if t.ident not in before and not t.daemon and t.is_alive()]
     assert wait_for(lambda: not [t for t in left if t.is_alive()], HANG_GUARD_S), left
+
+
+class SlowToReap:
+    """A service process that ignores SIGTERM and whose reaping outlasts every wait (a loaded
+    machine): what the launcher's stop must survive without raising."""
+
+    pid = 424242
+    stdout = None
+
+    def __init__(self) -> None:
+        self.killed = False
+
+    def poll(self) -> None:
+        return None
+
+    def send_signal(self, _signal: int) -> None:
+        pass
+
+    def kill(self) -> None:
+        self.killed = True
+
+    def wait(self, timeout: float | None = None) -> int:
+        raise subprocess.TimeoutExpired("service", timeout or 0.0)
+
+
+def test_a_service_slow_to_reap_after_sigkill_does_not_break_the_stop(ring_name, endpoint, monkeypatch):
+    monkeypatch.setattr(launcher_module, "STOP_TIMEOUT_S", 0.01)
+    monkeypatch.setattr(launcher_module, "KILL_REAP_S", 0.01)
+    output = io.StringIO()
+    launcher = Launcher([], ring=ring_name, listen=[endpoint], output=output)
+    slow = SlowToReap()
+    launcher.service_children["world"] = slow  # type: ignore[assignment]
+    launcher.stop()  # raises nothing: the rest of the stop still runs
+    assert slow.killed
+    assert "world did not stop" in output.getvalue() and "survived SIGKILL" in output.getvalue()

@@ -549,8 +549,12 @@ class Launcher:
                     process.wait(STOP_TIMEOUT_S)
                 except subprocess.TimeoutExpired:
                     self.say(f"{name} did not stop in {STOP_TIMEOUT_S} s: killing it")
-                    process.kill()
-                    process.wait(1.0)
+                    with contextlib.suppress(ProcessLookupError):
+                        process.kill()
+                    try:  # a loaded machine may take seconds to reap it; the stop goes on
+                        process.wait(KILL_REAP_S)
+                    except subprocess.TimeoutExpired:
+                        self.say(f"{name} (pid {process.pid}) survived SIGKILL")
         self.output.join_reader(timeout=1.0)
         for process in [c.process for c in self.child_list()] + list(self.service_children.values()):
             if process.stdout is not None:
