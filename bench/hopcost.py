@@ -104,16 +104,16 @@ def per_visit(
     return out
 
 
+def perf_report(data: Path, sort: str) -> str:
+    """``perf report``'s table of ``data``, sample counts by the ``sort`` keys (comm,dso,...)."""
+    command = ["perf", "report", "-i", str(data), "--sort", sort, "-n", "--stdio", "-g", "none"]
+    return subprocess.run(command, capture_output=True, text=True, check=False).stdout
+
+
 def perf_split(data: Path, visits: int) -> dict[str, float]:
     """µs per visit of one node's ``perf record`` samples, by ``thread group / library``."""
-    report = subprocess.run(
-        ["perf", "report", "-i", str(data), "--sort", "comm,dso", "-n", "--stdio", "-g", "none"],
-        capture_output=True,
-        text=True,
-        check=False,
-    ).stdout
     out: dict[str, float] = {}
-    for line in report.splitlines():
+    for line in perf_report(data, "comm,dso").splitlines():
         parts = line.split()
         if len(parts) < 4 or not parts[0].endswith("%") or line.lstrip().startswith("#"):
             continue
@@ -129,14 +129,8 @@ def perf_split(data: Path, visits: int) -> dict[str, float]:
 
 def perf_symbols(data: Path, visits: int) -> dict[str, float]:
     """µs per visit of the token's receiving thread in one node's ``perf record``, by function."""
-    report = subprocess.run(
-        ["perf", "report", "-i", str(data), "--sort", "comm,dso,sym", "-n", "--stdio", "-g", "none"],
-        capture_output=True,
-        text=True,
-        check=False,
-    ).stdout
     out: dict[str, float] = {}
-    for line in report.splitlines():
+    for line in perf_report(data, "comm,dso,sym").splitlines():
         parts = line.split(None, 5)
         if len(parts) < 6 or not parts[0].endswith("%") or not parts[2].startswith("rx-"):
             continue
