@@ -428,6 +428,7 @@ def test_bad_command_line_input_exits_2_with_a_message():
         (["up", "--ring", "a/b"], "ring name"),
         (["sniff", "--channels", "radar.data", "--duration", "0.1"], "unknown channel 'radar.data'"),
         (["bench", "--nodes", "1"], "--nodes must be 2..255"),
+        (["bench", "--transport", "udp", "--tap"], "--tap listens to the token on Zenoh"),
         (["up", "--connect", "localhost:7447"], "not of the form tcp/HOST:PORT"),
     ]
     for args, message in cases:

@@ -83,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--rounds must be 10..16000")
     if args.repeat < 1:
         raise UsageError("--repeat must be at least 1")
+    if args.tap and args.transport != "zenoh":
+        raise UsageError(f"--tap listens to the token on Zenoh; over {args.transport} it never passes there")
     from tokenring.ring import parse_bitrate
 
     bitrate = parse_bitrate(args.bitrate)
