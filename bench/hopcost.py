@@ -146,26 +146,20 @@ class BareRing:
 
     def __init__(self, nodes: int, router: bool) -> None:
         from tokenring.cliutil import free_port
-        from tokenring.launcher import die_with_parent
-        from tokenring.zconfig import make_config, node_environment, open_session
+        from tokenring.roundtrip import spawn_bare_ring
+        from tokenring.zconfig import make_config, open_session
 
         port = free_port()
-        self.prefix = f"tokenring-bare/h{os.getpid()}x{port}"
-        base = [sys.executable, "-m", "tokenring.roundtrip_bare", "--count", str(nodes), "--port", str(port)]
-        base += ["--rounds", "10000000", "--warmup", "50", "--ring", self.prefix.split("/")[1]]
-        base += ["--timeout", "600", "--mode", "client" if router else "peer", "--stamps"]
-        env = node_environment()
+        ring = f"h{os.getpid()}x{port}"
+        self.prefix = f"tokenring-bare/{ring}"
         self.router = (
             open_session(make_config(mode="router", listen=[f"tcp/127.0.0.1:{port}"])) if router else None
         )
         connect = make_config(mode="client" if router else "peer", connect=[f"tcp/127.0.0.1:{port}"])
-        self.first = subprocess.Popen(
-            [*base, "--index", "0"], stdout=subprocess.PIPE, text=True, env=env, preexec_fn=die_with_parent
+        # runs until stop(): rounds enough for any window
+        self.first, self.others = spawn_bare_ring(
+            nodes, port, ring, 10_000_000, 50, 600, router=router, stamps=True
         )
-        self.others = [
-            subprocess.Popen([*base, "--index", str(i)], env=env, preexec_fn=die_with_parent)
-            for i in range(1, nodes)
-        ]
         self.session = open_session(connect)
         self.pids = [self.first.pid] + [p.pid for p in self.others]
 

@@ -67,6 +67,9 @@ def test_hopcost_counts_each_rings_visits_and_leaves_no_process(tmp_path):
         # every hop runs on some thread: the round's CPU is more than nothing, the visits were counted
         assert run["visits"] >= 10 and run["per_visit_us"]["total"] > 0
         assert run["round_ms"] == pytest.approx(1.5e3 / run["visits"], rel=0.5)
+        # CPU read from /proc: all processes together cannot have used more than the cores give
+        cpu_s = run["per_visit_us"]["total"] * 1e-6 * run["visits"] * 3
+        assert 0 < cpu_s <= 1.5 * (os.cpu_count() or 1) * 1.2
         for pid in run["pids"]:
             assert not os.path.exists(f"/proc/{pid}") or "zombie" in Path(f"/proc/{pid}/status").read_text()
     # the node's own Python threads (watchdog, token thread) exist only in the ring

@@ -92,21 +92,26 @@ def progress(text: str, quiet: bool = False) -> None:
 # ---------------------------------------------------------------------------------------------
 
 
-def run_bare(
-    n: int, rounds: int, warmup: int, timeout: float = 120.0, *, router: bool = False
-) -> list[float]:
-    """Round times (s) of a bare Zenoh ring of ``n`` processes: a full mesh of peers, or with
-    ``router`` every process a client of a Zenoh router opened here (as the launcher does)."""
-    port = free_port()
-    ring = f"b{os.getpid()}x{port}"
+def spawn_bare_ring(
+    n: int,
+    port: int,
+    ring: str,
+    rounds: int,
+    warmup: int,
+    timeout: float,
+    *,
+    router: bool,
+    stamps: bool = False,
+) -> tuple[subprocess.Popen, list[subprocess.Popen]]:
+    """Start the ``n`` processes of a bare Zenoh ring (``tokenring.roundtrip_bare``) on ``port``:
+    process 0, whose stdout carries the result line, and the others. They run the ring's Zenoh
+    runtime and, like the launcher's nodes, die with a benchmark that is killed. With ``router``
+    the caller has opened the router on ``port``; ``stamps``: process 0 also prints each round's
+    arrival time."""
     base = [sys.executable, "-m", "tokenring.roundtrip_bare", "--count", str(n), "--port", str(port)]
     base += ["--rounds", str(rounds), "--warmup", str(warmup), "--ring", ring, "--timeout", str(timeout)]
-    base += ["--mode", "client" if router else "peer"]
+    base += ["--mode", "client" if router else "peer"] + (["--stamps"] if stamps else [])
     env = node_environment()  # the same Zenoh runtime as the ring's nodes
-    router_session = (
-        open_session(make_config(mode="router", listen=[f"tcp/127.0.0.1:{port}"])) if router else None
-    )
-    # like the launcher's nodes, the bare ring dies with a benchmark that is killed
     first = subprocess.Popen(
         [*base, "--index", "0"], stdout=subprocess.PIPE, text=True, env=env, preexec_fn=die_with_parent
     )
@@ -116,6 +121,19 @@ def run_bare(
         )
         for i in range(1, n)
     ]
+    return first, others
+
+
+def run_bare(
+    n: int, rounds: int, warmup: int, timeout: float = 120.0, *, router: bool = False
+) -> list[float]:
+    """Round times (s) of a bare Zenoh ring of ``n`` processes: a full mesh of peers, or with
+    ``router`` every process a client of a Zenoh router opened here (as the launcher does)."""
+    port = free_port()
+    router_session = (
+        open_session(make_config(mode="router", listen=[f"tcp/127.0.0.1:{port}"])) if router else None
+    )
+    first, others = spawn_bare_ring(n, port, f"b{os.getpid()}x{port}", rounds, warmup, timeout, router=router)
     try:
         out, _ = first.communicate(timeout=timeout + 30)
     except subprocess.TimeoutExpired:
