@@ -13,7 +13,8 @@ SET_GLOBAL_POSITION corrections of the motor (the filter integrates the step cou
 leave alone), the compass module's own calibration and the ring's timing (see bench.closedloop).
 
 ``python -m bench.drivesim --generated tuning|evaluation[:N] --seeds 1-3 --jobs 2 [--json FILE]
-[--set filter.compass.sigma_deg=0.6 ...]`` prints per drive the filter's end error, RMSE, worst
+[--set filter.compass.sigma_deg=0.6 ...]`` (or ``--world square`` for the Darmstadt square's three
+laps, ``--actions FILE`` for another drive) prints per drive the filter's end error, RMSE, worst
 error, the share of synchronisations whose truth lay within the filter's 3σ and dead reckoning's
 end error, then the medians, the worst and the overall share (issue 21's aims: median ≤ 20 mm,
 worst ≤ 50 mm, 3σ ≥ 99 %).
@@ -216,13 +217,29 @@ def run_drive(
     except DriveError as exc:  # (the room leaves no free leg: no drive to judge)
         return {"room": room_seed, "seed": seed, "error": f"no drive: {exc}"}
     text = drive_text(moves, f"random drive {room_seed} in generated room {room_seed}")
-    sim = DriveSim(str(path), seed, text, repository_config(str(path), overrides))
+    return judged_drive(room_seed, str(path), seed, text, overrides)
+
+
+def run_world(
+    world: str, actions_path: str, seed: int, overrides: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """A bundled world (or world file) driven by an action file at noise ``seed``: with the
+    square and ``actions/square-3-laps.act`` the Darmstadt experiment of ``bench.localization``."""
+    text = Path(actions_path).read_text()
+    return judged_drive(world, world, seed, text, overrides)
+
+
+def judged_drive(
+    room: int | str, world: str, seed: int, actions_text: str, overrides: dict[str, Any] | None
+) -> dict[str, Any]:
+    """One drive of ``world`` by ``actions_text``, judged against the truth (see :func:`judge`)."""
+    sim = DriveSim(world, seed, actions_text, repository_config(world, overrides))
     result = sim.drive()
     figures = judge(result["positions"], result["truth"])
     k, o = figures.get("K", {}), figures.get("O", {})
     report = result["report"]
     return {
-        "room": room_seed,
+        "room": room,
         "seed": seed,
         "filter_mm": k.get("end_error_mm"),
         "filter_rmse_mm": k.get("rmse_mm"),
@@ -276,8 +293,14 @@ def main(argv: list[str] | None = None) -> int:
     from bench.rooms import room_seeds
 
     parser = argparse.ArgumentParser(prog="python -m bench.drivesim", description=__doc__.split("\n\n")[0])
+    rooms = parser.add_mutually_exclusive_group(required=True)
+    rooms.add_argument("--generated", metavar="ROOMS", help="tuning, evaluation[:N], or 101-105")
+    rooms.add_argument("--world", metavar="WORLD", help="a bundled world or world file, driven by --actions")
     parser.add_argument(
-        "--generated", required=True, metavar="ROOMS", help="tuning, evaluation[:N], or 101-105"
+        "--actions",
+        default="actions/square-3-laps.act",
+        metavar="FILE",
+        help="the action file for --world (default: the Darmstadt square's three laps)",
     )
     parser.add_argument("--seeds", default="1", help="noise seeds: 1, 1,2,3 or 1-3")
     parser.add_argument("--jobs", type=int, default=1, help="drives in parallel")
@@ -286,18 +309,27 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     rooms_dir = str(Path(__file__).parent / "results" / "raw" / "rooms")
     overrides = parse_overrides(args.set)
-    jobs = [(room, seed) for room in room_seeds(args.generated) for seed in parse_seeds(args.seeds)]
     rows: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        futures = [pool.submit(run_drive, room, seed, rooms_dir, overrides) for room, seed in jobs]
+        if args.world:
+            futures = [
+                pool.submit(run_world, args.world, args.actions, seed, overrides)
+                for seed in parse_seeds(args.seeds)
+            ]
+        else:
+            futures = [
+                pool.submit(run_drive, room, seed, rooms_dir, overrides)
+                for room in room_seeds(args.generated)
+                for seed in parse_seeds(args.seeds)
+            ]
         for future in futures:
             r = future.result()
             rows.append(r)
             if "error" in r:
-                print(f"room {r['room']:3d} seed {r['seed']}: {r['error']}", flush=True)
+                print(f"room {r['room']:>3} seed {r['seed']}: {r['error']}", flush=True)
                 continue
             print(
-                f"room {r['room']:3d} seed {r['seed']}: filter {r['filter_mm']:5.1f} mm (RMSE "
+                f"room {r['room']:>3} seed {r['seed']}: filter {r['filter_mm']:5.1f} mm (RMSE "
                 f"{r['filter_rmse_mm']:5.1f}, worst {r['filter_max_mm']:5.1f} at {r['worst_at_s']:4.0f} s, "
                 f"within 3σ {r['within_3sigma']:6.1%}, heading {r['filter_heading_deg']:+.2f}°) | dead reckoning "
                 f"{r['dead_reckoning_mm']:4.0f} mm | {r['sim_seconds']:.0f} s | {r['finished']}",

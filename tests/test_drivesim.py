@@ -82,3 +82,19 @@ def test_judge_on_hand_made_records():
     assert s["end_median_mm"] == 20.0 and s["end_worst_mm"] == 30.0
     assert s["within_3sigma"] == 0.875 and s["synchronisations"] == 8
     assert s["not_done"] == ["2/1"]
+
+
+def test_a_bundled_world_is_driven_by_an_action_file(tmp_path, capsys):
+    from bench.drivesim import main
+
+    actions = tmp_path / "short.act"
+    actions.write_text("s 600\nr 90\ns 400\n")
+    out = tmp_path / "square.json"
+    assert main(["--world", "square", "--actions", str(actions), "--seeds", "2", "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "room square seed 2: filter" in printed and "action file done" in printed
+    import json
+
+    (run,) = json.loads(out.read_text())["runs"]
+    assert run["room"] == "square" and run["finished"] == "action file done"
+    assert run["moves"]  # the file's moves were driven
