@@ -8,7 +8,8 @@ the same size and topology; in each, once the token circulates, a window of ``--
   sending and timer threads (``tx-*``, ``net-*``, ``acc-*``, ``app-*``), the Python threads (the
   node's watchdog, token and system threads; the bare forwarder has only its idle main thread) —
   and their context switches, each divided by the visits in the window;
-* with ``--perf``, ``perf record`` of one node (the second) over the window, its samples split by
+* with ``--perf``, ``perf record`` of one node (the second; ``--perf-nodes K``: the K after the
+  first, for enough samples in a big ring's slow rounds) over the window, its samples split by
   thread and library (``_tokenpath`` is the visit in C, ``libpython`` the Python it calls,
   ``zenoh`` the transport, the kernel the syscalls and wake-ups), in µs per visit.
 
@@ -18,6 +19,7 @@ the mean over pairs with its 95 % interval (bench/ownshare.py).
 
     python -m bench.hopcost --nodes 8 --pairs 3 --window 5 --perf [--json F]
     python -m bench.hopcost --nodes 64 --topology router --pairs 2 --perf
+    python -m bench.hopcost --nodes 255 --topology router --pairs 1 --perf --perf-nodes 32
 """
 
 from __future__ import annotations
@@ -111,7 +113,8 @@ def perf_report(data: Path, sort: str) -> str:
 
 
 def perf_split(data: Path, visits: int) -> dict[str, float]:
-    """µs per visit of one node's ``perf record`` samples, by ``thread group / library``."""
+    """µs per visit of a node's ``perf record`` samples, by ``thread group / library`` (``visits``:
+    the recorded nodes' visits together)."""
     out: dict[str, float] = {}
     for line in perf_report(data, "comm,dso").splitlines():
         parts = line.split()
@@ -128,7 +131,7 @@ def perf_split(data: Path, visits: int) -> dict[str, float]:
 
 
 def perf_symbols(data: Path, visits: int) -> dict[str, float]:
-    """µs per visit of the token's receiving thread in one node's ``perf record``, by function."""
+    """µs per visit of the token's receiving thread in a node's ``perf record``, by function."""
     out: dict[str, float] = {}
     for line in perf_report(data, "comm,dso,sym").splitlines():
         parts = line.split(None, 5)
@@ -198,8 +201,12 @@ class BareRing:
         return json.loads(lines[-1]).get("stamps_s", []) if lines else []
 
 
-def measure(kind: str, nodes: int, router: bool, window: float, perf: bool, out_dir: Path) -> dict[str, Any]:
-    """One ring (``bare`` or ``ring``) of ``nodes``: its CPU per visit over one window."""
+def measure(
+    kind: str, nodes: int, router: bool, window: float, perf_nodes: int, out_dir: Path
+) -> dict[str, Any]:
+    """One ring (``bare`` or ``ring``) of ``nodes``: its CPU per visit over one window, and
+    ``perf record`` of ``perf_nodes`` of its nodes (0: none)."""
+    perf = perf_nodes > 0
     perf_data = out_dir / f"{kind}-{nodes}-{time.monotonic_ns()}.data"
     perf_proc: subprocess.Popen | None = None
     if kind == "bare":
@@ -210,7 +217,7 @@ def measure(kind: str, nodes: int, router: bool, window: float, perf: bool, out_
             time.sleep(1.0)
             t0, before = time.monotonic(), sample_threads(pids)
             if perf:
-                perf_proc = start_perf(pids[1], window, perf_data)
+                perf_proc = start_perf(pids[1 : 1 + perf_nodes], window, perf_data)
             time.sleep(window)
             t1, after = time.monotonic(), sample_threads(pids)
             if perf_proc is not None:
@@ -219,7 +226,7 @@ def measure(kind: str, nodes: int, router: bool, window: float, perf: bool, out_
             stamps = bare.stop()
         visits = sum(1 for s in stamps if t0 <= s <= t1)
     else:
-        visits, before, after, t0, t1, pids = ring_window(nodes, router, window, perf, perf_data)
+        visits, before, after, t0, t1, pids = ring_window(nodes, router, window, perf_nodes, perf_data)
     if visits < 10:
         raise RuntimeError(f"{kind} ring of {nodes}: only {visits} rounds in the window")
     result = {
@@ -231,14 +238,17 @@ def measure(kind: str, nodes: int, router: bool, window: float, perf: bool, out_
         "load": [round(x, 2) for x in os.getloadavg()],
     }
     if perf and perf_data.exists():
-        result["perf_us"] = perf_split(perf_data, visits)
-        result["perf_rx_symbols_us"] = perf_symbols(perf_data, visits)
+        result["perf_nodes"] = perf_nodes
+        result["perf_us"] = perf_split(perf_data, visits * perf_nodes)
+        result["perf_rx_symbols_us"] = perf_symbols(perf_data, visits * perf_nodes)
         perf_data.unlink()
     return result
 
 
-def start_perf(pid: int, window: float, data: Path) -> subprocess.Popen:
-    record = ["perf", "record", "-e", "cpu-clock", "-F", str(PERF_HZ), "-o", str(data), "-p", str(pid)]
+def start_perf(pids: list[int], window: float, data: Path) -> subprocess.Popen:
+    """``perf record`` of the processes ``pids`` for ``window`` seconds into ``data``."""
+    pid_list = ",".join(str(pid) for pid in pids)
+    record = ["perf", "record", "-e", "cpu-clock", "-F", str(PERF_HZ), "-o", str(data), "-p", pid_list]
     return subprocess.Popen(
         [*record, "--", "sleep", str(window)],
         stdout=subprocess.DEVNULL,
@@ -247,7 +257,7 @@ def start_perf(pid: int, window: float, data: Path) -> subprocess.Popen:
 
 
 def ring_window(
-    nodes: int, router: bool, window: float, perf: bool, perf_data: Path
+    nodes: int, router: bool, window: float, perf_nodes: int, perf_data: Path
 ) -> tuple[int, Any, Any, float, float, list[int]]:
     """A tokenring ring of ``nodes`` (as ``tokenring bench`` runs it): visits and thread samples."""
     from tokenring import keys
@@ -287,7 +297,7 @@ def ring_window(
             time.sleep(1.0)
             pids = [c.process.pid for c in launcher.child_list()]
             v0, t0, before = visits(), time.monotonic(), sample_threads(pids)
-            perf_proc = start_perf(pids[1], window, perf_data) if perf else None
+            perf_proc = start_perf(pids[1 : 1 + perf_nodes], window, perf_data) if perf_nodes else None
             time.sleep(window)
             v1, t1, after = visits(), time.monotonic(), sample_threads(pids)
             if perf_proc is not None:
@@ -338,10 +348,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pairs", type=int, default=3, help="alternating bare/ring pairs (default 3)")
     parser.add_argument("--window", type=float, default=5.0, help="seconds measured per ring (default 5)")
     parser.add_argument("--perf", action="store_true", help="also perf-record one node per ring")
+    parser.add_argument(
+        "--perf-nodes", type=int, default=1, metavar="K", help="with --perf: record K nodes (default 1)"
+    )
     parser.add_argument("--json", metavar="FILE", help="write the pairs and tables as JSON")
     args = parser.parse_args(argv)
     if not 2 <= args.nodes <= 255 or args.pairs < 1 or args.window <= 0:
         sys.stderr.write("hopcost: --nodes 2..255, --pairs >= 1, --window > 0\n")
+        return 2
+    if not 1 <= args.perf_nodes < args.nodes:
+        sys.stderr.write(f"hopcost: --perf-nodes 1..{args.nodes - 1} (the nodes after the first)\n")
         return 2
     if args.json and Path(args.json).exists():
         sys.stderr.write(f"hopcost: {args.json} exists; not overwritten\n")
@@ -361,7 +377,8 @@ def main(argv: list[str] | None = None) -> int:
                 sys.stderr.write(
                     f"[pair {pair + 1}/{args.pairs}] {kind} ring of {args.nodes} ({args.topology}s) ...\n"
                 )
-                got[kind] = measure(kind, args.nodes, router, args.window, args.perf, Path(tmp))
+                perf_nodes = args.perf_nodes if args.perf else 0
+                got[kind] = measure(kind, args.nodes, router, args.window, perf_nodes, Path(tmp))
                 sys.stderr.write(
                     f"    {got[kind]['visits']} rounds, {got[kind]['round_ms']:.3f} ms each, "
                     f"{got[kind]['per_visit_us']['total']:.1f} µs CPU per visit per node, load {got[kind]['load'][0]}\n"
@@ -380,11 +397,11 @@ def main(argv: list[str] | None = None) -> int:
     }
     if args.perf:
         split = table(pairs, "perf_us")
-        print("\none node's perf samples (thread / library), per visit:")
+        print(f"\nperf samples of {args.perf_nodes} node(s) (thread / library), per visit of a node:")
         print(format_rows([row for row in split if abs(row["ring"]) + abs(row["bare"]) >= 0.5], "µs"))
         result["perf"] = split
         symbols = table(pairs, "perf_rx_symbols_us")[:30]
-        print("\nthe token's receiving thread of that node, by function (the 30 largest differences):")
+        print("\nthe token's receiving thread, by function (the 30 largest differences):")
         print(format_rows(symbols, "µs"))
         result["perf_rx_symbols"] = symbols
     if args.json:  # the tables and each run's thread figures; the perf samples' dicts stay out

@@ -84,3 +84,16 @@ def test_hopcost_refuses_an_existing_output_file(tmp_path):
         [sys.executable, "-m", "bench.hopcost", "--json", str(out)], capture_output=True, text=True, cwd=REPO
     )
     assert result.returncode == 2 and "exists" in result.stderr and out.read_text() == "{}"
+
+
+@pytest.mark.parametrize("count", ["0", "8"])
+def test_hopcost_refuses_to_record_nodes_the_ring_does_not_have(count):
+    result = subprocess.run(
+        [sys.executable, "-m", "bench.hopcost", "--nodes", "8", "--perf", "--perf-nodes", count],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=60,
+    )
+    assert result.returncode == 2 and "--perf-nodes 1..7" in result.stderr
+    assert "Traceback" not in result.stderr
