@@ -532,6 +532,7 @@ class LocalizationCore:
         accepted = ekf.correct_line(wall["alpha"], wall["d"], cov, best[1], kind=f"wall_{wall['kind']}")
         if accepted:
             self.wall_corrected_at[best[1].index] = pose
+            self._keep_bias_floor(best[1])
         self.message(
             "D",
             stamp,
@@ -544,6 +545,19 @@ class LocalizationCore:
                 f"{wall['kind']} wall (sonar {wall['sensors']}) rejected by the gate for wall {best[1].index}",
             )
         return [best[1].index, int(accepted)]
+
+    def _keep_bias_floor(self, wall: KnownWall) -> None:
+        """Keep the pose's variance across ``wall`` at ``walls.bias_floor_mm``² at least: its fits
+        share an error (the sonar model's residue at that range and incidence) that the filter,
+        taking them as independent, would otherwise average away."""
+        floor = self.config["walls"]["bias_floor_mm"]
+        ekf = self.ekf
+        if floor <= 0 or ekf is None:
+            return
+        normal = np.array([math.cos(wall.alpha), math.sin(wall.alpha)])
+        variance = float(normal @ ekf.P[:2, :2] @ normal)
+        if variance < floor * floor:
+            ekf.P[:2, :2] += (floor * floor - variance) * np.outer(normal, normal)
 
     def _correct_travel(self, travel: dict[str, Any], stamp: int) -> None:
         """A straight drive's step scale from a sonar's range series; the beam's incidence on the

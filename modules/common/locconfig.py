@@ -78,6 +78,7 @@ DEFAULTS: dict[str, Any] = {
         "sonar_late": {"from_mm": 700.0, "mm_per_m": 25.0, "mm_per_deg2": 0.055},
         "shared_sigma_mm": 0.0,
         "repeat_after_mm": 100.0,
+        "bias_floor_mm": 0.0,
         "association": {"max_d_mm": 400.0, "max_alpha_deg": 20.0, "margin_mm": 150.0, "min_wall_length_mm": 500.0},
     },
     "robot": {"mm_per_step": 0.5419, "steps_per_degree": 6.5, "sonars": "robot"},
@@ -88,7 +89,8 @@ DEFAULTS: dict[str, Any] = {
 #: what config/localization.yaml sets beyond the built-in defaults (issue 21): the sonar's
 #: tangent range model with its late echo, the error a fit's points share, longer side lines, the
 #: travel gauge's settings (out to 1.4 m, known walls only, checked where its ranges were read; off),
-#: the compass's measured accuracy and no compass reading bent by the motors' start or stop. The built-in
+#: the compass's measured accuracy, no compass reading bent by the motors' start or stop, and a floor
+#: under the pose's σ across a wall (its fits share an error). The built-in
 #: defaults keep the earlier values: exploration mode builds on them, and old logs replay as they ran
 REPOSITORY_SETTINGS: dict[str, Any] = {
     "filter": {
@@ -97,7 +99,12 @@ REPOSITORY_SETTINGS: dict[str, Any] = {
         "noise": {"compass_offset_walk_deg_per_s": 0.01},
         "initial": {"compass_offset_sigma_deg": 0.5},
     },
-    "walls": {"range_model": "tangent", "shared_sigma_mm": 8.0, "min_span_side_mm": 220.0},
+    "walls": {
+        "range_model": "tangent",
+        "shared_sigma_mm": 8.0,
+        "min_span_side_mm": 220.0,
+        "bias_floor_mm": 8.0,
+    },
 }
 
 ESTIMATES = ("glide", "compass_offset", "step_scale")
