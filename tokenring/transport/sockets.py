@@ -165,6 +165,10 @@ class UdpTransport(SocketTransport):
         self._sock.close()
 
 
+#: frames and messages a PUSH socket may hold for one node (ZeroMQ's SNDHWM)
+ZMQ_SEND_QUEUE = 1000
+
+
 class ZmqTransport(SocketTransport):
     """A ZeroMQ PULL socket per node, PUSH sockets towards the others."""
 
@@ -195,7 +199,11 @@ class ZmqTransport(SocketTransport):
             zmq = self._zmq
             push = self._context.socket(zmq.PUSH)
             push.setsockopt(zmq.LINGER, 0)
-            push.setsockopt(zmq.SNDHWM, 16)
+            # a full pipe fails the token's send (EAGAIN). ZeroMQ tells the sender what left the
+            # pipe only every SNDHWM/2 messages, and the sending thread reads that news at most
+            # once a millisecond: with 16, a ring passing more than ~8 frames a millisecond to one
+            # node (4 nodes in one process do) met a "full" pipe now and then, and lost the token
+            push.setsockopt(zmq.SNDHWM, ZMQ_SEND_QUEUE)
             push.setsockopt(zmq.IMMEDIATE, 1)
             push.connect(f"tcp://{addr}")
             self._push[node_id] = push
