@@ -244,6 +244,72 @@ def pose_error(result: dict[str, Any]) -> dict[str, float]:
     }
 
 
+def ring_timing(result: dict[str, Any], step_mm: float = 0.5419) -> dict[str, Any]:
+    """What the closed loop does not model, from the recording: how often copro saw a new
+    motor.data sample (the token round, simulated ms), the share of sonar sweeps it never saw (and
+    how often a frame brought a sweep older than one seen before), and the world's truth against the motor's step counters on straight moves (true over counted
+    travel per move, middle of the move only): a stalled motor process leaves the world's robot
+    standing while its counters run on, which spreads these ratios beyond the floor's own noise."""
+    out: dict[str, Any] = {}
+    samples: dict[int, dict] = {}
+    for m in result.get("motor_log", []):
+        if m["stamp_ms"]:
+            samples[m["stamp_ms"]] = m
+    motor = [samples[k] for k in sorted(samples)]
+    if len(motor) > 2:
+        gaps = np.diff([m["stamp_ms"] for m in motor])
+        out["motor_sample_ms"] = {
+            "median": float(np.median(gaps)),
+            "p90": float(np.percentile(gaps, 90)),
+            "max": float(gaps.max()),
+        }
+    sweeps = [sonar["sweep"] for sonar, _, _ in result.get("records", [])]
+    if len(sweeps) > 1:
+        newest, ahead, stale = sweeps[0], [], 0
+        for sweep in sweeps[1:]:
+            step = (sweep - newest) & 0xFFFF
+            if 0 < step < 0x8000:
+                ahead.append(step)
+                newest = sweep
+            else:  # not newer than one seen before: a stale frame
+                stale += 1
+        span = sum(ahead)
+        out["sweeps_missed_fraction"] = round(1.0 - len(ahead) / span, 4) if span else 0.0
+        out["stale_sweeps"] = stale
+    truth = sorted(result.get("truth", []))
+    ratios = []
+    if motor and len(truth) > 2:
+        t_true = np.array([t[0] for t in truth], dtype=float)
+        path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(np.array([t[1:3] for t in truth]).T)))])
+        i = 0
+        while i < len(motor):
+            j = i
+            while (
+                j + 1 < len(motor)
+                and motor[i]["direction"] == 1
+                and motor[j + 1]["direction"] == 1
+                and motor[j + 1]["move_seq"] == motor[i]["move_seq"]
+            ):
+                j += 1
+            start, end = motor[i]["stamp_ms"] + 300, motor[j]["stamp_ms"] - 300
+            inside = (t_true >= start) & (t_true <= end)
+            if motor[i]["direction"] == 1 and end - start >= 1000 and inside.sum() >= 5:
+                stamps = np.array([m["stamp_ms"] for m in motor[i : j + 1]], dtype=float)
+                counted = np.array([(m["steps_left"] + m["steps_right"]) / 2 for m in motor[i : j + 1]])
+                nominal = np.interp(t_true[inside], stamps, counted) * step_mm
+                ratios.append(float(np.polyfit(nominal, path[inside], 1)[0]))
+            i = j + 1
+    if ratios:
+        r = np.asarray(ratios)
+        out["straight_moves"] = {
+            "moves": len(r),
+            "true_over_counted_median": round(float(np.median(r)), 4),
+            "spread_mad": round(float(np.median(np.abs(r - np.median(r)))), 4),
+            "off_by_2pct": int(np.sum(np.abs(r - np.median(r)) > 0.02)),
+        }
+    return out
+
+
 def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any]:
     """The compass module's heading against the truth (OK samples only, degrees): steady, and
     within ``settle_ms`` after the motors started or stopped (motor.data's state as recorded)."""
@@ -382,6 +448,22 @@ def main(argv: list[str] | None = None) -> int:
                 f"p95 {errors['position_p95_mm']:.0f} mm, heading median {errors['heading_median_deg']:.1f}°",
                 flush=True,
             )
+        timing = ring_timing(result)
+        if "motor_sample_ms" in timing:
+            t = timing["motor_sample_ms"]
+            print(
+                f"  copro saw a new motor sample every {t['median']:.0f} ms (p90 {t['p90']:.0f}, max {t['max']:.0f}); "
+                f"sweeps missed {timing.get('sweeps_missed_fraction', 0.0):.1%}, "
+                f"{timing.get('stale_sweeps', 0)} stale (older than one seen before)",
+                flush=True,
+            )
+        if "straight_moves" in timing:
+            s = timing["straight_moves"]
+            print(
+                f"  straight moves, true over counted travel: median {s['true_over_counted_median']:.4f}, "
+                f"spread ±{s['spread_mad']:.4f}, {s['off_by_2pct']}/{s['moves']} off by 2 % (the world held by a stall)",
+                flush=True,
+            )
         compass = compass_error(result)
         if "disturbed_fraction" in compass:
             print(f"  compass DISTURBED in {compass['disturbed_fraction']:.1%} of its readings", flush=True)
@@ -403,6 +485,7 @@ def main(argv: list[str] | None = None) -> int:
             "sweeps": len(result["records"]),
             "finished": result.get("finished", ""),
             "pose_error": errors,
+            "timing": timing,
             "compass_error": compass,
         }
         variants = [("seed", SEED_METHOD, "dead reckoning"), ("ours", OUR_METHOD, "dead reckoning"),

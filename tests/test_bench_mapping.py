@@ -26,3 +26,45 @@ def test_the_compass_error_on_straight_moves_is_fitted_as_a_harmonic_of_the_head
         compass_log.append({"stamp_ms": stamp, "state": 1, "heading_cdeg": heading_to_cdeg(heading)})
     out = compass_error({"truth": truth, "motor_log": motor_log, "compass_log": compass_log}, settle_ms=0)
     assert out["moving_harmonic_deg"] == pytest.approx(0.5, abs=0.02)
+
+
+def _straight_move(seq: int, t0: int, steps0: int, stall: tuple[int, int] | None = None) -> tuple[list, list]:
+    """A 6 s forward move at 100 mm/s counted by the motor every 100 ms, and the world's truth
+    every 100 ms: 1 % longer than counted, or standing still through ``stall`` and caught up after."""
+    motor, truth = [], []
+    rate = 100.0 / 0.5419  # half-steps per second per track at 100 mm/s
+    for k in range(61):
+        t = t0 + 100 * k
+        steps = steps0 + round(rate * (t - t0) / 1000.0)
+        motor.append(
+            {"stamp_ms": t, "direction": 1, "move_seq": seq, "steps_left": steps, "steps_right": steps}
+        )
+        held = stall[0] if stall is not None and stall[0] <= t < stall[1] else t
+        truth.append((t + 50, 1.01 * 100.0 * (held + 50 - t0) / 1000.0, 0.0, 0.0))
+    return motor, truth
+
+
+def test_ring_timing_counts_missed_sweeps_slow_rounds_and_a_world_held_by_a_stall() -> None:
+    """Sweeps 1, 2, 3, 5, (4 and 5 again: stale,) 6 seen: one of five sweeps missed. A move whose truth stood for 1.2 s
+    near its end reads far below the others' 1.01 and is counted off by 2 %."""
+    from bench.mapping import ring_timing
+
+    moves = [
+        _straight_move(1, 0, 0),
+        _straight_move(2, 7000, 20000),
+        _straight_move(3, 14000, 40000, (18500, 19700)),
+    ]
+    moves.append(_straight_move(4, 21000, 60000))
+    motor = [m for ms, _ in moves for m in ms]
+    truth = [t for _, ts in moves for t in ts]
+    # the rounds: 100 ms apart within a move; between moves 1 s (the gap of 1000 ms counted as max)
+    records = [({"sweep": s}, {}, {}) for s in (1, 2, 3, 5, 4, 5, 6)]  # 4, then 5 again: stale frames
+    out = ring_timing({"motor_log": motor, "truth": truth, "records": records})
+    assert out["sweeps_missed_fraction"] == pytest.approx(0.2)
+    assert out["stale_sweeps"] == 2
+    assert out["motor_sample_ms"]["median"] == 100
+    assert out["motor_sample_ms"]["max"] == 1000
+    straight = out["straight_moves"]
+    assert straight["moves"] == 4
+    assert straight["true_over_counted_median"] == pytest.approx(1.01, abs=0.002)
+    assert straight["off_by_2pct"] == 1
