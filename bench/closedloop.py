@@ -3,7 +3,8 @@ and stand-ins for motor, sonar and compass, all stepped on one simulated clock i
 
 The ring runs these same classes inside node processes and passes their data through the token;
 here the "token" is a dict of the channels' latest values, read by main and copro every
-``VISIT_MS`` (a round of the ring at ``--speed K``, which scales the wire too). The world is the
+``--visit-ms`` (default ``VISIT_MS``; the ring's round at ``--speed K``, which scales the wire too,
+is 110-140 ms at speed 20 on two shared cores: ``bench.mapping`` prints it). The world is the
 simulator's own: :class:`TrackedRobot` (per-move slip), the sonar echo envelopes with the
 threshold + tangent contact, the magnetic field with its anomalies. What is left out: the
 compass's bridges and calibration (its heading is the field's direction with σ 1° of noise and
@@ -283,6 +284,7 @@ class ClosedLoop:
         localizer_config: dict[str, Any] | None = None,
         calibrate: bool = True,
         start_deg: float | None = None,
+        visit_ms: float = VISIT_MS,
     ) -> None:
         from modules.common.navigator import ExploreAvoid, ExploreLeftWall
         from modules.common.pilot import Pilot
@@ -335,6 +337,7 @@ class ClosedLoop:
         self.last_sweep: int | None = None
         self.counter = 0
         self.calibration_turns = 8 if calibrate else 0
+        self.visit_ms = visit_ms
         self.log: list[str] = []
 
     # -- the ring's commands ------------------------------------------------------------------
@@ -504,7 +507,7 @@ class ClosedLoop:
                     )
                 self.next_truth += TRUTH_PERIOD_MS
             if self.now >= next_visit:
-                next_visit += VISIT_MS
+                next_visit += self.visit_ms
                 self.counter = (self.counter + 1) & 0xFF
                 self._copro()
                 if self.calibration_turns > 0:  # the compass's CALIBRATE: 8 turns of 45°
@@ -570,10 +573,12 @@ def explore(
     out: str | None = None,
     variant_pngs: bool = False,
     overrides: dict[str, Any] | None = None,
+    visit_ms: float = VISIT_MS,
 ) -> dict[str, Any]:
     """One closed-loop exploration, scored: the map as the robot made it and the four variants
     (seed/ours × dead reckoning/filter) of the same drive; PNGs to ``out``. ``overrides`` are
-    Localizer settings laid over exploration mode's (copro's ``EXPLORATION_CONFIG``)."""
+    Localizer settings laid over exploration mode's (copro's ``EXPLORATION_CONFIG``); ``visit_ms``
+    how often main and copro see the token."""
     from modules.common.mapscore import score_map
     from modules.pc.mapfiles import load_truth, write_map
 
@@ -591,6 +596,7 @@ def explore(
         localizer=not dead_reckoning,
         localizer_config=config,
         start_deg=start_deg,
+        visit_ms=visit_ms,
     )
     run = loop.run(minutes)
     name, truth = load_truth(world)
@@ -738,6 +744,13 @@ def main(argv: list[str] | None = None) -> int:
         "(e.g. '{walls: {range_model: tangent}}')",
     )
     parser.add_argument("--start-deg", type=float, help="the robot's start heading (default: the room's)")
+    parser.add_argument(
+        "--visit-ms",
+        type=float,
+        default=VISIT_MS,
+        help=f"how often main and copro see the token, simulated ms (default {VISIT_MS}; the ring at "
+        "speed 20 on two cores: 110-140 at the median, bench.mapping prints it)",
+    )
     parser.add_argument("--out", metavar="DIR", help="write the maps' PNGs here")
     parser.add_argument("--moves", action="store_true", help="print the navigator's moves")
     parser.add_argument("--variants", action="store_true", help="also score seed/ours × DR/filter")
@@ -768,6 +781,7 @@ def main(argv: list[str] | None = None) -> int:
         out=args.out,
         variant_pngs=args.variants,
         overrides=overrides,
+        visit_ms=args.visit_ms,
     )
     results: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:

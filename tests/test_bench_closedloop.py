@@ -43,3 +43,18 @@ def test_the_json_holds_the_runs_so_far_without_their_logs(tmp_path: Path) -> No
     document = json.loads(path.read_text())
     assert document["command"] == "python -m bench.closedloop --world empty"
     assert document["runs"] == [{"room": "empty", "seed": 1, "rows": []}]
+
+
+def test_main_and_copro_see_the_token_as_often_as_asked() -> None:
+    """``visit_ms`` stands for the ring's round: a slow ring's copro runs every 130 ms."""
+    loop = ClosedLoop("empty", seed=1, visit_ms=130)
+    seen: list[float] = []
+    copro = loop._copro
+
+    def visit() -> None:
+        seen.append(loop.now)
+        copro()
+
+    loop._copro = visit  # type: ignore[method-assign]
+    loop.run(minutes=0.02)  # 1.2 simulated seconds
+    assert seen == [130.0 * k for k in range(10)]
