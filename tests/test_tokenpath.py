@@ -86,3 +86,59 @@ def test_the_c_type_refuses_a_visit_before_setup_and_a_wrong_buffer():
         path._work = bytes(514)
     with pytest.raises(TypeError):
         path._leaving = 1  # flags are bools, as the Python path keeps them
+
+
+class _Payload:
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+
+    def to_bytes(self) -> bytes:
+        return self.data
+
+
+class _Sample:
+    def __init__(self, data: bytes) -> None:
+        self.payload = _Payload(data)
+
+
+def test_the_tokens_subscriber_callback_hands_the_payload_bytes_on():
+    got: list[bytes] = []
+    callback = tokenpath.payload_call(got.append)
+    if tokenpath.NATIVE:  # no Python frame per hop where the token path is in C
+        assert type(callback).__name__ == "PayloadCall"
+    callback(_Sample(b"\x01\x02"))
+    callback(_Sample(bytes(514)))
+    assert got == [b"\x01\x02", bytes(514)]
+
+    def failing(frame: bytes) -> None:
+        raise ValueError(f"{len(frame)} bytes")
+
+    with pytest.raises(ValueError, match="3 bytes"):  # the handler's error reaches Zenoh's caller
+        tokenpath.payload_call(failing)(_Sample(b"abc"))
+
+
+@pytest.mark.skipif(not tokenpath.NATIVE, reason="checks of the C type itself")
+def test_the_c_payload_call_refuses_what_is_not_a_sample_or_a_handler():
+    from tokenring import _tokenpath  # type: ignore[attr-defined]
+
+    with pytest.raises(TypeError, match="callable"):
+        _tokenpath.PayloadCall(42)
+    callback = _tokenpath.PayloadCall(print)
+    with pytest.raises(TypeError, match="one sample"):
+        callback()
+    with pytest.raises(AttributeError):
+        callback(object())
+
+
+def test_the_visits_counters_read_and_write_as_plain_node_stats():
+    from tokenring.node import NodeStats
+
+    stats = NodeStats()
+    assert stats.as_dict() == dict.fromkeys(NodeStats.FIELDS, 0)
+    if tokenpath.NATIVE:  # C integers the visit adds to without touching a Python object
+        assert type(stats.counters).__name__ == "Counters"
+    stats.visits += 3
+    stats.frames_sent = 2**40
+    stats.rounds_missed += 1
+    assert (stats.visits, stats.frames_sent, stats.rounds_missed) == (3, 2**40, 1)
+    assert stats.as_dict()["visits"] == 3 and stats.as_dict()["frames_sent"] == 2**40

@@ -24,11 +24,11 @@ static int epoch_mask = 0x7F;    /* tokenring.ring.EPOCH_MASK, read at import */
 static PyObject *epoch_order;    /* tokenring.ring.epoch_order */
 
 /* interned attribute and method names */
-static PyObject *s_frames_received, *s_frames_sent, *s_rejected_length, *s_rejected_crc,
-    *s_rejected_marker, *s_rejected_did, *s_rejected_sid, *s_duplicate_passes, *s_rounds,
-    *s_rounds_missed, *s_visits, *s_successor, *s_visit, *s_acquire, *s_release, *s_send_ack,
-    *s_answer_stale, *s_adopt_epoch, *s_include, *s_drop_outboxes, *s_activate_outboxes,
-    *s_sweep_own_commands, *s_notify_visit, *s_send_failed, *s_sender, *s_replayed_passes;
+static PyObject *s_rejected_length, *s_rejected_crc, *s_rejected_marker, *s_rejected_did,
+    *s_rejected_sid, *s_duplicate_passes, *s_successor, *s_visit, *s_acquire, *s_release,
+    *s_send_ack, *s_answer_stale, *s_adopt_epoch, *s_include, *s_drop_outboxes,
+    *s_activate_outboxes, *s_sweep_own_commands, *s_notify_visit, *s_send_failed, *s_sender,
+    *s_replayed_passes;
 
 /* The objects the node sets up, once: (Python attribute, C field). The struct, the garbage
    collector's traverse and clear, and the attribute table all come from this list. _defer hands
@@ -55,8 +55,37 @@ static PyObject *s_frames_received, *s_frames_sent, *s_rejected_length, *s_rejec
     X("_defer", defer)                                                                            \
     X("_accepted_frame", accepted_frame)
 /* ... and the two whose type is checked where they are set (see TokenPath_getset) */
-#define CHECKED_OBJECTS(X) X("_work", work) X("_const_bytes", const_bytes)
+#define CHECKED_OBJECTS(X) X("_work", work) X("_const_bytes", const_bytes) X("_counters", counters)
 #define ALL_OBJECTS(X) OBJECT_MEMBERS(X) CHECKED_OBJECTS(X)
+
+/* The counters every visit adds to, as C integers: a Python int per counter would be read,
+   allocated and written back per visit, in memory the other nodes' visits have evicted.
+   tokenring.node.NodeStats reads and writes them through properties of the same names. */
+#define HOT_COUNTERS(X) X(frames_received) X(frames_sent) X(visits) X(rounds) X(rounds_missed)
+
+#define DECLARE_COUNTER(name) unsigned long long name;
+
+typedef struct {
+    PyObject_HEAD
+    HOT_COUNTERS(DECLARE_COUNTER)
+} Counters;
+
+#define COUNTER_MEMBER(name) {#name, T_ULONGLONG, offsetof(Counters, name), 0, NULL},
+
+static PyMemberDef Counters_members[] = {
+    HOT_COUNTERS(COUNTER_MEMBER)
+    {NULL},
+};
+
+static PyTypeObject CountersType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "tokenring._tokenpath.Counters",
+    .tp_doc = PyDoc_STR("The token path's per-visit counters as C integers (see NodeStats)."),
+    .tp_basicsize = sizeof(Counters),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_new = PyType_GenericNew,
+    .tp_members = Counters_members,
+};
 
 #define DECLARE_FIELD(name, field) PyObject *field;
 
@@ -71,9 +100,14 @@ typedef struct {
     int last_sent_crc, confirmed_did, regeneration_streak, visit_waiters, deferred_pending;
     double last_seen, last_visit, last_sent_time, confirmed_at, recovery_until, ack_interval;
     double hop, paced;
+    unsigned long sends; /* every 16th send is timed */
+    /* _token_lock's bound acquire and release, looked up once per lock, not once per visit */
+    PyObject *lock_of_methods, *lock_acquire, *lock_release;
     char ack_pending, has_sent, ack_adaptive, ack_always, closing, leaving, departed;
     char system_busy;
 } TokenPath;
+
+#define COUNTERS(self) ((Counters *)(self)->counters)
 
 /* ------------------------------------------------------------------------------------------ */
 
@@ -131,16 +165,6 @@ static int stats_add(TokenPath *self, PyObject *name, long by)
     int rc = PyObject_SetAttr(self->stats, name, updated);
     Py_DECREF(updated);
     return rc;
-}
-
-static long stats_get(TokenPath *self, PyObject *name)
-{
-    PyObject *value = PyObject_GetAttr(self->stats, name);
-    if (value == NULL)
-        return -1;
-    long current = PyLong_AsLong(value);
-    Py_DECREF(value);
-    return current;
 }
 
 /* a hook's answer as C truth: 1, 0, or -1 with an exception set */
@@ -215,10 +239,7 @@ static int transmit(TokenPath *self, int did)
             Py_CLEAR(sender);
     }
     if (sender != NULL) {
-        long sent = stats_get(self, s_frames_sent);
-        if (sent == -1 && PyErr_Occurred()) {
-            ok = -1;
-        } else if (sent & 15) {
+        if (self->sends++ & 15) {
             ok = truth_of(PyObject_CallOneArg(sender, self->work)) < 0 ? -1 : 0;
         } else { /* every 16th send is timed */
             double t0 = now();
@@ -236,7 +257,7 @@ static int transmit(TokenPath *self, int did)
             }
         }
         if (ok == 0)
-            ok = stats_add(self, s_frames_sent, 1);
+            COUNTERS(self)->frames_sent++;
         Py_DECREF(sender);
     } else {
         ok = -1;
@@ -432,13 +453,29 @@ static int bookkeeping(TokenPath *self, double t_in, int counter, int wraps)
             return -1;
     }
     int missed = (counter - self->last_counter) & 0xFF;
-    if (missed > 1 && self->last_counter >= 0 && stats_add(self, s_rounds_missed, missed - 1) < 0)
-        return -1;
+    if (missed > 1 && self->last_counter >= 0)
+        COUNTERS(self)->rounds_missed += (unsigned long long)(missed - 1);
     self->last_counter = counter;
-    if (stats_add(self, s_visits, 1) < 0)
+    COUNTERS(self)->visits++;
+    if (wraps)
+        COUNTERS(self)->rounds++;
+    return 0;
+}
+
+/* _token_lock's bound acquire and release, fetched again only when the lock is another one */
+static int lock_methods(TokenPath *self)
+{
+    if (self->lock_of_methods == self->token_lock && self->lock_acquire && self->lock_release)
+        return 0;
+    PyObject *acquire = PyObject_GetAttr(self->token_lock, s_acquire);
+    PyObject *release = acquire ? PyObject_GetAttr(self->token_lock, s_release) : NULL;
+    if (release == NULL) {
+        Py_XDECREF(acquire);
         return -1;
-    if (wraps && stats_add(self, s_rounds, 1) < 0)
-        return -1;
+    }
+    Py_XSETREF(self->lock_acquire, acquire);
+    Py_XSETREF(self->lock_release, release);
+    Py_XSETREF(self->lock_of_methods, Py_NewRef(self->token_lock));
     return 0;
 }
 
@@ -447,7 +484,8 @@ static int ready(TokenPath *self)
 {
     if (self->stats && self->membership && self->transport && self->work && self->token_lock &&
         self->live && self->excluded && self->senders && PyDict_Check(self->senders) &&
-        self->const_bytes && self->rounds_add && self->handler_add && self->send_add &&
+        self->const_bytes && self->counters && self->rounds_add && self->handler_add &&
+        self->send_add &&
         PyByteArray_GET_SIZE(self->work) == self->frame_size && self->token_size > 0 &&
         self->token_size + 2 <= self->frame_size)
         return 1;
@@ -470,8 +508,7 @@ static PyObject *visit_frame(TokenPath *self, PyObject *frame_obj)
     double t_in = now();
     if (!ready(self))
         return NULL;
-    if (stats_add(self, s_frames_received, 1) < 0)
-        return NULL;
+    COUNTERS(self)->frames_received++;
     if (self->rx_fault != NULL && self->rx_fault != Py_None) {
         int dropped = truth_of(PyObject_CallOneArg(self->rx_fault, frame_obj));
         if (dropped != 0)
@@ -578,7 +615,9 @@ static PyObject *visit_frame(TokenPath *self, PyObject *frame_obj)
     if (excluded < 0)
         goto done;
 
-    PyObject *locked = PyObject_CallMethodNoArgs(self->token_lock, s_acquire);
+    if (lock_methods(self) < 0)
+        goto done;
+    PyObject *locked = PyObject_CallNoArgs(self->lock_acquire);
     if (locked == NULL)
         goto done;
     Py_DECREF(locked);
@@ -591,7 +630,7 @@ static PyObject *visit_frame(TokenPath *self, PyObject *frame_obj)
     PyObject *type = NULL, *value = NULL, *traceback = NULL;
     if (passed < 0)
         PyErr_Fetch(&type, &value, &traceback);
-    PyObject *released = PyObject_CallMethodNoArgs(self->token_lock, s_release);
+    PyObject *released = PyObject_CallNoArgs(self->lock_release);
     if (passed < 0) {
         Py_XDECREF(released);
         PyErr_Restore(type, value, traceback);
@@ -725,12 +764,18 @@ static PyObject *TokenPath_wake(TokenPath *self, PyObject *Py_UNUSED(ignored))
 static int TokenPath_traverse(TokenPath *self, visitproc visit, void *arg)
 {
     ALL_OBJECTS(VISIT_FIELD)
+    Py_VISIT(self->lock_of_methods);
+    Py_VISIT(self->lock_acquire);
+    Py_VISIT(self->lock_release);
     return 0;
 }
 
 static int TokenPath_clear(TokenPath *self)
 {
     ALL_OBJECTS(CLEAR_FIELD)
+    Py_CLEAR(self->lock_of_methods);
+    Py_CLEAR(self->lock_acquire);
+    Py_CLEAR(self->lock_release);
     return 0;
 }
 
@@ -784,10 +829,22 @@ static int set_const_bytes(TokenPath *self, PyObject *value, void *Py_UNUSED(clo
     return set_checked(self, value, &self->const_bytes, &PyBytes_Type, "_const_bytes");
 }
 
+static PyObject *get_counters(TokenPath *self, void *Py_UNUSED(closure))
+{
+    return Py_NewRef(self->counters ? self->counters : Py_None);
+}
+
+static int set_counters(TokenPath *self, PyObject *value, void *Py_UNUSED(closure))
+{
+    return set_checked(self, value, &self->counters, &CountersType, "_counters");
+}
+
 static PyGetSetDef TokenPath_getset[] = {
     {"_work", (getter)get_work, (setter)set_work, "the working token (a bytearray frame)", NULL},
     {"_const_bytes", (getter)get_const_bytes, (setter)set_const_bytes,
      "the header's constant markers", NULL},
+    {"_counters", (getter)get_counters, (setter)set_counters,
+     "the visit's counters (tokenring._tokenpath.Counters, NodeStats's)", NULL},
     {NULL},
 };
 
@@ -869,6 +926,87 @@ static PyTypeObject TokenPathType = {
     .tp_methods = TokenPath_methods,
 };
 
+/* ------------------------------------------------------------------------------------------ */
+/* the receiving entry: a Zenoh sample's payload, as bytes, to a frame handler */
+
+static PyObject *s_payload, *s_to_bytes;
+
+typedef struct {
+    PyObject_HEAD
+    PyObject *handler;
+    vectorcallfunc vectorcall;
+} PayloadCall;
+
+static PyObject *PayloadCall_vectorcall(PayloadCall *self, PyObject *const *args, size_t nargsf,
+                                        PyObject *kwnames)
+{
+    if (PyVectorcall_NARGS(nargsf) != 1 || kwnames != NULL) {
+        PyErr_SetString(PyExc_TypeError, "PayloadCall takes one sample");
+        return NULL;
+    }
+    PyObject *payload = PyObject_GetAttr(args[0], s_payload);
+    if (payload == NULL)
+        return NULL;
+    PyObject *frame = PyObject_CallMethodNoArgs(payload, s_to_bytes);
+    Py_DECREF(payload);
+    if (frame == NULL)
+        return NULL;
+    PyObject *result = PyObject_CallOneArg(self->handler, frame);
+    Py_DECREF(frame);
+    return result;
+}
+
+static PyObject *PayloadCall_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
+{
+    PyObject *handler;
+    if (!PyArg_ParseTuple(args, "O:PayloadCall", &handler))
+        return NULL;
+    if (!PyCallable_Check(handler)) {
+        PyErr_SetString(PyExc_TypeError, "PayloadCall needs a callable");
+        return NULL;
+    }
+    PayloadCall *self = (PayloadCall *)type->tp_alloc(type, 0);
+    if (self == NULL)
+        return NULL;
+    self->handler = Py_NewRef(handler);
+    self->vectorcall = (vectorcallfunc)PayloadCall_vectorcall;
+    return (PyObject *)self;
+}
+
+static int PayloadCall_traverse(PayloadCall *self, visitproc visit, void *arg)
+{
+    Py_VISIT(self->handler);
+    return 0;
+}
+
+static int PayloadCall_clear(PayloadCall *self)
+{
+    Py_CLEAR(self->handler);
+    return 0;
+}
+
+static void PayloadCall_dealloc(PayloadCall *self)
+{
+    PyObject_GC_UnTrack(self);
+    PayloadCall_clear(self);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static PyTypeObject PayloadCallType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "tokenring._tokenpath.PayloadCall",
+    .tp_doc = PyDoc_STR("PayloadCall(handler)(sample) calls handler(sample.payload.to_bytes()): "
+                        "the token's Zenoh callback without a Python frame per hop."),
+    .tp_basicsize = sizeof(PayloadCall),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC | Py_TPFLAGS_HAVE_VECTORCALL,
+    .tp_new = PayloadCall_new,
+    .tp_dealloc = (destructor)PayloadCall_dealloc,
+    .tp_traverse = (traverseproc)PayloadCall_traverse,
+    .tp_clear = (inquiry)PayloadCall_clear,
+    .tp_call = PyVectorcall_Call,
+    .tp_vectorcall_offset = offsetof(PayloadCall, vectorcall),
+};
+
 static struct PyModuleDef tokenpath_module = {
     PyModuleDef_HEAD_INIT,
     .m_name = "tokenring._tokenpath",
@@ -902,12 +1040,10 @@ PyMODINIT_FUNC PyInit__tokenpath(void)
         PyObject **slot;
         const char *name;
     } names[] = {
-        {&s_frames_received, "frames_received"}, {&s_frames_sent, "frames_sent"},
         {&s_rejected_length, "rejected_length"}, {&s_rejected_crc, "rejected_crc"},
         {&s_rejected_marker, "rejected_marker"}, {&s_rejected_did, "rejected_did"},
         {&s_rejected_sid, "rejected_sid"},       {&s_duplicate_passes, "duplicate_passes"},
-        {&s_rounds, "rounds"},                   {&s_rounds_missed, "rounds_missed"},
-        {&s_visits, "visits"},                   {&s_successor, "successor"},
+        {&s_successor, "successor"},
         {&s_visit, "visit"},                     {&s_acquire, "acquire"},
         {&s_release, "release"},                 {&s_send_ack, "_send_ack"},
         {&s_answer_stale, "_answer_stale"},      {&s_adopt_epoch, "_adopt_epoch"},
@@ -916,6 +1052,7 @@ PyMODINIT_FUNC PyInit__tokenpath(void)
         {&s_sweep_own_commands, "_sweep_own_commands"},
         {&s_notify_visit, "_notify_visit"},      {&s_send_failed, "_send_failed"},
         {&s_sender, "sender"},                   {&s_replayed_passes, "replayed_passes"},
+        {&s_payload, "payload"},                 {&s_to_bytes, "to_bytes"},
     };
     for (size_t i = 0; i < sizeof(names) / sizeof(names[0]); i++)
         if (intern(names[i].slot, names[i].name) < 0)
@@ -927,12 +1064,15 @@ PyMODINIT_FUNC PyInit__tokenpath(void)
     int failed = epoch_order == NULL || read_int(ring, "ACK_REQUESTED", &ack_requested) < 0 ||
                  read_int(ring, "EPOCH_MASK", &epoch_mask) < 0;
     Py_DECREF(ring);
-    if (failed || PyType_Ready(&TokenPathType) < 0)
+    if (failed || PyType_Ready(&TokenPathType) < 0 || PyType_Ready(&PayloadCallType) < 0 ||
+        PyType_Ready(&CountersType) < 0)
         return NULL;
     PyObject *module = PyModule_Create(&tokenpath_module);
     if (module == NULL)
         return NULL;
-    if (PyModule_AddObjectRef(module, "TokenPath", (PyObject *)&TokenPathType) < 0) {
+    if (PyModule_AddObjectRef(module, "TokenPath", (PyObject *)&TokenPathType) < 0 ||
+        PyModule_AddObjectRef(module, "PayloadCall", (PyObject *)&PayloadCallType) < 0 ||
+        PyModule_AddObjectRef(module, "Counters", (PyObject *)&CountersType) < 0) {
         Py_DECREF(module);
         return NULL;
     }

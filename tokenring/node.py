@@ -39,12 +39,24 @@ from tokenring.programapi import ProgramAPI
 from tokenring.protocol import Protocol
 from tokenring.recovery import RingRecovery
 from tokenring.ring import EPOCH_MASK
-from tokenring.tokenpath import TokenPathBase
+from tokenring.tokenpath import HOT_COUNTERS, TokenPathBase, new_counters
 from tokenring.transport.base import Transport
 
 log = logging.getLogger("tokenring.node")
 
 perf_counter = time.perf_counter
+
+
+def _hot_counter(name: str) -> Any:
+    """A counter the token path adds to on every visit: kept in its C integers (``counters``)."""
+
+    def read(stats: NodeStats) -> int:
+        return int(getattr(stats.counters, name))
+
+    def write(stats: NodeStats, value: int) -> None:
+        setattr(stats.counters, name, value)
+
+    return property(read, write, doc=f"{name} (the token path's own counter)")
 
 
 class NodeStats:
@@ -84,9 +96,9 @@ class NodeStats:
         "system_commands",
         "watchdog_wakes",  # its timer thread's loops: each costs a sleeping process CPU
     )
-    __slots__ = FIELDS
-    frames_received: int
-    frames_sent: int
+    __slots__ = (*(name for name in FIELDS if name not in HOT_COUNTERS), "counters")
+    frames_received = _hot_counter("frames_received")
+    frames_sent = _hot_counter("frames_sent")
     rejected_length: int
     rejected_crc: int
     rejected_marker: int
@@ -95,9 +107,9 @@ class NodeStats:
     duplicate_passes: int
     stale_tokens: int
     replayed_passes: int
-    rounds: int
-    rounds_missed: int
-    visits: int
+    rounds = _hot_counter("rounds")
+    rounds_missed = _hot_counter("rounds_missed")
+    visits = _hot_counter("visits")
     passes_acked: int
     pass_retries: int
     unacked_passes: int
@@ -119,6 +131,7 @@ class NodeStats:
     watchdog_wakes: int
 
     def __init__(self) -> None:
+        self.counters = new_counters()
         for name in self.FIELDS:
             setattr(self, name, 0)
 
@@ -152,6 +165,7 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         self.spec = spec
         self.name = name or (spec.name if spec else f"node{node_id}")
         self.stats = NodeStats()
+        self._counters = self.stats.counters
         self.timing = R.Timing(bitrate, ack_mode)
         self.membership = R.Membership(node_id)
         if master_id is None and "main" in protocol.nodes:

@@ -28,8 +28,10 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -77,6 +79,7 @@ class TokenPathHost:
     _handler_add: Any  # callable(seconds): one visit's time in the handler
     _send_add: Any  # callable(seconds): one timed send
     _defer: Any = None  # callable(frame): hand a frame to the node's token thread
+    _counters: Any  # the per-visit counters, NodeStats's (Counters in C, else PyCounters)
     # --- the token and its layout (protocol.yaml) ----------------------------------------------
     _work: bytearray  # the working frame: token + CRC
     _work_body: memoryview
@@ -410,6 +413,41 @@ def _load_native() -> type | None:
         return None
     native: type = _tokenpath.TokenPath
     return native
+
+
+#: the counters every visit adds to (NodeStats keeps them in a Counters object: C integers
+#: where the token path is in C)
+HOT_COUNTERS = ("frames_received", "frames_sent", "visits", "rounds", "rounds_missed")
+
+
+class PyCounters:
+    """The per-visit counters of the Python token path (the C path's ``Counters``)."""
+
+    __slots__ = HOT_COUNTERS
+
+    def __init__(self) -> None:
+        for name in HOT_COUNTERS:
+            setattr(self, name, 0)
+
+
+def new_counters() -> Any:
+    """Counters for a new node: the C type where the token path is in C."""
+    native = getattr(sys.modules.get("tokenring._tokenpath"), "Counters", None)
+    return native() if _native is not None and native is not None else PyCounters()
+
+
+def payload_call(handler: Callable[[bytes], object]) -> Callable[[Any], object]:
+    """The token's subscriber callback: ``handler(sample.payload.to_bytes())``. In C where the
+    token path is: a Python function here would be the one frame of bytecode left per hop."""
+    native = getattr(sys.modules.get("tokenring._tokenpath"), "PayloadCall", None)
+    if _native is not None and native is not None:
+        call: Callable[[Any], object] = native(handler)
+        return call
+
+    def python_call(sample: Any) -> object:
+        return handler(sample.payload.to_bytes())
+
+    return python_call
 
 
 _native = _load_native()

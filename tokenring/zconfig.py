@@ -31,7 +31,7 @@ NODE_RUNTIME = "(rx:(worker_threads:1),tx:(handover:rx))"
 DIRECT_CALLBACKS = os.environ.get("TOKENRING_ZENOH_DIRECT", "1") != "0"
 
 
-def hop_callback(callback: Callable[[zenoh.Sample], None]) -> Any:
+def hop_callback(callback: Callable[[zenoh.Sample], object]) -> Any:
     """The handler to subscribe the token path with (see :data:`DIRECT_CALLBACKS`)."""
     if DIRECT_CALLBACKS:
         return zenoh.handlers.Callback(callback, indirect=False)

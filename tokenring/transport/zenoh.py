@@ -14,6 +14,7 @@ import threading
 import zenoh
 
 from tokenring import keys
+from tokenring.tokenpath import payload_call
 from tokenring.transport.base import FrameHandler, MembershipHandler, MessageHandler, Transport
 from tokenring.zconfig import hop_callback
 
@@ -38,9 +39,6 @@ class ZenohTransport(Transport):
     ) -> set[int]:
         ring, session = self.ring, self.session
 
-        def frame_callback(sample: zenoh.Sample) -> None:
-            on_frame(sample.payload.to_bytes())
-
         def message_callback(sample: zenoh.Sample) -> None:
             on_message(sample.payload.to_bytes())
 
@@ -59,7 +57,7 @@ class ZenohTransport(Transport):
             session.liveliness().declare_subscriber(keys.node(ring, "*"), liveliness_callback, history=True)
         )
         self._keep.append(
-            session.declare_subscriber(keys.token(ring, self.node_id), hop_callback(frame_callback))
+            session.declare_subscriber(keys.token(ring, self.node_id), hop_callback(payload_call(on_frame)))
         )
         self._keep.append(session.declare_subscriber(keys.ack(ring, self.node_id), message_callback))
         self._keep.append(session.declare_subscriber(keys.ring_event(ring), message_callback))
