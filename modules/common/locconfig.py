@@ -89,14 +89,15 @@ DEFAULTS: dict[str, Any] = {
 #: what config/localization.yaml sets beyond the built-in defaults (issue 21): the sonar's
 #: tangent range model with its late echo, the error a fit's points share, longer side lines, the
 #: travel gauge's settings (out to 1.4 m, known walls only, checked where its ranges were read; off),
-#: the compass's measured accuracy, no compass reading bent by the motors' start or stop, and a floor
-#: under the pose's σ across a wall (its fits share an error). The built-in
+#: the compass's measured accuracy, no compass reading bent by the motors' start or stop, a floor
+#: under the pose's σ across a wall (its fits share an error) and a step scale's per-move variance
+#: for a move that starts from the last one's estimate. The built-in
 #: defaults keep the earlier values: exploration mode builds on them, and old logs replay as they ran
 REPOSITORY_SETTINGS: dict[str, Any] = {
     "filter": {
         "compass": {"sigma_deg": 0.5, "settle_ms": 400},
         "travel": {"enabled": False, "max_range_mm": 1400.0, "unknown_wall": False, "check_at": "points"},
-        "noise": {"compass_offset_walk_deg_per_s": 0.01},
+        "noise": {"compass_offset_walk_deg_per_s": 0.01, "step_scale_per_move": 0.007},
         "initial": {"compass_offset_sigma_deg": 0.5},
     },
     "walls": {
