@@ -137,6 +137,8 @@ def test_the_visits_counters_read_and_write_as_plain_node_stats():
     assert stats.as_dict() == dict.fromkeys(NodeStats.FIELDS, 0)
     if tokenpath.NATIVE:  # C integers the visit adds to without touching a Python object
         assert type(stats.counters).__name__ == "Counters"
+        # the C type's members and the Python list of them are one set
+        assert {n for n in dir(stats.counters) if not n.startswith("_")} == set(tokenpath.HOT_COUNTERS)
     stats.visits += 3
     stats.frames_sent = 2**40
     stats.rounds_missed += 1

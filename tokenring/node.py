@@ -51,7 +51,8 @@ def _hot_counter(name: str) -> Any:
     """A counter the token path adds to on every visit: kept in its C integers (``counters``)."""
 
     def read(stats: NodeStats) -> int:
-        return int(getattr(stats.counters, name))
+        count: int = getattr(stats.counters, name)
+        return count
 
     def write(stats: NodeStats, value: int) -> None:
         setattr(stats.counters, name, value)

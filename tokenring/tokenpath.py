@@ -28,11 +28,11 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import sys
 import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 from tokenring import ring as R
@@ -393,8 +393,8 @@ class PyTokenPath(TokenPathHost):
     _defer_lock = threading.Lock()  # the fallback's counter; one lock for all nodes is enough
 
 
-def _load_native() -> type | None:
-    """The C token path, or None (not built, or ``TOKENRING_NATIVE=0``)."""
+def _load_native() -> ModuleType | None:
+    """The compiled token path module, or None (not built, or ``TOKENRING_NATIVE=0``)."""
     if os.environ.get("TOKENRING_NATIVE", "1") == "0":
         return None
     try:
@@ -411,8 +411,8 @@ def _load_native() -> type | None:
             library.name,
         )
         return None
-    native: type = _tokenpath.TokenPath
-    return native
+    module: ModuleType = _tokenpath
+    return module
 
 
 #: the counters every visit adds to (NodeStats keeps them in a Counters object: C integers
@@ -432,16 +432,14 @@ class PyCounters:
 
 def new_counters() -> Any:
     """Counters for a new node: the C type where the token path is in C."""
-    native = getattr(sys.modules.get("tokenring._tokenpath"), "Counters", None)
-    return native() if _native is not None and native is not None else PyCounters()
+    return _native.Counters() if _native is not None else PyCounters()
 
 
 def payload_call(handler: Callable[[bytes], object]) -> Callable[[Any], object]:
-    """The token's subscriber callback: ``handler(sample.payload.to_bytes())``. In C where the
-    token path is: a Python function here would be the one frame of bytecode left per hop."""
-    native = getattr(sys.modules.get("tokenring._tokenpath"), "PayloadCall", None)
-    if _native is not None and native is not None:
-        call: Callable[[Any], object] = native(handler)
+    """A Zenoh subscriber callback: ``handler(sample.payload.to_bytes())``. In C where the token
+    path is: a Python function here would be the one frame of bytecode left per hop."""
+    if _native is not None:
+        call: Callable[[Any], object] = _native.PayloadCall(handler)
         return call
 
     def python_call(sample: Any) -> object:
@@ -452,6 +450,6 @@ def payload_call(handler: Callable[[bytes], object]) -> Callable[[Any], object]:
 
 _native = _load_native()
 #: what NodeOS inherits its token path from
-TokenPathBase: type = _native if _native is not None else PyTokenPath
+TokenPathBase: type = _native.TokenPath if _native is not None else PyTokenPath
 #: True when the token path runs in C
 NATIVE: bool = _native is not None

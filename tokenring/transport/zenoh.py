@@ -39,8 +39,7 @@ class ZenohTransport(Transport):
     ) -> set[int]:
         ring, session = self.ring, self.session
 
-        def message_callback(sample: zenoh.Sample) -> None:
-            on_message(sample.payload.to_bytes())
+        message_callback = payload_call(on_message)
 
         def liveliness_callback(sample: zenoh.Sample) -> None:
             node_id = keys.id_from_key(str(sample.key_expr))
