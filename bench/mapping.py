@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from modules.description import keys as robot_keys
+from modules.description.robot import STEP_MM
 
 ROOMS = ("empty", "office", "square", "slanted")
 
@@ -244,17 +245,15 @@ def pose_error(result: dict[str, Any]) -> dict[str, float]:
     }
 
 
-def ring_timing(result: dict[str, Any], step_mm: float = 0.5419) -> dict[str, Any]:
+def ring_timing(result: dict[str, Any], step_mm: float = STEP_MM) -> dict[str, Any]:
     """What the closed loop does not model, from the recording: how often copro saw a new
     motor.data sample (the token round, simulated ms), the share of sonar sweeps it never saw (and
-    how often a frame brought a sweep older than one seen before), and the world's truth against the motor's step counters on straight moves (true over counted
-    travel per move, middle of the move only): a stalled motor process leaves the world's robot
-    standing while its counters run on, which spreads these ratios beyond the floor's own noise."""
+    how often a frame brought a sweep older than one seen before), and the world's truth against
+    the motor's step counters on straight moves (true over counted travel per move, middle of the
+    move only): a stalled motor process leaves the world's robot standing while its counters run
+    on, which spreads these ratios beyond the floor's own noise."""
     out: dict[str, Any] = {}
-    samples: dict[int, dict] = {}
-    for m in result.get("motor_log", []):
-        if m["stamp_ms"]:
-            samples[m["stamp_ms"]] = m
+    samples = {m["stamp_ms"]: m for m in result.get("motor_log", []) if m["stamp_ms"]}
     motor = [samples[k] for k in sorted(samples)]
     if len(motor) > 2:
         gaps = np.diff([m["stamp_ms"] for m in motor])
@@ -265,40 +264,8 @@ def ring_timing(result: dict[str, Any], step_mm: float = 0.5419) -> dict[str, An
         }
     sweeps = [sonar["sweep"] for sonar, _, _ in result.get("records", [])]
     if len(sweeps) > 1:
-        newest, ahead, stale = sweeps[0], [], 0
-        for sweep in sweeps[1:]:
-            step = (sweep - newest) & 0xFFFF
-            if 0 < step < 0x8000:
-                ahead.append(step)
-                newest = sweep
-            else:  # not newer than one seen before: a stale frame
-                stale += 1
-        span = sum(ahead)
-        out["sweeps_missed_fraction"] = round(1.0 - len(ahead) / span, 4) if span else 0.0
-        out["stale_sweeps"] = stale
-    truth = sorted(result.get("truth", []))
-    ratios = []
-    if motor and len(truth) > 2:
-        t_true = np.array([t[0] for t in truth], dtype=float)
-        path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(np.array([t[1:3] for t in truth]).T)))])
-        i = 0
-        while i < len(motor):
-            j = i
-            while (
-                j + 1 < len(motor)
-                and motor[i]["direction"] == 1
-                and motor[j + 1]["direction"] == 1
-                and motor[j + 1]["move_seq"] == motor[i]["move_seq"]
-            ):
-                j += 1
-            start, end = motor[i]["stamp_ms"] + 300, motor[j]["stamp_ms"] - 300
-            inside = (t_true >= start) & (t_true <= end)
-            if motor[i]["direction"] == 1 and end - start >= 1000 and inside.sum() >= 5:
-                stamps = np.array([m["stamp_ms"] for m in motor[i : j + 1]], dtype=float)
-                counted = np.array([(m["steps_left"] + m["steps_right"]) / 2 for m in motor[i : j + 1]])
-                nominal = np.interp(t_true[inside], stamps, counted) * step_mm
-                ratios.append(float(np.polyfit(nominal, path[inside], 1)[0]))
-            i = j + 1
+        out.update(sweep_gaps(sweeps))
+    ratios = straight_move_ratios(motor, sorted(result.get("truth", [])), step_mm)
     if ratios:
         r = np.asarray(ratios)
         out["straight_moves"] = {
@@ -308,6 +275,58 @@ def ring_timing(result: dict[str, Any], step_mm: float = 0.5419) -> dict[str, An
             "off_by_2pct": int(np.sum(np.abs(r - np.median(r)) > 0.02)),
         }
     return out
+
+
+def sweep_gaps(sweeps: list[int]) -> dict[str, Any]:
+    """The share of sonar sweeps never seen in a series of 16-bit sweep counters, and how many
+    frames brought a sweep not newer than one seen before (stale)."""
+    newest, ahead, stale = sweeps[0], [], 0
+    for sweep in sweeps[1:]:
+        step = (sweep - newest) & 0xFFFF
+        if 0 < step < 0x8000:
+            ahead.append(step)
+            newest = sweep
+        else:
+            stale += 1
+    span = sum(ahead)
+    return {
+        "sweeps_missed_fraction": round(1.0 - len(ahead) / span, 4) if span else 0.0,
+        "stale_sweeps": stale,
+    }
+
+
+def straight_move_ratios(motor: list[dict], truth: list[tuple], step_mm: float) -> list[float]:
+    """Per forward move of at least 1 s (its first and last 300 ms left out): the world's true
+    path over the travel its step counters count, fitted over the truth samples inside it."""
+    if not motor or len(truth) <= 2:
+        return []
+    t_true = np.array([t[0] for t in truth], dtype=float)
+    path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(np.array([t[1:3] for t in truth]).T)))])
+    ratios = []
+    for move in forward_moves(motor):
+        start, end = move[0]["stamp_ms"] + 300, move[-1]["stamp_ms"] - 300
+        inside = (t_true >= start) & (t_true <= end)
+        if end - start >= 1000 and inside.sum() >= 5:
+            stamps = np.array([m["stamp_ms"] for m in move], dtype=float)
+            counted = np.array([(m["steps_left"] + m["steps_right"]) / 2 for m in move])
+            nominal = np.interp(t_true[inside], stamps, counted) * step_mm
+            ratios.append(float(np.polyfit(nominal, path[inside], 1)[0]))
+    return ratios
+
+
+def forward_moves(motor: list[dict]) -> list[list[dict]]:
+    """motor.data samples in runs of one forward move: consecutive, forward, one ``move_seq``."""
+    moves: list[list[dict]] = []
+    run: list[dict] = []
+    for sample in motor:
+        if run and (sample["direction"] != 1 or sample["move_seq"] != run[0]["move_seq"]):
+            moves.append(run)
+            run = []
+        if sample["direction"] == 1:
+            run.append(sample)
+    if run:
+        moves.append(run)
+    return moves
 
 
 def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any]:

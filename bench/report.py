@@ -30,7 +30,11 @@ from typing import Any
 import numpy as np
 
 from bench.sections import SECTIONS, has_samples, raw_path, summary_section
+from bench.suite import pairs_for
 from tokenring.roundtrip import ROUTER_FROM
+
+#: how many bare/ring pairs the suite runs per size, as the scaling table's text says it
+PAIRS_TEXT = f"{pairs_for(64, False)} up to 64 nodes, {pairs_for(65, False)} beyond"
 
 HERE = Path(__file__).resolve().parent
 REPRODUCE = "python -m bench"
@@ -505,7 +509,9 @@ def scaling_md(section: dict[str, Any], plots: Path) -> str:
     text = [
         "## Round trip vs ring size",
         "",
-        "Bitrate max, adaptive acks; every tokenring ring against a bare Zenoh ring (N processes forwarding 514 bytes, no OS work) of the same size and topology, measured right before it. *peers*: a full mesh of Zenoh peers (the default of `tokenring up`); *routers*: every node a client of the launcher's Zenoh router (`tokenring up --router`). The round trip is timed by the round master (the lowest ID); `handler` is the median time a node holds the token, from its arrival to the put that passes it on (the visit's bookkeeping runs after the put); CPU is per node while circulating, `launcher` is the launcher process with the router in it; `load` is the 1-minute load average after the run (the machine is shared). Each size is measured as alternating bare/ring pairs (8 up to 64 nodes, 3 beyond), pooled; the aims table gives the own share per hop as the mean over pairs with its 95 % interval.",
+        "Bitrate max, adaptive acks; every tokenring ring against a bare Zenoh ring (N processes forwarding 514 bytes, no OS work) of the same size and topology, measured right before it. *peers*: a full mesh of Zenoh peers (the default of `tokenring up`); *routers*: every node a client of the launcher's Zenoh router (`tokenring up --router`). The round trip is timed by the round master (the lowest ID); `handler` is the median time a node holds the token, from its arrival to the put that passes it on (the visit's bookkeeping runs after the put); CPU is per node while circulating, `launcher` is the launcher process with the router in it; `load` is the 1-minute load average after the run (the machine is shared). Each size is measured as alternating bare/ring pairs ("
+        + PAIRS_TEXT
+        + "), pooled; the aims table gives the own share per hop as the mean over pairs with its 95 % interval.",
         "",
     ]
     text.append(md_table(rows, head))
