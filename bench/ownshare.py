@@ -63,6 +63,18 @@ def describe(share: dict[str, Any]) -> str:
     )
 
 
+def pairs_for(n: int, quick: bool) -> int:
+    """Alternating bare/ring pairs per size: on two shared cores a single pair can land in a fast
+    or a slow mode (the bare 8-node ring's median moves between 0.6 and 0.8 ms from run to run:
+    fast while other work keeps both virtual CPUs busy, slow when they halt between hops), so the
+    own share per hop is a mean over pairs with its 95 % interval (:func:`own_share`). Small rings
+    take seconds a pair, 64 nodes about 15 s (8 pairs: four gave an interval 18 µs wide), 255
+    nodes minutes (255 processes form twice)."""
+    if quick:
+        return 2 if n <= 8 else 1
+    return 8 if n <= 64 else 3
+
+
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     if len(args) != 1:

@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from bench.ownshare import pairs_for
 from bench.sections import SECTIONS, has_samples, raw_path, summary_section
-from bench.suite import pairs_for
 from tokenring.roundtrip import ROUTER_FROM
 
 #: how many bare/ring pairs the suite runs per size, as the scaling table's text says it

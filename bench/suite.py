@@ -52,7 +52,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.ownshare import describe, own_share
+from bench.ownshare import describe, own_share, pairs_for
 from bench.sections import QUICK_SECTIONS, RAW_DIR, SECTIONS, SLOW_SECTIONS, raw_path, summary_of
 
 HERE = Path(__file__).resolve().parent
@@ -71,18 +71,6 @@ def rounds_for(n: int, quick: bool) -> tuple[int, int]:
     budget = 6000 if quick else 16000
     rounds = int(np.clip(budget / n, 150, 800 if quick else 2000))
     return rounds, max(50, rounds // 5)
-
-
-def pairs_for(n: int, quick: bool) -> int:
-    """Alternating bare/ring pairs per size: on two shared cores a single pair can land in a fast
-    or a slow mode (the bare 8-node ring's median moves between 0.6 and 0.8 ms from run to run:
-    fast while other work keeps both virtual CPUs busy, slow when they halt between hops), so the
-    own share per hop is a mean over pairs with its 95 % interval (bench/ownshare.py). Small rings
-    take seconds a pair, 64 nodes about 15 s (8 pairs: four gave an interval 18 µs wide), 255
-    nodes minutes (255 processes form twice)."""
-    if quick:
-        return 2 if n <= 8 else 1
-    return 8 if n <= 64 else 3
 
 
 def pool_runs(runs: list[Any]) -> Any:
