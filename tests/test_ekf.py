@@ -14,10 +14,15 @@ from modules.common.walls import KnownWall, wrap
 
 
 def reference_motion(
-    state: np.ndarray, dl: float, dr: float, names: list[str], odo: OdometryParams
+    state: np.ndarray, dl: float, dr: float, names: list[str], odo: OdometryParams, new_move: bool = False
 ) -> np.ndarray:
-    """The seed's odometry model written out independently of modules.common.ekf."""
+    """The seed's odometry model written out independently of modules.common.ekf; a new straight
+    or arc move with a mean step scale in the state starts from that mean."""
     values = dict(zip(names, state, strict=True))
+    state = state.copy()
+    if new_move and dl != -dr and "step_scale_mean" in values:
+        values["step_scale"] = values["step_scale_mean"]
+        state[names.index("step_scale")] = values["step_scale_mean"]
     mu = values.get("glide", odo.steps_per_degree)
     k = values.get("step_scale", 1.0)
     omega = math.radians((dr - dl) / 2 / mu)
@@ -40,29 +45,42 @@ def numeric_jacobian(f, x: np.ndarray, eps: float = 1e-6) -> np.ndarray:
     return np.array(columns).T
 
 
-@pytest.mark.parametrize("model", ["arc", "straight"])
-def test_cross_check_against_filterpy(model: str) -> None:
+@pytest.mark.parametrize(
+    ("model", "mean"), [("arc", False), ("straight", False), ("arc", True), ("straight", True)]
+)
+def test_cross_check_against_filterpy(model: str, mean: bool) -> None:
     odo = OdometryParams(model=model)
-    params = EkfParams(odometry=odo, estimate=("glide", "compass_offset", "step_scale"))
+    states = ("glide", "compass_offset", "step_scale", *(("step_scale_mean",) if mean else ()))
+    params = EkfParams(odometry=odo, estimate=states)
     ours = PoseEKF(params, (100.0, 200.0, 0.3))
     theirs = filterpy_kalman.ExtendedKalmanFilter(dim_x=len(ours.x), dim_z=1)
     theirs.x = ours.x.copy()
     theirs.P = ours.P.copy()
     wall = KnownWall.segment(-5000, 1500, 5000, 1500)
     rng = np.random.default_rng(4)
+    last_kind = None
     for step in range(60):
-        dl, dr = (rng.integers(-200, 400), rng.integers(-200, 400))
+        shape = step % 4  # straight, arc, turn, arc again: every kind of move, and moves that start
+        dl = int(rng.integers(-200, 400))
+        dr = {0: dl, 1: int(rng.integers(-200, 400)), 2: -dl, 3: int(rng.integers(-200, 400))}[shape]
+        kind = "straight" if dl == dr else "turn" if dl == -dr else "arc"
+        new_move, last_kind = kind != last_kind, kind
         _, _, Q = ours.motion(dl, dr, 0.1)
         ours.predict(dl, dr, 0.1)
 
-        def f(x, dl=dl, dr=dr):
-            return reference_motion(x, dl, dr, ours.names, odo)
+        def f(x, dl=dl, dr=dr, new_move=new_move):
+            return reference_motion(x, dl, dr, ours.names, odo, new_move)
 
         theirs.F = numeric_jacobian(f, theirs.x)
         theirs.Q = Q
         theirs.x = f(theirs.x)
         theirs.x[2] = wrap(theirs.x[2])  # both keep the heading in [-π, π)
         theirs.P = theirs.F @ theirs.P @ theirs.F.T + theirs.Q
+        if kind == "straight" and new_move:  # a straight move does not observe the last turn's glide
+            g = ours.names.index("glide")
+            diagonal = theirs.P[g, g]
+            theirs.P[g, :] = theirs.P[:, g] = 0.0
+            theirs.P[g, g] = diagonal
         np.testing.assert_allclose(ours.x, theirs.x, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(ours.P, theirs.P, rtol=1e-5, atol=1e-9)
 
@@ -169,3 +187,40 @@ def test_glide_factor_is_learned_from_compass_during_turns() -> None:
 def test_unknown_state_name_is_refused() -> None:
     with pytest.raises(ValueError, match="unknown states"):
         PoseEKF(EkfParams(estimate=("wheel_radius",)), (0, 0, 0))
+
+
+def test_the_mean_step_scale_is_the_posterior_of_every_move_measured() -> None:
+    """Each move's scale is the floor's mean plus its own draw: measured moves inform the mean as
+    independent draws around it, the closed-form Gaussian posterior, and a new move starts there."""
+    draw_sd, noise_sd, prior_sd = 0.005, 0.002, 0.02
+    params = EkfParams(
+        estimate=("glide", "step_scale", "step_scale_mean"),
+        step_scale_per_move=draw_sd,
+        step_scale_mean_walk_per_move=0.0,
+        step_scale_walk_per_m=0.0,
+        initial_step_scale_sigma=prior_sd,
+    )
+    ekf = PoseEKF(params, (0.0, 0.0, 0.0))
+    rng = np.random.default_rng(7)
+    readings = []
+    for _ in range(25):
+        ekf.predict(200, 200)  # a straight move: its scale restarts at the mean
+        k = ekf.names.index("step_scale")
+        assert ekf.step_scale == pytest.approx(ekf.step_scale_mean)
+        reading = 1.012 + rng.normal(0.0, draw_sd) + rng.normal(0.0, noise_sd)
+        readings.append(reading)
+        assert ekf.correct_step_scale(reading, noise_sd)
+        ekf.predict(300, 300)
+        ekf.predict(-100, 100)  # a turn ends the move
+    precision = 1 / prior_sd**2 + len(readings) / (draw_sd**2 + noise_sd**2)
+    expected = (1.0 / prior_sd**2 + sum(readings) / (draw_sd**2 + noise_sd**2)) / precision
+    m = ekf.names.index("step_scale_mean")
+    assert ekf.step_scale_mean == pytest.approx(expected, abs=1e-9)
+    assert ekf.P[m, m] == pytest.approx(1 / precision, rel=1e-6)
+    ekf.predict(200, 200)
+    assert ekf.P[k, k] == pytest.approx(1 / precision + draw_sd**2, rel=1e-6)
+
+
+def test_a_mean_step_scale_needs_the_move_s_scale() -> None:
+    with pytest.raises(ValueError, match="step_scale_mean needs step_scale"):
+        PoseEKF(EkfParams(estimate=("step_scale_mean",)), (0.0, 0.0, 0.0))

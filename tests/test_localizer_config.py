@@ -61,6 +61,10 @@ def test_partial_file_overrides_only_what_it_names() -> None:
         ),
         ("filter:\n  estimate: [glide, wheelbase]\n", "filter.estimate: unknown state 'wheelbase'"),
         (
+            "filter:\n  estimate: [glide, step_scale_mean]\n",
+            "filter.estimate: step_scale_mean needs step_scale",
+        ),
+        (
             "filter:\n  initial_pose: {x_mm: 1}\n",
             "filter.initial_pose: expected world, motor or {x_mm, y_mm, heading_deg}",
         ),

@@ -5,7 +5,11 @@ State: ``x, y`` (mm), ``ψ`` (rad, counter-clockwise from +X), and optionally
 - ``glide`` — the glide factor μ (differential half-steps per degree turned), estimated online
   instead of the seed's calibration run;
 - ``compass_offset`` — a slowly drifting compass bias (rad);
-- ``step_scale`` — the true length of a straight half-step relative to the nominal one.
+- ``step_scale`` — the true length of a straight half-step relative to the nominal one, in the
+  current move;
+- ``step_scale_mean`` — the floor's mean of it. The floor draws each move's step length afresh
+  around one mean (SPEC §5), so a new move's scale starts at this mean, not at the last move's
+  scale: what one move measured is not carried into the next as if the floor repeated it.
 
 Prediction from synchronised step increments with the seed's odometry model
 ``(x, y, ψ) += (cos(ψ+ω/2)·s, sin(ψ+ω/2)·s, ω)``, ``s`` the straight-line mean or the exact
@@ -31,7 +35,7 @@ import numpy as np
 from modules.common.sync import OdometryParams
 from modules.common.walls import KnownWall, wrap
 
-OPTIONAL_STATES = ("glide", "compass_offset", "step_scale")
+OPTIONAL_STATES = ("glide", "compass_offset", "step_scale", "step_scale_mean")
 
 
 @dataclass(frozen=True)
@@ -51,6 +55,7 @@ class EkfParams:
     glide_walk_per_deg: float = 0.001
     compass_offset_walk_deg_per_s: float = 0.05
     step_scale_walk_per_m: float = 0.0005
+    step_scale_mean_walk_per_move: float = 0.001  # with step_scale_mean: the floor may change
     # initial uncertainty
     initial_sigma_mm: float = 20.0
     initial_sigma_deg: float = 2.0
@@ -97,6 +102,8 @@ class PoseEKF:
         unknown = set(params.estimate) - set(OPTIONAL_STATES)
         if unknown:
             raise ValueError(f"unknown states to estimate: {sorted(unknown)}")
+        if "step_scale_mean" in params.estimate and "step_scale" not in params.estimate:
+            raise ValueError("step_scale_mean needs step_scale")
         self.params = params
         self.names = ["x", "y", "psi", *[s for s in OPTIONAL_STATES if s in params.estimate]]
         self.index = {name: i for i, name in enumerate(self.names)}
@@ -111,6 +118,9 @@ class PoseEKF:
             sigmas.append(math.radians(params.initial_compass_offset_sigma_deg))
         if "step_scale" in self.index:
             self.x[self.index["step_scale"]] = 1.0
+            sigmas.append(params.initial_step_scale_sigma)
+        if "step_scale_mean" in self.index:
+            self.x[self.index["step_scale_mean"]] = 1.0
             sigmas.append(params.initial_step_scale_sigma)
         self.P = np.diag(np.square(sigmas))
         self.gates = GateCounts()
@@ -135,6 +145,12 @@ class PoseEKF:
     def step_scale(self) -> float:
         i = self.index.get("step_scale")
         return float(self.x[i]) if i is not None else 1.0
+
+    @property
+    def step_scale_mean(self) -> float:
+        """The floor's mean step scale (the current move's scale without that state)."""
+        i = self.index.get("step_scale_mean")
+        return float(self.x[i]) if i is not None else self.step_scale
 
     @property
     def compass_offset(self) -> float:
@@ -169,12 +185,18 @@ class PoseEKF:
         states, and — when this increment starts a new move — A·D·Aᵀ for the new draw D of the
         floor's slip (glide factor for a turn, step length for a straight move): the slip of one
         move is one error, correlated over all its increments, not independent per increment.
+        With ``step_scale_mean`` a new straight move's scale restarts at the mean (A includes
+        that restart).
         """
         p = self.params
         odo = p.odometry
-        x = self.x
-        mu = self.glide
-        k = self.step_scale
+        kind = motion_kind(dl, dr)
+        starts_move = kind is not None and kind != self.last_kind
+        restart = self._scale_restart() if starts_move and kind in ("straight", "arc") else None
+        x = self.x if restart is None else restart @ self.x
+        n = len(x)
+        mu = float(x[self.index["glide"]]) if "glide" in self.index else odo.steps_per_degree
+        k = float(x[self.index["step_scale"]]) if "step_scale" in self.index else 1.0
         psi = float(x[2])
         nominal = (dl + dr) / 2.0 * odo.mm_per_step  # mm, nominal mean track distance
         differential = (dr - dl) / 2.0  # half-steps
@@ -188,7 +210,6 @@ class PoseEKF:
         new[1] += s * sn
         new[2] += omega
 
-        n = len(x)
         A = np.eye(n)
         A[0, 2] = -s * sn
         A[1, 2] = s * c
@@ -220,15 +241,32 @@ class PoseEKF:
         if "step_scale" in self.index:
             i = self.index["step_scale"]
             Q[i, i] += p.step_scale_walk_per_m**2 * abs(s) / 1000.0
-        kind = motion_kind(dl, dr)
-        if kind is not None and kind != self.last_kind:
+        if starts_move:
             D = np.zeros((n, n))
             if "glide" in self.index and kind in ("turn", "arc"):
                 D[self.index["glide"], self.index["glide"]] = (p.glide_per_move_rel * mu) ** 2
             if "step_scale" in self.index and kind in ("straight", "arc"):
                 D[self.index["step_scale"], self.index["step_scale"]] = p.step_scale_per_move**2
+            if "step_scale_mean" in self.index and kind in ("straight", "arc"):
+                i = self.index["step_scale_mean"]
+                D[i, i] = p.step_scale_mean_walk_per_move**2
             Q = Q + A @ D @ A.T
+        if restart is not None:
+            A = A @ restart
         return new, A, Q
+
+    def _scale_restart(self) -> np.ndarray | None:
+        """The linear map that sets the move's step scale to the floor's mean (None: no mean).
+
+        The last move's own scale drops out of the state; nothing later observes it, so this is
+        its exact marginalisation, and the pose keeps what that move's scale did to it."""
+        if "step_scale_mean" not in self.index:
+            return None
+        i, m = self.index["step_scale"], self.index["step_scale_mean"]
+        T = np.eye(len(self.x))
+        T[i, i] = 0.0
+        T[i, m] = 1.0
+        return T
 
     def predict(self, dl: float, dr: float, dt_s: float = 0.0) -> None:
         """Advance by ``dl``, ``dr`` half-steps of the left and right motor over ``dt_s`` seconds."""
@@ -363,5 +401,6 @@ def describe(ekf: PoseEKF) -> dict[str, Any]:
         "glide": ekf.glide,
         "compass_offset_deg": math.degrees(ekf.compass_offset),
         "step_scale": ekf.step_scale,
+        "step_scale_mean": ekf.step_scale_mean,
         "gates": ekf.gates.as_dict(),
     }

@@ -162,6 +162,7 @@ def ekf_params(config: dict[str, Any]) -> EkfParams:
         glide_walk_per_deg=noise["glide_walk_per_deg"],
         compass_offset_walk_deg_per_s=noise["compass_offset_walk_deg_per_s"],
         step_scale_walk_per_m=noise["step_scale_walk_per_m"],
+        step_scale_mean_walk_per_move=noise["step_scale_mean_walk_per_move"],
         initial_sigma_mm=initial["sigma_mm"],
         initial_sigma_deg=initial["sigma_deg"],
         initial_glide_sigma=initial["glide_sigma"],

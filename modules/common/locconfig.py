@@ -50,6 +50,7 @@ DEFAULTS: dict[str, Any] = {
             "glide_walk_per_deg": 0.001,
             "compass_offset_walk_deg_per_s": 0.05,
             "step_scale_walk_per_m": 0.0005,
+            "step_scale_mean_walk_per_move": 0.001,
         },
         "initial": {"sigma_mm": 20.0, "sigma_deg": 2.0, "glide_sigma": 0.3, "compass_offset_sigma_deg": 3.0, "step_scale_sigma": 0.02},
         "gate_probability": 0.997,
@@ -90,14 +91,15 @@ DEFAULTS: dict[str, Any] = {
 #: tangent range model with its late echo, the error a fit's points share, longer side lines, the
 #: travel gauge's settings (out to 1.4 m, known walls only, checked where its ranges were read; off),
 #: the compass's measured accuracy, no compass reading bent by the motors' start or stop, a floor
-#: under the pose's σ across a wall (its fits share an error) and a step scale's per-move variance
-#: for a move that starts from the last one's estimate. The built-in
+#: under the pose's σ across a wall (its fits share an error) and the floor's mean step scale as a
+#: state, from which each move's scale starts. The built-in
 #: defaults keep the earlier values: exploration mode builds on them, and old logs replay as they ran
 REPOSITORY_SETTINGS: dict[str, Any] = {
     "filter": {
         "compass": {"sigma_deg": 0.5, "settle_ms": 400},
         "travel": {"enabled": False, "max_range_mm": 1400.0, "unknown_wall": False, "check_at": "points"},
-        "noise": {"compass_offset_walk_deg_per_s": 0.01, "step_scale_per_move": 0.007},
+        "estimate": ["glide", "compass_offset", "step_scale", "step_scale_mean"],
+        "noise": {"compass_offset_walk_deg_per_s": 0.01},
         "initial": {"compass_offset_sigma_deg": 0.5},
     },
     "walls": {
@@ -108,7 +110,7 @@ REPOSITORY_SETTINGS: dict[str, Any] = {
     },
 }
 
-ESTIMATES = ("glide", "compass_offset", "step_scale")
+ESTIMATES = ("glide", "compass_offset", "step_scale", "step_scale_mean")
 #: sync.trigger.mode: every period_ms of the sensor's time on a fixed grid, or after count samples
 TRIGGER_MODES = ("period", "count")
 
@@ -262,6 +264,8 @@ class _Checker:
                 raise self.fail(
                     ("filter", "estimate"), f"unknown state {name!r} (known: {', '.join(ESTIMATES)})"
                 )
+        if "step_scale_mean" in c["filter"]["estimate"] and "step_scale" not in c["filter"]["estimate"]:
+            raise self.fail(("filter", "estimate"), "step_scale_mean needs step_scale")
         pose = c["filter"]["initial_pose"]
         if isinstance(pose, dict):
             keys = {"x_mm", "y_mm", "heading_deg"}
