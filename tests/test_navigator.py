@@ -647,3 +647,73 @@ def test_explore2_calls_a_lap_round_once_it_turned_630_degrees_wherever_it_is():
     moves = nav.plan(None, s, STOPPED)
     assert nav.note == "left an island" and len(nav.islands) == 1
     assert moves and moves[0].label in ("leave", "find")
+
+
+def _crosses(
+    a: tuple[float, float], b: tuple[float, float], c: tuple[float, float], d: tuple[float, float]
+) -> bool:
+    """Whether segment ab crosses segment cd (orientation test)."""
+
+    def side(p, q, r):
+        return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+
+    return side(a, b, c) * side(a, b, d) < 0 and side(c, d, a) * side(c, d, b) < 0
+
+
+def test_the_way_home_goes_round_a_partition_the_straight_line_runs_into():
+    from modules.common.navigator import route_home
+
+    # a lap round a partition from the left wall (x = 0, y = 1000, 2.5 m long): out along the
+    # bottom, up the right, back along the top; the start lies straight below the robot
+    partition = ((-300.0, 1000.0), (2500.0, 1000.0))
+    trail = (
+        [(float(x), 0.0) for x in range(0, 3001, 20)]
+        + [(3000.0, float(y)) for y in range(0, 2001, 20)]
+        + [(float(x), 2000.0) for x in range(3000, -1, -20)]
+    )
+    here, home = (0.0, 2000.0), (0.0, 0.0)
+    assert _crosses(here, home, *partition)  # the straight way home
+    route = route_home(trail, here, home, corridor_mm=100.0)
+    assert route[-1] == home and len(route) <= 4
+    legs = list(zip([here, *route[:-1]], route, strict=True))
+    assert not any(_crosses(a, b, *partition) for a, b in legs)
+    length = sum(math.dist(a, b) for a, b in legs)
+    assert length <= 8000  # no longer than the 8 m of trail back: corners cut, no detour
+
+
+def test_the_way_home_is_straight_across_an_open_lap_and_round_an_island_gone_round():
+    from modules.common.navigator import route_home
+
+    lap = [(300.0, 300.0), (3700.0, 300.0), (3700.0, 2700.0), (300.0, 2700.0)]
+    trail = [(300.0 + x, 300.0) for x in range(0, 3401, 50)] + [
+        (3700.0, 300.0 + y) for y in range(0, 2401, 50)
+    ]
+    trail += [(3700.0 - x, 2700.0) for x in range(0, 3401, 50)] + [
+        (300.0, 2700.0 - y) for y in range(0, 1201, 50)
+    ]
+    here, home = (300.0, 1500.0), (3700.0, 1500.0)  # home halfway up the right side of the lap
+    assert route_home(trail, here, home, 100.0, outline=lap) == [home]  # nothing in between
+    island = [(1500.0, 1200.0), (2500.0, 1200.0), (2500.0, 1800.0), (1500.0, 1800.0)]
+    route = route_home(trail, here, home, 100.0, outline=lap, islands=[island])
+    assert route[-1] == home and len(route) >= 2
+    legs = list(zip([here, *route[:-1]], route, strict=True))
+    edges = list(zip(island, island[1:] + island[:1], strict=True))
+    assert not any(_crosses(a, b, c, d) for a, b in legs for c, d in edges)
+
+
+def test_no_lap_ends_on_the_way_home_where_the_way_passes_the_lap_s_start():
+    from modules.common.pilot import Outcome
+
+    nav = ExploreLeftWall(LAYOUT)
+    s = sensors_with()
+    s.pose = (1000.0, 0.0, 0.0)
+    nav.home = (3000.0, 0.0, 0.0)
+    nav.done_note = "lap closed"
+    # all a lap's end needs: following began here, turned once round and more, driven enough
+    nav.lap_start, nav.rotation, nav.follow_mm = (1000.0, 0.0, 0.0), math.radians(700.0), 9000
+    nav.phase = "home"
+    nav.trail = [(3000.0 - x, 0.0) for x in range(0, 2001, 50)]
+    drive = Move(FORWARD, 500, 100, label="home")
+    moves = nav.plan(Outcome(REASON["DONE"], drive, driven_mm=500), s, STOPPED)
+    assert moves and moves[-1].label in ("aim", "home")
+    assert nav.phase == "home" and nav.islands == [] and nav.note != "left an island"

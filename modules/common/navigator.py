@@ -188,6 +188,11 @@ class WallSettings:
     home_tolerance_mm: float = 200.0
     home_detours: int = 4  # something in the way home: turn right, drive on, aim again; this often
     detour_mm: int = 500
+    #: the way home retraces the trail, cut short wherever a straight line stays this near it
+    #: (the robot's centre drove there; the body is 188 mm out, the followed wall 300 mm away)
+    home_corridor_mm: float = 100.0
+    route_spacing_mm: float = 50.0  # the trail's points this far apart for the route
+    waypoint_tolerance_mm: float = 120.0  # a waypoint on the way home this near is reached
 
 
 @dataclass
@@ -272,6 +277,7 @@ class ExploreLeftWall(Navigator):
         self.home_reached = False
         self.detours = 0
         self.detouring = False
+        self.route: list[tuple[float, float]] | None = None  # waypoints home, the start last
         self.done_note = ""
 
     # -- the moves ----------------------------------------------------------------------------
@@ -465,6 +471,9 @@ class ExploreLeftWall(Navigator):
                 self.state = NAV["TURN"]
                 return judged
             label = "turned"
+        if self.phase in ("home", "home_turn"):  # no lap ends on the way home, whatever it passes
+            blocked = last is not None and last.trigger in ("ahead_within", "front_within")
+            return self._homeward(label, blocked, sensors)
         self._count_rotation(sensors)
         if self.target is not None and self.lap_start is not None and self.follow_mm > s.island_budget_mm:
             self.note = "gave up going round an island"
@@ -488,9 +497,6 @@ class ExploreLeftWall(Navigator):
             self.outer_path = self.path
             return self._next_island(sensors)
         blocked = last is not None and last.trigger in ("ahead_within", "front_within")
-
-        if self.phase in ("home", "home_turn"):
-            return self._homeward(label, blocked, sensors)
 
         if self.phase == "probe":  # a drive into the interior: something in the way is an island
             if label == "probe":
@@ -695,7 +701,9 @@ class ExploreLeftWall(Navigator):
 
     # -- home: back to the start pose when done -------------------------------------------------
     def _go_home(self, sensors: Sensors) -> list[Move] | None:
-        """Aim at the start and drive there; there already: turn to its heading; then done."""
+        """Aim at the next waypoint home and drive there; at the start: turn to its heading; then
+        done. The waypoints retrace the trail (:func:`route_home`): a straight line to the start
+        runs into the walls of a room with a notch or a partition between."""
         assert self.home is not None and sensors.pose is not None
         x, y, heading = sensors.pose
         hx, hy, home_heading = self.home
@@ -704,12 +712,31 @@ class ExploreLeftWall(Navigator):
             self.phase = "home_turn"
             turn = math.degrees(math.remainder(home_heading - heading, 2 * math.pi))
             return self._turn(turn, "home turn", sensors) or self._homeward("home turn", False, sensors)
-        bearing = math.degrees(math.remainder(math.atan2(hy - y, hx - x) - heading, 2 * math.pi))
+        tx, ty = self._waypoint(sensors)
+        bearing = math.degrees(math.remainder(math.atan2(ty - y, tx - x) - heading, 2 * math.pi))
         return self._turn(bearing, "aim", sensors) or [self._home_move(sensors)]
+
+    def _waypoint(self, sensors: Sensors) -> tuple[float, float]:
+        """The next point on the way home (planned on the first call, and again after a detour)."""
+        assert self.home is not None and sensors.pose is not None
+        s = self.s
+        if self.route is None:
+            self.route = route_home(
+                self.trail,
+                sensors.pose[:2],
+                self.home[:2],
+                s.home_corridor_mm,
+                s.route_spacing_mm,
+                outline=self.outer_path,
+                islands=self.circled,
+            )
+        while len(self.route) > 1 and math.dist(sensors.pose[:2], self.route[0]) <= s.waypoint_tolerance_mm:
+            self.route.pop(0)
+        return self.route[0] if self.route else self.home[:2]
 
     def _home_move(self, sensors: Sensors) -> Move:
         assert self.home is not None and sensors.pose is not None
-        return self._forward(max(50, round(math.dist(sensors.pose[:2], self.home[:2]))), "home")
+        return self._forward(max(50, round(math.dist(sensors.pose[:2], self._waypoint(sensors)))), "home")
 
     def _homeward(self, label: str, blocked: bool, sensors: Sensors) -> list[Move] | None:
         """The way home, one plan at a time: drive, go round what is in the way, the last turn."""
@@ -727,6 +754,7 @@ class ExploreLeftWall(Navigator):
             if self._detours_used_up():
                 return None
             self.detouring = True
+            self.route = None  # planned again from wherever the detour ends
             return self._turn(-90, "detour", sensors) or self._homeward("detour", False, sensors)
         if sensors.pose is None:
             return None
@@ -911,6 +939,52 @@ def _inside(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         xint = ax + (y - ay) * (bx - ax) / np.where(by != ay, by - ay, 1.0)
     return (crosses & (x < xint)).sum(axis=1) % 2 == 1
+
+
+def route_home(
+    trail: list[tuple[float, float]],
+    here: tuple[float, float],
+    home: tuple[float, float],
+    corridor_mm: float,
+    spacing_mm: float = 50.0,
+    outline: list[tuple[float, float]] | None = None,
+    islands: list[list[tuple[float, float]]] | None = None,
+) -> list[tuple[float, float]]:
+    """Waypoints from ``here`` to ``home`` (where the trail began), ``home`` last: the trail
+    retraced backwards, each leg going as far back along it as a straight line can while it
+    stays in free space (string pulling). Free is within ``corridor_mm`` of the trail, and inside
+    the lap along the room's walls (``outline``) but outside the laps round ``islands``."""
+    import shapely  # the world generator's geometry library; only main's homing needs it here
+
+    points: list[tuple[float, float]] = [home]
+    for p in trail:
+        if math.dist(p, points[-1]) >= spacing_mm:
+            points.append(p)
+    if len(points) < 2:
+        return [home]
+    free = shapely.LineString(points).buffer(corridor_mm)
+    if outline is not None and len(outline) >= 3:
+        room = shapely.make_valid(shapely.Polygon(outline))
+        for ring in islands or []:
+            if len(ring) >= 3:
+                room = room.difference(shapely.make_valid(shapely.Polygon(ring)).buffer(corridor_mm))
+        free = free.union(room)
+    shapely.prepare(free)
+    corridor = free
+    nodes = np.asarray(points, dtype=float)
+    last = int(np.argmin(np.hypot(*(nodes - np.asarray(here, dtype=float)).T)))
+    route: list[tuple[float, float]] = []
+    at = (float(here[0]), float(here[1]))
+    while last > 0:
+        legs = shapely.linestrings([[at, tuple(node)] for node in nodes[: last + 1]])
+        inside = np.flatnonzero(shapely.covers(corridor, legs))
+        reach = int(inside[0]) if len(inside) else last  # outside it (a pose fix): to the trail first
+        if reach == last and route:
+            reach = last - 1  # consecutive trail points are always joined inside it
+        at = (float(nodes[reach][0]), float(nodes[reach][1]))
+        route.append(at)
+        last = reach
+    return route or [home]
 
 
 def point_in_polygon(p: tuple[float, float], polygon: list[tuple[float, float]]) -> bool:
