@@ -970,17 +970,16 @@ def route_home(
                 room = room.difference(shapely.make_valid(shapely.Polygon(ring)).buffer(corridor_mm))
         free = free.union(room)
     shapely.prepare(free)
-    corridor = free
     nodes = np.asarray(points, dtype=float)
     last = int(np.argmin(np.hypot(*(nodes - np.asarray(here, dtype=float)).T)))
     route: list[tuple[float, float]] = []
     at = (float(here[0]), float(here[1]))
     while last > 0:
         legs = shapely.linestrings([[at, tuple(node)] for node in nodes[: last + 1]])
-        inside = np.flatnonzero(shapely.covers(corridor, legs))
-        reach = int(inside[0]) if len(inside) else last  # outside it (a pose fix): to the trail first
+        inside = np.flatnonzero(shapely.covers(free, legs))
+        reach = int(inside[0]) if len(inside) else last  # outside (a pose fix): to the trail first
         if reach == last and route:
-            reach = last - 1  # consecutive trail points are always joined inside it
+            reach = last - 1  # consecutive trail points are always joined in free space
         at = (float(nodes[reach][0]), float(nodes[reach][1]))
         route.append(at)
         last = reach
