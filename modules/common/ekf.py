@@ -195,8 +195,8 @@ class PoseEKF:
         restart = self._scale_restart() if starts_move and kind in ("straight", "arc") else None
         x = self.x if restart is None else restart @ self.x
         n = len(x)
-        mu = float(x[self.index["glide"]]) if "glide" in self.index else odo.steps_per_degree
-        k = float(x[self.index["step_scale"]]) if "step_scale" in self.index else 1.0
+        mu = self.glide  # a restart sets the step scale only
+        k = float(x[self.index["step_scale"]]) if restart is not None else self.step_scale
         psi = float(x[2])
         nominal = (dl + dr) / 2.0 * odo.mm_per_step  # mm, nominal mean track distance
         differential = (dr - dl) / 2.0  # half-steps
