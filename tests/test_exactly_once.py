@@ -185,12 +185,80 @@ def test_the_memory_decides_new_repeat_and_stale():
     assert memory.classify(10, 7, 2) is NEW
     assert memory.classify(10, 7, 0) is STALE
     memory.saw(10, 7, 2, taken=False)  # refused: the inbox was locked
-    assert memory.classify(10, 7, 2) is STALE  # a copy of a refused command is never taken later
+    assert memory.classify(10, 7, 2) is NEW  # sent again, a refused command may be taken
     assert memory.classify(10, 7, 1) is REPEAT
     memory.saw(10, 9, 1, taken=True)  # a new incarnation
     assert memory.classify(10, 7, 3) is STALE  # the earlier incarnation's leftovers are stale
     assert memory.classify(10, 9, 1) is REPEAT
     assert memory.classify(20, 7, 1) is NEW  # senders are remembered apart
+
+
+def test_a_refused_command_sent_again_is_new_until_it_is_taken():
+    """deliver resends a command under its own seq: refused while the inbox was locked, it is
+    taken when it comes again to an open one, and from then on only acknowledged."""
+    memory = CommandMemory()
+    memory.saw(10, 7, 1, taken=True)
+    for _ in range(3):  # refused at every visit while the program holds the inbox locked
+        assert memory.classify(10, 7, 2) is NEW
+        memory.saw(10, 7, 2, taken=False)
+    assert memory.classify(10, 7, 1) is REPEAT  # the one taken before is still only acked
+    memory.saw(10, 7, 2, taken=True)
+    assert memory.classify(10, 7, 2) is REPEAT  # taken: sent again, it is acknowledged again
+    assert memory.classify(10, 7, 1) is STALE  # older than the one taken
+    assert memory.classify(10, 7, 3) is NEW
+
+
+def test_a_taken_command_sent_again_is_a_repeat_and_an_older_one_stale():
+    memory = CommandMemory()
+    memory.saw(10, 7, 40, taken=True)
+    for _ in range(3):  # the acknowledgement lost again and again: never taken twice
+        assert memory.classify(10, 7, 40) is REPEAT
+    assert memory.classify(10, 7, 39) is STALE
+    memory.saw(10, 7, 41, taken=False)  # a newer one refused
+    assert memory.classify(10, 7, 41) is NEW
+    assert memory.classify(10, 7, 40) is REPEAT  # the one taken is still acknowledged again
+    assert memory.classify(10, 7, 39) is STALE
+
+
+def test_resends_across_the_seq_wrap():
+    """The same verdicts where seq wraps from 0xFFFF to 0 (serial arithmetic)."""
+    memory = CommandMemory()
+    memory.saw(10, 7, 0xFFFE, taken=True)
+    memory.saw(10, 7, 0xFFFF, taken=False)
+    assert memory.classify(10, 7, 0xFFFF) is NEW  # refused, sent again
+    memory.saw(10, 7, 0xFFFF, taken=True)
+    assert memory.classify(10, 7, 0xFFFF) is REPEAT
+    assert memory.classify(10, 7, 0xFFFE) is STALE
+    memory.saw(10, 7, 0, taken=False)  # past the wrap, refused
+    assert memory.classify(10, 7, 0) is NEW
+    assert memory.classify(10, 7, 0xFFFF) is REPEAT  # still the one last taken
+    assert memory.classify(10, 7, 0xFFFE) is STALE
+    memory.saw(10, 7, 0, taken=True)
+    assert memory.classify(10, 7, 0) is REPEAT
+    assert memory.classify(10, 7, 0xFFFF) is STALE
+    assert memory.classify(10, 7, 0x8000) is STALE  # half the circle back
+    assert memory.classify(10, 7, 1) is NEW
+    assert memory.classify(10, 7, 0x7FFF) is NEW
+
+
+def test_the_memory_log_keeps_what_was_taken_not_what_was_refused(tmp_path):
+    """Read back, a refused command sent again may still be taken; a taken one is a repeat."""
+    log = tmp_path / "main" / "inbox-memory"
+    first = CommandMemory(log)
+    first.saw(30, 7, 0xFFFF, taken=True)
+    first.saw(30, 7, 0, taken=False)
+    first.close()
+    second = CommandMemory(log)
+    assert second.classify(30, 7, 0xFFFF) is REPEAT
+    assert second.classify(30, 7, 0xFFFE) is STALE
+    assert second.classify(30, 7, 0) is NEW  # refused before: may be taken when it comes again
+    second.saw(30, 7, 0, taken=True)
+    second.close()
+    third = CommandMemory(log)
+    assert third.classify(30, 7, 0) is REPEAT
+    assert third.classify(30, 7, 0xFFFF) is STALE
+    assert third.classify(30, 7, 1) is NEW
+    third.close()
 
 
 def test_the_memory_never_mistakes_a_new_command_for_a_repeat_after_a_full_wrap():

@@ -9,9 +9,11 @@ registered-letter semantics:
 * the receiver's OS copies it into the user's structure only if the inbox is **unlocked**, sets
   the acknowledge state and **locks** the inbox (the user unlocks it to receive the next one);
   a command is named by (sender, incarnation, seq): the one last taken is acknowledged again
-  but never handed over twice, an older copy is cleared unexecuted (:class:`CommandMemory`);
+  but never handed over twice, the newest one refused may be taken when it comes again, an
+  older copy is cleared unexecuted (:class:`CommandMemory`);
 * when the token is back at the sender, its OS records transmitted/acknowledged and **clears**
-  the inbox in every case. There is no retry: the user program resends if it wants.
+  the inbox in every case. There is no retry: the user program resends if it wants (``deliver``
+  resends the same command, under its own seq).
 
 The objects here run inside the token handler: each ``visit`` is a handful of byte operations.
 """
@@ -206,7 +208,10 @@ class CommandMemory:
             self._load()
 
     def classify(self, sender: int, incarnation: int, seq: int) -> str:
-        """NEW (never seen: may be taken), REPEAT (the one last taken) or STALE (an old copy)."""
+        """NEW (not taken yet: may be taken), REPEAT (the one last taken) or STALE (an old copy).
+
+        Not taken yet: never seen, or the newest seen but refused (the inbox was locked): the
+        sender resends a command under its own seq until it is acknowledged."""
         record = self._senders.get(sender)
         if record is None:
             return NEW
@@ -214,7 +219,7 @@ class CommandMemory:
             return STALE if incarnation in record.retired else NEW
         if seq == record.taken:
             return REPEAT
-        return NEW if 0 < (seq - record.newest) & 0xFFFF < 0x8000 else STALE
+        return NEW if (seq - record.newest) & 0xFFFF < 0x8000 else STALE
 
     def saw(self, sender: int, incarnation: int, seq: int, taken: bool) -> None:
         """Record a NEW command as seen (refused: inbox locked) or taken."""
