@@ -31,6 +31,7 @@ class Receiver:
     def __init__(self, node) -> None:
         self.node = node
         self.taken: list[tuple[int, int, int]] = []  # (sender, incarnation, count)
+        self.seqs: list[int] = []  # the seq of each command taken
         self._stop = threading.Event()
         node.set_own_input_id()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -40,6 +41,7 @@ class Receiver:
         while not self._stop.is_set():
             cmd = self.node.receive_command(timeout=0.05)
             if cmd is not None:
+                self.seqs.append(cmd.seq)
                 self.taken.append((cmd.sender, cmd.incarnation, cmd.args.get("count", -1)))
 
     def stop(self) -> None:
@@ -259,6 +261,75 @@ def test_the_memory_log_keeps_what_was_taken_not_what_was_refused(tmp_path):
     assert third.classify(30, 7, 0xFFFF) is STALE
     assert third.classify(30, 7, 1) is NEW
     third.close()
+
+
+def test_deliver_after_a_lost_acknowledgement_hands_the_command_over_once(ring):
+    """motor takes the command, its acknowledgement is lost on the way back (sonar's pass puts
+    the inbox back to occupied, as a token regenerated from a copy before motor's pass would):
+    deliver resends the same command, motor acknowledges it again and never takes it twice."""
+    main, motor_node, sonar = ring.nodes[MAIN], ring.nodes[MOTOR], ring.nodes[SONAR]
+    motor = Receiver(motor_node)
+    channel = PROTOCOL.channel("motor.command")
+    a, off = channel.address, sonar._cmd
+    lost = threading.Event()
+
+    def lose_the_acknowledgement(work: bytearray) -> bool:
+        if not lost.is_set() and work[a + off.sender] == MAIN and work[a + off.state] == off.ACKNOWLEDGED:
+            work[a + off.state] = off.OCCUPIED
+            lost.set()
+        return False
+
+    try:
+        seq = main._cmd_seqs.get(channel.name, 0)
+        before, sent_before = motor_node.stats.as_dict(), main.stats.as_dict()
+        sonar.system_handler, sonar.system_busy = lose_the_acknowledgement, True
+        assert main.deliver("motor", "VECTOR_COUNTER", count=7, timeout=30)
+        sonar.system_handler, sonar.system_busy = None, False
+        assert lost.is_set()
+        ring.wait_rounds(20, MOTOR, timeout=30)  # rounds in which a second copy would be taken
+        assert [c for _, _, c in motor.taken] == [7]
+        assert motor.seqs == [(seq + 1) & 0xFFFF]
+        assert main._cmd_seqs[channel.name] == (seq + 1) & 0xFFFF  # resent under its own seq
+        after, sent_after = motor_node.stats.as_dict(), main.stats.as_dict()
+        assert sent_after["commands_unacknowledged"] > sent_before["commands_unacknowledged"]
+        assert after["duplicate_commands"] > before["duplicate_commands"]  # acknowledged again
+        # a new command from the program is a new command: the next seq, taken
+        assert main.deliver("motor", "VECTOR_COUNTER", count=7, timeout=30)
+        wait_for(lambda: len(motor.taken) == 2, 30, "the second command")
+        assert motor.seqs == [(seq + 1) & 0xFFFF, (seq + 2) & 0xFFFF]
+    finally:
+        sonar.system_handler, sonar.system_busy = None, False
+        motor.stop()
+
+
+def test_deliver_to_a_locked_inbox_is_taken_once_the_program_opens_it(ring):
+    """Refused at each visit while motor's program keeps its inbox locked, the same command comes
+    again until it is taken: acknowledged, handed over once, under the seq it was sent with."""
+    main, motor_node = ring.nodes[MAIN], ring.nodes[MOTOR]
+    channel = PROTOCOL.channel("motor.command")
+    motor_node.set_own_input_id()  # an inbox starts locked
+    seq = main._cmd_seqs.get(channel.name, 0)
+    refused = motor_node.stats.inbox_full
+    result: list[bool] = []
+    sender = threading.Thread(
+        target=lambda: result.append(main.deliver("motor", "VECTOR_COUNTER", count=3, timeout=60))
+    )
+    sender.start()
+    motor = None
+    try:
+        wait_for(lambda: motor_node.stats.inbox_full >= refused + 3, 30, "the command refused three times")
+        assert not result
+        motor = Receiver(motor_node)  # the program opens its inbox
+        sender.join(60)
+        assert result == [True]
+        assert main._cmd_seqs[channel.name] == (seq + 1) & 0xFFFF  # every resend under one seq
+        ring.wait_rounds(20, MOTOR, timeout=30)
+        assert [c for _, _, c in motor.taken] == [3]
+        assert motor.seqs == [(seq + 1) & 0xFFFF]
+    finally:
+        sender.join(60)
+        if motor is not None:
+            motor.stop()
 
 
 def test_the_memory_never_mistakes_a_new_command_for_a_repeat_after_a_full_wrap():

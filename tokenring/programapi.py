@@ -172,7 +172,24 @@ class ProgramAPI(TokenPathHost):
         return buffer
 
     def send_command(self, target: str, command: str | int, **args: Any) -> Outbox:
-        """Queue a command for another module's inbox; the OS writes it when the inbox is free."""
+        """Queue a command for another module's inbox; the OS writes it when the inbox is free.
+
+        Every call is a new command with the next seq: a receiver that took an earlier one
+        takes this one too."""
+        outbox = self._queue_command(target, command, args)
+        assert outbox is not None
+        return outbox
+
+    def _queue_command(
+        self, target: str, command: str | int, args: dict[str, Any], again: Outbox | None = None
+    ) -> Outbox | None:
+        """Queue a command; with ``again``, the same command once more, under its own seq.
+
+        A resend keeps the command's name (sender, incarnation, seq), so a receiver that took
+        it already acknowledges it again and never hands it over twice. It is queued only while
+        ``again`` is still the last command to ``target``: once a newer one was sent (by another
+        thread), the receiver would clear this older seq unexecuted, never acknowledged: None.
+        """
         ch = self.channel(target)
         if not isinstance(ch, CommandChannel):
             raise ChannelError(f"{ch.name} is not a command channel")
@@ -180,11 +197,16 @@ class ProgramAPI(TokenPathHost):
         # token lock first (the handler's order): a waiting outbox is never replaced mid-visit
         with self._token_lock, self._regs_lock:
             current = self._outboxes.get(ch.name)
+            if again is not None and current is not again:
+                return None
             if current is not None and current.state == Outbox.IN_TOKEN:
                 raise ChannelError(f"a command to {ch.name} is still travelling; wait for it first")
             if current is not None:
                 current.cancel()
-            seq = self._cmd_seqs[ch.name] = (self._cmd_seqs.get(ch.name, 0) + 1) & 0xFFFF
+            if again is not None:
+                seq = again.seq
+            else:
+                seq = self._cmd_seqs[ch.name] = (self._cmd_seqs.get(ch.name, 0) + 1) & 0xFFFF
             outbox = Outbox(ch, cmd, self._cmd, self.node_id, seq, args, self.stats, self.incarnation)
             self._outboxes[ch.name] = outbox
             self._pending_outboxes.append(outbox)
@@ -266,11 +288,16 @@ class ProgramAPI(TokenPathHost):
         return received
 
     def deliver(self, target: str, command: str | int, *, timeout: float = 5.0, **args: Any) -> bool:
-        """Send until acknowledged (resending after each unacknowledged round) or timeout."""
+        """Send until acknowledged (resending after each unacknowledged round) or timeout.
+
+        Each resend is the same command (same seq), never a new one: when the receiver took it
+        but the acknowledgement was lost (a token regenerated from an older copy), the resend
+        is acknowledged again and not handed over twice. False: not acknowledged in time, the
+        receiver may or may not have it; a new call sends it as a new command."""
         deadline = time.monotonic() + timeout
         self.wait_channel_free(target, timeout)
-        while not self.stopping:
-            outbox = self.send_command(target, command, **args)
+        outbox: Outbox | None = self.send_command(target, command, **args)
+        while outbox is not None and not self.stopping:
             while not outbox.done.wait(0.05):
                 if self.stopping or time.monotonic() > deadline:
                     outbox.cancel()
@@ -280,6 +307,7 @@ class ProgramAPI(TokenPathHost):
             if time.monotonic() > deadline:
                 return False
             time.sleep(min(0.002, max(0.0, deadline - time.monotonic())))
+            outbox = self._queue_command(target, command, args, again=outbox)
         return False
 
     def wait_channel_free(self, target: str, timeout: float) -> bool:
