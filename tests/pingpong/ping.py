@@ -1,7 +1,6 @@
 """Serves the ball: sends n to pong, waits for n + 1, counts the rally in its data channel."""
 
 import os
-import time
 from pathlib import Path
 
 from tokenring.program import UserProgram
@@ -16,7 +15,12 @@ class Program(UserProgram):
     def run(self):
         n, rallies = 1, 0
         while self.running:
-            if not self._serve(n):
+            # deliver resends n as the same command until pong's OS acknowledges it, so pong
+            # takes it once even when an acknowledgement is lost with a token. Not acknowledged
+            # in time, pong may have it: n is served again as a new command and can come back
+            # twice
+            if not self.os.deliver("pong", "BALL", n=n, timeout=2.0):
+                self._note(f"again {n}")
                 continue
             answer = self.os.receive_command(timeout=5.0)
             # a ball served again comes back twice: the late answer is stale
@@ -30,24 +34,6 @@ class Program(UserProgram):
             rallies += 1
             self.score.write(rallies=rallies)
             n = answer.args["n"] + 1
-
-    def _serve(self, n: int, timeout: float = 2.0) -> bool:
-        """Send n until pong's OS acknowledges it, as ``os.deliver`` does, noting each resend of a
-        ball that was transmitted but not acknowledged: pong may have taken it (the token that
-        carried the acknowledgement was lost), so it can come back twice."""
-        deadline = time.monotonic() + timeout
-        while self.running and time.monotonic() < deadline:
-            self.os.wait_channel_free("pong", timeout)
-            box = self.os.send_command("pong", "BALL", n=n)
-            if not box.done.wait(max(0.0, deadline - time.monotonic())):
-                box.cancel()
-                self._note(f"again {n}")
-                return False
-            if box.acknowledged:
-                return True
-            if box.transmitted:
-                self._note(f"again {n}")
-        return False
 
     def _note(self, line: str) -> None:
         with self.log.open("a") as out:
