@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from modules.common.frontier import SeenGrid
 from modules.common.pilot import (
     FORWARD,
     REASON,
@@ -183,6 +184,14 @@ class WallSettings:
     max_probes: int = 8
     probe_cell_mm: float = 250.0  # the interior's grid
     probe_seen_mm: float = 900.0  # a cell this near a path driven counts as seen (sighting_cm)
+    # what the lap cut off: after the probes, drive to where the space the sonars saw ends (a
+    # frontier, :mod:`modules.common.frontier`) and follow the wall found there, this far
+    max_frontiers: int = 6
+    frontier_follow_mm: int = 4000
+    frontier_tried_mm: float = 700.0  # a frontier this near one driven to is not tried again
+    frontier_beyond_mm: float = 1000.0  # ... driven on past it into the unseen until blocked
+    route_clearance_mm: float = 250.0  # the way there keeps this far from every echo
+    goto_moves: int = 12  # moves on the way there at most (each aims at the next waypoint)
     # done: back to where the exploration began, facing as it did then
     return_home: bool = True
     home_tolerance_mm: float = 200.0
@@ -273,6 +282,11 @@ class ExploreLeftWall(Navigator):
         self.trail: list[tuple[float, float]] = []  # everywhere the robot went (seen from)
         self.probes = 0
         self.probe_goals: list[tuple[float, float]] = []  # interior goals driven to (or tried)
+        self.seen: SeenGrid | None = None  # what the sonars saw (made at the first pose)
+        self.frontier_goals: list[tuple[float, float]] = []
+        self.frontier_follow = False  # following a wall found beyond a frontier (not an island)
+        self.goto: list[tuple[float, float]] = []  # waypoints to a place left to explore
+        self.goto_moves = 0
         self.home: tuple[float, float, float] | None = None  # the pose the exploration began at
         self.home_reached = False
         self.detours = 0
@@ -452,6 +466,7 @@ class ExploreLeftWall(Navigator):
             self.last_follow = last
         if last is not None:
             self.trail += [pose[:2] for pose in last.poses if pose is not None]
+            self._see(last)
         if last is not None and self.lap_start is not None:
             self._record(last, label)
         if last is not None and last.reason == REASON["ALERT"]:
@@ -475,8 +490,13 @@ class ExploreLeftWall(Navigator):
             blocked = last is not None and last.trigger in ("ahead_within", "front_within")
             return self._homeward(label, blocked, sensors)
         self._count_rotation(sensors)
-        if self.target is not None and self.lap_start is not None and self.follow_mm > s.island_budget_mm:
-            self.note = "gave up going round an island"
+        budget = s.frontier_follow_mm if self.frontier_follow else s.island_budget_mm
+        if self.target is not None and self.lap_start is not None and self.follow_mm > budget:
+            self.note = (
+                "followed a wall beyond the seen space"
+                if self.frontier_follow
+                else "gave up going round an island"
+            )
             return self._next_island(sensors)
         if self._lap_done(sensors):
             if self.target is not None:  # round the island visited: on to the next one
@@ -510,12 +530,22 @@ class ExploreLeftWall(Navigator):
             self.state = NAV["ENTRY"]
             return [self._probe_move(sensors)]
 
+        if self.phase == "goto":  # the way to a place left to explore, through space seen free
+            if label == "goto" and blocked:
+                if self._mapped_ahead(sensors):
+                    return self._next_island(sensors)
+                return self._onto_island(sensors)  # a wall nobody followed: follow it
+            return self._goto_next(sensors)
+
         if self.phase == "approach":  # drive to the island chosen until it blocks the way
             if label == "approach":
+                if blocked and self.frontier_follow and self._mapped_ahead(sensors):
+                    return self._next_island(sensors)  # a wall mapped already: nothing new there
                 if blocked:  # it is ahead: put it on the left and go round it
                     return self._onto_island(sensors)
                 assert self.target is not None
-                self.unreached.append(self.target)  # missed it (or it was not there)
+                if not self.frontier_follow:
+                    self.unreached.append(self.target)  # missed it (or it was not there)
                 return self._next_island(sensors)
             self.state = NAV["ENTRY"]
             return [self._approach(sensors)]
@@ -586,8 +616,9 @@ class ExploreLeftWall(Navigator):
 
     def completeness(self) -> dict[str, object]:
         """How complete the map is, as far as the robot can tell: the room's outline closed by a
-        lap, islands found and gone round, probes into the interior, and whether any of the
-        interior is still out of every sonar's sight (``interior_seen``)."""
+        lap, islands found and gone round, probes into the interior, whether any of the interior
+        is still out of every sonar's sight (``interior_seen``), the places left to explore after
+        them that it drove to, and how many are left (walls seen but not mapped, frontiers)."""
         outline = len(self.outer_path) >= 3
         islands = [ring for ring in self.circled if len(ring) >= 3]
         unseen = None
@@ -599,6 +630,8 @@ class ExploreLeftWall(Navigator):
             "islands_found": len(self.circled),  # gone round, or lapped while looking for the room
             "islands_gone_round": len(self.circled) - len(self.islands),
             "probes": self.probes,
+            "places_explored": len(self.frontier_goals),
+            "places_left": self._places_left(),
             "interior_seen": outline and unseen is None,
             "returned_home": self.home_reached,
         }
@@ -656,12 +689,15 @@ class ExploreLeftWall(Navigator):
     def _next_island(self, sensors: Sensors) -> list[Move] | None:
         """After a lap: turn toward the nearest island not yet visited, or end the run."""
         s = self.s
-        self.target = None
+        self.target, self.frontier_follow = None, False
         islands = self._islands() if self.visits < s.visit_islands and sensors.pose is not None else []
         if not islands:
             probe = self._next_probe(sensors)
             if probe is not None:
                 return probe
+            frontier = self._next_frontier(sensors)
+            if frontier is not None:
+                return frontier
             gone_round = len(self.circled) - len(self.islands)
             self.done_note = f"lap closed, {gone_round} island(s) gone round" if self.visits else "lap closed"
             self.note = self.done_note
@@ -673,6 +709,7 @@ class ExploreLeftWall(Navigator):
         x, y, heading = sensors.pose
         tx, ty, _ = min(islands, key=lambda i: math.dist((x, y), i[:2]))
         self.target = (tx, ty)
+        self.lap_start, self.follow_mm = None, 0  # a lap given up on does not count against it
         self.path = []
         self.visits += 1
         self.phase, self.last_follow = "approach", None
@@ -698,6 +735,90 @@ class ExploreLeftWall(Navigator):
         self.note = f"probing the interior ({self.probes})"
         bearing = math.degrees(math.remainder(math.atan2(goal[1] - y, goal[0] - x) - heading, 2 * math.pi))
         return self._turn(bearing, "aim", sensors) or [self._probe_move(sensors)]
+
+    def _see(self, last: Outcome) -> None:
+        """Every sweep of the last moves into the grid of what the sonars saw."""
+        lay = self.layout
+        scanning = last.move is not None and last.move.scan
+        sides = (lay.left_front, lay.left_rear, lay.right_front, lay.right_rear)
+        before: tuple[float, float, float] | None = None
+        for (_, distances), pose in zip(last.samples, last.poses, strict=False):
+            if pose is None:
+                continue
+            if self.seen is None:
+                self.seen = SeenGrid(pose[:2], mounts=lay.mounts)
+            straight = before is not None and abs(math.remainder(pose[2] - before[2], 2 * math.pi)) < 0.06
+            self.seen.add(pose, distances, sides if scanning and straight else ())
+            before = pose
+
+    def _next_frontier(self, sensors: Sensors) -> list[Move] | None:
+        """Turn toward the nearest frontier not driven to yet (where the seen space ends: a
+        corner the lap cut off), or None: none left, or ``max_frontiers`` tried. Driving there,
+        what blocks the way is a wall nobody followed: it is followed as an island is."""
+        s = self.s
+        if len(self.frontier_goals) >= s.max_frontiers or sensors.pose is None or self.seen is None:
+            return None
+        here = sensors.pose[:2]
+        for found in (self.seen.unmapped_walls(), self.seen.frontiers()):  # walls first: the map
+            goals = [
+                (f.x, f.y)
+                for f in found
+                if all(math.dist((f.x, f.y), g) > s.frontier_tried_mm for g in self.frontier_goals)
+            ]
+            for goal in sorted(goals, key=lambda g: math.dist(here, g)):
+                self.frontier_goals.append(goal)
+                route = self.seen.route(here, goal, s.route_clearance_mm)
+                if route is not None and len(self.frontier_goals) <= s.max_frontiers:
+                    self.target, self.frontier_follow, self.goto = goal, True, route
+                    self.lap_start, self.follow_mm, self.goto_moves = None, 0, 0
+                    self.path = []
+                    self.phase, self.last_follow = "goto", None
+                    self.commands.append(("copro", "FLUSH", {}))
+                    self.note = f"to a place left to explore ({len(self.frontier_goals)})"
+                    return self._goto_next(sensors)
+        return None
+
+    def _goto_next(self, sensors: Sensors) -> list[Move] | None:
+        """Aim at the next waypoint on the way to the place left to explore and drive there;
+        past the last one, aim at the place itself and drive on until something blocks the way."""
+        s = self.s
+        assert self.target is not None
+        if sensors.pose is None:
+            return self._next_island(sensors)
+        here = sensors.pose[:2]
+        while self.goto and math.dist(here, self.goto[0]) <= s.waypoint_tolerance_mm:
+            self.goto.pop(0)
+        self.goto_moves += 1
+        if self.goto_moves > s.goto_moves:
+            return self._next_island(sensors)
+        x, y, heading = sensors.pose
+        tx, ty = self.goto[0] if self.goto else self.target
+        bearing = math.degrees(math.remainder(math.atan2(ty - y, tx - x) - heading, 2 * math.pi))
+        self.state = NAV["ENTRY"]
+        if not self.goto:
+            self.phase = "approach"
+            return self._turn(bearing, "aim", sensors) or [self._approach(sensors)]
+        return self._turn(bearing, "aim", sensors) or [
+            self._forward(max(50, round(math.dist(here, (tx, ty)))), "goto")
+        ]
+
+    def _places_left(self) -> int:
+        """Walls seen but not mapped and frontiers, not driven to yet."""
+        if self.seen is None:
+            return 0
+        found = [*self.seen.unmapped_walls(), *self.seen.frontiers()]
+        tried = self.frontier_goals
+        return sum(
+            1 for f in found if all(math.dist((f.x, f.y), g) > self.s.frontier_tried_mm for g in tried)
+        )
+
+    def _mapped_ahead(self, sensors: Sensors) -> bool:
+        """What blocks the way lies on a wall mapped already (a side sonar followed it)."""
+        if sensors.pose is None or self.seen is None:
+            return False
+        index = min(self.layout.front, key=lambda i: sensors.distances[i])
+        point = sonar_point(sensors.pose, index, sensors.distances[index] * 10.0, self.layout.mounts)
+        return self.seen.mapped_near(point)
 
     # -- home: back to the start pose when done -------------------------------------------------
     def _go_home(self, sensors: Sensors) -> list[Move] | None:
@@ -814,7 +935,8 @@ class ExploreLeftWall(Navigator):
     def _approach(self, sensors: Sensors) -> Move:
         assert self.target is not None
         distance = math.dist(sensors.pose[:2], self.target) if sensors.pose is not None else self.s.find_mm
-        return self._forward(round(distance + 300.0), "approach")
+        beyond = self.s.frontier_beyond_mm if self.frontier_follow else 300.0
+        return self._forward(round(distance + beyond), "approach")
 
     def _inner(self, sensors: Sensors) -> list[Move]:
         """The way ahead is blocked: turn right so the wall ahead is on the left."""
