@@ -752,9 +752,10 @@ class ExploreLeftWall(Navigator):
             before = pose
 
     def _next_frontier(self, sensors: Sensors) -> list[Move] | None:
-        """Turn toward the nearest frontier not driven to yet (where the seen space ends: a
-        corner the lap cut off), or None: none left, or ``max_frontiers`` tried. Driving there,
-        what blocks the way is a wall nobody followed: it is followed as an island is."""
+        """Set off for the nearest place left to explore not tried yet — a wall seen but not
+        mapped, else a frontier — along a way through space seen free; None: none left, or
+        ``max_frontiers`` tried (one with no known way there counts). What blocks the way there
+        is followed as an island is, for ``frontier_follow_mm``, unless it is mapped already."""
         s = self.s
         if len(self.frontier_goals) >= s.max_frontiers or sensors.pose is None or self.seen is None:
             return None
