@@ -191,6 +191,7 @@ class WallSettings:
     frontier_tried_mm: float = 700.0  # a frontier this near one driven to is not tried again
     frontier_beyond_mm: float = 1000.0  # ... driven on past it into the unseen until blocked
     route_clearance_mm: float = 250.0  # the way there keeps this far from every echo
+    frontier_arrived_mm: float = 600.0  # blocked this near the place: there (follow what blocks)
     goto_moves: int = 12  # moves on the way there at most (each aims at the next waypoint)
     # done: back to where the exploration began, facing as it did then
     return_home: bool = True
@@ -532,14 +533,23 @@ class ExploreLeftWall(Navigator):
 
         if self.phase == "goto":  # the way to a place left to explore, through space seen free
             if label == "goto" and blocked:
-                if self._mapped_ahead(sensors):
-                    return self._next_island(sensors)
-                return self._onto_island(sensors)  # a wall nobody followed: follow it
+                if self._known_ahead(sensors):  # something mapped in the way: round it
+                    assert self.target is not None and sensors.pose is not None
+                    route = (
+                        self.seen.route(sensors.pose[:2], self.target, s.route_clearance_mm)
+                        if self.seen
+                        else None
+                    )
+                    if route is None:
+                        return self._next_island(sensors)
+                    self.goto = route
+                    return self._goto_next(sensors)
+                return self._onto_island(sensors)  # there, or a wall nobody followed: follow it
             return self._goto_next(sensors)
 
         if self.phase == "approach":  # drive to the island chosen until it blocks the way
             if label == "approach":
-                if blocked and self.frontier_follow and self._mapped_ahead(sensors):
+                if blocked and self.frontier_follow and self._known_ahead(sensors):
                     return self._next_island(sensors)  # a wall mapped already: nothing new there
                 if blocked:  # it is ahead: put it on the left and go round it
                     return self._onto_island(sensors)
@@ -813,12 +823,15 @@ class ExploreLeftWall(Navigator):
             1 for f in found if all(math.dist((f.x, f.y), g) > self.s.frontier_tried_mm for g in tried)
         )
 
-    def _mapped_ahead(self, sensors: Sensors) -> bool:
-        """What blocks the way lies on a wall mapped already (a side sonar followed it)."""
-        if sensors.pose is None or self.seen is None:
+    def _known_ahead(self, sensors: Sensors) -> bool:
+        """What blocks the way lies on a wall mapped already (a side sonar followed it), away
+        from the place left to explore (its unmapped stretch may begin next to a mapped one)."""
+        if sensors.pose is None or self.seen is None or self.target is None:
             return False
         index = min(self.layout.front, key=lambda i: sensors.distances[i])
         point = sonar_point(sensors.pose, index, sensors.distances[index] * 10.0, self.layout.mounts)
+        if math.dist(point, self.target) <= self.s.frontier_arrived_mm:
+            return False
         return self.seen.mapped_near(point)
 
     # -- home: back to the start pose when done -------------------------------------------------
