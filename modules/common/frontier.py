@@ -33,9 +33,7 @@ Pose = tuple[float, float, float]
 class FrontierSettings:
     cell_mm: float = 100.0
     extent_mm: float = 16000.0  # the grid reaches this far from the start each way
-    #: echoes this far at most count: farther ones are coarse, and a reading with no echo at all
-    #: may be a wall met too obliquely to answer (it shows nothing free)
-    free_range_mm: float = 1500.0
+    free_range_mm: float = 1500.0  # echoes this far at most count: farther ones are coarse
     cone_deg: float = 10.0  # the part of the 30° beam taken as seen free up to its echo
     rays: int = 3
     hit_clearance_mm: float = 300.0  # frontier cells this near a hit are a wall's unseen stretch
@@ -43,7 +41,7 @@ class FrontierSettings:
     map_range_mm: float = 1000.0  # side echoes this near make vectors (the tracker's range)
     mapped_clearance_mm: float = 300.0  # hits this near a mapped cell are that wall's
     min_wall_cells: int = 5  # an unmapped wall shorter than this many cells is noise
-    narrow_cost: float = 8.0  # a way through cells nearer an echo than the clearance costs this much more
+    narrow_cost: float = 8.0  # a cell next to an echo costs this many times one in the open
 
 
 @dataclass(frozen=True)
@@ -86,8 +84,9 @@ class SeenGrid:
 
     def add(self, pose: Pose, distances_cm: Sequence[int], mapping: Sequence[int] = ()) -> None:
         """One sweep: each echo's point hit, and its cone free up to it (no further than the
-        first cell hit before). Echoes of the sonars in ``mapping`` (the side sonars, driving
-        straight with vector generation on) within ``map_range_mm`` mark their cells mapped."""
+        first cell hit before); no echo shows nothing (a wall met too obliquely to answer looks
+        the same). Echoes of the sonars in ``mapping`` (the side sonars, driving straight with
+        vector generation on) within ``map_range_mm`` mark their cells mapped."""
         s = self.s
         for index, cm in enumerate(distances_cm[: len(self.mounts)]):
             if cm == NO_CONTACT_CM or cm * 10.0 > s.free_range_mm:
@@ -102,7 +101,7 @@ class SeenGrid:
                 self.mapped[row, col] = True
             steps = self._steps[
                 self._steps < cm * 10.0 - 1.5 * s.cell_mm
-            ]  # both sides of a thin wall never touch
+            ]  # a thin wall's two sides never touch
             for angle in direction + self._offsets:
                 row, col, inside = self._cells(sx + np.cos(angle) * steps, sy + np.sin(angle) * steps)
                 if not inside.all():
@@ -124,9 +123,9 @@ class SeenGrid:
         self, start: tuple[float, float], goal: tuple[float, float], clearance_mm: float
     ) -> list[tuple[float, float]] | None:
         """Waypoints (world mm; the last one the free cell nearest ``goal``) through cells seen
-        free: the cheapest path on the grid (Dijkstra), a cell nearer than ``clearance_mm`` to
-        an echo costing ``narrow_cost`` times as much, pulled straight wherever a line keeps at
-        least the clearance its stretch of path had. None: no way there is known."""
+        free: the cheapest path on the grid (Dijkstra), a cell costing more the nearer it lies to
+        an echo within ``clearance_mm`` (up to ``narrow_cost`` times), pulled straight wherever a
+        line keeps at least the clearance its stretch of path had. None: no way there is known."""
         from scipy import ndimage
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import dijkstra
@@ -135,7 +134,8 @@ class SeenGrid:
         if len(cells) == 0:
             return None
         clearance = ndimage.distance_transform_edt(~self.hit) * self.s.cell_mm
-        cost = np.where(clearance >= clearance_mm, 1.0, self.s.narrow_cost)
+        # 1 at the clearance and beyond, rising to narrow_cost right at an echo
+        cost = 1.0 + (self.s.narrow_cost - 1.0) * np.clip(1.0 - clearance / clearance_mm, 0.0, 1.0)
         number = np.full(self.free.shape, -1)
         number[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
         rows, cols, weights = [], [], []
@@ -171,6 +171,8 @@ class SeenGrid:
         waypoints, at = [], 0
         while at < len(points) - 1:
             ahead = len(points) - 1
+            if kept[at] < clearance_mm:  # out of a narrow place along the path itself first
+                ahead = next((i for i in range(at + 1, len(points)) if kept[i] >= clearance_mm), ahead)
             while ahead > at + 1 and not self._clear(
                 points[at], points[ahead], clearance, min(clearance_mm, *kept[at : ahead + 1])
             ):

@@ -533,17 +533,8 @@ class ExploreLeftWall(Navigator):
 
         if self.phase == "goto":  # the way to a place left to explore, through space seen free
             if label == "goto" and blocked:
-                if self._known_ahead(sensors):  # something mapped in the way: round it
-                    assert self.target is not None and sensors.pose is not None
-                    route = (
-                        self.seen.route(sensors.pose[:2], self.target, s.route_clearance_mm)
-                        if self.seen
-                        else None
-                    )
-                    if route is None:
-                        return self._next_island(sensors)
-                    self.goto = route
-                    return self._goto_next(sensors)
+                if self._known_ahead(sensors):  # a wall mapped already: nothing new there
+                    return self._next_island(sensors)
                 return self._onto_island(sensors)  # there, or a wall nobody followed: follow it
             return self._goto_next(sensors)
 
@@ -719,7 +710,6 @@ class ExploreLeftWall(Navigator):
         x, y, heading = sensors.pose
         tx, ty, _ = min(islands, key=lambda i: math.dist((x, y), i[:2]))
         self.target = (tx, ty)
-        self.lap_start, self.follow_mm = None, 0  # a lap given up on does not count against it
         self.path = []
         self.visits += 1
         self.phase, self.last_follow = "approach", None
@@ -770,7 +760,12 @@ class ExploreLeftWall(Navigator):
         if len(self.frontier_goals) >= s.max_frontiers or sensors.pose is None or self.seen is None:
             return None
         here = sensors.pose[:2]
-        for found in (self.seen.unmapped_walls(), self.seen.frontiers()):  # walls first: the map
+        trail = np.asarray(self._seen_from(), dtype=float)
+        walls, frontiers = self.seen.unmapped_walls(), self.seen.frontiers()
+        # a frontier the probes count as seen (near a path: an empty room's middle has no echo
+        # to show it free) is no place to go
+        far = [f for f in frontiers if np.hypot(*(trail - (f.x, f.y)).T).min() > s.probe_seen_mm]
+        for found in (walls, far):  # walls first: the map
             goals = [
                 (f.x, f.y)
                 for f in found
