@@ -14,7 +14,10 @@ class Program(UserProgram):
             ball = self.os.receive_command(timeout=0.2)
             if ball is None or ball.name != "BALL":
                 continue
-            while self.running and not self.os.deliver("ping", "BALL", n=ball.args["n"] + 1, timeout=2.0):
-                pass
+            # one deliver resends the same command until acknowledged, so ping takes it once; a
+            # new deliver after a timeout would be a second command ping could take too. Not
+            # delivered at all, ping serves its ball again (and notes it)
+            if not self.os.deliver("ping", "BALL", n=ball.args["n"] + 1, timeout=30.0):
+                continue
             returned += 1
             self.score.write(returned=returned)
