@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from modules.common.actions import load_actions
@@ -114,6 +114,7 @@ def clean(reader, path: Path) -> None:
 @pytest.mark.parametrize("name", READERS)
 @FUZZ
 @given(data=st.binary(max_size=600))
+@example(data=b"._")  # once resolved as a float with no digit, and float(".") raised ValueError
 def test_random_bytes_are_a_clean_error(name, data, tmp_path_factory):
     reader, suffix = READERS[name]
     path = tmp_path_factory.mktemp("fuzz") / f"input{suffix}"
