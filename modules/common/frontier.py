@@ -220,8 +220,8 @@ class SeenGrid:
             row, col = cells[int(np.argmin(((cells - middle) ** 2).sum(axis=1)))]
             found.append(
                 Frontier(
-                    self.x0 + (col + 0.5) * self.s.cell_mm,
-                    self.y0 + (row + 0.5) * self.s.cell_mm,
+                    float(self.x0 + (col + 0.5) * self.s.cell_mm),
+                    float(self.y0 + (row + 0.5) * self.s.cell_mm),
                     len(cells),
                 )
             )

@@ -760,17 +760,7 @@ class ExploreLeftWall(Navigator):
         if len(self.frontier_goals) >= s.max_frontiers or sensors.pose is None or self.seen is None:
             return None
         here = sensors.pose[:2]
-        trail = np.asarray(self._seen_from(), dtype=float)
-        walls, frontiers = self.seen.unmapped_walls(), self.seen.frontiers()
-        # a frontier the probes count as seen (near a path: an empty room's middle has no echo
-        # to show it free) is no place to go
-        far = [f for f in frontiers if np.hypot(*(trail - (f.x, f.y)).T).min() > s.probe_seen_mm]
-        for found in (walls, far):  # walls first: the map
-            goals = [
-                (f.x, f.y)
-                for f in found
-                if all(math.dist((f.x, f.y), g) > s.frontier_tried_mm for g in self.frontier_goals)
-            ]
+        for goals in self._untried_places():  # walls first: the map
             for goal in sorted(goals, key=lambda g: math.dist(here, g)):
                 self.frontier_goals.append(goal)
                 route = self.seen.route(here, goal, s.route_clearance_mm)
@@ -808,23 +798,36 @@ class ExploreLeftWall(Navigator):
             self._forward(max(50, round(math.dist(here, (tx, ty)))), "goto")
         ]
 
-    def _places_left(self) -> int:
-        """Walls seen but not mapped and frontiers, not driven to yet."""
+    def _untried_places(self) -> tuple[list[tuple[float, float]], list[tuple[float, float]]]:
+        """The places left to explore not tried yet: walls seen but not mapped, and frontiers
+        farther than ``probe_seen_mm`` from every path (nearer ones the probes count as seen: an
+        empty room's middle has no echo to show it free)."""
         if self.seen is None:
-            return 0
-        found = [*self.seen.unmapped_walls(), *self.seen.frontiers()]
-        tried = self.frontier_goals
-        return sum(
-            1 for f in found if all(math.dist((f.x, f.y), g) > self.s.frontier_tried_mm for g in tried)
+            return [], []
+        s = self.s
+        trail = np.asarray(self._seen_from(), dtype=float)
+        far = [f for f in self.seen.frontiers() if np.hypot(*(trail - (f.x, f.y)).T).min() > s.probe_seen_mm]
+        walls, frontiers = (
+            [
+                (f.x, f.y)
+                for f in found
+                if all(math.dist((f.x, f.y), g) > s.frontier_tried_mm for g in self.frontier_goals)
+            ]
+            for found in (self.seen.unmapped_walls(), far)
         )
+        return walls, frontiers
+
+    def _places_left(self) -> int:
+        """Places left to explore that :meth:`_next_frontier` would still go to."""
+        walls, frontiers = self._untried_places()
+        return len(walls) + len(frontiers)
 
     def _known_ahead(self, sensors: Sensors) -> bool:
         """What blocks the way lies on a wall mapped already (a side sonar followed it), away
         from the place left to explore (its unmapped stretch may begin next to a mapped one)."""
         if sensors.pose is None or self.seen is None or self.target is None:
             return False
-        index = min(self.layout.front, key=lambda i: sensors.distances[i])
-        point = sonar_point(sensors.pose, index, sensors.distances[index] * 10.0, self.layout.mounts)
+        point = self._point_ahead(sensors)
         if math.dist(point, self.target) <= self.s.frontier_arrived_mm:
             return False
         return self.seen.mapped_near(point)
@@ -919,9 +922,7 @@ class ExploreLeftWall(Navigator):
         gone round: a free-standing obstacle nobody saw yet."""
         if sensors.pose is None:
             return False
-        ahead = min(sensors.distances[i] for i in self.layout.front)
-        index = min(self.layout.front, key=lambda i: sensors.distances[i])
-        point = sonar_point(sensors.pose, index, ahead * 10.0, self.layout.mounts)
+        point = self._point_ahead(sensors)
         outer = self.outer_path
         return (
             point_in_polygon(point, outer)
@@ -932,6 +933,12 @@ class ExploreLeftWall(Navigator):
                 if len(ring) >= 3
             )
         )
+
+    def _point_ahead(self, sensors: Sensors) -> tuple[float, float]:
+        """Where the nearest echo of the front sonars came from (the pose known)."""
+        assert sensors.pose is not None
+        index = min(self.layout.front, key=lambda i: sensors.distances[i])
+        return sonar_point(sensors.pose, index, sensors.distances[index] * 10.0, self.layout.mounts)
 
     def _onto_island(self, sensors: Sensors) -> list[Move]:
         """An island blocks the way: turn so it is on the left and follow it, a lap of its own."""
