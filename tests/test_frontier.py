@@ -137,3 +137,44 @@ def test_a_wall_the_lap_cut_off_is_visited_and_mapped(tmp_path: Path) -> None:
     assert covered >= 0.6 * 41, (covered, run.finished)  # the lap alone maps a quarter of it
     assert loop.navigator.frontier_goals, "it went to places left to explore"
     assert run.finished.endswith("back at the start"), run.finished
+
+
+def test_the_way_home_goes_round_a_wall_the_lap_left_inside_it_by_space_seen_free() -> None:
+    from modules.common.navigator import ExploreLeftWall, route_home
+    from modules.common.pilot import FORWARD, REASON, STOPPED, Move, Outcome, Sensors
+    from modules.common.vectorgen import default_layout
+
+    # a partition from the left wall (y = 1000, x up to 2500); the lap cut across the room, so
+    # the whole rectangle it drew counts as free and the straight way home runs through the wall
+    room = Polygon([(-500, -500), (3500, -500), (3500, 2500), (-500, 2500)])
+    partition = LineString([(-500, 1000), (2500, 1000)])
+    trail = (
+        [(float(x), 0.0) for x in range(0, 3001, 50)]
+        + [(3000.0, float(y)) for y in range(0, 2001, 50)]
+        + [(float(x), 2000.0) for x in range(3000, -1, -50)]
+    )
+    lap = [(0.0, 0.0), (3000.0, 0.0), (3000.0, 2000.0), (0.0, 2000.0)]
+    here, home = (0.0, 2000.0), (0.0, 0.0)
+    assert route_home(trail, here, home, 100.0, outline=lap) == [home]  # through the partition
+
+    grid = SeenGrid(home, FrontierSettings(rays=1), mounts=AHEAD)
+    walls = room.exterior.union(partition)
+    for x, y in trail[::10]:
+        for degrees in range(0, 360, 5):
+            theta = math.radians(degrees)
+            ray = LineString([(x, y), (x + 5000 * math.cos(theta), y + 5000 * math.sin(theta))])
+            echo = Point(x, y).distance(ray.intersection(walls))
+            grid.add((x, y, theta), [round(echo / 10.0) if echo <= 1500 else NO_ECHO])
+
+    nav = ExploreLeftWall(default_layout())
+    nav.home, nav.trail, nav.outer_path, nav.seen = (*home, 0.0), trail, lap, grid
+    nav.phase, nav.done_note = "home", "lap closed"
+    sensors = Sensors(distances=[255] * 8)
+    sensors.pose = (*here, 0.0)
+    drive = Move(FORWARD, 500, 100, label="home")
+    assert nav.plan(Outcome(REASON["DONE"], drive, driven_mm=500), sensors, STOPPED)
+    assert nav.route is not None and nav.route[-1] == home
+    legs = list(zip([here, *nav.route[:-1]], nav.route, strict=True))
+    for a, b in legs:
+        assert LineString([a, b]).distance(partition) >= 200, (a, b)
+    assert max(x for x, _ in nav.route) > 2500  # round the partition's end

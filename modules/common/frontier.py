@@ -16,6 +16,7 @@ target come out of it:
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -180,6 +181,17 @@ class SeenGrid:
             waypoints.append(points[ahead])
             at = ahead
         return waypoints or [points[-1]]
+
+    def crosses_echo(self, points: Sequence[tuple[float, float]]) -> bool:
+        """A leg of the path through ``points`` passes a cell an echo came from (sampled every
+        tenth of a cell: a line between two diagonal hit cells of a thin wall clips one)."""
+        for a, b in itertools.pairwise(points):
+            n = max(2, int(math.dist(a, b) / (self.s.cell_mm / 10.0)) + 1)
+            t = np.linspace(0.0, 1.0, n)
+            row, col, _ = self._cells(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t)
+            if self.hit[row, col].any():
+                return True
+        return False
 
     def _clear(
         self, a: tuple[float, float], b: tuple[float, float], clearance: np.ndarray, least_mm: float

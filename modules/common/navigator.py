@@ -850,19 +850,26 @@ class ExploreLeftWall(Navigator):
         return self._turn(bearing, "aim", sensors) or [self._home_move(sensors)]
 
     def _waypoint(self, sensors: Sensors) -> tuple[float, float]:
-        """The next point on the way home (planned on the first call, and again after a detour)."""
+        """The next point on the way home (planned on the first call, and again after a detour):
+        the trail retraced, unless that runs through a wall the sonars saw (a wall inside the
+        lap, which counts as free) — then the way through space seen free."""
         assert self.home is not None and sensors.pose is not None
         s = self.s
         if self.route is None:
+            here, home = sensors.pose[:2], self.home[:2]
             self.route = route_home(
                 self.trail,
-                sensors.pose[:2],
-                self.home[:2],
+                here,
+                home,
                 s.home_corridor_mm,
                 s.route_spacing_mm,
                 outline=self.outer_path,
                 islands=self.circled,
             )
+            if self.seen is not None and self.seen.crosses_echo([here, *self.route]):
+                seen_way = self.seen.route(here, home, s.route_clearance_mm)
+                if seen_way is not None:
+                    self.route = [*seen_way[:-1], home]
         while len(self.route) > 1 and math.dist(sensors.pose[:2], self.route[0]) <= s.waypoint_tolerance_mm:
             self.route.pop(0)
         return self.route[0] if self.route else self.home[:2]
