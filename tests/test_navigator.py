@@ -721,3 +721,24 @@ def test_no_lap_ends_on_the_way_home_where_the_way_passes_the_lap_s_start():
     moves = nav.plan(Outcome(REASON["DONE"], drive, driven_mm=500), s, STOPPED)
     assert moves and moves[-1].label in ("aim", "home")
     assert nav.phase == "home" and nav.islands == [] and nav.note != "left an island"
+
+
+def test_a_turn_alerted_again_after_its_escape_backs_off_before_turning_once_more():
+    from modules.common.pilot import Outcome
+
+    # the nose at a wall's end: the turn toward home touches it, the escape turn the other way
+    # is all the lock allows, and aiming again touches it again — unless the robot backs off
+    nav = ExploreLeftWall(LAYOUT)
+    s = sensors_with(front=2)
+    nav.home, nav.phase, nav.done_note = (-3000.0, 0.0, 0.0), "home", "lap closed"  # behind
+    aim = Move(TURN_LEFT, 140, 100, label="aim")
+    first = nav.plan(Outcome(REASON["ALERT"], aim, driven_mm=0), s, TURN_RIGHT)
+    assert [(m.label, m.direction) for m in first] == [("escape turn", TURN_RIGHT)]
+    again = nav.plan(Outcome(REASON["DONE"], first[0], driven_mm=15), s, STOPPED)
+    assert again and again[0].label == "aim"
+    second = nav.plan(Outcome(REASON["ALERT"], aim, driven_mm=0), s, TURN_RIGHT)
+    assert [(m.label, m.direction) for m in second] == [("escape turn", TURN_RIGHT), ("back off", REVERSE)]
+    # backed off and aimed: a later ALERT is the first of a new run, the escape alone
+    nav.plan(Outcome(REASON["DONE"], second[-1], driven_mm=80), s, STOPPED)
+    third = nav.plan(Outcome(REASON["ALERT"], aim, driven_mm=0), s, TURN_RIGHT)
+    assert [m.label for m in third] == ["escape turn"]

@@ -146,6 +146,10 @@ class WallSettings:
     clear_mm: int = 400  # drive on past an outer corner before turning left
     max_correction_deg: float = 15.0
     speed_pct: int = 100
+    #: ALERTs in a row with no other move finished between: the escape the lock allows backs
+    #: off too (a turn with the nose at a wall's end touches it whichever way it goes first)
+    alerts_before_back_off: int = 2
+    alert_back_mm: int = 80
     lap_min_mm: int = 2500  # driven along walls before a lap can end
     lap_radius_mm: float = 450.0
     lap_overlap_mm: float = 0.0  # a lap ends this far short of its start at the latest
@@ -294,6 +298,7 @@ class ExploreLeftWall(Navigator):
         self.detouring = False
         self.route: list[tuple[float, float]] | None = None  # waypoints home, the start last
         self.done_note = ""
+        self.alerts = 0  # ALERTs in a row, escapes between them not counting
 
     # -- the moves ----------------------------------------------------------------------------
     def _front_stop(self) -> tuple[Abort, ...]:
@@ -474,7 +479,13 @@ class ExploreLeftWall(Navigator):
             self.state = NAV["BACK_OFF"]
             self.note = "alert"
             self.check = None
-            return self.escape(alert_lock if alert_lock != STOPPED else REVERSE)
+            self.alerts += 1
+            escape = self.escape(alert_lock if alert_lock != STOPPED else REVERSE)
+            if self.alerts >= s.alerts_before_back_off and escape[0].direction != REVERSE:
+                escape.append(Move(REVERSE, s.alert_back_mm, s.speed_pct, label="back off"))
+            return escape
+        if last is not None and not label.startswith("escape"):
+            self.alerts = 0
         if last is not None and last.reason in (REASON["STALL"], REASON["COLLISION"]):
             self.state = NAV["BACK_OFF"]
             if self.phase not in ("home", "home_turn"):  # on the way home: aim again after it
