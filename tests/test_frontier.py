@@ -178,3 +178,19 @@ def test_the_way_home_goes_round_a_wall_the_lap_left_inside_it_by_space_seen_fre
     for a, b in legs:
         assert LineString([a, b]).distance(partition) >= 200, (a, b)
     assert max(x for x, _ in nav.route) > 2500  # round the partition's end
+
+
+def test_open_floor_the_robot_drove_over_is_a_way_though_no_echo_showed_it_free() -> None:
+    # two boxes 4 m apart, the floor between them farther than 1.5 m from every wall: no echo
+    # shows it free, but the robot drove across it, so the way back is known
+    west = Polygon([(-1000, -1000), (1000, -1000), (1000, 1000), (-1000, 1000)])
+    east = Polygon([(5000, -1000), (7000, -1000), (7000, 1000), (5000, 1000)])
+    grid = SeenGrid((0.0, 0.0), mounts=AHEAD)
+    spin(grid, 0.0, 0.0, west)
+    spin(grid, 6000.0, 0.0, east)
+    for x in range(0, 6001, 40):  # the drive across, its sonar reading nothing
+        grid.add((float(x), 0.0, 0.0), [NO_ECHO])
+    assert not grid.free[cell_of(grid, 3000.0, 0.0)]  # nothing seen out there
+    route = grid.route((6000.0, 0.0), (0.0, 0.0), clearance_mm=250.0)
+    assert route is not None and math.dist(route[-1], (0.0, 0.0)) <= 150
+    assert all(abs(y) < 1000 for _, y in route)

@@ -4,8 +4,9 @@ but never mapped: the places left to explore after the room's lap.
 A coarse grid round the start. A cell is *hit* where an echo came from, *free* where the axis of
 a beam reached past it to its echo (not past an earlier hit: an oblique wall's echo is weak, and
 the reading runs on beyond it), and *mapped* where a side sonar's echo came from while the robot
-drove straight with vector generation on, near enough for it (``map_range_mm``). Two kinds of
-target come out of it:
+drove straight with vector generation on, near enough for it (``map_range_mm``); *driven* under
+the robot's body wherever it was (a way, even where no echo showed the floor free). Two kinds of target
+come out of it:
 
 * a *frontier*: free cells next to cells nothing reached, away from every hit — space the robot
   could drive into and has not seen (Yamauchi 1997, "A frontier-based approach to autonomous
@@ -23,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from modules.description.robot import SONAR_MOUNTS, SonarMount, sonar_world_pose
+from modules.description.robot import ROBOT_RADIUS_MM, SONAR_MOUNTS, SonarMount, sonar_world_pose
 
 NO_CONTACT_CM = 255
 
@@ -73,9 +74,17 @@ class SeenGrid:
         self.free = np.zeros((self.size, self.size), dtype=bool)
         self.hit = np.zeros((self.size, self.size), dtype=bool)
         self.mapped = np.zeros((self.size, self.size), dtype=bool)
+        self.driven = np.zeros((self.size, self.size), dtype=bool)  # under the robot's body
         half = math.radians(self.s.cone_deg) / 2.0
         self._offsets = np.linspace(-half, half, self.s.rays) if self.s.rays > 1 else np.zeros(1)
         self._steps = np.arange(0.0, self.s.free_range_mm, self.s.cell_mm / 2.0)
+        # the floor under the robot's body: points of its disc half a cell apart
+        reach = np.linspace(
+            -ROBOT_RADIUS_MM, ROBOT_RADIUS_MM, 2 * math.ceil(ROBOT_RADIUS_MM / self.s.cell_mm * 2) + 1
+        )
+        self._footprint = np.array(
+            [(x, y) for x in reach for y in reach if math.hypot(x, y) <= ROBOT_RADIUS_MM]
+        )
 
     def _cells(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         col = np.floor((x - self.x0) / self.s.cell_mm).astype(int)
@@ -87,8 +96,12 @@ class SeenGrid:
         """One sweep: each echo's point hit, and its cone free up to it (no further than the
         first cell hit before); no echo shows nothing (a wall met too obliquely to answer looks
         the same). Echoes of the sonars in ``mapping`` (the side sonars, driving straight with
-        vector generation on) within ``map_range_mm`` mark their cells mapped."""
+        vector generation on) within ``map_range_mm`` mark their cells mapped. The cells under the
+        robot's body are *driven*: a way for :meth:`route` where no echo came near enough to
+        show it free (open floor more than 1.5 m from every wall)."""
         s = self.s
+        row, col, _ = self._cells(pose[0] + self._footprint[:, 0], pose[1] + self._footprint[:, 1])
+        self.driven[row, col] = True
         for index, cm in enumerate(distances_cm[: len(self.mounts)]):
             if cm == NO_CONTACT_CM or cm * 10.0 > s.free_range_mm:
                 continue
@@ -124,14 +137,15 @@ class SeenGrid:
         self, start: tuple[float, float], goal: tuple[float, float], clearance_mm: float
     ) -> list[tuple[float, float]] | None:
         """Waypoints (world mm; the last one the free cell nearest ``goal``) through cells seen
-        free: the cheapest path on the grid (Dijkstra), a cell costing more the nearer it lies to
+        free or driven: the cheapest path on the grid (Dijkstra), a cell costing more the nearer it lies to
         an echo within ``clearance_mm`` (up to ``narrow_cost`` times), pulled straight wherever a
         line keeps at least the clearance its stretch of path had. None: no way there is known."""
         from scipy import ndimage
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import dijkstra
 
-        cells = np.argwhere(self.free)
+        passable = self.free | self.driven
+        cells = np.argwhere(passable)
         if len(cells) == 0:
             return None
         clearance = ndimage.distance_transform_edt(~self.hit) * self.s.cell_mm
@@ -175,7 +189,7 @@ class SeenGrid:
             if kept[at] < clearance_mm:  # out of a narrow place along the path itself first
                 ahead = next((i for i in range(at + 1, len(points)) if kept[i] >= clearance_mm), ahead)
             while ahead > at + 1 and not self._clear(
-                points[at], points[ahead], clearance, min(clearance_mm, *kept[at : ahead + 1])
+                points[at], points[ahead], passable, clearance, min(clearance_mm, *kept[at : ahead + 1])
             ):
                 ahead -= 1
             waypoints.append(points[ahead])
@@ -194,13 +208,18 @@ class SeenGrid:
         return False
 
     def _clear(
-        self, a: tuple[float, float], b: tuple[float, float], clearance: np.ndarray, least_mm: float
+        self,
+        a: tuple[float, float],
+        b: tuple[float, float],
+        passable: np.ndarray,
+        clearance: np.ndarray,
+        least_mm: float,
     ) -> bool:
-        """Every cell on the line from ``a`` to ``b`` is free and ``least_mm`` from every echo."""
+        """Every cell on the line from ``a`` to ``b`` is passable and ``least_mm`` from every echo."""
         n = max(2, int(math.dist(a, b) / (self.s.cell_mm / 2.0)) + 1)
         t = np.linspace(0.0, 1.0, n)
         row, col, inside = self._cells(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t)
-        return bool(inside.all() and self.free[row, col].all() and (clearance[row, col] >= least_mm).all())
+        return bool(inside.all() and passable[row, col].all() and (clearance[row, col] >= least_mm).all())
 
     def frontiers(self) -> list[Frontier]:
         """Stretches of free cells next to unseen ones, away from hits, longest first."""

@@ -196,7 +196,8 @@ class WallSettings:
     frontier_beyond_mm: float = 1000.0  # ... driven on past it into the unseen until blocked
     route_clearance_mm: float = 250.0  # the way there keeps this far from every echo
     frontier_arrived_mm: float = 600.0  # blocked this near the place: there (follow what blocks)
-    goto_moves: int = 12  # moves on the way there at most (each aims at the next waypoint)
+    #: moves on the way there at most: this many, and 3 more for each waypoint (aim, check, drive)
+    goto_moves: int = 12
     # done: back to where the exploration began, facing as it did then
     return_home: bool = True
     home_tolerance_mm: float = 200.0
@@ -292,6 +293,7 @@ class ExploreLeftWall(Navigator):
         self.frontier_follow = False  # following a wall found beyond a frontier (not an island)
         self.goto: list[tuple[float, float]] = []  # waypoints to a place left to explore
         self.goto_moves = 0
+        self.goto_budget = 0
         self.home: tuple[float, float, float] | None = None  # the pose the exploration began at
         self.home_reached = False
         self.detours = 0
@@ -778,6 +780,7 @@ class ExploreLeftWall(Navigator):
                 if route is not None and len(self.frontier_goals) <= s.max_frontiers:
                     self.target, self.frontier_follow, self.goto = goal, True, route
                     self.lap_start, self.follow_mm, self.goto_moves = None, 0, 0
+                    self.goto_budget = s.goto_moves + 3 * len(route)
                     self.path = []
                     self.phase, self.last_follow = "goto", None
                     self.commands.append(("copro", "FLUSH", {}))
@@ -796,7 +799,7 @@ class ExploreLeftWall(Navigator):
         while self.goto and math.dist(here, self.goto[0]) <= s.waypoint_tolerance_mm:
             self.goto.pop(0)
         self.goto_moves += 1
-        if self.goto_moves > s.goto_moves:
+        if self.goto_moves > self.goto_budget:
             return self._next_island(sensors)
         x, y, heading = sensors.pose
         tx, ty = self.goto[0] if self.goto else self.target
