@@ -4,9 +4,9 @@ but never mapped: the places left to explore after the room's lap.
 A coarse grid round the start. A cell is *hit* where an echo came from, *free* where the axis of
 a beam reached past it to its echo (not past an earlier hit: an oblique wall's echo is weak, and
 the reading runs on beyond it), and *mapped* where a side sonar's echo came from while the robot
-drove straight with vector generation on, near enough for it (``map_range_mm``); *driven* under
-the robot's body wherever it was (a way, even where no echo showed the floor free). Two kinds of target
-come out of it:
+drove straight with vector generation on, near enough for it (``map_range_mm``), and *driven*
+under the robot's body wherever it was (a way, even where no echo showed the floor free). Two
+kinds of target come out of it:
 
 * a *frontier*: free cells next to cells nothing reached, away from every hit — space the robot
   could drive into and has not seen (Yamauchi 1997, "A frontier-based approach to autonomous
@@ -136,10 +136,11 @@ class SeenGrid:
     def route(
         self, start: tuple[float, float], goal: tuple[float, float], clearance_mm: float
     ) -> list[tuple[float, float]] | None:
-        """Waypoints (world mm; the last one the free cell nearest ``goal``) through cells seen
-        free or driven: the cheapest path on the grid (Dijkstra), a cell costing more the nearer it lies to
-        an echo within ``clearance_mm`` (up to ``narrow_cost`` times), pulled straight wherever a
-        line keeps at least the clearance its stretch of path had. None: no way there is known."""
+        """Waypoints (world mm; the last one the passable cell nearest ``goal``) through cells
+        seen free or driven: the cheapest path on the grid (Dijkstra), a cell costing more the
+        nearer it lies to an echo within ``clearance_mm`` (up to ``narrow_cost`` times), pulled
+        straight wherever a line keeps at least the clearance its stretch of path had. None: no
+        way there is known."""
         from scipy import ndimage
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import dijkstra
