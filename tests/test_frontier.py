@@ -9,6 +9,7 @@ import math
 from pathlib import Path
 
 from shapely.geometry import LineString, Point, Polygon
+from shapely.geometry.base import BaseGeometry
 
 from bench.closedloop import ClosedLoop
 from modules.common.frontier import FrontierSettings, SeenGrid
@@ -43,12 +44,14 @@ def test_no_echo_shows_nothing_and_no_reading_sees_through_a_wall_hit_before() -
     assert grid.free[cell_of(grid, 350.0, 0.0)]
 
 
-def spin(grid: SeenGrid, x: float, y: float, room: Polygon, mapping: bool = False) -> None:
-    """Turn on the spot at (x, y) in 5° steps, the one sonar reading the room's walls."""
+def spin(grid: SeenGrid, x: float, y: float, walls: BaseGeometry, mapping: bool = False) -> None:
+    """Turn on the spot at (x, y) in 5° steps, the one sonar reading ``walls`` (a room's outline
+    for a polygon, else the lines themselves)."""
+    lines = walls.exterior if isinstance(walls, Polygon) else walls
     for degrees in range(0, 360, 5):
         theta = math.radians(degrees)
         ray = LineString([(x, y), (x + 5000 * math.cos(theta), y + 5000 * math.sin(theta))])
-        echo = Point(x, y).distance(ray.intersection(room.exterior))
+        echo = Point(x, y).distance(ray.intersection(lines))
         cm = round(echo / 10.0) if echo <= 1500 else NO_ECHO
         grid.add((x, y, theta), [cm], (0,) if mapping else ())
 
@@ -87,11 +90,7 @@ def test_the_way_round_a_partition_goes_through_its_gap_on_free_cells() -> None:
     grid = SeenGrid((0.0, 0.0), FrontierSettings(rays=1), mounts=AHEAD)
     walls = room.exterior.union(partition_low)
     for x, y in [(-1000, 0), (-1000, 500), (-500, 1000), (300, 1000), (1000, 0), (1000, 500)]:
-        for degrees in range(0, 360, 5):
-            theta = math.radians(degrees)
-            ray = LineString([(x, y), (x + 5000 * math.cos(theta), y + 5000 * math.sin(theta))])
-            echo = Point(x, y).distance(ray.intersection(walls))
-            grid.add((x, y, theta), [round(echo / 10.0) if echo <= 1500 else NO_ECHO])
+        spin(grid, x, y, walls)
     route = grid.route((-1000.0, 0.0), (1000.0, 0.0), clearance_mm=250.0)
     assert route is not None
     legs = list(zip([(-1000.0, 0.0), *route[:-1]], route, strict=True))
@@ -160,11 +159,7 @@ def test_the_way_home_goes_round_a_wall_the_lap_left_inside_it_by_space_seen_fre
     grid = SeenGrid(home, FrontierSettings(rays=1), mounts=AHEAD)
     walls = room.exterior.union(partition)
     for x, y in trail[::10]:
-        for degrees in range(0, 360, 5):
-            theta = math.radians(degrees)
-            ray = LineString([(x, y), (x + 5000 * math.cos(theta), y + 5000 * math.sin(theta))])
-            echo = Point(x, y).distance(ray.intersection(walls))
-            grid.add((x, y, theta), [round(echo / 10.0) if echo <= 1500 else NO_ECHO])
+        spin(grid, x, y, walls)
 
     nav = ExploreLeftWall(default_layout())
     nav.home, nav.trail, nav.outer_path, nav.seen = (*home, 0.0), trail, lap, grid

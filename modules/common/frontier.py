@@ -201,9 +201,7 @@ class SeenGrid:
         """A leg of the path through ``points`` passes a cell an echo came from (sampled every
         tenth of a cell: a line between two diagonal hit cells of a thin wall clips one)."""
         for a, b in itertools.pairwise(points):
-            n = max(2, int(math.dist(a, b) / (self.s.cell_mm / 10.0)) + 1)
-            t = np.linspace(0.0, 1.0, n)
-            row, col, _ = self._cells(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t)
+            row, col, _ = self._line(a, b, self.s.cell_mm / 10.0)
             if self.hit[row, col].any():
                 return True
         return False
@@ -217,10 +215,15 @@ class SeenGrid:
         least_mm: float,
     ) -> bool:
         """Every cell on the line from ``a`` to ``b`` is passable and ``least_mm`` from every echo."""
-        n = max(2, int(math.dist(a, b) / (self.s.cell_mm / 2.0)) + 1)
-        t = np.linspace(0.0, 1.0, n)
-        row, col, inside = self._cells(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t)
+        row, col, inside = self._line(a, b, self.s.cell_mm / 2.0)
         return bool(inside.all() and passable[row, col].all() and (clearance[row, col] >= least_mm).all())
+
+    def _line(
+        self, a: tuple[float, float], b: tuple[float, float], step_mm: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The cells of points every ``step_mm`` from ``a`` to ``b`` (as :meth:`_cells`)."""
+        t = np.linspace(0.0, 1.0, max(2, int(math.dist(a, b) / step_mm) + 1))
+        return self._cells(a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t)
 
     def frontiers(self) -> list[Frontier]:
         """Stretches of free cells next to unseen ones, away from hits, longest first."""

@@ -292,8 +292,7 @@ class ExploreLeftWall(Navigator):
         self.frontier_goals: list[tuple[float, float]] = []
         self.frontier_follow = False  # following a wall found beyond a frontier (not an island)
         self.goto: list[tuple[float, float]] = []  # waypoints to a place left to explore
-        self.goto_moves = 0
-        self.goto_budget = 0
+        self.goto_moves_left = 0  # on the way there, before the place is given up
         self.home: tuple[float, float, float] | None = None  # the pose the exploration began at
         self.home_reached = False
         self.detours = 0
@@ -779,8 +778,8 @@ class ExploreLeftWall(Navigator):
                 route = self.seen.route(here, goal, s.route_clearance_mm)
                 if route is not None and len(self.frontier_goals) <= s.max_frontiers:
                     self.target, self.frontier_follow, self.goto = goal, True, route
-                    self.lap_start, self.follow_mm, self.goto_moves = None, 0, 0
-                    self.goto_budget = s.goto_moves + 3 * len(route)
+                    self.lap_start, self.follow_mm = None, 0
+                    self.goto_moves_left = s.goto_moves + 3 * len(route)
                     self.path = []
                     self.phase, self.last_follow = "goto", None
                     self.commands.append(("copro", "FLUSH", {}))
@@ -798,8 +797,8 @@ class ExploreLeftWall(Navigator):
         here = sensors.pose[:2]
         while self.goto and math.dist(here, self.goto[0]) <= s.waypoint_tolerance_mm:
             self.goto.pop(0)
-        self.goto_moves += 1
-        if self.goto_moves > self.goto_budget:
+        self.goto_moves_left -= 1
+        if self.goto_moves_left < 0:
             return self._next_island(sensors)
         x, y, heading = sensors.pose
         tx, ty = self.goto[0] if self.goto else self.target
