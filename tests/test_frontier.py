@@ -13,6 +13,7 @@ from shapely.geometry.base import BaseGeometry
 
 from bench.closedloop import ClosedLoop
 from modules.common.frontier import FrontierSettings, SeenGrid
+from modules.common.navigator import WallSettings
 from modules.description.generate import generate_room, room_yaml
 from modules.description.robot import SonarMount
 
@@ -189,3 +190,51 @@ def test_open_floor_the_robot_drove_over_is_a_way_though_no_echo_showed_it_free(
     route = grid.route((6000.0, 0.0), (0.0, 0.0), clearance_mm=250.0)
     assert route is not None and math.dist(route[-1], (0.0, 0.0)) <= 150
     assert all(abs(y) < 1000 for _, y in route)
+
+
+def test_a_long_way_to_a_place_left_gets_three_moves_per_waypoint() -> None:
+    from modules.common.navigator import ExploreLeftWall
+    from modules.common.pilot import FORWARD, REASON, STOPPED, Move, Outcome, Sensors
+    from modules.common.vectorgen import default_layout
+
+    # a snake of floor the robot drove, between four partitions it mapped; at its far end a
+    # wall seen but not mapped. The way there has many waypoints: more than a fixed 12 moves
+    grid = SeenGrid((0.0, 0.0), mounts=AHEAD)
+    corners = [(0, 0), (3000, 0), (3000, 1000), (0, 1000), (0, 2000), (3000, 2000)]
+    corners += [(3000, 3000), (0, 3000), (0, 4000), (3000, 4000)]
+    for (ax, ay), (bx, by) in itertools.pairwise(corners):
+        for i in range(0, int(math.dist((ax, ay), (bx, by))) + 1, 40):
+            t = i / math.dist((ax, ay), (bx, by))
+            grid.add((ax + (bx - ax) * t, ay + (by - ay) * t, 0.0), [NO_ECHO])
+
+    def wall(a: tuple[float, float], b: tuple[float, float], mapped: bool) -> None:
+        for i in range(101):
+            cell = cell_of(grid, a[0] + (b[0] - a[0]) * i / 100, a[1] + (b[1] - a[1]) * i / 100)
+            grid.hit[cell] = True
+            grid.mapped[cell] |= mapped
+
+    for y, (x1, x2) in zip((500, 1500, 2500, 3500), itertools.cycle([(-500, 2500), (500, 3500)])):
+        wall((x1, y), (x2, y), mapped=True)
+    wall((3600, 3700), (3600, 4300), mapped=False)
+
+    nav = ExploreLeftWall(default_layout())
+    nav.seen, nav.trail = grid, [(0.0, 0.0)]
+    sensors = Sensors(distances=[255] * 8)
+    sensors.pose = (0.0, 0.0, 0.0)
+    assert nav._next_frontier(sensors) and nav.phase == "goto"
+    way = list(nav.goto)
+    assert 3 * len(way) > WallSettings().goto_moves, way  # what a fixed budget cut short
+    assert nav.target is not None
+    ends = [*way, nav.target]
+    drive = Move(FORWARD, 500, 100, label="goto")
+    at = (0.0, 0.0)
+    for n, point in enumerate(way):
+        for _ in range(2):  # an aim and its check, still short of the waypoint
+            sensors.pose = (*at, math.atan2(point[1] - at[1], point[0] - at[0]))
+            assert nav.plan(Outcome(REASON["DONE"], drive, driven_mm=0), sensors, STOPPED)
+            assert nav.phase == "goto", (n, len(way))
+        at, after = point, ends[n + 1]
+        sensors.pose = (*at, math.atan2(after[1] - at[1], after[0] - at[0]))
+        moves = nav.plan(Outcome(REASON["DONE"], drive, driven_mm=500), sensors, STOPPED)
+        assert moves, (n, len(way))
+    assert nav.phase == "approach"  # past the last waypoint: on to the place itself
