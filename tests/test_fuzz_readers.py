@@ -125,6 +125,7 @@ def test_random_bytes_are_a_clean_error(name, data, tmp_path_factory):
 @pytest.mark.parametrize("name", [n for n in READERS if n != "log"])
 @FUZZ
 @given(tree=TREES)
+@example(tree={"anomalies": True})  # a world's anomalies once iterated as given: TypeError
 def test_extreme_but_valid_yaml_is_a_clean_error(name, tree, tmp_path_factory):
     reader, suffix = READERS[name]
     path = tmp_path_factory.mktemp("fuzz") / f"input{suffix}"

@@ -291,7 +291,10 @@ def parse_world_yaml(text: str, source: str, default_name: str = "world", base: 
         )
 
     anomalies = []
-    for index, item in enumerate(doc.get("anomalies", []) or [], start=1):
+    raw_anomalies = doc.get("anomalies", []) or []
+    if not isinstance(raw_anomalies, list):
+        raise r.fail(top, "anomalies must be a list")
+    for index, item in enumerate(raw_anomalies, start=1):
         line = getattr(item, "line", top)
         m = r.mapping(item, line, f"anomaly {index}", {"x", "y", "radius", "field_ut"})
         missing = {"x", "y", "radius", "field_ut"} - set(m)
