@@ -201,6 +201,19 @@ def test_hang_is_skipped_and_the_node_rejoins_after_resume(ring):
     ring.one_token_through(IDS, timeout=20)
 
 
+def test_a_resume_right_after_its_hang_leaves_the_node_running(ring):
+    from tokenring.faults import AFTER_REPLY_S, FaultClient
+
+    # the hard hang stops the node AFTER_REPLY_S after it answered; a resume sent sooner (chaos
+    # injects faults back to back after a slow one) must not leave that stop to come after it
+    client = FaultClient(ring.session, ring.name, timeout=10.0)
+    client.inject(40, {"kind": "hang"})
+    client.inject(40, {"kind": "resume"})
+    time.sleep(4 * AFTER_REPLY_S)  # past the moment the stop would have come (no event to wait on)
+    assert client.inject(40, {"kind": "list"})["faults"] == {}  # a stopped node answers nothing
+    ring.one_token_through(IDS, timeout=20)
+
+
 def test_soft_hang_and_resume(ring):
     ring.fault("lcd", "hang", "--soft")
     ring.one_token_through([i for i in IDS if i != 70])

@@ -146,6 +146,7 @@ class FaultInjector:
         self._thawed = threading.Event()
         self._thawed.set()
         self._lock = threading.Lock()
+        self._pending_stop: threading.Timer | None = None  # a hard hang's SIGSTOP, not sent yet
         self.counts = {"dropped": 0, "corrupted": 0, "duplicated": 0, "lost": 0, "blocked": 0, "delayed": 0}
         self.changed_at = float("-inf")  # time.monotonic() of the last change of the faults
         #: called with the listing after every change (the node process tells the ring, whose
@@ -170,6 +171,7 @@ class FaultInjector:
                     self.os.paused = True
                 else:
                     later = threading.Timer(AFTER_REPLY_S, os.kill, args=(os.getpid(), signal.SIGSTOP))
+                    self._pending_stop = later
                 self.active["hang"] = {"since": time.time(), **spec}
             elif kind == "resume":
                 self._resume()
@@ -205,6 +207,11 @@ class FaultInjector:
                 log.exception("telling the ring of a fault failed")
 
     def _resume(self) -> None:
+        # a resume within AFTER_REPLY_S of its hang: the SIGSTOP would come after the SIGCONT
+        # and stop the node for good (chaos: hang and resume 18 ms apart, node 70 never answered)
+        if self._pending_stop is not None:
+            self._pending_stop.cancel()
+            self._pending_stop = None
         self.active.pop("hang", None)
         self.os.paused = False
         self._thawed.set()
@@ -329,14 +336,16 @@ class FaultClient:
         """End a hang: SIGCONT through the launcher (a stopped node answers nothing), then clear."""
         from tokenring.cliutil import query
 
-        launcher = query(
-            self.session,
-            keys.control(self.ring, "launcher", "signal"),
-            {"id": node_id, "signal": "CONT"},
-            self.timeout,
-        )
         deadline = time.monotonic() + self.timeout + 2.0
         while time.monotonic() < deadline:
+            # SIGCONT every time round: a hang asked for just before stops its node only after
+            # answering (AFTER_REPLY_S), so one SIGCONT can come before the stop it should end
+            launcher = query(
+                self.session,
+                keys.control(self.ring, "launcher", "signal"),
+                {"id": node_id, "signal": "CONT"},
+                self.timeout,
+            )
             answer = query(
                 self.session, keys.control(self.ring, node_id, "fault"), {"kind": "resume"}, timeout=1.0
             )
