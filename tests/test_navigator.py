@@ -25,6 +25,7 @@ from modules.common.vectorgen import default_layout
 
 LAYOUT = default_layout()
 FAR = 255
+NO_GAUGE = WallSettings(gauge_mm=0)  # no gauging of the floor at the first wall (tested on its own)
 
 
 class Bench:
@@ -244,7 +245,7 @@ def test_explore1_follows_the_seed_pseudo_code():
 def test_explore2_follows_the_left_wall_and_turns_at_corners():
     from modules.common.pilot import Outcome
 
-    nav = ExploreLeftWall(LAYOUT)
+    nav = ExploreLeftWall(LAYOUT, NO_GAUGE)
     s = sensors_with(left_front=30, left_rear=30)
     find = nav.plan(None, sensors_with(), STOPPED)  # nothing near: drive until a wall is ahead
     assert [m.label for m in find] == ["find"]
@@ -280,6 +281,52 @@ def test_explore2_follows_the_left_wall_and_turns_at_corners():
     assert esc[0].direction == REVERSE and nav.state == NAV["BACK_OFF"]
 
 
+def test_explore2_gauges_the_floor_once_square_on_to_the_first_wall_before_its_lap():
+    nav = ExploreLeftWall(LAYOUT, WallSettings(gauge_mm=700))
+    s = sensors_with(left_front=30, left_rear=30)
+    find = nav.plan(None, sensors_with(), STOPPED)
+    inner = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
+    assert inner[0].direction == TURN_RIGHT and inner[0].amount == 90
+    # the wall put parallel on the left: turn back to face it, square on
+    face = settle(nav, Outcome(REASON["DONE"], inner[0]), s)
+    assert [(m.label, m.direction, m.amount) for m in face] == [("gauge", TURN_LEFT, 90)]
+    assert nav.lap_start is None  # the lap begins after the gauging, where following does
+    gauge = settle(nav, Outcome(REASON["DONE"], face[0]), sensors_with(front=20))
+    assert [(m.label, m.direction, m.amount) for m in gauge] == [
+        ("gauge back", REVERSE, 700),
+        ("gauge ahead", FORWARD, 700),
+    ]
+    assert [a.kind for a in gauge[0].abort] == ["rear_within"]  # backing into something: stop
+    assert "ahead_within" in [a.kind for a in gauge[1].abort]  # and up to the wall, not into it
+    # up to the wall again: the wall back on the left, and the lap begins
+    back = nav.plan(
+        Outcome(REASON["CLOSE"], gauge[1], trigger="ahead_within"), sensors_with(front=20), STOPPED
+    )
+    assert back[0].direction == TURN_RIGHT and back[0].amount == 90
+    seg = settle(nav, Outcome(REASON["DONE"], back[0]), s)
+    assert [m.label for m in seg] == ["follow"] and nav.lap_start is not None
+    # the next wall ahead is an inner corner like any other: no second gauging
+    inner = nav.plan(Outcome(REASON["CLOSE"], seg[0], trigger="ahead_within"), s, STOPPED)
+    assert settle(nav, Outcome(REASON["DONE"], inner[0]), s)[-1].label == "follow"
+
+
+def test_explore2_gauging_stopped_by_something_behind_drives_up_to_the_wall_from_there():
+    nav = ExploreLeftWall(LAYOUT, WallSettings(gauge_mm=700))
+    s = sensors_with(left_front=30, left_rear=30)
+    find = nav.plan(None, sensors_with(), STOPPED)
+    inner = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
+    face = settle(nav, Outcome(REASON["DONE"], inner[0]), s)
+    gauge = settle(nav, Outcome(REASON["DONE"], face[0]), sensors_with(front=20))
+    stopped = Outcome(REASON["CLOSE"], gauge[0], driven_mm=300, trigger="rear_within")
+    ahead = nav.plan(stopped, sensors_with(front=50), STOPPED)
+    assert [(m.label, m.direction, m.amount) for m in ahead] == [("gauge ahead", FORWARD, 700)]
+    # an ALERT on the way up ends the gauging: the escape, then on with the lap
+    escape = nav.plan(Outcome(REASON["ALERT"], ahead[0]), s, REVERSE)
+    assert escape[0].direction == REVERSE
+    turn = nav.plan(Outcome(REASON["DONE"], escape[-1]), s, STOPPED)
+    assert turn[0].direction == TURN_RIGHT and turn[0].amount == 90
+
+
 def settle(nav: ExploreLeftWall, last, s: Sensors, sweeps: int = 30) -> list[Move] | None:
     """Plan at rest, one sonar sweep (120 ms) per call, until the navigator stops waiting."""
     for _ in range(sweeps):
@@ -307,7 +354,7 @@ def test_explore2_first_faces_the_nearest_echo_around_then_drives_to_it():
 def test_explore2_leaves_an_island_it_went_round_and_finds_the_room_wall():
     from modules.common.pilot import Outcome
 
-    nav = ExploreLeftWall(LAYOUT)
+    nav = ExploreLeftWall(LAYOUT, NO_GAUGE)
     nav.phase = "follow"
     s = sensors_with(left_front=30, left_rear=30)
     seg = nav.plan(None, s, STOPPED)
@@ -336,7 +383,7 @@ def test_wall_angle_from_the_left_pair_inside_and_beyond_the_beam():
 
 
 def test_explore2_turns_a_wall_left_askew_by_a_turn_parallel_with_the_left_pair():
-    nav = ExploreLeftWall(LAYOUT)
+    nav = ExploreLeftWall(LAYOUT, NO_GAUGE)
     s = sensors_with(front=20)
     find = nav.plan(None, s, STOPPED)
     turn = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
@@ -351,7 +398,7 @@ def test_explore2_turns_a_wall_left_askew_by_a_turn_parallel_with_the_left_pair(
 
 def test_explore2_looks_for_the_wall_when_the_turn_left_it_out_of_view():
     for ahead, direction in ((30, TURN_RIGHT), (FAR, TURN_LEFT)):
-        nav = ExploreLeftWall(LAYOUT)
+        nav = ExploreLeftWall(LAYOUT, NO_GAUGE)
         s = sensors_with(front=20)
         find = nav.plan(None, s, STOPPED)
         turn = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
@@ -390,7 +437,7 @@ def _with(index: int, cm: int) -> list[int]:
 def test_explore2_ends_after_one_lap():
     from modules.common.pilot import Outcome
 
-    nav = ExploreLeftWall(LAYOUT)
+    nav = ExploreLeftWall(LAYOUT, NO_GAUGE)
     nav.phase = "follow"
     s = sensors_with(left_front=30, left_rear=30)
     seg = nav.plan(None, s, STOPPED)
@@ -456,7 +503,7 @@ def test_a_move_is_not_finished_before_the_motor_was_seen_running_it():
 def test_explore2_corrects_a_turn_the_floor_let_slip_by_the_compass():
     from modules.common.pilot import Outcome
 
-    nav = ExploreLeftWall(LAYOUT)
+    nav = ExploreLeftWall(LAYOUT, NO_GAUGE)
     s = sensors_with(left_front=30, left_rear=30)
     s.heading_cdeg = 9000  # east, navigation convention
     find = nav.plan(None, sensors_with(), STOPPED)
@@ -521,7 +568,7 @@ def test_explore2_goes_round_a_free_standing_obstacle_seen_on_the_right_after_th
 
     # islands only: no way home, and no places left to explore (the made-up echoes here leave
     # most of the room unseen; tests/test_frontier.py has those)
-    nav = ExploreLeftWall(LAYOUT, WallSettings(return_home=False, max_frontiers=0))
+    nav = ExploreLeftWall(LAYOUT, WallSettings(gauge_mm=0, return_home=False, max_frontiers=0))
     nav.phase = "follow"
     s = sensors_with(left_front=30, left_rear=30)
     # on the first leg (west along y = 400) a pillar 80 cm to the right for x 1800..2200
@@ -560,7 +607,7 @@ def test_explore2_goes_round_a_free_standing_obstacle_seen_on_the_right_after_th
 def test_explore2_ends_at_the_lap_when_nothing_stood_inside_it():
     from modules.common.pilot import Outcome
 
-    nav = ExploreLeftWall(LAYOUT, WallSettings(max_frontiers=0))  # the lap, the interior, home
+    nav = ExploreLeftWall(LAYOUT, WallSettings(gauge_mm=0, max_frontiers=0))  # the lap, the interior, home
     nav.phase = "follow"
     s = sensors_with(left_front=30, left_rear=30)
     # one stray echo on the right is no island ...
@@ -607,7 +654,7 @@ def test_explore2_does_not_visit_an_island_again_whose_echoes_lie_just_outside_i
 
     # islands only: no way home, and no places left to explore (the made-up echoes here leave
     # most of the room unseen; tests/test_frontier.py has those)
-    nav = ExploreLeftWall(LAYOUT, WallSettings(return_home=False, max_frontiers=0))
+    nav = ExploreLeftWall(LAYOUT, WallSettings(gauge_mm=0, return_home=False, max_frontiers=0))
     nav.phase = "follow"
     s = sensors_with(left_front=30, left_rear=30)
     aim = _room_lap(nav, s, lambda x, y: 80 if 1600 <= x <= 2400 else FAR)
