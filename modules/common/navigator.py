@@ -11,7 +11,8 @@ the next state — the seed's cooperative navigator/pilot alternation.
   left (labyrinth rule) with straight segments and turns on the spot. Ours: after every segment
   the course is corrected from the slope of the left sonar's readings over the distance driven
   (the angle to the wall) and the distance error; inner corners (the front blocked) turn right,
-  outer corners (the wall lost) drive past, turn left and pick the wall up again; one lap
+  outer corners (the wall lost) drive past, turn left and pick the wall up again; at the first
+  wall the floor's step is gauged (face it, back off, drive up again: the filter's travel fit); one lap
   (back near the start, judged by the best pose) closes the outline. Then the islands the lap
   saw on its right are gone round, drives into the interior no path came near find the ones it
   could not see, and the robot drives back to its start pose (``completeness()`` says how it went).
