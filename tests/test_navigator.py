@@ -327,6 +327,37 @@ def test_explore2_gauging_stopped_by_something_behind_drives_up_to_the_wall_from
     assert turn[0].direction == TURN_RIGHT and turn[0].amount == 90
 
 
+def test_explore2_backs_off_a_collision_away_from_what_the_move_ran_into():
+    nav = ExploreLeftWall(LAYOUT, NO_GAUGE)
+    nav.phase = "follow"
+    s = sensors_with(left_front=30, left_rear=30)
+    seg = nav.plan(None, s, STOPPED)
+    ahead = nav.plan(Outcome(REASON["COLLISION"], seg[0], driven_mm=200, trigger="motor"), s, STOPPED)
+    assert (ahead[0].label, ahead[0].direction) == ("back off", REVERSE)
+    # a reverse move that hit something the rear sonar missed: backing off again would hit it
+    # again (a generated room looped so for 1800 s, 1873 collisions); forwards instead
+    escape = Move(REVERSE, 60, label="escape back")
+    behind = nav.plan(Outcome(REASON["COLLISION"], escape, driven_mm=30, trigger="motor"), s, STOPPED)
+    assert (behind[0].label, behind[0].direction) == ("back off", FORWARD)
+    assert behind[1].label == "away"
+
+
+def test_explore2_gauging_that_backs_into_something_unseen_drives_up_to_the_wall_from_there():
+    nav = ExploreLeftWall(LAYOUT, WallSettings(gauge_mm=700))
+    s = sensors_with(left_front=30, left_rear=30)
+    find = nav.plan(None, sensors_with(), STOPPED)
+    inner = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
+    face = settle(nav, Outcome(REASON["DONE"], inner[0]), s)
+    gauge = settle(nav, Outcome(REASON["DONE"], face[0]), sensors_with(front=20))
+    hit = Outcome(REASON["COLLISION"], gauge[0], driven_mm=250, trigger="motor")
+    ahead = nav.plan(hit, sensors_with(front=45), STOPPED)
+    assert [(m.label, m.direction) for m in ahead] == [("gauge ahead", FORWARD)]
+    turn = nav.plan(
+        Outcome(REASON["CLOSE"], ahead[0], trigger="ahead_within"), sensors_with(front=20), STOPPED
+    )
+    assert turn[0].direction == TURN_RIGHT and turn[0].amount == 90
+
+
 def settle(nav: ExploreLeftWall, last, s: Sensors, sweeps: int = 30) -> list[Move] | None:
     """Plan at rest, one sonar sweep (120 ms) per call, until the navigator stops waiting."""
     for _ in range(sweeps):

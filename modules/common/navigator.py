@@ -497,10 +497,15 @@ class ExploreLeftWall(Navigator):
             self.alerts = 0
         if last is not None and last.reason in (REASON["STALL"], REASON["COLLISION"]):
             self.state = NAV["BACK_OFF"]
+            if self.phase == "gauge":  # backed into something unseen: up to the wall from here
+                self.gauge_begun = True
+                return [self._forward(s.gauge_mm, "gauge ahead")]
             if self.phase not in ("home", "home_turn"):  # on the way home: aim again after it
                 self.phase = "follow"
             self.last_follow = None
-            return [Move(REVERSE, 80, s.speed_pct, label="back off"), *self._turn(-30, "away", sensors)]
+            # away from what the move ran into: backwards after a forward move, else forwards
+            away = FORWARD if last.move is not None and last.move.direction == REVERSE else REVERSE
+            return [Move(away, 80, s.speed_pct, label="back off"), *self._turn(-30, "away", sensors)]
         if self.check is not None:
             judged = self._judge(last, sensors)
             if judged is not None:
