@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from modules.common.navigator import NAV, Calibrate, ExploreAvoid, ExploreLeftWall, WallSettings
 from modules.common.pilot import (
     FORWARD,
@@ -310,17 +312,27 @@ def test_explore2_gauges_the_floor_once_square_on_to_the_first_wall_before_its_l
     assert settle(nav, Outcome(REASON["DONE"], inner[0]), s)[-1].label == "follow"
 
 
-def test_explore2_gauging_stopped_by_something_behind_drives_up_to_the_wall_from_there():
-    nav = ExploreLeftWall(LAYOUT, WallSettings(gauge_mm=700))
+def at_the_gauge(gauge_mm: int = 700) -> tuple[ExploreLeftWall, list[Move]]:
+    """A navigator at its first wall, the wall put on the left: (navigator, the gauge's two moves)."""
+    nav = ExploreLeftWall(LAYOUT, WallSettings(gauge_mm=gauge_mm))
     s = sensors_with(left_front=30, left_rear=30)
     find = nav.plan(None, sensors_with(), STOPPED)
     inner = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
     face = settle(nav, Outcome(REASON["DONE"], inner[0]), s)
-    gauge = settle(nav, Outcome(REASON["DONE"], face[0]), sensors_with(front=20))
-    stopped = Outcome(REASON["CLOSE"], gauge[0], driven_mm=300, trigger="rear_within")
+    return nav, settle(nav, Outcome(REASON["DONE"], face[0]), sensors_with(front=20))
+
+
+@pytest.mark.parametrize(
+    ("reason", "trigger"),
+    [("CLOSE", "rear_within"), ("COLLISION", "motor")],  # seen behind, or run into unseen
+)
+def test_explore2_gauging_stopped_behind_drives_up_to_the_wall_from_there(reason: str, trigger: str):
+    nav, gauge = at_the_gauge()
+    stopped = Outcome(REASON[reason], gauge[0], driven_mm=300, trigger=trigger)
     ahead = nav.plan(stopped, sensors_with(front=50), STOPPED)
     assert [(m.label, m.direction, m.amount) for m in ahead] == [("gauge ahead", FORWARD, 700)]
     # an ALERT on the way up ends the gauging: the escape, then on with the lap
+    s = sensors_with(left_front=30, left_rear=30)
     escape = nav.plan(Outcome(REASON["ALERT"], ahead[0]), s, REVERSE)
     assert escape[0].direction == REVERSE
     turn = nav.plan(Outcome(REASON["DONE"], escape[-1]), s, STOPPED)
@@ -340,22 +352,6 @@ def test_explore2_backs_off_a_collision_away_from_what_the_move_ran_into():
     behind = nav.plan(Outcome(REASON["COLLISION"], escape, driven_mm=30, trigger="motor"), s, STOPPED)
     assert (behind[0].label, behind[0].direction) == ("back off", FORWARD)
     assert behind[1].label == "away"
-
-
-def test_explore2_gauging_that_backs_into_something_unseen_drives_up_to_the_wall_from_there():
-    nav = ExploreLeftWall(LAYOUT, WallSettings(gauge_mm=700))
-    s = sensors_with(left_front=30, left_rear=30)
-    find = nav.plan(None, sensors_with(), STOPPED)
-    inner = nav.plan(Outcome(REASON["CLOSE"], find[0], trigger="ahead_within"), s, STOPPED)
-    face = settle(nav, Outcome(REASON["DONE"], inner[0]), s)
-    gauge = settle(nav, Outcome(REASON["DONE"], face[0]), sensors_with(front=20))
-    hit = Outcome(REASON["COLLISION"], gauge[0], driven_mm=250, trigger="motor")
-    ahead = nav.plan(hit, sensors_with(front=45), STOPPED)
-    assert [(m.label, m.direction) for m in ahead] == [("gauge ahead", FORWARD)]
-    turn = nav.plan(
-        Outcome(REASON["CLOSE"], ahead[0], trigger="ahead_within"), sensors_with(front=20), STOPPED
-    )
-    assert turn[0].direction == TURN_RIGHT and turn[0].amount == 90
 
 
 def settle(nav: ExploreLeftWall, last, s: Sensors, sweeps: int = 30) -> list[Move] | None:
