@@ -306,8 +306,8 @@ class ExploreLeftWall(Navigator):
         self.route: list[tuple[float, float]] | None = None  # waypoints home, the start last
         self.done_note = ""
         self.alerts = 0  # ALERTs in a row, escapes between them not counting
-        self.gauged = False  # the floor's step gauged at the first wall (or no need)
-        self.gauge_begun = False
+        self.gauged = False  # the first wall reached: the floor gauged there (or, out of view, never)
+        self.gauge_begun = False  # the gauge's moves sent: anything after them goes on with the lap
 
     # -- the moves ----------------------------------------------------------------------------
     def _front_stop(self) -> tuple[Abort, ...]:
