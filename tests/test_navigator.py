@@ -339,6 +339,16 @@ def test_explore2_gauging_stopped_behind_drives_up_to_the_wall_from_there(reason
     assert turn[0].direction == TURN_RIGHT and turn[0].amount == 90
 
 
+def test_explore2_gauging_that_runs_into_something_ahead_backs_off_and_goes_on_with_the_lap():
+    nav, gauge = at_the_gauge()
+    s = sensors_with(left_front=30, left_rear=30)
+    hit = Outcome(REASON["COLLISION"], gauge[1], driven_mm=400, trigger="motor")
+    off = nav.plan(hit, s, STOPPED)
+    # not another drive ahead into what it hit: back off from it, as any collision
+    assert [(m.label, m.direction) for m in off[:1]] == [("back off", REVERSE)]
+    assert nav.phase == "follow"
+
+
 def test_explore2_backs_off_a_collision_away_from_what_the_move_ran_into():
     nav = ExploreLeftWall(LAYOUT, NO_GAUGE)
     nav.phase = "follow"

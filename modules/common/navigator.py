@@ -495,11 +495,13 @@ class ExploreLeftWall(Navigator):
             return escape
         if last is not None and not label.startswith("escape"):
             self.alerts = 0
-        if last is not None and last.reason in (REASON["STALL"], REASON["COLLISION"]):
+        # (the gauge's back-off, however it ended, goes up to its wall: phase "gauge" below)
+        if (
+            last is not None
+            and last.reason in (REASON["STALL"], REASON["COLLISION"])
+            and label != "gauge back"
+        ):
             self.state = NAV["BACK_OFF"]
-            if self.phase == "gauge":  # backed into something unseen: up to the wall from here
-                self.gauge_begun = True
-                return [self._forward(s.gauge_mm, "gauge ahead")]
             if self.phase not in ("home", "home_turn"):  # on the way home: aim again after it
                 self.phase = "follow"
             self.last_follow = None
@@ -619,7 +621,7 @@ class ExploreLeftWall(Navigator):
             return [self._reacquire()]
 
         if self.phase == "gauge":  # facing the first wall: back off and drive up to it again
-            if label == "gauge back":  # stopped by something behind: up to the wall from there
+            if label == "gauge back":  # stopped by something behind, seen or run into: up to the wall
                 return [self._forward(s.gauge_mm, "gauge ahead")]
             if label == "gauge ahead" or self.gauge_begun:  # (or interrupted): on with the lap
                 self.phase = "follow"
