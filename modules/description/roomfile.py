@@ -238,6 +238,17 @@ class _Reader:
         return value  # type: ignore[return-value]
 
 
+def _top_list(r: _Reader, doc: Any, key: str, empty_ok: bool = False) -> list[Any]:
+    """The world file's list under ``key`` ([] if absent; with ``empty_ok`` also if left empty):
+    anything else is one clear line naming the key, not a traceback from iterating it."""
+    raw = doc.get(key, [])
+    if empty_ok and not raw:
+        return []
+    if not isinstance(raw, list):
+        raise r.fail(doc.line, f"{key} must be a list")
+    return raw
+
+
 def parse_world_yaml(text: str, source: str, default_name: str = "world", base: Path | None = None) -> World:
     """Parse our YAML world format (see the module docstring)."""
     doc = _compose(text, source)
@@ -252,9 +263,7 @@ def parse_world_yaml(text: str, source: str, default_name: str = "world", base: 
     top = doc.line
 
     walls: list[Wall] = []
-    raw_walls = doc.get("walls", [])
-    if not isinstance(raw_walls, list):
-        raise r.fail(top, "walls must be a list")
+    raw_walls = _top_list(r, doc, "walls")
     for index, item in enumerate(raw_walls, start=1):
         walls.extend(_parse_wall_item(r, item, index, getattr(item, "line", raw_walls.line)))
     if "wall_file" in doc:
@@ -269,9 +278,7 @@ def parse_world_yaml(text: str, source: str, default_name: str = "world", base: 
         walls.extend(parse_wall_file(read_text(wall_path, "wall file", unreadable), str(wall_path)))
 
     circles = []
-    raw_circles = doc.get("circles", [])
-    if not isinstance(raw_circles, list):
-        raise r.fail(top, "circles must be a list")
+    raw_circles = _top_list(r, doc, "circles")
     for index, item in enumerate(raw_circles, start=1):
         line = getattr(item, "line", raw_circles.line)
         if isinstance(item, list) and len(item) == 3:
@@ -291,9 +298,7 @@ def parse_world_yaml(text: str, source: str, default_name: str = "world", base: 
         )
 
     anomalies = []
-    raw_anomalies = doc.get("anomalies", []) or []
-    if not isinstance(raw_anomalies, list):
-        raise r.fail(top, "anomalies must be a list")
+    raw_anomalies = _top_list(r, doc, "anomalies", empty_ok=True)
     for index, item in enumerate(raw_anomalies, start=1):
         line = getattr(item, "line", top)
         m = r.mapping(item, line, f"anomaly {index}", {"x", "y", "radius", "field_ut"})
