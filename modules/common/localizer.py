@@ -75,7 +75,10 @@ from modules.common.walls import (
     SonarMount,
     TravelGauge,
     WallDetector,
+    beam_echoes,
+    circle_in_beam,
     from_frame,
+    load_known_circles,
     load_known_walls,
     wall_position,
     wrap,
@@ -278,6 +281,12 @@ class LocalizationCore:
             )
         else:
             self.known_walls = list(known_walls or [])
+        #: round obstacles of the wall file's room: a beam meets them before the wall behind
+        self.known_circles = (
+            load_known_circles(config["walls"]["file"])
+            if walls_mode == "darmstadt" and known_walls is None
+            else []
+        )
         self.ekf_params = ekf_params(config)
         self.ekf: PoseEKF | None = None
         self.dead_reckoning: tuple[float, float, float] | None = None
@@ -293,6 +302,13 @@ class LocalizationCore:
         self.walls_repeated = 0  # fits of a wall from where it was last corrected with: not used
         self.wall_corrected_at: dict[int, tuple[float, float, float]] = {}
         self.compass_skipped_turning = 0
+        #: the walls.ahead ranges: used, or why not
+        self.ahead = dict.fromkeys(
+            ("used", "rejected", "repeated", "ambiguous", "not_square", "unexpected", "unconfirmed"), 0
+        )
+        self.ahead_corrected_at: dict[int, tuple[float, float]] = {}
+        #: (sensor, wall) -> (stamp, innovation) of the last range that passed the other checks
+        self.ahead_candidate: dict[tuple[int, int], tuple[int, float]] = {}
         self.travel = {"used": 0, "assumed_square": 0, "oblique": 0, "unknown": 0, "rejected": 0, "waited": 0}
         #: fits whose wall the robot's own map does not have yet: (stamp, beam origin, direction, fit)
         self.pending_travel: list[tuple[int, tuple[float, float], float, dict[str, Any]]] = []
@@ -484,6 +500,9 @@ class LocalizationCore:
                 wall_fix = self._wall_fix(reference, sonar.get("walls", []), wall_results)
                 for travel in sonar.get("travel", []):
                     self._correct_travel(travel, stamp)
+                ahead = self.config["walls"]["ahead"]
+                if ahead["enabled"] and turn_rate <= ahead["max_turn_rate_deg_s"]:
+                    self._correct_ahead(sonar, stamp)
         self._store_positions(stamp, data, wall_results, wall_fix)
         self.last_sync_ms = stamp
         self.syncs += 1
@@ -546,6 +565,87 @@ class LocalizationCore:
                 f"{wall['kind']} wall (sonar {wall['sensors']}) rejected by the gate for wall {best[1].index}",
             )
         return [best[1].index, int(accepted)]
+
+    def _correct_ahead(self, sonar: dict[str, Any], stamp: int) -> None:
+        """Each ``walls.ahead`` sonar's range to the known wall it meets square on: a position
+        measurement along its beam. On a long leg towards a wall it is what bounds the error the
+        floor's step scale leaves; side walls cannot see it. Used only where the wall is the
+        nearest thing in the cone by a margin and its perpendicular is near the beam's axis."""
+        ekf = self.ekf
+        assert ekf is not None
+        settings = self.config["walls"]["ahead"]
+        walls = self.config["walls"]
+        late = walls["sonar_late"] if walls["range_model"] == "tangent" else None
+        distances = sonar.get("distances_mm", [])
+        at_x, at_y, at_heading = sonar.get("at", (0.0, 0.0, 0.0))  # where they were read
+        mounts = sonar_mounts(self.config)
+        x, y, psi = ekf.pose
+        c, s = math.cos(psi), math.sin(psi)
+        for index in settings["sensors"]:
+            measured = distances[index] if index < len(distances) else None
+            if measured is None or measured > settings["max_range_mm"]:
+                continue
+            mount = mounts[index]
+            # the sensor when it read, as a lever from the pose at the synchronisation (robot frame)
+            ch, sh = math.cos(at_heading), math.sin(at_heading)
+            lever_x = at_x + mount.x * ch - mount.y * sh
+            lever_y = at_y + mount.x * sh + mount.y * ch
+            origin = (x + c * lever_x - s * lever_y, y + s * lever_x + c * lever_y)
+            half_width = math.radians(walls["max_beam_off_deg"])
+            echoes = beam_echoes(origin, psi + at_heading + mount.angle, half_width, self.known_walls)
+            first = echoes[0] if echoes else None
+            if (
+                first is None
+                or first.foot_off is None
+                or abs(first.foot_off) > math.radians(settings["max_off_deg"])
+                or first.wall.length < walls["association"]["min_wall_length_mm"]
+                or not first.wall.visible_from(x, y)
+            ):
+                self.ahead["not_square"] += 1
+                continue
+            nearest_other = echoes[1].range_mm if len(echoes) > 1 else math.inf
+            for circle in self.known_circles:
+                met = circle_in_beam(origin, psi + at_heading + mount.angle, half_width, circle)
+                if met is not None:
+                    nearest_other = min(nearest_other, met)
+            if nearest_other - first.range_mm < settings["clear_mm"]:
+                self.ahead["ambiguous"] += 1  # another wall (a corner) or a pillar about as near
+                continue
+            corrected = float(measured)
+            if late is not None:
+                corrected -= max(0.0, corrected - late["from_mm"]) * late["mm_per_m"] / 1000.0
+                corrected -= late["mm_per_deg2"] * math.degrees(first.foot_off) ** 2
+            if abs(corrected - first.range_mm) > settings["max_innovation_mm"]:
+                self.ahead["unexpected"] += 1  # something the map does not have, or a lost pose
+                continue
+            wall = first.wall
+            innovation = corrected - first.range_mm
+            previous = self.ahead_candidate.get((index, wall.index))
+            self.ahead_candidate[(index, wall.index)] = (stamp, innovation)
+            if (
+                previous is None
+                or stamp - previous[0] > settings["confirm_within_ms"]
+                or abs(innovation - previous[1]) > settings["confirm_mm"]
+            ):
+                self.ahead["unconfirmed"] += 1  # a range that its predecessor does not bear out
+                continue
+            last = self.ahead_corrected_at.get(wall.index)
+            if last is not None and math.hypot(x - last[0], y - last[1]) < settings["repeat_after_mm"]:
+                self.ahead["repeated"] += 1  # the same range and incidence err alike
+                continue
+            ca, sa = math.cos(wall.alpha), math.sin(wall.alpha)
+            signed = wall.d - origin[0] * ca - origin[1] * sa
+            sign = 1.0 if signed >= 0 else -1.0
+            H = np.zeros((1, len(ekf.x)))
+            H[0, 0], H[0, 1] = -sign * ca, -sign * sa
+            H[0, 2] = -sign * (ca * (-s * lever_x - c * lever_y) + sa * (c * lever_x - s * lever_y))
+            R = np.array([[settings["sigma_mm"] ** 2]])
+            if ekf.update("ahead", np.array([corrected]), np.array([abs(signed)]), H, R):
+                self.ahead["used"] += 1
+                self.ahead_corrected_at[wall.index] = (x, y)
+                self._keep_bias_floor(wall)
+            else:
+                self.ahead["rejected"] += 1
 
     def _keep_bias_floor(self, wall: KnownWall) -> None:
         """Keep the pose's variance across ``wall`` at ``walls.bias_floor_mm``² at least: its fits
@@ -720,6 +820,7 @@ class LocalizationCore:
             "compass_skipped_turning": self.compass_skipped_turning,
             "compass_skipped_settling": self.synchronisers["compass"].settling,
             "travel": dict(self.travel),
+            "ahead": dict(self.ahead),
             "grid_skipped": self.trigger.skipped,
         }
         if self.ekf is not None:

@@ -81,6 +81,7 @@ DEFAULTS: dict[str, Any] = {
         "repeat_after_mm": 100.0,
         "bias_floor_mm": 0.0,
         "association": {"max_d_mm": 400.0, "max_alpha_deg": 20.0, "margin_mm": 150.0, "min_wall_length_mm": 500.0},
+        "ahead": {"enabled": False, "sensors": [1], "max_range_mm": 1400.0, "max_off_deg": 20.0, "sigma_mm": 15.0, "clear_mm": 150.0, "max_innovation_mm": 150.0, "repeat_after_mm": 100.0, "max_turn_rate_deg_s": 2.0, "confirm_mm": 30.0, "confirm_within_ms": 1000},
     },
     "robot": {"mm_per_step": 0.5419, "steps_per_degree": 6.5, "sonars": "robot"},
     "logs": {"enabled": True, "directory": "logs", "data": "localization-{start}.trlog", "errors": "localization-{start}.trerr", "debug": False},
@@ -310,6 +311,9 @@ class _Checker:
         for i in walls["side_sensors"]:
             if not isinstance(i, int) or not 0 <= i < count:
                 raise self.fail(("walls", "side_sensors"), f"sonar index {i!r} is not in 0..{count - 1}")
+        for i in walls["ahead"]["sensors"]:
+            if not isinstance(i, int) or not 0 <= i < count:
+                raise self.fail(("walls", "ahead", "sensors"), f"sonar index {i!r} is not in 0..{count - 1}")
         for pair in walls["pairs"]:
             if not (
                 isinstance(pair, list)

@@ -517,8 +517,6 @@ class SonarSync:
         self.newest: list[int | None] | None = None
 
     def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any] | None:
-        if not samples and self.detector is None:
-            return None
         travel: list[dict[str, Any]] = []
         for sample in samples:
             self.newest = [None if d == NO_CONTACT_CM else int(d) * 10 for d in sample.values["distances"]]
@@ -528,31 +526,32 @@ class SonarSync:
                     self.detector.add(sample.stamp_ms, pose, self.newest)
                 if self.gauge is not None:
                     travel.extend(self.gauge.add(pose, self.newest))
-        walls: list[dict[str, Any]] = []
-        if self.detector is not None and samples:
-            at_sync = self.track.pose_at(sync_ms)
-            if at_sync is not None:
-                walls = self.detector.detect(at_sync)
         if not samples:
             return None
+        at_sync = self.track.pose_at(sync_ms)
+        walls = self.detector.detect(at_sync) if self.detector is not None and at_sync is not None else []
         record: dict[str, Any] = {
             "distances_mm": list(self.newest or []),
             "walls": walls,
             "count": len(samples),
             "stamp_ms": samples[-1].stamp_ms,
         }
+        newest_at = self.track.pose_at(samples[-1].stamp_ms)
+        if newest_at is not None and at_sync is not None:
+            record["at"] = relative_pose(newest_at, at_sync)  # where the newest distances were read
         if travel:
-            at_sync = self.track.pose_at(sync_ms)
             for fit in travel:  # where the run ended, seen from the pose at the sync
-                ex, ey, eh = fit.pop("end_pose")
-                if at_sync is not None:
-                    c, s = math.cos(at_sync[2]), math.sin(at_sync[2])
-                    dx, dy = ex - at_sync[0], ey - at_sync[1]
-                    fit["end"] = [c * dx + s * dy, -s * dx + c * dy, wrap(eh - at_sync[2])]
-                else:
-                    fit["end"] = [0.0, 0.0, 0.0]
+                end_pose = fit.pop("end_pose")
+                fit["end"] = relative_pose(end_pose, at_sync) if at_sync is not None else [0.0, 0.0, 0.0]
             record["travel"] = travel
         return record
+
+
+def relative_pose(pose: tuple[float, float, float], reference: tuple[float, float, float]) -> list[float]:
+    """``pose`` in the frame of ``reference`` (both odometry-frame poses): [x, y, heading]."""
+    c, s = math.cos(reference[2]), math.sin(reference[2])
+    dx, dy = pose[0] - reference[0], pose[1] - reference[1]
+    return [c * dx + s * dy, -s * dx + c * dy, wrap(pose[2] - reference[2])]
 
 
 class NewestSync:

@@ -144,6 +144,29 @@ def load_known_walls(name_or_path: str | Path) -> list[KnownWall]:
     return walls
 
 
+def load_known_circles(name_or_path: str | Path) -> list[tuple[float, float, float]]:
+    """The round obstacles of a room (x, y, radius in mm): nothing a wall fit can use, but a beam
+    meets them before the wall behind."""
+    from modules.description import load_world
+
+    return [(c.x, c.y, c.r) for c in load_world(name_or_path).circles]
+
+
+def circle_in_beam(
+    origin: tuple[float, float], direction: float, half_width: float, circle: tuple[float, float, float]
+) -> float | None:
+    """How far a sonar cone first meets a round obstacle (its near face, within the cone or
+    touching its edge); None if the cone misses it."""
+    cx, cy, radius = circle
+    distance = math.hypot(cx - origin[0], cy - origin[1])
+    if distance <= radius:
+        return 0.0
+    off = abs(wrap(math.atan2(cy - origin[1], cx - origin[0]) - direction))
+    if off > half_width + math.asin(radius / distance) or off > math.pi / 2:
+        return None
+    return distance - radius
+
+
 def segments_to_walls(segments: Any) -> list[KnownWall]:
     """Known walls from ``(x1, y1, x2, y2)`` segments in mm (a world's walls, the map's vectors)."""
     return [KnownWall.segment(*map(float, seg[:4]), index=i) for i, seg in enumerate(segments)]
@@ -185,6 +208,59 @@ def wall_position(
         "psi": wrap(psi0 + sum(headings) / len(headings)),
         "valid": [bool(dx), bool(dy), True],
     }
+
+
+@dataclass(frozen=True)
+class BeamEcho:
+    """Where a beam first meets one known wall: the nearest point of the wall inside the cone."""
+
+    range_mm: float
+    wall: KnownWall
+    #: the perpendicular's angle off the beam's axis when the nearest point is the foot of the
+    #: perpendicular (then the range is the distance to the wall's line); None at a cone's edge
+    #: or a wall's end
+    foot_off: float | None
+
+
+def beam_echoes(
+    origin: tuple[float, float], direction: float, half_width: float, walls: list[KnownWall]
+) -> list[BeamEcho]:
+    """Every known wall a sonar cone (apex ``origin``, axis ``direction``, ± ``half_width`` rad)
+    meets, nearest first: the first echo comes from the nearest point of any wall in the cone,
+    which is the foot of the perpendicular if that lies in the cone, else an end of the wall or
+    a crossing of the cone's edge."""
+    ox, oy = origin
+    echoes = []
+    for wall in walls:
+        ex, ey = wall.x2 - wall.x1, wall.y2 - wall.y1
+        length_sq = ex * ex + ey * ey
+        if length_sq <= 0.0:
+            continue
+        candidates: list[tuple[float, float | None]] = []
+        u = ((ox - wall.x1) * ex + (oy - wall.y1) * ey) / length_sq
+        if 0.0 <= u <= 1.0:
+            fx, fy = wall.x1 + u * ex - ox, wall.y1 + u * ey - oy
+            off = wrap(math.atan2(fy, fx) - direction)
+            if abs(off) <= half_width:
+                candidates.append((math.hypot(fx, fy), off))
+        for px, py in ((wall.x1, wall.y1), (wall.x2, wall.y2)):
+            if abs(wrap(math.atan2(py - oy, px - ox) - direction)) <= half_width:
+                candidates.append((math.hypot(px - ox, py - oy), None))
+        for edge in (direction - half_width, direction + half_width):
+            dx, dy = math.cos(edge), math.sin(edge)
+            denominator = dx * ey - dy * ex
+            if abs(denominator) < 1e-12:
+                continue
+            wx, wy = wall.x1 - ox, wall.y1 - oy
+            t = (wx * ey - wy * ex) / denominator
+            s = (wx * dy - wy * dx) / denominator
+            if t > 0.0 and 0.0 <= s <= 1.0:
+                candidates.append((t, None))
+        if candidates:
+            distance, off = min(candidates, key=lambda c: c[0])
+            echoes.append(BeamEcho(distance, wall, off))
+    echoes.sort(key=lambda e: e.range_mm)
+    return echoes
 
 
 # =============================================================================================
