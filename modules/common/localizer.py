@@ -581,18 +581,19 @@ class LocalizationCore:
         mounts = sonar_mounts(self.config)
         x, y, psi = ekf.pose
         c, s = math.cos(psi), math.sin(psi)
+        ch, sh = math.cos(at_heading), math.sin(at_heading)
+        half_width = math.radians(walls["max_beam_off_deg"])
         for index in settings["sensors"]:
             measured = distances[index] if index < len(distances) else None
             if measured is None or measured > settings["max_range_mm"]:
                 continue
             mount = mounts[index]
             # the sensor when it read, as a lever from the pose at the synchronisation (robot frame)
-            ch, sh = math.cos(at_heading), math.sin(at_heading)
             lever_x = at_x + mount.x * ch - mount.y * sh
             lever_y = at_y + mount.x * sh + mount.y * ch
             origin = (x + c * lever_x - s * lever_y, y + s * lever_x + c * lever_y)
-            half_width = math.radians(walls["max_beam_off_deg"])
-            echoes = beam_echoes(origin, psi + at_heading + mount.angle, half_width, self.known_walls)
+            beam = psi + at_heading + mount.angle
+            echoes = beam_echoes(origin, beam, half_width, self.known_walls)
             first = echoes[0] if echoes else None
             if (
                 first is None
@@ -605,7 +606,7 @@ class LocalizationCore:
                 continue
             nearest_other = echoes[1].range_mm if len(echoes) > 1 else math.inf
             for circle in self.known_circles:
-                met = circle_in_beam(origin, psi + at_heading + mount.angle, half_width, circle)
+                met = circle_in_beam(origin, beam, half_width, circle)
                 if met is not None:
                     nearest_other = min(nearest_other, met)
             if nearest_other - first.range_mm < settings["clear_mm"]:
