@@ -77,9 +77,10 @@ from modules.common.walls import (
     WallDetector,
     beam_echoes,
     circle_in_beam,
+    echo_lateness_mm,
     from_frame,
-    load_known_circles,
-    load_known_walls,
+    load_known_room,
+    ray_crossing,
     wall_position,
     wrap,
 )
@@ -275,18 +276,12 @@ class LocalizationCore:
         self.timing = {
             name: SampleTiming(name, float(config["sensors"][name]["period_ms"]) or None) for name in SENSORS
         }
-        if walls_mode == "darmstadt":
-            self.known_walls = (
-                known_walls if known_walls is not None else load_known_walls(config["walls"]["file"])
-            )
+        #: round obstacles of the wall file's room: a beam meets them before the wall behind
+        self.known_circles: list[tuple[float, float, float]] = []
+        if walls_mode == "darmstadt" and known_walls is None:
+            self.known_walls, self.known_circles = load_known_room(config["walls"]["file"])
         else:
             self.known_walls = list(known_walls or [])
-        #: round obstacles of the wall file's room: a beam meets them before the wall behind
-        self.known_circles = (
-            load_known_circles(config["walls"]["file"])
-            if walls_mode == "darmstadt" and known_walls is None
-            else []
-        )
         self.ekf_params = ekf_params(config)
         self.ekf: PoseEKF | None = None
         self.dead_reckoning: tuple[float, float, float] | None = None
@@ -581,7 +576,6 @@ class LocalizationCore:
         mounts = sonar_mounts(self.config)
         x, y, psi = ekf.pose
         c, s = math.cos(psi), math.sin(psi)
-        ch, sh = math.cos(at_heading), math.sin(at_heading)
         half_width = math.radians(walls["max_beam_off_deg"])
         for index in settings["sensors"]:
             measured = distances[index] if index < len(distances) else None
@@ -589,9 +583,8 @@ class LocalizationCore:
                 continue
             mount = mounts[index]
             # the sensor when it read, as a lever from the pose at the synchronisation (robot frame)
-            lever_x = at_x + mount.x * ch - mount.y * sh
-            lever_y = at_y + mount.x * sh + mount.y * ch
-            origin = (x + c * lever_x - s * lever_y, y + s * lever_x + c * lever_y)
+            lever_x, lever_y = from_frame((mount.x, mount.y), (at_x, at_y, at_heading))
+            origin = from_frame((lever_x, lever_y), (x, y, psi))
             beam = psi + at_heading + mount.angle
             echoes = beam_echoes(origin, beam, half_width, self.known_walls)
             first = echoes[0] if echoes else None
@@ -614,8 +607,9 @@ class LocalizationCore:
                 continue
             corrected = float(measured)
             if late is not None:
-                corrected -= max(0.0, corrected - late["from_mm"]) * late["mm_per_m"] / 1000.0
-                corrected -= late["mm_per_deg2"] * math.degrees(first.foot_off) ** 2
+                corrected -= echo_lateness_mm(
+                    corrected, late["from_mm"], late["mm_per_m"], first.foot_off, late["mm_per_deg2"]
+                )
             if abs(corrected - first.range_mm) > settings["max_innovation_mm"]:
                 self.ahead["unexpected"] += 1  # something the map does not have, or a lost pose
                 continue
@@ -851,25 +845,17 @@ def _beam_hit(
 ) -> float | None:
     """The incidence (rad, 0 = square on) of a beam on the nearest known wall it meets near the
     measured range (within 25 % or 150 mm); None when it meets none there."""
-    ox, oy = origin
-    dx, dy = math.cos(direction), math.sin(direction)
     best: tuple[float, float] | None = None
     for wall in walls:
-        ex, ey = wall.x2 - wall.x1, wall.y2 - wall.y1
-        denominator = dx * ey - dy * ex
-        if abs(denominator) < 1e-9:
+        crossing = ray_crossing(origin, direction, wall)
+        if crossing is None:
             continue
-        wx, wy = wall.x1 - ox, wall.y1 - oy
-        t = (wx * ey - wy * ex) / denominator  # along the beam
-        u = (wx * dy - wy * dx) / denominator  # along the wall, 0..1 on it
+        t, u, sine = crossing  # along the beam, along the wall (0..1 on it)
         if t <= 0 or not -0.05 <= u <= 1.05:
             continue
-        if (
-            abs(t - range_mm) > max(150.0, 0.25 * range_mm)
-            and abs(t * abs(denominator) / wall.length - range_mm) > 150.0
-        ):
+        if abs(t - range_mm) > max(150.0, 0.25 * range_mm) and abs(t * sine - range_mm) > 150.0:
             continue
-        incidence = math.acos(min(1.0, abs(denominator) / wall.length))
+        incidence = math.acos(min(1.0, sine))
         if best is None or t < best[0]:
             best = (t, incidence)
     return best[1] if best is not None else None

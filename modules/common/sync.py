@@ -40,7 +40,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
-from modules.common.walls import wrap
+from modules.common.walls import to_frame, wrap
 
 #: sensors the synchronisation knows, in the order their synchronisers run
 SENSORS = ("odometry", "compass", "sonar", "battery", "truth")
@@ -549,9 +549,7 @@ class SonarSync:
 
 def relative_pose(pose: tuple[float, float, float], reference: tuple[float, float, float]) -> list[float]:
     """``pose`` in the frame of ``reference`` (both odometry-frame poses): [x, y, heading]."""
-    c, s = math.cos(reference[2]), math.sin(reference[2])
-    dx, dy = pose[0] - reference[0], pose[1] - reference[1]
-    return [c * dx + s * dy, -s * dx + c * dy, wrap(pose[2] - reference[2])]
+    return [*to_frame((pose[0], pose[1]), reference), wrap(pose[2] - reference[2])]
 
 
 class NewestSync:

@@ -125,8 +125,12 @@ class KnownWall:
         return hi >= -margin and lo <= length + margin
 
 
-def load_known_walls(name_or_path: str | Path) -> list[KnownWall]:
-    """The known walls of a room: a bundled world name, a YAML world file or the seed's wall file.
+def load_known_room(
+    name_or_path: str | Path,
+) -> tuple[list[KnownWall], list[tuple[float, float, float]]]:
+    """A room's known walls (a bundled world name, a YAML world file or the seed's wall file), and
+    its round obstacles (x, y, radius in mm): nothing a wall fit can use, but a beam meets them
+    before the wall behind.
 
     Reads through :func:`modules.description.load_world`, so every format the simulator accepts works
     here too; the seed wall file's visibility boxes (table B.3) are kept. Errors name the file
@@ -141,15 +145,16 @@ def load_known_walls(name_or_path: str | Path) -> list[KnownWall]:
     for i, w in enumerate(world.walls):
         wall = KnownWall.segment(w.x1, w.y1, w.x2, w.y2, index=i)
         walls.append(KnownWall(wall.x1, wall.y1, wall.x2, wall.y2, wall.alpha, wall.d, i, w.visible))
-    return walls
+    return walls, [(c.x, c.y, c.r) for c in world.circles]
 
 
-def load_known_circles(name_or_path: str | Path) -> list[tuple[float, float, float]]:
-    """The round obstacles of a room (x, y, radius in mm): nothing a wall fit can use, but a beam
-    meets them before the wall behind."""
-    from modules.description import load_world
-
-    return [(c.x, c.y, c.r) for c in load_world(name_or_path).circles]
+def echo_lateness_mm(
+    range_mm: float, from_mm: float, mm_per_m: float, off_axis: float = 0.0, mm_per_deg2: float = 0.0
+) -> float:
+    """How much later than the wall's distance a sonar's echo reads (``walls.sonar_late``, measured
+    on recorded drives): by ``mm_per_m`` beyond ``from_mm``, and by ``mm_per_deg2`` times the
+    square of the wall's normal's angle off the beam's axis (``off_axis``, rad) in degrees."""
+    return max(0.0, range_mm - from_mm) * mm_per_m / 1000.0 + mm_per_deg2 * math.degrees(off_axis) ** 2
 
 
 def circle_in_beam(
@@ -210,6 +215,25 @@ def wall_position(
     }
 
 
+def ray_crossing(
+    origin: tuple[float, float], direction: float, wall: KnownWall
+) -> tuple[float, float, float] | None:
+    """Where a ray from ``origin`` along ``direction`` (rad) crosses ``wall``'s line: how far along
+    the ray, where along the wall (0 at its first end, 1 at its second) and the sine of the angle
+    between ray and wall; None if they are parallel."""
+    dx, dy = math.cos(direction), math.sin(direction)
+    ex, ey = wall.x2 - wall.x1, wall.y2 - wall.y1
+    denominator = dx * ey - dy * ex
+    if abs(denominator) < 1e-9:
+        return None
+    wx, wy = wall.x1 - origin[0], wall.y1 - origin[1]
+    return (
+        (wx * ey - wy * ex) / denominator,
+        (wx * dy - wy * dx) / denominator,
+        abs(denominator) / wall.length,
+    )
+
+
 @dataclass(frozen=True)
 class BeamEcho:
     """Where a beam first meets one known wall: the nearest point of the wall inside the cone."""
@@ -247,15 +271,9 @@ def beam_echoes(
             if abs(wrap(math.atan2(py - oy, px - ox) - direction)) <= half_width:
                 candidates.append((math.hypot(px - ox, py - oy), None))
         for edge in (direction - half_width, direction + half_width):
-            dx, dy = math.cos(edge), math.sin(edge)
-            denominator = dx * ey - dy * ex
-            if abs(denominator) < 1e-12:
-                continue
-            wx, wy = wall.x1 - ox, wall.y1 - oy
-            t = (wx * ey - wy * ex) / denominator
-            s = (wx * dy - wy * dx) / denominator
-            if t > 0.0 and 0.0 <= s <= 1.0:
-                candidates.append((t, None))
+            crossing = ray_crossing(origin, edge, wall)
+            if crossing is not None and crossing[0] > 0.0 and 0.0 <= crossing[1] <= 1.0:
+                candidates.append((crossing[0], None))
         if candidates:
             distance, off = min(candidates, key=lambda c: c[0])
             echoes.append(BeamEcho(distance, wall, off))
@@ -347,12 +365,12 @@ class WallDetector:
         sx, sy = from_frame((mount.x, mount.y), pose)
         if self.tangent:
             p = self.params
-            distance -= max(0.0, distance - p.late_from_mm) * p.late_mm_per_m / 1000.0
+            distance -= echo_lateness_mm(distance, p.late_from_mm, p.late_mm_per_m)
         return sx, sy, wrap(pose[2] + mount.angle), distance
 
     def late_off_axis(self, normal: float, beam: float) -> float:
         """How much later (mm) an echo from a wall whose normal is ``normal`` reads in ``beam``."""
-        return self.params.late_mm_per_deg2 * math.degrees(wrap(normal - beam)) ** 2
+        return echo_lateness_mm(0.0, 0.0, 0.0, wrap(normal - beam), self.params.late_mm_per_deg2)
 
     def add(self, stamp_ms: int, pose: tuple[float, float, float], distances: list[int | None]) -> None:
         """One sonar sample (distances in mm, None = no contact) taken at odometry-frame ``pose``."""
@@ -700,7 +718,7 @@ class TravelGauge:
             if i < len(distances):
                 r = distances[i]
                 if r is not None and p.min_range_mm <= r <= p.max_range_mm:
-                    late = max(0.0, r - p.late_from_mm) * p.late_mm_per_m / 1000.0
+                    late = echo_lateness_mm(r, p.late_from_mm, p.late_mm_per_m)
                     self.points[i].append((travel, float(r) - late, moving))
         return done
 
