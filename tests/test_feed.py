@@ -81,6 +81,25 @@ def test_frames_channels_and_round_trips(fed: tuple[Feed, Collector, RingSource]
         jsonschema.validate(message.data, schemas[message.topic])
 
 
+def test_round_trips_only_over_whole_rounds_seen_where_the_ring_wraps(
+    fed: tuple[Feed, Collector, RingSource],
+) -> None:
+    """A new subscriber hears some senders before others, and may miss a frame: no round trip
+    is then reported at the wrong node or over two rounds."""
+    feed, got, _ = fed
+    ring = [10, 20, 30, 40]
+    t = 0
+    for lap in range(6):
+        for i, did in enumerate(ring):
+            t += 1_000_000  # 1 ms a hop: 4 ms a lap
+            if did != 10 or lap in (2, 4, 5):  # laps 0-1: not subscribed at 40 yet; lap 3: lost
+                frame = make_frame(ring[i - 1], did, lap, motor_x_mm=lap * 10 + i)
+                feed.feed_raw(RawSample(f"tokenring/t/token/{did}", t, frame))
+    trips = got.on("/ring/roundtrip")
+    # wraps heard at 10 in laps 2, 4 and 5: only 4 -> 5 is one round
+    assert trips == [{"ms": 4.0, "node": 10}]
+
+
 def test_a_damaged_or_repeated_frame_adds_nothing_but_its_header(
     fed: tuple[Feed, Collector, RingSource],
 ) -> None:

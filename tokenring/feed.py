@@ -160,7 +160,7 @@ ROUNDTRIP_SCHEMA: dict[str, Any] = {
     "type": "object",
     "properties": {
         "ms": {"type": "number", "description": "since the token last reached the same node"},
-        "node": {"type": "integer"},
+        "node": {"type": "integer", "description": "where the ring wraps (the round counter's node)"},
     },
     "required": ["ms", "node"],
 }
@@ -199,7 +199,7 @@ class RingSource(FeedSource):
     poll_interval_s: float = 0.5
     _last_channel: dict[str, bytes] = field(default_factory=dict)
     _last_frame: bytes = b""
-    _arrivals: dict[int, int] = field(default_factory=dict)
+    _wraps: dict[int, tuple[int, int]] = field(default_factory=dict)  # node -> (time, counter)
 
     def channels(self) -> list[Channel]:
         return [ch for node in self.protocol.nodes.values() for ch in (node.command, node.data)]
@@ -260,11 +260,15 @@ class RingSource(FeedSource):
         if frame == self._last_frame or problem:
             return out  # a repeated pass (late acknowledgement) or a damaged frame: nothing new
         self._last_frame = frame
-        if did is not None:
-            before = self._arrivals.get(did)
-            self._arrivals[did] = time_ns
-            if before is not None and did == min(self._arrivals):
-                out.append(Message("/ring/roundtrip", time_ns, {"ms": (time_ns - before) / 1e6, "node": did}))
+        sid, counter = header["sid"], header["counter"]
+        if did is not None and sid >= did:
+            # the token reaches the node where the ring wraps: one round since the last such
+            # arrival if the round counter moved on by one (none missed by this subscriber)
+            before = self._wraps.get(did)
+            self._wraps[did] = (time_ns, counter)
+            if before is not None and (counter - before[1]) & 0xFF == 1:
+                trip = {"ms": (time_ns - before[0]) / 1e6, "node": did}
+                out.append(Message("/ring/roundtrip", time_ns, trip))
         for ch in self.channels():
             raw = frame[ch.address : ch.end]
             if self._last_channel.get(ch.name) == raw:
