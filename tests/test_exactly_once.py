@@ -19,6 +19,7 @@ from memring import MemoryRing, wait_for
 from ringutil import control, launcher_pids, stats, tap, wait_ring, wait_until
 
 from tokenring.channels import NEW, REPEAT, STALE, CommandMemory
+from tokenring.pclink import PcLinkServer
 from tokenring.protocol import default_protocol
 
 PROTOCOL = default_protocol()
@@ -297,6 +298,39 @@ def test_deliver_after_a_lost_acknowledgement_hands_the_command_over_once(ring):
         assert main.deliver("motor", "VECTOR_COUNTER", count=7, timeout=30)
         wait_for(lambda: len(motor.taken) == 2, 30, "the second command")
         assert motor.seqs == [(seq + 1) & 0xFFFF, (seq + 2) & 0xFFFF]
+    finally:
+        sonar.system_handler, sonar.system_busy = None, False
+        motor.stop()
+
+
+def test_a_pc_link_command_after_a_lost_acknowledgement_is_handed_over_once(ring):
+    """The PC link's retry is the same command too: before, it sent a new one (the next seq),
+    and a receiver whose acknowledgement was lost took the command twice (the compass asked
+    main for two calibration turns)."""
+    main, motor_node, sonar = ring.nodes[MAIN], ring.nodes[MOTOR], ring.nodes[SONAR]
+    motor = Receiver(motor_node)
+    channel = PROTOCOL.channel("motor.command")
+    a, off = channel.address, sonar._cmd
+    lost = threading.Event()
+
+    def lose_the_acknowledgement(work: bytearray) -> bool:
+        if not lost.is_set() and work[a + off.sender] == MAIN and work[a + off.state] == off.ACKNOWLEDGED:
+            work[a + off.state] = off.OCCUPIED
+            lost.set()
+        return False
+
+    link = PcLinkServer(main, None, "t")  # its verbs, called as its queryable would
+    try:
+        seq = main._cmd_seqs.get(channel.name, 0)
+        sonar.system_handler, sonar.system_busy = lose_the_acknowledgement, True
+        request = {"target": "motor", "command": "VECTOR_COUNTER", "args": {"count": 5}, "timeout": 30}
+        answer = link.handlers["command"](request)
+        sonar.system_handler, sonar.system_busy = None, False
+        assert lost.is_set()
+        assert answer == {"transmitted": True, "acknowledged": True, "attempts": 2}, answer
+        ring.wait_rounds(20, MOTOR, timeout=30)  # rounds in which a second copy would be taken
+        assert [c for _, _, c in motor.taken] == [5]
+        assert motor.seqs == [(seq + 1) & 0xFFFF]
     finally:
         sonar.system_handler, sonar.system_busy = None, False
         motor.stop()

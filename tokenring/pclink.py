@@ -8,8 +8,8 @@ and relays through its own node OS — so everything the tools do still goes thr
 verb          request → result
 ============  ===========================================================================
 ``command``   ``{target, command, args, timeout, retry}`` → ``{transmitted, acknowledged,
-              attempts}``: main sends a command into ``target``'s inbox (resending until
-              acknowledged when ``retry``)
+              attempts}``: main sends a command into ``target``'s inbox (resending the same
+              command, taken once, until acknowledged when ``retry``)
 ``read``      ``{channel}`` → ``{data, visits}``: main's copy of a data channel (main starts
               copying it on the first request)
 ``request``   ``{verb, payload}`` → whatever main's user program returns from
@@ -39,6 +39,7 @@ from tokenring.errors import ChannelError, TransportError, UsageError
 from tokenring.zconfig import unanswered_hint
 
 if TYPE_CHECKING:
+    from tokenring.channels import Outbox
     from tokenring.node import NodeOS
 
 log = logging.getLogger("tokenring.pclink")
@@ -95,15 +96,18 @@ class PcLinkServer:
         self.os.wait_channel_free(target, timeout)
         attempts = 0
         transmitted = acknowledged = False
-        while not acknowledged and time.monotonic() < deadline:
+        # a retry is the same command (same seq): a receiver that took it but whose acknowledgement
+        # was late acknowledges it again and does not act on it twice
+        outbox: Outbox | None = self.os.send_command(target, name, **args)
+        while outbox is not None and not acknowledged and time.monotonic() < deadline:
             attempts += 1
-            outbox = self.os.send_command(target, name, **args)
             if not outbox.done.wait(max(0.0, deadline - time.monotonic())):
                 outbox.cancel()
                 break
-            transmitted, acknowledged = outbox.transmitted, outbox.acknowledged
-            if not retry:
+            transmitted, acknowledged = transmitted or outbox.transmitted, outbox.acknowledged
+            if not retry or acknowledged:
                 break
+            outbox = self.os.resend_command(target, name, outbox, **args)
         return {"transmitted": transmitted, "acknowledged": acknowledged, "attempts": attempts}
 
     def _read(self, request: dict[str, Any]) -> dict[str, Any]:

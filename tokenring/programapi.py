@@ -180,6 +180,11 @@ class ProgramAPI(TokenPathHost):
         assert outbox is not None
         return outbox
 
+    def resend_command(self, target: str, command: str | int, previous: Outbox, **args: Any) -> Outbox | None:
+        """``previous`` once more, under its own seq (a receiver that took it acts on it once);
+        None when a newer command to ``target`` replaced it meanwhile."""
+        return self._queue_command(target, command, args, again=previous)
+
     def _queue_command(
         self, target: str, command: str | int, args: dict[str, Any], again: Outbox | None = None
     ) -> Outbox | None:
