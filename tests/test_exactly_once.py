@@ -9,10 +9,12 @@ repeat, acknowledged and never handed over.
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import threading
 import time
 from collections import Counter
+from collections.abc import Iterator
 
 import pytest
 from memring import MemoryRing, wait_for
@@ -264,12 +266,11 @@ def test_the_memory_log_keeps_what_was_taken_not_what_was_refused(tmp_path):
     third.close()
 
 
-def test_deliver_after_a_lost_acknowledgement_hands_the_command_over_once(ring):
-    """motor takes the command, its acknowledgement is lost on the way back (sonar's pass puts
-    the inbox back to occupied, as a token regenerated from a copy before motor's pass would):
-    deliver resends the same command, motor acknowledges it again and never takes it twice."""
-    main, motor_node, sonar = ring.nodes[MAIN], ring.nodes[MOTOR], ring.nodes[SONAR]
-    motor = Receiver(motor_node)
+@contextlib.contextmanager
+def one_acknowledgement_lost(ring) -> Iterator[threading.Event]:
+    """sonar's pass puts main's acknowledged command in motor's inbox back to occupied, once, as
+    a token regenerated from a copy before motor's pass would; the event tells it happened."""
+    sonar = ring.nodes[SONAR]
     channel = PROTOCOL.channel("motor.command")
     a, off = channel.address, sonar._cmd
     lost = threading.Event()
@@ -280,12 +281,24 @@ def test_deliver_after_a_lost_acknowledgement_hands_the_command_over_once(ring):
             lost.set()
         return False
 
+    sonar.system_handler, sonar.system_busy = lose_the_acknowledgement, True
+    try:
+        yield lost
+    finally:
+        sonar.system_handler, sonar.system_busy = None, False
+
+
+def test_deliver_after_a_lost_acknowledgement_hands_the_command_over_once(ring):
+    """motor takes the command, its acknowledgement is lost on the way back: deliver resends
+    the same command, motor acknowledges it again and never takes it twice."""
+    main, motor_node = ring.nodes[MAIN], ring.nodes[MOTOR]
+    motor = Receiver(motor_node)
+    channel = PROTOCOL.channel("motor.command")
     try:
         seq = main._cmd_seqs.get(channel.name, 0)
         before, sent_before = motor_node.stats.as_dict(), main.stats.as_dict()
-        sonar.system_handler, sonar.system_busy = lose_the_acknowledgement, True
-        assert main.deliver("motor", "VECTOR_COUNTER", count=7, timeout=30)
-        sonar.system_handler, sonar.system_busy = None, False
+        with one_acknowledgement_lost(ring) as lost:
+            assert main.deliver("motor", "VECTOR_COUNTER", count=7, timeout=30)
         assert lost.is_set()
         ring.wait_rounds(20, MOTOR, timeout=30)  # rounds in which a second copy would be taken
         assert [c for _, _, c in motor.taken] == [7]
@@ -299,7 +312,6 @@ def test_deliver_after_a_lost_acknowledgement_hands_the_command_over_once(ring):
         wait_for(lambda: len(motor.taken) == 2, 30, "the second command")
         assert motor.seqs == [(seq + 1) & 0xFFFF, (seq + 2) & 0xFFFF]
     finally:
-        sonar.system_handler, sonar.system_busy = None, False
         motor.stop()
 
 
@@ -307,32 +319,20 @@ def test_a_pc_link_command_after_a_lost_acknowledgement_is_handed_over_once(ring
     """The PC link's retry is the same command too: before, it sent a new one (the next seq),
     and a receiver whose acknowledgement was lost took the command twice (the compass asked
     main for two calibration turns)."""
-    main, motor_node, sonar = ring.nodes[MAIN], ring.nodes[MOTOR], ring.nodes[SONAR]
-    motor = Receiver(motor_node)
-    channel = PROTOCOL.channel("motor.command")
-    a, off = channel.address, sonar._cmd
-    lost = threading.Event()
-
-    def lose_the_acknowledgement(work: bytearray) -> bool:
-        if not lost.is_set() and work[a + off.sender] == MAIN and work[a + off.state] == off.ACKNOWLEDGED:
-            work[a + off.state] = off.OCCUPIED
-            lost.set()
-        return False
-
+    main = ring.nodes[MAIN]
+    motor = Receiver(ring.nodes[MOTOR])
     link = PcLinkServer(main, None, "t")  # its verbs, called as its queryable would
     try:
-        seq = main._cmd_seqs.get(channel.name, 0)
-        sonar.system_handler, sonar.system_busy = lose_the_acknowledgement, True
+        seq = main._cmd_seqs.get("motor.command", 0)
         request = {"target": "motor", "command": "VECTOR_COUNTER", "args": {"count": 5}, "timeout": 30}
-        answer = link.handlers["command"](request)
-        sonar.system_handler, sonar.system_busy = None, False
+        with one_acknowledgement_lost(ring) as lost:
+            answer = link.handlers["command"](request)
         assert lost.is_set()
         assert answer == {"transmitted": True, "acknowledged": True, "attempts": 2}, answer
         ring.wait_rounds(20, MOTOR, timeout=30)  # rounds in which a second copy would be taken
         assert [c for _, _, c in motor.taken] == [5]
         assert motor.seqs == [(seq + 1) & 0xFFFF]
     finally:
-        sonar.system_handler, sonar.system_busy = None, False
         motor.stop()
 
 
