@@ -254,6 +254,7 @@ def judged_drive(
         "moves": result["moves"],
         "gates": report.get("gates"),
         "walls_associated": report.get("walls_associated"),
+        "walls_past_end": report.get("walls_past_end"),
     }
 
 

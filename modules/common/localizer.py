@@ -295,6 +295,7 @@ class LocalizationCore:
         self.walls_unassociated = 0
         self.walls_associated = 0
         self.walls_repeated = 0  # fits of a wall from where it was last corrected with: not used
+        self.walls_past_end = 0  # known walls passed over: the fit's sensors beyond their ends
         self.wall_corrected_at: dict[int, tuple[float, float, float]] = {}
         self.compass_skipped_turning = 0
         #: the walls.ahead ranges: used, or why not
@@ -515,6 +516,7 @@ class LocalizationCore:
         pose = ekf.pose
         p1, p2 = from_frame(tuple(wall["p1"]), pose), from_frame(tuple(wall["p2"]), pose)
         cov = np.array([[wall["cov"][0], wall["cov"][1]], [wall["cov"][1], wall["cov"][2]]])
+        sensors = self._sensors_at(wall.get("sensors", []), pose)
         best: tuple[float, KnownWall] | None = None
         for known in self.known_walls:
             if known.length < assoc["min_wall_length_mm"] or not known.visible_from(pose[0], pose[1]):
@@ -525,6 +527,11 @@ class LocalizationCore:
             if abs(wall["d"] - predicted[1]) > assoc["max_d_mm"]:
                 continue
             if abs(math.degrees(wrap(wall["alpha"] - predicted[0]))) > assoc["max_alpha_deg"]:
+                continue
+            if sensors and not known.contains(sensors[0], sensors[-1], assoc["margin_mm"]):
+                # the sensors are past the wall's end: their nearest echo is the end, not the foot
+                # of a perpendicular (a fit on a corner's ranges, tilted, read up to 50 mm long)
+                self.walls_past_end += 1
                 continue
             nis = ekf.line_nis(wall["alpha"], wall["d"], cov, known)
             if best is None or nis < best[0]:
@@ -560,6 +567,16 @@ class LocalizationCore:
                 f"{wall['kind']} wall (sonar {wall['sensors']}) rejected by the gate for wall {best[1].index}",
             )
         return [best[1].index, int(accepted)]
+
+    def _sensors_at(self, indices: list[int], pose: tuple[float, float, float]) -> list[tuple[float, float]]:
+        """Where the sonars ``indices`` are with the robot at ``pose``: with the tangent model, whose
+        ranges are to the wall's nearest point, the points a fitted wall's perpendiculars start at.
+        Only against a wall file's walls, which end where the room's do; a map's end where mapped."""
+        walls = self.config["walls"]
+        if walls["range_model"] != "tangent" or walls["mode"] != "darmstadt":
+            return []
+        mounts = sonar_mounts(self.config)
+        return [from_frame((mounts[i].x, mounts[i].y), pose) for i in indices if i < len(mounts)]
 
     def _correct_ahead(self, sonar: dict[str, Any], stamp: int) -> None:
         """Each ``walls.ahead`` sonar's range to the known wall it meets square on: a position
@@ -810,6 +827,7 @@ class LocalizationCore:
             "timing": {name: self.timing[name].as_dict() for name in self.sensors},
             "walls_associated": self.walls_associated,
             "walls_unassociated": self.walls_unassociated,
+            "walls_past_end": self.walls_past_end,
             "walls_fitted": self.detector.fitted if self.detector else 0,
             "compass_skipped": self.synchronisers["compass"].skipped,
             "compass_skipped_turning": self.compass_skipped_turning,
