@@ -66,6 +66,7 @@ def explore(
         row["error"] = scored.stderr[-600:]
         return row
     row.update(json.loads(scored.stdout))
+    row["map"] = out.name  # the file's own name: its scratch directory is gone after the run
     row.update(drift(out, world))
     end = json.loads(out.read_text()).get("end_pose") or {}  # main's pose against the truth
     row["end_error_mm"] = end.get("error_mm")
