@@ -826,3 +826,29 @@ def test_a_turn_alerted_again_after_its_escape_backs_off_before_turning_once_mor
     nav.plan(Outcome(REASON["DONE"], second[-1], driven_mm=80), s, STOPPED)
     third = nav.plan(Outcome(REASON["ALERT"], aim, driven_mm=0), s, TURN_RIGHT)
     assert [m.label for m in third] == ["escape turn"]
+
+
+def test_an_inner_turn_that_touches_the_corner_backs_off_and_turns_again_from_there():
+    from modules.common.pilot import Outcome
+
+    # the nose at the end of a notch's wall: the inner turn (right) touches it with the
+    # front-left pair, the escape turns back left. Driving on first (reacquire) would take the
+    # robot back to where the turn touched: generated room 128 at seed 3 did that 374 times
+    nav = ExploreLeftWall(LAYOUT)
+    s = sensors_with(front=24, front_left=5)
+    nav.phase, nav.gauged, nav.lap_start = "follow", True, (0.0, 0.0, 0.0)
+    inner = Move(TURN_RIGHT, 90, 100, label="inner")
+    for retry in range(WallSettings().inner_retries):
+        escape = nav.plan(Outcome(REASON["ALERT"], inner, driven_mm=0), s, TURN_LEFT)
+        assert [(m.label, m.direction) for m in escape] == [("escape turn", TURN_LEFT), ("back off", REVERSE)]
+        again = nav.plan(Outcome(REASON["DONE"], escape[-1], driven_mm=80), s, STOPPED)
+        assert [(m.label, m.direction) for m in again][:1] == [("inner", TURN_RIGHT)], (retry, again)
+    # a corner no back-off clears: the escapes go on as for any ALERT, not another retry
+    escape = nav.plan(Outcome(REASON["ALERT"], inner, driven_mm=0), s, TURN_LEFT)
+    after = nav.plan(Outcome(REASON["DONE"], escape[-1], driven_mm=15), s, STOPPED)
+    assert after and after[0].label != "inner"
+    # an inner turn that went round starts the count again (the next corner's turn: follow)
+    nav.plan(Outcome(REASON["DONE"], inner, driven_mm=0), s, STOPPED)
+    nav.phase = "follow"
+    escape = nav.plan(Outcome(REASON["ALERT"], inner, driven_mm=0), s, TURN_LEFT)
+    assert escape[-1].label == "back off"

@@ -156,6 +156,9 @@ class WallSettings:
     #: off too (a turn with the nose at a wall's end touches it whichever way it goes first)
     alerts_before_back_off: int = 2
     alert_back_mm: int = 80
+    #: an inner turn that hit ALERT (its nose at the corner's end) is backed off and turned again,
+    #: this many times in a row; after that the escapes go on as for any ALERT
+    inner_retries: int = 4
     lap_min_mm: int = 2500  # driven along walls before a lap can end
     lap_radius_mm: float = 450.0
     lap_overlap_mm: float = 0.0  # a lap ends this far short of its start at the latest
@@ -306,6 +309,10 @@ class ExploreLeftWall(Navigator):
         self.route: list[tuple[float, float]] | None = None  # waypoints home, the start last
         self.done_note = ""
         self.alerts = 0  # ALERTs in a row, escapes between them not counting
+        #: inner turns that hit ALERT since one last turned: each is backed off and turned again
+        #: from there (driving on first would take the robot back to where the turn touched)
+        self.inner_alerts = 0
+        self.retry_inner = False
         self.gauged = False  # the first wall reached: the floor gauged there (or, out of view, never)
         self.gauge_begun = False  # the gauge's moves sent: anything after them goes on with the lap
 
@@ -490,11 +497,21 @@ class ExploreLeftWall(Navigator):
             self.check = None
             self.alerts += 1
             escape = self.escape(alert_lock if alert_lock != STOPPED else REVERSE)
-            if self.alerts >= s.alerts_before_back_off and escape[0].direction != REVERSE:
+            inner = label == "inner" and self.phase == "follow"
+            self.inner_alerts += inner
+            self.retry_inner = inner and self.inner_alerts <= s.inner_retries
+            if (self.alerts >= s.alerts_before_back_off or self.retry_inner) and escape[
+                0
+            ].direction != REVERSE:
                 escape.append(Move(REVERSE, s.alert_back_mm, s.speed_pct, label="back off"))
             return escape
         if last is not None and not label.startswith("escape"):
             self.alerts = 0
+        if label == "inner":
+            self.inner_alerts = 0
+        if self.retry_inner and label in ("back off", "escape back") and self.phase == "follow":
+            self.retry_inner = False
+            return self._inner(sensors)
         # (the gauge's back-off, however it ended, goes up to its wall: phase "gauge" below)
         if (
             last is not None
