@@ -55,6 +55,13 @@ def test_a_fit_on_a_short_walls_end_from_past_it_is_left_out() -> None:
     assert core.walls_past_end == 1
 
 
+def test_a_fit_from_just_past_the_end_is_left_out_too() -> None:
+    # 100 mm past the end (the rear sonar 20 mm): the series' later ranges are to the end already
+    core = core_at(1700.0)
+    core.process_synchronised(1, 100, {"sonar": sonar(left_fit(1700.0, 1420.0, (1450.0, 1600.0)))})
+    assert core.walls_associated == 0 and core.walls_past_end == 1
+
+
 def test_the_same_fit_alongside_the_wall_is_used() -> None:
     core = core_at(1300.0)
     core.process_synchronised(1, 100, {"sonar": sonar(left_fit(1300.0, 1420.0, (1200.0, 1400.0)))})

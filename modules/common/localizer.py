@@ -528,9 +528,10 @@ class LocalizationCore:
                 continue
             if abs(math.degrees(wrap(wall["alpha"] - predicted[0]))) > assoc["max_alpha_deg"]:
                 continue
-            if sensors and not known.contains(sensors[0], sensors[-1], assoc["margin_mm"]):
+            if sensors and not known.contains(sensors[0], sensors[-1], 0.0):
                 # the sensors are past the wall's end: their nearest echo is the end, not the foot
-                # of a perpendicular (a fit on a corner's ranges, tilted, read up to 50 mm long)
+                # of a perpendicular (a fit on a corner's ranges, tilted, read up to 50 mm long;
+                # 100 mm past it, 15° off)
                 self.walls_past_end += 1
                 continue
             nis = ekf.line_nis(wall["alpha"], wall["d"], cov, known)
