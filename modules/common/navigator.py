@@ -500,9 +500,8 @@ class ExploreLeftWall(Navigator):
             inner = label == "inner" and self.phase == "follow"
             self.inner_alerts += inner
             self.retry_inner = inner and self.inner_alerts <= s.inner_retries
-            if (self.alerts >= s.alerts_before_back_off or self.retry_inner) and escape[
-                0
-            ].direction != REVERSE:
+            backs_off = self.alerts >= s.alerts_before_back_off or self.retry_inner
+            if backs_off and escape[0].direction != REVERSE:
                 escape.append(Move(REVERSE, s.alert_back_mm, s.speed_pct, label="back off"))
             return escape
         if last is not None and not label.startswith("escape"):
