@@ -28,6 +28,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import asdict
 from typing import TYPE_CHECKING, Any
 
 import msgpack
@@ -39,7 +40,6 @@ from tokenring.errors import ChannelError, TransportError, UsageError
 from tokenring.zconfig import unanswered_hint
 
 if TYPE_CHECKING:
-    from tokenring.channels import Outbox
     from tokenring.node import NodeOS
 
 log = logging.getLogger("tokenring.pclink")
@@ -92,23 +92,7 @@ class PcLinkServer:
             channel.command(name)  # type: ignore[attr-defined]
         except (ChannelError, AttributeError) as exc:
             raise UsageError(str(exc)) from None
-        deadline = time.monotonic() + timeout
-        self.os.wait_channel_free(target, timeout)
-        attempts = 0
-        transmitted = acknowledged = False
-        # a retry is the same command (same seq): a receiver that took it but whose acknowledgement
-        # was late acknowledges it again and does not act on it twice
-        outbox: Outbox | None = self.os.send_command(target, name, **args)
-        while outbox is not None and not acknowledged and time.monotonic() < deadline:
-            attempts += 1
-            if not outbox.done.wait(max(0.0, deadline - time.monotonic())):
-                outbox.cancel()
-                break
-            transmitted, acknowledged = transmitted or outbox.transmitted, outbox.acknowledged
-            if not retry or acknowledged:
-                break
-            outbox = self.os.resend_command(target, name, outbox, **args)
-        return {"transmitted": transmitted, "acknowledged": acknowledged, "attempts": attempts}
+        return asdict(self.os.send_until_acknowledged(target, name, args, timeout, retry))
 
     def _read(self, request: dict[str, Any]) -> dict[str, Any]:
         name = str(request.get("channel", ""))

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 from typing import Any
 
 from tokenring.channels import (
@@ -43,6 +44,16 @@ from tokenring.channels import (
 from tokenring.errors import ChannelError
 from tokenring.protocol import Channel, CommandChannel, NodeSpec, Protocol
 from tokenring.tokenpath import TokenPathHost
+
+
+@dataclass(frozen=True)
+class Delivery:
+    """What became of a command sent until acknowledged: written into the inbox at least once,
+    acknowledged, and in how many rounds."""
+
+    transmitted: bool
+    acknowledged: bool
+    attempts: int
 
 
 class ProgramAPI(TokenPathHost):
@@ -180,11 +191,6 @@ class ProgramAPI(TokenPathHost):
         assert outbox is not None
         return outbox
 
-    def resend_command(self, target: str, command: str | int, previous: Outbox, **args: Any) -> Outbox | None:
-        """``previous`` once more, under its own seq (a receiver that took it acts on it once);
-        None when a newer command to ``target`` replaced it meanwhile."""
-        return self._queue_command(target, command, args, again=previous)
-
     def _queue_command(
         self, target: str, command: str | int, args: dict[str, Any], again: Outbox | None = None
     ) -> Outbox | None:
@@ -299,21 +305,28 @@ class ProgramAPI(TokenPathHost):
         but the acknowledgement was lost (a token regenerated from an older copy), the resend
         is acknowledged again and not handed over twice. False: not acknowledged in time, the
         receiver may or may not have it; a new call sends it as a new command."""
+        return self.send_until_acknowledged(target, command, args, timeout).acknowledged
+
+    def send_until_acknowledged(
+        self, target: str, command: str | int, args: dict[str, Any], timeout: float, retry: bool = True
+    ) -> Delivery:
+        """:meth:`deliver` with its account (the PC link reports it); ``retry`` False: one round."""
         deadline = time.monotonic() + timeout
         self.wait_channel_free(target, timeout)
         outbox: Outbox | None = self.send_command(target, command, **args)
+        attempts, transmitted = 0, False
         while outbox is not None and not self.stopping:
+            attempts += 1
             while not outbox.done.wait(0.05):
                 if self.stopping or time.monotonic() > deadline:
                     outbox.cancel()
-                    return False
-            if outbox.acknowledged:
-                return True
-            if time.monotonic() > deadline:
-                return False
+                    return Delivery(transmitted, False, attempts)
+            transmitted = transmitted or outbox.transmitted
+            if outbox.acknowledged or not retry or time.monotonic() > deadline:
+                return Delivery(transmitted, outbox.acknowledged, attempts)
             time.sleep(min(0.002, max(0.0, deadline - time.monotonic())))
             outbox = self._queue_command(target, command, args, again=outbox)
-        return False
+        return Delivery(transmitted, False, attempts)
 
     def wait_channel_free(self, target: str, timeout: float) -> bool:
         """Wait until no earlier command of ours to ``target`` is still travelling."""
