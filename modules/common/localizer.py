@@ -77,9 +77,10 @@ from modules.common.walls import (
     WallDetector,
     beam_echoes,
     circle_in_beam,
-    echo_lateness_mm,
     from_frame,
     load_known_room,
+    off_axis_lateness_mm,
+    range_lateness_mm,
     ray_crossing,
     wall_position,
     wrap,
@@ -625,9 +626,8 @@ class LocalizationCore:
                 continue
             corrected = float(measured)
             if late is not None:
-                corrected -= echo_lateness_mm(
-                    corrected, late["from_mm"], late["mm_per_m"], first.foot_off, late["mm_per_deg2"]
-                )
+                corrected -= range_lateness_mm(corrected, late["from_mm"], late["mm_per_m"])
+                corrected -= off_axis_lateness_mm(first.foot_off, late["mm_per_deg2"])
             if abs(corrected - first.range_mm) > settings["max_innovation_mm"]:
                 self.ahead["unexpected"] += 1  # something the map does not have, or a lost pose
                 continue

@@ -148,13 +148,17 @@ def load_known_room(
     return walls, [(c.x, c.y, c.r) for c in world.circles]
 
 
-def echo_lateness_mm(
-    range_mm: float, from_mm: float, mm_per_m: float, off_axis: float = 0.0, mm_per_deg2: float = 0.0
-) -> float:
-    """How much later than the wall's distance a sonar's echo reads (``walls.sonar_late``, measured
-    on recorded drives): by ``mm_per_m`` beyond ``from_mm``, and by ``mm_per_deg2`` times the
-    square of the wall's normal's angle off the beam's axis (``off_axis``, rad) in degrees."""
-    return max(0.0, range_mm - from_mm) * mm_per_m / 1000.0 + mm_per_deg2 * math.degrees(off_axis) ** 2
+# how much later than the wall's distance a sonar's echo reads (walls.sonar_late, measured on
+# recorded drives): a part growing with the range, and one with the wall's angle off the beam
+def range_lateness_mm(range_mm: float, from_mm: float, mm_per_m: float) -> float:
+    """The late echo's range part: ``mm_per_m`` beyond ``from_mm``."""
+    return max(0.0, range_mm - from_mm) * mm_per_m / 1000.0
+
+
+def off_axis_lateness_mm(off_axis: float, mm_per_deg2: float) -> float:
+    """The late echo's angle part: ``mm_per_deg2`` times the square of the wall's normal's angle off
+    the beam's axis (``off_axis``, rad) in degrees (a weaker echo crosses the threshold later)."""
+    return mm_per_deg2 * math.degrees(off_axis) ** 2
 
 
 def circle_in_beam(
@@ -365,12 +369,12 @@ class WallDetector:
         sx, sy = from_frame((mount.x, mount.y), pose)
         if self.tangent:
             p = self.params
-            distance -= echo_lateness_mm(distance, p.late_from_mm, p.late_mm_per_m)
+            distance -= range_lateness_mm(distance, p.late_from_mm, p.late_mm_per_m)
         return sx, sy, wrap(pose[2] + mount.angle), distance
 
     def late_off_axis(self, normal: float, beam: float) -> float:
         """How much later (mm) an echo from a wall whose normal is ``normal`` reads in ``beam``."""
-        return echo_lateness_mm(0.0, 0.0, 0.0, wrap(normal - beam), self.params.late_mm_per_deg2)
+        return off_axis_lateness_mm(wrap(normal - beam), self.params.late_mm_per_deg2)
 
     def add(self, stamp_ms: int, pose: tuple[float, float, float], distances: list[int | None]) -> None:
         """One sonar sample (distances in mm, None = no contact) taken at odometry-frame ``pose``."""
@@ -718,7 +722,7 @@ class TravelGauge:
             if i < len(distances):
                 r = distances[i]
                 if r is not None and p.min_range_mm <= r <= p.max_range_mm:
-                    late = echo_lateness_mm(r, p.late_from_mm, p.late_mm_per_m)
+                    late = range_lateness_mm(r, p.late_from_mm, p.late_mm_per_m)
                     self.points[i].append((travel, float(r) - late, moving))
         return done
 
