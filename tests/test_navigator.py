@@ -852,3 +852,21 @@ def test_an_inner_turn_that_touches_the_corner_backs_off_and_turns_again_from_th
     nav.phase = "follow"
     escape = nav.plan(Outcome(REASON["ALERT"], inner, driven_mm=0), s, TURN_LEFT)
     assert escape[-1].label == "back off"
+
+
+def test_a_back_off_that_runs_into_something_is_a_collision_not_another_inner_turn():
+    from modules.common.pilot import Outcome
+
+    # the inner turn touched the corner; backing off from it the robot's tail hit something
+    # behind: turning into the corner again would ignore what it hit
+    nav = ExploreLeftWall(LAYOUT)
+    s = sensors_with(front=24, front_left=5)
+    nav.phase, nav.gauged, nav.lap_start = "follow", True, (0.0, 0.0, 0.0)
+    inner = Move(TURN_RIGHT, 90, 100, label="inner")
+    escape = nav.plan(Outcome(REASON["ALERT"], inner, driven_mm=0), s, TURN_LEFT)
+    assert escape[-1].label == "back off"
+    for reason in ("COLLISION", "STALL"):
+        after = nav.plan(Outcome(REASON[reason], escape[-1], driven_mm=30), s, STOPPED)
+        assert [(m.label, m.direction) for m in after][:1] == [("back off", FORWARD)], (reason, after)
+        assert not nav.retry_inner
+        nav.retry_inner = True  # as if the inner turn had alerted again

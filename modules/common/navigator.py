@@ -510,7 +510,9 @@ class ExploreLeftWall(Navigator):
             self.inner_alerts = 0
         if self.retry_inner and label in ("back off", "escape back") and self.phase == "follow":
             self.retry_inner = False
-            return self._inner(sensors)
+            ran_into = last is not None and last.reason in (REASON["STALL"], REASON["COLLISION"])
+            if not ran_into:  # a back-off that ran into something is handled as any collision
+                return self._inner(sensors)
         # (the gauge's back-off, however it ended, goes up to its wall: phase "gauge" below)
         if (
             last is not None
