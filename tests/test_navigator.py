@@ -863,10 +863,9 @@ def test_a_back_off_that_runs_into_something_is_a_collision_not_another_inner_tu
     s = sensors_with(front=24, front_left=5)
     nav.phase, nav.gauged, nav.lap_start = "follow", True, (0.0, 0.0, 0.0)
     inner = Move(TURN_RIGHT, 90, 100, label="inner")
-    escape = nav.plan(Outcome(REASON["ALERT"], inner, driven_mm=0), s, TURN_LEFT)
-    assert escape[-1].label == "back off"
-    for reason in ("COLLISION", "STALL"):
+    for reason in ("COLLISION", "STALL"):  # each time the inner turn alerts again first
+        escape = nav.plan(Outcome(REASON["ALERT"], inner, driven_mm=0), s, TURN_LEFT)
+        assert escape[-1].label == "back off"
         after = nav.plan(Outcome(REASON[reason], escape[-1], driven_mm=30), s, STOPPED)
         assert [(m.label, m.direction) for m in after][:1] == [("back off", FORWARD)], (reason, after)
         assert not nav.retry_inner
-        nav.retry_inner = True  # as if the inner turn had alerted again
