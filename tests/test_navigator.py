@@ -869,3 +869,20 @@ def test_a_back_off_that_runs_into_something_is_a_collision_not_another_inner_tu
         after = nav.plan(Outcome(REASON[reason], escape[-1], driven_mm=30), s, STOPPED)
         assert [(m.label, m.direction) for m in after][:1] == [("back off", FORWARD)], (reason, after)
         assert not nav.retry_inner
+
+
+def test_an_alert_behind_is_backed_off_forwards_not_into_it_again():
+    from modules.common.pilot import Outcome
+
+    # evaluation room 20 seed 3: after a rear sonar's ALERT the lock allows only forward; backing
+    # off in reverse drove into the same thing again, 974 times until the time was up
+    nav = ExploreLeftWall(LAYOUT)
+    s = sensors_with(front=24, front_left=5)
+    nav.phase, nav.gauged, nav.lap_start = "follow", True, (0.0, 0.0, 0.0)
+    inner = Move(TURN_RIGHT, 90, 100, label="inner")
+    escape = nav.plan(Outcome(REASON["ALERT"], inner, driven_mm=0), s, TURN_LEFT)
+    assert (escape[-1].label, escape[-1].direction) == ("back off", REVERSE)
+    for _ in range(3):  # the back-off alerted behind, and so did each escape after it
+        escape = nav.plan(Outcome(REASON["ALERT"], escape[-1], driven_mm=0), s, FORWARD)
+        assert escape[0].direction == FORWARD, escape
+        assert REVERSE not in [m.direction for m in escape], escape

@@ -502,7 +502,9 @@ class ExploreLeftWall(Navigator):
             self.retry_inner = inner and self.inner_alerts <= s.inner_retries
             backs_off = self.alerts >= s.alerts_before_back_off or self.retry_inner
             if backs_off and escape[0].direction != REVERSE:
-                escape.append(Move(REVERSE, s.alert_back_mm, s.speed_pct, label="back off"))
+                # away from what alerted: on forwards when it is behind (the lock allows only forward)
+                away = FORWARD if escape[0].direction == FORWARD else REVERSE
+                escape.append(Move(away, s.alert_back_mm, s.speed_pct, label="back off"))
             return escape
         if last is not None and not label.startswith("escape"):
             self.alerts = 0
