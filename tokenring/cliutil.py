@@ -8,6 +8,7 @@ import math
 import random
 import socket
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -26,6 +27,24 @@ class OneLineParser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+#: how long a main thread waiting for a stop sleeps at most before it looks for a signal
+SIGNAL_CHECK_S = 0.2
+
+
+def wait_for_stop(stop: threading.Event, duration: float | None = None) -> bool:
+    """Wait until ``stop`` is set (a signal handler sets it) or ``duration`` is up; True if
+    stopped. The kernel may hand SIGTERM to any thread (Zenoh's Rust ones too), and then only
+    wakes that one: a main thread asleep on an endless wait never ran its Python handler.
+    Short slices let it run within :data:`SIGNAL_CHECK_S`."""
+    deadline = None if duration is None else time.monotonic() + duration
+    while not stop.is_set():
+        left = SIGNAL_CHECK_S if deadline is None else min(SIGNAL_CHECK_S, deadline - time.monotonic())
+        if left <= 0:
+            return False
+        stop.wait(left)
+    return True
 
 
 #: the longest wait or run a number of seconds may ask for (a week): beyond it is a typo

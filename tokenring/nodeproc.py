@@ -24,7 +24,7 @@ import zenoh
 
 from tokenring import extensions, keys
 from tokenring.channels import CommandMemory
-from tokenring.cliutil import seconds
+from tokenring.cliutil import seconds, wait_for_stop
 from tokenring.control import answer_query
 from tokenring.errors import UsageError
 from tokenring.faults import FaultInjector
@@ -230,7 +230,8 @@ class NodeProcess:
         self.os.start_program(program_class, self.hardware)
 
     def wait(self, duration: float | None = None) -> None:
-        self.stop_event.wait(duration)
+        """Run until a signal, a stop request or ``duration`` ends the node."""
+        wait_for_stop(self.stop_event, duration)
 
     def shutdown(self) -> None:
         if self.resident is not None:

@@ -18,6 +18,7 @@ from modules.description.roomfile import DEFAULT_WORLD, load_world
 from modules.world.service import WorldService
 from modules.world.sim import Simulator
 from tokenring import keys
+from tokenring.cliutil import wait_for_stop
 from tokenring.errors import TokenRingError, UsageError
 from tokenring.zconfig import make_config, open_session
 
@@ -85,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
                 flush=True,
             )
             try:
-                stop.wait(args.duration)
+                wait_for_stop(stop, args.duration)
             finally:
                 service.close()
     except TokenRingError as exc:
