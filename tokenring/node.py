@@ -399,7 +399,7 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
             log.warning("leaving: %s", exc)
         quiet = max(0.05, 3 * self.timing.rounds.percentile(99, 0.0), 3 * self.timing.hop)
         deadline = time.monotonic() + (grace if grace is not None else 2.0)
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and not self.ring_stopping:  # it may come late
             now = perf_counter()
             if now - announced >= quiet and now - self._last_seen >= quiet:
                 break

@@ -50,6 +50,10 @@ log = logging.getLogger("tokenring.nodeproc")
 ControlHandler = Callable[[dict[str, Any]], Any]
 
 
+#: a node's leave that takes longer reports its steps (the launcher kills after 1.5 s)
+SLOW_LEAVE_S = 0.5
+
+
 class NodeProcess:
     """The process around a :class:`NodeOS`: session, control plane, program, shutdown."""
 
@@ -234,15 +238,33 @@ class NodeProcess:
         wait_for_stop(self.stop_event, duration)
 
     def shutdown(self) -> None:
+        """Leave the ring; a leave slower than :data:`SLOW_LEAVE_S` says which step took the time."""
+        steps: list[tuple[str, float]] = []
+        started = last = time.perf_counter()
+
+        def step(name: str) -> None:
+            nonlocal last
+            now = time.perf_counter()
+            steps.append((name, now - last))
+            last = now
+
         if self.resident is not None:
             self.resident.stop()
+            step("resident")
         if self.pclink is not None:
             self.pclink.close()
+            step("pc link")
         self.os.leave(grace=1.0)
+        step("leave")
         self.system.close()
         if self._queryable is not None:
             with contextlib.suppress(zenoh.ZError):
                 self._queryable.undeclare()
+        step("system")
+        if last - started > SLOW_LEAVE_S:
+            spent = ", ".join(f"{name} {seconds * 1000:.0f} ms" for name, seconds in steps)
+            stopping = "the ring was stopping" if self.os.ring_stopping else "the ring goes on"
+            log.info("slow leave, %.2f s (%s): %s", last - started, stopping, spent)
 
 
 def add_node_arguments(parser: argparse.ArgumentParser) -> None:
