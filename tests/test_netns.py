@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 import uuid
+from pathlib import Path
 
 import pytest
 from conftest import REPO, wait_gone
@@ -64,6 +65,14 @@ def ring_of(nodes: dict[int, dict], members: list[int]) -> dict[int, dict] | Non
     return nodes if one_ring(nodes, members) else None
 
 
+def log_tails(directory: Path, lines: int = 40) -> str:
+    """The last lines of each host's launcher log, for a failure's message."""
+    return "\n".join(
+        f"--- {path.name}\n" + "\n".join(path.read_text().splitlines()[-lines:])
+        for path in sorted(directory.glob("host-*.log"))
+    )
+
+
 @pytest.mark.timeout(400)  # its hang guards: a loaded machine's status queries are slow
 def test_a_ring_across_two_hosts_splits_on_a_cut_and_heals_into_one(procs, tmp_path):
     hosts = Hosts()
@@ -74,6 +83,7 @@ def test_a_ring_across_two_hosts_splits_on_a_cut_and_heals_into_one(procs, tmp_p
     # router-to-router link crosses the cable (the deployment the README recommends across hosts)
     common = ["--ring", ring, "--bitrate", "10M", "--no-programs", "--no-world", "--router"]
     launchers = []
+    seen: dict[str, dict[int, tuple]] = {}  # each host's last answer: successor and epoch per node
     up = [sys.executable, "-m", "tokenring", "up", *common]
     try:
         # output to files: an unread pipe would fill up and stall the launcher's writer
@@ -93,6 +103,12 @@ def test_a_ring_across_two_hosts_splits_on_a_cut_and_heals_into_one(procs, tmp_p
                 )
             )
         everyone, side_a, side_b = [10, 20, 30, 40, 50, 60, 70, 80], [10, 20, 30, 40], [50, 60, 70, 80]
+
+        def healed(ns: str, endpoint: str) -> bool:
+            nodes = status(hosts, ns, ring, endpoint)
+            seen[ns] = {i: (n["successor"], tuple(n["epoch"])) for i, n in sorted(nodes.items())}
+            return one_ring(nodes, everyone)
+
         joined = wait_until(
             lambda: ring_of(status(hosts, hosts.a, ring, ep_a), everyone), 60, "one ring across both hosts"
         )
@@ -112,13 +128,11 @@ def test_a_ring_across_two_hosts_splits_on_a_cut_and_heals_into_one(procs, tmp_p
             dead = side[node]["stats"]["successors_declared_dead"]
             assert dead > joined[node]["stats"]["successors_declared_dead"], (node, dead)
         hosts.mend()
-        wait_until(
-            lambda: one_ring(status(hosts, hosts.a, ring, ep_a), everyone), 60, "one ring again after the cut"
-        )
+        wait_until(lambda: healed(hosts.a, ep_a), 60, "one ring again after the cut")
         # host B's view too: one status query may miss a node on a loaded machine, so asked again
-        wait_until(
-            lambda: one_ring(status(hosts, hosts.b, ring, ep_b), everyone), 60, "host B in the one ring"
-        )
+        wait_until(lambda: healed(hosts.b, ep_b), 60, "host B in the one ring")
+    except AssertionError as failure:  # what each host saw last, and what its nodes said
+        raise AssertionError(f"{failure}\nlast seen: {seen}\n{log_tails(tmp_path)}") from None
     finally:
         pids = [p.pid for p in launchers]
         for launcher in launchers:

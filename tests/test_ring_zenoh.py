@@ -252,9 +252,10 @@ def test_up_with_a_duration_and_sniff_json_exits_zero_and_leaves_nothing(procs, 
     assert time.monotonic() - started >= 30  # ... and not before the duration is up
     assert wait_gone(pids, 30) == []
     output = launcher.stdout.read()
-    assert "stopped (exit code 0)" in output
-    assert "every node has exited" not in output  # it ended the ring, the ring did not end it
-    assert "did not stop" not in output  # each node left on SIGTERM, none had to be killed
+    assert "stopped (exit code 0)" in output, output[-3000:]
+    # it ended the ring, the ring did not end it
+    assert "every node has exited" not in output, output[-3000:]
+    assert "did not stop" not in output, output[-3000:]  # each left on SIGTERM, none was killed
     for name in ("main", "charger"):
         assert f"{name} |" in output  # log lines are prefixed with the node's name
 
