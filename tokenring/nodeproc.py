@@ -262,7 +262,7 @@ class NodeProcess:
                 self._queryable.undeclare()
         step("system")
         if last - started > SLOW_LEAVE_S:
-            spent = ", ".join(f"{name} {seconds * 1000:.0f} ms" for name, seconds in steps)
+            spent = ", ".join(f"{name} {took * 1000:.0f} ms" for name, took in steps)
             stopping = "the ring was stopping" if self.os.ring_stopping else "the ring goes on"
             log.info("slow leave, %.2f s (%s): %s", last - started, stopping, spent)
 
