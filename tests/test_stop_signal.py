@@ -2,7 +2,7 @@
 
 A signal sent to a process may land on any of its threads; Python runs the handler only on the
 main thread, and only once that thread wakes. A node asleep on an endless wait for its stop
-never woke: the launcher killed it after 1.5 s (CI saw it as "did not stop ... killing map").
+never woke: the launcher killed it after 1.5 s (CI saw "did not stop in 1.5 s: killing lcd").
 """
 
 from __future__ import annotations
