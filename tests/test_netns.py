@@ -104,21 +104,16 @@ def test_a_ring_across_two_hosts_splits_on_a_cut_and_heals_into_one(procs, tmp_p
             )
         everyone, side_a, side_b = [10, 20, 30, 40, 50, 60, 70, 80], [10, 20, 30, 40], [50, 60, 70, 80]
 
-        def healed(ns: str, endpoint: str) -> bool:
+        def ring_seen(ns: str, endpoint: str, members: list[int]) -> dict[int, dict] | None:
+            """``ring_of`` the host's status answer, which is kept for a failure's message."""
             nodes = status(hosts, ns, ring, endpoint)
             seen[ns] = {i: (n["successor"], tuple(n["epoch"])) for i, n in sorted(nodes.items())}
-            return one_ring(nodes, everyone)
+            return ring_of(nodes, members)
 
-        joined = wait_until(
-            lambda: ring_of(status(hosts, hosts.a, ring, ep_a), everyone), 60, "one ring across both hosts"
-        )
+        joined = wait_until(lambda: ring_seen(hosts.a, ep_a, everyone), 60, "one ring across both hosts")
         hosts.cut()
-        split_a = wait_until(
-            lambda: ring_of(status(hosts, hosts.a, ring, ep_a), side_a), 60, "host A's own ring"
-        )
-        split_b = wait_until(
-            lambda: ring_of(status(hosts, hosts.b, ring, ep_b), side_b), 60, "host B's own ring"
-        )
+        split_a = wait_until(lambda: ring_seen(hosts.a, ep_a, side_a), 60, "host A's own ring")
+        split_b = wait_until(lambda: ring_seen(hosts.b, ep_b, side_b), 60, "host B's own ring")
         # the split was found well before Zenoh's 10 s lease: by the pass acknowledgements. The
         # nodes that pass across the cable (compass 40 to copro 50, charger 80 to main 10)
         # declared their successor dead after unanswered passes; had the lease dropped the other
@@ -128,9 +123,9 @@ def test_a_ring_across_two_hosts_splits_on_a_cut_and_heals_into_one(procs, tmp_p
             dead = side[node]["stats"]["successors_declared_dead"]
             assert dead > joined[node]["stats"]["successors_declared_dead"], (node, dead)
         hosts.mend()
-        wait_until(lambda: healed(hosts.a, ep_a), 60, "one ring again after the cut")
+        wait_until(lambda: ring_seen(hosts.a, ep_a, everyone), 60, "one ring again after the cut")
         # host B's view too: one status query may miss a node on a loaded machine, so asked again
-        wait_until(lambda: healed(hosts.b, ep_b), 60, "host B in the one ring")
+        wait_until(lambda: ring_seen(hosts.b, ep_b, everyone), 60, "host B in the one ring")
     except AssertionError as failure:  # what each host saw last, and what its nodes said
         raise AssertionError(f"{failure}\nlast seen: {seen}\n{log_tails(tmp_path)}") from None
     finally:
