@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -20,11 +21,18 @@ import yaml
 from shapely import affinity
 from shapely.geometry import LineString, Point, Polygon, box
 from shapely.geometry.polygon import orient
+from shapely.ops import unary_union
 
 #: the robot needs this much room round a pillar or stub to pass it (its radius is 190 mm)
 PASSAGE_MM = 700.0
 #: the start pose keeps this far from everything
 START_CLEARANCE_MM = 500.0
+#: every stretch of the outline lies this near somewhere the robot's centre can get to (a gap
+#: narrower than the robot, ``ROBOT_ROOM_MM`` each side, is a wall): two notches side by side
+#: once left a pocket 0.6 m wide whose only way in was 11 cm wide, 2 m of walls nobody could map;
+#: a stub's tip 38 cm from a notch's corner another, 2.4 m
+OUTLINE_REACH_MM = 600.0
+ROBOT_ROOM_MM = 220.0
 MIN_WALLS, MAX_WALLS = 5, 14
 
 
@@ -86,7 +94,20 @@ def _cut(room: Polygon, piece: Polygon) -> Polygon:
     if len(coords) > MAX_WALLS or rest.area < 0.6 * room.area:
         return room
     sides = [math.dist(a, b) for a, b in zip(coords, coords[1:] + coords[:1], strict=True)]
-    return rest if min(sides) >= 300 else room
+    return rest if min(sides) >= 300 and _within_reach(rest) else room
+
+
+def _within_reach(room: Polygon, stubs: Sequence[LineString] = ()) -> bool:
+    """Every point of the outline and the stubs lies within :data:`OUTLINE_REACH_MM` of the
+    largest piece of the room the robot's centre can go in (no pocket behind a gap it does not
+    fit through)."""
+    free = room.difference(unary_union([stub.buffer(1.0) for stub in stubs])) if stubs else room
+    inner = free.buffer(-ROBOT_ROOM_MM)
+    if inner.is_empty:
+        return False
+    largest = max(getattr(inner, "geoms", [inner]), key=lambda piece: piece.area)
+    reach = largest.buffer(OUTLINE_REACH_MM)
+    return bool(reach.covers(room.exterior) and all(reach.covers(stub) for stub in stubs))
 
 
 def _pillar(rng: np.random.Generator, free: Any) -> tuple[str, Any] | None:
@@ -143,7 +164,11 @@ def generate_room(seed: int, size: tuple[float, float] | None = None) -> dict[st
     taken = room.exterior.buffer(PASSAGE_MM)
     for _ in range(int(rng.integers(0, 3))):
         stub = _stub(rng, room)
-        if stub is not None and all(stub.distance(other) >= PASSAGE_MM for other in stubs):
+        if (
+            stub is not None
+            and all(stub.distance(other) >= PASSAGE_MM for other in stubs)
+            and _within_reach(room, [*stubs, stub])
+        ):
             stubs.append(stub)
             taken = taken.union(stub.buffer(PASSAGE_MM))
     for _ in range(int(rng.integers(0, 4))):
