@@ -195,3 +195,29 @@ def test_the_wall_ahead_bounds_the_error_along_a_long_move_honestly() -> None:
     # the move's step scale is learnt from the ranges: nearer the truth than the prior (1.0)
     scale_error = sum(abs(est - true) for *_, est, true in with_ahead) / TRIALS
     assert scale_error < sum(abs(1.0 - true) for *_, true in with_ahead) / TRIALS / 2
+
+
+def test_the_rear_sonar_ranges_a_wall_behind_as_the_front_one_does_ahead() -> None:
+    # facing away from the wall: the rear sonar (188 mm behind the reference point) reads it
+    wall = KnownWall.segment(-1500.0, -1000.0, -1500.0, 1000.0)
+    core = core_facing([wall], (0.0, 0.0, 0.0), sensors=[REAR])
+    # predicted 1312 mm; it reads 1270 (late echo 14 mm: 56 mm less), twice
+    for k in (1, 2):
+        core.process_synchronised(k, 100 * k, {"sonar": rear_record(1270.0)})
+    assert core.ahead["used"] == 1, core.ahead
+    x, y, _ = core.ekf.pose  # type: ignore[union-attr]
+    assert -60.0 <= x < -20.0  # towards the wall behind, by most of it
+    assert abs(y) < 1.0
+    front_only = core_facing([wall], (0.0, 0.0, 0.0), sensors=[FRONT])
+    for k in (1, 2):
+        front_only.process_synchronised(k, 100 * k, {"sonar": rear_record(1270.0)})
+    assert front_only.ahead["used"] == 0 and front_only.ekf.pose[0] == 0.0  # type: ignore[union-attr]
+
+
+REAR = 5
+
+
+def rear_record(range_mm: float) -> dict[str, Any]:
+    distances: list[int | None] = [None] * 8
+    distances[REAR] = round(range_mm / 10) * 10
+    return {"walls": [], "distances_mm": distances, "at": [0.0, 0.0, 0.0]}
