@@ -238,3 +238,45 @@ def test_a_long_way_to_a_place_left_gets_three_moves_per_waypoint() -> None:
         moves = nav.plan(Outcome(REASON["DONE"], drive, driven_mm=500), sensors, STOPPED)
         assert moves, (n, len(way))
     assert nav.phase == "approach"  # past the last waypoint: on to the place itself
+
+
+def test_a_mapped_wall_across_the_way_there_is_gone_round_by_a_new_plan_then_given_up() -> None:
+    from modules.common.navigator import ExploreLeftWall
+    from modules.common.pilot import FORWARD, REASON, STOPPED, Move, Outcome, Sensors
+    from modules.common.vectorgen import default_layout
+
+    # floor driven all over a 6 x 4 m area, a wall seen but not mapped at its far end: the way
+    # there is planned straight. Then a partition across it (x = 2 m, |y| < 1 m) blocks the way,
+    # its side mapped on the lap: nothing new there, but the place lies beyond it
+    grid = SeenGrid((0.0, 0.0), mounts=AHEAD)
+    for y in range(-2000, 2001, 200):
+        for x in range(-1000, 5001, 40):
+            grid.add((float(x), float(y), 0.0), [NO_ECHO])
+    for y in range(-600, 601, 50):
+        grid.hit[cell_of(grid, 5200.0, float(y))] = True
+    nav = ExploreLeftWall(default_layout())
+    nav.seen, nav.trail = grid, [(0.0, 0.0)]
+    sensors = Sensors(distances=[255] * 8)
+    sensors.pose = (0.0, 0.0, 0.0)
+    assert nav._next_frontier(sensors) and nav.phase == "goto"
+    target = nav.target
+    assert target is not None and target[0] > 5000
+    for y in range(-1000, 1001, 50):
+        cell = cell_of(grid, 2000.0, float(y))
+        grid.hit[cell] = grid.mapped[cell] = True
+    partition = LineString([(2000, -1000), (2000, 1000)])
+
+    sensors.distances = [255] * 8
+    for index in nav.layout.front:
+        sensors.distances[index] = 20  # the partition right ahead
+    sensors.pose = (2000.0 - 200.0 - 188.0, 0.0, 0.0)
+    drive = Move(FORWARD, 5000, 100, label="goto")
+    blocked = Outcome(REASON["CLOSE"], drive, driven_mm=1600, trigger="front_within")
+    for replan in range(1, WallSettings().goto_replans + 1):
+        assert nav.plan(blocked, sensors, STOPPED), replan
+        assert nav.phase == "goto" and nav.target == target, (replan, nav.note)
+        way = [sensors.pose[:2], *nav.goto]
+        assert all(LineString([a, b]).distance(partition) >= 200 for a, b in itertools.pairwise(way)), way
+        assert "another way" in nav.note
+    nav.plan(blocked, sensors, STOPPED)  # blocked once more: the place is given up
+    assert nav.phase != "goto" and target in nav.frontier_goals

@@ -207,6 +207,8 @@ class WallSettings:
     frontier_arrived_mm: float = 600.0  # blocked this near the place: there (follow what blocks)
     #: moves on the way there at most: this many, and 3 more for each waypoint (aim, check, drive)
     goto_moves: int = 12
+    #: a wall mapped already blocked the way short of the place: plan it again this often
+    goto_replans: int = 2
     # done: back to where the exploration began, facing as it did then
     return_home: bool = True
     home_tolerance_mm: float = 200.0
@@ -302,6 +304,7 @@ class ExploreLeftWall(Navigator):
         self.frontier_follow = False  # following a wall found beyond a frontier (not an island)
         self.goto: list[tuple[float, float]] = []  # waypoints to a place left to explore
         self.goto_moves_left = 0  # on the way there, before the place is given up
+        self.goto_replans = 0  # ways there planned again after a mapped wall blocked this one
         self.home: tuple[float, float, float] | None = None  # the pose the exploration began at
         self.home_reached = False
         self.detours = 0
@@ -581,7 +584,8 @@ class ExploreLeftWall(Navigator):
         if self.phase == "goto":  # the way to a place left to explore, through space seen free
             if label == "goto" and blocked:
                 if self._known_ahead(sensors):  # a wall mapped already: nothing new there
-                    return self._next_island(sensors)
+                    replanned = self._replan_goto(sensors)
+                    return replanned if replanned is not None else self._next_island(sensors)
                 return self._onto_island(sensors)  # there, or a wall nobody followed: follow it
             return self._goto_next(sensors)
 
@@ -833,6 +837,7 @@ class ExploreLeftWall(Navigator):
                     self.target, self.frontier_follow, self.goto = goal, True, route
                     self.lap_start, self.follow_mm = None, 0
                     self.goto_moves_left = s.goto_moves + 3 * len(route)
+                    self.goto_replans = 0
                     self.path = []
                     self.phase, self.last_follow = "goto", None
                     self.commands.append(("copro", "FLUSH", {}))
@@ -863,6 +868,25 @@ class ExploreLeftWall(Navigator):
         return self._turn(bearing, "aim", sensors) or [
             self._forward(max(50, round(math.dist(here, (tx, ty)))), "goto")
         ]
+
+    def _replan_goto(self, sensors: Sensors) -> list[Move] | None:
+        """A mapped wall blocked the way short of the place: plan the way again from here, the
+        echo that blocked it now on the grid (a partition's end the first plan cut past), up to
+        ``goto_replans`` times; None: at the place already, out of replans, or no way known."""
+        s = self.s
+        if sensors.pose is None or self.seen is None or self.target is None:
+            return None
+        here = sensors.pose[:2]
+        if self.goto_replans >= s.goto_replans or math.dist(here, self.target) <= s.frontier_arrived_mm:
+            return None
+        route = self.seen.route(here, self.target, s.route_clearance_mm)
+        if route is None:
+            return None
+        self.goto_replans += 1
+        self.goto = route
+        self.goto_moves_left = s.goto_moves + 3 * len(route)
+        self.note = f"to a place left to explore ({len(self.frontier_goals)}), another way"
+        return self._goto_next(sensors)
 
     def _untried_places(self) -> tuple[list[tuple[float, float]], list[tuple[float, float]]]:
         """The places left to explore not tried yet: walls seen but not mapped, and frontiers
