@@ -93,9 +93,9 @@ DEFAULTS: dict[str, Any] = {
 #: travel gauge's settings (out to 1.4 m, known walls only, checked where its ranges were read; off),
 #: the compass's measured accuracy, no compass reading bent by the motors' start or stop, a floor
 #: under the pose's σ across a wall (its fits share an error) and the floor's mean step scale as a
-#: state, from which each move's scale starts, and the front and rear sonars' ranges to a wall ahead
-#: or behind. The built-in defaults keep the earlier values: exploration mode builds on them, and
-#: old logs replay as they ran
+#: state, from which each move's scale starts, and the front sonar's range to a wall ahead. The
+#: built-in defaults keep the earlier values: exploration mode builds on them, and old logs replay
+#: as they ran
 REPOSITORY_SETTINGS: dict[str, Any] = {
     "filter": {
         "compass": {"sigma_deg": 0.5, "settle_ms": 400},
@@ -109,7 +109,7 @@ REPOSITORY_SETTINGS: dict[str, Any] = {
         "shared_sigma_mm": 8.0,
         "min_span_side_mm": 220.0,
         "bias_floor_mm": 8.0,
-        "ahead": {"enabled": True, "sensors": [1, 5]},
+        "ahead": {"enabled": True},
     },
 }
 
