@@ -20,6 +20,7 @@ from modules.common.locconfig import default_config_path, load_config
 from modules.common.walls import KnownWall, beam_echoes
 
 FRONT = 1
+REAR = 5
 FRONT_X_MM = 188.0  # the front sonar's face ahead of the reference point (robot.py)
 HALF_CONE = math.radians(25.0)
 
@@ -212,9 +213,6 @@ def test_the_rear_sonar_ranges_a_wall_behind_as_the_front_one_does_ahead() -> No
     for k in (1, 2):
         front_only.process_synchronised(k, 100 * k, {"sonar": rear_record(1270.0)})
     assert front_only.ahead["used"] == 0 and front_only.ekf.pose[0] == 0.0  # type: ignore[union-attr]
-
-
-REAR = 5
 
 
 def rear_record(range_mm: float) -> dict[str, Any]:
