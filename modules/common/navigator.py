@@ -834,10 +834,9 @@ class ExploreLeftWall(Navigator):
                 self.frontier_goals.append(goal)
                 route = self.seen.route(here, goal, s.route_clearance_mm)
                 if route is not None and len(self.frontier_goals) <= s.max_frontiers:
-                    self.target, self.frontier_follow, self.goto = goal, True, route
-                    self.lap_start, self.follow_mm = None, 0
-                    self.goto_moves_left = s.goto_moves + 3 * len(route)
-                    self.goto_replans = 0
+                    self.target, self.frontier_follow = goal, True
+                    self._set_way(route)
+                    self.lap_start, self.follow_mm, self.goto_replans = None, 0, 0
                     self.path = []
                     self.phase, self.last_follow = "goto", None
                     self.commands.append(("copro", "FLUSH", {}))
@@ -869,6 +868,11 @@ class ExploreLeftWall(Navigator):
             self._forward(max(50, round(math.dist(here, (tx, ty)))), "goto")
         ]
 
+    def _set_way(self, route: list[tuple[float, float]]) -> None:
+        """The waypoints to the place, and the moves allowed to get there (3 per waypoint)."""
+        self.goto = route
+        self.goto_moves_left = self.s.goto_moves + 3 * len(route)
+
     def _replan_goto(self, sensors: Sensors) -> list[Move] | None:
         """A mapped wall blocked the way short of the place: plan the way again from here, the
         echo that blocked it now on the grid (a partition's end the first plan cut past), up to
@@ -883,8 +887,7 @@ class ExploreLeftWall(Navigator):
         if route is None:
             return None
         self.goto_replans += 1
-        self.goto = route
-        self.goto_moves_left = s.goto_moves + 3 * len(route)
+        self._set_way(route)
         self.note = f"to a place left to explore ({len(self.frontier_goals)}), another way"
         return self._goto_next(sensors)
 
