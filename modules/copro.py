@@ -53,8 +53,15 @@ EXPLORATION_CONFIG: dict[str, Any] = {
         "estimate": ["glide", "step_scale"],
         "noise": {"rotation_rad_per_mm": 0.00002, "step_scale_per_move": 0.001},
         "initial": {"step_scale_sigma": 0.01},
-        # out to 1.4 m: the late echo (walls.sonar_late) is taken off each range
-        "travel": {"enabled": True, "max_range_mm": 1400.0},
+        # out to 1.4 m: the late echo (walls.sonar_late) is taken off each range; on a wall the
+        # own map lacks, only a precise fit, and not one far below the filter's (cos φ reads low)
+        "travel": {
+            "enabled": True,
+            "max_range_mm": 1400.0,
+            "unknown_wall_bound": True,
+            "unknown_wall_bound_sigma": 2.0,
+            "unknown_wall_max_sigma": 0.006,
+        },
         "compass": {"settle_ms": 400},
     },
     # own-map walls: every fit used, as when this was tuned (repeat_after_mm was measured on

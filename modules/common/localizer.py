@@ -306,7 +306,15 @@ class LocalizationCore:
         self.ahead_corrected_at: dict[int, tuple[float, float]] = {}
         #: (sensor, wall) -> (stamp, innovation) of the last range that passed the other checks
         self.ahead_candidate: dict[tuple[int, int], tuple[int, float]] = {}
-        self.travel = {"used": 0, "assumed_square": 0, "oblique": 0, "unknown": 0, "rejected": 0, "waited": 0}
+        self.travel = {
+            "used": 0,
+            "assumed_square": 0,
+            "below_bound": 0,
+            "oblique": 0,
+            "unknown": 0,
+            "rejected": 0,
+            "waited": 0,
+        }
         #: fits whose wall the robot's own map does not have yet: (stamp, beam origin, direction, fit)
         self.pending_travel: list[tuple[int, tuple[float, float], float, dict[str, Any]]] = []
         self._last_loss_message = -1000
@@ -727,6 +735,18 @@ class LocalizationCore:
             if not settings["unknown_wall"]:
                 self.travel["unknown"] += 1
                 return
+            if travel["sigma"] > settings["unknown_wall_max_sigma"]:
+                self.travel["unknown"] += 1  # a short or scattered series on such a wall reads low
+                return
+            if settings["unknown_wall_bound"]:
+                # a wall met φ off square reads the scale low by cos φ: a fit on a wall of unknown
+                # incidence bounds the scale from below; one far below the filter's says nothing
+                margin = settings["unknown_wall_bound_sigma"] * math.hypot(
+                    travel["sigma"], settings["model_sigma"]
+                )
+                if travel["scale"] < ekf.step_scale - margin:
+                    self.travel["below_bound"] += 1
+                    return
             self.travel["assumed_square"] += 1
             incidence = 0.0  # no wall of the map there: taken as square on
         if incidence > math.radians(settings["max_incidence_deg"]):
