@@ -15,7 +15,7 @@ from bench.closedloop import ClosedLoop
 from modules.common.frontier import FrontierSettings, SeenGrid
 from modules.common.navigator import WallSettings
 from modules.description.generate import generate_room, room_yaml
-from modules.description.robot import SonarMount
+from modules.description.robot import SONAR_OUTLINE_MM, SonarMount
 
 NO_ECHO = 255
 #: one sonar at the robot's centre looking straight ahead: the grid's geometry without the body's
@@ -269,7 +269,7 @@ def test_a_mapped_wall_across_the_way_there_is_gone_round_by_a_new_plan_then_giv
     sensors.distances = [255] * 8
     for index in nav.layout.front:
         sensors.distances[index] = 20  # the partition right ahead
-    sensors.pose = (2000.0 - 200.0 - 188.0, 0.0, 0.0)  # its front 20 cm from the partition
+    sensors.pose = (2000.0 - 200.0 - SONAR_OUTLINE_MM, 0.0, 0.0)  # its front 20 cm from the partition
     drive = Move(FORWARD, 5000, 100, label="goto")
     blocked = Outcome(REASON["CLOSE"], drive, driven_mm=1600, trigger="front_within")
     for replan in range(1, WallSettings().goto_replans + 1):

@@ -728,32 +728,28 @@ class LocalizationCore:
         self.pending_travel = kept
 
     def _use_travel(self, travel: dict[str, Any], incidence: float | None, stamp: int) -> None:
+        """Correct the step scale with one fit, its wall met at ``incidence`` (None: not known)."""
         ekf = self.ekf
         assert ekf is not None
         settings = self.config["filter"]["travel"]
+        sigma = math.hypot(travel["sigma"], settings["model_sigma"])
         if incidence is None:
-            if not settings["unknown_wall"]:
+            # a short or scattered series on such a wall reads the scale low on average
+            if not settings["unknown_wall"] or travel["sigma"] > settings["unknown_wall_max_sigma"]:
                 self.travel["unknown"] += 1
                 return
-            if travel["sigma"] > settings["unknown_wall_max_sigma"]:
-                self.travel["unknown"] += 1  # a short or scattered series on such a wall reads low
+            # a wall met φ off square reads the scale low by cos φ: a fit on a wall of unknown
+            # incidence bounds the scale from below; one far below the filter's says nothing
+            bound = ekf.step_scale - settings["unknown_wall_bound_sigma"] * sigma
+            if settings["unknown_wall_bound"] and travel["scale"] < bound:
+                self.travel["below_bound"] += 1
                 return
-            if settings["unknown_wall_bound"]:
-                # a wall met φ off square reads the scale low by cos φ: a fit on a wall of unknown
-                # incidence bounds the scale from below; one far below the filter's says nothing
-                margin = settings["unknown_wall_bound_sigma"] * math.hypot(
-                    travel["sigma"], settings["model_sigma"]
-                )
-                if travel["scale"] < ekf.step_scale - margin:
-                    self.travel["below_bound"] += 1
-                    return
             self.travel["assumed_square"] += 1
             incidence = 0.0  # no wall of the map there: taken as square on
         if incidence > math.radians(settings["max_incidence_deg"]):
             self.travel["oblique"] += 1
             return
         scale = travel["scale"] / math.cos(incidence)
-        sigma = math.hypot(travel["sigma"], settings["model_sigma"])
         if ekf.correct_step_scale(scale, sigma):
             self.travel["used"] += 1
             self.message(
