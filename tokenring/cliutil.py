@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import random
+import select
+import signal
 import socket
 import sys
 import threading
@@ -29,22 +32,75 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
-#: how long a main thread waiting for a stop sleeps at most before it looks for a signal
+#: how long a wait for a stop sleeps at most where it cannot be woken by a signal's byte (a plain
+#: :class:`threading.Event`, or a thread other than the main one)
 SIGNAL_CHECK_S = 0.2
+
+
+class StopEvent(threading.Event):
+    """A process's stop flag that :func:`wait_for_stop` sleeps on without polling.
+
+    Setting it, from any thread or a signal handler, also writes a byte to a socket the waiting
+    main thread selects on; the same socket is the signal module's wake-up fd, so a signal the
+    kernel hands to another thread (one of Zenoh's) wakes the main thread at once too.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.wake_reader, self._wake_writer = socket.socketpair()
+        self.wake_reader.setblocking(False)
+        self._wake_writer.setblocking(False)
+
+    def set(self) -> None:
+        """Set the flag and wake the waiter."""
+        super().set()
+        # a full buffer holds wake-ups already; a closing process may have shut the socket
+        with contextlib.suppress(OSError):
+            self._wake_writer.send(b"\0")
+
+    @property
+    def wake_fd(self) -> int:
+        """The socket a signal's C handler writes to (``signal.set_wakeup_fd``)."""
+        return self._wake_writer.fileno()
 
 
 def wait_for_stop(stop: threading.Event, duration: float | None = None) -> bool:
     """Wait until ``stop`` is set (a signal handler sets it) or ``duration`` is up; True if
-    stopped. The kernel may hand SIGTERM to any thread (Zenoh's Rust ones too), and then only
-    wakes that one: a main thread asleep on an endless wait never ran its Python handler.
-    Short slices let it run within :data:`SIGNAL_CHECK_S`."""
+    stopped.
+
+    The kernel may hand SIGTERM to any thread (Zenoh's Rust ones too), and then only wakes that
+    one: a main thread asleep on an endless wait never runs its Python handler. A
+    :class:`StopEvent` waited on from the main thread sleeps in ``select`` on its socket, which
+    the signal's C handler writes to whichever thread took it, so an idle node never wakes;
+    anything else waits in slices of :data:`SIGNAL_CHECK_S`.
+    """
     deadline = None if duration is None else time.monotonic() + duration
-    while not stop.is_set():
-        left = SIGNAL_CHECK_S if deadline is None else min(SIGNAL_CHECK_S, deadline - time.monotonic())
-        if left <= 0:
-            return False
-        stop.wait(left)
-    return True
+    if not isinstance(stop, StopEvent) or threading.current_thread() is not threading.main_thread():
+        while not stop.is_set():
+            left = SIGNAL_CHECK_S if deadline is None else min(SIGNAL_CHECK_S, deadline - time.monotonic())
+            if left <= 0:
+                return False
+            stop.wait(left)
+        return True
+    previous = signal.set_wakeup_fd(stop.wake_fd, warn_on_full_buffer=False)
+    try:
+        while not stop.is_set():
+            left = None if deadline is None else deadline - time.monotonic()
+            if left is not None and left <= 0:
+                return False
+            # the handler of a signal taken by another thread runs once this thread is back in
+            # bytecode, right after select returns; its stop.set() then ends the loop
+            select.select([stop.wake_reader], [], [], left)
+            _drain(stop.wake_reader)
+        return True
+    finally:
+        signal.set_wakeup_fd(previous)
+
+
+def _drain(reader: socket.socket) -> None:
+    with contextlib.suppress(BlockingIOError, InterruptedError):
+        while reader.recv(64):
+            pass
 
 
 #: the longest wait or run a number of seconds may ask for (a week): beyond it is a typo

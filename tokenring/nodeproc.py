@@ -13,7 +13,6 @@ import gc
 import logging
 import signal
 import sys
-import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -24,7 +23,7 @@ import zenoh
 
 from tokenring import extensions, keys
 from tokenring.channels import CommandMemory
-from tokenring.cliutil import seconds, wait_for_stop
+from tokenring.cliutil import StopEvent, seconds, wait_for_stop
 from tokenring.control import answer_query
 from tokenring.errors import UsageError
 from tokenring.faults import FaultInjector
@@ -93,7 +92,7 @@ class NodeProcess:
             expected_nodes=expected_nodes,
         )
         install_profile(self.os, profile, bitrate, time.perf_counter())
-        self.stop_event = threading.Event()
+        self.stop_event = StopEvent()
         self.control: dict[str, ControlHandler] = {
             "stats": lambda _: self._stats(),
             "rounds": lambda _: self.os.round_times(),
@@ -335,7 +334,7 @@ def run_node(args: argparse.Namespace) -> int:
         listen=args.listen or [],
         config_file=args.zenoh_config,
     )
-    stop = threading.Event()
+    stop = StopEvent()
 
     def on_signal(signum: int, _frame: Any) -> None:
         stop.set()

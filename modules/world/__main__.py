@@ -9,7 +9,6 @@ import argparse
 import logging
 import signal
 import sys
-import threading
 from typing import Any
 
 from modules.description import keys as robot_keys
@@ -18,7 +17,7 @@ from modules.description.roomfile import DEFAULT_WORLD, load_world
 from modules.world.service import WorldService
 from modules.world.sim import Simulator
 from tokenring import keys
-from tokenring.cliutil import wait_for_stop
+from tokenring.cliutil import StopEvent, wait_for_stop
 from tokenring.errors import TokenRingError, UsageError
 from tokenring.zconfig import make_config, open_session
 
@@ -61,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=getattr(logging, args.log_level.upper()), format="%(levelname)-5s %(message)s")
-    stop = threading.Event()
+    stop = StopEvent()
 
     def on_signal(_signum: int, _frame: Any) -> None:
         stop.set()
