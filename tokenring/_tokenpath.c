@@ -293,14 +293,16 @@ static int forward(TokenPath *self, double t_in)
         return -1;
     work[self->o_sid] = (unsigned char)self->node_id;
     work[self->o_did] = (unsigned char)did;
-    int want_ack;
+    int want_ack, arm_now;
     if (did == self->node_id)
-        want_ack = 0;
-    else if (self->ack_adaptive)
-        want_ack = did != self->confirmed_did || t_in < self->recovery_until ||
-                   t_in - self->confirmed_at > self->ack_interval;
-    else
-        want_ack = self->ack_always;
+        want_ack = arm_now = 0;
+    else if (self->ack_adaptive) {
+        /* a new link or a recovering ring: the watchdog arms the ack timer now; a link's
+           periodic confirmation is checked on the watchdog's next wake (see tokenpath.py) */
+        arm_now = did != self->confirmed_did || t_in < self->recovery_until;
+        want_ack = arm_now || t_in - self->confirmed_at > self->ack_interval;
+    } else
+        want_ack = arm_now = self->ack_always;
     work[self->o_epoch] = (unsigned char)(want_ack ? self->epoch | ack_requested : self->epoch);
     work[self->o_origin] = (unsigned char)self->origin;
     unsigned int crc = crc16_arc(work, self->token_size);
@@ -339,7 +341,7 @@ static int forward(TokenPath *self, double t_in)
     self->last_sent_time = now(); /* also ends the handler's time */
     if (transmit(self, (int)did) < 0)
         return -1;
-    return want_ack ? wake(self) : 0;
+    return arm_now ? wake(self) : 0;
 }
 
 /* ------------------------------------------------------------------------------------------ */

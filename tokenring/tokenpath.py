@@ -325,15 +325,16 @@ class PyTokenPath(TokenPathHost):
         work[self._o_sid] = self.node_id
         work[self._o_did] = did
         if did == self.node_id:
-            want_ack = False
+            want_ack = arm_now = False
         elif self._ack_adaptive:
-            want_ack = (
-                did != self._confirmed_did
-                or t_in < self._recovery_until
-                or t_in - self._confirmed_at > self._ack_interval
-            )
+            # a new link or a recovering ring: wake the watchdog to arm the ack timer now. A
+            # link's periodic confirmation is checked on its next wake instead: if the successor
+            # hung, the token is lost and regenerated as after any unasked pass, and at 255 nodes
+            # two wakes per confirmation were a third of a node's Python CPU per visit
+            arm_now = did != self._confirmed_did or t_in < self._recovery_until
+            want_ack = arm_now or t_in - self._confirmed_at > self._ack_interval
         else:
-            want_ack = self._ack_always
+            want_ack = arm_now = self._ack_always
         work[self._o_epoch] = self._epoch | ACK_REQUESTED if want_ack else self._epoch
         work[self._o_origin] = self._origin
         size = self._token_size
@@ -361,7 +362,7 @@ class PyTokenPath(TokenPathHost):
         self._ack_pending = want_ack or (self._ack_pending and self._retries > 0)
         self._last_sent_time = perf_counter()  # also ends the handler's time (see _on_frame)
         self._transmit(did)
-        if want_ack:
+        if arm_now:
             self._wake()
 
     def _transmit(self, did: int) -> None:
