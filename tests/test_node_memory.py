@@ -129,3 +129,19 @@ def test_a_visit_maps_no_memory_the_receiving_thread_keeps_its_python_state(proc
     assert launcher.wait(60) == 130
     per_visit = (faults1 - faults0) / (visits1 - visits0)
     assert per_visit < 0.2, f"{faults1 - faults0} page faults in {visits1 - visits0} visits"
+
+
+def test_a_benchmark_ring_of_generated_ids_boots_no_application():
+    """``tokenring bench`` measures the ring alone: a generated ID that protocol.yaml names (70,
+    the robot's lcd) must not boot the robot's resident menu (it made one node of every 64- and
+    255-node benchmark ring 58 MB against the others' 37)."""
+    from tokenring.roundtrip import run_ring
+
+    reports: dict[str, dict] = {}
+
+    def on_ready(session, ring: str) -> None:
+        reports["lcd"] = control(session, ring, 70, "memory")
+
+    run = run_ring(2, 50, 20, ids=[10, 70], on_ready=on_ready, timeout=120.0)
+    assert len(run.rounds_s) == 50
+    assert unwanted(reports["lcd"]["modules"]) == [], unwanted(reports["lcd"]["modules"])

@@ -122,12 +122,15 @@ class Launcher:
         profile: str | None = None,
         boot_concurrency: int = BOOT_CONCURRENCY,
         env: Mapping[str, str] | None = None,
+        residents: bool = True,
     ) -> None:
         if boot_concurrency < 1:
             raise UsageError(f"--boot-wave {boot_concurrency}: at least one node must boot at a time")
         self.plans = list(plans)
         self.boot_concurrency = boot_concurrency
         self.extra_env = dict(env or {})  # added to every node's environment (chaos: the ledger)
+        #: False: no node loads an application's resident program (a bare ring: the benchmark's)
+        self.residents = residents
         if transport != "zenoh":
             from tokenring.transport.factory import require_backend
 
@@ -276,6 +279,8 @@ class Launcher:
     def has_resident(self, plan: NodePlan) -> bool:
         """Whether an application adds a resident program to this node's OS (asked here, once
         per ring, so that the other nodes need not load the applications at boot)."""
+        if not self.residents:
+            return False
         if "TOKENRING_EXTENSIONS" in self.extra_env:
             return True  # the nodes have their own choice of applications: let them look
         from tokenring import extensions

@@ -205,6 +205,9 @@ def run_ring(
     processes (the robot), instead of ``n`` generated IDs; ``tap``: also time the rounds from
     outside, by the arrivals of the master's frames at a subscriber of this process.
     """
+    # a ring of generated IDs is the ring alone: its node 70 must not boot as the robot's lcd,
+    # whose resident program (the boot menu, with numpy and Pillow) made it a 58 MB node
+    residents = plans is not None
     if plans is None:
         ids = ids or generated_ids(n)
         plans = [NodePlan(i, f"node{i}", (programs or {}).get(i)) for i in ids]
@@ -224,6 +227,7 @@ def run_ring(
         transport=transport,
         profile=profile,
         services=services or [],
+        residents=residents,
     )
     from tokenring.protocol import default_protocol
 
