@@ -85,12 +85,12 @@ def wait_for_stop(stop: threading.Event, duration: float | None = None) -> bool:
     previous = signal.set_wakeup_fd(stop.wake_fd, warn_on_full_buffer=False)
     try:
         while not stop.is_set():
-            left = None if deadline is None else deadline - time.monotonic()
-            if left is not None and left <= 0:
+            remaining = None if deadline is None else deadline - time.monotonic()
+            if remaining is not None and remaining <= 0:
                 return False
             # the handler of a signal taken by another thread runs once this thread is back in
             # bytecode, right after select returns; its stop.set() then ends the loop
-            select.select([stop.wake_reader], [], [], left)
+            select.select([stop.wake_reader], [], [], remaining)
             _drain(stop.wake_reader)
         return True
     finally:
