@@ -73,6 +73,7 @@ class NodeProcess:
         profile: str | None = None,
         expected_nodes: int | None = None,
         resident: bool = True,
+        stop_event: StopEvent | None = None,
     ) -> None:
         self.protocol = protocol
         #: look for an application's resident program at boot (``--no-resident``: the launcher
@@ -92,7 +93,8 @@ class NodeProcess:
             expected_nodes=expected_nodes,
         )
         install_profile(self.os, profile, bitrate, time.perf_counter())
-        self.stop_event = StopEvent()
+        #: set to end :meth:`wait` (the process's signal handlers set the same one)
+        self.stop_event = stop_event if stop_event is not None else StopEvent()
         self.control: dict[str, ControlHandler] = {
             "stats": lambda _: self._stats(),
             "rounds": lambda _: self.os.round_times(),
@@ -359,8 +361,8 @@ def run_node(args: argparse.Namespace) -> int:
             profile=args.profile,
             expected_nodes=args.expect,
             resident=not args.no_resident,
+            stop_event=stop,
         )
-        node.stop_event = stop
         node.start()
         try:
             node.run_program(args.program)
