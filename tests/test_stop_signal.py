@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from ringutil import tap, wait_ring
+from ringutil import control, tap, wait_ring, wait_until
 
 LIBC = ctypes.CDLL(None, use_errno=True)
 
@@ -60,3 +60,29 @@ def test_a_sigterm_taken_by_a_zenoh_thread_still_stops_the_world(procs, ring_nam
     banner = world.stdout.readline()
     assert banner.startswith("world "), banner
     stop_through_a_zenoh_thread(world)
+
+
+def main_thread_switches(pid: int) -> int:
+    """How often the process's main thread has gone to sleep and been woken (the kernel's count)."""
+    for line in Path(f"/proc/{pid}/task/{pid}/status").read_text().splitlines():
+        if line.startswith("voluntary_ctxt_switches:"):
+            return int(line.split()[1])
+    raise AssertionError(f"no voluntary_ctxt_switches for {pid}")
+
+
+def test_an_idle_node_s_main_thread_sleeps_until_a_signal(procs, ring_name, endpoint):
+    """The main thread waits for a signal without polling: while the node passes the token to
+    itself a thousand times, it never wakes (it woke five times a second before)."""
+    node = procs.tokenring(
+        "node", "--id", "10", "--ring", ring_name, "--listen", endpoint, "--bitrate", "max", "--no-store"
+    )
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10])
+        visits = control(session, ring_name, 10, "visits")
+        before = main_thread_switches(node.pid)
+        wait_until(lambda: control(session, ring_name, 10, "visits") >= visits + 1000, 60, "1000 more visits")
+        after = main_thread_switches(node.pid)
+    assert after == before, f"the main thread woke {after - before} times"
+    node.send_signal(signal.SIGTERM)
+    output, _ = node.communicate(timeout=60)
+    assert node.returncode == 0 and "node main left the ring" in output

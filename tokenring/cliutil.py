@@ -32,8 +32,7 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
-#: how long a wait for a stop sleeps at most where it cannot be woken by a signal's byte (a plain
-#: :class:`threading.Event`, or a thread other than the main one)
+#: how long a wait for a stop sleeps at most off the main thread, where no signal's byte wakes it
 SIGNAL_CHECK_S = 0.2
 
 
@@ -64,37 +63,35 @@ class StopEvent(threading.Event):
         return self._wake_writer.fileno()
 
 
-def wait_for_stop(stop: threading.Event, duration: float | None = None) -> bool:
+def wait_for_stop(stop: StopEvent, duration: float | None = None) -> bool:
     """Wait until ``stop`` is set (a signal handler sets it) or ``duration`` is up; True if
     stopped.
 
     The kernel may hand SIGTERM to any thread (Zenoh's Rust ones too), and then only wakes that
-    one: a main thread asleep on an endless wait never runs its Python handler. A
-    :class:`StopEvent` waited on from the main thread sleeps in ``select`` on its socket, which
-    the signal's C handler writes to whichever thread took it, so an idle node never wakes;
-    anything else waits in slices of :data:`SIGNAL_CHECK_S`.
+    one: a main thread asleep on an endless wait never runs its Python handler. The main thread
+    sleeps in ``select`` on the stop flag's socket, which the signal's C handler writes to
+    whichever thread took it, so an idle node never wakes; another thread (which cannot own the
+    wake-up fd) waits in slices of :data:`SIGNAL_CHECK_S`.
     """
     deadline = None if duration is None else time.monotonic() + duration
-    if not isinstance(stop, StopEvent) or threading.current_thread() is not threading.main_thread():
-        while not stop.is_set():
-            left = SIGNAL_CHECK_S if deadline is None else min(SIGNAL_CHECK_S, deadline - time.monotonic())
-            if left <= 0:
-                return False
-            stop.wait(left)
-        return True
-    previous = signal.set_wakeup_fd(stop.wake_fd, warn_on_full_buffer=False)
+    on_main = threading.current_thread() is threading.main_thread()
+    previous = signal.set_wakeup_fd(stop.wake_fd, warn_on_full_buffer=False) if on_main else None
     try:
         while not stop.is_set():
             remaining = None if deadline is None else deadline - time.monotonic()
             if remaining is not None and remaining <= 0:
                 return False
-            # the handler of a signal taken by another thread runs once this thread is back in
-            # bytecode, right after select returns; its stop.set() then ends the loop
-            select.select([stop.wake_reader], [], [], remaining)
-            _drain(stop.wake_reader)
+            if on_main:
+                # the handler of a signal taken by another thread runs once this thread is back
+                # in bytecode, right after select returns; its stop.set() then ends the loop
+                select.select([stop.wake_reader], [], [], remaining)
+                _drain(stop.wake_reader)
+            else:
+                stop.wait(SIGNAL_CHECK_S if remaining is None else min(SIGNAL_CHECK_S, remaining))
         return True
     finally:
-        signal.set_wakeup_fd(previous)
+        if previous is not None:
+            signal.set_wakeup_fd(previous)
 
 
 def _drain(reader: socket.socket) -> None:
