@@ -60,6 +60,12 @@ def test_c_and_python_paths_send_the_same_bytes_and_keep_the_same_state():
     assert twin["stats"]["visits"] == before["stats"]["visits"] + 1
     assert twin["stats"]["duplicate_passes"] == before["stats"]["duplicate_passes"]
     assert python["calls"] == [10, 11]  # the hook ran while busy, not once idle
+    # a pass over a new link arms the ack timer at once; a link's periodic confirmation asks
+    # for an ack too but leaves the timer to the watchdog's next wake
+    assert first["woke"] and first["state"]["_ack_pending"]
+    periodic = steps["a periodic confirmation: asks, wakes nobody"]
+    assert periodic["sent"][0][:2] == ["frame", 30] and periodic["state"]["_ack_pending"]
+    assert not periodic["woke"]
     for reference, candidate in zip(python["steps"], native["steps"], strict=True):
         assert candidate == reference, f"the C path differs at step {reference['step']!r}"
 

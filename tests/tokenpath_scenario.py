@@ -141,6 +141,8 @@ def main() -> int:
                 "stats": node.stats.as_dict(),
                 "state": {attribute: getattr(node, attribute) for attribute in STATE},
                 "live": sorted(node.membership.active),
+                # whether the step woke the watchdog (released its lock; no watchdog runs here)
+                "woke": node._wake_lock.acquire(blocking=False),
             }
         )
         transport.log.clear()
@@ -223,6 +225,10 @@ def main() -> int:
     step("the successor is gone: passes to main", frame(epoch=3, origin=main_id, counter=73))
     node.membership.set_live(main_id, False)
     step("alone: passes to itself", frame(sid=motor_id, epoch=3, origin=main_id, counter=74, ack=False))
+    for member in (main_id, sonar_id):
+        node.membership.set_live(member, True)
+    node._confirmed_did, node._confirmed_at = sonar_id, -1e9  # a link confirmed long ago
+    step("a periodic confirmation: asks, wakes nobody", frame(epoch=3, origin=main_id, counter=75))
     json.dump({"native": tokenpath.NATIVE, "steps": steps, "calls": calls}, sys.stdout)
     return 0
 
