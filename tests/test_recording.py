@@ -314,3 +314,47 @@ def test_a_trlog_converts_to_mcap(tmp_path):
     # an existing output without --force, and a missing --out
     one_line_refusal(run_tokenring("log", "convert", str(path), "--to", "mcap", "--out", str(out)), "exists")
     one_line_refusal(run_tokenring("log", "convert", str(path), "--to", "mcap"), "--out")
+
+
+def test_play_waits_for_a_sniff_that_stalls_and_the_sniff_loses_no_frame(procs, tmp_path):
+    """A sniff frozen for 6 s while play sends (longer than the 5 s Zenoh waits on a blocked link
+    before closing it) still gets every frame: play waits on it, and before closing its session
+    asks every sniff whether it has taken the last frame."""
+    from tokenring.feed import RawSample
+    from tokenring.frame import Token
+    from tokenring.recording import McapRecorder
+
+    ring, frames = "stall", 20000
+    recording = tmp_path / "frames.mcap"
+    recorder = McapRecorder(recording, ring=ring)
+    for i in range(frames):
+        token = Token()
+        token["sid"], token["did"], token["counter"] = 10 * (i % 8 + 1), 10 * ((i + 1) % 8 + 1), i % 256
+        recorder.on_raw(
+            RawSample(
+                f"tokenring/{ring}/token/{token['did']}", 1_000_000_000 + i * 1_000_000, token.to_frame()
+            )
+        )
+    recorder.close()
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    player = procs.tokenring(
+        "play", str(recording), "--listen", endpoint, "--rate", "5", "--wait", "60", "--json"
+    )
+    sniffed = tmp_path / "sniffed.jsonl"
+    with sniffed.open("w") as out:
+        sniff = procs.tokenring(
+            "sniff", "--ring", ring, "-e", endpoint, "--json", "--wait", "90", "-n", str(frames), stdout=out
+        )
+        wait_until(lambda: sniffed.stat().st_size > 0, 60, "the sniff's first frame")
+        os.kill(sniff.pid, signal.SIGSTOP)
+        time.sleep(6.0)  # the fault: a sniff that reads nothing for 6 s (Zenoh's lease is 10 s)
+        os.kill(sniff.pid, signal.SIGCONT)
+        played, _ = player.communicate(timeout=180)
+        assert player.returncode == 0, played
+        summary = json.loads(played.strip().splitlines()[-1])
+        assert summary["frames"] == frames and summary["taps_drained"] == 1, summary
+        sniff.wait(timeout=120)
+    assert sniff.returncode == 0
+    lines = sniffed.read_text().splitlines()
+    assert len(lines) == frames
+    assert [json.loads(line)["header"]["counter"] for line in lines] == [i % 256 for i in range(frames)]

@@ -203,14 +203,16 @@ def add_json_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="machine-readable JSON output")
 
 
-def tap_session(args: argparse.Namespace) -> zenoh.Session:
-    """A session for a tool joining a running ring (connects to the tap endpoint by default)."""
+def tap_session(args: argparse.Namespace, block_close_s: float | None = None) -> zenoh.Session:
+    """A session for a tool joining a running ring (connects to the tap endpoint by default);
+    ``block_close_s`` as :func:`tokenring.zconfig.make_config`."""
     connect = list(args.connect or [keys.default_endpoint()])
     config = make_config(
         mode=getattr(args, "mode", "peer"),
         connect=connect,
         listen=getattr(args, "listen", None) or [],
         config_file=getattr(args, "zenoh_config", None),
+        block_close_s=block_close_s,
     )
     return open_session(config)
 

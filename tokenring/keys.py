@@ -71,6 +71,12 @@ def watch_ready(ring: str, tag: str) -> str:
     return f"{PREFIX}/{ring}/watch/{tag}"
 
 
+def tap_drained(ring: str, tap: str = "*") -> str:
+    """A tap's (``tokenring sniff``'s) queryable: its reply says every sample put before the
+    query on the same link has reached it (``tokenring play`` asks before it closes)."""
+    return f"{PREFIX}/{ring}/tap/{tap}/drained"
+
+
 def id_from_key(key: str) -> int | None:
     """The trailing numeric chunk of a key (``.../node/20`` -> 20), or None."""
     tail = key.rsplit("/", 1)[-1]

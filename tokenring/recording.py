@@ -648,6 +648,33 @@ class Player:
             if on_sample is not None:
                 on_sample(raw)
 
+    def wait_drained(self, timeout: float, stop: threading.Event) -> tuple[int, bool]:
+        """Ask every tap of the ring (:func:`tokenring.keys.tap_drained`) and wait for their
+        replies: a reply comes after the tap took every sample played before the question, so
+        closing the session then loses nothing still queued towards a slow tap. Returns
+        (taps that answered, whether the wait ran out or was stopped first)."""
+        import zenoh
+
+        replies = self.session.get(
+            keys.tap_drained(self.ring),
+            handler=zenoh.handlers.FifoChannel(256),
+            target=zenoh.QueryTarget.ALL,
+            consolidation=zenoh.ConsolidationMode.NONE,
+            timeout=timeout + 1.0,  # the loop below times out first, so it can tell
+        )
+        answered = 0
+        deadline = time.monotonic() + timeout
+        while not stop.is_set() and time.monotonic() < deadline:
+            try:
+                reply = replies.try_recv()
+            except zenoh.ZError:  # every reply in, or the query's timeout: the channel closed
+                return answered, False
+            if reply is None:
+                stop.wait(0.02)
+            elif reply.ok is not None:
+                answered += 1
+        return answered, True
+
     def close(self) -> None:
         for declared in [*self._queryables, *self._tokens]:
             with contextlib.suppress(Exception):

@@ -71,8 +71,11 @@ def make_config(
     connect: Sequence[str] = (),
     listen: Sequence[str] = (),
     config_file: str | None = None,
+    block_close_s: float | None = None,
 ) -> zenoh.Config:
-    """A Zenoh config; peers listen on an ephemeral loopback port unless told otherwise."""
+    """A Zenoh config; peers listen on an ephemeral loopback port unless told otherwise.
+    ``block_close_s``: how long a put with blocking congestion control may wait on a subscriber
+    that does not read before Zenoh closes that link, losing what it had not read (Zenoh: 5 s)."""
     path = config_file or os.environ.get("ZENOH_CONFIG")
     global _config_in_use
     _config_in_use = path or None
@@ -93,6 +96,11 @@ def make_config(
         config.insert_json5("listen/endpoints", json.dumps(["tcp/127.0.0.1:0"]))
     if connect:
         config.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    if block_close_s is not None:
+        config.insert_json5(
+            "transport/link/tx/queue/congestion_control/block/wait_before_close",
+            str(int(block_close_s * 1e6)),
+        )
     if mode == "client" and not path:
         # Zenoh's clients give up on the first refused connect; a router busy accepting hundreds
         # of nodes (a 255-node ring starting at once) needs them to retry for a while.

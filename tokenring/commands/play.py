@@ -5,6 +5,10 @@ counters and faults as recorded (play answers its queries and holds the nodes' l
 samples go back on the keys they were recorded on (the recorded ring's name) unless ``--ring``
 names another. Playing into a ring that is running under that name would inject old frames into
 it, so play refuses when it finds the ring's nodes live.
+
+Play never drops a frame for a slow reader: it waits on a subscriber that reads slower than it
+sends (up to ``--slow-wait``), and before it closes it asks every ``sniff`` whether the last frame
+has reached it (exit code 1 if one did not answer in time).
 """
 
 from __future__ import annotations
@@ -70,6 +74,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="S",
         help="wait up to S seconds for a subscriber (sniff, the web view) before playing (default 5)",
     )
+    p.add_argument(
+        "--slow-wait",
+        type=seconds,
+        default=60.0,
+        metavar="S",
+        help="wait up to S seconds on a subscriber that reads slower than play sends, and at the "
+        "end for every sniff to have taken the last frame (default 60; Zenoh drops a link blocked "
+        "for 5 s, which lost frames to a sniff on a loaded machine)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.add_argument("--json", action="store_true", help="print a JSON summary at the end")
     add_ring_options(p)
@@ -104,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
         args.connect = [keys.default_endpoint()]
     stopper = Stopper()
     stopper.install()
-    with tap_session(args) as session:
+    with tap_session(args, block_close_s=args.slow_wait) as session:
         if ring_is_live(session, ring):
             raise UsageError(
                 f"ring {ring!r} is running on this network: playing would inject old frames into it; "
@@ -146,12 +159,23 @@ def run(args: argparse.Namespace) -> int:
                 )
                 sys.stderr.flush()
 
+        taps, unconfirmed = 0, False
         try:
             while not stopper.event.is_set():
                 player.play_once(stopper.event, show)
                 player.stats.loops += 1
                 if not args.loop:
                     break
+            if not stopper.event.is_set():
+                taps, ran_out = player.wait_drained(args.slow_wait, stopper.event)
+                unconfirmed = ran_out and not stopper.event.is_set()
+                if unconfirmed:
+                    print(
+                        f"a tap had not taken every frame within {args.slow_wait:g} s (--slow-wait); "
+                        "what was still queued towards it is lost",
+                        file=sys.stderr,
+                        flush=True,
+                    )
             time.sleep(0.2)  # let the last samples leave before the session closes
         finally:
             player.close()
@@ -164,6 +188,7 @@ def run(args: argparse.Namespace) -> int:
         "samples": player.stats.samples,
         "frames": player.stats.frames,
         "loops": player.stats.loops,
+        "taps_drained": taps,  # sniffs that confirmed every frame before play closed
         "seconds": round(time.monotonic() - started, 3),
     }
     if args.json:
@@ -172,4 +197,6 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"played {summary['samples']} samples ({summary['frames']} frames) in {summary['seconds']:.1f} s"
         )
-    return 130 if stopper.signal == signal.SIGINT else 0
+    if stopper.signal == signal.SIGINT:
+        return 130
+    return 1 if unconfirmed else 0

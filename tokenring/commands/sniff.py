@@ -7,6 +7,7 @@ import argparse
 import json
 import sys
 import time
+import uuid
 from typing import Any
 
 import zenoh
@@ -96,6 +97,11 @@ def run(args: argparse.Namespace) -> int:
         # opened once the session is: a refused endpoint leaves no FILE.part behind
         capture = open_capture(args, protocol, ring)
         subscriber = session.declare_subscriber(key, zenoh.handlers.FifoChannel(8192))
+        # answered on Zenoh's receiving thread once the frames before the question are in the
+        # channel above: `play` asks before it closes, so nothing queued towards us is lost
+        drained = session.declare_queryable(
+            keys.tap_drained(ring, uuid.uuid4().hex), lambda query: query.reply(query.key_expr, b"")
+        )
         try:
             while True:
                 if deadline is not None and time.monotonic() >= deadline:
@@ -129,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
             sys.stdout.flush()
             ended = True
         finally:
+            drained.undeclare()
             subscriber.undeclare()
             if capture is not None:
                 capture.finish(seen, ended)
