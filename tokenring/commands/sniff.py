@@ -97,8 +97,9 @@ def run(args: argparse.Namespace) -> int:
         # opened once the session is: a refused endpoint leaves no FILE.part behind
         capture = open_capture(args, protocol, ring)
         subscriber = session.declare_subscriber(key, zenoh.handlers.FifoChannel(8192))
-        # answered on Zenoh's receiving thread once the frames before the question are in the
-        # channel above: `play` asks before it closes, so nothing queued towards us is lost
+        # Zenoh's receiving thread hands the question on only after the frames that came before
+        # it are in the channel above: `play` asks before it closes, so nothing queued towards
+        # this sniff is lost
         drained = session.declare_queryable(
             keys.tap_drained(ring, uuid.uuid4().hex), lambda query: query.reply(query.key_expr, b"")
         )
