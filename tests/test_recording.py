@@ -316,17 +316,13 @@ def test_a_trlog_converts_to_mcap(tmp_path):
     one_line_refusal(run_tokenring("log", "convert", str(path), "--to", "mcap"), "--out")
 
 
-def test_play_waits_for_a_sniff_that_stalls_and_the_sniff_loses_no_frame(procs, tmp_path):
-    """A sniff frozen for 6 s while play sends (longer than the 5 s Zenoh waits on a blocked link
-    before closing it) still gets every frame: play waits on it, and before closing its session
-    asks every sniff whether it has taken the last frame."""
+def write_token_frames(path: Path, ring: str, frames: int) -> Path:
+    """A recording of ``frames`` synthetic passes 1 ms apart, counters 0, 1, ... mod 256."""
     from tokenring.feed import RawSample
     from tokenring.frame import Token
     from tokenring.recording import McapRecorder
 
-    ring, frames = "stall", 20000
-    recording = tmp_path / "frames.mcap"
-    recorder = McapRecorder(recording, ring=ring)
+    recorder = McapRecorder(path, ring=ring)
     for i in range(frames):
         token = Token()
         token["sid"], token["did"], token["counter"] = 10 * (i % 8 + 1), 10 * ((i + 1) % 8 + 1), i % 256
@@ -336,6 +332,15 @@ def test_play_waits_for_a_sniff_that_stalls_and_the_sniff_loses_no_frame(procs, 
             )
         )
     recorder.close()
+    return path
+
+
+def test_play_waits_for_a_sniff_that_stalls_and_the_sniff_loses_no_frame(procs, tmp_path):
+    """A sniff frozen for 6 s while play sends (longer than the 5 s Zenoh waits on a blocked link
+    before closing it) still gets every frame: play waits on it, and before closing its session
+    asks every sniff whether it has taken the last frame."""
+    ring, frames = "stall", 20000
+    recording = write_token_frames(tmp_path / "frames.mcap", ring, frames)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     player = procs.tokenring(
         "play", str(recording), "--listen", endpoint, "--rate", "5", "--wait", "60", "--json"
@@ -358,3 +363,46 @@ def test_play_waits_for_a_sniff_that_stalls_and_the_sniff_loses_no_frame(procs, 
     lines = sniffed.read_text().splitlines()
     assert len(lines) == frames
     assert [json.loads(line)["header"]["counter"] for line in lines] == [i % 256 for i in range(frames)]
+
+
+def test_play_reports_a_sniff_whose_link_zenoh_cut_even_when_it_came_back(procs, tmp_path):
+    """A sniff frozen for 4 s while play sends, with play waiting at most 1 s on it: Zenoh cuts
+    its link and drops what was queued. The sniff reconnects and confirms the last frame, but
+    play still names it and exits 1, and the sniff did miss frames."""
+    ring, frames = "cut", 20000
+    recording = write_token_frames(tmp_path / "frames.mcap", ring, frames)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    player = procs.tokenring(
+        "play", str(recording), "--listen", endpoint, "--rate", "2", "--wait", "60", "--slow-wait", "1",
+        "--json",
+    )  # fmt: skip
+    sniffed = tmp_path / "sniffed.jsonl"
+    with sniffed.open("w") as out:
+        sniff = procs.tokenring("sniff", "--ring", ring, "-e", endpoint, "--json", "--wait", "90", stdout=out)
+        wait_until(lambda: sniffed.stat().st_size > 0, 60, "the sniff's first frame")
+        os.kill(sniff.pid, signal.SIGSTOP)
+        time.sleep(4.0)  # the fault: longer than --slow-wait, shorter than play's 10 s of frames
+        os.kill(sniff.pid, signal.SIGCONT)
+        played, _ = player.communicate(timeout=180)
+        sniff.send_signal(signal.SIGINT)
+        sniff.wait(timeout=30)
+    summary = json.loads(played.strip().splitlines()[-1])
+    assert player.returncode == 1, played
+    assert len(summary["taps_lost"]) == 1, summary
+    assert len(sniffed.read_text().splitlines()) < frames  # the judge: frames did go missing
+
+
+def test_play_does_not_report_a_sniff_that_stopped_on_purpose(procs, tmp_path):
+    """A sniff that stops after 100 frames (-n) while play goes on lost nothing it wanted: play
+    exits 0 and names no tap lost."""
+    ring = "early"
+    recording = write_token_frames(tmp_path / "frames.mcap", ring, 5000)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    player = procs.tokenring("play", str(recording), "--listen", endpoint, "--wait", "60", "--json")
+    sniff = procs.tokenring("sniff", "--ring", ring, "-e", endpoint, "--json", "--wait", "90", "-n", "100")
+    sniffed, _ = sniff.communicate(timeout=120)
+    assert sniff.returncode == 0 and len(sniffed.splitlines()) == 100
+    played, _ = player.communicate(timeout=120)
+    summary = json.loads(played.strip().splitlines()[-1])
+    assert player.returncode == 0, played
+    assert summary["taps_lost"] == [] and summary["frames"] == 5000, summary

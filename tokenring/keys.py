@@ -10,6 +10,9 @@ key                                      what travels on it
 ``tokenring/<ring>/ctl/<ID>/<verb>``     queryables of node ``ID``: ``stats``, ``fault``, ...
 ``tokenring/<ring>/ctl/launcher/<verb>`` queryables of the launcher (``status``)
 ``tokenring/<ring>/pc/<verb>``           the PC link ("serial line") to main
+``tokenring/<ring>/tap/<id>``            liveliness token of a tap (``tokenring sniff``)
+``tokenring/<ring>/tap/<id>/drained``    its queryable: every sample put before has reached it
+``tokenring/<ring>/tap/<id>/left``       its goodbye: it stopped on purpose, nothing was cut
 ``tokenring/<ring>/...``                 an application's own keys (the robot's: modules.description.keys)
 =======================================  ========================================================
 """
@@ -69,6 +72,17 @@ def pc_link(ring: str, verb: str) -> str:
 def watch_ready(ring: str, tag: str) -> str:
     """The liveliness token a watcher (``tokenring watch``) declares once it serves and records."""
     return f"{PREFIX}/{ring}/watch/{tag}"
+
+
+def tap(ring: str, tap_id: str = "*") -> str:
+    """The liveliness token a tap (``tokenring sniff``) holds while it listens: ``play`` tells
+    a tap cut off mid-play (its token gone without a goodbye) from one that stopped."""
+    return f"{PREFIX}/{ring}/tap/{tap_id}"
+
+
+def tap_left(ring: str, tap_id: str = "*") -> str:
+    """A tap's goodbye, put just before it stops on purpose."""
+    return f"{PREFIX}/{ring}/tap/{tap_id}/left"
 
 
 def tap_drained(ring: str, tap: str = "*") -> str:

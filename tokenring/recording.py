@@ -548,6 +548,12 @@ class Player:
         self.nodes: dict[str, Any] = {}
         self.faults: dict[str, Any] = {}
         self.keys = [k for k in recording.raw_keys() if self.selection.key(k)]
+        # taps (sniffs) by ID: seen listening, their token gone, said goodbye, confirmed drained
+        self.taps_seen: set[str] = set()
+        self.taps_gone: Counter[str] = Counter()
+        self.taps_left: Counter[str] = Counter()
+        self.taps_drained: set[str] = set()
+        self._tap_watch: list[Any] = []
 
     def target_key(self, key: str) -> str:
         return rename_ring(key, self.recording.ring, self.ring)
@@ -574,6 +580,35 @@ class Player:
                 return False
             stop.wait(0.05)
         return False
+
+    def watch_taps(self) -> None:
+        """Follow the ring's taps while playing: a tap whose liveliness token goes without its
+        goodbye (:func:`tokenring.keys.tap_left`) had its link cut by Zenoh (frozen past the
+        blocked-link wait, or its lease), and what was queued towards it was dropped."""
+        import zenoh
+
+        def on_token(sample: Any) -> None:
+            tap_id = str(sample.key_expr).rsplit("/", 1)[-1]
+            if sample.kind == zenoh.SampleKind.PUT:
+                self.taps_seen.add(tap_id)
+            else:
+                self.taps_gone[tap_id] += 1
+
+        def on_left(sample: Any) -> None:
+            self.taps_left[str(sample.key_expr).rsplit("/", 2)[-2]] += 1
+
+        self._tap_watch.append(
+            self.session.liveliness().declare_subscriber(keys.tap(self.ring), on_token, history=True)
+        )
+        self._tap_watch.append(self.session.declare_subscriber(keys.tap_left(self.ring), on_left))
+
+    def taps_lost(self) -> list[str]:
+        """Taps that missed frames: a token gone more often than its tap said goodbye (cut off,
+        perhaps back since), or seen but silent at the end without a goodbye. Counted, not
+        ordered: the goodbye and the token's end may arrive either way round."""
+        cut = {tap_id for tap_id, gone in self.taps_gone.items() if gone > self.taps_left[tap_id]}
+        silent = {t for t in self.taps_seen - self.taps_drained if not self.taps_left[t]}
+        return sorted(cut | silent)
 
     def serve_control(self) -> None:
         """Answer ``monitor``: every recorded node's liveliness token and its ``stats`` and
@@ -673,10 +708,11 @@ class Player:
                 stop.wait(0.02)
             elif reply.ok is not None:
                 answered += 1
+                self.taps_drained.add(str(reply.ok.key_expr).rsplit("/", 2)[-2])
         return answered, True
 
     def close(self) -> None:
-        for declared in [*self._queryables, *self._tokens]:
+        for declared in [*self._queryables, *self._tokens, *self._tap_watch]:
             with contextlib.suppress(Exception):
                 declared.undeclare()
         for publisher in self._publishers.values():

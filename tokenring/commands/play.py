@@ -8,7 +8,8 @@ it, so play refuses when it finds the ring's nodes live.
 
 Play never drops a frame for a slow reader: it waits on a subscriber that reads slower than it
 sends (up to ``--slow-wait``), and before it closes it asks every ``sniff`` whether the last frame
-has reached it (exit code 1 if one did not answer in time).
+has reached it. Exit code 1 if one did not answer in time, or if Zenoh cut a sniff's link while
+playing (its liveliness token went without its goodbye: the frames queued towards it are lost).
 """
 
 from __future__ import annotations
@@ -135,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
         if not player.keys:
             raise UsageError(f"--topics {args.topics}: matches none of the recorded keys")
         player.declare()
+        player.watch_taps()
         player.serve_control()  # monitor sees the recorded nodes' counters
         if not args.quiet:
             print(
@@ -159,7 +161,7 @@ def run(args: argparse.Namespace) -> int:
                 )
                 sys.stderr.flush()
 
-        taps, unconfirmed = 0, False
+        taps, unconfirmed, lost = 0, False, []
         try:
             while not stopper.event.is_set():
                 player.play_once(stopper.event, show)
@@ -176,6 +178,15 @@ def run(args: argparse.Namespace) -> int:
                         file=sys.stderr,
                         flush=True,
                     )
+                lost = player.taps_lost()
+                if lost and not unconfirmed:
+                    print(
+                        f"Zenoh cut the link to {len(lost)} tap(s) while playing ({', '.join(lost)}: "
+                        f"stalled past --slow-wait {args.slow_wait:g} s or past its lease); the frames "
+                        "queued towards it were dropped",
+                        file=sys.stderr,
+                        flush=True,
+                    )
             time.sleep(0.2)  # let the last samples leave before the session closes
         finally:
             player.close()
@@ -189,6 +200,7 @@ def run(args: argparse.Namespace) -> int:
         "frames": player.stats.frames,
         "loops": player.stats.loops,
         "taps_drained": taps,  # sniffs that confirmed every frame before play closed
+        "taps_lost": lost,  # sniffs cut off while playing: frames towards them were dropped
         "seconds": round(time.monotonic() - started, 3),
     }
     if args.json:
@@ -199,4 +211,4 @@ def run(args: argparse.Namespace) -> int:
         )
     if stopper.signal == signal.SIGINT:
         return 130
-    return 1 if unconfirmed else 0
+    return 1 if unconfirmed or lost else 0

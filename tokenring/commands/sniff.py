@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import time
@@ -100,9 +101,11 @@ def run(args: argparse.Namespace) -> int:
         # Zenoh's receiving thread hands the question on only after the frames that came before
         # it are in the channel above: `play` asks before it closes, so nothing queued towards
         # this sniff is lost
-        drained = session.declare_queryable(
-            keys.tap_drained(ring, uuid.uuid4().hex), lambda query: query.reply(query.key_expr, b"")
-        )
+        tap_id = uuid.uuid4().hex
+        drained_key = keys.tap_drained(ring, tap_id)  # the reply names this tap (play counts them)
+        drained = session.declare_queryable(drained_key, lambda query: query.reply(drained_key, b""))
+        # declared after the queryable: whoever sees the token can already ask it
+        alive = session.liveliness().declare_token(keys.tap(ring, tap_id))
         try:
             while True:
                 if deadline is not None and time.monotonic() >= deadline:
@@ -136,6 +139,9 @@ def run(args: argparse.Namespace) -> int:
             sys.stdout.flush()
             ended = True
         finally:
+            with contextlib.suppress(zenoh.ZError):  # stopped on purpose: nothing was cut
+                session.put(keys.tap_left(ring, tap_id), b"")
+            alive.undeclare()
             drained.undeclare()
             subscriber.undeclare()
             if capture is not None:
