@@ -219,3 +219,39 @@ def rear_record(range_mm: float) -> dict[str, Any]:
     distances: list[int | None] = [None] * 8
     distances[REAR] = round(range_mm / 10) * 10
     return {"walls": [], "distances_mm": distances, "at": [0.0, 0.0, 0.0]}
+
+
+def oblique_shift(**ahead: Any) -> tuple[float, dict[str, int]]:
+    """How far two equal ranges to a wall whose normal lies 22° off the front beam move the
+    pose along that normal (the wall's foot 1000 mm from the sonar, the reading 40 mm short of
+    what the filter expects after the late echo's share: 25 mm/m past 0.7 m, 0.055 mm/deg²)."""
+    tilt = math.radians(22.0)
+    sonar = (FRONT_X_MM, 0.0)
+    foot = (sonar[0] + 1000.0 * math.cos(tilt), sonar[1] + 1000.0 * math.sin(tilt))
+    along = (-math.sin(tilt), math.cos(tilt))
+    wall = KnownWall.segment(
+        foot[0] - 1500 * along[0],
+        foot[1] - 1500 * along[1],
+        foot[0] + 1500 * along[0],
+        foot[1] + 1500 * along[1],
+    )
+    core = core_facing([wall], (0.0, 0.0, 0.0), **ahead)
+    late = (1000.0 - 700.0) * 0.025 + 0.055 * 22.0**2  # 7.5 + 26.6 mm
+    for k in (1, 2):
+        core.process_synchronised(k, 100 * k, {"sonar": front_record(1000.0 + late - 40.0)})
+    x, y, _ = core.ekf.pose  # type: ignore[union-attr]
+    return x * math.cos(tilt) + y * math.sin(tilt), dict(core.ahead)
+
+
+def test_a_wall_met_obliquely_is_used_only_when_allowed_and_then_weighs_less() -> None:
+    shift, counts = oblique_shift(max_off_deg=20.0)  # the built-in 20°: not square enough
+    assert shift == 0.0 and counts["used"] == 0 and counts["not_square"] == 2, counts
+    square_weight, counts = oblique_shift(max_off_deg=25.0, oblique_from_deg=25.0)
+    assert counts["used"] == 1, counts
+    oblique_weight, counts = oblique_shift(max_off_deg=25.0, oblique_from_deg=20.0, oblique_sigma_mm=25.0)
+    assert counts["used"] == 1, counts
+    # towards the wall by the Kalman gain's share of 40 mm: prior σ 20 mm in x and y, the range's
+    # σ 15 mm -> 0.64 (the heading's lever adds a little to the prior); σ 25 mm weighs
+    # (p + 15²) / (p + 25²) of that: 0.61 at p = 20², 0.65 at 23²
+    assert 40.0 * 0.55 < square_weight < 40.0 * 0.75, square_weight
+    assert 0.55 < oblique_weight / square_weight < 0.70, (oblique_weight, square_weight)

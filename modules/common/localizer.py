@@ -660,7 +660,8 @@ class LocalizationCore:
             H = np.zeros((1, len(ekf.x)))
             H[0, 0], H[0, 1] = -sign * ca, -sign * sa
             H[0, 2] = -sign * (ca * (-s * lever_x - c * lever_y) + sa * (c * lever_x - s * lever_y))
-            R = np.array([[settings["sigma_mm"] ** 2]])
+            oblique = abs(first.foot_off) > math.radians(settings["oblique_from_deg"])
+            R = np.array([[settings["oblique_sigma_mm" if oblique else "sigma_mm"] ** 2]])
             if ekf.update("ahead", np.array([corrected]), np.array([abs(signed)]), H, R):
                 self.ahead["used"] += 1
                 self.ahead_corrected_at[wall.index] = (x, y)

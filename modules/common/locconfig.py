@@ -81,7 +81,7 @@ DEFAULTS: dict[str, Any] = {
         "repeat_after_mm": 100.0,
         "bias_floor_mm": 0.0,
         "association": {"max_d_mm": 400.0, "max_alpha_deg": 20.0, "margin_mm": 150.0, "min_wall_length_mm": 500.0},
-        "ahead": {"enabled": False, "sensors": [1], "max_range_mm": 1400.0, "max_off_deg": 20.0, "sigma_mm": 15.0, "clear_mm": 150.0, "max_innovation_mm": 150.0, "repeat_after_mm": 100.0, "max_turn_rate_deg_s": 2.0, "confirm_mm": 30.0, "confirm_within_ms": 1000},
+        "ahead": {"enabled": False, "sensors": [1], "max_range_mm": 1400.0, "max_off_deg": 20.0, "sigma_mm": 15.0, "oblique_from_deg": 20.0, "oblique_sigma_mm": 25.0, "clear_mm": 150.0, "max_innovation_mm": 150.0, "repeat_after_mm": 100.0, "max_turn_rate_deg_s": 2.0, "confirm_mm": 30.0, "confirm_within_ms": 1000},
     },
     "robot": {"mm_per_step": 0.5419, "steps_per_degree": 6.5, "sonars": "robot"},
     "logs": {"enabled": True, "directory": "logs", "data": "localization-{start}.trlog", "errors": "localization-{start}.trerr", "debug": False},
@@ -93,7 +93,8 @@ DEFAULTS: dict[str, Any] = {
 #: travel gauge's settings (out to 1.4 m, known walls only, checked where its ranges were read; off),
 #: the compass's measured accuracy, no compass reading bent by the motors' start or stop, a floor
 #: under the pose's σ across a wall (its fits share an error) and the floor's mean step scale as a
-#: state, from which each move's scale starts, and the front sonar's range to a wall ahead. The
+#: state, from which each move's scale starts, and the front sonar's range to a wall ahead (up to
+#: 25° off its normal, beyond 20° with a larger σ). The
 #: built-in defaults keep the earlier values: exploration mode builds on them, and old logs replay
 #: as they ran
 REPOSITORY_SETTINGS: dict[str, Any] = {
@@ -109,7 +110,7 @@ REPOSITORY_SETTINGS: dict[str, Any] = {
         "shared_sigma_mm": 8.0,
         "min_span_side_mm": 220.0,
         "bias_floor_mm": 8.0,
-        "ahead": {"enabled": True},
+        "ahead": {"enabled": True, "max_off_deg": 25.0},
     },
 }
 
