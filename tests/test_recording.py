@@ -407,3 +407,12 @@ def test_play_does_not_report_a_sniff_that_stopped_on_purpose(procs, tmp_path):
     summary = json.loads(played.strip().splitlines()[-1])
     assert player.returncode == 0, played
     assert summary["taps_lost"] == [] and summary["frames"] == 5000, summary
+
+
+def test_a_tap_is_named_alike_in_its_token_its_drain_reply_and_its_goodbye():
+    from tokenring import keys
+
+    assert keys.tap_id_from_key("tokenring/r/tap/ab12") == "ab12"
+    assert keys.tap_id_from_key("tokenring/r/tap/ab12/drained") == "ab12"
+    assert keys.tap_id_from_key("tokenring/r/tap/ab12/left") == "ab12"
+    assert keys.tap_id_from_key("tokenring/r/node/20") is None

@@ -97,6 +97,12 @@ def id_from_key(key: str) -> int | None:
     return int(tail) if tail.isdigit() else None
 
 
+def tap_id_from_key(key: str) -> str | None:
+    """The tap's ID in any of its keys (``.../tap/<id>``, ``.../tap/<id>/drained``, ``/left``)."""
+    chunks = key.split("/")
+    return chunks[3] if len(chunks) >= 4 and chunks[2] == "tap" else None
+
+
 def check_ring_name_type(ring: str) -> str:
     """:func:`check_ring_name` as an argparse type (refused while the options are parsed)."""
     import argparse

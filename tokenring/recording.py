@@ -588,14 +588,18 @@ class Player:
         import zenoh
 
         def on_token(sample: Any) -> None:
-            tap_id = str(sample.key_expr).rsplit("/", 1)[-1]
+            tap_id = keys.tap_id_from_key(str(sample.key_expr))
+            if tap_id is None:
+                return
             if sample.kind == zenoh.SampleKind.PUT:
                 self.taps_seen.add(tap_id)
             else:
                 self.taps_gone[tap_id] += 1
 
         def on_left(sample: Any) -> None:
-            self.taps_left[str(sample.key_expr).rsplit("/", 2)[-2]] += 1
+            tap_id = keys.tap_id_from_key(str(sample.key_expr))
+            if tap_id is not None:
+                self.taps_left[tap_id] += 1
 
         self._tap_watch.append(
             self.session.liveliness().declare_subscriber(keys.tap(self.ring), on_token, history=True)
@@ -697,19 +701,17 @@ class Player:
             consolidation=zenoh.ConsolidationMode.NONE,
             timeout=timeout + 1.0,  # the loop below times out first, so it can tell
         )
-        answered = 0
         deadline = time.monotonic() + timeout
         while not stop.is_set() and time.monotonic() < deadline:
             try:
                 reply = replies.try_recv()
             except zenoh.ZError:  # every reply in, or the query's timeout: the channel closed
-                return answered, False
+                return len(self.taps_drained), False
             if reply is None:
                 stop.wait(0.02)
-            elif reply.ok is not None:
-                answered += 1
-                self.taps_drained.add(str(reply.ok.key_expr).rsplit("/", 2)[-2])
-        return answered, True
+            elif reply.ok is not None and (tap_id := keys.tap_id_from_key(str(reply.ok.key_expr))):
+                self.taps_drained.add(tap_id)
+        return len(self.taps_drained), True
 
     def close(self) -> None:
         for declared in [*self._queryables, *self._tokens, *self._tap_watch]:
