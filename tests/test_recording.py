@@ -416,3 +416,7 @@ def test_a_tap_is_named_alike_in_its_token_its_drain_reply_and_its_goodbye():
     assert keys.tap_id_from_key("tokenring/r/tap/ab12/drained") == "ab12"
     assert keys.tap_id_from_key("tokenring/r/tap/ab12/left") == "ab12"
     assert keys.tap_id_from_key("tokenring/r/node/20") is None
+    assert keys.tap_id_from_key("other/r/tap/ab12") is None
+    # the keys a sniff declares and puts parse back to the ID it made them with
+    for key in (keys.tap("r", "ab12"), keys.tap_drained("r", "ab12"), keys.tap_left("r", "ab12")):
+        assert keys.tap_id_from_key(key) == "ab12", key

@@ -100,7 +100,7 @@ def id_from_key(key: str) -> int | None:
 def tap_id_from_key(key: str) -> str | None:
     """The tap's ID in any of its keys (``.../tap/<id>``, ``.../tap/<id>/drained``, ``/left``)."""
     chunks = key.split("/")
-    return chunks[3] if len(chunks) >= 4 and chunks[2] == "tap" else None
+    return chunks[3] if len(chunks) >= 4 and chunks[0] == PREFIX and chunks[2] == "tap" else None
 
 
 def check_ring_name_type(ring: str) -> str:
