@@ -15,6 +15,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -102,22 +103,36 @@ def spawn_bare_ring(
     *,
     router: bool,
     stamps: bool = False,
+    chain: bool = False,
+    stdout: Any = subprocess.PIPE,
+    stderr: Any = None,
 ) -> tuple[subprocess.Popen, list[subprocess.Popen]]:
     """Start the ``n`` processes of a bare Zenoh ring (``tokenring.roundtrip_bare``) on ``port``:
     process 0, whose stdout carries the result line, and the others. They run the ring's Zenoh
     runtime and, like the launcher's nodes, die with a benchmark that is killed. With ``router``
     the caller has opened the router on ``port``; ``stamps``: process 0 also prints each round's
-    arrival time."""
+    arrival time; ``chain``: each process linked to its successor only, on ports of its own.
+    ``stdout``: process 0's; ``stderr``: every process's."""
     base = [sys.executable, "-m", "tokenring.roundtrip_bare", "--count", str(n), "--port", str(port)]
     base += ["--rounds", str(rounds), "--warmup", str(warmup), "--ring", ring, "--timeout", str(timeout)]
-    base += ["--mode", "client" if router else "peer"] + (["--stamps"] if stamps else [])
+    mode = "chain" if chain else "client" if router else "peer"
+    base += ["--mode", mode] + (["--stamps"] if stamps else [])
+    if chain:
+        ports: set[int] = set()
+        while len(ports) < n:  # free_port() samples at random: 255 draws would repeat some
+            ports.add(free_port())
+        base += ["--ports", ",".join(map(str, sorted(ports)))]
     env = node_environment()  # the same Zenoh runtime as the ring's nodes
     first = subprocess.Popen(
-        [*base, "--index", "0"], stdout=subprocess.PIPE, text=True, env=env, preexec_fn=die_with_parent
+        [*base, "--index", "0"], stdout=stdout, stderr=stderr, text=True, env=env, preexec_fn=die_with_parent
     )
     others = [
         subprocess.Popen(
-            [*base, "--index", str(i)], stdout=subprocess.DEVNULL, env=env, preexec_fn=die_with_parent
+            [*base, "--index", str(i)],
+            stdout=subprocess.DEVNULL,
+            stderr=stderr,
+            env=env,
+            preexec_fn=die_with_parent,
         )
         for i in range(1, n)
     ]
@@ -125,32 +140,52 @@ def spawn_bare_ring(
 
 
 def run_bare(
-    n: int, rounds: int, warmup: int, timeout: float = 120.0, *, router: bool = False
+    n: int, rounds: int, warmup: int, timeout: float = 120.0, *, router: bool = False, chain: bool = False
 ) -> list[float]:
-    """Round times (s) of a bare Zenoh ring of ``n`` processes: a full mesh of peers, or with
-    ``router`` every process a client of a Zenoh router opened here (as the launcher does)."""
+    """Round times (s) of a bare Zenoh ring of ``n`` processes: a full mesh of peers, with
+    ``router`` every process a client of a Zenoh router opened here (as the launcher does), with
+    ``chain`` every process a peer linked to its successor only (a topology the ring has not)."""
     port = free_port()
     router_session = (
         open_session(make_config(mode="router", listen=[f"tcp/127.0.0.1:{port}"])) if router else None
     )
-    first, others = spawn_bare_ring(n, port, f"b{os.getpid()}x{port}", rounds, warmup, timeout, router=router)
-    try:
-        out, _ = first.communicate(timeout=timeout + 30)
-    except subprocess.TimeoutExpired:
-        first.kill()
-        out = ""
-    finally:
-        for proc in others:
-            try:
-                proc.wait(5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(2)
-        if first.poll() is None:
-            first.kill()
-            first.wait(2)
-        if router_session is not None:
-            router_session.close()
+    with tempfile.TemporaryFile("w+") as out_file, tempfile.TemporaryFile("w+") as err_file:
+        first, others = spawn_bare_ring(
+            n,
+            port,
+            f"b{os.getpid()}x{port}",
+            rounds,
+            warmup,
+            timeout,
+            router=router,
+            chain=chain,
+            stdout=out_file,
+            stderr=err_file,
+        )
+        try:
+            failed = _wait_first(first, others, timeout + 30)
+        finally:
+            for proc in others:
+                try:
+                    proc.wait(5)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait(2)
+            if first.poll() is None:
+                first.kill()
+                first.wait(2)
+            if router_session is not None:
+                router_session.close()
+        out_file.seek(0)
+        out = out_file.read()
+        if failed is not None:
+            err_file.seek(0)
+            said = [line.strip() for line in err_file.read().splitlines() if line.strip()]
+            why = f": {said[-1][:300]}" if said else ""
+            raise TokenRingError(
+                f"bare ring of {n}: process {failed[0]} ended with exit code {failed[1]} before "
+                f"the rounds were done{why}"
+            )
     lines = [line for line in out.splitlines() if line.startswith("{")]
     if not lines:
         raise TokenRingError(f"the bare ring of {n} produced no result")
@@ -158,6 +193,22 @@ def run_bare(
     if "error" in result:
         raise TokenRingError(f"bare ring of {n}: {result['error']}")
     return result["rounds_s"]
+
+
+def _wait_first(
+    first: subprocess.Popen, others: list[subprocess.Popen], timeout: float
+) -> tuple[int, int] | None:
+    """Wait for process 0 of a bare ring to end; (index, exit code) of a process that failed
+    first (the ring can no longer go round: stop waiting at once), None if none did."""
+    deadline = time.monotonic() + timeout
+    while first.poll() is None:
+        ended = next(((i, p.returncode) for i, p in enumerate(others, 1) if p.poll() not in (None, 0)), None)
+        if ended is not None:
+            return ended
+        if time.monotonic() > deadline:
+            return None
+        time.sleep(0.2)
+    return (0, first.returncode) if first.returncode not in (0, 1) else None
 
 
 @dataclass

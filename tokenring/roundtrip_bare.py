@@ -3,7 +3,10 @@
 Same Zenoh settings as the real ring (peers on loopback, multicast off, express publishers,
 congestion control DROP, real-time priority); process 0 times the rounds and prints them as
 one JSON line on stdout. ``--mode client``: every process is a client of a router at ``--port``
-(the router topology of ``Launcher(router=True)``); otherwise process 0 listens there and the
+(the router topology of ``Launcher(router=True)``); ``--mode chain``: each process a peer
+listening on its own port of ``--ports`` and linked to its successor's only (gossip off), so each
+pass is one link and no process routes for the others (what a ring of direct successor links
+would cost; tokenring's nodes do not run that way); otherwise process 0 listens there and the
 others connect to it, forming a full mesh of peers.
 """
 
@@ -30,14 +33,27 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--warmup", type=int, default=200)
     p.add_argument("--ring", default="bare")
     p.add_argument("--timeout", type=float, default=120.0)
-    p.add_argument("--mode", default="peer", choices=("peer", "client"))
+    p.add_argument("--mode", default="peer", choices=("peer", "client", "chain"))
+    p.add_argument("--ports", help="--mode chain: every process's port, comma-separated, in ring order")
     p.add_argument(
         "--stamps", action="store_true", help="also print each round's arrival time (CLOCK_MONOTONIC, s)"
     )
     args = p.parse_args(argv)
     i, n = args.index, args.count
     endpoint = f"tcp/127.0.0.1:{args.port}"
-    if args.mode == "client":
+    if args.mode == "chain":
+        ports = [int(port) for port in (args.ports or "").split(",") if port]
+        if len(ports) != n:
+            p.error(f"--mode chain needs {n} --ports, got {len(ports)}")
+        config = make_config(
+            listen=[f"tcp/127.0.0.1:{ports[i]}"], connect=[f"tcp/127.0.0.1:{ports[(i + 1) % n]}"]
+        )
+        config.insert_json5("scouting/gossip/enabled", "false")  # no links beyond the successor's
+        config.insert_json5("connect/timeout_ms", "-1")  # the successor may not listen yet
+        config.insert_json5(
+            "connect/retry", '{"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}'
+        )
+    elif args.mode == "client":
         config = make_config(mode="client", connect=[endpoint])
     elif i == 0:
         config = make_config(listen=[endpoint])
@@ -74,6 +90,27 @@ def main(argv: list[str] | None = None) -> int:
                     put(payload)
                     put_times.append(perf() - t0)
 
+            if args.mode == "chain":
+                plain = handle
+                kept: list[int] = []
+
+                def handle(sample: zenoh.Sample) -> None:
+                    # a start frame resent before the first came back circulates too: keep the
+                    # first to come back (its number), drop the others
+                    number = int.from_bytes(sample.payload.to_bytes()[:4], "little")
+                    if not kept:
+                        kept.append(number)
+                    if number == kept[0]:
+                        plain(sample)
+
+        elif args.mode == "chain":
+
+            def handle(sample: zenoh.Sample) -> None:
+                payload = sample.payload.to_bytes()
+                put(payload)
+                if len(payload) == 1:  # the stop: nothing else reaches past the successor
+                    done.set()
+
         else:
 
             def handle(sample: zenoh.Sample) -> None:
@@ -82,7 +119,20 @@ def main(argv: list[str] | None = None) -> int:
         subscriber = session.declare_subscriber(f"{prefix}/hop/{i}", hop_callback(handle))
         stop = session.declare_subscriber(f"{prefix}/stop", lambda _s: done.set())
         token = session.liveliness().declare_token(f"{prefix}/live/{i}")
-        if i == 0:
+
+        def stop_all() -> None:
+            session.put(f"{prefix}/stop", b"")
+            if args.mode == "chain":
+                put(b"\xff")
+
+        if i == 0 and args.mode == "chain":
+            # no process sees the others' liveliness: send until a frame has gone round
+            deadline, number = time.monotonic() + args.timeout, 0
+            while not stamps and time.monotonic() < deadline:
+                put(number.to_bytes(4, "little") + bytes(510))
+                number += 1
+                time.sleep(1.0)
+        elif i == 0:
             deadline = time.monotonic() + args.timeout
             while time.monotonic() < deadline:
                 live = [r for r in session.liveliness().get(f"{prefix}/live/*", timeout=1.0) if r.ok]
@@ -94,12 +144,13 @@ def main(argv: list[str] | None = None) -> int:
                 return 1
             time.sleep(0.3 + 0.01 * n)  # let every peer connect to every other
             put(bytes(514))
+        if i == 0:
             if not done.wait(args.timeout):
                 print(
                     json.dumps({"error": f"only {len(stamps)} rounds in {args.timeout} s"}),
                     flush=True,
                 )
-                session.put(f"{prefix}/stop", b"")
+                stop_all()
                 return 1
             rounds = [b - a for a, b in itertools.pairwise(stamps)][args.warmup :]
             put_times.sort()
@@ -108,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
             if args.stamps:  # a profiler counts the rounds inside its own window
                 result["stamps_s"] = stamps[args.warmup :]
             print(json.dumps(result), flush=True)
-            session.put(f"{prefix}/stop", b"")
+            stop_all()
             time.sleep(0.1)
         else:
             done.wait(args.timeout + 30)

@@ -1,0 +1,46 @@
+"""The bare ring of direct successor links (``roundtrip_bare --mode chain``) circulates and ends."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from tokenring.roundtrip import run_bare
+
+
+def children_running(marker: bytes) -> list[int]:
+    """PIDs of this process's children whose command line holds ``marker`` (read from /proc)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            cmdline = (entry / "cmdline").read_bytes()
+        except (OSError, IndexError, ValueError):
+            continue
+        if ppid == os.getpid() and marker in cmdline:
+            found.append(int(entry.name))
+    return found
+
+
+def test_a_chain_of_direct_links_passes_the_frame_round_and_every_process_ends():
+    rounds = run_bare(8, 30, 5, timeout=120.0, chain=True)
+    assert len(rounds) == 30
+    assert all(r > 0 for r in rounds)
+    assert children_running(b"tokenring.roundtrip_bare") == []
+
+
+def test_a_process_of_a_bare_ring_that_fails_ends_the_wait_at_once():
+    from tokenring.roundtrip import _wait_first
+
+    first = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    failing = subprocess.Popen([sys.executable, "-c", "import sys; sys.exit(3)"])
+    waiting = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        assert _wait_first(first, [waiting, failing], timeout=60) == (2, 3)
+        assert first.poll() is None  # it did not wait for process 0 to end
+    finally:
+        for proc in (first, failing, waiting):
+            proc.kill()
+            proc.wait()
