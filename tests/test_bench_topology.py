@@ -1,9 +1,12 @@
-"""The bare ring of direct successor links (``roundtrip_bare --mode chain``) circulates and ends."""
+"""The bare rings of direct successor links (``roundtrip_bare --mode chain`` and ``links``)
+circulate and end, and a bare ring whose process fails ends the wait at once."""
 
 import os
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 from tokenring.roundtrip import run_bare
 
@@ -24,8 +27,9 @@ def children_running(marker: bytes) -> list[int]:
     return found
 
 
-def test_a_chain_of_direct_links_passes_the_frame_round_and_every_process_ends():
-    rounds = run_bare(8, 30, 5, timeout=120.0, chain=True)
+@pytest.mark.parametrize("router", [False, True], ids=["chain", "links"])
+def test_a_chain_of_direct_links_passes_the_frame_round_and_every_process_ends(router):
+    rounds = run_bare(8, 30, 5, timeout=120.0, chain=True, router=router)
     assert len(rounds) == 30
     assert all(r > 0 for r in rounds)
     assert children_running(b"tokenring.roundtrip_bare") == []

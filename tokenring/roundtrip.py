@@ -111,11 +111,12 @@ def spawn_bare_ring(
     process 0, whose stdout carries the result line, and the others. They run the ring's Zenoh
     runtime and, like the launcher's nodes, die with a benchmark that is killed. With ``router``
     the caller has opened the router on ``port``; ``stamps``: process 0 also prints each round's
-    arrival time; ``chain``: each process linked to its successor only, on ports of its own.
+    arrival time; ``chain``: each process linked to its successor only, on ports of its own (with
+    ``router`` also a client of the router in a second session: ``roundtrip_bare --mode links``).
     ``stdout``: process 0's; ``stderr``: every process's."""
     base = [sys.executable, "-m", "tokenring.roundtrip_bare", "--count", str(n), "--port", str(port)]
     base += ["--rounds", str(rounds), "--warmup", str(warmup), "--ring", ring, "--timeout", str(timeout)]
-    mode = "chain" if chain else "client" if router else "peer"
+    mode = ("links" if router else "chain") if chain else "client" if router else "peer"
     base += ["--mode", mode] + (["--stamps"] if stamps else [])
     if chain:
         ports: set[int] = set()
@@ -144,7 +145,8 @@ def run_bare(
 ) -> list[float]:
     """Round times (s) of a bare Zenoh ring of ``n`` processes: a full mesh of peers, with
     ``router`` every process a client of a Zenoh router opened here (as the launcher does), with
-    ``chain`` every process a peer linked to its successor only (a topology the ring has not)."""
+    ``chain`` every process a peer linked to its successor only (a topology the ring has not),
+    with both the chain plus a client session of the router in every process."""
     port = free_port()
     router_session = (
         open_session(make_config(mode="router", listen=[f"tcp/127.0.0.1:{port}"])) if router else None
@@ -165,12 +167,7 @@ def run_bare(
         try:
             failed = _wait_first(first, others, timeout + 30)
         finally:
-            for proc in others:
-                try:
-                    proc.wait(5)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait(2)
+            _end_all(others, grace_s=10.0)
             if first.poll() is None:
                 first.kill()
                 first.wait(2)
@@ -193,6 +190,19 @@ def run_bare(
     if "error" in result:
         raise TokenRingError(f"bare ring of {n}: {result['error']}")
     return result["rounds_s"]
+
+
+def _end_all(processes: list[subprocess.Popen], grace_s: float) -> None:
+    """Give ``processes`` one shared ``grace_s`` to end on their own, then kill the rest (waiting
+    a few seconds for each in turn had a stalled 255-process ring hold a run for 15 minutes)."""
+    deadline = time.monotonic() + grace_s
+    for proc in processes:
+        try:
+            proc.wait(max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+    for proc in processes:
+        proc.wait()
 
 
 def _wait_first(

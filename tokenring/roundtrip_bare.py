@@ -6,13 +6,18 @@ one JSON line on stdout. ``--mode client``: every process is a client of a route
 (the router topology of ``Launcher(router=True)``); ``--mode chain``: each process a peer
 listening on its own port of ``--ports`` and linked to its successor's only (gossip off), so each
 pass is one link and no process routes for the others (what a ring of direct successor links
-would cost; tokenring's nodes do not run that way); otherwise process 0 listens there and the
-others connect to it, forming a full mesh of peers.
+would cost; tokenring's nodes do not run that way); ``--mode links``: the chain, plus a second
+session in every process, a client of a router at ``--port``, that carries liveliness and the
+stop and subscribes the hop key too (a Zenoh router routes for its clients, not between peers:
+a node on direct links would need such a session for everything else and for a pass past a dead
+successor); otherwise process 0 listens there and the others connect to it, forming a full
+mesh of peers.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import itertools
 import json
 import sys
@@ -22,6 +27,11 @@ import time
 import zenoh
 
 from tokenring.zconfig import hop_callback, make_config, open_session
+
+#: a chained process waits this long after passing the stop on before it closes its session: a
+#: session closed at once can drop the frame still queued (a 255-node chain then stopped part way
+#: and its other processes waited out their timeout)
+CHAIN_LINGER_S = 0.5
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -33,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--warmup", type=int, default=200)
     p.add_argument("--ring", default="bare")
     p.add_argument("--timeout", type=float, default=120.0)
-    p.add_argument("--mode", default="peer", choices=("peer", "client", "chain"))
+    p.add_argument("--mode", default="peer", choices=("peer", "client", "chain", "links"))
     p.add_argument("--ports", help="--mode chain: every process's port, comma-separated, in ring order")
     p.add_argument(
         "--stamps", action="store_true", help="also print each round's arrival time (CLOCK_MONOTONIC, s)"
@@ -41,10 +51,11 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     i, n = args.index, args.count
     endpoint = f"tcp/127.0.0.1:{args.port}"
-    if args.mode == "chain":
+    chained = args.mode in ("chain", "links")
+    if chained:
         ports = [int(port) for port in (args.ports or "").split(",") if port]
         if len(ports) != n:
-            p.error(f"--mode chain needs {n} --ports, got {len(ports)}")
+            p.error(f"--mode {args.mode} needs {n} --ports, got {len(ports)}")
         config = make_config(
             listen=[f"tcp/127.0.0.1:{ports[i]}"], connect=[f"tcp/127.0.0.1:{ports[(i + 1) % n]}"]
         )
@@ -63,7 +74,13 @@ def main(argv: list[str] | None = None) -> int:
     done = threading.Event()
     stamps: list[float] = []
     total = args.rounds + args.warmup + 1
-    with open_session(config) as session:
+    with contextlib.ExitStack() as stack:
+        session = stack.enter_context(open_session(config))
+        control = (
+            stack.enter_context(open_session(make_config(mode="client", connect=[endpoint])))
+            if args.mode == "links"
+            else session
+        )
         publisher = session.declare_publisher(
             f"{prefix}/hop/{(i + 1) % n}",
             express=True,
@@ -90,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
                     put(payload)
                     put_times.append(perf() - t0)
 
-            if args.mode == "chain":
+            if chained:
                 plain = handle
                 kept: list[int] = []
 
@@ -103,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
                     if number == kept[0]:
                         plain(sample)
 
-        elif args.mode == "chain":
+        elif chained:
 
             def handle(sample: zenoh.Sample) -> None:
                 payload = sample.payload.to_bytes()
@@ -117,13 +134,19 @@ def main(argv: list[str] | None = None) -> int:
                 put(sample.payload.to_bytes())
 
         subscriber = session.declare_subscriber(f"{prefix}/hop/{i}", hop_callback(handle))
-        stop = session.declare_subscriber(f"{prefix}/stop", lambda _s: done.set())
-        token = session.liveliness().declare_token(f"{prefix}/live/{i}")
+        fallback = (
+            control.declare_subscriber(f"{prefix}/hop/{i}", hop_callback(handle))
+            if control is not session
+            else None
+        )
+        stop = control.declare_subscriber(f"{prefix}/stop", lambda _s: done.set())
+        token = control.liveliness().declare_token(f"{prefix}/live/{i}")
 
         def stop_all() -> None:
-            session.put(f"{prefix}/stop", b"")
-            if args.mode == "chain":
+            control.put(f"{prefix}/stop", b"")
+            if chained:
                 put(b"\xff")
+                time.sleep(CHAIN_LINGER_S)
 
         if i == 0 and args.mode == "chain":
             # no process sees the others' liveliness: send until a frame has gone round
@@ -135,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
         elif i == 0:
             deadline = time.monotonic() + args.timeout
             while time.monotonic() < deadline:
-                live = [r for r in session.liveliness().get(f"{prefix}/live/*", timeout=1.0) if r.ok]
+                live = [r for r in control.liveliness().get(f"{prefix}/live/*", timeout=1.0) if r.ok]
                 if len(live) >= n:
                     break
                 time.sleep(0.05)
@@ -163,7 +186,11 @@ def main(argv: list[str] | None = None) -> int:
             time.sleep(0.1)
         else:
             done.wait(args.timeout + 30)
+            if chained:
+                time.sleep(CHAIN_LINGER_S)
         subscriber.undeclare()
+        if fallback is not None:
+            fallback.undeclare()
         stop.undeclare()
         token.undeclare()
     return 0
