@@ -26,6 +26,7 @@ from typing import IO, Any
 import zenoh
 
 from tokenring import keys
+from tokenring.cliutil import free_port
 from tokenring.control import answer_query
 from tokenring.errors import TransportError, UsageError
 from tokenring.launchio import ExitWatch, PrefixedOutput
@@ -118,6 +119,7 @@ class Launcher:
         extra_node_args: Sequence[str] = (),
         services: Sequence[ServicePlan] = (),
         router: bool = False,
+        links: bool = False,
         transport: str = "zenoh",
         profile: str | None = None,
         boot_concurrency: int = BOOT_CONCURRENCY,
@@ -139,6 +141,14 @@ class Launcher:
         self.profile = profile  # tokenring.profile: emulated hardware timing on every node
         self.registry: Any = None
         self.router = router  # this launcher is its host's Zenoh router; its nodes are clients
+        if links and not router:
+            raise UsageError("direct links to the ring successor need the launcher as the nodes' router")
+        if links and transport != "zenoh":
+            raise UsageError(f"direct links are Zenoh links; --transport {transport} has its own")
+        #: the token's hop also on a direct link from each node to its successor (a second
+        #: session per node, see :mod:`tokenring.transport.links`); their ports, by node ID
+        self.links = links
+        self.link_ports: dict[int, int] = {}
         self.services = list(services)
         self.service_children: dict[str, subprocess.Popen] = {}
         self.ring = keys.check_ring_name(ring)
@@ -266,6 +276,8 @@ class Launcher:
             cmd += ["--listen", endpoint]
         if self.router:
             cmd += ["--mode", "client"]
+        if self.links:
+            cmd += self.link_options(plan.node_id)
         if plan.program:
             cmd += ["--program", plan.program]
         if self.registry is not None:
@@ -275,6 +287,23 @@ class Launcher:
         if not self.has_resident(plan):
             cmd += ["--no-resident"]  # the node then loads no application before a program starts
         return cmd + self.extra_node_args + plan.extra_args
+
+    def link_options(self, node_id: int) -> list[str]:
+        """A node's direct link: where it listens and its ring successor's endpoint. Ports stay
+        with their node ID, so a respawned node listens where its predecessor reconnects; a
+        node that joins later is reached through the router until it is someone's successor
+        at launch."""
+        ids = sorted({p.node_id for p in self.plans} | {node_id})
+        successor = ids[(ids.index(node_id) + 1) % len(ids)]
+        for wanted in (node_id, successor):
+            while wanted not in self.link_ports:
+                port = free_port()
+                if port not in self.link_ports.values():
+                    self.link_ports[wanted] = port
+        options = ["--link-listen", f"tcp/127.0.0.1:{self.link_ports[node_id]}"]
+        if successor != node_id:
+            options += ["--link-connect", f"tcp/127.0.0.1:{self.link_ports[successor]}"]
+        return options
 
     def has_resident(self, plan: NodePlan) -> bool:
         """Whether an application adds a resident program to this node's OS (asked here, once

@@ -70,6 +70,7 @@ class NodeProcess:
         capacity: int = DEFAULT_CAPACITY,
         transport: str = "zenoh",
         registry: str | None = None,
+        link_session: zenoh.Session | None = None,
         profile: str | None = None,
         expected_nodes: int | None = None,
         resident: bool = True,
@@ -82,7 +83,9 @@ class NodeProcess:
         self.ring = ring
         self.session = session
         # the token path's transport; the control plane below stays on the Zenoh session
-        self.transport = make_transport(transport, session, ring, node_id, protocol.frame_size, registry)
+        self.transport = make_transport(
+            transport, session, ring, node_id, protocol.frame_size, registry, link_session=link_session
+        )
         self.os = NodeOS(
             protocol,
             node_id,
@@ -310,6 +313,15 @@ def add_node_arguments(parser: argparse.ArgumentParser) -> None:
         help="emulate a hardware's timing on top of the wire (arcnet: the seed robot)",
     )
     parser.add_argument(
+        "--link-listen",
+        metavar="ENDPOINT",
+        help="pass the token on a direct link too: listen here in a second session, a Zenoh peer "
+        "without gossip (the launcher's --links)",
+    )
+    parser.add_argument(
+        "--link-connect", metavar="ENDPOINT", help="with --link-listen: the ring successor's link endpoint"
+    )
+    parser.add_argument(
         "--no-resident",
         action="store_true",
         help="no application adds to this node's OS (the launcher asked): load none at boot, "
@@ -345,7 +357,20 @@ def run_node(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, on_signal)
     if not args.no_store:
         check_store_root(Path(args.store) if args.store else default_store_root())
-    with open_session(config) as session:
+    if args.link_connect and not args.link_listen:
+        raise UsageError("--link-connect needs --link-listen")
+    if args.link_listen and args.transport != "zenoh":
+        raise UsageError(f"--link-listen is a Zenoh link; --transport {args.transport} has its own")
+    with contextlib.ExitStack() as sessions:
+        session = sessions.enter_context(open_session(config))
+        link_session = None
+        if args.link_listen:
+            link_config = make_config(
+                listen=[args.link_listen],
+                connect=[args.link_connect] if args.link_connect else [],
+                gossip=False,
+            )
+            link_session = sessions.enter_context(open_session(link_config))
         node = NodeProcess(
             protocol,
             args.id,
@@ -358,6 +383,7 @@ def run_node(args: argparse.Namespace) -> int:
             capacity=args.capacity,
             transport=args.transport,
             registry=args.registry,
+            link_session=link_session,
             profile=args.profile,
             expected_nodes=args.expect,
             resident=not args.no_resident,

@@ -249,6 +249,7 @@ def run_ring(
     ids: list[int] | None = None,
     extra_node_args: list[str] | None = None,
     router: bool = False,
+    links: bool = False,
     transport: str = "zenoh",
     profile: str | None = None,
     plans: list[NodePlan] | None = None,
@@ -261,7 +262,8 @@ def run_ring(
     """Round times (s) of the real ring of ``n`` node processes, with RSS and CPU per node.
 
     ``router``: the launcher's session is a Zenoh router and the nodes its clients (else a full
-    mesh of peers); ``transport``: what carries the token (zenoh, udp, zmq); ``profile``: an
+    mesh of peers); ``links``: with the router, each node's token hop also on a direct link to
+    its successor (``Launcher(links=True)``); ``transport``: what carries the token (zenoh, udp, zmq); ``profile``: an
     emulated hardware timing; ``plans``/``services``: named nodes with programs and helper
     processes (the robot), instead of ``n`` generated IDs; ``tap``: also time the rounds from
     outside, by the arrivals of the master's frames at a subscriber of this process.
@@ -285,6 +287,7 @@ def run_ring(
         output=io.StringIO(),
         extra_node_args=extra_node_args or [],
         router=router,
+        links=links,
         transport=transport,
         profile=profile,
         services=services or [],

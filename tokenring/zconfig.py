@@ -72,10 +72,13 @@ def make_config(
     listen: Sequence[str] = (),
     config_file: str | None = None,
     block_close_s: float | None = None,
+    gossip: bool = True,
 ) -> zenoh.Config:
     """A Zenoh config; peers listen on an ephemeral loopback port unless told otherwise.
     ``block_close_s``: how long a put with blocking congestion control may wait on a subscriber
-    that does not read before Zenoh closes that link, losing what it had not read (Zenoh: 5 s)."""
+    that does not read before Zenoh closes that link, losing what it had not read (Zenoh: 5 s).
+    ``gossip`` False: a peer links only to the endpoints it connects to (and those that connect
+    to it), retrying them quickly until they listen; gossip would link every peer to every other."""
     path = config_file or os.environ.get("ZENOH_CONFIG")
     global _config_in_use
     _config_in_use = path or None
@@ -100,6 +103,12 @@ def make_config(
         config.insert_json5(
             "transport/link/tx/queue/congestion_control/block/wait_before_close",
             str(int(block_close_s * 1e6)),
+        )
+    if not gossip:
+        config.insert_json5("scouting/gossip/enabled", "false")
+        config.insert_json5("connect/timeout_ms", "-1")  # a successor may not listen yet
+        config.insert_json5(
+            "connect/retry", '{"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}'
         )
     if mode == "client" and not path:
         # Zenoh's clients give up on the first refused connect; a router busy accepting hundreds

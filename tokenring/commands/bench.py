@@ -27,6 +27,7 @@ EXAMPLES = """examples:
   tokenring bench --repeat 4 --tap                  4 alternating pairs, each pair's own share
                                                     per hop, and the rounds timed from outside
   tokenring bench --nodes 255 --json out.json       255 nodes (clients of a router), as JSON
+  tokenring bench --nodes 255 --topology links      each node linked to its successor directly
   tokenring bench --transport udp --nodes 8         the token over plain UDP sockets
   tokenring bench --bitrate 2.5M --profile arcnet   the seed robot's hardware timing
 
@@ -59,8 +60,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--topology",
         default="auto",
-        choices=("auto", "peer", "router"),
-        help=f"Zenoh peers in a full mesh, or clients of a router (auto: router from {ROUTER_FROM} nodes on)",
+        choices=("auto", "peer", "router", "links"),
+        help="Zenoh peers in a full mesh, clients of a router, or clients of a router whose token "
+        f"hop goes on a direct link to the successor (links); auto: router from {ROUTER_FROM} nodes on",
     )
     p.add_argument(
         "--transport",
@@ -98,8 +100,16 @@ def run(args: argparse.Namespace) -> int:
             )
     if args.timeout is None:
         args.timeout = run_budget(args.nodes, args.rounds + args.warmup, bitrate)
-    router = args.topology == "router" or (args.topology == "auto" and args.nodes >= ROUTER_FROM)
-    topology = "router" if router else "peer"
+    links = args.topology == "links"
+    router = links or args.topology == "router" or (args.topology == "auto" and args.nodes >= ROUTER_FROM)
+    topology = "links" if links else "router" if router else "peer"
+    kind = {"peer": "peers", "router": "routers", "links": "direct links"}[topology]
+    if links and args.tap:
+        raise UsageError(
+            "--tap listens at the router; with --topology links the token passes on direct links"
+        )
+    if links and args.transport != "zenoh":
+        raise UsageError(f"--topology links is a Zenoh topology; --transport {args.transport} has its own")
     bare: list[float] = []
     ring: list[float] = []
     rss: list[float] = []
@@ -114,15 +124,15 @@ def run(args: argparse.Namespace) -> int:
     for _ in range(args.repeat):
         step += 1
         progress(
-            f"[{step}/{total}] bare Zenoh ring, {args.nodes} processes ({topology}s), {args.rounds} rounds ...",
+            f"[{step}/{total}] bare Zenoh ring, {args.nodes} processes ({kind}), {args.rounds} rounds ...",
             args.quiet,
         )
-        part = run_bare(args.nodes, args.rounds, args.warmup, args.timeout, router=router)
+        part = run_bare(args.nodes, args.rounds, args.warmup, args.timeout, router=router, chain=links)
         bare += part
         progress(f"        median {summarize(part)['median']:.3f} ms", args.quiet)
         step += 1
         progress(
-            f"[{step}/{total}] tokenring ring, {args.nodes} nodes over {args.transport} ({topology}s), "
+            f"[{step}/{total}] tokenring ring, {args.nodes} nodes over {args.transport} ({kind}), "
             f"bitrate {args.bitrate}, ack {args.ack} ...",
             args.quiet,
         )
@@ -135,6 +145,7 @@ def run(args: argparse.Namespace) -> int:
             timeout=args.timeout,
             ids=ids,
             router=router,
+            links=links,
             transport=args.transport,
             profile=args.profile,
             tap=args.tap,
@@ -201,7 +212,7 @@ def run(args: argparse.Namespace) -> int:
     ]
     print(
         f"token round trip, {args.nodes} nodes, {report['rounds']} rounds, bitrate {args.bitrate}, ack {args.ack}, "
-        f"{args.transport} ({topology}s){', profile ' + args.profile if args.profile else ''}"
+        f"{args.transport} ({kind}){', profile ' + args.profile if args.profile else ''}"
     )
     print(format_table(rows, ["ring", "median ms", "p90 ms", "p99 ms", "max ms", "per hop us"]))
     print(

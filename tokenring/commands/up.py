@@ -16,6 +16,8 @@ EXAMPLES = """examples:
   tokenring up --no-start          boot and download; the programs wait for ARCNET_START_SYSTEM
   tokenring load --start           ... which this sends (or the application's own way, said at boot)
   tokenring up --no-download       every node starts its program from its file, no download
+  tokenring up --router --links -l tcp/127.0.0.1:7447
+                                   the nodes clients of this launcher, the token on direct links
 """
 
 if TYPE_CHECKING:
@@ -78,6 +80,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="this launcher is its host's Zenoh router (needs --listen); its nodes are clients of it. "
         "For rings across hosts: only router-to-router links cross between hosts",
+    )
+    p.add_argument(
+        "--links",
+        action="store_true",
+        help="with --router: each node also passes the token on a direct link to its successor "
+        "(a second Zenoh session per node; the router carries everything else)",
     )
     p.add_argument(
         "--boot-wave",
@@ -183,6 +191,7 @@ def run(args: argparse.Namespace) -> int:
         log_level=args.log_level,
         respawn=args.respawn,
         router=args.router,
+        links=args.links,
         profile=args.profile,
         services=services,
         extra_node_args=["--store", args.store] if args.store else [],

@@ -27,10 +27,21 @@ def require_backend(kind: str) -> None:
 
 
 def make_transport(
-    kind: str, session: Any, ring: str, node_id: int, frame_size: int, registry: str | None = None
+    kind: str,
+    session: Any,
+    ring: str,
+    node_id: int,
+    frame_size: int,
+    registry: str | None = None,
+    link_session: Any = None,
 ) -> Transport:
-    """The token path's transport: ``zenoh`` on the node's session, or a socket backend that
-    finds its peers through the membership registry at ``registry`` (HOST:PORT)."""
+    """The token path's transport: ``zenoh`` on the node's session (with ``link_session``, a
+    peer linked to the successor, the hop over that link), or a socket backend that finds its
+    peers through the membership registry at ``registry`` (HOST:PORT)."""
+    if kind == "zenoh" and link_session is not None:
+        from tokenring.transport.links import LinkedZenohTransport
+
+        return LinkedZenohTransport(session, link_session, ring, node_id, frame_size)
     if kind == "zenoh":
         from tokenring.transport.zenoh import ZenohTransport
 

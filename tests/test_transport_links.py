@@ -1,0 +1,89 @@
+"""The token's hop on direct links (``tokenring node --link-listen/--link-connect``): real node
+processes, clients of a router opened here, each linked to its successor in a second session.
+
+The judge is the router: it subscribes every node's token key, so it sees exactly the frames
+that went through it and none of those that went over a direct link.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+
+from ringutil import stats, wait_until
+
+from tokenring.cliutil import free_port
+from tokenring.zconfig import make_config, open_session
+
+IDS = (10, 20, 30, 40)
+
+
+def test_the_hop_goes_direct_and_past_a_dead_successor_through_the_router(procs, ring_name, endpoint):
+    ports: dict[int, int] = {}
+    while len(set(ports.values())) < len(IDS):
+        ports = {node_id: free_port() for node_id in IDS}
+    router = open_session(make_config(mode="router", listen=[endpoint]))
+    through_router: list[str] = []
+    lock = threading.Lock()
+
+    def routed(sample) -> None:
+        with lock:
+            through_router.append(str(sample.key_expr))
+
+    watcher = router.declare_subscriber(f"tokenring/{ring_name}/token/*", routed)
+    try:
+        nodes = {}
+        for index, node_id in enumerate(IDS):
+            successor = IDS[(index + 1) % len(IDS)]
+            nodes[node_id] = procs.tokenring(
+                *("node", "--id", str(node_id), "--ring", ring_name, "--bitrate", "max", "--no-store"),
+                *("--mode", "client", "--connect", endpoint),
+                *("--link-listen", f"tcp/127.0.0.1:{ports[node_id]}"),
+                *("--link-connect", f"tcp/127.0.0.1:{ports[successor]}"),
+            )
+
+        def formed():
+            found = stats(router, ring_name, 10)
+            return found.get(10, {}).get("active") == list(IDS) and found[10]["stats"]["visits"] > 50
+
+        wait_until(formed, 60.0, "a ring of four on direct links")
+        with lock:
+            through_router.clear()
+        before = stats(router, ring_name, 10)[10]["stats"]["visits"]
+        wait_until(
+            lambda: stats(router, ring_name, 10)[10]["stats"]["visits"] > before + 200, 30.0, "200 rounds"
+        )
+        with lock:
+            assert through_router == [], "with every node live, no frame should pass the router"
+
+        nodes[20].send_signal(signal.SIGKILL)
+        nodes[20].wait(30)
+
+        def healed():
+            found = stats(router, ring_name, 10)
+            return found.get(10, {}).get("active") == [10, 30, 40] and found[10]["successor"] == 30
+
+        wait_until(healed, 30.0, "node 10 passes to 30 past the killed 20")
+        before = stats(router, ring_name, 10)[10]["stats"]["visits"]
+        wait_until(
+            lambda: stats(router, ring_name, 10)[10]["stats"]["visits"] > before + 50, 30.0, "circulating"
+        )
+        with lock:
+            # 10 has no link to 30 (10 links to 20 and 40 links to 10): through the router
+            assert f"tokenring/{ring_name}/token/30" in through_router
+            assert f"tokenring/{ring_name}/token/10" not in through_router  # 40 -> 10 stays direct
+        for node_id in (10, 30, 40):
+            nodes[node_id].send_signal(signal.SIGTERM)
+        for node_id in (10, 30, 40):
+            assert nodes[node_id].wait(30) == 0
+    finally:
+        watcher.undeclare()
+        router.close()
+
+
+def test_a_launched_ring_on_direct_links_circulates():
+    from tokenring.roundtrip import run_ring
+
+    result = run_ring(6, 100, 20, router=True, links=True, timeout=120.0)
+    assert len(result.rounds_s) == 100
+    assert all(r > 0 for r in result.rounds_s)
