@@ -10,6 +10,7 @@ from __future__ import annotations
 import signal
 import threading
 
+import pytest
 from ringutil import stats, wait_until
 
 from tokenring.cliutil import free_port
@@ -87,3 +88,15 @@ def test_a_launched_ring_on_direct_links_circulates():
     result = run_ring(6, 100, 20, router=True, links=True, timeout=120.0)
     assert len(result.rounds_s) == 100
     assert all(r > 0 for r in result.rounds_s)
+
+
+def test_links_are_refused_where_they_would_bypass_the_rings_rules(tmp_path):
+    from tokenring.errors import UsageError
+    from tokenring.launcher import Launcher
+
+    for options in (
+        {"links": True},
+        {"links": True, "router": True, "zenoh_config": str(tmp_path / "z.json5")},
+    ):
+        with pytest.raises(UsageError):
+            Launcher([], ring="t", listen=["tcp/127.0.0.1:1"], **options)

@@ -145,6 +145,9 @@ class Launcher:
             raise UsageError("direct links to the ring successor need the launcher as the nodes' router")
         if links and transport != "zenoh":
             raise UsageError(f"direct links are Zenoh links; --transport {transport} has its own")
+        if links and (zenoh_config or os.environ.get("ZENOH_CONFIG")):
+            # the links are plain TCP on loopback, outside the config's (a secured ring's) rules
+            raise UsageError("direct links (--links) are plain TCP: not on a ring with a Zenoh config file")
         #: the token's hop also on a direct link from each node to its successor (a second
         #: session per node, see :mod:`tokenring.transport.links`); their ports, by node ID
         self.links = links
