@@ -48,3 +48,12 @@ def test_a_process_of_a_bare_ring_that_fails_ends_the_wait_at_once():
         for proc in (first, failing, waiting):
             proc.kill()
             proc.wait()
+
+
+def test_ports_drawn_for_a_255_process_chain_never_repeat():
+    from tokenring.cliutil import free_port
+
+    ports: list[int] = []
+    for _ in range(255):
+        ports.append(free_port(avoid=ports))
+    assert len(set(ports)) == 255

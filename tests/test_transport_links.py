@@ -21,8 +21,8 @@ IDS = (10, 20, 30, 40)
 
 def test_the_hop_goes_direct_and_past_a_dead_successor_through_the_router(procs, ring_name, endpoint):
     ports: dict[int, int] = {}
-    while len(set(ports.values())) < len(IDS):
-        ports = {node_id: free_port() for node_id in IDS}
+    for node_id in IDS:
+        ports[node_id] = free_port(avoid=ports.values())
     router = open_session(make_config(mode="router", listen=[endpoint]))
     through_router: list[str] = []
     lock = threading.Lock()

@@ -13,7 +13,7 @@ import socket
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -300,15 +300,19 @@ def _ephemeral_ports() -> tuple[int, int]:
         return 32768, 60999
 
 
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that is free right now (tests and benchmarks).
+def free_port(avoid: Collection[int] = ()) -> int:
+    """A TCP port on 127.0.0.1 that is free right now (tests and benchmarks), and not in ``avoid``
+    (ports handed out already for listeners that have not bound yet: draws are random and repeat).
 
     Chosen below the ephemeral range: a port the kernel handed out (``bind(0)``) can be taken a
     moment later by any process's outgoing connection, before the listener that asked for it binds.
     """
     low, _ = _ephemeral_ports()
     candidates = range(max(1024, low - 12000), low) if low > 2048 else range(20000, 30000)
-    for port in random.SystemRandom().sample(candidates, min(200, len(candidates))):
+    taken = set(avoid)
+    for port in random.SystemRandom().sample(candidates, min(200 + len(taken), len(candidates))):
+        if port in taken:
+            continue
         with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
             try:
                 sock.bind(("127.0.0.1", port))

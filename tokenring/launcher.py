@@ -299,10 +299,8 @@ class Launcher:
         ids = sorted({p.node_id for p in self.plans} | {node_id})
         successor = ids[(ids.index(node_id) + 1) % len(ids)]
         for wanted in (node_id, successor):
-            while wanted not in self.link_ports:
-                port = free_port()
-                if port not in self.link_ports.values():
-                    self.link_ports[wanted] = port
+            if wanted not in self.link_ports:
+                self.link_ports[wanted] = free_port(avoid=self.link_ports.values())
         options = ["--link-listen", f"tcp/127.0.0.1:{self.link_ports[node_id]}"]
         if successor != node_id:
             options += ["--link-connect", f"tcp/127.0.0.1:{self.link_ports[successor]}"]

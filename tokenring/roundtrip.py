@@ -119,10 +119,10 @@ def spawn_bare_ring(
     mode = ("links" if router else "chain") if chain else "client" if router else "peer"
     base += ["--mode", mode] + (["--stamps"] if stamps else [])
     if chain:
-        ports: set[int] = set()
-        while len(ports) < n:  # free_port() samples at random: 255 draws would repeat some
-            ports.add(free_port())
-        base += ["--ports", ",".join(map(str, sorted(ports)))]
+        ports: list[int] = []
+        for _ in range(n):
+            ports.append(free_port(avoid=ports))
+        base += ["--ports", ",".join(map(str, ports))]
     env = node_environment()  # the same Zenoh runtime as the ring's nodes
     first = subprocess.Popen(
         [*base, "--index", "0"], stdout=stdout, stderr=stderr, text=True, env=env, preexec_fn=die_with_parent
@@ -263,8 +263,8 @@ def run_ring(
 
     ``router``: the launcher's session is a Zenoh router and the nodes its clients (else a full
     mesh of peers); ``links``: with the router, each node's token hop also on a direct link to
-    its successor (``Launcher(links=True)``); ``transport``: what carries the token (zenoh, udp, zmq); ``profile``: an
-    emulated hardware timing; ``plans``/``services``: named nodes with programs and helper
+    its successor (``Launcher(links=True)``); ``transport``: what carries the token (zenoh, udp,
+    zmq); ``profile``: an emulated hardware timing; ``plans``/``services``: named nodes with programs and helper
     processes (the robot), instead of ``n`` generated IDs; ``tap``: also time the rounds from
     outside, by the arrivals of the master's frames at a subscriber of this process.
     """

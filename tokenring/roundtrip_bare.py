@@ -56,13 +56,10 @@ def main(argv: list[str] | None = None) -> int:
         ports = [int(port) for port in (args.ports or "").split(",") if port]
         if len(ports) != n:
             p.error(f"--mode {args.mode} needs {n} --ports, got {len(ports)}")
-        config = make_config(
-            listen=[f"tcp/127.0.0.1:{ports[i]}"], connect=[f"tcp/127.0.0.1:{ports[(i + 1) % n]}"]
-        )
-        config.insert_json5("scouting/gossip/enabled", "false")  # no links beyond the successor's
-        config.insert_json5("connect/timeout_ms", "-1")  # the successor may not listen yet
-        config.insert_json5(
-            "connect/retry", '{"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}'
+        config = make_config(  # no links beyond the successor's
+            listen=[f"tcp/127.0.0.1:{ports[i]}"],
+            connect=[f"tcp/127.0.0.1:{ports[(i + 1) % n]}"],
+            gossip=False,
         )
     elif args.mode == "client":
         config = make_config(mode="client", connect=[endpoint])
