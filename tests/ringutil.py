@@ -159,3 +159,17 @@ def write_probe_programs(directory: Path) -> Path:
     for node in default_protocol().nodes.values():
         (directory / f"{node.name}.py").write_text(PROBE_PROGRAM)
     return directory
+
+
+def processes() -> dict[int, tuple[int, bytes]]:
+    """Every process's parent PID and command line (read only)."""
+    found = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+                cmdline = (entry / "cmdline").read_bytes()
+            except (OSError, IndexError, ValueError):
+                continue
+            found[int(entry.name)] = (ppid, cmdline)
+    return found

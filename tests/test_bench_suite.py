@@ -10,10 +10,9 @@ import os
 import signal
 import subprocess
 import threading
-from pathlib import Path
 
 from conftest import REPO, wait_gone
-from ringutil import wait_until
+from ringutil import processes, wait_until
 from test_bench_report import suite_run
 
 from bench import suite
@@ -82,20 +81,6 @@ def test_a_bench_run_gets_its_environment_and_the_python_token_path_circulates()
 ENDLESS = ["--nodes", "8", "--rounds", "10", "--warmup", "100000000"]
 HANG_GUARD_S = 60.0
 BARE = b"tokenring.roundtrip_bare"
-
-
-def processes() -> dict[int, tuple[int, bytes]]:
-    """Every process's parent PID and command line (read only)."""
-    found = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-                cmdline = (entry / "cmdline").read_bytes()
-            except (OSError, IndexError, ValueError):
-                continue
-            found[int(entry.name)] = (ppid, cmdline)
-    return found
 
 
 def bare_ring_of(benchmarks: set[int]) -> set[int]:

@@ -4,27 +4,17 @@ circulate and end, and a bare ring whose process fails ends the wait at once."""
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
+from ringutil import processes
 
 from tokenring.roundtrip import run_bare
 
 
 def children_running(marker: bytes) -> list[int]:
-    """PIDs of this process's children whose command line holds ``marker`` (read from /proc)."""
-    found = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            cmdline = (entry / "cmdline").read_bytes()
-        except (OSError, IndexError, ValueError):
-            continue
-        if ppid == os.getpid() and marker in cmdline:
-            found.append(int(entry.name))
-    return found
+    """PIDs of this process's children whose command line holds ``marker``."""
+    me = os.getpid()
+    return [pid for pid, (ppid, cmdline) in processes().items() if ppid == me and marker in cmdline]
 
 
 @pytest.mark.parametrize("router", [False, True], ids=["chain", "links"])

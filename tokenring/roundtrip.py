@@ -28,6 +28,7 @@ from tokenring import keys
 from tokenring.cliutil import free_port, query
 from tokenring.errors import TokenRingError, UsageError
 from tokenring.launcher import Launcher, NodePlan, die_with_parent
+from tokenring.launchio import ExitWatch
 from tokenring.zconfig import hop_callback, make_config, node_environment, open_session
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
@@ -209,15 +210,27 @@ def _wait_first(
     first: subprocess.Popen, others: list[subprocess.Popen], timeout: float
 ) -> tuple[int, int] | None:
     """Wait for process 0 of a bare ring to end; (index, exit code) of a process that failed
-    first (the ring can no longer go round: stop waiting at once), None if none did."""
+    first (the ring can no longer go round: stop waiting at once), None if none did. Woken by
+    the processes' exits (pidfds, as the launcher's supervisor is), not by polling 255 of them
+    from beside the ring being measured."""
+    watch = ExitWatch()
+    for proc in (first, *others):
+        watch.add(proc.pid, proc.pid)
     deadline = time.monotonic() + timeout
-    while first.poll() is None:
-        ended = next(((i, p.returncode) for i, p in enumerate(others, 1) if p.poll() not in (None, 0)), None)
-        if ended is not None:
-            return ended
-        if time.monotonic() > deadline:
-            return None
-        time.sleep(0.2)
+    try:
+        while first.poll() is None:
+            failed = next(
+                ((i, p.returncode) for i, p in enumerate(others, 1) if p.poll() not in (None, 0)), None
+            )
+            if failed is not None:
+                return failed
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None
+            watch.wait(left if watch.works else min(left, 0.2))
+    finally:
+        watch.close_reading()
+        watch.close_waking()
     return (0, first.returncode) if first.returncode not in (0, 1) else None
 
 
