@@ -100,3 +100,21 @@ def test_links_are_refused_where_they_would_bypass_the_rings_rules(tmp_path):
     ):
         with pytest.raises(UsageError):
             Launcher([], ring="t", listen=["tcp/127.0.0.1:1"], **options)
+
+
+def test_the_launcher_links_each_node_to_its_successors_listener():
+    from tokenring.launcher import Launcher, NodePlan
+
+    launcher = Launcher(
+        [NodePlan(i, f"node{i}", None) for i in (30, 10, 20)],
+        ring="t",
+        listen=["tcp/127.0.0.1:1"],
+        router=True,
+        links=True,
+    )
+    options = {i: launcher.link_options(i) for i in (10, 20, 30)}
+    listens = {i: o[o.index("--link-listen") + 1] for i, o in options.items()}
+    connects = {i: o[o.index("--link-connect") + 1] for i, o in options.items()}
+    assert connects == {10: listens[20], 20: listens[30], 30: listens[10]}  # in ID order, round
+    assert len(set(listens.values())) == 3
+    assert launcher.link_options(20) == options[20]  # a respawned node listens where it did
