@@ -19,7 +19,7 @@ def children_running(marker: bytes) -> list[int]:
 
 @pytest.mark.parametrize("router", [False, True], ids=["chain", "links"])
 def test_a_chain_of_direct_links_passes_the_frame_round_and_every_process_ends(router):
-    rounds = run_bare(8, 30, 5, timeout=120.0, chain=True, router=router)
+    rounds = run_bare(8, 30, 5, timeout=60.0, chain=True, router=router)
     assert len(rounds) == 30
     assert all(r > 0 for r in rounds)
     assert children_running(b"tokenring.roundtrip_bare") == []

@@ -145,14 +145,7 @@ def main(argv: list[str] | None = None) -> int:
                 put(b"\xff")
                 time.sleep(CHAIN_LINGER_S)
 
-        if i == 0 and args.mode == "chain":
-            # no process sees the others' liveliness: send until a frame has gone round
-            deadline, number = time.monotonic() + args.timeout, 0
-            while not stamps and time.monotonic() < deadline:
-                put(number.to_bytes(4, "little") + bytes(510))
-                number += 1
-                time.sleep(1.0)
-        elif i == 0:
+        if i == 0 and args.mode != "chain":  # the chain's processes see no one's liveliness
             deadline = time.monotonic() + args.timeout
             while time.monotonic() < deadline:
                 live = [r for r in control.liveliness().get(f"{prefix}/live/*", timeout=1.0) if r.ok]
@@ -162,6 +155,15 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 print(json.dumps({"error": "bare ring did not form"}), flush=True)
                 return 1
+        if i == 0 and chained:
+            # every process is up, but a successor link may still be forming and a frame put
+            # before it is lost: send until a frame has gone round
+            deadline, number = time.monotonic() + args.timeout, 0
+            while not stamps and time.monotonic() < deadline:
+                put(number.to_bytes(4, "little") + bytes(510))
+                number += 1
+                done.wait(1.0)
+        elif i == 0:
             time.sleep(0.3 + 0.01 * n)  # let every peer connect to every other
             put(bytes(514))
         if i == 0:
