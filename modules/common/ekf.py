@@ -62,6 +62,10 @@ class EkfParams:
     initial_glide_sigma: float = 0.3
     initial_compass_offset_sigma_deg: float = 3.0
     initial_step_scale_sigma: float = 0.02
+    #: the floor's mean step scale to start from (1.0: the nominal step; else an odometry
+    #: calibration, ``tokenring calibrate``) and its σ (None: ``initial_step_scale_sigma``)
+    initial_step_scale: float = 1.0
+    initial_step_scale_mean_sigma: float | None = None
     # measurements
     compass_sigma_deg: float = 1.5
     gate_probability: float = 0.997
@@ -117,11 +121,12 @@ class PoseEKF:
         if "compass_offset" in self.index:
             sigmas.append(math.radians(params.initial_compass_offset_sigma_deg))
         if "step_scale" in self.index:
-            self.x[self.index["step_scale"]] = 1.0
+            self.x[self.index["step_scale"]] = params.initial_step_scale
             sigmas.append(params.initial_step_scale_sigma)
         if "step_scale_mean" in self.index:
-            self.x[self.index["step_scale_mean"]] = 1.0
-            sigmas.append(params.initial_step_scale_sigma)
+            self.x[self.index["step_scale_mean"]] = params.initial_step_scale
+            mean_sigma = params.initial_step_scale_mean_sigma
+            sigmas.append(params.initial_step_scale_sigma if mean_sigma is None else mean_sigma)
         self.P = np.diag(np.square(sigmas))
         self.gates = GateCounts()
         self.gate_1 = chi2_quantile(params.gate_probability, 1)
@@ -151,6 +156,12 @@ class PoseEKF:
         """The floor's mean step scale (the current move's scale without that state)."""
         i = self.index.get("step_scale_mean")
         return float(self.x[i]) if i is not None else self.step_scale
+
+    @property
+    def step_scale_mean_sigma(self) -> float | None:
+        """The floor mean's standard deviation; None without that state."""
+        i = self.index.get("step_scale_mean")
+        return float(math.sqrt(max(self.P[i, i], 0.0))) if i is not None else None
 
     @property
     def compass_offset(self) -> float:

@@ -173,6 +173,8 @@ def ekf_params(config: dict[str, Any]) -> EkfParams:
         initial_glide_sigma=initial["glide_sigma"],
         initial_compass_offset_sigma_deg=initial["compass_offset_sigma_deg"],
         initial_step_scale_sigma=initial["step_scale_sigma"],
+        initial_step_scale=initial["step_scale"],
+        initial_step_scale_mean_sigma=initial["step_scale_mean_sigma"],
         compass_sigma_deg=f["compass"]["sigma_deg"],
         gate_probability=f["gate_probability"],
         valid_sigma_mm=f["valid_sigma_mm"],
@@ -810,6 +812,8 @@ class LocalizationCore:
                 "glide": self.ekf.glide,
                 "compass_offset": self.ekf.compass_offset,
                 "step_scale": self.ekf.step_scale,
+                "step_scale_mean": self.ekf.step_scale_mean,
+                "step_scale_mean_sigma": self.ekf.step_scale_mean_sigma,
                 "walls": walls,
             }
         if wall_fix is not None:
@@ -858,6 +862,8 @@ class LocalizationCore:
             out["gates"] = self.ekf.gates.as_dict()
             out["glide"] = self.ekf.glide
             out["step_scale"] = self.ekf.step_scale
+            out["step_scale_mean"] = self.ekf.step_scale_mean
+            out["step_scale_mean_sigma"] = self.ekf.step_scale_mean_sigma
             out["compass_offset_deg"] = math.degrees(self.ekf.compass_offset)
         pose = self.pose()
         out["pose"] = {

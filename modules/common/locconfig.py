@@ -52,7 +52,7 @@ DEFAULTS: dict[str, Any] = {
             "step_scale_walk_per_m": 0.0005,
             "step_scale_mean_walk_per_move": 0.001,
         },
-        "initial": {"sigma_mm": 20.0, "sigma_deg": 2.0, "glide_sigma": 0.3, "compass_offset_sigma_deg": 3.0, "step_scale_sigma": 0.02},
+        "initial": {"sigma_mm": 20.0, "sigma_deg": 2.0, "glide_sigma": 0.3, "compass_offset_sigma_deg": 3.0, "step_scale": 1.0, "step_scale_sigma": 0.02, "step_scale_mean_sigma": 0.02},
         "gate_probability": 0.997,
         "valid_sigma_mm": 150.0,
         "valid_sigma_deg": 5.0,
@@ -270,6 +270,11 @@ class _Checker:
                 )
         if "step_scale_mean" in c["filter"]["estimate"] and "step_scale" not in c["filter"]["estimate"]:
             raise self.fail(("filter", "estimate"), "step_scale_mean needs step_scale")
+        if not 0.5 <= c["filter"]["initial"]["step_scale"] <= 1.5:
+            raise self.fail(
+                ("filter", "initial", "step_scale"),
+                f"must lie between 0.5 and 1.5 (true step / nominal), got {c['filter']['initial']['step_scale']}",
+            )
         pose = c["filter"]["initial_pose"]
         if isinstance(pose, dict):
             keys = {"x_mm", "y_mm", "heading_deg"}
