@@ -233,8 +233,10 @@ def judged_drive(
     room: int | str, world: str, seed: int, actions_text: str, overrides: dict[str, Any] | None
 ) -> dict[str, Any]:
     """One drive of ``world`` by ``actions_text``, judged against the truth (see :func:`judge`)."""
-    sim = DriveSim(world, seed, actions_text, repository_config(world, overrides))
+    config = repository_config(world, overrides)
+    sim = DriveSim(world, seed, actions_text, config)
     result = sim.drive()
+    initial = sim.core.config["filter"]["initial"] if sim.core is not None else {}
     figures = judge(result["positions"], result["truth"])
     k, o = figures.get("K", {}), figures.get("O", {})
     report = result["report"]
@@ -255,6 +257,10 @@ def judged_drive(
         "gates": report.get("gates"),
         "walls_associated": report.get("walls_associated"),
         "walls_past_end": report.get("walls_past_end"),
+        # the floor's mean step scale as the drive left it (what `tokenring calibrate` pools)
+        "step_scale_mean": report.get("step_scale_mean"),
+        "step_scale_mean_sigma": report.get("step_scale_mean_sigma"),
+        "step_scale_prior": [initial.get("step_scale"), initial.get("step_scale_mean_sigma")],
     }
 
 
@@ -276,6 +282,35 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "dead_reckoning_median_mm": round(statistics.median(r["dead_reckoning_mm"] for r in done)),
         "not_done": [f"{r['room']}/{r['seed']}" for r in done if r["finished"] != "action file done"],
         "no_drive": sorted({r["room"] for r in rows if "error" in r}),
+        "floor_calibration": floor_calibration(done),
+    }
+
+
+def floor_calibration(rows: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The floor's step scale pooled over these drives (:mod:`modules.common.calibration`), as
+    ``tokenring calibrate`` pools it from the ring's logs; None if no drive measured it."""
+    from modules.common.calibration import CalibrationError, FloorEstimate, pool
+
+    estimates = [
+        FloorEstimate(
+            f"{r['room']}/{r['seed']}",
+            r["step_scale_mean"],
+            r["step_scale_mean_sigma"],
+            r["step_scale_prior"][1],
+        )
+        for r in rows
+        if r.get("step_scale_mean_sigma") is not None and None not in r.get("step_scale_prior", [None])
+    ]
+    try:
+        found = pool(estimates)
+    except CalibrationError:
+        return None
+    return {
+        "step_scale": round(found.step_scale, 5),
+        "sigma": round(found.sigma, 5),
+        "birge_ratio": round(found.birge_ratio, 2),
+        "drives_used": len(found.used),
+        "drives_skipped": len(found.skipped),
     }
 
 
@@ -333,7 +368,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"room {r['room']:>3} seed {r['seed']}: filter {r['filter_mm']:5.1f} mm (RMSE "
                 f"{r['filter_rmse_mm']:5.1f}, worst {r['filter_max_mm']:5.1f} at {r['worst_at_s']:4.0f} s, "
                 f"within 3σ {r['within_3sigma']:6.1%}, heading {r['filter_heading_deg']:+.2f}°) | dead reckoning "
-                f"{r['dead_reckoning_mm']:4.0f} mm | {r['sim_seconds']:.0f} s | {r['finished']}",
+                f"{r['dead_reckoning_mm']:4.0f} mm | floor {r['step_scale_mean'] or 0:.4f} ± "
+                f"{r['step_scale_mean_sigma'] or 0:.4f} | {r['sim_seconds']:.0f} s | {r['finished']}",
                 flush=True,
             )
     s = summarise(rows)
@@ -347,6 +383,14 @@ def main(argv: list[str] | None = None) -> int:
             + (f"; rooms without a drive: {s['no_drive']}" if s["no_drive"] else "")
         )
         print("aims (issue 21): median ≤ 20 mm, worst ≤ 50 mm, within 3σ ≥ 99 %")
+        floor = s["floor_calibration"]
+        if floor:
+            print(
+                f"floor step scale pooled over {floor['drives_used']} drives that measured it "
+                f"({floor['drives_skipped']} did not): {floor['step_scale']:.4f} ± {floor['sigma']:.4f} "
+                f"(Birge ratio {floor['birge_ratio']:.2f}); to start from it: --set "
+                f"filter.initial.step_scale={floor['step_scale']:.4f}"
+            )
     if args.json:
         document = {
             "benchmark": "drivesim",
