@@ -72,6 +72,8 @@ def config(**ahead: Any) -> dict[str, Any]:
     data["walls"]["ahead"] = {"enabled": True, **ahead}
     data["walls"]["bias_floor_mm"] = 0.0
     data["logs"] = {"enabled": False}
+    # the floor at its nominal 1.0 ± 0.02, not the file's calibration: these drives draw their own
+    data["filter"]["initial"].update(step_scale=1.0, step_scale_mean_sigma=0.02)
     return load_config(data)
 
 

@@ -29,6 +29,7 @@ def core_after_fit(scale: float, bound: bool, sigma: float = 0.004) -> Localizat
         unknown_wall_max_sigma=0.006,
     )
     config["logs"]["enabled"] = False
+    config["filter"]["initial"].update(step_scale=1.0, step_scale_mean_sigma=0.02)  # not calibrated
     core = LocalizationCore(config, known_walls=[], start_pose=(1000.0, 1000.0, 0.0))
     fit = {
         "sensor": FRONT,

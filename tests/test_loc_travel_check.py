@@ -37,6 +37,7 @@ def core_after_fit(check_at: str) -> LocalizationCore:
     config = copy.deepcopy(load_config("config/localization.yaml"))
     config["filter"]["travel"].update(enabled=True, check_at=check_at)
     config["logs"]["enabled"] = False
+    config["filter"]["initial"].update(step_scale=1.0, step_scale_mean_sigma=0.02)  # not calibrated
     core = LocalizationCore(config, known_walls=walls(), start_pose=(3000.0, 1000.0, 0.0))
     fit = {
         "sensor": REAR,

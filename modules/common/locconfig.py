@@ -94,7 +94,8 @@ DEFAULTS: dict[str, Any] = {
 #: the compass's measured accuracy, no compass reading bent by the motors' start or stop, a floor
 #: under the pose's σ across a wall (its fits share an error) and the floor's mean step scale as a
 #: state, from which each move's scale starts, and the front sonar's range to a wall ahead (up to
-#: 25° off its normal, beyond 20° with a larger σ). The
+#: 25° off its normal, beyond 20° with a larger σ), and the floor's step scale calibrated on the
+#: tuning drives (``tokenring calibrate``). The
 #: built-in defaults keep the earlier values: exploration mode builds on them, and old logs replay
 #: as they ran
 REPOSITORY_SETTINGS: dict[str, Any] = {
@@ -103,7 +104,7 @@ REPOSITORY_SETTINGS: dict[str, Any] = {
         "travel": {"enabled": False, "max_range_mm": 1400.0, "unknown_wall": False, "check_at": "points"},
         "estimate": ["glide", "compass_offset", "step_scale", "step_scale_mean"],
         "noise": {"compass_offset_walk_deg_per_s": 0.01},
-        "initial": {"compass_offset_sigma_deg": 0.5},
+        "initial": {"compass_offset_sigma_deg": 0.5, "step_scale": 1.0129, "step_scale_mean_sigma": 0.002},
     },
     "walls": {
         "range_model": "tangent",
