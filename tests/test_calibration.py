@@ -126,7 +126,7 @@ def test_calibrate_pools_the_logs_last_estimates(tmp_path: Path, capsys: pytest.
 @pytest.mark.parametrize(
     ("logs", "message"),
     [
-        (["flat"], "none of 1 drive(s) measured the distance driven"),
+        (["flat"], "none of 1 drive(s) learnt the floor"),
         (["a", "other_step"], "the logs' filters used different nominal steps"),
         (["no_mean"], "filter.estimate lacks step_scale_mean"),
         (["missing"], "no such log file"),

@@ -92,8 +92,9 @@ def pool(estimates: Iterable[FloorEstimate]) -> FloorCalibration:
             )
     if not used:
         raise CalibrationError(
-            f"none of {len(skipped)} drive(s) measured the distance driven (no wall ahead or behind "
-            "in sonar range on a straight leg): nothing to calibrate from"
+            f"none of {len(skipped)} drive(s) learnt the floor: each one's σ stayed above "
+            f"{MAX_SIGMA_SHARE} of the σ it began with (no wall ahead or behind in sonar range on a "
+            "straight leg, or it began from a calibration already): nothing to calibrate from"
         )
     weights = [1.0 / e.sigma**2 for e in used]
     total = sum(weights)
