@@ -52,6 +52,28 @@ def test_replay_from_synchronised_data_is_bit_identical(online_log, tmp_path) ->
     assert result.identical, result.first_difference
 
 
+def test_a_log_from_before_the_floor_fields_replays_as_identical(online_log, tmp_path) -> None:
+    """Logs written before the filter positions carried the floor's mean and σ still --check
+    equal on every field they have; a changed value in one of them is still found."""
+    path, _ = online_log
+    original = read_log(path)
+
+    def rewrite(target, change):
+        log = DataLog(target, "test", original.header["config"], original.header.get("meta"))
+        for stamp, source, kind, payload in original.records:
+            if source == "K" and kind == "P":
+                payload = change({k: v for k, v in payload.items() if not k.startswith("step_scale_mean")})
+            log.write(stamp, source, kind, payload)
+        log.close()
+        return target
+
+    older = rewrite(tmp_path / "older.trlog", lambda p: p)
+    assert replay(older, tmp_path / "older-again.trlog", mode="sync").identical
+    tampered = rewrite(tmp_path / "tampered.trlog", lambda p: {**p, "step_scale": p["step_scale"] + 1e-9})
+    result = replay(tampered, tmp_path / "tampered-again.trlog", mode="sync")
+    assert not result.identical and "K P" in (result.first_difference or "")
+
+
 def test_replay_with_other_settings_differs_and_retrigger_runs(online_log, tmp_path) -> None:
     path, core = online_log
     config = load_config({"filter": {"compass": {"sigma_deg": 3.0}, "estimate": ["glide", "step_scale"]}})
