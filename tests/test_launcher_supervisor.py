@@ -9,6 +9,7 @@ test tells it to (a trigger file), not after a time that a loaded machine may ov
 from __future__ import annotations
 
 import io
+import signal
 import subprocess
 import sys
 import threading
@@ -168,6 +169,31 @@ def test_respawn_starts_a_dead_node_again_after_a_short_delay(
         # ... and it is its own timer that started it: the periodic check is an hour away
     finally:
         launcher.stop()
+
+
+def test_a_respawned_node_is_stopped_by_sigterm_like_the_others(
+    procs, ring_name, endpoint, tmp_path, monkeypatch
+):
+    """A node's parent-death signal (SIGKILL) fires when the thread that started it ends: the
+    supervisor, which respawns, ended at every stop and so killed every respawned node before
+    it was asked to leave (CI: `up` then exited 1 on "motor killed by SIGKILL")."""
+    monkeypatch.setattr(launcher_module, "RESPAWN_DELAY_S", 0.1)
+    trigger = tmp_path / "exit-now"
+    launcher = short_and_long(ring_name, endpoint, trigger, respawn=True)
+    launcher.start()
+    try:
+        first = launcher.children[1]
+        procs.watch([c.process.pid for c in launcher.child_list()])
+        trigger.touch()
+        second = wait_for(
+            lambda: launcher.children[1] is not first and launcher.children[1], HANG_GUARD_S, "respawn"
+        )
+        procs.watch([second.process.pid])
+    finally:
+        launcher.stop()
+    assert second.process.returncode == -signal.SIGTERM
+    assert launcher.children[2].process.returncode == -signal.SIGTERM
+    assert [code for _, _, code in launcher.deaths] == [3]  # the first child's exit, nothing at the stop
 
 
 def test_a_service_that_never_comes_up_leaves_nothing_running(ring_name: str, endpoint: str) -> None:

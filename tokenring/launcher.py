@@ -175,6 +175,7 @@ class Launcher:
         self._supervisor: threading.Thread | None = None
         self._booter: threading.Thread | None = None
         self._children_gone = threading.Event()
+        self._supervision_ended = threading.Event()  # the supervisor touches no child any more
         # children's exits wake the supervisor through their pidfds (readable once a process
         # exits); polling 255 children 20 times a second took CPU from the router in this process
         self._exits = ExitWatch()
@@ -468,6 +469,9 @@ class Launcher:
         self._children_gone.wait()
 
     def _supervise(self) -> None:
+        """Report exits and respawn until the stop; then outlive the nodes this thread respawned
+        (their parent-death signal fires when the *thread* that started them ends: a respawned
+        node was SIGKILLed at every stop instead of leaving the ring)."""
         try:
             while not self._stop.is_set():
                 timeout = EXIT_CHECK_S if self._exits.works else CHILD_POLL_S
@@ -485,6 +489,8 @@ class Launcher:
                     self.check_children()
         finally:
             self._exits.close_reading()
+            self._supervision_ended.set()
+        self._children_gone.wait()
 
     def check_children(self) -> None:
         """Report nodes that died; with ``--respawn`` start them again RESPAWN_DELAY_S later."""
@@ -538,8 +544,8 @@ class Launcher:
         if self._supervisor is None:
             self._exits.close_reading()  # never started
         elif self._supervisor is not threading.current_thread():
-            self._supervisor.join(timeout=1.0)
-        if self._supervisor is None or not self._supervisor.is_alive():
+            self._supervision_ended.wait(timeout=1.0)
+        if self._supervisor is None or self._supervision_ended.is_set():
             self._exits.close_waking()
         with self._children_lock:
             self.check_children()  # report what died before the stop
