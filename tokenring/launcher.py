@@ -49,7 +49,9 @@ KILL_REAP_S = 10.0  # after SIGKILL, how long the kernel may take to reap them a
 
 
 def die_with_parent() -> None:  # pragma: no cover - runs in the child between fork and exec
-    """``preexec_fn`` of a child process: the kernel kills it when its parent dies, even by SIGKILL."""
+    """``preexec_fn`` of a child process: the kernel kills it when its parent dies, even by SIGKILL
+    — and when the *thread* that started it ends, so start children only from threads that
+    outlive them."""
     libc = ctypes.CDLL("libc.so.6", use_errno=True)
     libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
 
