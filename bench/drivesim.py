@@ -233,10 +233,9 @@ def judged_drive(
     room: int | str, world: str, seed: int, actions_text: str, overrides: dict[str, Any] | None
 ) -> dict[str, Any]:
     """One drive of ``world`` by ``actions_text``, judged against the truth (see :func:`judge`)."""
-    config = repository_config(world, overrides)
-    sim = DriveSim(world, seed, actions_text, config)
+    sim = DriveSim(world, seed, actions_text, repository_config(world, overrides))
     result = sim.drive()
-    initial = sim.core.config["filter"]["initial"] if sim.core is not None else {}
+    initial = sim.core.config["filter"]["initial"]
     figures = judge(result["positions"], result["truth"])
     k, o = figures.get("K", {}), figures.get("O", {})
     report = result["report"]

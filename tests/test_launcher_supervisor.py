@@ -142,6 +142,18 @@ def test_an_exit_is_reported_even_while_another_thread_polls_that_child(
         launcher.stop()
 
 
+def kill_short_and_wait_for_its_respawn(launcher: ShortLivedLauncher, procs, trigger: Path):
+    """Trigger "short"'s exit; (the first child, its respawn), both watched for leaks."""
+    first = launcher.children[1]
+    procs.watch([c.process.pid for c in launcher.child_list()])
+    trigger.touch()
+    second = wait_for(
+        lambda: launcher.children[1] is not first and launcher.children[1], HANG_GUARD_S, "respawn"
+    )
+    procs.watch([second.process.pid])
+    return first, second
+
+
 def test_respawn_starts_a_dead_node_again_after_a_short_delay(
     procs, ring_name, endpoint, tmp_path, no_safety_net, monkeypatch
 ):
@@ -155,14 +167,8 @@ def test_respawn_starts_a_dead_node_again_after_a_short_delay(
     launcher = short_and_long(ring_name, endpoint, trigger, respawn=True)
     launcher.start()
     try:
-        first = launcher.children[1]
-        procs.watch([c.process.pid for c in launcher.child_list()])
         told = time.monotonic()  # the child exits after this, so the respawn is due after it too
-        trigger.touch()
-        second = wait_for(
-            lambda: launcher.children[1] is not first and launcher.children[1], HANG_GUARD_S, "respawn"
-        )
-        procs.watch([second.process.pid])
+        first, second = kill_short_and_wait_for_its_respawn(launcher, procs, trigger)
         assert first.process.poll() == 3 and second.restarts == 1
         # not at once: the delay runs from the exit, which came after the trigger ...
         assert second.started - told >= delay
@@ -182,13 +188,7 @@ def test_a_respawned_node_is_stopped_by_sigterm_like_the_others(
     launcher = short_and_long(ring_name, endpoint, trigger, respawn=True)
     launcher.start()
     try:
-        first = launcher.children[1]
-        procs.watch([c.process.pid for c in launcher.child_list()])
-        trigger.touch()
-        second = wait_for(
-            lambda: launcher.children[1] is not first and launcher.children[1], HANG_GUARD_S, "respawn"
-        )
-        procs.watch([second.process.pid])
+        _, second = kill_short_and_wait_for_its_respawn(launcher, procs, trigger)
     finally:
         launcher.stop()
     assert second.process.returncode == -signal.SIGTERM
