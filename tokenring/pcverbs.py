@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import itertools
 import logging
 import time
@@ -14,6 +13,7 @@ from tokenring.errors import UsageError
 if TYPE_CHECKING:
     from tokenring.pclink import PcLinkServer
 
+from tokenring.program import program_sha256
 from tokenring.programstore import now_ms
 from tokenring.system import SystemLayer
 from tokenring.syswire import SystemCommandError, Transaction
@@ -64,7 +64,7 @@ class PcSystemVerbs:
             raise UsageError("download needs the program's source as bytes")
         stamp = int(request.get("stamp_ms") or now_ms())
         if request.get("restamp"):  # the node has this very program: only the new time stamp
-            steps = [self.layer.restamp_step(target, hashlib.sha256(source).digest(), stamp)]
+            steps = [self.layer.restamp_step(target, program_sha256(source), stamp)]
         else:
             steps = self.layer.download_steps(
                 target,

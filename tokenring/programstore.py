@@ -3,7 +3,6 @@ battery-backed RAM), and the time stamps ``load -i`` compares."""
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 import os
@@ -11,10 +10,8 @@ import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    pass
+from tokenring.program import program_sha256
 
 log = logging.getLogger("tokenring.system")
 
@@ -88,7 +85,7 @@ class ProgramStore:
         except (OSError, ValueError, KeyError, TypeError) as exc:
             log.warning("program store %s is unreadable (%s): booting bare", meta_path, exc)
             return None
-        if hashlib.sha256(source).digest() != digest:
+        if program_sha256(source) != digest:
             log.warning("program store %s: %s does not match its hash: booting bare", meta_path, file)
             return None
         return Installed(source, digest, stamp, str(file))

@@ -9,11 +9,11 @@ naming the entry. After compilation every channel offers a zero-copy view over a
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import json
 import os
 import re
 import struct
+import zlib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import cache, cached_property
@@ -386,17 +386,19 @@ def parse_protocol(text: str, source: str = "<protocol>", *, cache: bool = False
         return _Compiler(source).compile(_read_yaml(text, source))
     path = cached_document_path(text)
     try:
-        return _Compiler(source).compile(json.loads(path.read_text()))
-    except (OSError, ValueError, ProtocolError):
+        kept = json.loads(path.read_text())
+        if kept["text"] == text:  # (the name is a 32-bit checksum: another text may share it)
+            return _Compiler(source).compile(kept["document"])
+    except (OSError, ValueError, TypeError, KeyError, ProtocolError):
         pass  # none yet, damaged, or not what this compiler accepts: read the YAML
     doc = _read_yaml(text, source)
     protocol = _Compiler(source).compile(doc)
-    keep_document(doc, path)
+    keep_document(doc, text, path)
     return protocol
 
 
 #: bump when the YAML reading changes what a text means (tokenring.yamlfile's loader)
-DOCUMENT_CACHE_VERSION = 1
+DOCUMENT_CACHE_VERSION = 2
 #: parsed documents kept (the newest; one per protocol text in use)
 DOCUMENT_CACHE_SIZE = 16
 
@@ -408,22 +410,25 @@ def document_cache_dir() -> Path:
 
 
 def cached_document_path(text: str) -> Path:
-    """Where the parsed document of protocol ``text`` is kept (named by the text's hash).
+    """Where the parsed document of protocol ``text`` is kept (named by the text's CRC-32).
 
     A protocol file's YAML is read once; later readings of the same text (every node of a ring
     booting) take its document from this JSON copy and import no YAML parser: 1-2 MB of each
     node process's memory. A text JSON cannot hold exactly, or a cache that cannot be written,
-    is simply read as YAML each time."""
-    digest = hashlib.sha256(f"{DOCUMENT_CACHE_VERSION}\0{text}".encode()).hexdigest()
-    return document_cache_dir() / f"protocol-{digest[:32]}.json"
+    is simply read as YAML each time. The name is a CRC, not a cryptographic hash: hashlib
+    would load OpenSSL into every node (3-4 MB of RSS); the copy holds its text, compared on
+    reading, so two texts with one name only cost a YAML reading."""
+    data = text.encode()
+    return document_cache_dir() / f"protocol-{DOCUMENT_CACHE_VERSION}-{zlib.crc32(data):08x}-{len(data)}.json"
 
 
-def keep_document(doc: Any, path: Path) -> None:
-    """Write ``doc`` to ``path`` if JSON gives it back as it was; keep the newest few."""
+def keep_document(doc: Any, text: str, path: Path) -> None:
+    """Write ``doc`` of protocol ``text`` (both) to ``path`` if JSON gives the document back as
+    it was; keep the newest few."""
     partial = path.with_name(f"{path.name}.{os.getpid()}.tmp")
     try:
-        copy = json.dumps(doc)
-        if json.loads(copy) != doc:  # e.g. keys that are numbers
+        copy = json.dumps({"text": text, "document": doc})
+        if json.loads(copy)["document"] != doc:  # e.g. keys that are numbers
             return
         path.parent.mkdir(parents=True, exist_ok=True)
         partial.write_text(copy)

@@ -5,7 +5,6 @@ download, start, stop). Mixed into :class:`~tokenring.system.SystemLayer`."""
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import logging
 import random
 import time
@@ -13,6 +12,7 @@ import zlib
 from typing import TYPE_CHECKING, Any
 
 from tokenring.errors import UsageError
+from tokenring.program import program_sha256
 from tokenring.ring import EPOCH_MASK
 
 if TYPE_CHECKING:
@@ -247,7 +247,7 @@ class SystemIssuer(SystemParts):
         chunks = (len(blob) + size - 1) // size
         if chunks > 0xFFFF:
             raise UsageError(f"a program of {len(source)} bytes needs {chunks} chunks, more than 65535")
-        digest = hashlib.sha256(source).digest()
+        digest = program_sha256(source)
         steps = [Step(target, self.BEGIN, self.layouts.BEGIN.pack(len(source), len(blob), encoding, size))]
         steps += [
             Step(target, self.DATA, self.layouts.INDEX.pack(i) + blob[i * size : (i + 1) * size])

@@ -4,7 +4,6 @@ the program state it reports. Mixed into :class:`~tokenring.system.SystemLayer`.
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import time
 import zlib
@@ -12,7 +11,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from tokenring.errors import ProgramError, UsageError
-from tokenring.program import load_program
+from tokenring.program import load_program, program_sha256
 
 if TYPE_CHECKING:
     pass
@@ -214,7 +213,7 @@ class SystemReceiver(SystemParts):
         if len(data) != dl.size:
             self._reject(job, Status.CORRUPT, f"{len(data)} bytes, not {dl.size}")
             return
-        got = hashlib.sha256(data).digest()
+        got = program_sha256(data)
         if got != digest:
             self._reject(job, Status.CORRUPT, f"hash {got.hex()[:8]}, sent {digest.hex()[:8]}")
             return
@@ -396,7 +395,7 @@ class SystemReceiver(SystemParts):
 
     def adopt(self, source: bytes, stamp_ms: int, filename: str, program_class: type) -> None:
         """A program started from a file (``--program``): report it as installed (not stored)."""
-        digest = hashlib.sha256(source).digest()
+        digest = program_sha256(source)
         self.installed = Installed(source, digest, stamp_ms, filename, program_class)
         self._running_digest = digest
 
