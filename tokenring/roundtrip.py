@@ -29,6 +29,7 @@ from tokenring.cliutil import free_port, query
 from tokenring.errors import TokenRingError, UsageError
 from tokenring.launcher import Launcher, NodePlan, die_with_parent
 from tokenring.launchio import ExitWatch
+from tokenring.wiretap import WireTap
 from tokenring.zconfig import hop_callback, make_config, node_environment, open_session
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
@@ -279,7 +280,8 @@ def run_ring(
     its successor (``Launcher(links=True)``); ``transport``: what carries the token (zenoh, udp,
     zmq); ``profile``: an emulated hardware timing; ``plans``/``services``: named nodes with programs and helper
     processes (the robot), instead of ``n`` generated IDs; ``tap``: also time the rounds from
-    outside, by the arrivals of the master's frames at a subscriber of this process.
+    outside, by the arrivals of the master's frames at a subscriber of this process (on direct
+    links, where no subscriber sees them, at the master's link port on the wire: :mod:`tokenring.wiretap`).
     """
     # a ring of generated IDs is the ring alone: its node 70 must not boot as the robot's lcd,
     # whose resident program (the boot menu, with numpy and Pillow) made it a 58 MB node
@@ -312,6 +314,7 @@ def run_ring(
         main_id = default_protocol().nodes["main"].id if "main" in default_protocol().nodes else None
         master = main_id if main_id in ids else min(ids)
     t_start = time.monotonic()
+    wire_tap: WireTap | None = None
     launcher.start()
     try:
         config = make_config(mode="client" if router else "peer", connect=[f"tcp/127.0.0.1:{port}"])
@@ -338,12 +341,16 @@ def run_ring(
                     f"(active {len(stats.get('active', []))}, visits {stats.get('stats', {}).get('visits', 0)})"
                 )
             arrivals: list[float] = []
+            wire_tap = WireTap(launcher.link_ports[master]) if tap and links else None
+            if wire_tap is not None:  # on direct links no subscriber sees the token: the wire
+                wire_tap.start()
+                arrivals = wire_tap.arrivals
             tap_subscriber = (
                 session.declare_subscriber(
                     keys.token(ring, master),
                     hop_callback(lambda _sample: arrivals.append(time.perf_counter())),
                 )
-                if tap
+                if tap and wire_tap is None
                 else None
             )
             cpu0 = {c.process.pid: proc_cpu_s(c.process.pid) for c in launcher.child_list()}
@@ -361,6 +368,8 @@ def run_ring(
             wall = time.monotonic() - t0
             if tap_subscriber is not None:
                 tap_subscriber.undeclare()
+            if wire_tap is not None:
+                wire_tap.stop()
             if on_ready is not None:  # e.g. collect what programs measured, while the ring runs
                 on_ready(session, ring)
             launcher_cpu = time.process_time() - own_cpu
@@ -382,6 +391,8 @@ def run_ring(
                 tap_rounds_s=[b - a for a, b in itertools.pairwise(arrivals)][-rounds:],
             )
     finally:
+        if wire_tap is not None:
+            wire_tap.stop()  # (again: a run that failed leaves no capture behind)
         launcher.stop()
 
 

@@ -74,7 +74,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--tap",
         action="store_true",
-        help="also time the rounds from outside: a subscriber of the round master's token key",
+        help="also time the rounds from outside: a subscriber of the round master's token key "
+        "(--topology links: the master's frames on the wire, captured by tcpdump)",
     )
 
 
@@ -105,9 +106,12 @@ def run(args: argparse.Namespace) -> int:
     topology = "links" if links else "router" if router else "peer"
     kind = {"peer": "peers", "router": "routers", "links": "direct links"}[topology]
     if links and args.tap:
-        raise UsageError(
-            "--tap listens at the router; with --topology links the token passes on direct links"
-        )
+        from tokenring.wiretap import WireTapError, tcpdump_path
+
+        try:
+            tcpdump_path()
+        except WireTapError as exc:
+            raise UsageError(str(exc)) from None
     if links and args.transport != "zenoh":
         raise UsageError(f"--topology links is a Zenoh topology; --transport {args.transport} has its own")
     bare: list[float] = []
@@ -224,8 +228,11 @@ def run(args: argparse.Namespace) -> int:
     shares = ", ".join(f"{x:.1f}" for x in own_share_us)
     print(f"tokenring's own share per hop {report['own_share_us']['mean']:.1f} us (per pair: {shares})")
     if args.tap:
+        vantage = (
+            "the master's frames on the wire, tcpdump" if links else "frames' arrival at the master's key"
+        )
         print(
-            f"outside tap (frames' arrival at the master's key): median {report['tap_rtt_ms']['median']:.3f} ms, "
+            f"outside tap ({vantage}): median {report['tap_rtt_ms']['median']:.3f} ms, "
             f"{report['tap_difference_pct']:+.1f} % against the ring's own figure"
         )
     if args.json:
