@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from bench.drivesim import DriveSim, judge, repository_config, summarise
+from bench.drivesim import DriveSim, chance_beyond, judge, repository_config, summarise
 from bench.rooms import generated_room
 from modules.description import load_world
 from modules.description.drives import drive_text, generate_drive
@@ -100,3 +100,12 @@ def test_a_bundled_world_is_driven_by_an_action_file(tmp_path, capsys):
     (run,) = json.loads(out.read_text())["runs"]
     assert run["room"] == "square" and run["finished"] == "action file done"
     assert run["moves"]  # the file's moves were driven
+
+
+def test_the_chance_beyond_the_aim_is_the_gaussians_mass_outside_the_disc():
+    # a round Gaussian: Rayleigh's tail exp(-R²/2σ²), in closed form
+    assert math.isclose(chance_beyond(50.0, 20.0, 20.0), math.exp(-(50.0**2) / (2 * 20.0**2)), rel_tol=1e-6)
+    # an elongated one, against draws (1e6 draws: the share's sd is under 0.0005)
+    rng = np.random.default_rng(7)
+    x, y = rng.normal(0.0, 37.0, 1_000_000), rng.normal(0.0, 26.0, 1_000_000)
+    assert abs(chance_beyond(50.0, 37.0, 26.0) - float(np.mean(np.hypot(x, y) > 50.0))) < 0.002
