@@ -7,8 +7,10 @@ that went through it and none of those that went over a direct link.
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
+from pathlib import Path
 
 import pytest
 from ringutil import stats, wait_until
@@ -88,6 +90,44 @@ def test_a_launched_ring_on_direct_links_circulates():
     result = run_ring(6, 100, 20, router=True, links=True, timeout=120.0)
     assert len(result.rounds_s) == 100
     assert all(r > 0 for r in result.rounds_s)
+
+
+def node_threads() -> dict[int, int]:
+    """Threads of each node process this process started, by node ID (``/proc/PID/task``)."""
+    found = {}
+    for entry in Path("/proc").iterdir():
+        try:
+            if entry.name.isdigit() and (entry / "stat").read_text().rsplit(")", 1)[1].split()[1] == str(
+                os.getpid()
+            ):
+                command = (entry / "cmdline").read_text().split("\0")
+                if "--id" in command:
+                    found[int(command[command.index("--id") + 1])] = len(list((entry / "task").iterdir()))
+        except (OSError, IndexError):
+            continue  # (a process that ended meanwhile)
+    return found
+
+
+def test_a_nodes_threads_do_not_grow_with_the_ring():
+    # a node prepares a direct sender for each node that joins near it in the ring (in a small
+    # ring, every other node); each sender's matching listener once had a Python thread of its
+    # own: 30 threads per node at 12 nodes, and the first nodes of 255 held 268 (40 MB of RSS)
+    from tokenring.roundtrip import run_ring
+
+    threads: dict[int, dict[int, int]] = {}
+    for n in (4, 12):
+        seen = threads[n] = {}
+        run_ring(
+            n,
+            50,
+            20,
+            router=True,
+            links=True,
+            timeout=120.0,
+            on_ready=lambda *_, s=seen: s.update(node_threads()),
+        )
+        assert len(seen) == n, seen
+    assert max(threads[12].values()) <= max(threads[4].values()) + 2, threads
 
 
 def test_links_are_refused_where_they_would_bypass_the_rings_rules(tmp_path):
