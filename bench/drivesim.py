@@ -276,7 +276,7 @@ def chance_beyond(radius: float, sigma_x: float, sigma_y: float) -> float:
     along the radius."""
     theta = np.linspace(0.0, 2 * math.pi, 721)[:-1]
     a = np.cos(theta) ** 2 / (2 * sigma_x**2) + np.sin(theta) ** 2 / (2 * sigma_y**2)
-    inside = np.mean((1 - np.exp(-a * radius**2)) / (2 * a)) * 2 * math.pi / (2 * math.pi * sigma_x * sigma_y)
+    inside = np.mean((1 - np.exp(-a * radius**2)) / (2 * a)) / (sigma_x * sigma_y)  # (2π cancels)
     return float(max(0.0, 1.0 - inside))
 
 

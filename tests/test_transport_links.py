@@ -7,13 +7,14 @@ that went through it and none of those that went over a direct link.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import threading
 from pathlib import Path
 
 import pytest
-from ringutil import stats, wait_until
+from ringutil import processes, stats, wait_until
 
 from tokenring.cliutil import free_port
 from tokenring.zconfig import make_config, open_session
@@ -95,16 +96,13 @@ def test_a_launched_ring_on_direct_links_circulates():
 def node_threads() -> dict[int, int]:
     """Threads of each node process this process started, by node ID (``/proc/PID/task``)."""
     found = {}
-    for entry in Path("/proc").iterdir():
-        try:
-            if entry.name.isdigit() and (entry / "stat").read_text().rsplit(")", 1)[1].split()[1] == str(
-                os.getpid()
-            ):
-                command = (entry / "cmdline").read_text().split("\0")
-                if "--id" in command:
-                    found[int(command[command.index("--id") + 1])] = len(list((entry / "task").iterdir()))
-        except (OSError, IndexError):
-            continue  # (a process that ended meanwhile)
+    for pid, (ppid, cmdline) in processes().items():
+        command = cmdline.decode(errors="replace").split("\0")
+        if ppid == os.getpid() and "--id" in command:
+            with contextlib.suppress(OSError):  # (a process that ended meanwhile)
+                found[int(command[command.index("--id") + 1])] = len(
+                    list(Path(f"/proc/{pid}/task").iterdir())
+                )
     return found
 
 

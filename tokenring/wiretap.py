@@ -93,13 +93,6 @@ class WireTap:
             thread.join(5.0)
         return self.arrivals
 
-    def __enter__(self) -> WireTap:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
     def _read_arrivals(self) -> None:
         assert self._process is not None and self._process.stdout is not None
         for line in self._process.stdout:  # "1764431234.123456789 IP 127.0.0.1.40000 > ...: tcp 530"
