@@ -1,6 +1,6 @@
 """Recovery benchmark: how fast an 8-node ring at ``--bitrate max`` comes back from faults.
 
-    python -m bench.recovery [--trials 10] [--json FILE]
+    python -m bench.recovery [--trials 10] [--topology peers|links] [--json FILE]
 
 For each trial a fault is injected at run time and the wire is watched: the recovery time is
 from the injection until the token has gone one full round through every node that should be
@@ -10,6 +10,11 @@ acknowledgement, long before Zenoh's 10 s lease), ``loss`` (a token swallowed af
 was acknowledged: only the reconfiguration timeout finds it) and ``heal`` (a partition into two
 rings of four is healed; time until one token goes round all eight). Aims (issue 3): crash
 median < 50 ms, hang < 150 ms, loss < 100 ms.
+
+``--topology links`` runs the same trials with the launcher as the nodes' router and the hop on
+direct links (issue 23): no subscriber sees those frames, so the wire is captured (tcpdump on
+every link port, and frames out of the router for passes past a dead successor) and judged the
+same way.
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from tokenring.cliutil import free_port, query
 from tokenring.faults import FaultClient
 from tokenring.launcher import Launcher, NodePlan
 from tokenring.wire import first_full_round, passes, settled
+from tokenring.wiretap import WireTap
 from tokenring.zconfig import make_config, open_session
 
 IDS = [10, 20, 30, 40, 50, 60, 70, 80]
@@ -63,7 +69,7 @@ def delta(before: dict, after: dict) -> tuple[int, int]:
     return regen, dup
 
 
-def wait_whole(capture: WireCapture, members: list[int], timeout: float = 20.0) -> bool:
+def wait_whole(capture: WireCapture | WireTap, members: list[int], timeout: float = 20.0) -> bool:
     """Until the last 0.5 s of the wire show exactly one token round ``members``."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -76,7 +82,12 @@ def wait_whole(capture: WireCapture, members: list[int], timeout: float = 20.0) 
 
 
 def trial(
-    kind: str, client: FaultClient, capture: WireCapture, session: Any, ring: str, rng: random.Random
+    kind: str,
+    client: FaultClient,
+    capture: WireCapture | WireTap,
+    session: Any,
+    ring: str,
+    rng: random.Random,
 ) -> dict[str, Any]:
     victim = rng.choice(IDS[1:-1])  # a middle node: neither main (round master) nor the highest
     before = counters(session, ring)
@@ -130,7 +141,13 @@ def trial(
     }
 
 
-def run(trials: int, kinds: list[str], ack: str, quiet: bool = False) -> dict[str, Any]:
+def run(
+    trials: int, kinds: list[str], ack: str, quiet: bool = False, topology: str = "peers"
+) -> dict[str, Any]:
+    """``trials`` of each fault in ``kinds``; ``topology`` ``peers`` (a full mesh: a subscriber
+    of every token key sees each frame) or ``links`` (the launcher the nodes' router, the hop on
+    direct links no subscriber sees: the wire is captured instead, :mod:`tokenring.wiretap`)."""
+    links = topology == "links"
     port = free_port()
     ring = f"rec{port}"
     endpoint = f"tcp/127.0.0.1:{port}"
@@ -143,6 +160,8 @@ def run(trials: int, kinds: list[str], ack: str, quiet: bool = False) -> dict[st
         log_level="warning",
         respawn=True,
         output=io.StringIO(),
+        router=links,
+        links=links,
     )
     for plan in launcher.plans:
         plan.name = {
@@ -155,12 +174,18 @@ def run(trials: int, kinds: list[str], ack: str, quiet: bool = False) -> dict[st
             70: "lcd",
             80: "charger",
         }[plan.node_id]
-    launcher.start()
     rng = random.Random(7)
     results: list[dict[str, Any]] = []
+    wire_tap: WireTap | None = None
+    launcher.start()
     try:
-        with open_session(make_config(connect=[endpoint])) as session:
-            capture = WireCapture(session, ring)
+        with open_session(make_config(mode="client" if links else "peer", connect=[endpoint])) as session:
+            capture: WireCapture | WireTap
+            if links:  # every node's link port either way, and frames out of the router
+                capture = wire_tap = WireTap.around(launcher.link_ports.values(), port)
+                wire_tap.start()
+            else:
+                capture = WireCapture(session, ring)
             if not wait_whole(capture, IDS, timeout=60):
                 raise SystemExit("the ring did not form")
             time.sleep(2.0)  # let every node's timeouts follow its measurements
@@ -180,10 +205,12 @@ def run(trials: int, kinds: list[str], ack: str, quiet: bool = False) -> dict[st
                     sys.stderr.write(
                         f"[{index + 1}/{total}] {kind:5s} node {result['victim']}: {took}{extra}\n"
                     )
-                capture.frames.clear()
+                capture.clear()
                 time.sleep(0.3)
             capture.close()
     finally:
+        if wire_tap is not None:
+            wire_tap.stop()  # (again: a run that failed leaves no capture behind)
         launcher.stop()
     summary = {}
     for kind in kinds:
@@ -201,6 +228,7 @@ def run(trials: int, kinds: list[str], ack: str, quiet: bool = False) -> dict[st
         }
     return {
         "benchmark": "recovery",
+        "topology": topology,
         "nodes": len(IDS),
         "bitrate": "max",
         "ack": ack,
@@ -239,7 +267,8 @@ def format_summary(report: dict[str, Any]) -> str:
                 s["duplicates_eliminated"],
             ]
         )
-    head = f"recovery, {report['nodes']} nodes, bitrate {report['bitrate']}, ack {report['ack']} (load {report['machine']['load_1min']:.1f})"
+    where = " on direct links (the wire tapped)" if report.get("topology") == "links" else ""
+    head = f"recovery, {report['nodes']} nodes{where}, bitrate {report['bitrate']}, ack {report['ack']} (load {report['machine']['load_1min']:.1f})"
     return (
         head
         + "\n"
@@ -259,6 +288,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trials", type=int, default=10, help="trials per fault (default %(default)s)")
     parser.add_argument("--faults", default="crash,hang,loss,heal", help="which faults (default %(default)s)")
     parser.add_argument("--ack", default="adaptive", choices=("adaptive", "always", "never"))
+    parser.add_argument(
+        "--topology",
+        default="peers",
+        choices=("peers", "links"),
+        help="a full mesh of peers, or the launcher as router with the hop on direct links "
+        "(timed from the wire with tcpdump; default %(default)s)",
+    )
     parser.add_argument("--json", metavar="FILE", help="write the report as JSON")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
@@ -266,12 +302,20 @@ def main(argv: list[str] | None = None) -> int:
     unknown = set(kinds) - {"crash", "hang", "loss", "heal"}
     if unknown:
         parser.error(f"unknown fault(s) {', '.join(sorted(unknown))} (crash, hang, loss, heal)")
-    report = run(args.trials, kinds, args.ack, args.quiet)
+    if args.topology == "links":
+        from tokenring.wiretap import WireTapError, tcpdump_path
+
+        try:
+            tcpdump_path()
+        except WireTapError as exc:
+            parser.error(str(exc))
+    report = run(args.trials, kinds, args.ack, args.quiet, args.topology)
     print(format_summary(report))
+    name = "recovery" if args.topology == "peers" else f"recovery-{args.topology}"
     out = (
         Path(args.json)
         if args.json
-        else Path(__file__).parent / "results" / f"recovery-{report['date'][:10]}.json"
+        else Path(__file__).parent / "results" / f"{name}-{report['date'][:10]}.json"
     )
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(report, indent=2) + "\n")

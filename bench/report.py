@@ -83,7 +83,11 @@ def previous_run(name: str, out_dir: Path, current: Path | None) -> tuple[dict[s
         order = (str(data.get("date", "")), path.stat().st_mtime)
         if name in data.get("sections", {}):
             found.append((*order, data["sections"][name], f"{data['date']} ({path.name})", path))
-        elif name == "recovery" and data.get("benchmark") == "recovery":
+        elif (
+            name == "recovery"
+            and data.get("benchmark") == "recovery"
+            and data.get("topology", "peers") == "peers"
+        ):
             found.append((*order, data, f"{data['date']} ({path.name}, `python -m bench.recovery`)", path))
     if not found:
         return None
@@ -435,12 +439,12 @@ def aims(sections: dict[str, Any]) -> str:
             ]
         )
     rec = sections.get("recovery")
-    if rec:
-        for kind, s in rec.get("summary", {}).items():
+    for run, where in ((rec, ""), ((rec or {}).get("links"), ", direct links")):
+        for kind, s in (run or {}).get("summary", {}).items():
             if s.get("aim_ms") and s.get("median_ms") is not None:
                 rows.append(
                     [
-                        f"recovery after {kind} (median, 8 nodes)",
+                        f"recovery after {kind} (median, 8 nodes{where})",
                         f"< {s['aim_ms']:.0f} ms",
                         f"{s['median_ms']:.1f} ms",
                         verdict(s["median_ms"] < s["aim_ms"]),
@@ -786,6 +790,20 @@ def profile_md(section: dict[str, Any], plots: Path) -> str:
 
 
 def recovery_md(section: dict[str, Any]) -> str:
+    text = recovery_table_md(section, "")
+    links = section.get("links")
+    if links:
+        text += "\n" + recovery_table_md(links, "direct links: ")
+    return "## Recovery\n\n" + text
+
+
+def recovery_table_md(section: dict[str, Any], where: str) -> str:
+    """One run of bench/recovery.py as a paragraph and a table."""
+    topology = (
+        "the launcher the nodes' router and the hop on direct links, the wire captured by tcpdump on every link port and out of the router"
+        if section.get("topology") == "links"
+        else "a full mesh of peers, the wire seen by a subscriber of every token key"
+    )
     rows = []
     for kind, s in section["summary"].items():
         rows.append(
@@ -803,8 +821,7 @@ def recovery_md(section: dict[str, Any]) -> str:
         )
     load = section.get("machine", {}).get("load_1min")
     return (
-        "## Recovery\n\n"
-        f"`bench/recovery.py`: faults injected at run time into an {section['nodes']}-node ring at bitrate max, recovery timed from the wire (until one token has gone round every node that should be in the ring), load {f(load, 1)} at its end.\n\n"
+        f"{where}`bench/recovery.py`: faults injected at run time into an {section['nodes']}-node ring at bitrate max ({topology}), recovery timed from the wire (until one token has gone round every node that should be in the ring), load {f(load, 1)} at its end.\n\n"
         + md_table(
             rows,
             [

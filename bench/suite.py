@@ -635,6 +635,18 @@ def section_recovery(ctx: Context) -> dict[str, Any]:
     report = run_recovery(trials, ["crash", "hang", "loss", "heal"], "adaptive", quiet=True)
     for kind, s in report["summary"].items():
         ctx.progress.note(f"{kind}: median {s['median_ms']} ms")
+    from tokenring.wiretap import WireTapError, tcpdump_path
+
+    try:
+        tcpdump_path()
+    except WireTapError as exc:
+        ctx.progress.note(f"recovery on direct links not measured: {exc}")
+        return report
+    ctx.progress.say(f"recovery on direct links (the wire tapped), {trials} trials each")
+    links = run_recovery(trials, ["crash", "hang", "loss", "heal"], "adaptive", quiet=True, topology="links")
+    for kind, s in links["summary"].items():
+        ctx.progress.note(f"links {kind}: median {s['median_ms']} ms")
+    report["links"] = links
     return report
 
 
@@ -702,7 +714,7 @@ def count_steps(
         "load": 2,
         "commands": 2,
         "profile": 2,
-        "recovery": 1,
+        "recovery": 2,
         "download": 2,
         "spurious": len(pick_configs(spurious_configs)) if "spurious" in sections else 0,
     }

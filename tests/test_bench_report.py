@@ -378,3 +378,34 @@ def test_without_a_hand_written_one_the_nemesis_section_is_rendered_from_its_res
     )
     assert text.index("## Nemesis") < text.index("## The robot's own benchmarks")
     assert nemesis_md(tmp_path / "none") == ""
+
+
+def recovery_run(topology: str, crash_ms: float) -> dict:
+    summary = {
+        kind: {
+            "trials": 10, "not_recovered": 0, "median_ms": median, "p90_ms": median * 1.1,
+            "max_ms": median * 1.3, "aim_ms": aim, "tokens_regenerated": 3, "duplicates_eliminated": 0,
+        }
+        for kind, median, aim in (("crash", crash_ms, 50.0), ("heal", 300.0, None))
+    }  # fmt: skip
+    return {
+        "benchmark": "recovery",
+        "topology": topology,
+        "nodes": 8,
+        "machine": {"load_1min": 1.0},
+        "summary": summary,
+    }
+
+
+def test_recovery_on_direct_links_gets_its_own_table_and_aims_beside_the_meshs():
+    from bench.report import recovery_md
+
+    section = recovery_run("peers", 13.3) | {"links": recovery_run("links", 14.1)}
+    text = recovery_md(section)
+    assert text.count("| crash |") == 2
+    assert "13.3" in text and "14.1" in text
+    assert "tcpdump" in text  # the links table says where its wire was seen
+    rows = aims({"recovery": section})
+    assert "recovery after crash (median, 8 nodes) | < 50 ms | 13.3 ms" in rows
+    assert "recovery after crash (median, 8 nodes, direct links) | < 50 ms | 14.1 ms" in rows
+    assert "heal" not in rows  # no aim, no row

@@ -218,6 +218,11 @@ class WireCapture:
         with self._lock:
             return list(self.frames)
 
+    def clear(self) -> None:
+        """Forget the frames so far (between trials)."""
+        with self._lock:
+            self.frames.clear()
+
     def close(self) -> None:
         self._sub.undeclare()
 

@@ -249,6 +249,18 @@ class RingRun:
     #: round times (s) seen from outside: the arrivals of the frames sent to the round master at
     #: a subscriber in this process, over the same window (empty unless ``run_ring(tap=True)``)
     tap_rounds_s: list[float] = field(default_factory=list)
+    #: packets the wire tap's kernel buffer lost (direct links; its rounds skip the gaps)
+    tap_dropped: int = 0
+
+
+def wire_rounds(frames: list[tuple[float, bytes]], master: int) -> list[float]:
+    """Round times (s) from frames captured on the wire: between fresh frames into ``master``
+    whose round counter moved on by one (a retransmission repeats a frame, a frame the capture
+    lost leaves a gap: neither becomes a round)."""
+    from tokenring.wire import passes
+
+    into = [p for p in passes(frames)[0] if p.did == master]
+    return [b.t - a.t for a, b in itertools.pairwise(into) if (b.counter - a.counter) & 0xFF == 1]
 
 
 def run_ring(
@@ -341,10 +353,10 @@ def run_ring(
                     f"(active {len(stats.get('active', []))}, visits {stats.get('stats', {}).get('visits', 0)})"
                 )
             arrivals: list[float] = []
-            wire_tap = WireTap(launcher.link_ports[master]) if tap and links else None
+            tap_dropped = 0
+            wire_tap = WireTap.into(launcher.link_ports[master]) if tap and links else None
             if wire_tap is not None:  # on direct links no subscriber sees the token: the wire
                 wire_tap.start()
-                arrivals = wire_tap.arrivals
             tap_subscriber = (
                 session.declare_subscriber(
                     keys.token(ring, master),
@@ -358,6 +370,10 @@ def run_ring(
             t0 = time.monotonic()
             start_visits = stats["stats"]["visits"]
             visits_key = keys.control(ring, master, "visits")
+            if tap:  # count the rounds from when the tap listens (tcpdump takes ~0.1-1 s to start)
+                replies = query(session, visits_key, timeout=1.0)
+                if replies and replies[0][1].get("ok"):
+                    start_visits = replies[0][1]["result"]
             while time.monotonic() < deadline:
                 time.sleep(0.2)
                 replies = query(session, visits_key, timeout=1.0)  # cheap: one integer
@@ -366,18 +382,23 @@ def run_ring(
             else:
                 raise TokenRingError(f"ring of {n}: measurement did not finish in {timeout:.0f} s")
             wall = time.monotonic() - t0
-            if tap_subscriber is not None:
-                tap_subscriber.undeclare()
-            if wire_tap is not None:
-                wire_tap.stop()
             if on_ready is not None:  # e.g. collect what programs measured, while the ring runs
                 on_ready(session, ring)
             launcher_cpu = time.process_time() - own_cpu
             cpu = [proc_cpu_s(c.process.pid) - cpu0[c.process.pid] for c in launcher.child_list()]
             memory = [proc_memory_mb(c.process.pid) for c in launcher.child_list()]
             rss, uss = [m[0] for m in memory], [m[1] for m in memory]
-            stats = query(session, key, timeout=2.0)[0][1]["result"]
-            round_list = query(session, keys.control(ring, master, "rounds"), timeout=2.0)[0][1]["result"]
+            stats = ask_master(session, key)
+            asked = time.perf_counter()  # the master's last round ends about here: the tap's too
+            round_list = ask_master(session, keys.control(ring, master, "rounds"))
+            if tap_subscriber is not None:
+                tap_subscriber.undeclare()
+            before = [t for t in arrivals if t <= asked]
+            tap_rounds_s = [b - a for a, b in itertools.pairwise(before)][-rounds:]
+            if wire_tap is not None:  # (it catches up past ``asked`` first; later frames go)
+                frames = [f for f in wire_tap.stop() if f[0] <= asked]
+                tap_rounds_s = wire_rounds(frames, master)[-rounds:]
+                tap_dropped = wire_tap.dropped
             return RingRun(
                 round_list[-rounds:],
                 rss,
@@ -388,7 +409,8 @@ def run_ring(
                 launcher_cpu_s=launcher_cpu,
                 form_s=formed - t_start if formed else float("nan"),
                 uss_mb=uss,
-                tap_rounds_s=[b - a for a, b in itertools.pairwise(arrivals)][-rounds:],
+                tap_rounds_s=tap_rounds_s,
+                tap_dropped=tap_dropped,
             )
     finally:
         if wire_tap is not None:
@@ -397,6 +419,16 @@ def run_ring(
 
 
 # ---------------------------------------------------------------------------------------------
+
+
+def ask_master(session: Any, key: str, attempts: int = 3) -> Any:
+    """The master's answer on control ``key``, asked up to ``attempts`` times (2 s each): on a
+    loaded machine one query can go unanswered; raises :class:`TokenRingError` if all do."""
+    for _ in range(attempts):
+        replies = query(session, key, timeout=2.0)
+        if replies and replies[0][1].get("ok"):
+            return replies[0][1]["result"]
+    raise TokenRingError(f"the round master did not answer {key} ({attempts} times)")
 
 
 def run_budget(nodes: int, rounds: int, bitrate: float | None) -> float:

@@ -121,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
     handler: list[dict[str, float]] = []
     puts: list[float] = []  # per run: the median µs of the put that passes the token on
     tapped: list[float] = []  # the outside tap's round times, every run
+    tap_dropped = 0  # packets the wire tap's kernel buffer lost, every run
     own_share_us: list[float] = []  # per pair: (ring median - bare median) / N
     wall = 0.0
     total = 2 * args.repeat
@@ -156,6 +157,7 @@ def run(args: argparse.Namespace) -> int:
         )
         ring += result.rounds_s
         tapped += result.tap_rounds_s
+        tap_dropped += result.tap_dropped
         own_share_us.append((float(np.median(result.rounds_s)) - float(np.median(part))) * 1e6 / args.nodes)
         rss += result.rss_mb
         cpu += [c / result.wall_s for c in result.cpu_s]
@@ -196,6 +198,8 @@ def run(args: argparse.Namespace) -> int:
         tap_s = summarize(tapped)
         report["tap_rtt_ms"] = tap_s
         report["tap_difference_pct"] = (tap_s["median"] / ring_s["median"] - 1) * 100
+        if links:
+            report["tap_dropped_packets"] = tap_dropped
     rows = [
         [
             f"tokenring ({args.transport})",
@@ -234,6 +238,7 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"outside tap ({vantage}): median {report['tap_rtt_ms']['median']:.3f} ms, "
             f"{report['tap_difference_pct']:+.1f} % against the ring's own figure"
+            + (f" ({tap_dropped} packets lost by the capture)" if tap_dropped else "")
         )
     if args.json:
         write_json(args.json, report)
