@@ -37,7 +37,7 @@ def test_bench_on_direct_links_times_the_rounds_on_the_wire(tmp_path):
 def test_wiretap_refuses_a_capture_it_cannot_start():
     from tokenring.wiretap import WireTap, WireTapError
 
-    tap = WireTap(5, interface="no-such-interface0")
+    tap = WireTap.into(5, interface="no-such-interface0")
     try:
         tap.start(timeout_s=10.0)
     except WireTapError as exc:

@@ -82,12 +82,14 @@ class WireTap:
         self._offset = time.time() - time.perf_counter()
 
     @classmethod
-    def into(cls, port: int, **options: object) -> WireTap:
+    def into(cls, port: int, *, interface: str = "lo") -> WireTap:
         """The frames sent to ``port`` (a node's link port: the frames it receives there)."""
-        return cls(f"dst port {port}", **options)  # type: ignore[arg-type]
+        return cls(f"dst port {port}", interface=interface)
 
     @classmethod
-    def around(cls, link_ports: Iterable[int], relay_port: int | None = None, **options: object) -> WireTap:
+    def around(
+        cls, link_ports: Iterable[int], relay_port: int | None = None, *, interface: str = "lo"
+    ) -> WireTap:
         """Every frame between nodes: on each link port either way, and out of the router's port
         (``relay_port``: a frame through the router counts once, on its way to the receiver)."""
         parts = [f"port {port}" for port in sorted(set(link_ports))]
@@ -95,7 +97,7 @@ class WireTap:
             parts.append(f"src port {relay_port}")
         if not parts:
             raise ValueError("a wire tap needs at least one port")
-        return cls(" or ".join(parts), **options)  # type: ignore[arg-type]
+        return cls(" or ".join(parts), interface=interface)
 
     def start(self, timeout_s: float = 10.0) -> None:
         """Start tcpdump and wait until it captures; raises :class:`WireTapError`."""
