@@ -28,7 +28,6 @@ from __future__ import annotations
 import functools
 import io
 import tempfile
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,7 +42,7 @@ from tokenring.faults import KINDS, NEEDS_VALUE, FaultClient, parse_partition, v
 from tokenring.launcher import Launcher, NodePlan
 from tokenring.ledger import judge as ledger_judge
 from tokenring.protocol import Protocol, default_protocol
-from tokenring.wire import first_full_round, passes, settled
+from tokenring.wire import CapturedFrames, first_full_round, passes, settled
 from tokenring.yamlfile import read_yaml
 from tokenring.zconfig import make_config, open_session
 
@@ -201,27 +200,15 @@ def load_scenario(path: str | Path, protocol: Protocol | None = None) -> Scenari
     return scenario
 
 
-class WireCapture:
+class WireCapture(CapturedFrames):
     """Every frame on ``token/*`` with its arrival time (``perf_counter``)."""
 
     def __init__(self, session: zenoh.Session, ring: str) -> None:
-        self.frames: list[tuple[float, bytes]] = []
-        self._lock = threading.Lock()
+        super().__init__()
         self._sub = session.declare_subscriber(keys.token(ring, "*"), self._on)
 
     def _on(self, sample: zenoh.Sample) -> None:
-        frame = sample.payload.to_bytes()
-        with self._lock:
-            self.frames.append((time.perf_counter(), frame))
-
-    def snapshot(self) -> list[tuple[float, bytes]]:
-        with self._lock:
-            return list(self.frames)
-
-    def clear(self) -> None:
-        """Forget the frames so far (between trials)."""
-        with self._lock:
-            self.frames.clear()
+        self._add(time.perf_counter(), sample.payload.to_bytes())
 
     def close(self) -> None:
         self._sub.undeclare()

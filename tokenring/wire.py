@@ -8,12 +8,37 @@ no new pass. ``chaos``, the recovery benchmark and the tests all judge the ring 
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from tokenring.frame import crc16_arc
 from tokenring.protocol import Protocol, default_protocol
 from tokenring.ring import EPOCH_MASK, epoch_order
+
+
+class CapturedFrames:
+    """Frames with their arrival times (``perf_counter`` s), appended by a capture's own thread
+    and read by the judge's: a subscriber's (:class:`tokenring.chaos.WireCapture`) or the wire's
+    (:class:`tokenring.wiretap.WireTap`)."""
+
+    def __init__(self) -> None:
+        self.frames: list[tuple[float, bytes]] = []
+        self._lock = threading.Lock()
+
+    def _add(self, t: float, frame: bytes) -> None:
+        with self._lock:
+            self.frames.append((t, frame))
+
+    def snapshot(self) -> list[tuple[float, bytes]]:
+        """The frames so far, oldest first."""
+        with self._lock:
+            return list(self.frames)
+
+    def clear(self) -> None:
+        """Forget the frames so far (between trials)."""
+        with self._lock:
+            self.frames.clear()
 
 
 @dataclass(frozen=True)

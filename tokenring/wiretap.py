@@ -24,6 +24,7 @@ from tokenring.errors import TokenRingError
 from tokenring.frame import crc16_arc
 from tokenring.launcher import die_with_parent
 from tokenring.protocol import Protocol, default_protocol
+from tokenring.wire import CapturedFrames
 
 #: bytes kept of each packet: a frame with Zenoh's framing, or several messages batched with it.
 #: In immediate mode the kernel's capture ring has one slot of this size per packet, and at
@@ -58,22 +59,21 @@ def find_frame(payload: bytes, protocol: Protocol) -> bytes | None:
     return None
 
 
-class WireTap:
+class WireTap(CapturedFrames):
     """Token frames on ``interface`` in TCP packets matching ``ports_filter`` (a pcap filter of
     ports, e.g. ``dst port 7447``): ``start()``, let the ring run, ``snapshot()`` any time,
     ``stop()``. ``frames`` holds ``(time, frame)`` in :func:`time.perf_counter`'s seconds, the
     clock the fault tools count from, oldest first."""
 
     def __init__(self, ports_filter: str, *, interface: str = "lo", protocol: Protocol | None = None) -> None:
+        super().__init__()
         self.ports_filter = ports_filter
         self.interface = interface
         self.protocol = protocol or default_protocol()
-        self.frames: list[tuple[float, bytes]] = []
         self.packets = 0  # packets captured, a frame in them or not
         #: packets the kernel captured but had to drop (tcpdump's count when it ends): a tap that
         #: lost frames says so rather than report a slower ring
         self.dropped = 0
-        self._lock = threading.Lock()
         self._process: subprocess.Popen[bytes] | None = None
         self._listening = threading.Event()
         self._errors: list[str] = []
@@ -128,16 +128,6 @@ class WireTap:
                 why = self._errors[-1] if self._errors else f"no capture within {timeout_s:.0f} s"
                 raise WireTapError(f"tcpdump on {self.interface} ({self.ports_filter}): {why}")
 
-    def snapshot(self) -> list[tuple[float, bytes]]:
-        """The frames so far."""
-        with self._lock:
-            return list(self.frames)
-
-    def clear(self) -> None:
-        """Forget the frames so far (between trials)."""
-        with self._lock:
-            self.frames.clear()
-
     def stop(self, catch_up_s: float = 3.0) -> list[tuple[float, bytes]]:
         """End the capture; the frames, oldest first. tcpdump ends without reading what the
         kernel still holds for it, and on a loaded machine it lags hundreds of packets behind:
@@ -180,10 +170,9 @@ class WireTap:
             ip_header = (packet[link] & 0x0F) * 4
             tcp_header = (packet[link + ip_header + 12] >> 4) * 4
             frame = find_frame(packet[link + ip_header + tcp_header :], self.protocol)
-            with self._lock:
-                self.packets += 1
-                if frame is not None:
-                    self.frames.append((float(stamp) - self._offset, frame))
+            self.packets += 1
+            if frame is not None:
+                self._add(float(stamp) - self._offset, frame)
 
     def _read_messages(self, stream: IO[bytes]) -> None:
         for raw in stream:
