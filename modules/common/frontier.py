@@ -41,7 +41,9 @@ class FrontierSettings:
     hit_clearance_mm: float = 300.0  # frontier cells this near a hit are a wall's unseen stretch
     min_cells: int = 5  # a frontier shorter than this many cells (0.5 m) is no way in
     map_range_mm: float = 1000.0  # side echoes this near make vectors (the tracker's range)
-    mapped_clearance_mm: float = 300.0  # hits this near a mapped cell are that wall's
+    #: hits this near a mapped cell are that wall's (at 300 a wall 30 cm behind a mapped one,
+    #: a shallow notch's back or a pocket's, was taken for it and never visited)
+    mapped_clearance_mm: float = 150.0
     min_wall_cells: int = 5  # an unmapped wall shorter than this many cells is noise
     narrow_cost: float = 8.0  # a cell next to an echo costs this many times one in the open
 
