@@ -632,7 +632,8 @@ def section_recovery(ctx: Context) -> dict[str, Any]:
 
     trials = 3 if ctx.quick else 10
     ctx.progress.say(f"recovery: crash, hang, loss, heal on an 8-node ring, {trials} trials each")
-    report = run_recovery(trials, ["crash", "hang", "loss", "heal"], "adaptive", quiet=True)
+    kinds = ["crash", "hang", "loss", "heal"]
+    report = run_recovery(trials, kinds, "adaptive", quiet=True)
     for kind, s in report["summary"].items():
         ctx.progress.note(f"{kind}: median {s['median_ms']} ms")
     from tokenring.wiretap import WireTapError, tcpdump_path
@@ -643,7 +644,7 @@ def section_recovery(ctx: Context) -> dict[str, Any]:
         ctx.progress.note(f"recovery on direct links not measured: {exc}")
         return report
     ctx.progress.say(f"recovery on direct links (the wire tapped), {trials} trials each")
-    links = run_recovery(trials, ["crash", "hang", "loss", "heal"], "adaptive", quiet=True, topology="links")
+    links = run_recovery(trials, kinds, "adaptive", quiet=True, topology="links")
     for kind, s in links["summary"].items():
         ctx.progress.note(f"links {kind}: median {s['median_ms']} ms")
     report["links"] = links

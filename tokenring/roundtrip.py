@@ -336,9 +336,9 @@ def run_ring(
             stats: dict[str, Any] = {}
             formed = 0.0
             while time.monotonic() < deadline:
-                replies = query(session, key, timeout=1.0)
-                if replies and replies[0][1].get("ok"):
-                    stats = replies[0][1]["result"]
+                answer = master_answer(session, key, timeout=1.0)
+                if answer is not None:
+                    stats = answer
                     if len(stats["active"]) == len(ids):
                         formed = formed or time.monotonic()
                         if stats["stats"]["visits"] >= warmup:
@@ -371,13 +371,11 @@ def run_ring(
             start_visits = stats["stats"]["visits"]
             visits_key = keys.control(ring, master, "visits")
             if tap:  # count the rounds from when the tap listens (tcpdump takes ~0.1-1 s to start)
-                replies = query(session, visits_key, timeout=1.0)
-                if replies and replies[0][1].get("ok"):
-                    start_visits = replies[0][1]["result"]
+                start_visits = master_answer(session, visits_key, timeout=1.0) or start_visits
             while time.monotonic() < deadline:
                 time.sleep(0.2)
-                replies = query(session, visits_key, timeout=1.0)  # cheap: one integer
-                if replies and replies[0][1].get("ok") and replies[0][1]["result"] >= start_visits + rounds:
+                visits = master_answer(session, visits_key, timeout=1.0)  # cheap: one integer
+                if visits is not None and visits >= start_visits + rounds:
                     break
             else:
                 raise TokenRingError(f"ring of {n}: measurement did not finish in {timeout:.0f} s")
@@ -421,13 +419,19 @@ def run_ring(
 # ---------------------------------------------------------------------------------------------
 
 
+def master_answer(session: Any, key: str, timeout: float) -> Any | None:
+    """The first good answer on control ``key`` within ``timeout`` s, or None."""
+    replies = query(session, key, timeout=timeout)
+    return replies[0][1]["result"] if replies and replies[0][1].get("ok") else None
+
+
 def ask_master(session: Any, key: str, attempts: int = 3) -> Any:
     """The master's answer on control ``key``, asked up to ``attempts`` times (2 s each): on a
     loaded machine one query can go unanswered; raises :class:`TokenRingError` if all do."""
     for _ in range(attempts):
-        replies = query(session, key, timeout=2.0)
-        if replies and replies[0][1].get("ok"):
-            return replies[0][1]["result"]
+        answer = master_answer(session, key, timeout=2.0)
+        if answer is not None:
+            return answer
     raise TokenRingError(f"the round master did not answer {key} ({attempts} times)")
 
 
