@@ -221,3 +221,34 @@ def test_orphaned_command_of_a_dead_issuer_is_cleared(ring):
     out.write(sweep=77)
     wait_for(lambda: reader["sweep"] == 77, 5, "user channels resume after the orphan is cleared")
     assert layers[10].stats.orphans_cleared + layers[30].stats.orphans_cleared >= 1
+
+
+def test_a_download_waits_out_a_target_the_ring_skipped_for_a_moment(ring):
+    # a loaded machine stalls the target for a few passes: its predecessor skips it and the
+    # ring runs on without it; rounds that never visit the target must not fail the command
+    r, layers = ring
+    main, motor = layers[10], layers[20]
+    source = program(8) + b"# padding\n" * 100
+    tx = main.submit(main.download_steps(20, source, 8, start=True, compress=False), "stalled target")
+    wait_for(lambda: tx.index > 2, 2, "the download under way")
+    r.freeze(20)
+    wait_for(lambda: 20 in r.nodes[10].membership.excluded, 3, "node 10 to skip the stalled target")
+    r.wait_rounds(30, node_id=10)  # well past the unacknowledged rounds a visited target may take
+    assert not tx.done.is_set(), tx.error
+    r.freeze(20, False)
+    assert tx.done.wait(20), tx.progress()
+    assert tx.ok, tx.error
+    assert motor.installed is not None and motor.installed.source == source
+
+
+def test_a_command_to_a_target_skipped_for_good_fails_naming_it(ring):
+    r, layers = ring
+    main = layers[10]
+    tx = main.submit([main.start_step(20)], "start a hung node")
+    r.freeze(20)
+    try:
+        wait_for(lambda: 20 in r.nodes[10].membership.excluded, 3, "node 10 to skip the hung target")
+        assert tx.done.wait(20), tx.progress()
+        assert tx.error == "node 20 is skipped by the ring (not answering for 3 s)"
+    finally:
+        r.freeze(20, False)

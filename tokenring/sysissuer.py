@@ -19,6 +19,7 @@ if TYPE_CHECKING:
     pass
 
 from tokenring.syswire import (
+    EXCLUDED_WAIT_S,
     LOST_LIMIT,
     NO_ACK_LIMIT,
     POLL_TIMEOUT_S,
@@ -137,10 +138,23 @@ class SystemIssuer(SystemParts):
         step = tx.steps[tx.index]
         if step.target != self.all_nodes:
             if work[self._o_ack] != step.target:
-                tx.retries += 1
-                if step.target not in self.os.membership.live:
+                membership = self.os.membership
+                if step.target not in membership.live:
                     self._finish(tx, f"node {step.target} left the ring")
                     return self._next_or_restore(work)
+                if step.target not in membership.active:
+                    now = time.monotonic()
+                    if not tx.excluded_since:
+                        tx.excluded_since = now
+                    elif now - tx.excluded_since > EXCLUDED_WAIT_S:
+                        self._finish(
+                            tx,
+                            f"node {step.target} is skipped by the ring (not answering for {EXCLUDED_WAIT_S:.0f} s)",
+                        )
+                        return self._next_or_restore(work)
+                else:
+                    tx.excluded_since = 0.0
+                    tx.retries += 1
                 if tx.retries > NO_ACK_LIMIT:
                     self._finish(tx, f"node {step.target} did not acknowledge")
                     return self._next_or_restore(work)
