@@ -257,3 +257,35 @@ def test_a_wall_met_obliquely_is_used_only_when_allowed_and_then_weighs_less() -
     # (p + 15²) / (p + 25²) of that: 0.61 at p = 20², 0.65 at 23²
     assert 40.0 * 0.55 < square_weight < 40.0 * 0.75, square_weight
     assert 0.55 < oblique_weight / square_weight < 0.70, (oblique_weight, square_weight)
+
+
+def test_a_diagonal_sonar_ranges_the_wall_it_meets_square_on_along_its_beam() -> None:
+    # the front-right pair sits 133 mm ahead and 133 mm right of the reference point and looks
+    # 45° right: a wall whose normal is that beam, its foot 1200 mm out, is met square on
+    front_right, diagonal_mm = 2, 133.0
+    beam = (math.cos(-math.pi / 4), math.sin(-math.pi / 4))
+    foot = (diagonal_mm + 1200.0 * beam[0], -diagonal_mm + 1200.0 * beam[1])
+    along = (-beam[1], beam[0])
+    wall = KnownWall.segment(
+        foot[0] - 1500 * along[0],
+        foot[1] - 1500 * along[1],
+        foot[0] + 1500 * along[0],
+        foot[1] + 1500 * along[1],
+    )
+    late = (1200.0 - 700.0) * 0.025  # 12.5 mm: square on, no off-axis share
+    distances: list[int | None] = [None] * 8
+    distances[front_right] = round(1200.0 + late - 40.0)  # 40 mm nearer than the filter expects
+    record = {"walls": [], "distances_mm": distances, "at": [0.0, 0.0, 0.0]}
+    core = core_facing([wall], (0.0, 0.0, 0.0), sensors=[front_right])
+    for k in (1, 2):
+        core.process_synchronised(k, 100 * k, {"sonar": record})
+    assert core.ahead["used"] == 1, core.ahead
+    x, y, _ = core.ekf.pose  # type: ignore[union-attr]
+    toward = x * beam[0] + y * beam[1]
+    across = x * along[0] + y * along[1]
+    assert 15.0 < toward <= 40.0  # towards the wall by most of the 40 mm (σ 20 mm before, 15 the range)
+    assert abs(across) < 1.0  # nothing along the wall
+    front_only = core_facing([wall], (0.0, 0.0, 0.0), sensors=[FRONT])
+    for k in (1, 2):
+        front_only.process_synchronised(k, 100 * k, {"sonar": record})
+    assert front_only.ahead["used"] == 0

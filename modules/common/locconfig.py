@@ -93,8 +93,8 @@ DEFAULTS: dict[str, Any] = {
 #: travel gauge's settings (out to 1.4 m, known walls only, checked where its ranges were read; off),
 #: the compass's measured accuracy, no compass reading bent by the motors' start or stop, a floor
 #: under the pose's σ across a wall (its fits share an error) and the floor's mean step scale as a
-#: state, from which each move's scale starts, and the front sonar's range to a wall ahead (up to
-#: 25° off its normal, beyond 20° with a larger σ), and the floor's step scale calibrated on the
+#: state, from which each move's scale starts, and the front and diagonal sonars' ranges to a wall
+#: ahead (up to 25° off its normal, beyond 20° with a larger σ), and the floor's step scale calibrated on the
 #: tuning drives (``tokenring calibrate``). The
 #: built-in defaults keep the earlier values: exploration mode builds on them, and old logs replay
 #: as they ran
@@ -111,7 +111,7 @@ REPOSITORY_SETTINGS: dict[str, Any] = {
         "shared_sigma_mm": 8.0,
         "min_span_side_mm": 220.0,
         "bias_floor_mm": 8.0,
-        "ahead": {"enabled": True, "max_off_deg": 25.0},
+        "ahead": {"enabled": True, "sensors": [0, 1, 2], "max_off_deg": 25.0},
     },
 }
 
