@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import hashlib
+import time
+from types import SimpleNamespace
 
 import pytest
 from memring import MemoryRing, wait_for
@@ -252,3 +254,30 @@ def test_a_command_to_a_target_skipped_for_good_fails_naming_it(ring):
         assert tx.error == "node 20 is skipped by the ring (not answering for 3 s)"
     finally:
         r.freeze(20, False)
+
+
+def test_each_skip_of_the_target_gets_its_own_wait(ring, monkeypatch):
+    # a long download whose target is skipped twice, the second time long after the first: the
+    # first skip's wait must not carry over (the clock jumps 10 s between them, as a long
+    # download would take)
+    import tokenring.sysissuer as sysissuer
+
+    offset = [0.0]
+    monkeypatch.setattr(sysissuer, "time", SimpleNamespace(monotonic=lambda: time.monotonic() + offset[0]))
+    r, layers = ring
+    main, motor = layers[10], layers[20]
+    source = program(9) + b"# padding\n" * 3000  # 1000 chunks: still going after skip 1
+    tx = main.submit(main.download_steps(20, source, 9, start=True, compress=False), "skipped twice")
+    wait_for(lambda: tx.index > 2, 2, "the download under way")
+    for skip in (1, 2):
+        r.freeze(20)
+        wait_for(lambda: 20 in r.nodes[10].membership.excluded, 3, f"skip {skip} of the target")
+        r.wait_rounds(30, node_id=10)
+        assert not tx.done.is_set(), (skip, tx.error)
+        index = tx.index
+        r.freeze(20, False)
+        wait_for(lambda i=index: tx.index > i or tx.done.is_set(), 5, f"the target back after skip {skip}")
+        offset[0] += 10.0
+    assert tx.done.wait(20), tx.progress()
+    assert tx.ok, tx.error
+    assert motor.installed is not None and motor.installed.source == source

@@ -153,7 +153,6 @@ class SystemIssuer(SystemParts):
                         )
                         return self._next_or_restore(work)
                 else:
-                    tx.excluded_since = 0.0
                     tx.retries += 1
                 if tx.retries > NO_ACK_LIMIT:
                     self._finish(tx, f"node {step.target} did not acknowledge")
@@ -162,6 +161,7 @@ class SystemIssuer(SystemParts):
                 self.stats.resends += 1
                 self._write(work, tx)
                 return True
+            tx.excluded_since = 0.0  # the target answered: a later skip starts its own wait
             status = work[self.w0]
             if status == Status.PENDING and step.poll:
                 now = time.monotonic()

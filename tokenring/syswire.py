@@ -27,9 +27,9 @@ log = logging.getLogger("tokenring.system")
 #: the 8051's code space: a node accepts programs up to this many bytes unless told otherwise
 DEFAULT_CAPACITY = 65536
 NO_ACK_LIMIT = 10  # rounds a live target may leave a command unacknowledged
-#: how long a command waits for a target that is live but skipped by the ring (a false
-#: exclusion on a loaded machine heals in a few rounds); unacknowledged rounds meanwhile
-#: prove nothing, since the token does not visit the target
+#: how long a command waits for a target that is live but skipped by the ring, from the first
+#: skipped round after its last answer (a false exclusion on a loaded machine heals in a few
+#: rounds); unacknowledged rounds meanwhile prove nothing, the token does not visit the target
 EXCLUDED_WAIT_S = 3.0
 LOST_LIMIT = 200  # times a command may vanish from the token (regeneration, sweep) per transaction
 POLL_TIMEOUT_S = 15.0  # how long a target may answer PENDING (verify, install, start)
