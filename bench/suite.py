@@ -10,7 +10,8 @@ Sections (``--sections``; all but the slow ``spurious`` by default):
 
 * ``scaling``    round trip vs ring size at ``--bitrate max``, each ring against a bare Zenoh
                  ring of the same size and topology measured in the same run (ratio, per hop),
-                 both topologies: a full mesh of peers and clients of a Zenoh router;
+                 three topologies: a full mesh of peers, clients of a Zenoh router, and
+                 direct links (each hop on a link to the successor, the router for the rest);
                  RSS and USS (private memory) and CPU per node, the launcher's (router's)
                  CPU, a fit of the cost in N;
 * ``transports`` the same ring over Zenoh (peers, router), plain UDP sockets and ZeroMQ;
@@ -61,7 +62,7 @@ RESULTS_DIR = HERE / "results"
 RSS_AIM_MB = 40.0
 #: issue 23's aim: the outside tap's median round trip within this many % of the ring's own
 TAP_AIM_PCT = 5.0
-FULL_SIZES = {"peer": [2, 4, 8, 16, 32, 64], "router": [8, 16, 32, 64, 128, 255]}
+FULL_SIZES = {"peer": [2, 4, 8, 16, 32, 64], "router": [8, 16, 32, 64, 128, 255], "links": [64, 255]}
 QUICK_SIZES = {"peer": [2, 4, 8], "router": [8]}
 SEED_NODES = ["main", "motor", "sonar", "compass", "copro", "map", "lcd"]  # the seed's 7 computers
 
@@ -201,14 +202,15 @@ def section_scaling(ctx: Context) -> dict[str, Any]:
     for topology, sizes in ctx.sizes.items():
         for n in sizes:
             rounds, warmup = rounds_for(n, ctx.quick)
-            router = topology == "router"
+            links = topology == "links"
+            router = links or topology == "router"
             record: dict[str, Any] = {
                 "topology": topology,
                 "nodes": n,
                 "rounds": rounds,
                 "load_before": load_avg(),
             }
-            pairs = pairs_for(n, ctx.quick)
+            pairs = ctx.pairs_for(n)
             record["pairs"] = pairs
             bare_rounds: list[float] = []
             ring_runs: list[Any] = []
@@ -221,7 +223,7 @@ def section_scaling(ctx: Context) -> dict[str, Any]:
                 ctx.progress.say(f"scaling: bare Zenoh ring, {n} processes, {topology} ({rounds} rounds){of}")
                 bare: list[float] = []
                 try:
-                    bare = run_bare(n, rounds, warmup, timeout_for(n), router=router)
+                    bare = run_bare(n, rounds, warmup, timeout_for(n), router=router, chain=links)
                     bare_rounds += bare
                     ctx.progress.note(f"median {np.median(bare) * 1e3:.3f} ms")
                 except Exception as exc:
@@ -230,7 +232,9 @@ def section_scaling(ctx: Context) -> dict[str, Any]:
                 ctx.progress.say(f"scaling: tokenring ring, {n} nodes, {topology}{of}")
                 tapped = pair == pairs - 1  # the outside tap watches the last pair's ring only
                 try:
-                    run = run_ring(n, rounds, warmup, timeout=timeout_for(n), router=router, tap=tapped)
+                    run = run_ring(
+                        n, rounds, warmup, timeout=timeout_for(n), router=router, links=links, tap=tapped
+                    )
                     ring_runs.append(run)
                     ctx.progress.note(
                         f"median {np.median(run.rounds_s) * 1e3:.3f} ms, p99 {np.percentile(run.rounds_s, 99) * 1e3:.3f} ms"
@@ -283,7 +287,7 @@ def fit_costs(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """Least-squares fits of how the cost grows with N, per topology: round trip = a + b N,
     RSS per node (mean), CPU of all nodes together."""
     fits: dict[str, Any] = {}
-    for topology in ("peer", "router"):
+    for topology in ("peer", "router", "links"):
         good = [r for r in runs if r["topology"] == topology and "rtt_ms" in r]
         if len(good) < 2:
             continue
@@ -695,21 +699,31 @@ class Context:
         progress: Progress,
         spurious_minutes: float | None = None,
         spurious_configs: str | None = None,
+        pairs: int | None = None,
     ) -> None:
         self.quick = quick
+        self.pairs = pairs
         self.sizes = sizes
         self.progress = progress
         self.spurious_minutes = spurious_minutes
         self.spurious_configs = spurious_configs
 
+    def pairs_for(self, n: int) -> int:
+        """Alternating bare/ring pairs for a ring of ``n``: ``--pairs`` or :func:`pairs_for`'s."""
+        return self.pairs or pairs_for(n, self.quick)
+
 
 def count_steps(
-    sections: list[str], sizes: dict[str, list[int]], quick: bool, spurious_configs: str | None = None
+    sections: list[str],
+    sizes: dict[str, list[int]],
+    quick: bool,
+    spurious_configs: str | None = None,
+    pairs: int | None = None,
 ) -> int:
     from bench.spurious import pick_configs  # a bad --spurious-configs is refused here, before any run
 
     per = {
-        "scaling": 2 * sum(pairs_for(n, quick) for v in sizes.values() for n in v),
+        "scaling": 2 * sum(pairs or pairs_for(n, quick) for v in sizes.values() for n in v),
         "transports": 5 * (1 if quick else 2),
         "runtime": len(RUNTIMES) * len(runtime_cases(quick)),
         "load": 2,
@@ -745,7 +759,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--quick", action="store_true", help="a subset in under 2 minutes")
     parser.add_argument("--sections", help=f"comma-separated subset of {','.join(SECTIONS)}")
-    parser.add_argument("--sizes", help="ring sizes for scaling, e.g. peer:2,8,32/router:8,64,255")
+    parser.add_argument("--sizes", help="ring sizes for scaling, e.g. peer:2,8,32/router:8,64/links:255")
+    parser.add_argument(
+        "--pairs",
+        type=int,
+        help="alternating bare/ring pairs per ring size in scaling (default 8 up to 64 nodes, 10 beyond): "
+        "the own share's interval narrows with the square root of the pairs",
+    )
     parser.add_argument("--out", default=str(RESULTS_DIR), help="results directory (default bench/results)")
     parser.add_argument("--no-report", action="store_true", help="write the JSON only, not RESULTS.md")
     parser.add_argument(
@@ -773,6 +793,8 @@ def main(argv: list[str] | None = None) -> int:
     sizes = dict(QUICK_SIZES if args.quick else FULL_SIZES)
     if args.sizes:
         sizes = parse_sizes(args.sizes)
+    if args.pairs is not None and not 1 <= args.pairs <= 1000:
+        raise UsageError(f"--pairs {args.pairs}: expected 1 to 1000")
     command = "python -m bench" + ("".join(f" {a}" for a in (argv if argv is not None else sys.argv[1:])))
     started = dt.datetime.now()
     results: dict[str, Any] = {
@@ -784,9 +806,9 @@ def main(argv: list[str] | None = None) -> int:
         "sections": {},
         "errors": {},
     }
-    progress = Progress(count_steps(sections, sizes, args.quick, args.spurious_configs))
+    progress = Progress(count_steps(sections, sizes, args.quick, args.spurious_configs, args.pairs))
     sys.stderr.write(f"{command.strip()}: sections {', '.join(sections)}; load {results['load_start']}\n")
-    ctx = Context(args.quick, sizes, progress, args.spurious_minutes, args.spurious_configs)
+    ctx = Context(args.quick, sizes, progress, args.spurious_minutes, args.spurious_configs, args.pairs)
     for name in sections:
         t0 = time.monotonic()
         try:
@@ -828,8 +850,8 @@ def parse_sizes(text: str) -> dict[str, list[int]]:
     sizes: dict[str, list[int]] = {}
     for part in text.split("/"):
         topology, _, values = part.partition(":")
-        if topology not in ("peer", "router") or not values:
-            raise UsageError(f"--sizes {text!r}: expected peer:2,8/router:8,255")
+        if topology not in ("peer", "router", "links") or not values:
+            raise UsageError(f"--sizes {text!r}: expected peer:2,8/router:8,64/links:255")
         try:
             sizes[topology] = [int(v) for v in values.split(",") if v]
         except ValueError:

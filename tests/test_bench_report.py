@@ -8,10 +8,20 @@ import json
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from bench.report import aims, kept_sections, nemesis_md, runtime_md, write_report
 from bench.sections import summary_of
-from bench.suite import FULL_SIZES, pairs_for, result_path, ring_record, rounds_for, write_results
+from bench.suite import (
+    FULL_SIZES,
+    pairs_for,
+    parse_sizes,
+    result_path,
+    ring_record,
+    rounds_for,
+    write_results,
+)
+from tokenring.errors import UsageError
 from tokenring.roundtrip import summarize
 
 
@@ -83,6 +93,22 @@ def test_the_8_node_aim_is_judged_on_the_shared_runtime_and_names_the_defaults_b
     assert "74.4 ms" in big and big.endswith("**met** |")
     # without the runtime section the row carries no such note
     assert "default runtime" not in aims({"scaling": scaling})
+
+
+def test_every_topology_of_the_biggest_size_gets_its_own_p99_row_and_links_are_named():
+    """A suite run with ``--sizes router:255/links:255`` judges the p99 aim on each topology."""
+    scaling = {"runs": [ring(255, "router", 83.0, 84.0, 110.0), ring(255, "links", 56.0, 57.0, 78.3)]}
+    rows = [line for line in aims({"scaling": scaling}).splitlines() if line.startswith("| 255 nodes")]
+    assert len(rows) == 2
+    router_row, links_row = sorted(rows, key=lambda line: "direct links" in line)
+    assert "(routers)" in router_row and "110.0 ms" in router_row and router_row.endswith("**missed** |")
+    assert "(direct links)" in links_row and "78.3 ms" in links_row and links_row.endswith("**met** |")
+
+
+def test_the_suites_sizes_take_direct_links_and_refuse_an_unknown_topology():
+    assert parse_sizes("router:8,64/links:255") == {"router": [8, 64], "links": [255]}
+    with pytest.raises(UsageError, match="mesh:8"):
+        parse_sizes("mesh:8")
 
 
 def test_a_later_run_on_the_same_day_never_overwrites_an_earlier_result_file(tmp_path):
@@ -409,3 +435,17 @@ def test_recovery_on_direct_links_gets_its_own_table_and_aims_beside_the_meshs()
     assert "recovery after crash (median, 8 nodes) | < 50 ms | 13.3 ms" in rows
     assert "recovery after crash (median, 8 nodes, direct links) | < 50 ms | 14.1 ms" in rows
     assert "heal" not in rows  # no aim, no row
+
+
+def test_the_scaling_text_says_how_many_pairs_each_size_had():
+    from bench.report import pairs_text
+
+    default = [{"nodes": 8, "topology": "peer", "pairs": 8}, {"nodes": 255, "topology": "links", "pairs": 10}]
+    assert pairs_text(default) == "8 up to 64 nodes, 10 beyond"
+    every = [{"nodes": 8, "topology": "peer", "pairs": 16}, {"nodes": 255, "topology": "links", "pairs": 16}]
+    assert pairs_text(every) == "16 for every size"
+    mixed = [
+        {"nodes": 64, "topology": "router", "pairs": 30},
+        {"nodes": 255, "topology": "links", "pairs": 12},
+    ]
+    assert pairs_text(mixed) == "30 at 64 routers, 12 at 255 direct links"

@@ -9,6 +9,7 @@ import json
 import os
 import signal
 import subprocess
+import sys
 import threading
 
 from conftest import REPO, wait_gone
@@ -45,6 +46,44 @@ def test_a_suite_run_writes_its_samples_to_raw_and_a_summary_of_kilobytes(tmp_pa
     assert (out / "plots" / "profile.png").exists()  # drawn from the samples in memory
     report = (tmp_path / "RESULTS.md").read_text()
     assert "| router | 255 |" in report and "![profile arcnet](results/plots/profile.png)" in report
+
+
+def test_pairs_set_for_every_size_reach_the_scaling_section_and_a_bad_count_is_refused(tmp_path, monkeypatch):
+    asked: list[tuple[int, int]] = []
+
+    def scaling(ctx):
+        asked.extend((n, ctx.pairs_for(n)) for sizes in ctx.sizes.values() for n in sizes)
+        return {"runs": []}
+
+    monkeypatch.setitem(suite.SECTION_FUNCTIONS, "scaling", scaling)
+    monkeypatch.setattr(zconfig, "use_node_runtime", lambda: None)
+    args = ["--sections", "scaling", "--sizes", "peer:8/links:255", "--out", str(tmp_path), "--no-report"]
+    assert suite.main([*args, "--pairs", "16"]) == 0
+    assert asked == [(8, 16), (255, 16)]
+    asked.clear()
+    assert suite.main(args) == 0
+    assert asked == [(8, 8), (255, 10)]  # the defaults
+    refused = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "bench",
+            "--sections",
+            "scaling",
+            "--pairs",
+            "0",
+            "--out",
+            str(tmp_path / "x"),
+        ],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert refused.returncode == 2
+    assert refused.stderr.strip() == "python -m bench: --pairs 0: expected 1 to 1000"
+    assert not (tmp_path / "x").exists()
 
 
 def test_the_raw_records_are_ignored_and_no_committed_result_file_is_over_100_kb():
