@@ -357,6 +357,24 @@ def defaults_growth_note(runtime: dict[str, Any], topology: str) -> str:
 BIG_RING_P99_AIM_MS = 80.0
 
 
+def steal_note(r: dict[str, Any]) -> str:
+    """What the host's steal time did to a size's pairs: how many were within the limit and the
+    own share over every pair taken (empty for a run from before steal was recorded)."""
+    every = r.get("own_share_all_us")
+    steal = r.get("pair_steal_pct")
+    if not every or steal is None:
+        return ""
+    from bench.ownshare import describe
+
+    limit = r["steal_limit_pct"]
+    calm = sum(max(pair) <= limit for pair in steal)
+    worst = max((max(pair) for pair in steal), default=0.0)
+    return (
+        f"; {calm} of {len(steal)} pairs within {limit:.0f} % steal time (worst {worst:.1f} %), "
+        f"over all {len(steal)}: {describe(every)}"
+    )
+
+
 def own_share_aims(runs: list[dict[str, Any]]) -> list[list[Any]]:
     """Rows for tokenring's own share per hop (its 95 % interval's top against the aim) and for
     the outside tap's round trip against the ring's own, per ring size that measured them."""
@@ -371,7 +389,7 @@ def own_share_aims(runs: list[dict[str, Any]]) -> list[list[Any]]:
                 [
                     f"tokenring's own share per hop, {r['nodes']} nodes ({plural(r['topology'])})",
                     f"≤ {OWN_SHARE_AIM_US:.0f} µs (top of the 95 % interval)",
-                    f"{describe(share)}; load {load:.1f}",
+                    f"{describe(share)}; load {load:.1f}" + steal_note(r),
                     verdict(bool(share["met"])),
                 ]
             )

@@ -97,3 +97,13 @@ def test_hopcost_refuses_to_record_nodes_the_ring_does_not_have(count):
     )
     assert result.returncode == 2 and "--perf-nodes 1..7" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_steal_time_is_the_hosts_share_of_the_cpus_between_two_readings():
+    from bench.ownshare import cpu_jiffies, steal_pct
+
+    assert steal_pct((100, 10_000), (250, 11_000)) == 15.0  # 150 of 1000 ticks went to the host
+    assert steal_pct((5, 50), (5, 50)) == 0.0  # no time passed: nothing stolen, no division by 0
+    steal, total = cpu_jiffies()
+    fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()  # read after: the counters only grow
+    assert fields[0] == "cpu" and 0 <= steal <= int(fields[8]) and steal <= total

@@ -12,6 +12,7 @@ import subprocess
 import sys
 import threading
 
+import pytest
 from conftest import REPO, wait_gone
 from ringutil import processes, wait_until
 from test_bench_report import suite_run
@@ -84,6 +85,49 @@ def test_pairs_set_for_every_size_reach_the_scaling_section_and_a_bad_count_is_r
     assert refused.returncode == 2
     assert refused.stderr.strip() == "python -m bench: --pairs 0: expected 1 to 1000"
     assert not (tmp_path / "x").exists()
+
+
+def test_a_pair_the_host_stole_from_is_retaken_and_the_own_share_judged_without_it(monkeypatch):
+    """Pairs of made-up runs: (bare, ring) medians in ms and the steal each run saw. The second
+    pair lost 30 % to the host, so a third is taken; the own share counts pairs 1 and 3 only."""
+    from tokenring import roundtrip
+
+    script = [  # (bare median ms, ring median ms, bare steal %, ring steal %)
+        (20.0, 20.64, 1.0, 2.0),
+        (20.0, 40.00, 30.0, 4.0),
+        (21.0, 21.32, 0.0, 9.5),
+    ]
+    medians = iter(x for bare, ring, _, _ in script for x in (bare, ring))
+    steals = iter(x for _, _, bare, ring in script for x in (bare, ring))
+    ticks = {"steal": 0, "total": 0}
+
+    def reading():
+        return ticks["steal"], ticks["total"]
+
+    def run(median_ms):
+        stolen = next(steals)  # what the host takes while this run goes on: 1000 ticks of CPU
+        ticks["steal"] += round(stolen * 10)
+        ticks["total"] += 1000
+        return [median_ms / 1e3] * 5
+
+    def fake_bare(n, rounds, warmup, timeout, *, router, chain):
+        return run(next(medians))
+
+    def fake_ring(n, rounds, warmup, *, timeout, router, links, tap):
+        rounds_s = run(next(medians))
+        return roundtrip.RingRun(rounds_s, [30.0] * n, [1.0] * n, {"median": 5.0}, 10.0)
+
+    monkeypatch.setattr(roundtrip, "run_bare", fake_bare)
+    monkeypatch.setattr(roundtrip, "run_ring", fake_ring)
+    monkeypatch.setattr(suite, "cpu_jiffies", reading)
+    ctx = suite.Context(False, {"router": [64]}, suite.Progress(4), pairs=2)
+    (record,) = suite.section_scaling(ctx)["runs"]
+    assert record["pairs_taken"] == 3
+    assert [tuple(pair) for pair in record["pair_steal_pct"]] == [(2.0, 1.0), (4.0, 30.0), (9.5, 0.0)]
+    # pairs 1 and 3: 0.64 and 0.32 ms over 64 nodes = 10 and 5 µs per hop
+    assert record["own_share_us"]["pairs_us"] == [10.0, 5.0]
+    assert record["own_share_us"]["mean"] == pytest.approx(7.5)
+    assert record["own_share_all_us"]["pairs_us"] == [10.0, 312.5, 5.0]
 
 
 def test_the_raw_records_are_ignored_and_no_committed_result_file_is_over_100_kb():
