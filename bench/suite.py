@@ -726,7 +726,7 @@ class Context:
         progress: Progress,
         spurious_minutes: float | None = None,
         spurious_configs: str | None = None,
-        pairs: int | None = None,
+        pairs: dict[int, int] | None = None,
     ) -> None:
         self.quick = quick
         self.pairs = pairs
@@ -737,7 +737,7 @@ class Context:
 
     def pairs_for(self, n: int) -> int:
         """Alternating bare/ring pairs for a ring of ``n``: ``--pairs`` or :func:`pairs_for`'s."""
-        return self.pairs or pairs_for(n, self.quick)
+        return (self.pairs or {}).get(n) or (self.pairs or {}).get(0) or pairs_for(n, self.quick)
 
 
 def count_steps(
@@ -745,12 +745,17 @@ def count_steps(
     sizes: dict[str, list[int]],
     quick: bool,
     spurious_configs: str | None = None,
-    pairs: int | None = None,
+    pairs: dict[int, int] | None = None,
 ) -> int:
     from bench.spurious import pick_configs  # a bad --spurious-configs is refused here, before any run
 
     per = {
-        "scaling": 2 * sum(pairs or pairs_for(n, quick) for v in sizes.values() for n in v),
+        "scaling": 2
+        * sum(
+            (pairs or {}).get(n) or (pairs or {}).get(0) or pairs_for(n, quick)
+            for v in sizes.values()
+            for n in v
+        ),
         "transports": 5 * (1 if quick else 2),
         "runtime": len(RUNTIMES) * len(runtime_cases(quick)),
         "load": 2,
@@ -789,9 +794,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sizes", help="ring sizes for scaling, e.g. peer:2,8,32/router:8,64/links:255")
     parser.add_argument(
         "--pairs",
-        type=int,
-        help="alternating bare/ring pairs per ring size in scaling (default 8 up to 64 nodes, 10 beyond): "
-        "the own share's interval narrows with the square root of the pairs",
+        help="alternating bare/ring pairs per ring size in scaling, K for every size or N:K,N:K per size "
+        "(default 8 up to 64 nodes, 10 beyond): the own share's interval narrows with the square root of the pairs",
     )
     parser.add_argument("--out", default=str(RESULTS_DIR), help="results directory (default bench/results)")
     parser.add_argument("--no-report", action="store_true", help="write the JSON only, not RESULTS.md")
@@ -820,8 +824,7 @@ def main(argv: list[str] | None = None) -> int:
     sizes = dict(QUICK_SIZES if args.quick else FULL_SIZES)
     if args.sizes:
         sizes = parse_sizes(args.sizes)
-    if args.pairs is not None and not 1 <= args.pairs <= 1000:
-        raise UsageError(f"--pairs {args.pairs}: expected 1 to 1000")
+    pairs = parse_pairs(args.pairs) if args.pairs is not None else None
     command = "python -m bench" + ("".join(f" {a}" for a in (argv if argv is not None else sys.argv[1:])))
     started = dt.datetime.now()
     results: dict[str, Any] = {
@@ -833,9 +836,9 @@ def main(argv: list[str] | None = None) -> int:
         "sections": {},
         "errors": {},
     }
-    progress = Progress(count_steps(sections, sizes, args.quick, args.spurious_configs, args.pairs))
+    progress = Progress(count_steps(sections, sizes, args.quick, args.spurious_configs, pairs))
     sys.stderr.write(f"{command.strip()}: sections {', '.join(sections)}; load {results['load_start']}\n")
-    ctx = Context(args.quick, sizes, progress, args.spurious_minutes, args.spurious_configs, args.pairs)
+    ctx = Context(args.quick, sizes, progress, args.spurious_minutes, args.spurious_configs, pairs)
     for name in sections:
         t0 = time.monotonic()
         try:
@@ -887,6 +890,22 @@ def parse_sizes(text: str) -> dict[str, list[int]]:
         if bad:
             raise UsageError(f"--sizes: {bad} outside 2..255")
     return sizes
+
+
+def parse_pairs(text: str) -> dict[int, int]:
+    """``--pairs``: ``16`` (every size; key 0) or ``8:16,64:32,255:12`` (per ring size)."""
+    from tokenring.errors import UsageError
+
+    pairs: dict[int, int] = {}
+    try:
+        for part in text.split(","):
+            size, _, count = part.strip().rpartition(":")
+            pairs[int(size) if size else 0] = int(count)
+    except ValueError:
+        raise UsageError(f"--pairs {text!r}: expected K or N:K,N:K (whole numbers)") from None
+    if any(not 1 <= k <= 1000 for k in pairs.values()):
+        raise UsageError(f"--pairs {text!r}: expected 1 to 1000 pairs")
+    return pairs
 
 
 if __name__ == "__main__":

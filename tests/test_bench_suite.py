@@ -62,6 +62,9 @@ def test_pairs_set_for_every_size_reach_the_scaling_section_and_a_bad_count_is_r
     assert suite.main([*args, "--pairs", "16"]) == 0
     assert asked == [(8, 16), (255, 16)]
     asked.clear()
+    assert suite.main([*args, "--pairs", "255:12"]) == 0
+    assert asked == [(8, 8), (255, 12)]  # a size not named keeps its default
+    asked.clear()
     assert suite.main(args) == 0
     assert asked == [(8, 8), (255, 10)]  # the defaults
     refused = subprocess.run(
@@ -83,7 +86,7 @@ def test_pairs_set_for_every_size_reach_the_scaling_section_and_a_bad_count_is_r
         check=False,
     )
     assert refused.returncode == 2
-    assert refused.stderr.strip() == "python -m bench: --pairs 0: expected 1 to 1000"
+    assert refused.stderr.strip() == "python -m bench: --pairs '0': expected 1 to 1000 pairs"
     assert not (tmp_path / "x").exists()
 
 
@@ -120,7 +123,7 @@ def test_a_pair_the_host_stole_from_is_retaken_and_the_own_share_judged_without_
     monkeypatch.setattr(roundtrip, "run_bare", fake_bare)
     monkeypatch.setattr(roundtrip, "run_ring", fake_ring)
     monkeypatch.setattr(suite, "cpu_jiffies", reading)
-    ctx = suite.Context(False, {"router": [64]}, suite.Progress(4), pairs=2)
+    ctx = suite.Context(False, {"router": [64]}, suite.Progress(4), pairs={64: 2})
     (record,) = suite.section_scaling(ctx)["runs"]
     assert record["pairs_taken"] == 3
     assert [tuple(pair) for pair in record["pair_steal_pct"]] == [(2.0, 1.0), (4.0, 30.0), (9.5, 0.0)]
