@@ -86,6 +86,16 @@ def own_share(pairs: list[tuple[float, float]], nodes: int) -> dict[str, Any]:
     return out
 
 
+def screened_pairs(record: dict[str, Any]) -> tuple[int, int, float] | None:
+    """(pairs within the steal limit, pairs taken, the limit %) of a scaling record; None for a
+    record from before steal was recorded."""
+    steal = record.get("pair_steal_pct")
+    if not record.get("own_share_all_us") or steal is None:
+        return None
+    limit = float(record.get("steal_limit_pct", STEAL_LIMIT_PCT))
+    return sum(max(pair) <= limit for pair in steal), len(steal), limit
+
+
 def describe(share: dict[str, Any]) -> str:
     """``12.3 µs per hop (95 % CI 8.1 to 16.5, 6 pairs)``; one pair: no interval."""
     if share["n"] < 2:
@@ -124,7 +134,13 @@ def main(argv: list[str] | None = None) -> int:
         share = record.get("own_share_us")
         if share:
             load = record.get("load_before", [None])[0]
-            print(f"{record['topology']:6} {record['nodes']:3} nodes: {describe(share)}, load {load}")
+            line = f"{record['topology']:6} {record['nodes']:3} nodes: {describe(share)}, load {load}"
+            screened = screened_pairs(record)
+            if screened:
+                calm, taken, limit = screened
+                every = describe(record["own_share_all_us"])
+                line += f"; {calm} of {taken} pairs within {limit:.0f} % steal, every pair: {every}"
+            print(line)
             shown += 1
     if not shown:
         sys.stderr.write(f"{args[0]}: no own share per hop in its scaling section\n")

@@ -360,18 +360,16 @@ BIG_RING_P99_AIM_MS = 80.0
 def steal_note(r: dict[str, Any]) -> str:
     """What the host's steal time did to a size's pairs: how many were within the limit and the
     own share over every pair taken (empty for a run from before steal was recorded)."""
-    every = r.get("own_share_all_us")
-    steal = r.get("pair_steal_pct")
-    if not every or steal is None:
-        return ""
-    from bench.ownshare import describe
+    from bench.ownshare import describe, screened_pairs
 
-    limit = r["steal_limit_pct"]
-    calm = sum(max(pair) <= limit for pair in steal)
-    worst = max((max(pair) for pair in steal), default=0.0)
+    screened = screened_pairs(r)
+    if not screened:
+        return ""
+    calm, taken, limit = screened
+    worst = max(max(pair) for pair in r["pair_steal_pct"]) if taken else 0.0
     return (
-        f"; {calm} of {len(steal)} pairs within {limit:.0f} % steal time (worst {worst:.1f} %), "
-        f"over all {len(steal)}: {describe(every)}"
+        f"; {calm} of {taken} pairs within {limit:.0f} % steal time (worst {worst:.1f} %), "
+        f"over all {taken}: {describe(r['own_share_all_us'])}"
     )
 
 

@@ -107,3 +107,26 @@ def test_steal_time_is_the_hosts_share_of_the_cpus_between_two_readings():
     steal, total = cpu_jiffies()
     fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()  # read after: the counters only grow
     assert fields[0] == "cpu" and 0 <= steal <= int(fields[8]) and steal <= total
+
+
+def test_the_intervals_of_a_result_file_are_printed_with_the_pairs_the_host_spoiled(tmp_path, capsys):
+    from bench.ownshare import main
+
+    record = {
+        "topology": "router",
+        "nodes": 64,
+        "load_before": [2.2],
+        "own_share_us": own_share([(21.0, 20.936), (22.0, 22.0)], 64),  # 1.0 and 0.0 µs per hop
+        "own_share_all_us": own_share([(21.0, 20.936), (40.0, 21.8), (22.0, 22.0)], 64),
+        "pair_steal_pct": [[1.0, 2.0], [25.0, 3.0], [0.5, 9.9]],
+        "steal_limit_pct": 10.0,
+    }
+    result = tmp_path / "run.json"
+    result.write_text(json.dumps({"sections": {"scaling": {"runs": [record]}}}))
+    assert main([str(result)]) == 0
+    line = capsys.readouterr().out.strip()
+    assert line.startswith("router  64 nodes: 0.5 µs per hop (95 % CI")
+    assert (
+        "2 pairs), load 2.2; 2 of 3 pairs within 10 % steal, every pair: 95.1 µs per hop" in line
+    )  # (1 + 284.4 + 0) / 3
+    assert main([str(tmp_path / "missing.json")]) == 2
