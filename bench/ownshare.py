@@ -86,6 +86,19 @@ def own_share(pairs: list[tuple[float, float]], nodes: int) -> dict[str, Any]:
     return out
 
 
+def within_steal_limit(pair_steal: tuple[float, float] | list[float], limit: float = STEAL_LIMIT_PCT) -> bool:
+    """A pair whose ring and bare run each lost at most ``limit`` % of the CPUs to the host."""
+    return max(pair_steal) <= limit
+
+
+def more_pairs_needed(taken: int, pairs: int, pair_steal: list[tuple[float, float]]) -> bool:
+    """The retake rule: take the ``pairs`` asked for, then more while fewer than ``pairs`` are
+    within the steal limit, at most ``2 * pairs`` in all (a pair that failed counts as spoiled)."""
+    if taken < pairs:
+        return True
+    return taken < 2 * pairs and sum(map(within_steal_limit, pair_steal)) < pairs
+
+
 def screened_pairs(record: dict[str, Any]) -> tuple[int, int, float] | None:
     """(pairs within the steal limit, pairs taken, the limit %) of a scaling record; None for a
     record from before steal was recorded."""
@@ -93,7 +106,7 @@ def screened_pairs(record: dict[str, Any]) -> tuple[int, int, float] | None:
     if not record.get("own_share_all_us") or steal is None:
         return None
     limit = float(record.get("steal_limit_pct", STEAL_LIMIT_PCT))
-    return sum(max(pair) <= limit for pair in steal), len(steal), limit
+    return sum(within_steal_limit(pair, limit) for pair in steal), len(steal), limit
 
 
 def describe(share: dict[str, Any]) -> str:

@@ -366,7 +366,7 @@ def steal_note(r: dict[str, Any]) -> str:
     if not screened:
         return ""
     calm, taken, limit = screened
-    worst = max(max(pair) for pair in r["pair_steal_pct"]) if taken else 0.0
+    worst = max(max(pair) for pair in r["pair_steal_pct"])
     return (
         f"; {calm} of {taken} pairs within {limit:.0f} % steal time (worst {worst:.1f} %), "
         f"over all {taken}: {describe(r['own_share_all_us'])}"
@@ -450,7 +450,7 @@ def aims(sections: dict[str, Any]) -> str:
             )
     rows += own_share_aims(runs)
     biggest = max((r["nodes"] for r in runs if "rtt_ms" in r), default=0)
-    for big in (r for r in runs if "rtt_ms" in r and r["nodes"] == biggest >= 128):
+    for big in (r for r in runs if "rtt_ms" in r and r["nodes"] == biggest and biggest >= 128):
         rows.append(
             [
                 f"{big['nodes']} nodes circulate, p99 round trip ({plural(big['topology'])})",

@@ -53,7 +53,16 @@ from typing import Any
 
 import numpy as np
 
-from bench.ownshare import STEAL_LIMIT_PCT, cpu_jiffies, describe, own_share, pairs_for, steal_pct
+from bench.ownshare import (
+    STEAL_LIMIT_PCT,
+    cpu_jiffies,
+    describe,
+    more_pairs_needed,
+    own_share,
+    pairs_for,
+    steal_pct,
+    within_steal_limit,
+)
 from bench.sections import QUICK_SECTIONS, RAW_DIR, SECTIONS, SLOW_SECTIONS, raw_path, summary_of
 
 HERE = Path(__file__).resolve().parent
@@ -220,9 +229,7 @@ def section_scaling(ctx: Context) -> dict[str, Any]:
             bare_errors: list[str] = []
             ring_errors: list[str] = []
             taken = 0
-            while taken < pairs or (
-                taken < 2 * pairs and sum(max(st) <= STEAL_LIMIT_PCT for st in pair_steal) < pairs
-            ):
+            while more_pairs_needed(taken, pairs, pair_steal):
                 if taken >= pairs:
                     ctx.progress.total += 2  # a retake: the host stole too much of a pair
                 taken += 1
@@ -287,9 +294,7 @@ def section_scaling(ctx: Context) -> dict[str, Any]:
                     record["pair_ratios"] = pair_ratios
                 if pair_medians:
                     calm = [
-                        m
-                        for m, st in zip(pair_medians, pair_steal, strict=True)
-                        if max(st) <= STEAL_LIMIT_PCT
+                        m for m, st in zip(pair_medians, pair_steal, strict=True) if within_steal_limit(st)
                     ]
                     record["pair_steal_pct"] = pair_steal
                     record["steal_limit_pct"] = STEAL_LIMIT_PCT
@@ -718,6 +723,13 @@ SECTION_FUNCTIONS: dict[str, Callable[[Context], dict[str, Any]]] = {
 }
 
 
+def pairs_of(n: int, quick: bool, pairs: dict[int, int] | None) -> int:
+    """Bare/ring pairs for a ring of ``n``: ``--pairs``' count for ``n``, else its count for
+    every size (key 0), else :func:`pairs_for`'s default."""
+    chosen = pairs or {}
+    return chosen.get(n) or chosen.get(0) or pairs_for(n, quick)
+
+
 class Context:
     def __init__(
         self,
@@ -737,7 +749,7 @@ class Context:
 
     def pairs_for(self, n: int) -> int:
         """Alternating bare/ring pairs for a ring of ``n``: ``--pairs`` or :func:`pairs_for`'s."""
-        return (self.pairs or {}).get(n) or (self.pairs or {}).get(0) or pairs_for(n, self.quick)
+        return pairs_of(n, self.quick, self.pairs)
 
 
 def count_steps(

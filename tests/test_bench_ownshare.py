@@ -130,3 +130,15 @@ def test_the_intervals_of_a_result_file_are_printed_with_the_pairs_the_host_spoi
         "2 pairs), load 2.2; 2 of 3 pairs within 10 % steal, every pair: 95.1 µs per hop" in line
     )  # (1 + 284.4 + 0) / 3
     assert main([str(tmp_path / "missing.json")]) == 2
+
+
+def test_the_retake_rule_stops_at_enough_calm_pairs_or_twice_the_pairs_asked():
+    from bench.ownshare import more_pairs_needed
+
+    calm, spoiled = (1.0, 2.0), (1.0, 10.5)  # 10.5 %: over the 10 % limit
+    assert more_pairs_needed(1, 2, [calm])  # the pairs asked for come first
+    assert not more_pairs_needed(2, 2, [calm, calm])
+    assert more_pairs_needed(2, 2, [calm, spoiled])  # one retake
+    assert not more_pairs_needed(3, 2, [calm, spoiled, calm])
+    assert not more_pairs_needed(4, 2, [spoiled, spoiled, spoiled, spoiled])  # capped at 2 x 2
+    assert more_pairs_needed(3, 2, [calm, spoiled])  # a failed pair recorded no steal: spoiled

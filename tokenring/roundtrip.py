@@ -371,7 +371,8 @@ def run_ring(
             start_visits = stats["stats"]["visits"]
             visits_key = keys.control(ring, master, "visits")
             if tap:  # count the rounds from when the tap listens (tcpdump takes ~0.1-1 s to start)
-                start_visits = master_answer(session, visits_key, timeout=1.0) or start_visits
+                answer = master_answer(session, visits_key, timeout=1.0)
+                start_visits = start_visits if answer is None else answer
             while time.monotonic() < deadline:
                 time.sleep(0.2)
                 visits = master_answer(session, visits_key, timeout=1.0)  # cheap: one integer
