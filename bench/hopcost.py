@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import io
 import json
 import os
 import re
@@ -38,6 +37,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from bench.liverings import BareRing, LiveRing
 from bench.ownshare import interval
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
@@ -144,63 +144,6 @@ def perf_symbols(data: Path, visits: int) -> dict[str, float]:
     return out
 
 
-class BareRing:
-    """A bare Zenoh ring that runs until told to stop, then reports each round's arrival time."""
-
-    def __init__(self, nodes: int, router: bool) -> None:
-        from tokenring.cliutil import free_port
-        from tokenring.roundtrip import spawn_bare_ring
-        from tokenring.zconfig import make_config, open_session
-
-        port = free_port()
-        ring = f"h{os.getpid()}x{port}"
-        self.prefix = f"tokenring-bare/{ring}"
-        self.router = (
-            open_session(make_config(mode="router", listen=[f"tcp/127.0.0.1:{port}"])) if router else None
-        )
-        connect = make_config(mode="client" if router else "peer", connect=[f"tcp/127.0.0.1:{port}"])
-        # runs until stop(): rounds enough for any window
-        self.first, self.others = spawn_bare_ring(
-            nodes, port, ring, 10_000_000, 50, 600, router=router, stamps=True
-        )
-        self.session = open_session(connect)
-        self.pids = [self.first.pid] + [p.pid for p in self.others]
-
-    def wait_circulating(self, timeout: float) -> None:
-        """Until the token has gone round (process 0 has the ring formed and passes it)."""
-        deadline = time.monotonic() + timeout
-        key = f"{self.prefix}/hop/0"
-        seen: list[float] = []
-        subscriber = self.session.declare_subscriber(key, lambda _s: seen.append(time.monotonic()))
-        try:
-            while len(seen) < 100:
-                if time.monotonic() > deadline or self.first.poll() is not None:
-                    raise RuntimeError("the bare ring did not circulate")
-                time.sleep(0.05)
-        finally:
-            subscriber.undeclare()
-
-    def stop(self) -> list[float]:
-        """Stop every process; the arrival times process 0 recorded."""
-        self.session.put(f"{self.prefix}/stop", b"")
-        try:
-            out, _ = self.first.communicate(timeout=30)
-        except subprocess.TimeoutExpired:
-            self.first.kill()
-            out, _ = self.first.communicate()
-        for proc in self.others:
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(5)
-        self.session.close()
-        if self.router is not None:
-            self.router.close()
-        lines = [line for line in out.splitlines() if line.startswith("{")]
-        return json.loads(lines[-1]).get("stamps_s", []) if lines else []
-
-
 def measure(
     kind: str, nodes: int, router: bool, window: float, perf_nodes: int, out_dir: Path
 ) -> dict[str, Any]:
@@ -260,51 +203,20 @@ def ring_window(
     nodes: int, router: bool, window: float, perf_nodes: int, perf_data: Path
 ) -> tuple[int, Any, Any, float, float, list[int]]:
     """A tokenring ring of ``nodes`` (as ``tokenring bench`` runs it): visits and thread samples."""
-    from tokenring import keys
-    from tokenring.cliutil import free_port, query
-    from tokenring.launcher import Launcher, NodePlan
-    from tokenring.roundtrip import generated_ids
-    from tokenring.zconfig import make_config, open_session
-
-    ids = generated_ids(nodes)
-    port = free_port()
-    ring = f"h{os.getpid()}x{port}"
-    launcher = Launcher(
-        [NodePlan(i, f"node{i}", None) for i in ids],
-        ring=ring,
-        bitrate="max",
-        ack_mode="adaptive",
-        listen=[f"tcp/127.0.0.1:{port}"],
-        log_level="warning",
-        output=io.StringIO(),
-        router=router,
-    )
-    launcher.start()
+    ring = LiveRing(nodes, router)
     try:
-        config = make_config(mode="client" if router else "peer", connect=[f"tcp/127.0.0.1:{port}"])
-        with open_session(config) as session:
-            master = min(ids)
-
-            def visits() -> int:
-                replies = query(session, keys.control(ring, master, "visits"), timeout=2.0)
-                return int(replies[0][1]["result"]) if replies and replies[0][1].get("ok") else -1
-
-            deadline = time.monotonic() + 60 + nodes
-            while visits() < 100:
-                if time.monotonic() > deadline:
-                    raise RuntimeError(f"the ring of {nodes} did not circulate")
-                time.sleep(0.1)
-            time.sleep(1.0)
-            pids = [c.process.pid for c in launcher.child_list()]
-            v0, t0, before = visits(), time.monotonic(), sample_threads(pids)
-            perf_proc = start_perf(pids[1 : 1 + perf_nodes], window, perf_data) if perf_nodes else None
-            time.sleep(window)
-            v1, t1, after = visits(), time.monotonic(), sample_threads(pids)
-            if perf_proc is not None:
-                perf_proc.wait()
-            return v1 - v0, before, after, t0, t1, pids
+        ring.wait_circulating(60 + nodes)
+        time.sleep(1.0)
+        pids = ring.pids
+        v0, t0, before = ring.visits(), time.monotonic(), sample_threads(pids)
+        perf_proc = start_perf(pids[1 : 1 + perf_nodes], window, perf_data) if perf_nodes else None
+        time.sleep(window)
+        v1, t1, after = ring.visits(), time.monotonic(), sample_threads(pids)
+        if perf_proc is not None:
+            perf_proc.wait()
+        return v1 - v0, before, after, t0, t1, pids
     finally:
-        launcher.stop()
+        ring.stop()
 
 
 def table(pairs: list[tuple[dict[str, Any], dict[str, Any]]], key: str) -> list[dict[str, Any]]:

@@ -1,0 +1,139 @@
+"""Rings that run until told to stop: a bare Zenoh ring and a tokenring ring, side by side.
+
+The benchmarks that look inside a running ring (``bench.hopcost``'s thread samples, the
+interleaved own share of ``bench.interleave``) need rings that keep circulating while they are
+watched, paused and resumed, rather than ``tokenring.roundtrip``'s runs of a fixed number of
+rounds. Both classes start their processes as ``tokenring bench`` does and give their PIDs.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import select
+import subprocess
+import time
+from typing import Any
+
+
+class BareRing:
+    """A bare Zenoh ring that runs until told to stop, then reports each round's arrival time
+    (CLOCK_MONOTONIC, the clock of this process's ``time.monotonic`` and ``perf_counter``)."""
+
+    def __init__(self, nodes: int, router: bool, chain: bool = False) -> None:
+        from tokenring.cliutil import free_port
+        from tokenring.roundtrip import spawn_bare_ring
+        from tokenring.zconfig import make_config, open_session
+
+        port = free_port()
+        ring = f"h{os.getpid()}x{port}"
+        self.prefix = f"tokenring-bare/{ring}"
+        self.router = (
+            open_session(make_config(mode="router", listen=[f"tcp/127.0.0.1:{port}"])) if router else None
+        )
+        connect = make_config(mode="client" if router else "peer", connect=[f"tcp/127.0.0.1:{port}"])
+        # runs until stop(): rounds enough for any window
+        self.first, self.others = spawn_bare_ring(
+            nodes, port, ring, 10_000_000, 50, 3600, router=router, stamps=True, chain=chain
+        )
+        self.session = open_session(connect)
+        self.pids = [self.first.pid] + [p.pid for p in self.others]
+
+    def wait_circulating(self, timeout: float) -> None:
+        """Until the token has gone round its warm-up rounds (process 0 says so on its stdout: on
+        direct links no subscriber here sees the token)."""
+        deadline = time.monotonic() + timeout
+        assert self.first.stdout is not None
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0 or self.first.poll() is not None:
+                raise RuntimeError("the bare ring did not circulate")
+            readable, _, _ = select.select([self.first.stdout], [], [], left)
+            if readable and '"warm"' in self.first.stdout.readline():
+                return
+
+    def stop(self) -> list[float]:
+        """Stop every process; the arrival times process 0 recorded."""
+        self.session.put(f"{self.prefix}/stop", b"")
+        try:
+            out, _ = self.first.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            self.first.kill()
+            out, _ = self.first.communicate()
+        for proc in self.others:
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(5)
+        self.session.close()
+        if self.router is not None:
+            self.router.close()
+        lines = [line for line in out.splitlines() if line.startswith("{")]
+        return json.loads(lines[-1]).get("stamps_s", []) if lines else []
+
+
+class LiveRing:
+    """A tokenring ring of ``nodes`` generated node IDs, launched as ``tokenring bench`` launches
+    it (``router``: the nodes clients of a router in this process; ``links``: with direct links to
+    their successors too), whose round master answers queries until :meth:`stop`."""
+
+    def __init__(self, nodes: int, router: bool, links: bool = False) -> None:
+        from tokenring.cliutil import free_port
+        from tokenring.launcher import Launcher, NodePlan
+        from tokenring.roundtrip import generated_ids
+        from tokenring.zconfig import make_config, open_session
+
+        ids = generated_ids(nodes)
+        port = free_port()
+        self.ring = f"h{os.getpid()}x{port}"
+        self.master = min(ids)
+        self.output = io.StringIO()  # the nodes' warnings, for a caller that wants to see them
+        self.launcher = Launcher(
+            [NodePlan(i, f"node{i}", None) for i in ids],
+            ring=self.ring,
+            bitrate="max",
+            ack_mode="adaptive",
+            listen=[f"tcp/127.0.0.1:{port}"],
+            log_level="warning",
+            output=self.output,
+            router=router,
+            links=links,
+        )
+        self.launcher.start()
+        try:
+            config = make_config(mode="client" if router else "peer", connect=[f"tcp/127.0.0.1:{port}"])
+            self.session = open_session(config)
+        except BaseException:
+            self.launcher.stop()
+            raise
+
+    @property
+    def pids(self) -> list[int]:
+        return [c.process.pid for c in self.launcher.child_list()]
+
+    def answer(self, what: str, timeout: float = 2.0) -> Any | None:
+        """The round master's answer on its control key ``what`` (visits, rounds, stats), or None."""
+        from tokenring import keys
+        from tokenring.cliutil import query
+
+        replies = query(self.session, keys.control(self.ring, self.master, what), timeout=timeout)
+        return replies[0][1]["result"] if replies and replies[0][1].get("ok") else None
+
+    def visits(self) -> int:
+        """The round master's visits so far; -1 if it did not answer."""
+        answer = self.answer("visits")
+        return int(answer) if answer is not None else -1
+
+    def wait_circulating(self, timeout: float, visits: int = 100) -> None:
+        """Until the round master has had ``visits`` visits."""
+        deadline = time.monotonic() + timeout
+        while self.visits() < visits:
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"the ring {self.ring} did not circulate")
+            time.sleep(0.1)
+
+    def stop(self) -> None:
+        self.session.close()
+        self.launcher.stop()
