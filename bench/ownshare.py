@@ -110,7 +110,9 @@ def screened_pairs(record: dict[str, Any]) -> tuple[int, int, float] | None:
 
 
 def describe(share: dict[str, Any]) -> str:
-    """``12.3 µs per hop (95 % CI 8.1 to 16.5, 6 pairs)``; one pair: no interval."""
+    """``12.3 µs per hop (95 % CI 8.1 to 16.5, 6 pairs)``; one pair: no interval; none: no share."""
+    if share["n"] == 0:
+        return "no pair to give it"
     if share["n"] < 2:
         return f"{share['mean']:.1f} µs per hop (1 pair: no interval)"
     return (
@@ -154,6 +156,14 @@ def main(argv: list[str] | None = None) -> int:
                 every = describe(record["own_share_all_us"])
                 line += f"; {calm} of {taken} pairs within {limit:.0f} % steal, every pair: {every}"
             print(line)
+            shown += 1
+        interleaved = record.get("interleaved")
+        if interleaved:
+            calm, every = interleaved["own_share_us"], interleaved["own_share_all_us"]
+            print(
+                f"{record['topology']:6} {record['nodes']:3} nodes, interleaved: {describe(calm)} within "
+                f"{interleaved['steal_limit_pct']:.0f} % steal; every pair: {describe(every)}"
+            )
             shown += 1
     if not shown:
         sys.stderr.write(f"{args[0]}: no own share per hop in its scaling section\n")

@@ -1,0 +1,254 @@
+"""tokenring's own share per hop with both rings in the same seconds: interleaved windows.
+
+Separate runs of the ring and of the bare Zenoh ring land in different seconds of the host, and
+on this virtual machine the host takes CPUs for seconds at a time (steal 15-30 % against 2-9 %,
+the bare 64-node ring 21 ms or 41-60 ms a round): even pairs of runs screened by their steal
+spread 86 µs per hop at 64 routers. So here both rings are up at once and take turns: the
+one not measured is frozen (SIGSTOP to each of its processes, SIGCONT to resume), and each pair
+is one window of the bare ring and one of the ring, next to each other in time (the order
+alternates, so a trend in the host's speed does not favour either). A pair's own share is
+``(ring window's median - bare window's median) / N``; over many pairs, their mean with its
+95 % interval (:func:`bench.ownshare.interval`), beside the same over the pairs whose two
+windows lost at most :data:`~bench.ownshare.STEAL_LIMIT_PCT` to the host.
+
+A window is short enough that a frozen ring does not notice: a node whose watchdog wakes more
+than :data:`tokenring.recovery.FROZEN_AFTER_S` late announces a rejoin (255 of them at once
+would be a storm no ring sees in use). The round that spans a freeze and the next
+``settle`` rounds are dropped; the ring's rounds are its round master's (the time between two of
+its visits, as ``tokenring bench`` reports them), the bare ring's are its process 0's.
+
+    python -m bench.interleave --nodes 64 --topology router --pairs 100
+    python -m bench.interleave --nodes 255 --topology links --pairs 150 --json F
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import itertools
+import json
+import os
+import signal
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from bench.liverings import BareRing, LiveRing
+from bench.ownshare import STEAL_LIMIT_PCT, cpu_jiffies, interval, steal_pct, within_steal_limit
+
+#: a window's share of the freeze a node can sleep through unnoticed (FROZEN_AFTER_S)
+WINDOW_OF_FROZEN = 0.6
+#: rounds dropped after a resume: the frozen ring's first rounds carry what queued meanwhile
+SETTLE_ROUNDS = 2
+TOPOLOGIES = ("peer", "router", "links")
+
+
+def signal_all(pids: list[int], signum: int) -> None:
+    """Send ``signum`` to each of ``pids`` (one that has already gone is skipped)."""
+    for pid in pids:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signum)
+
+
+def window_rounds(stamps: list[float], start: float, end: float, settle: int) -> list[float]:
+    """The bare ring's rounds (s) in one window: between arrival ``stamps`` (sorted, monotonic
+    clock) from ``start`` (the resume) to ``end`` (the freeze), without the first ``settle``."""
+    inside = [t for t in stamps if start <= t <= end]
+    return [b - a for a, b in itertools.pairwise(inside)][settle:]
+
+
+def after_freeze(rounds: list[float], frozen_s: float, settle: int) -> list[float]:
+    """The ring's rounds (s) since its last freeze: after the last round that lasted at least
+    half the freeze (it spans it), without the first ``settle``; [] if no round spans it."""
+    span = next((i for i in range(len(rounds) - 1, -1, -1) if rounds[i] >= frozen_s / 2), None)
+    return [] if span is None else rounds[span + 1 + settle :]
+
+
+def pair_share_us(ring: list[float], before: list[float], after: list[float], nodes: int) -> float:
+    """One pair's own share per hop (µs): the ring window's median round above the mean of the
+    medians of the bare windows before and after it (a steady drift of the host cancels), per node."""
+    bare = (statistics.median(before) + statistics.median(after)) / 2
+    return (statistics.median(ring) - bare) * 1e6 / nodes
+
+
+def interleave(
+    nodes: int,
+    topology: str,
+    pairs: int,
+    window_s: float | None = None,
+    settle: int = SETTLE_ROUNDS,
+    say: Callable[[str], None] = lambda _text: None,
+) -> dict[str, Any]:
+    """Run the two rings of ``nodes`` in ``topology`` side by side for ``pairs`` pairs of windows
+    (each ``window_s``, default :data:`WINDOW_OF_FROZEN` of the freeze a node sleeps through);
+    the own share per hop over all pairs and over the calm ones, each pair's medians and steal."""
+    from tokenring.recovery import FROZEN_AFTER_S
+
+    window_s = window_s or WINDOW_OF_FROZEN * FROZEN_AFTER_S
+    router, links = topology in ("router", "links"), topology == "links"
+    t_begin = time.monotonic()
+    say(f"bare Zenoh ring of {nodes} ({topology}) forming")
+    bare = BareRing(nodes, router, chain=links)
+    ring: LiveRing | None = None
+    frozen: list[int] = []
+    try:
+        bare.wait_circulating(60 + nodes)
+        # the bare ring runs on while the ring forms: frozen for a minute, its clients' Zenoh
+        # leases would end
+        say(f"tokenring ring of {nodes} ({topology}) forming")
+        ring = LiveRing(nodes, router, links)
+        ring.wait_circulating(60 + 1.5 * nodes)
+        ring_pids = ring.pids
+        frozen = bare.pids + ring_pids
+        signal_all(frozen, signal.SIGSTOP)
+        warnings_before = ring.output.getvalue().count("\n")
+        bare_windows: list[tuple[float, float]] = []
+        ring_rounds: list[list[float]] = []
+        window_steal: list[float] = []  # % of the CPUs the host took, window by window
+        ring_frozen_at = time.monotonic()
+        for index in range(2 * pairs + 1):  # bare, ring, bare, ..., ring, bare
+            measuring_ring = index % 2 == 1
+            pids = ring_pids if measuring_ring else bare.pids
+            jiffies = cpu_jiffies()
+            signal_all(pids, signal.SIGCONT)
+            frozen = []
+            start = time.monotonic()
+            time.sleep(window_s)
+            rounds = (ring.answer("rounds") or []) if measuring_ring else []
+            end = time.monotonic()
+            signal_all(pids, signal.SIGSTOP)
+            frozen = pids
+            window_steal.append(steal_pct(jiffies, cpu_jiffies()))
+            if measuring_ring:
+                ring_rounds.append(after_freeze(rounds, start - ring_frozen_at, settle))
+                ring_frozen_at = end
+            else:
+                bare_windows.append((start, end))
+                done = index // 2
+                if done and done % max(1, pairs // 10) == 0:
+                    say(f"pair {done}/{pairs} ({time.monotonic() - t_begin:.0f} s)")
+        warnings = ring.output.getvalue().count("\n") - warnings_before
+    finally:
+        signal_all(frozen, signal.SIGCONT)  # a frozen process cannot stop
+        stamps = bare.stop()
+        if ring is not None:
+            ring.stop()
+    bare_rounds = [window_rounds(stamps, start, end, settle) for start, end in bare_windows]
+    record = summarize(nodes, topology, window_s, settle, ring_rounds, bare_rounds, window_steal, warnings)
+    record["pids"] = {"ring": ring_pids, "bare": bare.pids}
+    return record
+
+
+def summarize(
+    nodes: int,
+    topology: str,
+    window_s: float,
+    settle: int,
+    ring_rounds: list[list[float]],
+    bare_rounds: list[list[float]],
+    window_steal: list[float],
+    warnings: int,
+) -> dict[str, Any]:
+    """The record of an interleaved run from its ring windows' rounds (s), the bare windows'
+    around them (one more) and every window's steal (%, in time order: bare, ring, ..., bare):
+    each pair's medians and steal, the own share per hop over the pairs with rounds in all three
+    windows and over the calm ones among them."""
+    pairs = len(ring_rounds)
+    if len(bare_rounds) != pairs + 1 or len(window_steal) != 2 * pairs + 1:
+        raise ValueError("an interleaved run has a bare window before and after each ring window")
+    usable = [i for i in range(pairs) if ring_rounds[i] and bare_rounds[i] and bare_rounds[i + 1]]
+    # (ring, bare) steal of each pair: a bare figure is the worse of its two windows'
+    steal = [
+        (round(window_steal[2 * i + 1], 1), round(max(window_steal[2 * i], window_steal[2 * i + 2]), 1))
+        for i in range(pairs)
+    ]
+    shares = {i: pair_share_us(ring_rounds[i], bare_rounds[i], bare_rounds[i + 1], nodes) for i in usable}
+    calm = [shares[i] for i in usable if within_steal_limit(steal[i])]
+    pooled_ring = [x for i in usable for x in ring_rounds[i]]
+    pooled_bare = [x for rounds in bare_rounds for x in rounds]
+    return {
+        "nodes": nodes,
+        "topology": topology,
+        "window_s": window_s,
+        "settle_rounds": settle,
+        "pairs": pairs,
+        "pairs_usable": len(usable),
+        "steal_limit_pct": STEAL_LIMIT_PCT,
+        "pair_steal_pct": steal,
+        "pair_shares_us": [round(shares[i], 2) if i in shares else None for i in range(pairs)],
+        "ring_medians_ms": [round(statistics.median(r) * 1e3, 4) if r else None for r in ring_rounds],
+        "bare_medians_ms": [round(statistics.median(b) * 1e3, 4) if b else None for b in bare_rounds],
+        "ring_rounds": [len(r) for r in ring_rounds],
+        "ring_measured_s": [round(sum(r), 4) for r in ring_rounds],  # of each window's length
+        "bare_rounds": [len(b) for b in bare_rounds],
+        "own_share_us": interval(calm),
+        "own_share_all_us": interval(list(shares.values())),
+        "pooled_median_ms": {
+            "ring": statistics.median(pooled_ring) * 1e3 if pooled_ring else None,
+            "bare": statistics.median(pooled_bare) * 1e3 if pooled_bare else None,
+        },
+        "ring_warnings": warnings,
+    }
+
+
+def describe(record: dict[str, Any]) -> str:
+    """One line per interval: the calm pairs' (the aim's) and every usable pair's."""
+    from bench.ownshare import describe as share_text
+
+    calm, every = record["own_share_us"], record["own_share_all_us"]
+    return (
+        f"{record['topology']} {record['nodes']}: {share_text(calm)} within {record['steal_limit_pct']:.0f} % steal; "
+        f"{share_text(every)} over {record['pairs_usable']} of {record['pairs']} pairs"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m bench.interleave",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--nodes", type=int, default=64, help="ring size, 2..255 (default 64)")
+    parser.add_argument("--topology", choices=TOPOLOGIES, default="router", help="default router")
+    parser.add_argument("--pairs", type=int, default=100, help="pairs of windows (default 100)")
+    parser.add_argument(
+        "--window",
+        type=float,
+        help=f"seconds per window (default {WINDOW_OF_FROZEN} of the freeze a node ignores)",
+    )
+    parser.add_argument("--json", metavar="FILE", help="also write the record as JSON (a new file)")
+    args = parser.parse_args(argv)
+    from tokenring.recovery import FROZEN_AFTER_S
+
+    if not 2 <= args.nodes <= 255 or not 2 <= args.pairs <= 10_000:
+        sys.stderr.write("interleave: --nodes 2..255, --pairs 2..10000\n")
+        return 2
+    if args.window is not None and not 0.05 <= args.window <= FROZEN_AFTER_S:
+        sys.stderr.write(
+            f"interleave: --window 0.05..{FROZEN_AFTER_S} s (a longer freeze makes nodes rejoin)\n"
+        )
+        return 2
+    if args.json and Path(args.json).exists():
+        sys.stderr.write(f"interleave: {args.json} exists; not overwritten\n")
+        return 2
+    from tokenring.zconfig import use_node_runtime
+
+    use_node_runtime()
+
+    def say(text: str) -> None:
+        sys.stderr.write(f"interleave: {text}\n")
+
+    record = interleave(args.nodes, args.topology, args.pairs, args.window, say=say)
+    print(describe(record))
+    if args.json:
+        Path(args.json).write_text(json.dumps(record, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    with contextlib.suppress(KeyboardInterrupt):
+        sys.exit(main())
+    sys.exit(130)

@@ -1,0 +1,123 @@
+"""The interleaved own share: both rings in the same seconds, one frozen while the other runs."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bench.interleave import after_freeze, summarize, window_rounds
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_a_bare_window_keeps_the_rounds_between_its_resume_and_freeze_after_the_settle():
+    stamps = [0.5, 0.9, 10.0, 10.1, 10.3, 10.6, 11.0, 20.0]  # 10.0 is the first arrival after the resume
+    assert window_rounds(stamps, 9.8, 11.2, settle=0) == pytest.approx([0.1, 0.2, 0.3, 0.4])
+    assert window_rounds(stamps, 9.8, 11.2, settle=2) == pytest.approx([0.3, 0.4])
+    assert window_rounds(stamps, 12.0, 13.0, settle=0) == []
+
+
+def test_a_ring_window_starts_after_the_round_that_spans_the_freeze():
+    # a round of 0.62 s spans a freeze of 0.6 s; before it, the previous window's rounds
+    rounds = [0.02, 0.03, 0.62, 0.05, 0.021, 0.022, 0.023]
+    assert after_freeze(rounds, 0.6, settle=1) == pytest.approx([0.021, 0.022, 0.023])
+    # the last spanning round counts: an older long round belongs to an earlier window
+    assert after_freeze([0.9, 0.02, 0.7, 0.02, 0.03], 0.6, settle=0) == pytest.approx([0.02, 0.03])
+    # no round spans the freeze: the ring did not go round since, nothing is measured
+    assert after_freeze([0.02, 0.03], 0.6, settle=0) == []
+
+
+def test_a_pair_sets_the_ring_window_against_the_bare_windows_either_side():
+    # 4 nodes; ring medians 1.2 and 1.0 ms; bare 1.0, 1.2, 0.8 ms: a bare ring drifting both ways
+    ring = [[0.0012, 0.0012, 0.0013], [0.0010, 0.0009, 0.0010]]
+    bare = [[0.0010, 0.0010], [0.0012, 0.0012], [0.0008, 0.0008]]
+    steal = [1.0, 2.0, 12.0, 0.0, 3.0]  # bare, ring, bare, ring, bare: the middle bare window spoiled
+    record = summarize(4, "peer", 0.6, 2, ring, bare, steal, warnings=0)
+    # pair 0: 1.2 - (1.0 + 1.2) / 2 = 0.1 ms over 4 nodes = 25 µs; pair 1: 1.0 - 1.0 = 0
+    assert record["pair_shares_us"] == pytest.approx([25.0, 0.0])
+    # a bare figure is the worse of its two windows': both pairs share the spoiled window
+    assert record["pair_steal_pct"] == [(2.0, 12.0), (0.0, 12.0)]
+    assert record["own_share_all_us"]["mean"] == pytest.approx(12.5) and record["own_share_all_us"]["n"] == 2
+    assert record["own_share_us"]["n"] == 0  # no pair within 10 % steal
+    assert record["ring_rounds"] == [3, 3] and record["bare_rounds"] == [2, 2, 2]
+
+
+def test_a_pair_without_rounds_in_any_of_its_windows_is_left_out():
+    ring = [[0.001], [], [0.001]]
+    bare = [[0.001], [0.001], [], [0.001]]
+    record = summarize(2, "peer", 0.6, 2, ring, bare, [0.0] * 7, warnings=0)
+    # pair 1 had no ring rounds, pair 2 no bare rounds before it: only pair 0 is usable
+    assert record["pairs"] == 3 and record["pairs_usable"] == 1
+    assert record["pair_shares_us"] == [0.0, None, None]
+
+
+def test_windows_that_do_not_alternate_are_refused():
+    with pytest.raises(ValueError, match="bare window before and after"):
+        summarize(2, "peer", 0.6, 2, [[0.001]], [[0.001]], [0.0, 0.0, 0.0], warnings=0)
+
+
+def test_both_rings_take_turns_without_the_frozen_ring_noticing(tmp_path):
+    out = tmp_path / "interleave.json"
+    pairs, window = 4, 0.5
+    command = [sys.executable, "-m", "bench.interleave", "--nodes", "4", "--topology", "peer"]
+    command += ["--pairs", str(pairs), "--window", str(window), "--json", str(out)]
+    result = subprocess.run(
+        command,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=REPO,
+    )
+    assert result.returncode == 0, result.stderr
+    record = json.loads(out.read_text())
+    assert record["pairs"] == pairs and record["pairs_usable"] == pairs
+    assert len(record["bare_rounds"]) == pairs + 1
+    # a 4-node ring goes round in about a millisecond: every window held many rounds, and the
+    # ring's counted rounds fit in its window (the round spanning the freeze was left out)
+    assert min(record["ring_rounds"]) >= 20 and min(record["bare_rounds"]) >= 20
+    # (with the round that spans a freeze, ~0.5 s, a window would hold ~1 s of rounds)
+    assert all(0 < measured <= 1.5 * window for measured in record["ring_measured_s"])
+    # no node woke to find itself frozen: no rejoin, regeneration or exclusion was logged
+    assert record["ring_warnings"] == 0
+    interval = record["own_share_all_us"]
+    assert interval["n"] == pairs and interval["lo"] <= interval["mean"] <= interval["hi"]
+    assert "µs per hop" in result.stdout
+    for pid in record["pids"]["ring"] + record["pids"]["bare"]:
+        assert not os.path.exists(f"/proc/{pid}") or "zombie" in Path(f"/proc/{pid}/status").read_text()
+
+
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [
+        (["--window", "5"], "--window 0.05..1.0 s"),
+        (["--nodes", "300"], "--nodes 2..255"),
+        (["--pairs", "1"], "--pairs 2..10000"),
+    ],
+)
+def test_values_it_cannot_measure_with_are_refused_in_one_line(args, says):
+    result = subprocess.run(
+        [sys.executable, "-m", "bench.interleave", *args],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=60,
+    )
+    assert result.returncode == 2 and says in result.stderr
+    assert "Traceback" not in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_an_existing_output_file_is_left_alone(tmp_path):
+    out = tmp_path / "kept.json"
+    out.write_text("{}")
+    result = subprocess.run(
+        [sys.executable, "-m", "bench.interleave", "--json", str(out)],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+    )
+    assert result.returncode == 2 and "exists" in result.stderr and out.read_text() == "{}"
