@@ -36,6 +36,9 @@ RAW_KEYS: dict[str, tuple[str, ...]] = {
     "profile": ("rounds_s",),
 }
 RECORD_LISTS = ("runs", "scenarios")
+#: the per-window lists of a scaling record's ``interleaved`` windows (bench/interleave.py): its
+#: summary keeps the pairs' shares and steal only
+INTERLEAVED_RAW_KEYS = ("ring_medians_ms", "bare_medians_ms", "ring_rounds", "bare_rounds", "ring_measured_s")
 RAW_DIR = "raw"  # under the results directory, git-ignored
 
 
@@ -76,6 +79,10 @@ def summary_section(name: str, section: dict[str, Any]) -> dict[str, Any]:
                 compact.append(record)
                 continue
             slim = {k: v for k, v in record.items() if k not in keys}
+            if isinstance(record.get("interleaved"), dict):
+                slim["interleaved"] = {
+                    k: v for k, v in record["interleaved"].items() if k not in INTERLEAVED_RAW_KEYS
+                }
             if "rounds_s" in keys and "rounds_s" in record:
                 slim["rounds_ms"] = sample_stats(record["rounds_s"])
             compact.append(slim)

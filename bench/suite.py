@@ -73,6 +73,12 @@ RSS_AIM_MB = 40.0
 TAP_AIM_PCT = 5.0
 FULL_SIZES = {"peer": [2, 4, 8, 16, 32, 64], "router": [8, 16, 32, 64, 128, 255], "links": [64, 255]}
 QUICK_SIZES = {"peer": [2, 4, 8], "router": [8]}
+#: ring sizes at which issue 23 judges tokenring's own share per hop: interleaved there by default
+OWN_SHARE_SIZES = (8, 64, 255)
+#: pairs of interleaved windows per size: at 64 routers 100 pairs (52 of them within the steal
+#: limit) gave an interval 12 µs wide, separate runs 24 pairs one 72 µs wide (2026-11-30)
+INTERLEAVED_PAIRS = 100
+INTERLEAVED_PAIRS_QUICK = 6
 SEED_NODES = ["main", "motor", "sonar", "compass", "copro", "map", "lcd"]  # the seed's 7 computers
 
 
@@ -205,6 +211,8 @@ def write_results(results: dict[str, Any], path: Path) -> tuple[Path, Path]:
 
 
 def section_scaling(ctx: Context) -> dict[str, Any]:
+    from bench.interleave import describe as describe_interleaved
+    from bench.interleave import interleave
     from tokenring.roundtrip import run_bare, run_ring
 
     out: dict[str, Any] = {"runs": []}
@@ -309,6 +317,19 @@ def section_scaling(ctx: Context) -> dict[str, Any]:
                         f"pooled: median {record['rtt_ms']['median']:.3f} ms"
                         + (f", ratio {record['ratio_median']:.2f}x" if "ratio_median" in record else "")
                     )
+            windows = ctx.windows_for(n)
+            if windows:
+                ctx.progress.say(
+                    f"scaling: both rings of {n} up at once, taking turns ({windows} pairs of windows)"
+                )
+                try:
+                    interleaved = interleave(n, topology, windows, say=ctx.progress.note)
+                    interleaved.pop("pids", None)
+                    record["interleaved"] = interleaved
+                    ctx.progress.note(f"interleaved: {describe_interleaved(interleaved)}")
+                except Exception as exc:
+                    record["interleaved_error"] = str(exc)
+                    ctx.progress.note(f"interleaved windows failed: {exc}")
             record["load_after"] = load_avg()
             out["runs"].append(record)
     out["fits"] = fit_costs(out["runs"])
@@ -730,6 +751,19 @@ def pairs_of(n: int, quick: bool, pairs: dict[int, int] | None) -> int:
     return chosen.get(n) or chosen.get(0) or pairs_for(n, quick)
 
 
+def windows_of(n: int, quick: bool, windows: dict[int, int] | None) -> int:
+    """Pairs of interleaved windows (bench/interleave.py) for a ring of ``n``: ``--interleaved``'s
+    count for ``n``, else its count for every size (key 0; 0 turns them off), else
+    :data:`INTERLEAVED_PAIRS` (quick: :data:`INTERLEAVED_PAIRS_QUICK`) at the sizes the own
+    share's aim names and none elsewhere."""
+    chosen = windows or {}
+    if n in chosen:
+        return chosen[n]
+    if 0 in chosen:
+        return chosen[0]
+    return (INTERLEAVED_PAIRS_QUICK if quick else INTERLEAVED_PAIRS) if n in OWN_SHARE_SIZES else 0
+
+
 class Context:
     def __init__(
         self,
@@ -739,9 +773,11 @@ class Context:
         spurious_minutes: float | None = None,
         spurious_configs: str | None = None,
         pairs: dict[int, int] | None = None,
+        windows: dict[int, int] | None = None,
     ) -> None:
         self.quick = quick
         self.pairs = pairs
+        self.windows = windows
         self.sizes = sizes
         self.progress = progress
         self.spurious_minutes = spurious_minutes
@@ -751,6 +787,10 @@ class Context:
         """Alternating bare/ring pairs for a ring of ``n``: ``--pairs`` or :func:`pairs_for`'s."""
         return pairs_of(n, self.quick, self.pairs)
 
+    def windows_for(self, n: int) -> int:
+        """Pairs of interleaved windows for a ring of ``n``: ``--interleaved`` or :func:`windows_of`'s."""
+        return windows_of(n, self.quick, self.windows)
+
 
 def count_steps(
     sections: list[str],
@@ -758,13 +798,13 @@ def count_steps(
     quick: bool,
     spurious_configs: str | None = None,
     pairs: dict[int, int] | None = None,
+    windows: dict[int, int] | None = None,
 ) -> int:
     from bench.spurious import pick_configs  # a bad --spurious-configs is refused here, before any run
 
     per = {
-        "scaling": 2
-        * sum(
-            (pairs or {}).get(n) or (pairs or {}).get(0) or pairs_for(n, quick)
+        "scaling": sum(
+            2 * pairs_of(n, quick, pairs) + (windows_of(n, quick, windows) > 0)
             for v in sizes.values()
             for n in v
         ),
@@ -809,6 +849,11 @@ def main(argv: list[str] | None = None) -> int:
         help="alternating bare/ring pairs per ring size in scaling, K for every size or N:K,N:K per size "
         "(default 8 up to 64 nodes, 10 beyond): the own share's interval narrows with the square root of the pairs",
     )
+    parser.add_argument(
+        "--interleaved",
+        help="pairs of interleaved windows per ring size in scaling (both rings up at once, taking turns: "
+        f"bench/interleave.py), K or N:K,N:K; 0 for none (default {INTERLEAVED_PAIRS} at 8, 64 and 255 nodes)",
+    )
     parser.add_argument("--out", default=str(RESULTS_DIR), help="results directory (default bench/results)")
     parser.add_argument("--no-report", action="store_true", help="write the JSON only, not RESULTS.md")
     parser.add_argument(
@@ -837,6 +882,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.sizes:
         sizes = parse_sizes(args.sizes)
     pairs = parse_pairs(args.pairs) if args.pairs is not None else None
+    windows = (
+        parse_pairs(args.interleaved, "--interleaved", least=0) if args.interleaved is not None else None
+    )
     command = "python -m bench" + ("".join(f" {a}" for a in (argv if argv is not None else sys.argv[1:])))
     started = dt.datetime.now()
     results: dict[str, Any] = {
@@ -848,9 +896,9 @@ def main(argv: list[str] | None = None) -> int:
         "sections": {},
         "errors": {},
     }
-    progress = Progress(count_steps(sections, sizes, args.quick, args.spurious_configs, pairs))
+    progress = Progress(count_steps(sections, sizes, args.quick, args.spurious_configs, pairs, windows))
     sys.stderr.write(f"{command.strip()}: sections {', '.join(sections)}; load {results['load_start']}\n")
-    ctx = Context(args.quick, sizes, progress, args.spurious_minutes, args.spurious_configs, pairs)
+    ctx = Context(args.quick, sizes, progress, args.spurious_minutes, args.spurious_configs, pairs, windows)
     for name in sections:
         t0 = time.monotonic()
         try:
@@ -904,8 +952,9 @@ def parse_sizes(text: str) -> dict[str, list[int]]:
     return sizes
 
 
-def parse_pairs(text: str) -> dict[int, int]:
-    """``--pairs``: ``16`` (every size; key 0) or ``8:16,64:32,255:12`` (per ring size)."""
+def parse_pairs(text: str, option: str = "--pairs", least: int = 1) -> dict[int, int]:
+    """``--pairs`` (or ``option``): ``16`` (every size; key 0) or ``8:16,64:32,255:12`` (per
+    ring size), each count ``least`` to 1000."""
     from tokenring.errors import UsageError
 
     pairs: dict[int, int] = {}
@@ -914,9 +963,9 @@ def parse_pairs(text: str) -> dict[int, int]:
             size, _, count = part.strip().rpartition(":")
             pairs[int(size) if size else 0] = int(count)
     except ValueError:
-        raise UsageError(f"--pairs {text!r}: expected K or N:K,N:K (whole numbers)") from None
-    if any(not 1 <= k <= 1000 for k in pairs.values()):
-        raise UsageError(f"--pairs {text!r}: expected 1 to 1000 pairs")
+        raise UsageError(f"{option} {text!r}: expected K or N:K,N:K (whole numbers)") from None
+    if any(not least <= k <= 1000 for k in pairs.values()):
+        raise UsageError(f"{option} {text!r}: expected {least} to 1000 pairs")
     return pairs
 
 

@@ -142,3 +142,28 @@ def test_the_retake_rule_stops_at_enough_calm_pairs_or_twice_the_pairs_asked():
     assert not more_pairs_needed(3, 2, [calm, spoiled, calm])
     assert not more_pairs_needed(4, 2, [spoiled, spoiled, spoiled, spoiled])  # capped at 2 x 2
     assert more_pairs_needed(3, 2, [calm, spoiled])  # a failed pair recorded no steal: spoiled
+
+
+def test_the_aim_is_judged_on_the_interleaved_windows_where_a_size_has_them():
+    from bench.report import own_share_aims
+
+    separate = own_share([(21.0, 20.0), (23.0, 20.5), (20.0, 20.9)], 64)  # wide: missed
+    record = {
+        "topology": "router",
+        "nodes": 64,
+        "load_before": [1.0],
+        "own_share_us": separate,
+        "interleaved": {
+            "window_s": 0.6,
+            "pairs": 100,
+            "steal_limit_pct": 10.0,
+            "own_share_us": {"mean": 1.0, "lo": -3.0, "hi": 5.0, "sd": 14.0, "n": 52},
+            "own_share_all_us": {"mean": -11.5, "lo": -30.1, "hi": 7.1, "sd": 90.0, "n": 100},
+        },
+    }
+    (row,) = own_share_aims([record])
+    assert row[3] == "**met**" and separate["met"] is False
+    assert row[2].startswith("1.0 µs per hop (95 % CI -3.0 to 5.0, 52 pairs), both rings up at once")
+    assert "52 of 100 pairs within 10 % steal" in row[2] and "separate runs: " in row[2]
+    record["interleaved"]["own_share_us"] = {"mean": 1.0, "lo": -9.0, "hi": 11.0, "sd": 14.0, "n": 52}
+    assert own_share_aims([record])[0][3] == "**missed**"

@@ -67,27 +67,7 @@ def test_pairs_set_for_every_size_reach_the_scaling_section_and_a_bad_count_is_r
     asked.clear()
     assert suite.main(args) == 0
     assert asked == [(8, 8), (255, 10)]  # the defaults
-    refused = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "bench",
-            "--sections",
-            "scaling",
-            "--pairs",
-            "0",
-            "--out",
-            str(tmp_path / "x"),
-        ],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-    )
-    assert refused.returncode == 2
-    assert refused.stderr.strip() == "python -m bench: --pairs '0': expected 1 to 1000 pairs"
-    assert not (tmp_path / "x").exists()
+    assert suite_refuses(tmp_path, "--pairs", "0") == "python -m bench: --pairs '0': expected 1 to 1000 pairs"
 
 
 def test_a_pair_the_host_stole_from_is_retaken_and_the_own_share_judged_without_it(monkeypatch):
@@ -123,14 +103,65 @@ def test_a_pair_the_host_stole_from_is_retaken_and_the_own_share_judged_without_
     monkeypatch.setattr(roundtrip, "run_bare", fake_bare)
     monkeypatch.setattr(roundtrip, "run_ring", fake_ring)
     monkeypatch.setattr(suite, "cpu_jiffies", reading)
-    ctx = suite.Context(False, {"router": [64]}, suite.Progress(4), pairs={64: 2})
+    ctx = suite.Context(False, {"router": [64]}, suite.Progress(4), pairs={64: 2}, windows={0: 0})
     (record,) = suite.section_scaling(ctx)["runs"]
-    assert record["pairs_taken"] == 3
+    assert record["pairs_taken"] == 3 and "interleaved" not in record
     assert [tuple(pair) for pair in record["pair_steal_pct"]] == [(2.0, 1.0), (4.0, 30.0), (9.5, 0.0)]
     # pairs 1 and 3: 0.64 and 0.32 ms over 64 nodes = 10 and 5 µs per hop
     assert record["own_share_us"]["pairs_us"] == [10.0, 5.0]
     assert record["own_share_us"]["mean"] == pytest.approx(7.5)
     assert record["own_share_all_us"]["pairs_us"] == [10.0, 312.5, 5.0]
+
+
+def test_interleaved_windows_run_at_the_aims_sizes_unless_told_otherwise(monkeypatch):
+    from bench import interleave as interleave_module
+    from tokenring import roundtrip
+
+    assert [suite.windows_of(n, False, None) for n in (8, 16, 64, 128, 255)] == [100, 0, 100, 0, 100]
+    assert suite.windows_of(8, True, None) == 6  # quick
+    assert suite.windows_of(64, False, {0: 0}) == 0  # --interleaved 0: none anywhere
+    assert [suite.windows_of(n, False, {16: 30}) for n in (16, 64)] == [30, 100]
+    asked = []
+
+    def fake_interleave(n, topology, pairs, say):
+        asked.append((n, topology, pairs))
+        return {"own_share_us": {"n": 0}, "pids": {"ring": [1], "bare": [2]}, "pairs": pairs}
+
+    monkeypatch.setattr(interleave_module, "interleave", fake_interleave)
+    monkeypatch.setattr(interleave_module, "describe", lambda record: "made up")
+    monkeypatch.setattr(roundtrip, "run_bare", lambda *a, **k: [0.02] * 5)
+    monkeypatch.setattr(
+        roundtrip,
+        "run_ring",
+        lambda *a, **k: roundtrip.RingRun([0.021] * 5, [30.0] * 4, [1.0] * 4, {"median": 5.0}, 1.0),
+    )
+    ctx = suite.Context(
+        False, {"peer": [4], "router": [64]}, suite.Progress(8), pairs={0: 1}, windows={64: 12}
+    )
+    runs = suite.section_scaling(ctx)["runs"]
+    assert asked == [(64, "router", 12)]  # 4 nodes: not an aim's size, nothing asked for it
+    assert "interleaved" not in runs[0]
+    assert runs[1]["interleaved"] == {"own_share_us": {"n": 0}, "pairs": 12}  # its PIDs dropped
+
+
+def suite_refuses(tmp_path, *args: str) -> str:
+    """What ``python -m bench --sections scaling ARGS`` says on stderr as it refuses them (exit
+    code 2, no output directory made)."""
+    refused = subprocess.run(
+        [sys.executable, "-m", "bench", "--sections", "scaling", *args, "--out", str(tmp_path / "x")],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert refused.returncode == 2 and not (tmp_path / "x").exists()
+    return refused.stderr.strip()
+
+
+def test_a_bad_interleaved_count_is_refused_in_one_line(tmp_path):
+    said = suite_refuses(tmp_path, "--interleaved", "64:x")
+    assert said == "python -m bench: --interleaved '64:x': expected K or N:K,N:K (whole numbers)"
 
 
 def test_the_raw_records_are_ignored_and_no_committed_result_file_is_over_100_kb():
