@@ -93,7 +93,6 @@ def interleave(
     say(f"bare Zenoh ring of {nodes} ({topology}) forming")
     bare = BareRing(nodes, router, chain=links)
     ring: LiveRing | None = None
-    frozen: list[int] = []
     try:
         bare.wait_circulating(60 + nodes)
         # the bare ring runs on while the ring forms: frozen for a minute, its clients' Zenoh
@@ -102,8 +101,8 @@ def interleave(
         ring = LiveRing(nodes, router, links)
         ring.wait_circulating(60 + 1.5 * nodes)
         ring_pids = ring.pids
-        frozen = bare.pids + ring_pids
-        signal_all(frozen, signal.SIGSTOP)
+        signal_all(bare.pids + ring_pids, signal.SIGSTOP)
+        say(f"both rings up ({time.monotonic() - t_begin:.0f} s): {pairs} pairs of {window_s:.2f} s windows")
         warnings_before = ring.output.getvalue().count("\n")
         bare_windows: list[tuple[float, float]] = []
         ring_rounds: list[list[float]] = []
@@ -114,13 +113,11 @@ def interleave(
             pids = ring_pids if measuring_ring else bare.pids
             jiffies = cpu_jiffies()
             signal_all(pids, signal.SIGCONT)
-            frozen = []
             start = time.monotonic()
             time.sleep(window_s)
             rounds = (ring.answer("rounds") or []) if measuring_ring else []
             end = time.monotonic()
             signal_all(pids, signal.SIGSTOP)
-            frozen = pids
             window_steal.append(steal_pct(jiffies, cpu_jiffies()))
             if measuring_ring:
                 ring_rounds.append(after_freeze(rounds, start - ring_frozen_at, settle))
@@ -132,7 +129,8 @@ def interleave(
                     say(f"pair {done}/{pairs} ({time.monotonic() - t_begin:.0f} s)")
         warnings = ring.output.getvalue().count("\n") - warnings_before
     finally:
-        signal_all(frozen, signal.SIGCONT)  # a frozen process cannot stop
+        # whatever was frozen when this ended (an error, Ctrl-C): a frozen process cannot stop
+        signal_all(bare.pids + (ring.pids if ring is not None else []), signal.SIGCONT)
         stamps = bare.stop()
         if ring is not None:
             ring.stop()

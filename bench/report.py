@@ -367,6 +367,8 @@ def steal_note(r: dict[str, Any]) -> str:
         return ""
     calm, taken, limit = screened
     worst = max(max(pair) for pair in r["pair_steal_pct"])
+    if calm == taken:
+        return f"; all {taken} pairs within {limit:.0f} % steal time (worst {worst:.1f} %)"
     return (
         f"; {calm} of {taken} pairs within {limit:.0f} % steal time (worst {worst:.1f} %), "
         f"over all {taken}: {describe(r['own_share_all_us'])}"

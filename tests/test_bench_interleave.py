@@ -121,3 +121,30 @@ def test_an_existing_output_file_is_left_alone(tmp_path):
         cwd=REPO,
     )
     assert result.returncode == 2 and "exists" in result.stderr and out.read_text() == "{}"
+
+
+def test_ctrl_c_between_windows_ends_both_rings_frozen_or_not(procs):
+    from conftest import wait_gone
+    from ringutil import processes, wait_until
+
+    driver = procs.start(
+        [sys.executable, "-m", "bench.interleave", "--nodes", "3", "--topology", "peer", "--pairs", "1000"],
+        cwd=REPO,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    for line in driver.stderr:  # the windows have begun: one ring frozen, the other running
+        if "pairs of" in line:
+            break
+    children = [pid for pid, (ppid, _) in processes().items() if ppid == driver.pid]
+    assert len(children) >= 6  # three bare processes, three nodes
+
+    def frozen() -> list[int]:
+        states = {pid: Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] for pid in children}
+        return [pid for pid, state in states.items() if state == "T"]
+
+    wait_until(frozen, timeout=60, what="the ring not measured to be frozen")
+    driver.send_signal(2)  # SIGINT
+    assert driver.wait(timeout=120) == 130
+    assert wait_gone(children, timeout=30) == []

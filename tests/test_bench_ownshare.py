@@ -167,3 +167,20 @@ def test_the_aim_is_judged_on_the_interleaved_windows_where_a_size_has_them():
     assert "52 of 100 pairs within 10 % steal" in row[2] and "separate runs: " in row[2]
     record["interleaved"]["own_share_us"] = {"mean": 1.0, "lo": -9.0, "hi": 11.0, "sd": 14.0, "n": 52}
     assert own_share_aims([record])[0][3] == "**missed**"
+
+
+def test_the_steal_note_gives_every_pairs_share_only_where_some_were_spoiled():
+    from bench.report import steal_note
+
+    shares = [(21.0, 20.936), (22.0, 22.0)]  # 1.0 and 0.0 µs per hop
+    record = {
+        "own_share_us": own_share(shares, 64),
+        "own_share_all_us": own_share(shares, 64),
+        "pair_steal_pct": [[1.0, 2.0], [0.5, 9.9]],
+        "steal_limit_pct": 10.0,
+    }
+    assert steal_note(record) == "; all 2 pairs within 10 % steal time (worst 9.9 %)"
+    record["pair_steal_pct"] = [[1.0, 2.0], [25.0, 9.9]]
+    assert steal_note(record).startswith(
+        "; 1 of 2 pairs within 10 % steal time (worst 25.0 %), over all 2: 0.5 µs"
+    )
