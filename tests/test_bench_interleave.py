@@ -45,6 +45,10 @@ def test_a_pair_sets_the_ring_window_against_the_bare_windows_either_side():
     assert record["own_share_all_us"]["mean"] == pytest.approx(12.5) and record["own_share_all_us"]["n"] == 2
     assert record["own_share_us"]["n"] == 0  # no pair within 10 % steal
     assert record["ring_rounds"] == [3, 3] and record["bare_rounds"] == [2, 2, 2]
+    # the ring's six rounds sorted: 0.9 1.0 1.0 1.2 1.2 1.3 ms; rank 0.99 * 5 = 4.95: 1.2 + 0.95 * 0.1
+    assert record["pooled_p99_ms"]["ring"] == pytest.approx(1.295)
+    # no ring window within the limit; the calm bare windows are the first and the last (1 and 3 %)
+    assert record["calm_p99_ms"]["ring"] is None and record["calm_p99_ms"]["bare"] == pytest.approx(1.0)
 
 
 def test_a_pair_without_rounds_in_any_of_its_windows_is_left_out():
@@ -88,7 +92,7 @@ def test_both_rings_take_turns_without_the_frozen_ring_noticing(tmp_path):
     assert record["ring_warnings"] == len(record["ring_warning_lines"]) <= 1
     interval = record["own_share_all_us"]
     assert interval["n"] == pairs and interval["lo"] <= interval["mean"] <= interval["hi"]
-    assert "µs per hop" in result.stdout
+    assert "µs per hop" in result.stdout and "p99 ring / bare: every window" in result.stdout
     for pid in record["pids"]["ring"] + record["pids"]["bare"]:
         assert not os.path.exists(f"/proc/{pid}") or "zombie" in Path(f"/proc/{pid}/status").read_text()
 

@@ -184,3 +184,12 @@ def test_the_steal_note_gives_every_pairs_share_only_where_some_were_spoiled():
     assert steal_note(record).startswith(
         "; 1 of 2 pairs within 10 % steal time (worst 25.0 %), over all 2: 0.5 µs"
     )
+
+
+def test_the_big_rings_tail_in_calm_windows_stands_beside_the_runs_p99():
+    from bench.report import calm_tail_note
+
+    record = {"interleaved": {"steal_limit_pct": 10.0, "calm_p99_ms": {"ring": 78.25, "bare": 80.04}}}
+    assert calm_tail_note(record) == "; in the interleaved windows within 10 % steal: 78.2 / 80.0 ms"
+    assert calm_tail_note({"interleaved": {"calm_p99_ms": {"ring": None, "bare": 80.0}}}) == ""
+    assert calm_tail_note({}) == ""  # a run from before the windows
