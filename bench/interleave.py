@@ -64,11 +64,16 @@ def window_rounds(stamps: list[float], start: float, end: float, settle: int) ->
     return [b - a for a, b in itertools.pairwise(inside)][settle:]
 
 
-def after_freeze(rounds: list[float], frozen_s: float, settle: int) -> list[float]:
-    """The ring's rounds (s) since its last freeze: after the last round that lasted at least
-    half the freeze (it spans it), without the first ``settle``; [] if no round spans it."""
-    span = next((i for i in range(len(rounds) - 1, -1, -1) if rounds[i] >= frozen_s / 2), None)
-    return [] if span is None else rounds[span + 1 + settle :]
+def since_resume(rounds: list[float], running_s: float, settle: int) -> list[float]:
+    """The ring's rounds (s) since its resume: the longest tail of ``rounds`` (oldest first) that
+    fits in the ``running_s`` the ring ran before they were asked for, without its first
+    ``settle``. The round that spans the freeze began before it and does not fit; a round that
+    was only slow does, so no slow round is mistaken for the freeze."""
+    total, first = 0.0, len(rounds)
+    while first > 0 and total + rounds[first - 1] <= running_s:
+        first -= 1
+        total += rounds[first]
+    return rounds[first + settle :]
 
 
 def pair_share_us(ring: list[float], before: list[float], after: list[float], nodes: int) -> float:
@@ -111,7 +116,6 @@ def interleave(
         bare_windows: list[tuple[float, float]] = []
         ring_rounds: list[list[float]] = []
         window_steal: list[float] = []  # % of the CPUs the host took, window by window
-        ring_frozen_at = time.monotonic()
         for index in range(2 * pairs + 1):  # bare, ring, bare, ..., ring, bare
             measuring_ring = index % 2 == 1
             pids = ring_pids if measuring_ring else bare.pids
@@ -124,8 +128,7 @@ def interleave(
             signal_all(pids, signal.SIGSTOP)
             window_steal.append(steal_pct(jiffies, cpu_jiffies()))
             if measuring_ring:
-                ring_rounds.append(after_freeze(rounds, start - ring_frozen_at, settle))
-                ring_frozen_at = end
+                ring_rounds.append(since_resume(rounds, end - start, settle))
             else:
                 bare_windows.append((start, end))
                 done = index // 2

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.interleave import after_freeze, summarize, window_rounds
+from bench.interleave import since_resume, summarize, window_rounds
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -23,13 +23,15 @@ def test_a_bare_window_keeps_the_rounds_between_its_resume_and_freeze_after_the_
 
 
 def test_a_ring_window_starts_after_the_round_that_spans_the_freeze():
-    # a round of 0.62 s spans a freeze of 0.6 s; before it, the previous window's rounds
+    # the ring ran 0.1 s before its rounds were asked for; the 0.62 s round spans the freeze
     rounds = [0.02, 0.03, 0.62, 0.05, 0.021, 0.022, 0.023]
-    assert after_freeze(rounds, 0.6, settle=1) == pytest.approx([0.021, 0.022, 0.023])
-    # the last spanning round counts: an older long round belongs to an earlier window
-    assert after_freeze([0.9, 0.02, 0.7, 0.02, 0.03], 0.6, settle=0) == pytest.approx([0.02, 0.03])
-    # no round spans the freeze: the ring did not go round since, nothing is measured
-    assert after_freeze([0.02, 0.03], 0.6, settle=0) == []
+    assert since_resume(rounds, 0.1, settle=0) == pytest.approx([0.021, 0.022, 0.023])
+    assert since_resume(rounds, 0.2, settle=1) == pytest.approx([0.021, 0.022, 0.023])
+    # a round slower than half the freeze but within the window is kept, not taken for the freeze
+    assert since_resume([0.02, 0.7, 0.02, 0.35, 0.03], 0.45, settle=0) == pytest.approx([0.02, 0.35, 0.03])
+    # no round since the resume: nothing is measured
+    assert since_resume([0.02, 0.9], 0.5, settle=0) == []
+    assert since_resume([0.1, 0.1], 0.25, settle=3) == []
 
 
 def test_a_pair_sets_the_ring_window_against_the_bare_windows_either_side():
