@@ -4,10 +4,10 @@ Separate runs of the ring and of the bare Zenoh ring land in different seconds o
 on this virtual machine the host takes CPUs for seconds at a time (steal 15-30 % against 2-9 %,
 the bare 64-node ring 21 ms or 41-60 ms a round): even pairs of runs screened by their steal
 spread 86 µs per hop at 64 routers. So here both rings are up at once and take turns: the
-one not measured is frozen (SIGSTOP to each of its processes, SIGCONT to resume), and each pair
-is one window of the bare ring and one of the ring, next to each other in time (the order
-alternates, so a trend in the host's speed does not favour either). A pair's own share is
-``(ring window's median - bare window's median) / N``; over many pairs, their mean with its
+one not measured is frozen (SIGSTOP to each of its processes, SIGCONT to resume). The windows
+go bare, ring, bare, ..., bare, and each ring window is paired with the bare windows on either
+side of it, so a steady drift of the host's speed cancels. A pair's own share is
+``(ring window's median - mean of the two bare windows' medians) / N``; over many pairs, their mean with its
 95 % interval (:func:`bench.ownshare.interval`), beside the same over the pairs whose two
 windows lost at most :data:`~bench.ownshare.STEAL_LIMIT_PCT` to the host.
 

@@ -55,18 +55,15 @@ class BareRing:
 
     def stop(self) -> list[float]:
         """Stop every process; the arrival times process 0 recorded."""
+        from tokenring.roundtrip import end_all
+
         self.session.put(f"{self.prefix}/stop", b"")
         try:
             out, _ = self.first.communicate(timeout=30)
         except subprocess.TimeoutExpired:
             self.first.kill()
             out, _ = self.first.communicate()
-        for proc in self.others:
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(5)
+        end_all(self.others, grace_s=10.0)
         self.session.close()
         if self.router is not None:
             self.router.close()
@@ -116,10 +113,9 @@ class LiveRing:
     def answer(self, what: str, timeout: float = 2.0) -> Any | None:
         """The round master's answer on its control key ``what`` (visits, rounds, stats), or None."""
         from tokenring import keys
-        from tokenring.cliutil import query
+        from tokenring.roundtrip import master_answer
 
-        replies = query(self.session, keys.control(self.ring, self.master, what), timeout=timeout)
-        return replies[0][1]["result"] if replies and replies[0][1].get("ok") else None
+        return master_answer(self.session, keys.control(self.ring, self.master, what), timeout)
 
     def visits(self) -> int:
         """The round master's visits so far; -1 if it did not answer."""

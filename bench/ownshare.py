@@ -157,13 +157,10 @@ def main(argv: list[str] | None = None) -> int:
                 line += f"; {calm} of {taken} pairs within {limit:.0f} % steal, every pair: {every}"
             print(line)
             shown += 1
-        interleaved = record.get("interleaved")
-        if interleaved:
-            calm, every = interleaved["own_share_us"], interleaved["own_share_all_us"]
-            print(
-                f"{record['topology']:6} {record['nodes']:3} nodes, interleaved: {describe(calm)} within "
-                f"{interleaved['steal_limit_pct']:.0f} % steal; every pair: {describe(every)}"
-            )
+        if record.get("interleaved"):
+            from bench.interleave import describe as describe_interleaved
+
+            print(f"interleaved windows, {describe_interleaved(record['interleaved'])}")
             shown += 1
     if not shown:
         sys.stderr.write(f"{args[0]}: no own share per hop in its scaling section\n")

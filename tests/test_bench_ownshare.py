@@ -193,3 +193,28 @@ def test_the_big_rings_tail_in_calm_windows_stands_beside_the_runs_p99():
     assert calm_tail_note(record) == "; in the interleaved windows within 10 % steal: 78.2 / 80.0 ms"
     assert calm_tail_note({"interleaved": {"calm_p99_ms": {"ring": None, "bare": 80.0}}}) == ""
     assert calm_tail_note({}) == ""  # a run from before the windows
+
+
+def test_a_result_files_interleaved_windows_are_printed_too(tmp_path, capsys):
+    from bench.ownshare import main
+
+    record = {
+        "topology": "links",
+        "nodes": 255,
+        "interleaved": {
+            "topology": "links",
+            "nodes": 255,
+            "pairs": 100,
+            "pairs_usable": 96,
+            "steal_limit_pct": 10.0,
+            "own_share_us": {"mean": -16.5, "lo": -23.0, "hi": -10.0, "sd": 26.0, "n": 67},
+            "own_share_all_us": {"mean": -21.7, "lo": -30.9, "hi": -12.5, "sd": 46.0, "n": 96},
+        },
+    }
+    result = tmp_path / "run.json"
+    result.write_text(json.dumps({"sections": {"scaling": {"runs": [record]}}}))
+    assert main([str(result)]) == 0
+    assert capsys.readouterr().out.strip() == (
+        "interleaved windows, links 255: -16.5 µs per hop (95 % CI -23.0 to -10.0, 67 pairs) within 10 % steal; "
+        "-21.7 µs per hop (95 % CI -30.9 to -12.5, 96 pairs) over 96 of 100 pairs"
+    )

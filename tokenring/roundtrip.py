@@ -169,7 +169,7 @@ def run_bare(
         try:
             failed = _wait_first(first, others, timeout + 30)
         finally:
-            _end_all(others, grace_s=10.0)
+            end_all(others, grace_s=10.0)
             if first.poll() is None:
                 first.kill()
                 first.wait(2)
@@ -194,7 +194,7 @@ def run_bare(
     return result["rounds_s"]
 
 
-def _end_all(processes: list[subprocess.Popen], grace_s: float) -> None:
+def end_all(processes: list[subprocess.Popen], grace_s: float) -> None:
     """Give ``processes`` one shared ``grace_s`` to end on their own, then kill the rest (waiting
     a few seconds for each in turn had a stalled 255-process ring hold a run for 15 minutes)."""
     deadline = time.monotonic() + grace_s

@@ -94,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
 
             def handle(sample: zenoh.Sample) -> None:
                 stamps.append(perf())
-                if len(stamps) > args.warmup:
+                if len(stamps) == args.warmup + 1:
                     warm.set()
                 if len(stamps) >= total:
                     done.set()
