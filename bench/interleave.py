@@ -41,7 +41,14 @@ from typing import Any
 import numpy as np
 
 from bench.liverings import BareRing, LiveRing
-from bench.ownshare import STEAL_LIMIT_PCT, cpu_jiffies, interval, steal_pct, within_steal_limit
+from bench.ownshare import (
+    STEAL_LIMIT_PCT,
+    cpu_jiffies,
+    describe_interleaved,
+    interval,
+    steal_pct,
+    within_steal_limit,
+)
 
 #: a window's share of the freeze a node can sleep through unnoticed (FROZEN_AFTER_S)
 WINDOW_OF_FROZEN = 0.6
@@ -222,17 +229,6 @@ def ms_text(value: float | None) -> str:
     return "-" if value is None else f"{value:.2f}"
 
 
-def describe(record: dict[str, Any]) -> str:
-    """One line per interval: the calm pairs' (the aim's) and every usable pair's."""
-    from bench.ownshare import describe as share_text
-
-    calm, every = record["own_share_us"], record["own_share_all_us"]
-    return (
-        f"{record['topology']} {record['nodes']}: {share_text(calm)} within {record['steal_limit_pct']:.0f} % steal; "
-        f"{share_text(every)} over {record['pairs_usable']} of {record['pairs']} pairs"
-    )
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m bench.interleave",
@@ -270,7 +266,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.write(f"interleave: {text}\n")
 
     record = interleave(args.nodes, args.topology, args.pairs, args.window, say=say)
-    print(describe(record))
+    print(describe_interleaved(record))
     every, calm = record["pooled_p99_ms"], record["calm_p99_ms"]
     print(
         f"p99 ring / bare: every window {ms_text(every['ring'])} / {ms_text(every['bare'])} ms, "

@@ -120,6 +120,16 @@ def describe(share: dict[str, Any]) -> str:
     )
 
 
+def describe_interleaved(record: dict[str, Any]) -> str:
+    """An interleaved record (bench/interleave.py) in a line: the own share over the pairs within
+    the steal limit (the aim's) and over every usable pair."""
+    calm, every = record["own_share_us"], record["own_share_all_us"]
+    return (
+        f"{record['topology']} {record['nodes']}: {describe(calm)} within {record['steal_limit_pct']:.0f} % steal; "
+        f"{describe(every)} over {record['pairs_usable']} of {record['pairs']} pairs"
+    )
+
+
 def pairs_for(n: int, quick: bool) -> int:
     """Alternating bare/ring pairs per size: on two shared cores a single pair can land in a fast
     or a slow mode (the bare 8-node ring's median moves between 0.6 and 0.8 ms from run to run:
@@ -158,8 +168,6 @@ def main(argv: list[str] | None = None) -> int:
             print(line)
             shown += 1
         if record.get("interleaved"):
-            from bench.interleave import describe as describe_interleaved
-
             print(f"interleaved windows, {describe_interleaved(record['interleaved'])}")
             shown += 1
     if not shown:

@@ -57,6 +57,7 @@ from bench.ownshare import (
     STEAL_LIMIT_PCT,
     cpu_jiffies,
     describe,
+    describe_interleaved,
     more_pairs_needed,
     own_share,
     pairs_for,
@@ -211,7 +212,6 @@ def write_results(results: dict[str, Any], path: Path) -> tuple[Path, Path]:
 
 
 def section_scaling(ctx: Context) -> dict[str, Any]:
-    from bench.interleave import describe as describe_interleaved
     from bench.interleave import interleave
     from tokenring.roundtrip import run_bare, run_ring
 

@@ -128,7 +128,7 @@ def test_interleaved_windows_run_at_the_aims_sizes_unless_told_otherwise(monkeyp
         return {"own_share_us": {"n": 0}, "pids": {"ring": [1], "bare": [2]}, "pairs": pairs}
 
     monkeypatch.setattr(interleave_module, "interleave", fake_interleave)
-    monkeypatch.setattr(interleave_module, "describe", lambda record: "made up")
+    monkeypatch.setattr(suite, "describe_interleaved", lambda record: "made up")
     monkeypatch.setattr(roundtrip, "run_bare", lambda *a, **k: [0.02] * 5)
     monkeypatch.setattr(
         roundtrip,
