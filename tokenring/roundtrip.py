@@ -381,6 +381,11 @@ def run_ring(
             else:
                 raise TokenRingError(f"ring of {n}: measurement did not finish in {timeout:.0f} s")
             wall = time.monotonic() - t0
+            # the rounds first, then what reads the nodes from outside: reading 255 processes'
+            # /proc (smaps_rollup walks each one's page tables under its memory lock) slowed the
+            # rounds it overlapped, and those were the last rounds measured (3 of 150 per run)
+            asked = time.perf_counter()  # the master's last round ends about here: the tap's too
+            round_list = ask_master(session, keys.control(ring, master, "rounds"))
             if on_ready is not None:  # e.g. collect what programs measured, while the ring runs
                 on_ready(session, ring)
             launcher_cpu = time.process_time() - own_cpu
@@ -388,8 +393,6 @@ def run_ring(
             memory = [proc_memory_mb(c.process.pid) for c in launcher.child_list()]
             rss, uss = [m[0] for m in memory], [m[1] for m in memory]
             stats = ask_master(session, key)
-            asked = time.perf_counter()  # the master's last round ends about here: the tap's too
-            round_list = ask_master(session, keys.control(ring, master, "rounds"))
             if tap_subscriber is not None:
                 tap_subscriber.undeclare()
             before = [t for t in arrivals if t <= asked]
