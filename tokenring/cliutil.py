@@ -332,11 +332,23 @@ def write_json(target: str, value: Any) -> None:
     """A ``--json TARGET`` report: ``-`` prints it, anything else is the file to write."""
     from tokenring.inputfile import write_atomically
 
-    text = json.dumps(value, indent=2, default=json_default) + "\n"
+    text = json.dumps(finite(value), indent=2, default=json_default) + "\n"
     if target == "-":
         sys.stdout.write(text)
     else:
         write_atomically(target, text)
+
+
+def finite(value: Any) -> Any:
+    """``value`` with every NaN or infinite float (a figure with nothing to give it) as None: JSON
+    has no NaN, and a script's reader (jq, JavaScript) refuses Python's."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {key: finite(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite(item) for item in value]
+    return value
 
 
 def check_option_output(option: str, target: str, force: bool = False) -> None:
