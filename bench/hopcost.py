@@ -15,7 +15,7 @@ the same size and topology; in each, once the token circulates, a window of ``--
 
 The visits in the window are counted, not estimated: the ring's master answers ``visits``, the bare
 ring's process 0 prints each round's arrival time. Each row's ring - bare difference is given as
-the mean over pairs with its 95 % interval (bench/ownshare.py).
+the mean over pairs with its 95 % interval (tokenring/ownshare.py).
 
     python -m bench.hopcost --nodes 8 --pairs 3 --window 5 --perf [--json F]
     python -m bench.hopcost --nodes 64 --topology router --pairs 2 --perf
@@ -37,8 +37,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from bench.liverings import BareRing, LiveRing
-from bench.ownshare import interval
+from tokenring.liverings import BareRing, LiveRing
+from tokenring.ownshare import interval
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 PERF_HZ = 1999

@@ -1,17 +1,10 @@
-"""tokenring's own share of a hop: what a node adds per hop on top of a bare Zenoh forwarder.
+"""The suite's own share per hop: issue 23's aim, the retake rule, the pairs per size.
 
-One run of a ring and one of the bare ring of the same size and topology make a pair; its own
-share per hop is ``(ring median - bare median) / N``. On two shared cores one pair can land in a
-fast or a slow mode of the machine, so a single ratio says little: the suite alternates pairs and
-reports the mean of their shares with a 95 % confidence interval (Student's t over the pairs, as
-the pairs are independent runs), and the load average beside it.
-
-On a virtual machine the slow mode is the hypervisor's: the 64-node bare ring's median went from
-21 to 53-60 ms for seconds at a time, and in exactly those seconds ``vmstat``'s steal time rose
-from 2-9 % to 15-30 % (2026-11-30), with nothing else running here. So every run's steal time
-is recorded; a pair in which either run lost more than :data:`STEAL_LIMIT_PCT` of the CPUs to
-the host is retaken (up to as many retakes as pairs asked for), and the own share is given both
-over the pairs within the limit (what the aim is judged on) and over every pair taken.
+The figures themselves (a pair's share, the 95 % interval, the host's steal time) are
+:mod:`tokenring.ownshare`'s, shared with ``tokenring bench``. Here: a pair in which either run
+lost more than :data:`~tokenring.ownshare.STEAL_LIMIT_PCT` of the CPUs to the host is retaken (up
+to as many retakes as pairs asked for), and the own share is given both over the pairs within
+the limit (what the aim is judged on) and over every pair taken.
 
 ``python -m bench.ownshare FILE.json`` prints the intervals of a suite result file.
 """
@@ -19,60 +12,21 @@ over the pairs within the limit (what the aim is judged on) and over every pair 
 from __future__ import annotations
 
 import json
-import math
-import statistics
 import sys
 from pathlib import Path
 from typing import Any
 
+from tokenring.ownshare import (
+    STEAL_LIMIT_PCT,
+    describe,
+    describe_interleaved,
+    interval,
+    pair_share_us,
+    within_steal_limit,
+)
+
 #: issue 23's aim: the interval's upper end at most this many µs per hop
 OWN_SHARE_AIM_US = 10.0
-
-#: a run that lost more of the machine's CPU time than this to the hypervisor (steal) is
-#: disturbed from outside; its pair is retaken
-STEAL_LIMIT_PCT = 10.0
-
-
-def cpu_jiffies() -> tuple[int, int]:
-    """(steal, total) clock ticks of all CPUs since boot, from ``/proc/stat``'s ``cpu`` line;
-    (0, 0) where the kernel does not say."""
-    try:
-        with open("/proc/stat") as stat:
-            fields = stat.readline().split()
-    except OSError:
-        return 0, 0
-    if len(fields) < 9 or fields[0] != "cpu":
-        return 0, 0
-    ticks = [int(x) for x in fields[1:9]]  # user nice system idle iowait irq softirq steal
-    return ticks[7], sum(ticks)
-
-
-def steal_pct(before: tuple[int, int], after: tuple[int, int]) -> float:
-    """The share (%) of the CPUs' time between two :func:`cpu_jiffies` readings that the
-    hypervisor gave to someone else."""
-    total = after[1] - before[1]
-    return 100.0 * (after[0] - before[0]) / total if total > 0 else 0.0
-
-
-def pair_share_us(ring_median_ms: float, bare_median_ms: float, nodes: int) -> float:
-    """One pair's own share per hop in µs: the ring's median round trip above the bare ring's, per node."""
-    return (ring_median_ms - bare_median_ms) * 1e3 / nodes
-
-
-def interval(values: list[float], confidence: float = 0.95) -> dict[str, Any]:
-    """Mean of ``values`` with its two-sided Student-t confidence interval (NaN bounds for fewer
-    than two values: one pair gives no spread)."""
-    from scipy.stats import t  # the t quantile; scipy comes with the test/bench install
-
-    n = len(values)
-    if n == 0:
-        return {"mean": math.nan, "lo": math.nan, "hi": math.nan, "sd": math.nan, "n": 0}
-    mean = statistics.fmean(values)
-    if n == 1:
-        return {"mean": mean, "lo": math.nan, "hi": math.nan, "sd": math.nan, "n": 1}
-    sd = statistics.stdev(values)
-    half = float(t.ppf(0.5 + confidence / 2, n - 1)) * sd / math.sqrt(n)
-    return {"mean": mean, "lo": mean - half, "hi": mean + half, "sd": sd, "n": n}
 
 
 def own_share(pairs: list[tuple[float, float]], nodes: int) -> dict[str, Any]:
@@ -84,11 +38,6 @@ def own_share(pairs: list[tuple[float, float]], nodes: int) -> dict[str, Any]:
     out["aim_us"] = OWN_SHARE_AIM_US
     out["met"] = bool(out["n"] >= 2 and out["hi"] <= OWN_SHARE_AIM_US)
     return out
-
-
-def within_steal_limit(pair_steal: tuple[float, float] | list[float], limit: float = STEAL_LIMIT_PCT) -> bool:
-    """A pair whose ring and bare run each lost at most ``limit`` % of the CPUs to the host."""
-    return max(pair_steal) <= limit
 
 
 def more_pairs_needed(taken: int, pairs: int, pair_steal: list[tuple[float, float]]) -> bool:
@@ -107,27 +56,6 @@ def screened_pairs(record: dict[str, Any]) -> tuple[int, int, float] | None:
         return None
     limit = float(record.get("steal_limit_pct", STEAL_LIMIT_PCT))
     return sum(within_steal_limit(pair, limit) for pair in steal), len(steal), limit
-
-
-def describe(share: dict[str, Any]) -> str:
-    """``12.3 µs per hop (95 % CI 8.1 to 16.5, 6 pairs)``; one pair: no interval; none: no share."""
-    if share["n"] == 0:
-        return "no pair to give it"
-    if share["n"] < 2:
-        return f"{share['mean']:.1f} µs per hop (1 pair: no interval)"
-    return (
-        f"{share['mean']:.1f} µs per hop (95 % CI {share['lo']:.1f} to {share['hi']:.1f}, {share['n']} pairs)"
-    )
-
-
-def describe_interleaved(record: dict[str, Any]) -> str:
-    """An interleaved record (bench/interleave.py) in a line: the own share over the pairs within
-    the steal limit (the aim's) and over every usable pair."""
-    calm, every = record["own_share_us"], record["own_share_all_us"]
-    return (
-        f"{record['topology']} {record['nodes']}: {describe(calm)} within {record['steal_limit_pct']:.0f} % steal; "
-        f"{describe(every)} over {record['pairs_usable']} of {record['pairs']} pairs"
-    )
 
 
 def pairs_for(n: int, quick: bool) -> int:

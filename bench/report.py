@@ -360,7 +360,8 @@ BIG_RING_P99_AIM_MS = 80.0
 def steal_note(r: dict[str, Any]) -> str:
     """What the host's steal time did to a size's pairs: how many were within the limit and the
     own share over every pair taken (empty for a run from before steal was recorded)."""
-    from bench.ownshare import describe, screened_pairs
+    from bench.ownshare import screened_pairs
+    from tokenring.ownshare import describe
 
     screened = screened_pairs(r)
     if not screened:
@@ -378,7 +379,7 @@ def steal_note(r: dict[str, Any]) -> str:
 def interleaved_note(interleaved: dict[str, Any]) -> str:
     """The own share from interleaved windows (both rings up at once, taking turns): over the
     pairs within the steal limit, and over every pair."""
-    from bench.ownshare import describe
+    from tokenring.ownshare import describe
 
     return (
         f"{describe(interleaved['own_share_us'])}, both rings up at once taking turns in "
@@ -404,7 +405,8 @@ def calm_tail_note(r: dict[str, Any]) -> str:
 def own_share_aims(runs: list[dict[str, Any]]) -> list[list[Any]]:
     """Rows for tokenring's own share per hop (its 95 % interval's top against the aim) and for
     the outside tap's round trip against the ring's own, per ring size that measured them."""
-    from bench.ownshare import OWN_SHARE_AIM_US, describe
+    from bench.ownshare import OWN_SHARE_AIM_US
+    from tokenring.ownshare import describe
 
     rows: list[list[Any]] = []
     for r in runs:

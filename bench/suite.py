@@ -53,18 +53,16 @@ from typing import Any
 
 import numpy as np
 
-from bench.ownshare import (
+from bench.ownshare import more_pairs_needed, own_share, pairs_for
+from bench.sections import QUICK_SECTIONS, RAW_DIR, SECTIONS, SLOW_SECTIONS, raw_path, summary_of
+from tokenring.ownshare import (
     STEAL_LIMIT_PCT,
     cpu_jiffies,
     describe,
     describe_interleaved,
-    more_pairs_needed,
-    own_share,
-    pairs_for,
     steal_pct,
     within_steal_limit,
 )
-from bench.sections import QUICK_SECTIONS, RAW_DIR, SECTIONS, SLOW_SECTIONS, raw_path, summary_of
 
 HERE = Path(__file__).resolve().parent
 RESULTS_DIR = HERE / "results"
@@ -212,7 +210,7 @@ def write_results(results: dict[str, Any], path: Path) -> tuple[Path, Path]:
 
 
 def section_scaling(ctx: Context) -> dict[str, Any]:
-    from bench.interleave import interleave
+    from tokenring.interleave import interleave
     from tokenring.roundtrip import run_bare, run_ring
 
     out: dict[str, Any] = {"runs": []}
@@ -752,7 +750,7 @@ def pairs_of(n: int, quick: bool, pairs: dict[int, int] | None) -> int:
 
 
 def windows_of(n: int, quick: bool, windows: dict[int, int] | None) -> int:
-    """Pairs of interleaved windows (bench/interleave.py) for a ring of ``n``: ``--interleaved``'s
+    """Pairs of interleaved windows (tokenring/interleave.py) for a ring of ``n``: ``--interleaved``'s
     count for ``n``, else its count for every size (key 0; 0 turns them off), else
     :data:`INTERLEAVED_PAIRS` (quick: :data:`INTERLEAVED_PAIRS_QUICK`) at the sizes the own
     share's aim names and none elsewhere."""
@@ -852,7 +850,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--interleaved",
         help="pairs of interleaved windows per ring size in scaling (both rings up at once, taking turns: "
-        f"bench/interleave.py), K or N:K,N:K; 0 for none (default {INTERLEAVED_PAIRS} at 8, 64 and 255 nodes)",
+        f"tokenring/interleave.py), K or N:K,N:K; 0 for none (default {INTERLEAVED_PAIRS} at 8, 64 and 255 nodes)",
     )
     parser.add_argument("--out", default=str(RESULTS_DIR), help="results directory (default bench/results)")
     parser.add_argument("--no-report", action="store_true", help="write the JSON only, not RESULTS.md")

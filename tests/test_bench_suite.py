@@ -114,7 +114,7 @@ def test_a_pair_the_host_stole_from_is_retaken_and_the_own_share_judged_without_
 
 
 def test_interleaved_windows_run_at_the_aims_sizes_unless_told_otherwise(monkeypatch):
-    from bench import interleave as interleave_module
+    from tokenring import interleave as interleave_module
     from tokenring import roundtrip
 
     assert [suite.windows_of(n, False, None) for n in (8, 16, 64, 128, 255)] == [100, 0, 100, 0, 100]

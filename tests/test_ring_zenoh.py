@@ -7,6 +7,7 @@ import itertools
 import json
 import os
 import signal
+import statistics
 import subprocess
 import sys
 import threading
@@ -410,7 +411,11 @@ def test_bench_cli_writes_the_promised_json(procs, tmp_path):
     # a vantage point cannot move the median of the same rounds by a quarter
     assert report["tap_rtt_ms"]["n"] >= 0.9 * 400
     assert 0.8 < report["tap_rtt_ms"]["median"] / report["rtt_ms"]["median"] < 1.25
-    assert len(report["own_share_us"]["pairs"]) == 2 and "own share per hop" in result.stdout
+    assert len(report["own_share_us"]["pairs"]) == 2 and "tokenring's own share: " in result.stdout
+    # two pairs give an interval around their mean (Student's t, 1 degree of freedom: 12.7 sd/√2)
+    share = report["own_share_us"]
+    assert share["n"] == 2 and share["lo"] <= statistics.fmean(share["pairs"]) == share["mean"] <= share["hi"]
+    assert "95 % CI" in result.stdout
     for key in ("rtt_ms", "baseline_rtt_ms"):
         assert report[key]["median"] > 0 and report[key]["p99"] >= report[key]["median"]
     assert report["ratio_median"] == report["rtt_ms"]["median"] / report["baseline_rtt_ms"]["median"]

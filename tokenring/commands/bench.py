@@ -1,17 +1,19 @@
 """``tokenring bench``: token round trips against a bare Zenoh ring, measured in one run
-(the library: :mod:`tokenring.roundtrip`)."""
+(the library: :mod:`tokenring.roundtrip`; ``--interleave``: :mod:`tokenring.interleave`)."""
 
 from __future__ import annotations
 
 import argparse
 import os
 import sys
+from typing import Any
 
 import numpy as np
 
 from tokenring import tokenpath
 from tokenring.cliutil import check_json_target, format_table, write_json
 from tokenring.errors import UsageError
+from tokenring.ownshare import describe, interval
 from tokenring.roundtrip import (
     ROUTER_FROM,
     generated_ids,
@@ -22,6 +24,9 @@ from tokenring.roundtrip import (
     summarize,
 )
 
+ROUNDS, WARMUP = 2000, 300
+KINDS = {"peer": "peers", "router": "routers", "links": "direct links"}
+
 EXAMPLES = """examples:
   tokenring bench                                   8 nodes, one bare/ring pair
   tokenring bench --repeat 4 --tap                  4 alternating pairs, each pair's own share
@@ -30,8 +35,11 @@ EXAMPLES = """examples:
   tokenring bench --nodes 255 --topology links      each node linked to its successor directly
   tokenring bench --transport udp --nodes 8         the token over plain UDP sockets
   tokenring bench --bitrate 2.5M --profile arcnet   the seed robot's hardware timing
+  tokenring bench --interleave 100 --nodes 64       both rings up at once, taking turns in
+                                                    0.6 s windows: the own share per hop with
+                                                    its 95 % interval on a host that steals CPUs
 
-The suite (python -m bench) gives the own share per hop with its 95 % interval.
+Two or more pairs (--repeat, --interleave) give the own share per hop with its 95 % interval.
 """
 
 
@@ -44,11 +52,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--nodes", type=int, default=8, help="ring size 2..255 (default %(default)s)")
-    p.add_argument("--rounds", type=int, default=2000, help="rounds measured per run (default %(default)s)")
-    p.add_argument("--warmup", type=int, default=300, help="rounds discarded first (default %(default)s)")
+    # rounds, warmup and repeat default to None so that --interleave can refuse them when given
+    p.add_argument("--rounds", type=int, help=f"rounds measured per run (default {ROUNDS})")
+    p.add_argument("--warmup", type=int, help=f"rounds discarded first (default {WARMUP})")
     p.add_argument("--bitrate", default="max", help="emulated bitrate of the ring (default %(default)s)")
     p.add_argument("--ack", default="adaptive", choices=("adaptive", "always", "never"))
-    p.add_argument("--repeat", type=int, default=1, help="alternate bare/ring runs this many times")
+    p.add_argument("--repeat", type=int, help="alternate bare/ring runs this many times (default 1)")
     p.add_argument(
         "--timeout",
         type=float,
@@ -77,11 +86,31 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="also time the rounds from outside: a subscriber of the round master's token key "
         "(--topology links: the master's frames on the wire, captured by tcpdump)",
     )
+    p.add_argument(
+        "--interleave",
+        type=int,
+        metavar="PAIRS",
+        help="instead of separate runs, both rings up at once taking turns: PAIRS ring windows, each "
+        "set against the bare windows either side (the ring not measured is frozen)",
+    )
+    p.add_argument(
+        "--window",
+        type=float,
+        metavar="S",
+        help="with --interleave: seconds per window (default 0.6 of the freeze a node sleeps through)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     check_json_target(args.json, args.force)  # before minutes of measuring
     ids = generated_ids(args.nodes)
+    if args.interleave is not None:
+        return run_interleaved(args)
+    if args.window is not None:
+        raise UsageError("--window sets the windows of --interleave")
+    args.rounds = ROUNDS if args.rounds is None else args.rounds
+    args.warmup = WARMUP if args.warmup is None else args.warmup
+    args.repeat = 1 if args.repeat is None else args.repeat
     if not 10 <= args.rounds <= 16000:
         raise UsageError("--rounds must be 10..16000")
     if args.repeat < 1:
@@ -101,10 +130,9 @@ def run(args: argparse.Namespace) -> int:
             )
     if args.timeout is None:
         args.timeout = run_budget(args.nodes, args.rounds + args.warmup, bitrate)
-    links = args.topology == "links"
-    router = links or args.topology == "router" or (args.topology == "auto" and args.nodes >= ROUTER_FROM)
-    topology = "links" if links else "router" if router else "peer"
-    kind = {"peer": "peers", "router": "routers", "links": "direct links"}[topology]
+    topology = topology_of(args)
+    links, router = topology == "links", topology in ("router", "links")
+    kind = KINDS[topology]
     if links and args.tap:
         from tokenring.wiretap import WireTapError, tcpdump_path
 
@@ -191,8 +219,8 @@ def run(args: argparse.Namespace) -> int:
         "cpu_per_node_pct": {"mean": float(np.mean(cpu) * 100), "max": float(np.max(cpu) * 100)},
         "machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]},
         "token_path": "C" if tokenpath.NATIVE else "Python",
-        # tokenring's own µs per hop in each alternating pair (the suite gives their 95 % interval)
-        "own_share_us": {"pairs": own_share_us, "mean": float(np.mean(own_share_us))},
+        # tokenring's own µs per hop in each alternating pair, their mean and 95 % interval
+        "own_share_us": {"pairs": own_share_us, **interval(own_share_us)},
     }
     if args.tap:
         tap_s = summarize(tapped)
@@ -230,7 +258,8 @@ def run(args: argparse.Namespace) -> int:
         f"token path in {report['token_path']}"
     )
     shares = ", ".join(f"{x:.1f}" for x in own_share_us)
-    print(f"tokenring's own share per hop {report['own_share_us']['mean']:.1f} us (per pair: {shares})")
+    each = f" (per pair: {shares})" if len(own_share_us) > 1 else ""
+    print(f"tokenring's own share: {describe(interval(own_share_us))}{each}")
     if args.tap:
         vantage = (
             "the master's frames on the wire, tcpdump" if links else "frames' arrival at the master's key"
@@ -243,3 +272,100 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         write_json(args.json, report)
     return 0
+
+
+def topology_of(args: argparse.Namespace) -> str:
+    """peer, router or links: ``--topology``, with auto a router from :data:`ROUTER_FROM` nodes on."""
+    if args.topology != "auto":
+        return str(args.topology)
+    return "router" if args.nodes >= ROUTER_FROM else "peer"
+
+
+def run_interleaved(args: argparse.Namespace) -> int:
+    """``--interleave PAIRS``: both rings up at once, taking turns (:mod:`tokenring.interleave`)."""
+    from tokenring.interleave import default_window_s, interleave
+    from tokenring.recovery import FROZEN_AFTER_S
+    from tokenring.ring import parse_bitrate
+
+    if not 2 <= args.interleave <= 10_000:
+        raise UsageError(f"--interleave takes 2..10000 pairs of windows, not {args.interleave}")
+    if args.window is not None and not 0.05 <= args.window <= FROZEN_AFTER_S:
+        raise UsageError(
+            f"--window must be 0.05..{FROZEN_AFTER_S:g} s, not {args.window:g} "
+            "(a node frozen for longer asks to rejoin)"
+        )
+    separate = {
+        "--rounds": args.rounds is not None,
+        "--warmup": args.warmup is not None,
+        "--repeat": args.repeat is not None,
+        "--timeout": args.timeout is not None,
+        "--tap": args.tap,
+        "--profile": args.profile is not None,
+        "--transport": args.transport != "zenoh",
+    }
+    given = [option for option, present in separate.items() if present]
+    if given:
+        raise UsageError(
+            f"{given[0]} belongs to separate runs; --interleave measures windows of two Zenoh rings "
+            "(--nodes, --topology, --bitrate, --ack, --window)"
+        )
+    parse_bitrate(args.bitrate)
+    topology = topology_of(args)
+    window_s = args.window or default_window_s()
+    progress(
+        f"interleaved windows of a bare Zenoh ring and a tokenring ring, {args.nodes} nodes ({KINDS[topology]})",
+        args.quiet,
+    )
+    record = interleave(
+        args.nodes,
+        topology,
+        args.interleave,
+        window_s,
+        say=lambda text: progress(f"        {text}", args.quiet),
+        bitrate=args.bitrate,
+        ack_mode=args.ack,
+    )
+    print_interleaved(record)
+    if args.json:
+        write_json(args.json, record)
+    return 0
+
+
+def ms_text(value: float | None) -> str:
+    """A figure in ms with three decimals, ``-`` for none."""
+    return "-" if value is None else f"{value:.3f}"
+
+
+def print_interleaved(record: dict[str, Any]) -> None:
+    """The interleaved record as a person reads it: medians and tails, the own share, the host."""
+    limit = record["steal_limit_pct"]
+    print(
+        f"token round trip, {record['nodes']} nodes ({KINDS[record['topology']]}), "
+        f"{record['pairs']} pairs of {record['window_s']:.2f} s windows, both rings up at once taking turns, "
+        f"bitrate {record['bitrate']}, ack {record['ack']}"
+    )
+    pooled, every, calm = record["pooled_median_ms"], record["pooled_p99_ms"], record["calm_p99_ms"]
+    rows = [
+        [name, ms_text(pooled[side]), ms_text(every[side]), ms_text(calm[side]), str(sum(record[rounds]))]
+        for name, side, rounds in (
+            ("tokenring", "ring", "ring_rounds"),
+            ("bare Zenoh", "bare", "bare_rounds"),
+        )
+    ]
+    headers = ["ring", "median ms", "p99 ms", f"p99 ms, windows within {limit:.0f} % steal", "rounds"]
+    print(format_table(rows, headers))
+    calm_pairs = record["own_share_us"]["n"]
+    print(
+        f"tokenring's own share: {describe(record['own_share_us'])} over the pairs within "
+        f"{limit:.0f} % steal; every pair: {describe(record['own_share_all_us'])}"
+    )
+    spoiled = record["pairs_usable"] - calm_pairs
+    host = f"the host took more than {limit:.0f} % of the CPUs in {spoiled} of {record['pairs_usable']} pairs"
+    unusable = record["pairs"] - record["pairs_usable"]
+    if unusable:
+        host += f"; {unusable} pairs had a window without rounds"
+    warned = record["ring_warnings"]
+    if warned:
+        first = record["ring_warning_lines"][0] if record["ring_warning_lines"] else ""
+        host += f"; the nodes warned {warned} times (a freeze's doing; first: {first.strip()[:120]})"
+    print(host)

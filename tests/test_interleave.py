@@ -1,4 +1,5 @@
-"""The interleaved own share: both rings in the same seconds, one frozen while the other runs."""
+"""The interleaved own share (``tokenring bench --interleave``): both rings in the same seconds,
+one frozen while the other runs."""
 
 from __future__ import annotations
 
@@ -10,9 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from bench.interleave import since_resume, summarize, window_rounds
+from tokenring.interleave import since_resume, summarize, window_rounds
 
 REPO = Path(__file__).resolve().parents[1]
+TOKENRING = [sys.executable, "-m", "tokenring"]
 
 
 def test_a_bare_window_keeps_the_rounds_between_its_resume_and_freeze_after_the_settle():
@@ -70,8 +72,8 @@ def test_windows_that_do_not_alternate_are_refused():
 def test_both_rings_take_turns_without_the_frozen_ring_noticing(tmp_path):
     out = tmp_path / "interleave.json"
     pairs, window = 4, 0.5
-    command = [sys.executable, "-m", "bench.interleave", "--nodes", "4", "--topology", "peer"]
-    command += ["--pairs", str(pairs), "--window", str(window), "--json", str(out)]
+    command = [*TOKENRING, "bench", "--nodes", "4", "--topology", "peer"]
+    command += ["--interleave", str(pairs), "--window", str(window), "--json", str(out)]
     result = subprocess.run(
         command,
         capture_output=True,
@@ -94,7 +96,15 @@ def test_both_rings_take_turns_without_the_frozen_ring_noticing(tmp_path):
     assert record["ring_warnings"] == len(record["ring_warning_lines"]) <= 1
     interval = record["own_share_all_us"]
     assert interval["n"] == pairs and interval["lo"] <= interval["mean"] <= interval["hi"]
-    assert "µs per hop" in result.stdout and "p99 ring / bare: every window" in result.stdout
+    # what a person reads: both rings' medians and tails, the own share over the calm pairs
+    assert "µs per hop" in result.stdout and "within 10 % steal" in result.stdout
+    rows = {
+        line.split()[0]: line.split()
+        for line in result.stdout.splitlines()
+        if line.startswith(("tokenring ", "bare "))
+    }
+    assert float(rows["tokenring"][1]) == pytest.approx(record["pooled_median_ms"]["ring"], abs=0.001)
+    assert rows["bare"][-1] == str(sum(record["bare_rounds"]))
     for pid in record["pids"]["ring"] + record["pids"]["bare"]:
         assert not os.path.exists(f"/proc/{pid}") or "zombie" in Path(f"/proc/{pid}/status").read_text()
 
@@ -102,14 +112,20 @@ def test_both_rings_take_turns_without_the_frozen_ring_noticing(tmp_path):
 @pytest.mark.parametrize(
     ("args", "says"),
     [
-        (["--window", "5"], "--window 0.05..1.0 s"),
-        (["--nodes", "300"], "--nodes 2..255"),
-        (["--pairs", "1"], "--pairs 2..10000"),
+        (["--interleave", "10", "--window", "5"], "--window must be 0.05..1 s"),
+        (["--interleave", "10", "--nodes", "300"], "--nodes must be 2..255"),
+        (["--interleave", "1"], "--interleave takes 2..10000 pairs"),
+        (["--interleave", "10", "--rounds", "500"], "--rounds belongs to separate runs"),
+        (["--interleave", "10", "--repeat", "2"], "--repeat belongs to separate runs"),
+        (["--interleave", "10", "--tap"], "--tap belongs to separate runs"),
+        (["--interleave", "10", "--transport", "udp"], "--transport belongs to separate runs"),
+        (["--interleave", "10", "--bitrate", "fast"], "bitrate"),
+        (["--window", "0.5"], "--window sets the windows of --interleave"),
     ],
 )
 def test_values_it_cannot_measure_with_are_refused_in_one_line(args, says):
     result = subprocess.run(
-        [sys.executable, "-m", "bench.interleave", *args],
+        [*TOKENRING, "bench", *args],
         capture_output=True,
         text=True,
         cwd=REPO,
@@ -123,7 +139,7 @@ def test_an_existing_output_file_is_left_alone(tmp_path):
     out = tmp_path / "kept.json"
     out.write_text("{}")
     result = subprocess.run(
-        [sys.executable, "-m", "bench.interleave", "--json", str(out)],
+        [*TOKENRING, "bench", "--interleave", "10", "--json", str(out)],
         capture_output=True,
         text=True,
         cwd=REPO,
@@ -136,7 +152,7 @@ def test_ctrl_c_between_windows_ends_both_rings_frozen_or_not(procs):
     from ringutil import processes, wait_until
 
     driver = procs.start(
-        [sys.executable, "-m", "bench.interleave", "--nodes", "3", "--topology", "peer", "--pairs", "1000"],
+        [*TOKENRING, "bench", "--nodes", "3", "--topology", "peer", "--interleave", "1000"],
         cwd=REPO,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,

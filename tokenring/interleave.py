@@ -8,8 +8,8 @@ one not measured is frozen (SIGSTOP to each of its processes, SIGCONT to resume)
 go bare, ring, bare, ..., bare, and each ring window is paired with the bare windows on either
 side of it, so a steady drift of the host's speed cancels. A pair's own share is
 ``(ring window's median - mean of the two bare windows' medians) / N``; over many pairs, their mean with its
-95 % interval (:func:`bench.ownshare.interval`), beside the same over the pairs whose two
-windows lost at most :data:`~bench.ownshare.STEAL_LIMIT_PCT` to the host.
+95 % interval (:func:`tokenring.ownshare.interval`), beside the same over the pairs whose two
+windows lost at most :data:`~tokenring.ownshare.STEAL_LIMIT_PCT` to the host.
 
 A window is short enough that a frozen ring hardly notices: a node whose watchdog wakes more
 than :data:`tokenring.recovery.FROZEN_AFTER_S` late announces a rejoin (255 of them at once
@@ -19,36 +19,25 @@ here); the record counts the nodes' warnings and keeps the first few. The round 
 freeze and the next ``settle`` rounds are dropped; the ring's rounds are its round master's (the time between two of
 its visits, as ``tokenring bench`` reports them), the bare ring's are its process 0's.
 
-    python -m bench.interleave --nodes 64 --topology router --pairs 100
-    python -m bench.interleave --nodes 255 --topology links --pairs 150 --json F
+    tokenring bench --interleave 100 --nodes 64 --topology router
+    tokenring bench --interleave 150 --nodes 255 --topology links --json F
 """
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import itertools
-import json
 import os
 import signal
 import statistics
-import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from bench.liverings import BareRing, LiveRing
-from bench.ownshare import (
-    STEAL_LIMIT_PCT,
-    cpu_jiffies,
-    describe_interleaved,
-    interval,
-    steal_pct,
-    within_steal_limit,
-)
+from tokenring.liverings import BareRing, LiveRing
+from tokenring.ownshare import STEAL_LIMIT_PCT, cpu_jiffies, interval, steal_pct, within_steal_limit
 
 #: a window's share of the freeze a node can sleep through unnoticed (FROZEN_AFTER_S)
 WINDOW_OF_FROZEN = 0.6
@@ -90,6 +79,13 @@ def pair_share_us(ring: list[float], before: list[float], after: list[float], no
     return (statistics.median(ring) - bare) * 1e6 / nodes
 
 
+def default_window_s() -> float:
+    """A window's length unless told: :data:`WINDOW_OF_FROZEN` of the freeze a node sleeps through."""
+    from tokenring.recovery import FROZEN_AFTER_S
+
+    return WINDOW_OF_FROZEN * FROZEN_AFTER_S
+
+
 def interleave(
     nodes: int,
     topology: str,
@@ -97,13 +93,14 @@ def interleave(
     window_s: float | None = None,
     settle: int = SETTLE_ROUNDS,
     say: Callable[[str], None] = lambda _text: None,
+    bitrate: str = "max",
+    ack_mode: str = "adaptive",
 ) -> dict[str, Any]:
     """Run the two rings of ``nodes`` in ``topology`` side by side for ``pairs`` pairs of windows
-    (each ``window_s``, default :data:`WINDOW_OF_FROZEN` of the freeze a node sleeps through);
-    the own share per hop over all pairs and over the calm ones, each pair's medians and steal."""
-    from tokenring.recovery import FROZEN_AFTER_S
-
-    window_s = window_s or WINDOW_OF_FROZEN * FROZEN_AFTER_S
+    (each ``window_s``, default :func:`default_window_s`); the own share per hop over all pairs
+    and over the calm ones, each pair's medians and steal. ``bitrate`` and ``ack_mode`` are the
+    ring's (the bare ring has neither)."""
+    window_s = window_s or default_window_s()
     router, links = topology in ("router", "links"), topology == "links"
     t_begin = time.monotonic()
     say(f"bare Zenoh ring of {nodes} ({topology}) forming")
@@ -114,7 +111,7 @@ def interleave(
         # the bare ring runs on while the ring forms: frozen for a minute, its clients' Zenoh
         # leases would end
         say(f"tokenring ring of {nodes} ({topology}) forming")
-        ring = LiveRing(nodes, router, links)
+        ring = LiveRing(nodes, router, links, bitrate=bitrate, ack_mode=ack_mode)
         ring.wait_circulating(60 + 1.5 * nodes)
         ring_pids = ring.pids
         signal_all(bare.pids + ring_pids, signal.SIGSTOP)
@@ -152,6 +149,7 @@ def interleave(
     record = summarize(nodes, topology, window_s, settle, ring_rounds, bare_rounds, window_steal, len(warned))
     record["ring_warning_lines"] = [line[:200] for line in warned[:5]]  # what the nodes said, if anything
     record["pids"] = {"ring": ring_pids, "bare": bare.pids}
+    record["bitrate"], record["ack"] = bitrate, ack_mode
     return record
 
 
@@ -222,62 +220,3 @@ def summarize(
         "pooled_p99_ms": {"ring": p99_ms(pooled_ring), "bare": p99_ms(pooled_bare)},
         "calm_p99_ms": {"ring": p99_ms(calm_ring), "bare": p99_ms(calm_bare)},
     }
-
-
-def ms_text(value: float | None) -> str:
-    """A figure in ms with two decimals, ``-`` for none."""
-    return "-" if value is None else f"{value:.2f}"
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m bench.interleave",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    parser.add_argument("--nodes", type=int, default=64, help="ring size, 2..255 (default 64)")
-    parser.add_argument("--topology", choices=TOPOLOGIES, default="router", help="default router")
-    parser.add_argument("--pairs", type=int, default=100, help="pairs of windows (default 100)")
-    parser.add_argument(
-        "--window",
-        type=float,
-        help=f"seconds per window (default {WINDOW_OF_FROZEN} of the freeze a node ignores)",
-    )
-    parser.add_argument("--json", metavar="FILE", help="also write the record as JSON (a new file)")
-    args = parser.parse_args(argv)
-    from tokenring.recovery import FROZEN_AFTER_S
-
-    if not 2 <= args.nodes <= 255 or not 2 <= args.pairs <= 10_000:
-        sys.stderr.write("interleave: --nodes 2..255, --pairs 2..10000\n")
-        return 2
-    if args.window is not None and not 0.05 <= args.window <= FROZEN_AFTER_S:
-        sys.stderr.write(
-            f"interleave: --window 0.05..{FROZEN_AFTER_S} s (a longer freeze makes nodes rejoin)\n"
-        )
-        return 2
-    if args.json and Path(args.json).exists():
-        sys.stderr.write(f"interleave: {args.json} exists; not overwritten\n")
-        return 2
-    from tokenring.zconfig import use_node_runtime
-
-    use_node_runtime()
-
-    def say(text: str) -> None:
-        sys.stderr.write(f"interleave: {text}\n")
-
-    record = interleave(args.nodes, args.topology, args.pairs, args.window, say=say)
-    print(describe_interleaved(record))
-    every, calm = record["pooled_p99_ms"], record["calm_p99_ms"]
-    print(
-        f"p99 ring / bare: every window {ms_text(every['ring'])} / {ms_text(every['bare'])} ms, "
-        f"windows within the steal limit {ms_text(calm['ring'])} / {ms_text(calm['bare'])} ms"
-    )
-    if args.json:
-        Path(args.json).write_text(json.dumps(record, indent=1) + "\n")
-    return 0
-
-
-if __name__ == "__main__":
-    with contextlib.suppress(KeyboardInterrupt):
-        sys.exit(main())
-    sys.exit(130)

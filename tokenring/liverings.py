@@ -1,9 +1,10 @@
 """Rings that run until told to stop: a bare Zenoh ring and a tokenring ring, side by side.
 
-The benchmarks that look inside a running ring (``bench.hopcost``'s thread samples, the
-interleaved own share of ``bench.interleave``) need rings that keep circulating while they are
-watched, paused and resumed, rather than ``tokenring.roundtrip``'s runs of a fixed number of
-rounds. Both classes start their processes as ``tokenring bench`` does and give their PIDs.
+The measures that look inside a running ring (the interleaved own share of
+:mod:`tokenring.interleave`, ``bench.hopcost``'s thread samples) need rings that keep
+circulating while they are watched, paused and resumed, rather than :mod:`tokenring.roundtrip`'s
+runs of a fixed number of rounds. Both classes start their processes as ``tokenring bench`` does
+and give their PIDs.
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ import subprocess
 import time
 from typing import Any
 
+from tokenring.errors import TokenRingError
+
 
 class BareRing:
     """A bare Zenoh ring that runs until told to stop, then reports each round's arrival time
@@ -23,7 +26,7 @@ class BareRing:
 
     def __init__(self, nodes: int, router: bool, chain: bool = False) -> None:
         from tokenring.cliutil import free_port
-        from tokenring.roundtrip import spawn_bare_ring
+        from tokenring.roundtrip import end_all, spawn_bare_ring
         from tokenring.zconfig import make_config, open_session
 
         port = free_port()
@@ -37,8 +40,14 @@ class BareRing:
         self.first, self.others = spawn_bare_ring(
             nodes, port, ring, 10_000_000, 50, 3600, router=router, stamps=True, chain=chain
         )
-        self.session = open_session(connect)
         self.pids = [self.first.pid] + [p.pid for p in self.others]
+        try:
+            self.session = open_session(connect)
+        except BaseException:
+            end_all([self.first, *self.others], grace_s=1.0)
+            if self.router is not None:
+                self.router.close()
+            raise
 
     def wait_circulating(self, timeout: float) -> None:
         """Until the token has gone round its warm-up rounds (process 0 says so on its stdout: on
@@ -48,7 +57,9 @@ class BareRing:
         while True:
             left = deadline - time.monotonic()
             if left <= 0 or self.first.poll() is not None:
-                raise RuntimeError("the bare ring did not circulate")
+                raise TokenRingError(
+                    f"the bare ring of {len(self.pids)} did not circulate within {timeout:.0f} s"
+                )
             readable, _, _ = select.select([self.first.stdout], [], [], left)
             if readable and '"warm"' in self.first.stdout.readline():
                 return
@@ -76,7 +87,14 @@ class LiveRing:
     it (``router``: the nodes clients of a router in this process; ``links``: with direct links to
     their successors too), whose round master answers queries until :meth:`stop`."""
 
-    def __init__(self, nodes: int, router: bool, links: bool = False) -> None:
+    def __init__(
+        self,
+        nodes: int,
+        router: bool,
+        links: bool = False,
+        bitrate: str = "max",
+        ack_mode: str = "adaptive",
+    ) -> None:
         from tokenring.cliutil import free_port
         from tokenring.launcher import Launcher, NodePlan
         from tokenring.roundtrip import generated_ids
@@ -90,8 +108,8 @@ class LiveRing:
         self.launcher = Launcher(
             [NodePlan(i, f"node{i}", None) for i in ids],
             ring=self.ring,
-            bitrate="max",
-            ack_mode="adaptive",
+            bitrate=bitrate,
+            ack_mode=ack_mode,
             listen=[f"tcp/127.0.0.1:{port}"],
             log_level="warning",
             output=self.output,
@@ -108,6 +126,7 @@ class LiveRing:
 
     @property
     def pids(self) -> list[int]:
+        """The node processes' PIDs."""
         return [c.process.pid for c in self.launcher.child_list()]
 
     def answer(self, what: str, timeout: float = 2.0) -> Any | None:
@@ -127,9 +146,10 @@ class LiveRing:
         deadline = time.monotonic() + timeout
         while self.visits() < visits:
             if time.monotonic() > deadline:
-                raise RuntimeError(f"the ring {self.ring} did not circulate")
+                raise TokenRingError(f"the ring {self.ring} did not circulate within {timeout:.0f} s")
             time.sleep(0.1)
 
     def stop(self) -> None:
+        """Close this process's session and stop every node."""
         self.session.close()
         self.launcher.stop()
