@@ -37,7 +37,14 @@ from typing import Any
 import numpy as np
 
 from tokenring.liverings import BareRing, LiveRing
-from tokenring.ownshare import STEAL_LIMIT_PCT, cpu_jiffies, interval, steal_pct, within_steal_limit
+from tokenring.ownshare import (
+    STEAL_LIMIT_PCT,
+    cpu_jiffies,
+    interval,
+    pair_share_us,
+    steal_pct,
+    within_steal_limit,
+)
 
 #: a window's share of the freeze a node can sleep through unnoticed (FROZEN_AFTER_S)
 WINDOW_OF_FROZEN = 0.6
@@ -72,11 +79,11 @@ def since_resume(rounds: list[float], running_s: float, settle: int) -> list[flo
     return rounds[first + settle :]
 
 
-def pair_share_us(ring: list[float], before: list[float], after: list[float], nodes: int) -> float:
-    """One pair's own share per hop (µs): the ring window's median round above the mean of the
-    medians of the bare windows before and after it (a steady drift of the host cancels), per node."""
-    bare = (statistics.median(before) + statistics.median(after)) / 2
-    return (statistics.median(ring) - bare) * 1e6 / nodes
+def window_share_us(ring: list[float], before: list[float], after: list[float], nodes: int) -> float:
+    """One pair's own share per hop (µs): the ring window's median round (s) against the mean of
+    the medians of the bare windows before and after it (a steady drift of the host cancels)."""
+    bare_s = (statistics.median(before) + statistics.median(after)) / 2
+    return pair_share_us(statistics.median(ring) * 1e3, bare_s * 1e3, nodes)
 
 
 def default_window_s() -> float:
@@ -183,7 +190,7 @@ def summarize(
         (round(window_steal[2 * i + 1], 1), round(max(window_steal[2 * i], window_steal[2 * i + 2]), 1))
         for i in range(pairs)
     ]
-    shares = {i: pair_share_us(ring_rounds[i], bare_rounds[i], bare_rounds[i + 1], nodes) for i in usable}
+    shares = {i: window_share_us(ring_rounds[i], bare_rounds[i], bare_rounds[i + 1], nodes) for i in usable}
     calm_pairs = [i for i in usable if within_steal_limit(steal[i])]
     calm = [shares[i] for i in calm_pairs]
     pooled_ring = [x for i in usable for x in ring_rounds[i]]
