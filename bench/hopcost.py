@@ -277,9 +277,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.perf and shutil.which("perf") is None:
         sys.stderr.write("hopcost: --perf needs perf (Debian: linux-perf)\n")
         return 2
-    from tokenring.zconfig import use_node_runtime
+    from tokenring.zconfig import use_host_runtime
 
-    use_node_runtime()
+    use_host_runtime()
     router = args.topology == "router"
     pairs: list[tuple[dict[str, Any], dict[str, Any]]] = []
     with tempfile.TemporaryDirectory(prefix="hopcost-") as tmp:

@@ -302,6 +302,9 @@ def main(argv: list[str] | None = None) -> int:
     unknown = set(kinds) - {"crash", "hang", "loss", "heal"}
     if unknown:
         parser.error(f"unknown fault(s) {', '.join(sorted(unknown))} (crash, hang, loss, heal)")
+    from tokenring.zconfig import use_host_runtime
+
+    use_host_runtime()  # as the suite and `tokenring up` run: the launcher's router in this process
     if args.topology == "links":
         from tokenring.wiretap import WireTapError, tcpdump_path
 

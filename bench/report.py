@@ -765,8 +765,11 @@ def runtime_md(section: dict[str, Any]) -> str:
         "",
         "Zenoh runs its I/O on async runtimes, by default six threads per process (rx ×2, tx, net, acc, app), "
         "so a frame is read on one thread, handed to Python, and the frame passed on written by another. "
-        "tokenring's processes (`tokenring up`, `bench`, every node the launcher starts) set "
-        f"`ZENOH_RUNTIME={section['node_runtime']}`, one worker thread receiving and sending, unless the user's "
+        "tokenring's node processes (and the bare ring's) set "
+        f"`ZENOH_RUNTIME={section['node_runtime']}`, one worker thread receiving and sending; the process "
+        f"that hosts the router (`tokenring up`, `bench`) `{section.get('host_runtime', '(rx:(worker_threads:1))')}`, "
+        "sending on a thread of its own (a router that also sends on its one worker stalls on a burst of "
+        "reliable messages), unless the user's "
         "environment sets `ZENOH_RUNTIME` (`()` gives Zenoh's defaults). zenoh-python by default hands every "
         "received sample to a Python thread of its own, a thread switch and a wake per hop; the token's "
         "subscriber runs its callback on the receiving thread instead (`indirect=False`; "

@@ -483,9 +483,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--configs", help=f"subset ({', '.join(c.key for c in CONFIGS)})")
     parser.add_argument("--json", help="write the record here")
     args = parser.parse_args(argv)
-    from tokenring.zconfig import use_node_runtime
+    from tokenring.zconfig import use_host_runtime
 
-    use_node_runtime()
+    use_host_runtime()
     result = run(pick_configs(args.configs), args.minutes)
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1) + "\n")

@@ -63,6 +63,7 @@ from tokenring.ownshare import (
     steal_pct,
     within_steal_limit,
 )
+from tokenring.zconfig import RUNTIME_CHOSEN
 
 HERE = Path(__file__).resolve().parent
 RESULTS_DIR = HERE / "results"
@@ -420,17 +421,19 @@ def runtime_cases(quick: bool) -> list[tuple[int, str]]:
     return [(8, "peer")] if quick else [(8, "peer"), (8, "router"), (64, "router")]
 
 
-def bench_cli(
-    args: list[str], runtime: str, timeout: float, env: dict[str, str] | None = None
-) -> dict[str, Any]:
-    """``tokenring bench <args> --json`` in its own process under Zenoh ``runtime`` (``env`` adds to
-    the environment and may override it):
+def bench_cli(args: list[str], timeout: float, env: dict[str, str] | None = None) -> dict[str, Any]:
+    """``tokenring bench <args> --json`` in its own process, under tokenring's Zenoh runtimes
+    unless ``env`` (which adds to the environment and may override it) sets ``ZENOH_RUNTIME``:
     its results, or ``{"error": why}`` (a failed or overlong run must not end the suite and lose
     its report)."""
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "bench.json"
         cmd = [sys.executable, "-m", "tokenring", "bench", *args, "--quiet", "--json", str(path)]
-        environment = {**os.environ, "ZENOH_RUNTIME": runtime, **(env or {})}  # env wins
+        environment = {**os.environ, **(env or {})}  # env wins
+        if "ZENOH_RUNTIME" in (env or {}):  # the runtime asked for, in the router's process and the nodes'
+            environment.pop(RUNTIME_CHOSEN, None)
+        elif environment.pop(RUNTIME_CHOSEN, None):  # the benchmark picks tokenring's own, as users get it
+            environment.pop("ZENOH_RUNTIME", None)
         try:
             done = subprocess.run(cmd, env=environment, capture_output=True, text=True, timeout=timeout)
         except subprocess.TimeoutExpired:
@@ -443,9 +446,9 @@ def bench_cli(
 def section_runtime(ctx: Context) -> dict[str, Any]:
     """``tokenring bench`` under each Zenoh runtime, as a subprocess: the runtime is fixed when a
     process first uses Zenoh, and the router lives in the process that runs the benchmark."""
-    from tokenring.zconfig import NODE_RUNTIME
+    from tokenring.zconfig import HOST_RUNTIME, NODE_RUNTIME
 
-    out: dict[str, Any] = {"node_runtime": NODE_RUNTIME, "runs": []}
+    out: dict[str, Any] = {"node_runtime": NODE_RUNTIME, "host_runtime": HOST_RUNTIME, "runs": []}
     for n, topology in runtime_cases(ctx.quick):
         rounds, warmup = rounds_for(n, ctx.quick)
         pairs = pairs_for(n, ctx.quick)
@@ -454,7 +457,7 @@ def section_runtime(ctx: Context) -> dict[str, Any]:
         for label, env in RUNTIMES.items():
             ctx.progress.say(f"runtime: {n} nodes ({topology}s), bare and tokenring, {label}")
             record: dict[str, Any] = {"nodes": n, "topology": topology, "runtime": label}
-            result = bench_cli(args, NODE_RUNTIME, timeout=4 * timeout_for(n) * pairs, env=env)
+            result = bench_cli(args, timeout=4 * timeout_for(n) * pairs, env=env)
             if "error" in result:
                 record["error"] = result["error"]
                 ctx.progress.note(f"failed: {record['error']}")
@@ -865,9 +868,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     from tokenring.errors import UsageError
-    from tokenring.zconfig import use_node_runtime
+    from tokenring.zconfig import use_host_runtime
 
-    use_node_runtime()  # as `tokenring up`/`bench` run: the routers in this process, the nodes
+    use_host_runtime()  # as `tokenring up`/`bench` run: the routers in this process, the nodes
 
     if args.sections:
         sections = [s.strip() for s in args.sections.split(",") if s.strip()]

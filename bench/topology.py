@@ -46,9 +46,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{args.json}: exists; not overwritten", file=sys.stderr)
         return 2
     from tokenring.roundtrip import run_bare
-    from tokenring.zconfig import use_node_runtime
+    from tokenring.zconfig import use_host_runtime
 
-    use_node_runtime()
+    use_host_runtime()
     runs: list[dict[str, Any]] = []
     for pair in range(args.pairs):
         for topology in TOPOLOGIES:

@@ -20,7 +20,6 @@ from test_bench_report import suite_run
 from bench import suite
 from bench.suite import bench_cli
 from tokenring import zconfig
-from tokenring.zconfig import NODE_RUNTIME
 
 
 def test_a_suite_run_writes_its_samples_to_raw_and_a_summary_of_kilobytes(tmp_path, monkeypatch, capsys):
@@ -32,7 +31,7 @@ def test_a_suite_run_writes_its_samples_to_raw_and_a_summary_of_kilobytes(tmp_pa
             name,
             lambda ctx, name=name: json.loads(json.dumps(made_up["sections"][name])),
         )
-    monkeypatch.setattr(zconfig, "use_node_runtime", lambda: None)
+    monkeypatch.setattr(zconfig, "use_host_runtime", lambda: None)
     out = tmp_path / "results"
     assert suite.main(["--sections", "scaling,profile", "--out", str(out)]) == 0
     (summary,) = out.glob("*.json")
@@ -57,7 +56,7 @@ def test_pairs_set_for_every_size_reach_the_scaling_section_and_a_bad_count_is_r
         return {"runs": []}
 
     monkeypatch.setitem(suite.SECTION_FUNCTIONS, "scaling", scaling)
-    monkeypatch.setattr(zconfig, "use_node_runtime", lambda: None)
+    monkeypatch.setattr(zconfig, "use_host_runtime", lambda: None)
     args = ["--sections", "scaling", "--sizes", "peer:8/links:255", "--out", str(tmp_path), "--no-report"]
     assert suite.main([*args, "--pairs", "16"]) == 0
     assert asked == [(8, 16), (255, 16)]
@@ -179,14 +178,12 @@ def test_the_raw_records_are_ignored_and_no_committed_result_file_is_over_100_kb
 
 
 def test_a_bench_run_that_fails_is_recorded_not_raised():
-    result = bench_cli(["--nodes", "2", "--rounds", "5"], NODE_RUNTIME, timeout=60)
+    result = bench_cli(["--nodes", "2", "--rounds", "5"], timeout=60)
     assert result == {"error": "tokenring bench: error: --rounds must be 10..16000"}
 
 
 def test_a_bench_run_gets_its_environment_and_the_python_token_path_circulates():
-    result = bench_cli(
-        ["--nodes", "3", "--rounds", "50", "--warmup", "10"], NODE_RUNTIME, 120, {"TOKENRING_NATIVE": "0"}
-    )
+    result = bench_cli(["--nodes", "3", "--rounds", "50", "--warmup", "10"], 120, {"TOKENRING_NATIVE": "0"})
     assert "error" not in result, result
     assert result["token_path"] == "Python"
     assert result["rounds"] >= 50 and result["rtt_ms"]["median"] > 0
@@ -230,7 +227,7 @@ def test_an_overlong_bench_run_is_recorded_as_an_error():
 
     def run() -> None:
         try:
-            result.update(bench_cli(ENDLESS, NODE_RUNTIME, timeout=budget))
+            result.update(bench_cli(ENDLESS, timeout=budget))
         finally:
             done.set()
 

@@ -456,7 +456,8 @@ def zenoh_threads(pid: int) -> set[str]:
 def test_nodes_receive_and_send_on_one_zenoh_thread_unless_the_user_sets_the_runtime(
     procs, ring_name, endpoint
 ):
-    # one worker thread receives and sends: 0.83 -> 0.66 ms for the bare 8-node ring (RESULTS.md)
+    # one worker thread receives and sends: 0.83 -> 0.66 ms for the bare 8-node ring (RESULTS.md);
+    # the launcher, which hosts the router, sends on a thread of its own (tests/test_host_runtime.py)
     for user_runtime in (None, "()"):  # "()": Zenoh's defaults, a thread per runtime
         ring = ring_name + ("user" if user_runtime else "")
         env = {"ZENOH_RUNTIME": user_runtime} if user_runtime else None
@@ -466,8 +467,10 @@ def test_nodes_receive_and_send_on_one_zenoh_thread_unless_the_user_sets_the_run
             pids = launcher_pids(session, ring)
             procs.watch(pids)
             threads = {pid: zenoh_threads(pid) for pid in pids}
+            launcher_threads = zenoh_threads(launcher.pid)
         launcher.send_signal(signal.SIGINT)
         assert launcher.wait(30) == 130
+        assert {"rx-0", "tx-0"} <= launcher_threads, launcher_threads
         for pid, names in threads.items():
             assert {"acc-0", "app-0", "net-0"} <= names, (pid, names)  # housekeeping on its own
             if user_runtime is None:  # rx-1 and on: tokio's blocking pool, named as its workers

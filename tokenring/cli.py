@@ -15,7 +15,7 @@ from collections.abc import Callable
 from typing import Any
 
 from tokenring.errors import TokenRingError
-from tokenring.zconfig import use_node_runtime
+from tokenring.zconfig import use_host_runtime
 
 Runner = Callable[[argparse.Namespace], int]
 
@@ -114,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     _setup_logging(args.log_level)
-    use_node_runtime()  # the launcher's router and every node it starts
+    use_host_runtime()  # the launcher's router and every node it starts
     try:
         return runners[args.command](args)
     except TokenRingError as exc:

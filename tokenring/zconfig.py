@@ -24,6 +24,19 @@ from tokenring.errors import TransportError, UsageError
 #: Zenoh's defaults; a user's own ``$ZENOH_RUNTIME`` wins.
 NODE_RUNTIME = "(rx:(worker_threads:1),tx:(handover:rx))"
 
+#: the runtime of a process that hosts a router or many sessions (``tokenring up``, ``bench``,
+#: the tools): one receiving thread, but sending on a thread of its own. On one worker that also
+#: sends, a message with blocking congestion control (a query, a declaration) routed to a face
+#: whose queue has no free batch waits synchronously for the tx task that would free one, which
+#: needs that same worker: the router stalls until Zenoh closes that face (5 s). It did in the
+#: recovery benchmark on direct links: a query to all nodes, one of them SIGSTOPped, and the
+#: launcher's answer to SIGCONT never came (tests/test_host_runtime.py).
+HOST_RUNTIME = "(rx:(worker_threads:1))"
+
+#: set beside ``$ZENOH_RUNTIME`` when tokenring chose it (not the user): a node started from such
+#: a process gets :data:`NODE_RUNTIME`, where a user's own runtime would be passed on as it is
+RUNTIME_CHOSEN = "TOKENRING_ZENOH_RUNTIME_CHOSEN"
+
 #: the token's subscriber runs its callback on the Zenoh thread that received the frame
 #: (``indirect=False``): by default zenoh-python hands every sample to a Python thread of its
 #: own, a thread switch and a wake per hop. ``TOKENRING_ZENOH_DIRECT=0`` restores the default;
@@ -122,16 +135,19 @@ def make_config(
 
 def node_environment(base: Mapping[str, str] | None = None) -> dict[str, str]:
     """The environment for a node (or bare-ring) process: ``base`` (default ``os.environ``)
-    with :data:`NODE_RUNTIME` unless ``$ZENOH_RUNTIME`` is already set there."""
+    with :data:`NODE_RUNTIME`, unless the user set ``$ZENOH_RUNTIME`` there."""
     env = dict(os.environ if base is None else base, PYTHONUNBUFFERED="1")
-    env.setdefault("ZENOH_RUNTIME", NODE_RUNTIME)
+    if env.pop(RUNTIME_CHOSEN, None) or "ZENOH_RUNTIME" not in env:
+        env["ZENOH_RUNTIME"] = NODE_RUNTIME
     return env
 
 
-def use_node_runtime() -> None:
-    """Give this process (and so every process it starts) :data:`NODE_RUNTIME`, unless
-    ``$ZENOH_RUNTIME`` is set; must run before the process's first Zenoh session."""
-    os.environ.setdefault("ZENOH_RUNTIME", NODE_RUNTIME)
+def use_host_runtime() -> None:
+    """Give this process :data:`HOST_RUNTIME` (and the nodes it starts :data:`NODE_RUNTIME`),
+    unless the user set ``$ZENOH_RUNTIME``; must run before the process's first Zenoh session."""
+    if "ZENOH_RUNTIME" not in os.environ:
+        os.environ["ZENOH_RUNTIME"] = HOST_RUNTIME
+        os.environ[RUNTIME_CHOSEN] = "1"
 
 
 def open_session(config: zenoh.Config) -> zenoh.Session:
