@@ -337,6 +337,7 @@ class FaultClient:
         from tokenring.cliutil import query
 
         deadline = time.monotonic() + self.timeout + 2.0
+        refused = ""  # what a launcher said instead of sending it
         while time.monotonic() < deadline:
             # SIGCONT every time round: a hang asked for just before stops its node only after
             # answering (AFTER_REPLY_S), so one SIGCONT can come before the stop it should end
@@ -344,17 +345,18 @@ class FaultClient:
                 self.session,
                 keys.control(self.ring, "launcher", "signal"),
                 {"id": node_id, "signal": "CONT"},
-                self.timeout,
+                max(0.1, min(self.timeout, deadline - time.monotonic())),
             )
             answer = query(
                 self.session, keys.control(self.ring, node_id, "fault"), {"kind": "resume"}, timeout=1.0
             )
             if answer and answer[0][1].get("ok"):
                 return answer[0][1]["result"]
-            if not launcher or not launcher[0][1].get("ok"):
+            if launcher and not launcher[0][1].get("ok"):
+                refused = f" (the launcher: {launcher[0][1].get('error', 'refused')})"
                 break
-            time.sleep(0.05)
+            time.sleep(0.05)  # no answer from either yet: a busy host, ask again until the deadline
         raise UsageError(
-            f"node {node_id} does not answer and no launcher of ring {self.ring!r} could send it SIGCONT; "
+            f"node {node_id} does not answer and no launcher of ring {self.ring!r} could send it SIGCONT{refused}; "
             "send SIGCONT to its process yourself (its pid is in 'tokenring status --json')"
         )
