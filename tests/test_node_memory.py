@@ -59,6 +59,44 @@ def test_nodes_without_programs_import_no_numpy_metadata_robot_code_or_other_ver
         assert 0 < report["uss_kb"] < report["rss_kb"], (node, report)
 
 
+def zenoh_shared_memory_kb(pid: int) -> int:
+    """Resident kB of the Zenoh shared-memory segments (``/dev/shm/*.zenoh``) process ``pid`` maps,
+    read from the kernel's smaps."""
+    total, in_segment = 0, False
+    with open(f"/proc/{pid}/smaps") as smaps:
+        for line in smaps:
+            fields = line.split()
+            if fields and "-" in fields[0] and not fields[0].endswith(":"):  # a mapping's header
+                in_segment = fields[-1].endswith(".zenoh")
+            elif in_segment and fields[0] == "Rss:":
+                total += int(fields[1])
+    return total
+
+
+def test_a_node_that_sends_a_large_answer_maps_no_shared_memory_pool(procs, ring_name, endpoint):
+    # Zenoh's default: a 16 MB pool, all of it resident, once a message over 3 KB goes to a
+    # local peer; the round master's `rounds` answer (a float per round, up to 1024) is one
+    launcher = procs.tokenring(
+        "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor",
+        "--no-programs", "--no-world", "--bitrate", "max",
+    )  # fmt: skip
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10, 20], timeout=120)
+        pids = launcher_pids(session, ring_name)
+        procs.watch(pids)
+        rounds = wait_until(
+            lambda: (r := control(session, ring_name, 10, "rounds")) and len(r) >= 1000 and r,
+            120,
+            "main to hold 1000 round times",
+        )
+        mapped = {pid: zenoh_shared_memory_kb(pid) for pid in pids}
+    launcher.send_signal(signal.SIGINT)
+    assert launcher.wait(60) == 130
+    assert len(json.dumps(rounds)) > 3 * 1024  # an answer Zenoh would have sent through its pool
+    # Zenoh's own small segments (12 kB each here) stay: only the 16 MB pool must not be there
+    assert all(kb < 1024 for kb in mapped.values()), mapped
+
+
 def test_a_node_started_by_hand_loads_only_the_node_verb(procs, ring_name, endpoint):
     node = procs.tokenring(
         "--log-level", "warning", "node", "--id", "37", "--ring", ring_name, "--no-store",

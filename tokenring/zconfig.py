@@ -106,6 +106,10 @@ def make_config(
     config.insert_json5("mode", json.dumps(mode))
     if not path:
         config.insert_json5("scouting/multicast/enabled", "false")
+        # Zenoh maps a 16 MB shared-memory pool into a process the first time it sends a message
+        # over 3 KB to a peer on this host (a round master's ``rounds`` answer): a third of a
+        # node's RSS. The token's frames (514 bytes) never go through it.
+        config.insert_json5("transport/shared_memory/transport_optimization/enabled", "false")
     if listen:
         config.insert_json5("listen/endpoints", json.dumps(list(listen)))
     elif mode == "peer" and not path:
