@@ -33,6 +33,18 @@ NODE_RUNTIME = "(rx:(worker_threads:1),tx:(handover:rx))"
 #: launcher's answer to SIGCONT never came (tests/test_host_runtime.py).
 HOST_RUNTIME = "(rx:(worker_threads:1))"
 
+#: batches a session's send queue holds per priority (Zenoh: 2, allocated as they are needed).
+#: On :data:`NODE_RUNTIME` the task that frees a batch runs on the receiving worker, so a message
+#: with blocking congestion control pushed there while every batch of its priority waits to be
+#: sent stalls the node until Zenoh closes the link (5 s): a node resumed from SIGSTOP answering
+#: the queries queued meanwhile, while its watchdog sent express events (gdb: rx-0 parked in
+#: push_network_message under send_response_final; 1 in ~150 hang trials on direct links).
+#: Sixteen, Zenoh's most, leaves such a burst room; memory is taken only while it lasts.
+TX_QUEUE_BATCHES = 16
+PRIORITIES = (
+    "control", "real_time", "interactive_high", "interactive_low", "data_high", "data", "data_low", "background"
+)  # fmt: skip
+
 #: set beside ``$ZENOH_RUNTIME`` when tokenring chose it (not the user): a node started from such
 #: a process gets :data:`NODE_RUNTIME`, where a user's own runtime would be passed on as it is
 RUNTIME_CHOSEN = "TOKENRING_ZENOH_RUNTIME_CHOSEN"
@@ -110,6 +122,9 @@ def make_config(
         # over 3 KB to a peer on this host (a round master's ``rounds`` answer): a third of a
         # node's RSS. The token's frames (514 bytes) never go through it.
         config.insert_json5("transport/shared_memory/transport_optimization/enabled", "false")
+        config.insert_json5(
+            "transport/link/tx/queue/size", json.dumps(dict.fromkeys(PRIORITIES, TX_QUEUE_BATCHES))
+        )
     if listen:
         config.insert_json5("listen/endpoints", json.dumps(list(listen)))
     elif mode == "peer" and not path:
