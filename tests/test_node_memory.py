@@ -22,6 +22,14 @@ NOT_IN_A_BARE_NODE = (
 )  # fmt: skip
 
 
+def ring_at_full_speed(procs, ring_name: str, endpoint: str, nodes: str):
+    """``tokenring up`` of ``nodes`` with no programs and no world, the token at bitrate max."""
+    return procs.tokenring(
+        "up", "--ring", ring_name, "--listen", endpoint, "--nodes", nodes,
+        "--no-programs", "--no-world", "--bitrate", "max",
+    )  # fmt: skip
+
+
 def unwanted(modules: list[str]) -> list[str]:
     """The modules of ``modules`` a bare node must not hold: the list above (and submodules),
     and every CLI verb but ``node``."""
@@ -34,10 +42,7 @@ def test_nodes_without_programs_import_no_numpy_metadata_robot_code_or_other_ver
     procs, ring_name, endpoint
 ):
     # the robot's extension is installed: only lcd, which it gives a resident menu, loads it
-    launcher = procs.tokenring(
-        "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor,lcd",
-        "--no-programs", "--no-world", "--bitrate", "max",
-    )  # fmt: skip
+    launcher = ring_at_full_speed(procs, ring_name, endpoint, "main,motor,lcd")
     with tap(endpoint) as session:
         wait_ring(session, ring_name, [10, 20, 70], timeout=120)
         pids = launcher_pids(session, ring_name)
@@ -76,10 +81,7 @@ def zenoh_shared_memory_kb(pid: int) -> int:
 def test_a_node_that_sends_a_large_answer_maps_no_shared_memory_pool(procs, ring_name, endpoint):
     # Zenoh's default: a 16 MB pool, all of it resident, once a message over 3 KB goes to a
     # local peer; the round master's `rounds` answer (a float per round, up to 1024) is one
-    launcher = procs.tokenring(
-        "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor",
-        "--no-programs", "--no-world", "--bitrate", "max",
-    )  # fmt: skip
+    launcher = ring_at_full_speed(procs, ring_name, endpoint, "main,motor")
     with tap(endpoint) as session:
         wait_ring(session, ring_name, [10, 20], timeout=120)
         pids = launcher_pids(session, ring_name)
@@ -156,10 +158,7 @@ def test_a_visit_maps_no_memory_the_receiving_thread_keeps_its_python_state(proc
     # Zenoh calls the token's callback on a thread Python does not know; were its Python thread
     # state made and deleted per call, CPython would map and unmap a 16 KB frame stack each
     # time and fault its pages in anew: a page fault or more per visit
-    launcher = procs.tokenring(
-        "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor,sonar",
-        "--no-programs", "--no-world", "--bitrate", "max",
-    )  # fmt: skip
+    launcher = ring_at_full_speed(procs, ring_name, endpoint, "main,motor,sonar")
     with tap(endpoint) as session:
         wait_ring(session, ring_name, [10, 20, 30], timeout=120)
         pids = launcher_pids(session, ring_name)
