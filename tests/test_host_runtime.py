@@ -17,6 +17,8 @@ import threading
 import zenoh
 from ringutil import launcher_pids, wait_until
 
+from tokenring.zconfig import HOST_RUNTIME, NODE_RUNTIME, RUNTIME_CHOSEN, node_environment
+
 #: 20 MB in 1 KB messages: the burst that stalled a one-worker router in 1 of 1 runs here
 #: (456 of 20 000 delivered, then the subscriber's face closed)
 BURST = 20_000
@@ -70,3 +72,13 @@ def test_a_burst_of_reliable_puts_through_the_launchers_router_all_arrive(procs,
     assert launcher.poll() is None, "the launcher died"
     launcher.send_signal(signal.SIGTERM)
     assert launcher.wait(30) == 0
+
+
+def test_a_node_gets_the_node_runtime_unless_a_runtime_was_set_after_tokenring_chose_one():
+    chose = {"ZENOH_RUNTIME": HOST_RUNTIME, RUNTIME_CHOSEN: HOST_RUNTIME}
+    assert node_environment({})["ZENOH_RUNTIME"] == NODE_RUNTIME
+    assert node_environment(chose)["ZENOH_RUNTIME"] == NODE_RUNTIME
+    assert RUNTIME_CHOSEN not in node_environment(chose)
+    # a runtime set since (a user's, a test's) wins, even where a marker was inherited
+    assert node_environment({**chose, "ZENOH_RUNTIME": "()"})["ZENOH_RUNTIME"] == "()"
+    assert node_environment({"ZENOH_RUNTIME": "()"})["ZENOH_RUNTIME"] == "()"

@@ -45,8 +45,8 @@ PRIORITIES = (
     "control", "real_time", "interactive_high", "interactive_low", "data_high", "data", "data_low", "background"
 )  # fmt: skip
 
-#: set beside ``$ZENOH_RUNTIME`` when tokenring chose it (not the user): a node started from such
-#: a process gets :data:`NODE_RUNTIME`, where a user's own runtime would be passed on as it is
+#: set beside ``$ZENOH_RUNTIME`` to the runtime tokenring chose (not the user): a node started from
+#: such a process gets :data:`NODE_RUNTIME`, where a runtime set since (the user's) is passed on
 RUNTIME_CHOSEN = "TOKENRING_ZENOH_RUNTIME_CHOSEN"
 
 #: the token's subscriber runs its callback on the Zenoh thread that received the frame
@@ -156,7 +156,8 @@ def node_environment(base: Mapping[str, str] | None = None) -> dict[str, str]:
     """The environment for a node (or bare-ring) process: ``base`` (default ``os.environ``)
     with :data:`NODE_RUNTIME`, unless the user set ``$ZENOH_RUNTIME`` there."""
     env = dict(os.environ if base is None else base, PYTHONUNBUFFERED="1")
-    if env.pop(RUNTIME_CHOSEN, None) or "ZENOH_RUNTIME" not in env:
+    chosen = env.pop(RUNTIME_CHOSEN, None)
+    if env.get("ZENOH_RUNTIME", chosen) == chosen:  # unset, or still the runtime tokenring chose
         env["ZENOH_RUNTIME"] = NODE_RUNTIME
     return env
 
@@ -165,8 +166,7 @@ def use_host_runtime() -> None:
     """Give this process :data:`HOST_RUNTIME` (and the nodes it starts :data:`NODE_RUNTIME`),
     unless the user set ``$ZENOH_RUNTIME``; must run before the process's first Zenoh session."""
     if "ZENOH_RUNTIME" not in os.environ:
-        os.environ["ZENOH_RUNTIME"] = HOST_RUNTIME
-        os.environ[RUNTIME_CHOSEN] = "1"
+        os.environ["ZENOH_RUNTIME"] = os.environ[RUNTIME_CHOSEN] = HOST_RUNTIME
 
 
 def open_session(config: zenoh.Config) -> zenoh.Session:
