@@ -15,7 +15,7 @@ from collections.abc import Callable
 from typing import Any
 
 from tokenring.errors import TokenRingError
-from tokenring.zconfig import use_host_runtime
+from tokenring.zconfig import use_host_runtime, use_node_runtime
 
 Runner = Callable[[argparse.Namespace], int]
 
@@ -114,7 +114,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     _setup_logging(args.log_level)
-    use_host_runtime()  # the launcher's router and every node it starts
+    if args.command == "node":  # a node started by hand (a launcher's nodes get it through their environment)
+        use_node_runtime()
+    else:
+        use_host_runtime()  # the launcher's router, the tools; its nodes get NODE_RUNTIME
     try:
         return runners[args.command](args)
     except TokenRingError as exc:

@@ -162,6 +162,13 @@ def node_environment(base: Mapping[str, str] | None = None) -> dict[str, str]:
     return env
 
 
+def use_node_runtime() -> None:
+    """Give this process, a node started by hand, :data:`NODE_RUNTIME`, unless the user set
+    ``$ZENOH_RUNTIME``; must run before the process's first Zenoh session."""
+    if "ZENOH_RUNTIME" not in os.environ:
+        os.environ["ZENOH_RUNTIME"] = NODE_RUNTIME
+
+
 def use_host_runtime() -> None:
     """Give this process :data:`HOST_RUNTIME` (and the nodes it starts :data:`NODE_RUNTIME`),
     unless the user set ``$ZENOH_RUNTIME``; must run before the process's first Zenoh session."""
