@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -88,6 +90,23 @@ def wait_ring(
 def launcher_pids(session: zenoh.Session, ring: str) -> list[int]:
     status = control(session, ring, "launcher", "status")
     return [n["pid"] for n in status["nodes"]]
+
+
+def answering_launcher_pids(session: zenoh.Session, ring: str) -> list[int]:
+    """:func:`launcher_pids`, or none while the launcher does not answer yet (for wait_until)."""
+    try:
+        return launcher_pids(session, ring)
+    except AssertionError:
+        return []
+
+
+def thread_names(pid: int) -> set[str]:
+    """The names of a process's threads (``/proc/PID/task/*/comm``)."""
+    names = set()
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        with contextlib.suppress(OSError):
+            names.add(Path(f"/proc/{pid}/task/{tid}/comm").read_text().strip())
+    return names
 
 
 PROBE_PROGRAM = '''

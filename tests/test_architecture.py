@@ -12,7 +12,7 @@ import tomllib
 from pathlib import Path
 
 from conftest import REPO, run_tokenring
-from ringutil import launcher_pids, tap, wait_until
+from ringutil import answering_launcher_pids, tap, wait_until
 
 LINT = [
     sys.executable,
@@ -98,14 +98,9 @@ def test_a_system_that_is_not_a_robot_runs_on_the_ring(procs, ring_name, endpoin
         ]
 
     with tap(endpoint) as session:
-
-        def pids() -> list[int]:
-            try:
-                return launcher_pids(session, ring_name)
-            except AssertionError:  # not answering yet
-                return []
-
-        procs.watch(wait_until(pids, 60, "the launcher to answer"))
+        procs.watch(
+            wait_until(lambda: answering_launcher_pids(session, ring_name), 60, "the launcher to answer")
+        )
         got = wait_until(lambda: len(rallies()) >= 30 and rallies(), 120, "30 rallies between ping and pong")
     launcher.send_signal(signal.SIGTERM)
     assert launcher.wait(30) == 0

@@ -11,14 +11,11 @@ that every message of a burst arrives and the launcher still answers.
 
 from __future__ import annotations
 
-import contextlib
-import os
 import signal
 import threading
-from pathlib import Path
 
 import zenoh
-from ringutil import launcher_pids, stats, wait_until
+from ringutil import answering_launcher_pids, launcher_pids, stats, thread_names, wait_until
 
 from tokenring.zconfig import HOST_RUNTIME, NODE_RUNTIME, RUNTIME_CHOSEN, node_environment
 
@@ -54,14 +51,9 @@ def test_a_burst_of_reliable_puts_through_the_launchers_router_all_arrive(procs,
             all_in.set()
 
     with client(endpoint) as listener, client(endpoint) as sender:
-
-        def pids() -> list[int]:
-            try:
-                return launcher_pids(listener, ring_name)
-            except AssertionError:  # not answering yet
-                return []
-
-        procs.watch(wait_until(pids, 60, "the launcher to answer"))
+        procs.watch(
+            wait_until(lambda: answering_launcher_pids(listener, ring_name), 60, "the launcher to answer")
+        )
         subscriber = listener.declare_subscriber(key, count)
         publisher = sender.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         wait_until(lambda: publisher.matching_status.matching, 30, "the publisher to see the subscriber")
@@ -87,22 +79,13 @@ def test_a_node_gets_the_node_runtime_unless_a_runtime_was_set_after_tokenring_c
     assert node_environment({"ZENOH_RUNTIME": "()"})["ZENOH_RUNTIME"] == "()"
 
 
-def zenoh_thread_names(pid: int) -> set[str]:
-    """Names of the process's threads (``/proc/PID/task/*/comm``)."""
-    names = set()
-    for tid in os.listdir(f"/proc/{pid}/task"):
-        with contextlib.suppress(OSError):
-            names.add(Path(f"/proc/{pid}/task/{tid}/comm").read_text().strip())
-    return names
-
-
 def test_a_node_started_by_hand_sends_on_its_receiving_thread(procs, ring_name, endpoint):
     node = procs.tokenring(
         "--log-level", "warning", "node", "--id", "37", "--ring", ring_name, "--no-store", "--listen", endpoint,
     )  # fmt: skip
     with client(endpoint) as session:
         wait_until(lambda: stats(session, ring_name, 37), 60, "node 37 to answer")
-        names = zenoh_thread_names(node.pid)
+        names = thread_names(node.pid)
     node.send_signal(signal.SIGTERM)
     assert node.wait(30) == 0
     assert "rx-0" in names and not any(n.startswith("tx-") for n in names), names

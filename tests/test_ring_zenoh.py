@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import itertools
 import json
 import os
@@ -17,7 +16,16 @@ from pathlib import Path
 import pytest
 import zenoh
 from conftest import REPO, pid_alive, run_tokenring, wait_gone
-from ringutil import control, launcher_pids, stats, tap, wait_ring, wait_until, write_probe_programs
+from ringutil import (
+    control,
+    launcher_pids,
+    stats,
+    tap,
+    thread_names,
+    wait_ring,
+    wait_until,
+    write_probe_programs,
+)
 
 from tokenring import keys
 from tokenring.frame import Token
@@ -446,11 +454,7 @@ def test_bad_command_line_input_exits_2_with_a_message():
 
 def zenoh_threads(pid: int) -> set[str]:
     """The names of a process's Zenoh runtime threads (rx-0, tx-0, acc-0, ...)."""
-    names = set()
-    for tid in os.listdir(f"/proc/{pid}/task"):
-        with contextlib.suppress(OSError):
-            names.add(Path(f"/proc/{pid}/task/{tid}/comm").read_text().strip())
-    return {n for n in names if n.split("-")[0] in ("rx", "tx", "net", "acc", "app")}
+    return {n for n in thread_names(pid) if n.split("-")[0] in ("rx", "tx", "net", "acc", "app")}
 
 
 def test_nodes_receive_and_send_on_one_zenoh_thread_unless_the_user_sets_the_runtime(
