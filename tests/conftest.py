@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from tokenring.cliutil import free_port as _free_port
+from tokenring.zconfig import RUNTIME_CHOSEN
 
 REPO = Path(__file__).resolve().parent.parent
 TOKENRING = [sys.executable, "-m", "tokenring"]
@@ -118,6 +119,20 @@ def program_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
     store = tmp_path_factory.mktemp("store")
     os.environ["TOKENRING_STORE"] = str(store)
     return store
+
+
+@pytest.fixture(autouse=True)
+def zenoh_runtime_unchanged() -> Iterator[None]:
+    """A test that runs the CLI in pytest's process sets the runtime variables there; later tests'
+    processes must not inherit them (a node started by hand once ran the router's runtime)."""
+    keys = ("ZENOH_RUNTIME", RUNTIME_CHOSEN)
+    before = {key: os.environ.get(key) for key in keys}
+    yield
+    for key, value in before.items():
+        if value is None:
+            os.environ.pop(key, None)
+        else:
+            os.environ[key] = value
 
 
 @pytest.hookimpl(hookwrapper=True)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import signal
 import threading
 
+import pytest
 import zenoh
 from ringutil import answering_launcher_pids, launcher_pids, stats, thread_names, wait_until
 
@@ -79,9 +80,15 @@ def test_a_node_gets_the_node_runtime_unless_a_runtime_was_set_after_tokenring_c
     assert node_environment({"ZENOH_RUNTIME": "()"})["ZENOH_RUNTIME"] == "()"
 
 
-def test_a_node_started_by_hand_sends_on_its_receiving_thread(procs, ring_name, endpoint):
+@pytest.mark.parametrize(
+    "inherited",
+    [{}, {"ZENOH_RUNTIME": HOST_RUNTIME, RUNTIME_CHOSEN: HOST_RUNTIME}],
+    ids=["own-shell", "shell-of-a-tokenring-process"],
+)
+def test_a_node_started_by_hand_sends_on_its_receiving_thread(procs, ring_name, endpoint, inherited):
     node = procs.tokenring(
         "--log-level", "warning", "node", "--id", "37", "--ring", ring_name, "--no-store", "--listen", endpoint,
+        env=inherited,
     )  # fmt: skip
     with client(endpoint) as session:
         wait_until(lambda: stats(session, ring_name, 37), 60, "node 37 to answer")

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping, MutableMapping, Sequence
 from typing import Any
 
 import zenoh
@@ -156,17 +156,20 @@ def node_environment(base: Mapping[str, str] | None = None) -> dict[str, str]:
     """The environment for a node (or bare-ring) process: ``base`` (default ``os.environ``)
     with :data:`NODE_RUNTIME`, unless the user set ``$ZENOH_RUNTIME`` there."""
     env = dict(os.environ if base is None else base, PYTHONUNBUFFERED="1")
-    chosen = env.pop(RUNTIME_CHOSEN, None)
-    if env.get("ZENOH_RUNTIME", chosen) == chosen:  # unset, or still the runtime tokenring chose
-        env["ZENOH_RUNTIME"] = NODE_RUNTIME
+    _choose_node_runtime(env)
     return env
 
 
 def use_node_runtime() -> None:
     """Give this process, a node started by hand, :data:`NODE_RUNTIME`, unless the user set
     ``$ZENOH_RUNTIME``; must run before the process's first Zenoh session."""
-    if "ZENOH_RUNTIME" not in os.environ:
-        os.environ["ZENOH_RUNTIME"] = NODE_RUNTIME
+    _choose_node_runtime(os.environ)
+
+
+def _choose_node_runtime(env: MutableMapping[str, str]) -> None:
+    chosen = env.pop(RUNTIME_CHOSEN, None)
+    if env.get("ZENOH_RUNTIME", chosen) == chosen:  # unset, or still the runtime tokenring chose
+        env["ZENOH_RUNTIME"] = NODE_RUNTIME
 
 
 def use_host_runtime() -> None:
