@@ -20,8 +20,9 @@ from tokenring.errors import TransportError, UsageError
 #: instead of two receiving and a third sending, handing each frame to one another. Zenoh's
 #: housekeeping (net, acc, app) keeps its own threads: handed over to the same worker too, a
 #: node leaving the ring lost the token about once in 30 handovers (tests/test_ring_zenoh.py,
-#: the late joiner), never in 80 with them apart. bench/RESULTS.md measures this against
-#: Zenoh's defaults; a user's own ``$ZENOH_RUNTIME`` wins.
+#: the late joiner), never in 80 with them apart. ``acc`` alone handed over makes a 64-node
+#: ring's hop ~13 % faster but lost the token in 1 of 80 late joins (bench/RESULTS.md, run 5).
+#: bench/RESULTS.md measures this against Zenoh's defaults; a user's own ``$ZENOH_RUNTIME`` wins.
 NODE_RUNTIME = "(rx:(worker_threads:1),tx:(handover:rx))"
 
 #: the runtime of a process that hosts a router or many sessions (``tokenring up``, ``bench``,
