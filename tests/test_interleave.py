@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -147,6 +149,7 @@ def test_an_existing_output_file_is_left_alone(tmp_path):
     assert result.returncode == 2 and "exists" in result.stderr and out.read_text() == "{}"
 
 
+@pytest.mark.timeout(240)
 def test_ctrl_c_between_windows_ends_both_rings_frozen_or_not(procs):
     from conftest import wait_gone
     from ringutil import processes, wait_until
@@ -158,9 +161,18 @@ def test_ctrl_c_between_windows_ends_both_rings_frozen_or_not(procs):
         stderr=subprocess.PIPE,
         text=True,
     )
-    for line in driver.stderr:  # the windows have begun: one ring frozen, the other running
-        if "pairs of" in line:
-            break
+    said: list[str] = []
+    begun = threading.Event()
+
+    def read_stderr() -> None:  # read to the end: a full pipe would stall the driver or a ring
+        for line in driver.stderr:
+            said.append(line)
+            if "pairs of" in line:  # the windows have begun: one ring frozen, the other running
+                begun.set()
+        begun.set()
+
+    threading.Thread(target=read_stderr, daemon=True).start()
+    assert begun.wait(120) and driver.poll() is None, "".join(said[-20:])
     children = [pid for pid, (ppid, _) in processes().items() if ppid == driver.pid]
     assert len(children) >= 6  # three bare processes, three nodes
 
@@ -170,5 +182,12 @@ def test_ctrl_c_between_windows_ends_both_rings_frozen_or_not(procs):
 
     wait_until(frozen, timeout=60, what="the ring not measured to be frozen")
     driver.send_signal(2)  # SIGINT
-    assert driver.wait(timeout=120) == 130
+    try:
+        code = driver.wait(timeout=90)
+    except subprocess.TimeoutExpired:
+        heard = len(said)
+        driver.send_signal(signal.SIGUSR1)  # the CLI prints every thread's stack
+        wait_until(lambda: len(said) > heard + 3, 10, "the driver's stacks")
+        pytest.fail(f"the driver did not stop within 90 s of Ctrl-C; it said: {''.join(said[-60:])}")
+    assert code == 130, "".join(said[-20:])
     assert wait_gone(children, timeout=30) == []

@@ -490,3 +490,23 @@ def test_a_bad_zenoh_runtime_is_named_without_a_traceback(ring_name):
     assert result.returncode == 2  # a usage error: the user's environment, as a bad --zenoh-config
     assert "$ZENOH_RUNTIME='(rx: 3)' is not a Zenoh runtime configuration" in result.stderr, result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_sigusr1_prints_where_every_thread_is_and_the_node_goes_on(procs, ring_name, endpoint):
+    node = procs.tokenring(
+        "--log-level", "warning", "node", "--id", "37", "--ring", ring_name, "--no-store", "--listen", endpoint,
+        stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    said: list[str] = []
+    threading.Thread(target=lambda: said.extend(node.stderr), daemon=True).start()
+    with tap(endpoint) as session:
+        wait_until(lambda: stats(session, ring_name, 37), 60, "node 37 to answer")
+        node.send_signal(signal.SIGUSR1)
+        wait_until(lambda: any("_watch" in line for line in said), 30, "the watchdog thread's stack")
+        assert any(line.startswith("Current thread 0x") for line in said), said
+        before = stats(session, ring_name, 37)[37]["stats"]["visits"]
+        wait_until(
+            lambda: stats(session, ring_name, 37)[37]["stats"]["visits"] > before, 30, "node 37 to go on"
+        )
+    node.send_signal(signal.SIGTERM)
+    assert node.wait(30) == 0

@@ -8,8 +8,10 @@ Exit codes: 0 success; 1 the run failed (a node died, an invariant broke, nobody
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import importlib
 import logging
+import signal
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -114,6 +116,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     _setup_logging(args.log_level)
+    # `kill -USR1 PID` prints where every thread of a stuck tokenring process is, and goes on
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     if args.command == "node":  # a node started by hand (a launcher's nodes get it through their environment)
         use_node_runtime()
     else:
