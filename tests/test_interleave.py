@@ -160,6 +160,9 @@ def test_ctrl_c_between_windows_ends_both_rings_frozen_or_not(procs):
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
+        # as a shell's foreground job: one started in the background (`cmd &`, nohup) inherits
+        # SIGINT ignored, and Python then raises no KeyboardInterrupt for it
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     said: list[str] = []
     begun = threading.Event()

@@ -105,6 +105,17 @@ def build_parser(verb: str | None = None) -> tuple[argparse.ArgumentParser, dict
     return parser, runners
 
 
+def _stacks_on_sigusr1() -> None:
+    """`kill -USR1 PID` prints where every thread of a stuck tokenring process is, and it goes on;
+    only where stderr is a real file (a caller running :func:`main` in its own process, e.g.
+    under pytest's capture, keeps its signals)."""
+    try:
+        sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):  # io.UnsupportedOperation is an OSError
+        return
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
         parser, runners = build_parser(requested_verb(sys.argv[1:] if argv is None else argv))
@@ -116,8 +127,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     _setup_logging(args.log_level)
-    # `kill -USR1 PID` prints where every thread of a stuck tokenring process is, and goes on
-    faulthandler.register(signal.SIGUSR1, all_threads=True)
+    _stacks_on_sigusr1()
     if args.command == "node":  # a node started by hand (a launcher's nodes get it through their environment)
         use_node_runtime()
     else:
