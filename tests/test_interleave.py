@@ -3,6 +3,7 @@ one frozen while the other runs."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -190,7 +191,8 @@ def test_ctrl_c_between_windows_ends_both_rings_frozen_or_not(procs):
     except subprocess.TimeoutExpired:
         heard = len(said)
         driver.send_signal(signal.SIGUSR1)  # the CLI prints every thread's stack
-        wait_until(lambda: len(said) > heard + 3, 10, "the driver's stacks")
+        with contextlib.suppress(AssertionError):  # no stacks: still fail with what it said
+            wait_until(lambda: len(said) > heard + 3, 10, "the driver's stacks")
         pytest.fail(f"the driver did not stop within 90 s of Ctrl-C; it said: {''.join(said[-60:])}")
     assert code == 130, "".join(said[-20:])
     assert wait_gone(children, timeout=30) == []
