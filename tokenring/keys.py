@@ -7,6 +7,8 @@ key                                      what travels on it
 ``tokenring/<ring>/node/<ID>``           liveliness token held by every live node
 ``tokenring/<ring>/ack/<ID>``            pass acknowledgements and stale-token notices to ``ID``
 ``tokenring/<ring>/ring/event``          ring events: a node excluded, a node rejoining
+``tokenring/<ring>/view/<ID>``           queryable of a node in a peer ring: the IDs it passes among
+``tokenring/<ring>/view/launcher``       the same from the launcher: the IDs whose liveliness it sees
 ``tokenring/<ring>/ctl/<ID>/<verb>``     queryables of node ``ID``: ``stats``, ``fault``, ...
 ``tokenring/<ring>/ctl/launcher/<verb>`` queryables of the launcher (``status``)
 ``tokenring/<ring>/pc/<verb>``           the PC link ("serial line") to main
@@ -59,6 +61,12 @@ def ack(ring: str, node_id: int | str) -> str:
 
 def ring_event(ring: str) -> str:
     return f"{PREFIX}/{ring}/ring/event"
+
+
+def ring_view(ring: str, who: int | str = "*") -> str:
+    """Where a peer ring's nodes (and its launcher) tell a joiner which IDs they see live: on a
+    peer-to-peer Zenoh network a liveliness query reaches only the peers already linked."""
+    return f"{PREFIX}/{ring}/view/{who}"
 
 
 def control(ring: str, node_id: int | str, verb: str = "**") -> str:

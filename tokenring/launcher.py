@@ -31,6 +31,7 @@ from tokenring.control import answer_query
 from tokenring.errors import TransportError, UsageError
 from tokenring.launchio import ExitWatch, PrefixedOutput
 from tokenring.ring import EVENT_RING_STOPPING, RING_EVENT
+from tokenring.transport.zenoh import RingViewServer, peer_to_peer
 from tokenring.zconfig import make_config, node_environment, open_session
 
 #: exit code of a node process killed on purpose by the ``crash`` fault
@@ -184,6 +185,7 @@ class Launcher:
         self._respawn_due: dict[int, float] = {}  # node ID -> when --respawn starts it again
         self._stop_signal: int | None = None
         self._queryable: Any = None
+        self._view_server: Any = None
         self.shutdown_reason: str | None = None
         self.booting = False  # programs are being downloaded over the ring (``up``)
         width = max(
@@ -406,6 +408,8 @@ class Launcher:
             keys.control(self.ring, "launcher", "*"),
             lambda query: answer_query(query, verbs.handlers, "the launcher"),
         )
+        if self.transport == "zenoh" and peer_to_peer(self.session):
+            self._view_server = RingViewServer(self.session, self.ring)
         where = self.endpoint or ", ".join(self.node_connect())
         self.say(
             f"ring {self.ring!r}: starting {len(self.plans)} nodes "
@@ -610,6 +614,9 @@ class Launcher:
             with contextlib.suppress(zenoh.ZError):
                 self._queryable.undeclare()
             self._queryable = None
+        if self._view_server is not None:
+            self._view_server.close()
+            self._view_server = None
         if self.session is not None:
             self.session.close()
             self.session = None

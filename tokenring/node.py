@@ -306,6 +306,7 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         )
         self._token_thread.start()
         self._defer = self._frames.put
+        self.transport.active_view = lambda: self.membership.active
         members = self.transport.open(self._on_frame, self._on_message, self._on_membership)
         for member in members:
             self.membership.set_live(member, True)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import threading
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 
 from tokenring.errors import FrameError, TokenRingError, TransportClosed, TransportError
 
@@ -33,6 +33,9 @@ class Transport(ABC):
         self._closed = False
         self._opened = False
         self._lock = threading.Lock()
+        #: the IDs this node passes the token among (set by the node before :meth:`open`); a
+        #: backend whose nodes see only part of the network tells joiners this
+        self.active_view: Callable[[], Iterable[int]] | None = None
 
     # -- life cycle ---------------------------------------------------------------------------
     def open(

@@ -9,7 +9,9 @@ the ring.
 from __future__ import annotations
 
 import contextlib
+import logging
 import threading
+import time
 
 import zenoh
 
@@ -17,6 +19,60 @@ from tokenring import keys
 from tokenring.tokenpath import payload_call
 from tokenring.transport.base import FrameHandler, MembershipHandler, MessageHandler, Transport
 from tokenring.zconfig import hop_callback
+
+log = logging.getLogger("tokenring.transport")
+
+#: how long a joining peer waits for the links that make its view of the ring whole
+JOIN_WAIT_S = 3.0
+#: how often it asks the ring again meanwhile (a liveliness change wakes it at once)
+VIEW_POLL_S = 0.05
+
+
+def peer_to_peer(session: zenoh.Session) -> bool:
+    """A peer reaching no router: liveliness queries see only the peers it has linked to."""
+    return not list(session.info.routers_zid())
+
+
+def ring_view(session: zenoh.Session, ring: str) -> set[int]:
+    """The IDs the ring's nodes see live (their union); from its launcher if no node answers."""
+    nodes: set[int] = set()
+    launchers: set[int] = set()
+    for reply in session.get(keys.ring_view(ring, "*"), timeout=1.0):
+        if reply.ok is None:
+            continue
+        ids = {i for i in bytes(reply.ok.payload.to_bytes()) if 1 <= i <= 255}
+        (nodes if keys.id_from_key(str(reply.ok.key_expr)) is not None else launchers).update(ids)
+    return nodes or launchers
+
+
+class RingViewServer:
+    """The launcher's answer to joiners (:func:`ring_view`): the node IDs whose liveliness it
+    sees. It links to every node it starts, so a joiner linked to it alone still learns them."""
+
+    def __init__(self, session: zenoh.Session, ring: str) -> None:
+        self._live: set[int] = set()
+        self._lock = threading.Lock()
+
+        def on_liveliness(sample: zenoh.Sample) -> None:
+            node_id = keys.id_from_key(str(sample.key_expr))
+            if node_id is not None:
+                with self._lock:
+                    (self._live.add if sample.kind == zenoh.SampleKind.PUT else self._live.discard)(node_id)
+
+        key = keys.ring_view(ring, "launcher")
+        self._subscriber = session.liveliness().declare_subscriber(
+            keys.node(ring, "*"), on_liveliness, history=True
+        )
+        self._queryable = session.declare_queryable(key, lambda query: query.reply(key, self._answer()))
+
+    def _answer(self) -> bytes:
+        with self._lock:
+            return bytes(sorted(self._live))
+
+    def close(self) -> None:
+        for entity in (self._queryable, self._subscriber):
+            with contextlib.suppress(zenoh.ZError):
+                entity.undeclare()
 
 
 class ZenohTransport(Transport):
@@ -33,6 +89,9 @@ class ZenohTransport(Transport):
         self._keep: list[object] = []
         self._token: zenoh.LivelinessToken | None = None
         self._event_publisher: zenoh.Publisher | None = None
+        self._seen: set[int] = set()  # whose liveliness this node sees
+        self._seen_changed = threading.Condition()
+        self.join_wait_s = JOIN_WAIT_S
 
     def _open(
         self, on_frame: FrameHandler, on_message: MessageHandler, on_membership: MembershipHandler
@@ -44,14 +103,18 @@ class ZenohTransport(Transport):
         def liveliness_callback(sample: zenoh.Sample) -> None:
             node_id = keys.id_from_key(str(sample.key_expr))
             if node_id is not None:
-                on_membership(node_id, sample.kind == zenoh.SampleKind.PUT)
+                alive = sample.kind == zenoh.SampleKind.PUT
+                with self._seen_changed:
+                    (self._seen.add if alive else self._seen.discard)(node_id)
+                    self._seen_changed.notify_all()
+                on_membership(node_id, alive)
 
-        members: set[int] = set()
         for reply in session.liveliness().get(keys.node(ring, "*"), timeout=2.0):
             if reply.ok is not None:
                 node_id = keys.id_from_key(str(reply.ok.key_expr))
                 if node_id is not None:
-                    members.add(node_id)
+                    with self._seen_changed:
+                        self._seen.add(node_id)
         self._keep.append(
             session.liveliness().declare_subscriber(keys.node(ring, "*"), liveliness_callback, history=True)
         )
@@ -63,8 +126,44 @@ class ZenohTransport(Transport):
         self._event_publisher = session.declare_publisher(
             keys.ring_event(ring), express=True, congestion_control=zenoh.CongestionControl.DROP
         )
-        members.discard(self.node_id)
-        return members
+        if peer_to_peer(session):
+            self._keep.append(session.declare_queryable(keys.ring_view(ring, self.node_id), self._tell_view))
+            self._await_whole_view()
+        with self._seen_changed:
+            return self._seen - {self.node_id}
+
+    def _tell_view(self, query: zenoh.Query) -> None:
+        """Answer a joiner with the IDs this node passes among, once it is in the ring itself."""
+        if self._token is None:
+            return
+        with self._seen_changed:
+            view = set(self.active_view() if self.active_view is not None else self._seen)
+        query.reply(keys.ring_view(self.ring, self.node_id), bytes(sorted(view | {self.node_id})))
+
+    def _await_whole_view(self) -> None:
+        """Wait until liveliness shows every node the ring's members (else its launcher) see.
+
+        A peer answers liveliness queries with its own token only, so a joiner that has not yet
+        linked to every node (gossip links them one by one) would see part of the ring, pass the
+        token to the wrong successor and so lose it. Gives up after :attr:`join_wait_s`, saying
+        which nodes it never saw."""
+        deadline = time.monotonic() + self.join_wait_s
+        while True:
+            wanted = ring_view(self.session, self.ring)
+            with self._seen_changed:
+                missing = wanted - self._seen - {self.node_id}
+                left = deadline - time.monotonic()
+                if not missing:
+                    return
+                if left <= 0:
+                    break
+                self._seen_changed.wait(min(VIEW_POLL_S, left))
+        log.warning(
+            "node %d joins seeing no liveliness of %s, which the ring lists, after %.1f s",
+            self.node_id,
+            sorted(missing),
+            self.join_wait_s,
+        )
 
     def _publisher(self, did: int, table: dict[int, zenoh.Publisher], key: str) -> zenoh.Publisher:
         publisher = table.get(did)
