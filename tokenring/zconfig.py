@@ -21,7 +21,9 @@ from tokenring.errors import TransportError, UsageError
 #: housekeeping (net, acc, app) keeps its own threads: handed over to the same worker too, a
 #: node leaving the ring lost the token about once in 30 handovers (tests/test_ring_zenoh.py,
 #: the late joiner), never in 80 with them apart. ``acc`` alone handed over makes a 64-node
-#: ring's hop ~13 % faster but lost the token in 1 of 80 late joins (bench/RESULTS.md, run 5).
+#: ring's hop ~13 % faster but lost the token in 1 of 80 late joins (bench/RESULTS.md, run 5);
+#: with joiners waiting for a whole view it lost none in 125, but twice the leave cost a
+#: regeneration (the token unseen for 63 ms after the leaver's session closed).
 #: bench/RESULTS.md measures this against Zenoh's defaults; a user's own ``$ZENOH_RUNTIME`` wins.
 NODE_RUNTIME = "(rx:(worker_threads:1),tx:(handover:rx))"
 
