@@ -685,6 +685,11 @@ def section_profile(ctx: Context) -> dict[str, Any]:
     return out
 
 
+def _ms(value: float | None) -> str:
+    """A recovery median for the progress line: 0.1 ms is all ten trials can tell."""
+    return "none (no trial recovered)" if value is None else f"{value:.1f} ms"
+
+
 def section_recovery(ctx: Context) -> dict[str, Any]:
     from bench.recovery import run as run_recovery
 
@@ -693,7 +698,7 @@ def section_recovery(ctx: Context) -> dict[str, Any]:
     kinds = ["crash", "hang", "loss", "heal"]
     report = run_recovery(trials, kinds, "adaptive", quiet=True)
     for kind, s in report["summary"].items():
-        ctx.progress.note(f"{kind}: median {s['median_ms']} ms")
+        ctx.progress.note(f"{kind}: median {_ms(s['median_ms'])}")
     from tokenring.wiretap import WireTapError, tcpdump_path
 
     try:
@@ -704,7 +709,7 @@ def section_recovery(ctx: Context) -> dict[str, Any]:
     ctx.progress.say(f"recovery on direct links (the wire tapped), {trials} trials each")
     links = run_recovery(trials, kinds, "adaptive", quiet=True, topology="links")
     for kind, s in links["summary"].items():
-        ctx.progress.note(f"links {kind}: median {s['median_ms']} ms")
+        ctx.progress.note(f"links {kind}: median {_ms(s['median_ms'])}")
     report["links"] = links
     return report
 

@@ -250,3 +250,8 @@ def test_a_killed_benchmark_takes_its_bare_ring_with_it(procs):
     bench.wait(HANG_GUARD_S)
     left = gone_or_killed(ring)
     assert not left, f"bare ring processes outlived the killed benchmark: {left}"
+
+
+def test_recovery_progress_prints_medians_to_a_tenth_of_a_ms_and_names_a_missing_one():
+    assert suite._ms(12.993187494430458) == "13.0 ms"
+    assert suite._ms(None) == "none (no trial recovered)"
