@@ -118,7 +118,16 @@ def test_a_joiner_that_never_sees_a_listed_node_joins_after_its_wait_and_says_so
     del node_10
 
 
-def test_the_launcher_answers_for_the_nodes_it_sees_until_a_node_can(sessions, ring_name):
+def view_answers(asker: zenoh.Session, ring: str) -> dict[str, set[int]]:
+    """Who answers ``view/*`` for this session, and with which IDs."""
+    found = {}
+    for reply in asker.get(f"tokenring/{ring}/view/*", timeout=5.0):
+        if reply.ok is not None:
+            found[str(reply.ok.key_expr).rsplit("/", 1)[-1]] = set(reply.ok.payload.to_bytes())
+    return found
+
+
+def test_the_launchers_view_follows_the_liveliness_it_sees(sessions, ring_name):
     port_launcher = free_port()
     launcher = peer(listen=port_launcher)
     sessions.append(launcher)
@@ -131,16 +140,43 @@ def test_the_launcher_answers_for_the_nodes_it_sees_until_a_node_can(sessions, r
     ]
     asker = peer(connect=port_launcher)
     sessions.append(asker)
-
-    def answers() -> dict[str, set[int]]:
-        found = {}
-        for reply in asker.get(f"tokenring/{ring_name}/view/*", timeout=5.0):
-            if reply.ok is not None:
-                found[str(reply.ok.key_expr).rsplit("/", 1)[-1]] = set(reply.ok.payload.to_bytes())
-        return found
-
-    wait_until(lambda: answers() == {"launcher": {10, 30}}, 30, "the launcher to list 10 and 30")
+    wait_until(
+        lambda: view_answers(asker, ring_name) == {"launcher": {10, 30}}, 30, "the launcher to list 10 and 30"
+    )
     tokens[1].undeclare()
-    wait_until(lambda: answers() == {"launcher": {10}}, 30, "the launcher to drop 30")
+    wait_until(lambda: view_answers(asker, ring_name) == {"launcher": {10}}, 30, "the launcher to drop 30")
     server.close()
     tokens[0].undeclare()
+
+
+def test_a_nodes_view_outweighs_the_launchers(sessions, ring_name):
+    """30 is live (the launcher sees it) but out of the ring (node 10 does not list it, as for a
+    hung node): the joiner must not wait for 30, which it can never see."""
+    port_launcher = free_port()
+    port_10 = free_port(avoid=[port_launcher])
+    port_40 = free_port(avoid=[port_launcher, port_10])
+    transport = joiner(sessions, ring_name, 40, connect=port_10, listen=port_40)
+    launcher = peer(listen=port_launcher, connect=port_40)
+    sessions.append(launcher)
+    server = RingViewServer(launcher, ring_name)
+    asked = threading.Event()
+    node_10 = ring_node(sessions, ring_name, 10, [10], asked, listen=port_10, connect=port_launcher)
+    node_30 = peer(connect=port_launcher)
+    sessions.append(node_30)
+    token_30 = node_30.liveliness().declare_token(f"tokenring/{ring_name}/node/30")
+    asker = peer(connect=port_launcher)
+    sessions.append(asker)
+    wait_until(
+        lambda: view_answers(asker, ring_name).get("launcher") == {10, 30},
+        30,
+        "the launcher to list 10 and 30",
+    )
+    transport.join_wait_s = 120.0  # the clock must not end the wait: node 10's answer must
+    thread, result = open_in_background(transport)
+    thread.join(60)
+    assert not thread.is_alive(), "the joiner waited for 30, which only the launcher lists"
+    assert asked.is_set() and result["members"] == {10}
+    transport.close()
+    server.close()
+    token_30.undeclare()
+    del node_10

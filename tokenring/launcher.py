@@ -185,7 +185,7 @@ class Launcher:
         self._respawn_due: dict[int, float] = {}  # node ID -> when --respawn starts it again
         self._stop_signal: int | None = None
         self._queryable: Any = None
-        self._view_server: Any = None
+        self._view_server: RingViewServer | None = None
         self.shutdown_reason: str | None = None
         self.booting = False  # programs are being downloaded over the ring (``up``)
         width = max(

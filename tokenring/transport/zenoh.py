@@ -45,29 +45,48 @@ def ring_view(session: zenoh.Session, ring: str) -> set[int]:
     return nodes or launchers
 
 
+class LiveIds:
+    """The node IDs whose liveliness a session sees, kept from a liveliness subscriber's samples;
+    :attr:`changed` is notified on every change (a joiner waits on it)."""
+
+    def __init__(self) -> None:
+        self.ids: set[int] = set()
+        self.changed = threading.Condition()
+
+    def add(self, node_id: int) -> None:
+        with self.changed:
+            self.ids.add(node_id)
+            self.changed.notify_all()
+
+    def update(self, sample: zenoh.Sample) -> tuple[int, bool] | None:
+        """Record one sample; returns (node ID, live) or None for a key that names no node."""
+        node_id = keys.id_from_key(str(sample.key_expr))
+        if node_id is None:
+            return None
+        alive = sample.kind == zenoh.SampleKind.PUT
+        with self.changed:
+            (self.ids.add if alive else self.ids.discard)(node_id)
+            self.changed.notify_all()
+        return node_id, alive
+
+    def snapshot(self) -> set[int]:
+        with self.changed:
+            return set(self.ids)
+
+
 class RingViewServer:
     """The launcher's answer to joiners (:func:`ring_view`): the node IDs whose liveliness it
     sees. It links to every node it starts, so a joiner linked to it alone still learns them."""
 
     def __init__(self, session: zenoh.Session, ring: str) -> None:
-        self._live: set[int] = set()
-        self._lock = threading.Lock()
-
-        def on_liveliness(sample: zenoh.Sample) -> None:
-            node_id = keys.id_from_key(str(sample.key_expr))
-            if node_id is not None:
-                with self._lock:
-                    (self._live.add if sample.kind == zenoh.SampleKind.PUT else self._live.discard)(node_id)
-
+        self._live = LiveIds()
         key = keys.ring_view(ring, "launcher")
         self._subscriber = session.liveliness().declare_subscriber(
-            keys.node(ring, "*"), on_liveliness, history=True
+            keys.node(ring, "*"), self._live.update, history=True
         )
-        self._queryable = session.declare_queryable(key, lambda query: query.reply(key, self._answer()))
-
-    def _answer(self) -> bytes:
-        with self._lock:
-            return bytes(sorted(self._live))
+        self._queryable = session.declare_queryable(
+            key, lambda query: query.reply(key, bytes(sorted(self._live.snapshot())))
+        )
 
     def close(self) -> None:
         for entity in (self._queryable, self._subscriber):
@@ -89,8 +108,7 @@ class ZenohTransport(Transport):
         self._keep: list[object] = []
         self._token: zenoh.LivelinessToken | None = None
         self._event_publisher: zenoh.Publisher | None = None
-        self._seen: set[int] = set()  # whose liveliness this node sees
-        self._seen_changed = threading.Condition()
+        self._seen = LiveIds()  # whose liveliness this node sees
         self.join_wait_s = JOIN_WAIT_S
 
     def _open(
@@ -101,20 +119,15 @@ class ZenohTransport(Transport):
         message_callback = payload_call(on_message)
 
         def liveliness_callback(sample: zenoh.Sample) -> None:
-            node_id = keys.id_from_key(str(sample.key_expr))
-            if node_id is not None:
-                alive = sample.kind == zenoh.SampleKind.PUT
-                with self._seen_changed:
-                    (self._seen.add if alive else self._seen.discard)(node_id)
-                    self._seen_changed.notify_all()
-                on_membership(node_id, alive)
+            change = self._seen.update(sample)
+            if change is not None:
+                on_membership(*change)
 
         for reply in session.liveliness().get(keys.node(ring, "*"), timeout=2.0):
             if reply.ok is not None:
                 node_id = keys.id_from_key(str(reply.ok.key_expr))
                 if node_id is not None:
-                    with self._seen_changed:
-                        self._seen.add(node_id)
+                    self._seen.add(node_id)
         self._keep.append(
             session.liveliness().declare_subscriber(keys.node(ring, "*"), liveliness_callback, history=True)
         )
@@ -129,15 +142,13 @@ class ZenohTransport(Transport):
         if peer_to_peer(session):
             self._keep.append(session.declare_queryable(keys.ring_view(ring, self.node_id), self._tell_view))
             self._await_whole_view()
-        with self._seen_changed:
-            return self._seen - {self.node_id}
+        return self._seen.snapshot() - {self.node_id}
 
     def _tell_view(self, query: zenoh.Query) -> None:
         """Answer a joiner with the IDs this node passes among, once it is in the ring itself."""
         if self._token is None:
             return
-        with self._seen_changed:
-            view = set(self.active_view() if self.active_view is not None else self._seen)
+        view = set(self.active_view()) if self.active_view is not None else self._seen.snapshot()
         query.reply(keys.ring_view(self.ring, self.node_id), bytes(sorted(view | {self.node_id})))
 
     def _await_whole_view(self) -> None:
@@ -150,14 +161,14 @@ class ZenohTransport(Transport):
         deadline = time.monotonic() + self.join_wait_s
         while True:
             wanted = ring_view(self.session, self.ring)
-            with self._seen_changed:
-                missing = wanted - self._seen - {self.node_id}
+            with self._seen.changed:
+                missing = wanted - self._seen.ids - {self.node_id}
                 left = deadline - time.monotonic()
                 if not missing:
                     return
                 if left <= 0:
                     break
-                self._seen_changed.wait(min(VIEW_POLL_S, left))
+                self._seen.changed.wait(min(VIEW_POLL_S, left))
         log.warning(
             "node %d joins seeing no liveliness of %s, which the ring lists, after %.1f s",
             self.node_id,
