@@ -3,7 +3,7 @@
 A wheel gets the compiled module beside the package; an editable install (``pip install -e .``)
 gets it in the source tree, where the install imports from. Without a working C compiler the
 install still succeeds with a warning: the token path then runs in Python
-(``tokenring/tokenpath.py``), which ``tokenring bench`` reports.
+(``tokenring/node/tokenpath.py``), which ``tokenring bench`` reports.
 """
 
 from __future__ import annotations

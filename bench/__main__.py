@@ -3,7 +3,7 @@
 import sys
 
 from bench.suite import main
-from tokenring.errors import TokenRingError
+from tokenring import TokenRingError
 
 try:
     sys.exit(main())

@@ -28,12 +28,9 @@ CHUNK_BYTES = 30
 
 def run_bitrate(bitrate: str, repeat: int, store: Path) -> dict[str, Any]:
     from modules.plugin import PROGRAMS_DIR
-    from tokenring import keys
-    from tokenring.cliutil import free_port, query
-    from tokenring.launcher import Launcher, plans_from_protocol
-    from tokenring.loader import Loader
-    from tokenring.pclink import open_link
-    from tokenring.protocol import default_protocol
+    from tokenring import default_protocol, keys
+    from tokenring.host import Launcher, Loader, open_link, plans_from_protocol
+    from tokenring.transport import free_port, query
 
     protocol = default_protocol()
     ring = f"dl{int(time.time() * 1000) % 10**8}"
@@ -111,8 +108,8 @@ def run_bitrate(bitrate: str, repeat: int, store: Path) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from tokenring.cliutil import format_table, write_json
-    from tokenring.ring import parse_bitrate
+    from tokenring import parse_bitrate
+    from tokenring.cli import format_table, write_json
 
     parser = argparse.ArgumentParser(prog="python -m bench.download", description=__doc__.split("\n\n")[0])
     parser.add_argument("--bitrates", default="2.5M,max", help="comma-separated (default %(default)s)")

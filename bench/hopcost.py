@@ -1,6 +1,6 @@
 """Where a hop's CPU goes: a tokenring node against a bare Zenoh forwarder, thread by thread.
 
-Alternating pairs of one bare Zenoh ring (``tokenring.roundtrip_bare``) and one tokenring ring of
+Alternating pairs of one bare Zenoh ring (``tokenring.perf.bare_ring``) and one tokenring ring of
 the same size and topology; in each, once the token circulates, a window of ``--window`` seconds:
 
 * every node's threads' CPU time (``/proc/PID/task/TID/stat``) before and after, grouped by what
@@ -15,7 +15,7 @@ the same size and topology; in each, once the token circulates, a window of ``--
 
 The visits in the window are counted, not estimated: the ring's master answers ``visits``, the bare
 ring's process 0 prints each round's arrival time. Each row's ring - bare difference is given as
-the mean over pairs with its 95 % interval (tokenring/ownshare.py).
+the mean over pairs with its 95 % interval (tokenring/perf/hop_overhead.py).
 
     python -m bench.hopcost --nodes 8 --pairs 3 --window 5 --perf [--json F]
     python -m bench.hopcost --nodes 64 --topology router --pairs 2 --perf
@@ -37,8 +37,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from tokenring.liverings import BareRing, LiveRing
-from tokenring.ownshare import interval
+from tokenring.perf import BareRing, LiveRing, interval
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 PERF_HZ = 1999
@@ -277,7 +276,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.perf and shutil.which("perf") is None:
         sys.stderr.write("hopcost: --perf needs perf (Debian: linux-perf)\n")
         return 2
-    from tokenring.zconfig import use_host_runtime
+    from tokenring.transport import use_host_runtime
 
     use_host_runtime()
     router = args.topology == "router"

@@ -35,7 +35,7 @@ import yaml
 
 from modules.common.algorithms import algorithm
 from modules.description import keys as robot_keys
-from tokenring.cliutil import free_port
+from tokenring.transport import free_port
 
 
 def square_actions(laps: int, side_mm: int) -> str:
@@ -68,10 +68,8 @@ def run_experiment(
     drive of its own starts where the robot stood before the compass's calibration turn."""
     from modules.pc.analysis import analyse
     from modules.plugin import PROGRAMS_DIR, world_service
-    from tokenring.errors import UsageError
-    from tokenring.launcher import Launcher, plans_from_protocol
-    from tokenring.pclink import open_link
-    from tokenring.protocol import load_protocol
+    from tokenring import UsageError, load_protocol
+    from tokenring.host import Launcher, open_link, plans_from_protocol
 
     tag = f"{Path(world).stem}-seed{seed}"
     logs = workdir / tag
@@ -188,7 +186,7 @@ def align(link: Any, speed_pct: int, timeout: float) -> None:
 
 def world_now(session: Any, ring: str) -> int | None:
     """The simulator's time now (ms), from ``world/state``."""
-    from tokenring.cliutil import query
+    from tokenring.transport import query
 
     for _, reply in query(session, robot_keys.world(ring, "state"), timeout=2.0):
         if reply.get("ok"):

@@ -37,8 +37,7 @@ class Recorder:
     """Decodes every frame addressed to copro: the data copro's program reads at that visit."""
 
     def __init__(self, session: Any, ring: str) -> None:
-        from tokenring import keys
-        from tokenring.protocol import default_protocol
+        from tokenring import default_protocol, keys
 
         protocol = default_protocol()
         self.sonar = protocol.channel("sonar.data")
@@ -96,7 +95,7 @@ def replay(
     the pose each sweep was mapped with."""
     from modules.common.units import pose_from_wire
     from modules.common.vectorgen import OUR_METHOD, PoseHistory, Vectorizer, default_layout
-    from tokenring.protocol import default_protocol
+    from tokenring import default_protocol
 
     forward = default_protocol().enums["direction"]["FORWARD"]
     vectors: list[tuple[float, float, float, float]] = []
@@ -134,7 +133,7 @@ def run_room(
     seed: int | None = None,
 ) -> dict[str, Any]:
     """One exploration on a fresh ring: ``room`` names its files, ``world`` is the room to load."""
-    from tokenring.zconfig import make_config, open_session
+    from tokenring.transport import make_config, open_session
 
     ring = f"bench{''.join(c for c in room if c.isalnum())}{port}"
     endpoint = f"tcp/127.0.0.1:{port}"
@@ -191,7 +190,7 @@ def save_recording(path: Path, result: dict[str, Any]) -> None:
 def load_recording(path: Path, live: Path) -> dict[str, Any]:
     import msgpack
 
-    from tokenring.errors import UsageError
+    from tokenring import UsageError
 
     if not path.exists():
         raise UsageError(f"{path}: no recorded drive (run without --replay first)")
@@ -347,7 +346,7 @@ def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any
         moving = now
     steady, settling = [], []
     moving: list[tuple[float, float]] = []  # (true heading, signed error) on straight moves
-    from tokenring.protocol import default_protocol
+    from tokenring import default_protocol
 
     direction = default_protocol().enums["direction"]
     straight = (direction["FORWARD"], direction["REVERSE"])
@@ -397,7 +396,7 @@ def main(argv: list[str] | None = None) -> int:
     from modules.common.mapscore import score_map
     from modules.common.vectorgen import OUR_METHOD, SEED_METHOD
     from modules.pc.mapfiles import load_map_file, load_truth, write_map
-    from tokenring.cliutil import free_port
+    from tokenring.transport import free_port
 
     parser = argparse.ArgumentParser(prog="python -m bench.mapping", description=__doc__.split("\n\n")[0])
     parser.add_argument("--rooms", default=",".join(ROOMS), help="comma-separated bundled rooms")

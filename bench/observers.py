@@ -35,8 +35,7 @@ from typing import Any
 import numpy as np
 
 from tokenring import keys
-from tokenring.cliutil import free_port, query
-from tokenring.zconfig import make_config, open_session
+from tokenring.transport import free_port, make_config, open_session, query
 
 REPO = Path(__file__).resolve().parent.parent
 MASTER = 10  # main: the round master times its rounds

@@ -1,8 +1,8 @@
 """The suite's own share per hop: issue 23's aim, the retake rule, the pairs per size.
 
 The figures themselves (a pair's share, the 95 % interval, the host's steal time) are
-:mod:`tokenring.ownshare`'s, shared with ``tokenring bench``. Here: a pair in which either run
-lost more than :data:`~tokenring.ownshare.STEAL_LIMIT_PCT` of the CPUs to the host is retaken (up
+:mod:`tokenring.perf.hop_overhead`'s, shared with ``tokenring bench``. Here: a pair in which either run
+lost more than :data:`~tokenring.perf.hop_overhead.STEAL_LIMIT_PCT` of the CPUs to the host is retaken (up
 to as many retakes as pairs asked for), and the own share is given both over the pairs within
 the limit (what the aim is judged on) and over every pair taken.
 
@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from tokenring.ownshare import (
+from tokenring.perf import (
     STEAL_LIMIT_PCT,
     describe,
     describe_interleaved,

@@ -34,12 +34,9 @@ import numpy as np
 
 from tokenring import keys
 from tokenring.chaos import WireCapture, recovery_time
-from tokenring.cliutil import free_port, query
-from tokenring.faults import FaultClient
-from tokenring.launcher import Launcher, NodePlan
-from tokenring.wire import first_full_round, passes, settled
-from tokenring.wiretap import WireTap
-from tokenring.zconfig import make_config, open_session
+from tokenring.host import FaultClient, Launcher, NodePlan
+from tokenring.observe import WireTap, first_full_round, passes, settled
+from tokenring.transport import free_port, make_config, open_session, query
 
 IDS = [10, 20, 30, 40, 50, 60, 70, 80]
 AIMS_MS = {"crash": 50.0, "hang": 150.0, "loss": 100.0}
@@ -108,7 +105,7 @@ def trial(
         }[kind]
         start = time.perf_counter()
         answer = client.inject(victim, request)
-        # a crash or hang takes effect a moment after its answer left (tokenring.faults): the
+        # a crash or hang takes effect a moment after its answer left (tokenring.node.faults): the
         # recovery counts from then, not from the request
         start = max(start, time.perf_counter() + float(answer.get("effective_in_s", 0.0)))
         expected = IDS if kind == "loss" else [i for i in IDS if i != victim]
@@ -146,7 +143,7 @@ def run(
 ) -> dict[str, Any]:
     """``trials`` of each fault in ``kinds``; ``topology`` ``peers`` (a full mesh: a subscriber
     of every token key sees each frame) or ``links`` (the launcher the nodes' router, the hop on
-    direct links no subscriber sees: the wire is captured instead, :mod:`tokenring.wiretap`)."""
+    direct links no subscriber sees: the wire is captured instead, :mod:`tokenring.observe.pcap_tap`)."""
     links = topology == "links"
     port = free_port()
     ring = f"rec{port}"
@@ -240,7 +237,7 @@ def run(
 
 
 def format_summary(report: dict[str, Any]) -> str:
-    from tokenring.cliutil import format_table
+    from tokenring.cli import format_table
 
     rows = []
     for kind, s in report["summary"].items():
@@ -302,11 +299,11 @@ def main(argv: list[str] | None = None) -> int:
     unknown = set(kinds) - {"crash", "hang", "loss", "heal"}
     if unknown:
         parser.error(f"unknown fault(s) {', '.join(sorted(unknown))} (crash, hang, loss, heal)")
-    from tokenring.zconfig import use_host_runtime
+    from tokenring.transport import use_host_runtime
 
     use_host_runtime()  # as the suite and `tokenring up` run: the launcher's router in this process
     if args.topology == "links":
-        from tokenring.wiretap import WireTapError, tcpdump_path
+        from tokenring.observe import WireTapError, tcpdump_path
 
         try:
             tcpdump_path()

@@ -31,7 +31,7 @@ import numpy as np
 
 from bench.ownshare import pairs_for
 from bench.sections import SECTIONS, has_samples, raw_path, summary_section
-from tokenring.roundtrip import ROUTER_FROM
+from tokenring.perf import ROUTER_FROM
 
 #: how many bare/ring pairs the suite runs per size, as the scaling table's text says it
 PAIRS_TEXT = f"{pairs_for(64, False)} up to 64 nodes, {pairs_for(65, False)} beyond"
@@ -361,7 +361,7 @@ def steal_note(r: dict[str, Any]) -> str:
     """What the host's steal time did to a size's pairs: how many were within the limit and the
     own share over every pair taken (empty for a run from before steal was recorded)."""
     from bench.ownshare import screened_pairs
-    from tokenring.ownshare import describe
+    from tokenring.perf import describe
 
     screened = screened_pairs(r)
     if not screened:
@@ -379,7 +379,7 @@ def steal_note(r: dict[str, Any]) -> str:
 def interleaved_note(interleaved: dict[str, Any]) -> str:
     """The own share from interleaved windows (both rings up at once, taking turns): over the
     pairs within the steal limit, and over every pair."""
-    from tokenring.ownshare import describe
+    from tokenring.perf import describe
 
     return (
         f"{describe(interleaved['own_share_us'])}, both rings up at once taking turns in "
@@ -406,7 +406,7 @@ def own_share_aims(runs: list[dict[str, Any]]) -> list[list[Any]]:
     """Rows for tokenring's own share per hop (its 95 % interval's top against the aim) and for
     the outside tap's round trip against the ring's own, per ring size that measured them."""
     from bench.ownshare import OWN_SHARE_AIM_US
-    from tokenring.ownshare import describe
+    from tokenring.perf import describe
 
     rows: list[list[Any]] = []
     for r in runs:
@@ -890,7 +890,7 @@ def profile_md(section: dict[str, Any], plots: Path) -> str:
         )
     return (
         "## The seed's timing: `--profile arcnet`\n\n"
-        f"Seven nodes (the seed's seven computers: {', '.join(section['nodes'])}) at 2.5 Mbit/s with the profile of `tokenring/profile.py`: per pass {m['wire_ms_per_hop']:.3f} ms wire time, {m['visit_ms']:.3f} ms of 8051 interrupt and header work, {m['byte_us']:.0f} µs per byte of each unlocked channel the node copies, and on the sonar the 10.2 ms interrupt lock of every 15 ms measurement (the token waits {m['sonar_mean_hold_ms']:.1f} ms there on average). Without any channel copied the model gives {m['no_copy_ms']:.1f} ms a round.\n\n"
+        f"Seven nodes (the seed's seven computers: {', '.join(section['nodes'])}) at 2.5 Mbit/s with the profile of `tokenring/node/pacing.py`: per pass {m['wire_ms_per_hop']:.3f} ms wire time, {m['visit_ms']:.3f} ms of 8051 interrupt and header work, {m['byte_us']:.0f} µs per byte of each unlocked channel the node copies, and on the sonar the 10.2 ms interrupt lock of every 15 ms measurement (the token waits {m['sonar_mean_hold_ms']:.1f} ms there on average). Without any channel copied the model gives {m['no_copy_ms']:.1f} ms a round.\n\n"
         + md_table(rows, ["", "round trip median ms", "p10-p90 ms", "max ms"])
         + f"\n\n![profile arcnet]({plots}/profile.png)\n"
     )

@@ -36,7 +36,7 @@ RAW_KEYS: dict[str, tuple[str, ...]] = {
     "profile": ("rounds_s",),
 }
 RECORD_LISTS = ("runs", "scenarios")
-#: the per-window lists of a scaling record's ``interleaved`` windows (tokenring/interleave.py): its
+#: the per-window lists of a scaling record's ``interleaved`` windows (tokenring/perf/interleaved_pairs.py): its
 #: summary keeps the pairs' shares and steal only
 INTERLEAVED_RAW_KEYS = ("ring_medians_ms", "bare_medians_ms", "ring_rounds", "bare_rounds", "ring_measured_s")
 RAW_DIR = "raw"  # under the results directory, git-ignored

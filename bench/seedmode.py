@@ -25,7 +25,7 @@ import numpy as np
 from bench.closedloop import parse_seeds
 from bench.seedreport import maps_table
 from modules.common.algorithms import PARTS
-from tokenring.cliutil import free_port
+from tokenring.transport import free_port
 
 #: every configuration a table row is about: the two robots, then each module seed alone
 CONFIGS = ("ours", "seed", *(f"{part}=seed" for part in PARTS))

@@ -77,7 +77,7 @@ def part_classifier(args: argparse.Namespace, say: Say) -> dict[str, Any]:
 
 def part_roundtrip(args: argparse.Namespace, say: Say) -> dict[str, Any]:
     from bench.suite import SEED_NODES, load_avg, node_store, robot_plans, world_plan
-    from tokenring.roundtrip import run_ring, summarize
+    from tokenring.perf import run_ring, summarize
 
     runs = []
     for config in ("seed", "ours"):

@@ -4,7 +4,7 @@ Each configuration launches ``tokenring up`` (its own ring name and port), waits
 circulates and the launcher has finished booting (programs loaded), optionally starts a CPU hog
 on both cores (``stress-ng --cpu 2``, or two busy Python loops without it), and then watches the
 ring for ``--minutes``: the nodes' ``tokens_regenerated`` (their sum's delta is the figure),
-their regenerations by cause (tokenring/regeneration.py), main's round counter, the round times
+their regenerations by cause (tokenring/node/regeneration.py), main's round counter, the round times
 of the highest node (rank 0: the first to regenerate a token it misses) against its
 reconfiguration timeout, the load average, and the warnings the nodes log about the token.
 No fault is injected: every regeneration here is spurious.
@@ -72,7 +72,7 @@ DEFAULT_BASES = ("idle", "robot", "speed10")
 
 def pick_configs(text: str | None) -> list[Config]:
     """Configurations by key, e.g. ``idle,idle+hog``; none given: every configuration."""
-    from tokenring.errors import UsageError
+    from tokenring import UsageError
 
     if not text:
         return [c for c in CONFIGS if c.key.split("+")[0] in DEFAULT_BASES]
@@ -88,7 +88,7 @@ def pick_configs(text: str | None) -> list[Config]:
 
 def per_hour(count: float, seconds: float) -> float | None:
     """``count`` in ``seconds`` as a rate per hour (None without time)."""
-    from tokenring.regeneration import per_hour as rate
+    from tokenring.host import per_hour as rate
 
     return rate(count, seconds)
 
@@ -101,7 +101,7 @@ def per_hour(count: float, seconds: float) -> float | None:
 def cpu_hog(enabled: bool, seconds: float, cores: int = 2) -> Iterator[str | None]:
     """A CPU hog on ``cores`` cores while the block runs (stopped by PID, and by itself after
     ``seconds`` plus a minute should this process die first); yields what it is."""
-    from tokenring.launcher import die_with_parent
+    from tokenring.host import die_with_parent
 
     if not enabled:
         yield None
@@ -158,7 +158,7 @@ class LogTail:
 def node_stats(session: Any, ring: str) -> dict[int, dict[str, Any]]:
     """Each answering node's ``stats`` reply by ID."""
     from tokenring import keys
-    from tokenring.cliutil import query
+    from tokenring.transport import query
 
     out = {}
     for _, reply in query(session, keys.control(ring, "*", "stats"), timeout=2.0):
@@ -169,9 +169,8 @@ def node_stats(session: Any, ring: str) -> dict[int, dict[str, Any]]:
 
 def wait_formed(session: Any, ring: str, ids: list[int], timeout: float, alive: Callable[[], bool]) -> None:
     """Until every node answers, sees all of them active, has had visits, and the launcher is done booting."""
-    from tokenring import keys
-    from tokenring.cliutil import query
-    from tokenring.errors import TokenRingError
+    from tokenring import TokenRingError, keys
+    from tokenring.transport import query
 
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -225,7 +224,7 @@ class GapWatch:
 
     def poll(self, session: Any, ring: str, visits: int) -> None:
         from tokenring import keys
-        from tokenring.cliutil import query
+        from tokenring.transport import query
 
         replies = query(session, keys.control(ring, HIGHEST, "rounds"), timeout=3.0)
         if not replies or not replies[0][1].get("ok"):
@@ -254,11 +253,9 @@ def run_config(
     config: Config, seconds: float, say: Callable[[str], None] = lambda _t: None
 ) -> dict[str, Any]:
     """One configuration: boot the ring, watch it for ``seconds`` with no fault, stop it; its record."""
-    from tokenring import keys
-    from tokenring.cliutil import free_port, query
-    from tokenring.launcher import die_with_parent
-    from tokenring.protocol import default_protocol
-    from tokenring.zconfig import make_config, open_session
+    from tokenring import default_protocol, keys
+    from tokenring.host import die_with_parent
+    from tokenring.transport import free_port, make_config, open_session, query
 
     ids = [n.id for n in default_protocol().nodes.values()]
     ring = f"spur{os.getpid()}{config.key.replace('+', 'h')}"
@@ -483,7 +480,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--configs", help=f"subset ({', '.join(c.key for c in CONFIGS)})")
     parser.add_argument("--json", help="write the record here")
     args = parser.parse_args(argv)
-    from tokenring.zconfig import use_host_runtime
+    from tokenring.transport import use_host_runtime
 
     use_host_runtime()
     result = run(pick_configs(args.configs), args.minutes)

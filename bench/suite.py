@@ -55,7 +55,7 @@ import numpy as np
 
 from bench.ownshare import more_pairs_needed, own_share, pairs_for
 from bench.sections import QUICK_SECTIONS, RAW_DIR, SECTIONS, SLOW_SECTIONS, raw_path, summary_of
-from tokenring.ownshare import (
+from tokenring.perf import (
     STEAL_LIMIT_PCT,
     cpu_jiffies,
     describe,
@@ -63,7 +63,7 @@ from tokenring.ownshare import (
     steal_pct,
     within_steal_limit,
 )
-from tokenring.zconfig import RUNTIME_CHOSEN
+from tokenring.transport import RUNTIME_CHOSEN
 
 HERE = Path(__file__).resolve().parent
 RESULTS_DIR = HERE / "results"
@@ -94,7 +94,7 @@ def pool_runs(runs: list[Any]) -> Any:
     time of the median run."""
     if len(runs) == 1:
         return runs[0]
-    from tokenring.roundtrip import RingRun
+    from tokenring.perf import RingRun
 
     middle = sorted(runs, key=lambda r: r.handler_us.get("median", 0.0))[len(runs) // 2]
     return RingRun(
@@ -138,7 +138,7 @@ def load_avg() -> list[float]:
 
 
 def stats_ms(seconds: list[float]) -> dict[str, float]:
-    from tokenring.roundtrip import summarize
+    from tokenring.perf import summarize
 
     return summarize(seconds)
 
@@ -211,8 +211,7 @@ def write_results(results: dict[str, Any], path: Path) -> tuple[Path, Path]:
 
 
 def section_scaling(ctx: Context) -> dict[str, Any]:
-    from tokenring.interleave import interleave
-    from tokenring.roundtrip import run_bare, run_ring
+    from tokenring.perf import interleave, run_bare, run_ring
 
     out: dict[str, Any] = {"runs": []}
     for topology, sizes in ctx.sizes.items():
@@ -365,7 +364,7 @@ def fit_costs(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def section_transports(ctx: Context) -> dict[str, Any]:
-    from tokenring.roundtrip import run_bare, run_ring
+    from tokenring.perf import run_bare, run_ring
 
     sizes = [8] if ctx.quick else [8, 64]
     out: dict[str, Any] = {"runs": []}
@@ -446,7 +445,7 @@ def bench_cli(args: list[str], timeout: float, env: dict[str, str] | None = None
 def section_runtime(ctx: Context) -> dict[str, Any]:
     """``tokenring bench`` under each Zenoh runtime, as a subprocess: the runtime is fixed when a
     process first uses Zenoh, and the router lives in the process that runs the benchmark."""
-    from tokenring.zconfig import HOST_RUNTIME, NODE_RUNTIME
+    from tokenring.transport import HOST_RUNTIME, NODE_RUNTIME
 
     out: dict[str, Any] = {"node_runtime": NODE_RUNTIME, "host_runtime": HOST_RUNTIME, "runs": []}
     for n, topology in runtime_cases(ctx.quick):
@@ -481,8 +480,8 @@ def section_runtime(ctx: Context) -> dict[str, Any]:
 
 def robot_plans(names: list[str], programs: bool) -> list[Any]:
     from modules.plugin import PROGRAMS_DIR
-    from tokenring.launcher import NodePlan
-    from tokenring.protocol import default_protocol
+    from tokenring import default_protocol
+    from tokenring.host import NodePlan
 
     protocol = default_protocol()
     folder = PROGRAMS_DIR
@@ -509,8 +508,8 @@ def node_store() -> Iterator[list[str]]:
 
 
 def section_load(ctx: Context) -> dict[str, Any]:
-    from tokenring.protocol import default_protocol
-    from tokenring.roundtrip import run_ring
+    from tokenring import default_protocol
+    from tokenring.perf import run_ring
 
     names = list(default_protocol().nodes)
     rounds, warmup = (1500, 500) if not ctx.quick else (600, 200)
@@ -538,9 +537,9 @@ def section_load(ctx: Context) -> dict[str, Any]:
 
 
 def section_commands(ctx: Context) -> dict[str, Any]:
-    from tokenring.cliutil import query
-    from tokenring.protocol import default_protocol
-    from tokenring.roundtrip import run_ring
+    from tokenring import default_protocol
+    from tokenring.perf import run_ring
+    from tokenring.transport import query
 
     protocol = default_protocol()
     names = list(protocol.nodes)
@@ -637,9 +636,9 @@ class CommandCollector:
 
 
 def section_profile(ctx: Context) -> dict[str, Any]:
-    from tokenring.profile import PROFILES
-    from tokenring.ring import hop_time
-    from tokenring.roundtrip import run_ring
+    from tokenring import hop_time
+    from tokenring.node import PROFILES
+    from tokenring.perf import run_ring
 
     profile = PROFILES["arcnet"]
     n = len(SEED_NODES)
@@ -699,7 +698,7 @@ def section_recovery(ctx: Context) -> dict[str, Any]:
     report = run_recovery(trials, kinds, "adaptive", quiet=True)
     for kind, s in report["summary"].items():
         ctx.progress.note(f"{kind}: median {_ms(s['median_ms'])}")
-    from tokenring.wiretap import WireTapError, tcpdump_path
+    from tokenring.observe import WireTapError, tcpdump_path
 
     try:
         tcpdump_path()
@@ -758,7 +757,7 @@ def pairs_of(n: int, quick: bool, pairs: dict[int, int] | None) -> int:
 
 
 def windows_of(n: int, quick: bool, windows: dict[int, int] | None) -> int:
-    """Pairs of interleaved windows (tokenring/interleave.py) for a ring of ``n``: ``--interleaved``'s
+    """Pairs of interleaved windows (tokenring/perf/interleaved_pairs.py) for a ring of ``n``: ``--interleaved``'s
     count for ``n``, else its count for every size (key 0; 0 turns them off), else
     :data:`INTERLEAVED_PAIRS` (quick: :data:`INTERLEAVED_PAIRS_QUICK`) at the sizes the own
     share's aim names and none elsewhere."""
@@ -829,7 +828,7 @@ def count_steps(
 def machine() -> dict[str, Any]:
     from importlib.metadata import version
 
-    from tokenring import tokenpath
+    from tokenring.node import NATIVE
 
     mem = Path("/proc/meminfo").read_text().split("\n")[0].split()[1]
     return {
@@ -839,7 +838,7 @@ def machine() -> dict[str, Any]:
         "zenoh": version("eclipse-zenoh"),
         "pyzmq": version("pyzmq"),
         "kernel": platform.release(),
-        "token_path": "C" if tokenpath.NATIVE else "Python",
+        "token_path": "C" if NATIVE else "Python",
     }
 
 
@@ -858,7 +857,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--interleaved",
         help="pairs of interleaved windows per ring size in scaling (both rings up at once, taking turns: "
-        f"tokenring/interleave.py), K or N:K,N:K; 0 for none (default {INTERLEAVED_PAIRS} at 8, 64 and 255 nodes)",
+        f"tokenring/perf/interleaved_pairs.py), K or N:K,N:K; 0 for none (default {INTERLEAVED_PAIRS} at 8, 64 and 255 nodes)",
     )
     parser.add_argument("--out", default=str(RESULTS_DIR), help="results directory (default bench/results)")
     parser.add_argument("--no-report", action="store_true", help="write the JSON only, not RESULTS.md")
@@ -872,8 +871,8 @@ def main(argv: list[str] | None = None) -> int:
         help="its configurations, e.g. idle,idle+hog (default: idle, robot, speed10, each also +hog)",
     )
     args = parser.parse_args(argv)
-    from tokenring.errors import UsageError
-    from tokenring.zconfig import use_host_runtime
+    from tokenring import UsageError
+    from tokenring.transport import use_host_runtime
 
     use_host_runtime()  # as `tokenring up`/`bench` run: the routers in this process, the nodes
 
@@ -941,7 +940,7 @@ def result_path(out_dir: Path, started: dt.datetime, quick: bool, sections: list
 
 
 def parse_sizes(text: str) -> dict[str, list[int]]:
-    from tokenring.errors import UsageError
+    from tokenring import UsageError
 
     sizes: dict[str, list[int]] = {}
     for part in text.split("/"):
@@ -961,7 +960,7 @@ def parse_sizes(text: str) -> dict[str, list[int]]:
 def parse_pairs(text: str, option: str = "--pairs", least: int = 1) -> dict[int, int]:
     """``--pairs`` (or ``option``): ``16`` (every size; key 0) or ``8:16,64:32,255:12`` (per
     ring size), each count ``least`` to 1000."""
-    from tokenring.errors import UsageError
+    from tokenring import UsageError
 
     pairs: dict[int, int] = {}
     try:

@@ -39,7 +39,7 @@ from typing import Any
 
 import yaml
 
-from tokenring.cliutil import free_port
+from tokenring.transport import free_port
 
 #: the drive: three 1.2 m legs with two left turns, about 75 s at 50 %
 DRIVE = "# bench.syncregular: three legs of 1.2 m\ne\ns 1200\nr 90\ns 1200\nr 90\ns 1200\n"

@@ -45,8 +45,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.json and Path(args.json).exists():
         print(f"{args.json}: exists; not overwritten", file=sys.stderr)
         return 2
-    from tokenring.roundtrip import run_bare
-    from tokenring.zconfig import use_host_runtime
+    from tokenring.perf import run_bare
+    from tokenring.transport import use_host_runtime
 
     use_host_runtime()
     runs: list[dict[str, Any]] = []

@@ -24,7 +24,7 @@ from modules.common.battery import (
     remaining_minutes,
     state_of_charge,
 )
-from tokenring.program import UserProgram
+from tokenring import UserProgram
 
 log = logging.getLogger("tokenring.charger")
 

@@ -59,7 +59,7 @@ from modules.common.compass import (
     symmetric,
 )
 from modules.common.units import heading_to_cdeg
-from tokenring.program import UserProgram
+from tokenring import UserProgram
 
 log = logging.getLogger("tokenring.compass")
 

@@ -30,7 +30,7 @@ from modules.common.algorithms import algorithm
 from modules.common.units import pose_from_wire, pose_to_wire
 from modules.common.vectorgen import OUR_METHOD, SEED_METHOD, PoseHistory, Vector, Vectorizer, default_layout
 from modules.common.vectormap import vector_to_wire
-from tokenring.program import UserProgram
+from tokenring import UserProgram
 
 log = logging.getLogger("tokenring.copro")
 

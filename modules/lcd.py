@@ -20,7 +20,7 @@ from typing import Any
 from modules.common.lcdui import MENU_NAMES, Menus, Screen
 from modules.common.mapclient import MapCollector
 from modules.common.units import pose_from_wire
-from tokenring.program import UserProgram
+from tokenring import UserProgram
 
 log = logging.getLogger("tokenring.lcd")
 REFRESH_S = 0.1

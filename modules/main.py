@@ -55,9 +55,7 @@ from modules.common.pilot import (
 from modules.common.poseupdate import CorrectionSettings, PoseCorrector
 from modules.common.units import pose_from_wire
 from modules.common.vectorgen import SonarLayout, default_layout
-from tokenring.errors import UsageError
-from tokenring.program import UserProgram
-from tokenring.protocol import default_protocol
+from tokenring import UsageError, UserProgram, default_protocol
 
 log = logging.getLogger("tokenring.main")
 NAV_NAMES = {v: k for k, v in NAV.items()}

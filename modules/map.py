@@ -15,7 +15,7 @@ import threading
 from typing import Any
 
 from modules.common.vectormap import CAPACITY, MapFull, VectorStore
-from tokenring.program import UserProgram
+from tokenring import UserProgram
 
 log = logging.getLogger("tokenring.map")
 

@@ -47,8 +47,7 @@ from modules.common.odometry import (
 )
 from modules.common.units import cdeg_to_rad, pose_to_wire
 from modules.description.robot import DEFAULT_MOTOR_CURRENT_MA, MAX_SPEED_MM_S, MOTOR_TICK_MS, STEP_MM
-from tokenring.errors import ChannelError
-from tokenring.program import UserProgram
+from tokenring import ChannelError, UserProgram
 
 log = logging.getLogger("tokenring.motor")
 

@@ -24,17 +24,15 @@ from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
-from tokenring.cliutil import seconds
-from tokenring.errors import UsageError
-from tokenring.extensions import Extension, UpPlan, WebAction, WebPanel
+from tokenring import Extension, UpPlan, UsageError, WebAction, WebPanel
+from tokenring.cli import seconds
 
 if TYPE_CHECKING:
     import zenoh
 
-    from tokenring.feed import FeedSource
-    from tokenring.launcher import Launcher, ServicePlan
-    from tokenring.protocol import Protocol
-    from tokenring.resident import ResidentProgram
+    from tokenring import Protocol, ResidentProgram
+    from tokenring.host import Launcher, ServicePlan
+    from tokenring.observe import FeedSource
 
 PROGRAMS_DIR = Path(__file__).resolve().parent
 
@@ -236,7 +234,7 @@ def world_service(args: argparse.Namespace, body: str = "ours") -> ServicePlan:
     from modules.description.roomfile import load_world, resolve_world
     from modules.world.__main__ import parse_speed
     from modules.world.service import ready_key
-    from tokenring.launcher import ServicePlan
+    from tokenring.host import ServicePlan
 
     load_world(args.world)
     parse_speed(args.speed)

@@ -30,7 +30,7 @@ from modules.common.sonar import (
     seed_distance_area,
 )
 from modules.description.robot import SONAR_COUNT, SONAR_SLOT_MS
-from tokenring.program import UserProgram
+from tokenring import UserProgram
 
 log = logging.getLogger("tokenring.sonar")
 PING_SAMPLES = 60  # the transmitter's burst: 1.2 ms

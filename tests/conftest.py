@@ -19,8 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from tokenring.cliutil import free_port as _free_port
-from tokenring.zconfig import RUNTIME_CHOSEN
+from tokenring.transport.session import free_port as _free_port
+from tokenring.transport.zenoh_config import RUNTIME_CHOSEN
 
 REPO = Path(__file__).resolve().parent.parent
 TOKENRING = [sys.executable, "-m", "tokenring"]
@@ -172,7 +172,7 @@ def endpoint(port: int) -> str:
     return f"tcp/127.0.0.1:{port}"
 
 
-#: threads of an in-process node (tokenring.node, tokenring.system): a test module that leaves
+#: threads of an in-process node (tokenring.node, tokenring.node.system.layer loggers): a test module that leaves
 #: one running keeps a ring circulating in this process and slows every later test's timing
 NODE_THREAD_PREFIXES = ("watchdog-", "system-", "program-")
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from tokenring.protocol import default_protocol
+from tokenring.contract.protocol import default_protocol
 
 
 class FakeBuffer:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tokenring.program import load_program_file
+from tokenring.node.program import load_program_file
 
 MODULES = Path(__file__).resolve().parent.parent / "modules"
 

@@ -6,8 +6,8 @@ import sys
 import time
 from collections.abc import Callable, Iterable
 
-from tokenring.node import NodeOS
-from tokenring.protocol import Protocol, default_protocol
+from tokenring.contract.protocol import Protocol, default_protocol
+from tokenring.node.node_os import NodeOS
 from tokenring.transport.memory import MemoryHub, MemoryTransport
 
 
@@ -22,7 +22,7 @@ def wait_for(condition: Callable[[], object], timeout: float = 5.0, what: str = 
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
-# node processes hand the GIL over every 0.5 ms (tokenring.nodeproc); eight in-process nodes
+# node processes hand the GIL over every 0.5 ms (tokenring.node.process); eight in-process nodes
 # need the same, or one node waits 5 ms per switch behind the others
 sys.setswitchinterval(0.0005)
 

@@ -11,10 +11,10 @@ from typing import Any
 
 import zenoh
 
-from tokenring import keys
-from tokenring.cliutil import query
-from tokenring.protocol import default_protocol
-from tokenring.zconfig import make_config, open_session
+from tokenring.contract import keys
+from tokenring.contract.protocol import default_protocol
+from tokenring.transport.session import query
+from tokenring.transport.zenoh_config import make_config, open_session
 
 
 def tap(endpoint: str) -> zenoh.Session:
@@ -118,7 +118,7 @@ import time
 
 import numpy as np
 
-from tokenring.program import UserProgram
+from tokenring.node.program import UserProgram
 
 
 class Program(UserProgram):

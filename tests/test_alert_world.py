@@ -42,8 +42,8 @@ from modules.description import keys as robot_keys
 from modules.description import load_world
 from modules.description.robot import FRONT, FRONT_LEFT, FRONT_RIGHT, MAX_STEP_RATE_HZ, REAR
 from modules.world.sim import Simulator
-from tokenring.cliutil import query
-from tokenring.pclink import PcLink, open_link
+from tokenring.host.pclink import PcLink, open_link
+from tokenring.transport.session import query
 
 PROTOCOL_YAML = Path(__file__).resolve().parent.parent / "protocol.yaml"
 SEED_ALERT_BELOW_CM = 4  # seed §4.3.6: "Bereichsunterschreitung von 4cm (dies entspricht dem ALERT-Bereich)"

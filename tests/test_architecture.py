@@ -42,19 +42,19 @@ def test_a_wrong_arrow_fails_the_contracts(tmp_path: Path):
             REPO / name, tmp_path / name, ignore=shutil.ignore_patterns("__pycache__", "*.so", "results")
         )
     shutil.copy(REPO / "pyproject.toml", tmp_path / "pyproject.toml")
-    keys = tmp_path / "tokenring" / "keys.py"
+    keys = tmp_path / "tokenring" / "contract" / "keys.py"
     keys.write_text(keys.read_text() + "\nimport modules.world.sim  # a wrong arrow\n")
     env = dict(os.environ, PYTHONPATH=str(tmp_path))  # the copy, not the installed tree
     result = lint(tmp_path, env)
     assert result.returncode != 0, result.stdout
     assert "The ring knows nothing of the robot BROKEN" in result.stdout, result.stdout
-    assert "tokenring.keys -> modules.world.sim" in result.stdout, result.stdout
+    assert "tokenring.contract.keys -> modules.world.sim" in result.stdout, result.stdout
 
 
 def test_the_bare_ring_loads_no_robot_code():
     env = dict(os.environ, TOKENRING_EXTENSIONS="")
     probe = (
-        "import sys; from tokenring.cli import build_parser; parser, runners = build_parser(); "
+        "import sys; from tokenring.cli.main import build_parser; parser, runners = build_parser(); "
         "print(sorted(runners)); print([m for m in sys.modules if m == 'modules' or m.startswith('modules.')])"
     )
     result = subprocess.run(

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from bench.ownshare import own_share
-from tokenring.ownshare import interval
+from tokenring.perf.hop_overhead import interval
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -101,7 +101,7 @@ def test_hopcost_refuses_to_record_nodes_the_ring_does_not_have(count):
 
 
 def test_steal_time_is_the_hosts_share_of_the_cpus_between_two_readings():
-    from tokenring.ownshare import cpu_jiffies, steal_pct
+    from tokenring.perf.hop_overhead import cpu_jiffies, steal_pct
 
     assert steal_pct((100, 10_000), (250, 11_000)) == 15.0  # 150 of 1000 ticks went to the host
     assert steal_pct((5, 50), (5, 50)) == 0.0  # no time passed: nothing stolen, no division by 0

@@ -22,7 +22,7 @@ from bench.suite import (
     write_results,
 )
 from tokenring.errors import UsageError
-from tokenring.roundtrip import summarize
+from tokenring.perf.roundtrip import summarize
 
 
 def ring(nodes: int, topology: str, bare_ms: float, ring_ms: float, p99_ms: float) -> dict:
@@ -143,8 +143,8 @@ def test_the_router_flatness_aim_names_the_growth_on_zenohs_default_runtime():
 
 def test_a_bench_runs_default_time_budget_covers_a_255_node_ring_and_the_wire():
     """`tokenring bench --nodes 255` failed with the old fixed 120 s: 2300 rounds of ~80 ms."""
-    from tokenring.ring import hop_time, parse_bitrate
-    from tokenring.roundtrip import run_budget
+    from tokenring.contract.ring import hop_time, parse_bitrate
+    from tokenring.perf.roundtrip import run_budget
 
     measured_round_s = 0.080  # 255 nodes, routers, bench/RESULTS.md
     assert run_budget(255, 2300, None) > 60 + 2300 * measured_round_s * 1.5

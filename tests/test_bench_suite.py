@@ -19,7 +19,7 @@ from test_bench_report import suite_run
 
 from bench import suite
 from bench.suite import bench_cli
-from tokenring import zconfig
+from tokenring.transport import zenoh_config as zconfig
 
 
 def test_a_suite_run_writes_its_samples_to_raw_and_a_summary_of_kilobytes(tmp_path, monkeypatch, capsys):
@@ -72,7 +72,7 @@ def test_pairs_set_for_every_size_reach_the_scaling_section_and_a_bad_count_is_r
 def test_a_pair_the_host_stole_from_is_retaken_and_the_own_share_judged_without_it(monkeypatch):
     """Pairs of made-up runs: (bare, ring) medians in ms and the steal each run saw. The second
     pair lost 30 % to the host, so a third is taken; the own share counts pairs 1 and 3 only."""
-    from tokenring import roundtrip
+    from tokenring.perf import roundtrip
 
     script = [  # (bare median ms, ring median ms, bare steal %, ring steal %)
         (20.0, 20.64, 1.0, 2.0),
@@ -113,8 +113,8 @@ def test_a_pair_the_host_stole_from_is_retaken_and_the_own_share_judged_without_
 
 
 def test_interleaved_windows_run_at_the_aims_sizes_unless_told_otherwise(monkeypatch):
-    from tokenring import interleave as interleave_module
-    from tokenring import roundtrip
+    from tokenring.perf import interleaved_pairs as interleave_module
+    from tokenring.perf import roundtrip
 
     assert [suite.windows_of(n, False, None) for n in (8, 16, 64, 128, 255)] == [100, 0, 100, 0, 100]
     assert suite.windows_of(8, True, None) == 6  # quick
@@ -194,7 +194,7 @@ def test_a_bench_run_gets_its_environment_and_the_python_token_path_circulates()
 #: anybody waits, so no budget has to be guessed against how fast this machine is today
 ENDLESS = ["--nodes", "8", "--rounds", "10", "--warmup", "100000000"]
 HANG_GUARD_S = 60.0
-BARE = b"tokenring.roundtrip_bare"
+BARE = b"tokenring.perf.bare_ring"
 
 
 def bare_ring_of(benchmarks: set[int]) -> set[int]:

@@ -8,7 +8,7 @@ import sys
 import pytest
 from ringutil import processes
 
-from tokenring.roundtrip import run_bare
+from tokenring.perf.roundtrip import run_bare
 
 
 def children_running(marker: bytes) -> list[int]:
@@ -22,11 +22,11 @@ def test_a_chain_of_direct_links_passes_the_frame_round_and_every_process_ends(r
     rounds = run_bare(8, 30, 5, timeout=60.0, chain=True, router=router)
     assert len(rounds) == 30
     assert all(r > 0 for r in rounds)
-    assert children_running(b"tokenring.roundtrip_bare") == []
+    assert children_running(b"tokenring.perf.bare_ring") == []
 
 
 def test_a_process_of_a_bare_ring_that_fails_ends_the_wait_at_once():
-    from tokenring.roundtrip import _wait_first
+    from tokenring.perf.roundtrip import _wait_first
 
     first = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     failing = subprocess.Popen([sys.executable, "-c", "import sys; sys.exit(3)"])
@@ -41,7 +41,7 @@ def test_a_process_of_a_bare_ring_that_fails_ends_the_wait_at_once():
 
 
 def test_ports_drawn_for_a_255_process_chain_never_repeat():
-    from tokenring.cliutil import free_port
+    from tokenring.transport.session import free_port
 
     ports: list[int] = []
     for _ in range(255):

@@ -13,7 +13,7 @@ from modules.common.calibration import CalibrationError, FloorEstimate, pool
 from modules.common.ekf import EkfParams, PoseEKF
 from modules.common.locconfig import ConfigError, load_config, parse_config
 from modules.common.logs import DataLog
-from tokenring.cli import main as cli_main
+from tokenring.cli.main import main as cli_main
 
 DRAW_SD, NOISE_SD, PRIOR_SD = 0.005, 0.002, 0.02
 

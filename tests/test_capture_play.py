@@ -29,8 +29,8 @@ from mcap.reader import make_reader
 from ringjudge import crc16_arc  # the judge's own CRC, not tokenring's
 from ringutil import launcher_pids, tap, wait_ring, wait_until
 
-from tokenring.cliutil import free_port
-from tokenring.protocol import default_protocol_path
+from tokenring.contract.protocol import default_protocol_path
+from tokenring.transport.session import free_port
 
 PROTOCOL_TEXT = Path(default_protocol_path()).read_text()
 PROTOCOL_YAML = yaml.safe_load(PROTOCOL_TEXT)

@@ -32,7 +32,7 @@ def test_a_random_schedule_runs_reproducibly_and_loses_nothing(tmp_path):
     assert again.returncode == 0, again.stderr
     first, second = tmp_path / "chaos-seed7.yaml", tmp_path / "chaos-seed7-2.yaml"
     assert second.read_text() == first.read_text()
-    # the ledgers, judged by the tests' own checker (it shares no code with tokenring.ledger)
+    # the ledgers, judged by the tests' own checker (it shares no code with tokenring.chaos.checker)
     verdict = judge_ledgers(ledger)
     assert verdict.ok, str(verdict)
     assert verdict.acked > 100 and not verdict.lost and not verdict.duplicated

@@ -22,8 +22,8 @@ from ringjudge import Header
 from ringutil import control, tap, wait_main_answers, wait_until
 
 from modules.description import keys as robot_keys
-from tokenring.cliutil import query
-from tokenring.pclink import open_link
+from tokenring.host.pclink import open_link
+from tokenring.transport.session import query
 
 PROTOCOL = yaml.safe_load((Path(__file__).resolve().parent.parent / "protocol.yaml").read_text())
 MAIN, COMPASS = PROTOCOL["nodes"]["main"]["id"], PROTOCOL["nodes"]["compass"]["id"]

@@ -17,8 +17,8 @@ from modules.common.compasscal import CompassCalibration
 from modules.common.pilot import Move, Outcome, Sensors
 from modules.common.poseupdate import ENV as SETPOS_ENV
 from modules.common.vectorgen import default_layout
+from tokenring.contract.protocol import default_protocol
 from tokenring.errors import UsageError
-from tokenring.protocol import default_protocol
 
 ENUMS = default_protocol().enums
 STOPPED, TURN_LEFT, TURN_RIGHT = (ENUMS["direction"][n] for n in ("STOPPED", "TURN_LEFT", "TURN_RIGHT"))

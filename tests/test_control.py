@@ -1,4 +1,4 @@
-"""Control requests (tokenring/control.py): one answer per request, and a fault that stops the
+"""Control requests (tokenring/transport/control.py): one answer per request, and a fault that stops the
 process takes effect only after its answer was handed over."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from types import SimpleNamespace
 
 import msgpack
 
-from tokenring.control import AfterReply, answer_query
-from tokenring.faults import FaultInjector
+from tokenring.node.faults import FaultInjector
+from tokenring.transport.control import AfterReply, answer_query
 
 
 class FakeQuery:

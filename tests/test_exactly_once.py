@@ -20,9 +20,9 @@ import pytest
 from memring import MemoryRing, wait_for
 from ringutil import control, launcher_pids, stats, tap, wait_ring, wait_until
 
-from tokenring.channels import NEW, REPEAT, STALE, CommandMemory
-from tokenring.pclink import PcLinkServer
-from tokenring.protocol import default_protocol
+from tokenring.contract.protocol import default_protocol
+from tokenring.node.channels import NEW, REPEAT, STALE, CommandMemory
+from tokenring.node.pclink.server import PcLinkServer
 
 PROTOCOL = default_protocol()
 MAIN, MOTOR, SONAR = (PROTOCOL.nodes[n].id for n in ("main", "motor", "sonar"))
@@ -380,7 +380,7 @@ def test_the_memory_never_mistakes_a_new_command_for_a_repeat_after_a_full_wrap(
 
 PROGRAMS = {
     "main": """
-from tokenring.program import UserProgram
+from tokenring.node.program import UserProgram
 
 class Program(UserProgram):
     def setup(self):
@@ -412,7 +412,7 @@ class Program(UserProgram):
         return {"acked": self.acked, "unclear": self.unclear, "finished": self.finished}
 """,
     "receiver": """
-from tokenring.program import UserProgram
+from tokenring.node.program import UserProgram
 
 class Program(UserProgram):
     def setup(self):

@@ -18,13 +18,13 @@ from conftest import REPO, TOKENRING, Processes, pid_alive
 from ringjudge import FrameTap, Header, judge_ledgers, one_token
 from ringutil import control, launcher_pids, stats, tap, wait_ring, wait_until
 
-from tokenring.cliutil import free_port
-from tokenring.protocol import default_protocol
+from tokenring.contract.protocol import default_protocol
+from tokenring.transport.session import free_port
 
 IDS = [n.id for n in default_protocol().nodes.values()]
-PROBE = str(REPO / "tokenring" / "chaosprobe.py")
+PROBE = str(REPO / "tokenring" / "chaos" / "probe.py")
 HEADER = Header.from_protocol()
-LEDGER_ENV = "TOKENRING_PROBE_LEDGER"  # the probe's ledger directory (tokenring/chaosprobe.py)
+LEDGER_ENV = "TOKENRING_PROBE_LEDGER"  # the probe's ledger directory (tokenring/chaos/probe.py)
 
 
 class Ring:
@@ -202,7 +202,8 @@ def test_hang_is_skipped_and_the_node_rejoins_after_resume(ring):
 
 
 def test_a_resume_right_after_its_hang_leaves_the_node_running(ring):
-    from tokenring.faults import AFTER_REPLY_S, FaultClient
+    from tokenring.host.faults import FaultClient
+    from tokenring.node.faults import AFTER_REPLY_S
 
     # the hard hang stops the node AFTER_REPLY_S after it answered; a resume sent sooner (chaos
     # injects faults back to back after a slow one) must not leave that stop to come after it

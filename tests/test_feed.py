@@ -1,4 +1,4 @@
-"""The ring's live feed (tokenring/feed.py) on synthetic frames, and on a real ring.
+"""The ring's live feed (tokenring/observe/feed.py) on synthetic frames, and on a real ring.
 
 The judge builds frames from protocol.yaml read as plain YAML and a bitwise CRC-16/ARC of its
 own, so it shares no decoding code with the feed; every message is checked against its
@@ -16,8 +16,8 @@ import pytest
 import yaml
 from ringjudge import crc16_arc  # the judge's own CRC, not tokenring's
 
-from tokenring.feed import Feed, Message, RawSample, RingSource
-from tokenring.protocol import default_protocol_path, load_protocol
+from tokenring.contract.protocol import default_protocol_path, load_protocol
+from tokenring.observe.feed import Feed, Message, RawSample, RingSource
 
 PROTOCOL_YAML = yaml.safe_load(Path(default_protocol_path()).read_text())
 

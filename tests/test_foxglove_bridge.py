@@ -1,4 +1,4 @@
-"""The Foxglove bridge (tokenring/foxglove.py, ``tokenring foxglove``, ``up --foxglove``).
+"""The Foxglove bridge (tokenring/observe/foxglove.py, ``tokenring foxglove``, ``up --foxglove``).
 
 The judge is a plain WebSocket client (the ``websockets`` package) speaking the Foxglove
 WebSocket protocol as its specification writes it (github.com/foxglove/ws-protocol): JSON
@@ -26,9 +26,9 @@ import yaml
 from conftest import REPO, pid_alive, run_tokenring
 from ringutil import tap, wait_until
 
-from tokenring import keys
-from tokenring.cliutil import free_port, query
-from tokenring.feed import Message, Topic
+from tokenring.contract import keys
+from tokenring.observe.feed import Message, Topic
+from tokenring.transport.session import free_port, query
 
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]  # the SDK's name, the original one
 MESSAGE_DATA = 0x01
@@ -215,7 +215,7 @@ def test_a_new_subscriber_gets_the_last_message_at_once_and_no_mcap_sink_sees_th
     import foxglove
     from mcap.reader import make_reader
 
-    from tokenring.foxglove import FoxgloveBridge
+    from tokenring.observe.foxglove import FoxgloveBridge
 
     topic = Topic(
         "/robot/walls",

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
+from tokenring.contract.frame import Token, crc16_arc, frame_problem
+from tokenring.contract.protocol import default_protocol
 from tokenring.errors import FrameError
-from tokenring.frame import Token, crc16_arc, frame_problem
-from tokenring.protocol import default_protocol
 
 
 def test_crc16_arc_check_value():

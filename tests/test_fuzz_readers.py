@@ -18,9 +18,9 @@ from modules.common.actions import load_actions
 from modules.common.locconfig import load_config
 from modules.common.logs import read_log
 from modules.description import load_world
-from tokenring.chaos import load_scenario
+from tokenring.chaos.runner import load_scenario
+from tokenring.contract.protocol import load_protocol
 from tokenring.errors import TokenRingError
-from tokenring.protocol import load_protocol
 
 FUZZ = settings(
     max_examples=int(os.environ.get("TOKENRING_FUZZ_EXAMPLES", "60")),

@@ -16,7 +16,7 @@ from modules.world.clients import (
 )
 from modules.world.hardware import FACTORIES, open_hardware
 from modules.world.sim import Simulator
-from tokenring.zconfig import make_config, open_session
+from tokenring.transport.zenoh_config import make_config, open_session
 
 
 def test_the_four_hardware_modules_have_clients_the_others_none():

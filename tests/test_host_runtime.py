@@ -5,7 +5,7 @@ reliable put) until the face it goes to has a free batch. On one worker thread t
 (tokenring's node runtime), the task that would free a batch needs that same worker, so a router
 on it stalls for Zenoh's 5 s and then closes the face, losing what it had queued: the launcher's
 answer to SIGCONT in the recovery benchmark never came. The launcher's process runs its own
-runtime (tokenring.zconfig.HOST_RUNTIME); this checks from outside, with plain Zenoh clients,
+runtime (tokenring.transport.zenoh_config.HOST_RUNTIME); this checks from outside, with plain Zenoh clients,
 that every message of a burst arrives and the launcher still answers.
 """
 
@@ -18,7 +18,7 @@ import pytest
 import zenoh
 from ringutil import answering_launcher_pids, launcher_pids, stats, thread_names, wait_until
 
-from tokenring.zconfig import HOST_RUNTIME, NODE_RUNTIME, RUNTIME_CHOSEN, node_environment
+from tokenring.transport.zenoh_config import HOST_RUNTIME, NODE_RUNTIME, RUNTIME_CHOSEN, node_environment
 
 #: 20 MB in 1 KB messages: the burst that stalled a one-worker router in 1 of 1 runs here
 #: (456 of 20 000 delivered, then the subscriber's face closed)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from tokenring.interleave import since_resume, summarize, window_rounds
+from tokenring.perf.interleaved_pairs import since_resume, summarize, window_rounds
 
 REPO = Path(__file__).resolve().parents[1]
 TOKENRING = [sys.executable, "-m", "tokenring"]

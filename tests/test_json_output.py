@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from tokenring.cliutil import write_json
+from tokenring.cli.output import write_json
 
 
 def refuse_constant(name: str) -> None:

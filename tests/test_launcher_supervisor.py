@@ -19,8 +19,8 @@ from pathlib import Path
 import pytest
 from memring import wait_for
 
-import tokenring.launcher as launcher_module
-from tokenring.launcher import Launcher, NodePlan
+import tokenring.host.launcher as launcher_module
+from tokenring.host.launcher import Launcher, NodePlan
 
 HOUR = 3600.0
 HANG_GUARD_S = 30.0  # how long a step may take before the test calls it hung, not slow
@@ -200,7 +200,7 @@ def test_a_service_that_never_comes_up_leaves_nothing_running(ring_name: str, en
     """``up`` whose world never appears ends with the error: the service is stopped and the
     session closed, so no Zenoh callback thread keeps the process alive after it (it did)."""
     from tokenring.errors import TransportError
-    from tokenring.launcher import ServicePlan
+    from tokenring.host.launcher import ServicePlan
 
     silent = ServicePlan(
         "silent",

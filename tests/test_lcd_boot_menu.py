@@ -34,9 +34,9 @@ from ringutil import control, launcher_pids, tap, wait_until
 from modules.common.lcdos import LcdOs
 from modules.common.lcdui import OsMenu, Screen
 from modules.pc.feed import LcdSource
-from tokenring.protocol import default_protocol
-from tokenring.resident import ResidentHost
-from tokenring.syswire import State
+from tokenring.contract.protocol import default_protocol
+from tokenring.node.resident import ResidentHost
+from tokenring.node.system.vocabulary import State
 
 FONT = proportional(LCD_FONT)
 OS_MENU = ["OS V2.0 Main Menu", "1 Start Robbi", "2 Components"]

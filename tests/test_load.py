@@ -19,16 +19,16 @@ import pytest
 from conftest import wait_gone
 from ringutil import control, launcher_pids, stats, tap, wait_ring, wait_until
 
-from tokenring import keys
-from tokenring.cliutil import query_one
+from tokenring.contract import keys
 from tokenring.errors import UsageError
-from tokenring.pclink import PcLink
-from tokenring.programstore import file_stamp
+from tokenring.host.pclink import PcLink
+from tokenring.node.store import file_stamp
+from tokenring.transport.session import query_one
 
 MODULES = Path(__file__).resolve().parent.parent / "modules"
 
 VERSIONED = """
-from tokenring.program import UserProgram
+from tokenring.node.program import UserProgram
 
 
 class Program(UserProgram):
@@ -40,7 +40,7 @@ class Program(UserProgram):
 {padding}"""
 
 RAISES = """
-from tokenring.program import UserProgram
+from tokenring.node.program import UserProgram
 
 
 class Program(UserProgram):

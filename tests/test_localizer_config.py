@@ -97,7 +97,7 @@ def test_every_error_names_file_line_and_key(text: str, message: str) -> None:
 def test_missing_file_and_command_line_exit_code(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(ConfigError, match="no such configuration file"):
         load_config(tmp_path / "nope.yaml")
-    from tokenring.cli import main
+    from tokenring.cli.main import main
 
     bad = tmp_path / "bad.yaml"
     bad.write_text("filter:\n  odometry_model: spline\n")

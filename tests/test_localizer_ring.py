@@ -15,8 +15,8 @@ from modules.common.logs import read_log
 from modules.description import keys as robot_keys
 from modules.pc.analysis import analyse
 from modules.pc.replay import replay
-from tokenring.cliutil import query
-from tokenring.pclink import open_link
+from tokenring.host.pclink import open_link
+from tokenring.transport.session import query
 
 
 def test_action_file_drive_with_the_localizer_on_copro(procs, ring_name, endpoint, tmp_path):

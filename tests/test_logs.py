@@ -22,7 +22,7 @@ from modules.common.logs import (
     sort_log,
     summary,
 )
-from tokenring.cli import main as cli_main
+from tokenring.cli.main import main as cli_main
 
 CONFIG = {"sensors": {}}
 

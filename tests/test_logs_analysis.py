@@ -12,7 +12,7 @@ from modules.common.localizer import LocalizationCore
 from modules.common.locconfig import load_config
 from modules.common.logs import DataLog, LogError
 from modules.pc.analysis import analyse
-from tokenring.cli import main as cli_main
+from tokenring.cli.main import main as cli_main
 
 
 @pytest.fixture(scope="module")

@@ -21,7 +21,7 @@ from modules.common.poseupdate import ENV as SETPOS_ENV
 from modules.common.poseupdate import CorrectionSettings, PoseCorrector
 from modules.common.sync import OdometryParams, OdometrySync, OdometryTrack, Sample
 from modules.common.vectorgen import default_layout
-from tokenring.protocol import default_protocol
+from tokenring.contract.protocol import default_protocol
 
 ENUMS = default_protocol().enums
 IDLE, MOVING = ENUMS["motor_state"]["IDLE"], ENUMS["motor_state"]["MOVING"]

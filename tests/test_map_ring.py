@@ -9,7 +9,7 @@ import sys
 
 from ringutil import control, launcher_pids, tap, wait_ring, wait_until
 
-from tokenring.pclink import PcLink
+from tokenring.host.pclink import PcLink
 
 
 def test_get_map_round_trip_through_main_and_the_lcd_over_zenoh(procs, ring_name, endpoint, tmp_path):

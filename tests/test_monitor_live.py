@@ -19,7 +19,7 @@ import pytest
 from conftest import REPO, TOKENRING, run_tokenring
 from ringutil import tap, wait_ring
 
-from tokenring.commands.monitor import render_rich
+from tokenring.cli.commands.monitor import render_rich
 
 CLEAR_SCREEN = "\x1b[2J"
 ERASE_LINE = "\x1b[2K"

@@ -5,10 +5,10 @@ from __future__ import annotations
 import itertools
 import json
 
-from tokenring.chaos import load_scenario
-from tokenring.ledger import judge
-from tokenring.nemesis import OPERATIONS, Operation, generate, scenario_document, shrink
-from tokenring.protocol import default_protocol
+from tokenring.chaos.checker import judge
+from tokenring.chaos.nemesis import OPERATIONS, Operation, generate, scenario_document, shrink
+from tokenring.chaos.runner import load_scenario
+from tokenring.contract.protocol import default_protocol
 
 NAMES = list(default_protocol().nodes)
 

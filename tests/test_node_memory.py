@@ -14,7 +14,7 @@ from pathlib import Path
 import yaml
 from ringutil import control, launcher_pids, tap, wait_ring, wait_until
 
-from tokenring.protocol import Protocol, load_protocol, parse_protocol
+from tokenring.contract.protocol import Protocol, load_protocol, parse_protocol
 
 #: what a node that runs no program must not have imported (the test's own list)
 NOT_IN_A_BARE_NODE = (
@@ -34,7 +34,9 @@ def unwanted(modules: list[str]) -> list[str]:
     """The modules of ``modules`` a bare node must not hold: the list above (and submodules),
     and every CLI verb but ``node``."""
     bad = [m for m in modules if any(m == n or m.startswith(n + ".") for n in NOT_IN_A_BARE_NODE)]
-    verbs = [m for m in modules if m.startswith("tokenring.commands.") and m != "tokenring.commands.node"]
+    verbs = [
+        m for m in modules if m.startswith("tokenring.cli.commands.") and m != "tokenring.cli.commands.node"
+    ]
     return bad + verbs
 
 
@@ -56,7 +58,9 @@ def test_nodes_without_programs_import_no_numpy_metadata_robot_code_or_other_ver
         report = reports[node]
         assert unwanted(report["modules"]) == [], (node, unwanted(report["modules"]))
         assert report["heavy"] == [], (node, report["heavy"])
-        assert "tokenring.nodeproc" in report["modules"] and report["modules_count"] == len(report["modules"])
+        assert "tokenring.node.process" in report["modules"] and report["modules_count"] == len(
+            report["modules"]
+        )
     assert "modules" in reports[70]["modules"]  # the robot's resident menu is robot code
     for node, report in reports.items():
         # read from the kernel: a node's private pages are part of its resident ones, never all
@@ -111,7 +115,7 @@ def test_a_node_started_by_hand_loads_only_the_node_verb(procs, ring_name, endpo
     node.send_signal(signal.SIGTERM)
     assert node.wait(30) == 0
     assert unwanted(report["modules"]) == [], unwanted(report["modules"])
-    assert "tokenring.commands.node" in report["modules"]
+    assert "tokenring.cli.commands.node" in report["modules"]
 
 
 def test_the_protocol_is_read_as_yaml_once_then_from_its_cached_document(tmp_path, monkeypatch):
@@ -181,7 +185,7 @@ def test_a_benchmark_ring_of_generated_ids_boots_no_application():
     """``tokenring bench`` measures the ring alone: a generated ID that protocol.yaml names (70,
     the robot's lcd) must not boot the robot's resident menu (it made one node of every 64- and
     255-node benchmark ring 58 MB against the others' 37)."""
-    from tokenring.roundtrip import run_ring
+    from tokenring.perf.roundtrip import run_ring
 
     reports: dict[str, dict] = {}
 

@@ -8,10 +8,10 @@ import pytest
 from ringutil import tap, wait_ring, wait_until
 
 from tokenring.errors import UsageError
-from tokenring.pclink import PcLink
+from tokenring.host.pclink import PcLink
 
 RECEIVER = """
-from tokenring.program import UserProgram
+from tokenring.node.program import UserProgram
 
 
 class Program(UserProgram):
@@ -32,7 +32,7 @@ class Program(UserProgram):
 """
 
 MAIN = """
-from tokenring.program import UserProgram
+from tokenring.node.program import UserProgram
 
 
 class Program(UserProgram):
@@ -82,7 +82,7 @@ def test_pc_link_relays_commands_reads_data_and_program_requests(procs, ring_nam
 
 SLOW_MAIN = """
 import os, time
-from tokenring.program import UserProgram
+from tokenring.node.program import UserProgram
 
 
 class Program(UserProgram):

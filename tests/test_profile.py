@@ -1,4 +1,4 @@
-"""``--profile arcnet``: the seed's hardware timing on top of the wire (tokenring/profile.py)."""
+"""``--profile arcnet``: the seed's hardware timing on top of the wire (tokenring/node/pacing.py)."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ import pytest
 from conftest import run_tokenring
 from memring import MemoryRing
 
-from tokenring.channels import ChannelBuffer, DataRegistration
+from tokenring.contract.protocol import default_protocol
+from tokenring.contract.ring import hop_time
 from tokenring.errors import UsageError
-from tokenring.profile import COMMAND_HEADER_BYTES, MACHINE_CYCLE_S, PROFILES, Pacer, get_profile, install
-from tokenring.protocol import default_protocol
-from tokenring.ring import hop_time
+from tokenring.node.channels import ChannelBuffer, DataRegistration
+from tokenring.node.pacing import COMMAND_HEADER_BYTES, MACHINE_CYCLE_S, PROFILES, Pacer, get_profile, install
 
 ARCNET = PROFILES["arcnet"]
 

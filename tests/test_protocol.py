@@ -10,8 +10,8 @@ import pytest
 import yaml
 from conftest import run_tokenring
 
+from tokenring.contract.protocol import load_protocol, parse_protocol
 from tokenring.errors import ProtocolError
-from tokenring.protocol import load_protocol, parse_protocol
 
 REPO = Path(__file__).resolve().parent.parent
 TEXT = (REPO / "protocol.yaml").read_text()

@@ -1,4 +1,4 @@
-"""MCAP recording and playback (tokenring/recording.py, ``record``, ``play``, ``up --record``,
+"""MCAP recording and playback (tokenring/observe/recording.py, ``record``, ``play``, ``up --record``,
 ``sniff --write/--read``, ``log convert --to mcap``).
 
 The judge of every file is the ``mcap`` package's own reader (``make_reader``), never our
@@ -22,9 +22,9 @@ from conftest import TOKENRING, run_tokenring
 from mcap.reader import NonSeekingReader, make_reader
 from ringutil import launcher_pids, tap, wait_ring, wait_until
 
-from tokenring.cliutil import free_port
-from tokenring.pclink import PcLink
-from tokenring.protocol import default_protocol_path
+from tokenring.contract.protocol import default_protocol_path
+from tokenring.host.pclink import PcLink
+from tokenring.transport.session import free_port
 
 PROTOCOL_TEXT = Path(default_protocol_path()).read_text()
 NODES = ["main", "motor", "sonar", "compass", "copro", "map", "lcd", "charger"]
@@ -213,8 +213,8 @@ def test_a_killed_recorder_leaves_its_part_file_readable_and_no_final_file(tmp_p
     before the kill, and the mcap package's streaming reader reads them."""
     script = """
 import sys, time
-from tokenring.feed import Message, Topic
-from tokenring.recording import McapRecorder
+from tokenring.observe.feed import Message, Topic
+from tokenring.observe.recording import McapRecorder
 rec = McapRecorder(sys.argv[1], ring="r", topics=[Topic("/n", "test.N", {"type": "object"})],
                    flush_interval_s=0.05)
 for i in range(200):
@@ -318,9 +318,9 @@ def test_a_trlog_converts_to_mcap(tmp_path):
 
 def write_token_frames(path: Path, ring: str, frames: int) -> Path:
     """A recording of ``frames`` synthetic passes 1 ms apart, counters 0, 1, ... mod 256."""
-    from tokenring.feed import RawSample
-    from tokenring.frame import Token
-    from tokenring.recording import McapRecorder
+    from tokenring.contract.frame import Token
+    from tokenring.observe.feed import RawSample
+    from tokenring.observe.recording import McapRecorder
 
     recorder = McapRecorder(path, ring=ring)
     for i in range(frames):
@@ -410,7 +410,7 @@ def test_play_does_not_report_a_sniff_that_stopped_on_purpose(procs, tmp_path):
 
 
 def test_a_tap_is_named_alike_in_its_token_its_drain_reply_and_its_goodbye():
-    from tokenring import keys
+    from tokenring.contract import keys
 
     assert keys.tap_id_from_key("tokenring/r/tap/ab12") == "ab12"
     assert keys.tap_id_from_key("tokenring/r/tap/ab12/drained") == "ab12"

@@ -1,18 +1,18 @@
-"""When a node regenerates a lost token: tokenring.recovery.regeneration_deadline, the watchdog's
+"""When a node regenerates a lost token: tokenring.node.recovery.regeneration_deadline, the watchdog's
 one decision, judged without threads, clocks or Zenoh."""
 
 from __future__ import annotations
 
 import pytest
 
-from tokenring.recovery import (
+from tokenring.contract.ring import Timeouts
+from tokenring.node.recovery import (
     EXPECT_CAP_S,
     LATECOMER_RECONS,
     REGENERATION_BACKOFF_MAX,
     SETTLE_CAP_S,
     regeneration_deadline,
 )
-from tokenring.ring import Timeouts
 
 T = Timeouts(hop=0.001, ack=0.01, recon=0.1, slot=0.02, ack_interval=0.5)
 RUNNING = dict(

@@ -254,7 +254,7 @@ def test_a_successor_skipped_while_only_slow_gets_a_longer_ack_timeout_that_shri
 
 
 def test_big_rings_get_timeouts_that_grow_with_the_live_count():
-    from tokenring.ring import ACK_CAP_S, Timing
+    from tokenring.contract.ring import ACK_CAP_S, Timing
 
     timing = Timing(bitrate=None)
     timing.ack_latency.add(1.0)  # a starved machine: acks a second late
@@ -269,7 +269,7 @@ def test_timeouts_come_from_the_same_percentiles_as_numpys():
 
     import numpy as np
 
-    from tokenring.ring import RollingStats
+    from tokenring.contract.ring import RollingStats
 
     stats = RollingStats(1000)
     assert stats.percentiles((50, 99), default=-1.0) == [-1.0, -1.0]
@@ -297,9 +297,9 @@ def test_a_booting_ring_told_its_size_starts_only_once_every_node_is_live():
 
 
 def test_only_an_excluded_nodes_neighbours_ping_it_often():
-    from tokenring.node import NodeOS
-    from tokenring.protocol import default_protocol
-    from tokenring.recovery import FAR_PROBE_S, PREPARED_NEIGHBOURS
+    from tokenring.contract.protocol import default_protocol
+    from tokenring.node.node_os import NodeOS
+    from tokenring.node.recovery import FAR_PROBE_S, PREPARED_NEIGHBOURS
     from tokenring.transport.memory import MemoryHub, MemoryTransport
 
     node = NodeOS(default_protocol(), 1, MemoryTransport(MemoryHub(), "mem", 1))

@@ -1,4 +1,4 @@
-"""Regenerations by cause (tokenring/regeneration.py): the per-hour arithmetic, the ledger's
+"""Regenerations by cause (tokenring/node/regeneration.py): the per-hour arithmetic, the ledger's
 rules, and a real ring where a lost token's regeneration counts as a fault's, not as spurious."""
 
 from __future__ import annotations
@@ -12,8 +12,9 @@ import pytest
 from conftest import run_tokenring
 from ringutil import launcher_pids, stats, tap, wait_ring, wait_until
 
-from tokenring.protocol import default_protocol
-from tokenring.regeneration import QUIET_S, RegenerationLedger, format_rates, per_hour, ring_rates
+from tokenring.contract.protocol import default_protocol
+from tokenring.host.regeneration import format_rates, ring_rates
+from tokenring.node.regeneration import QUIET_S, RegenerationLedger, per_hour
 
 IDS = [n.id for n in default_protocol().nodes.values()]
 
@@ -202,7 +203,7 @@ def test_the_reconfiguration_timeout_follows_the_tail_of_rounds_that_came_back()
     """A starved machine stretches the tail of the rounds, not their median: the timeout stays
     3 x the 99th percentile of the rounds that came back before it; a longer one (a loss) never
     lengthens its own timeout."""
-    from tokenring.ring import ROUND_TAIL_FACTOR, Timing
+    from tokenring.contract.ring import ROUND_TAIL_FACTOR, Timing
 
     timing = Timing(None)
     for _ in range(500):
@@ -223,7 +224,7 @@ def test_recent_rounds_can_be_read_while_the_token_path_appends():
     deque raised "deque mutated during iteration" and killed the watchdog thread."""
     import threading
 
-    from tokenring.ring import RollingStats
+    from tokenring.contract.ring import RollingStats
 
     stats = RollingStats(4096)
     stop = threading.Event()

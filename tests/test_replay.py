@@ -11,7 +11,7 @@ from modules.common.localizer import LocalizationCore
 from modules.common.locconfig import load_config
 from modules.common.logs import DataLog, ErrorLog, LogError, read_log
 from modules.pc.replay import replay
-from tokenring.cli import main as cli_main
+from tokenring.cli.main import main as cli_main
 
 
 @pytest.fixture(scope="module")

@@ -9,9 +9,9 @@ import time
 import pytest
 from memring import MemoryRing, wait_for
 
+from tokenring.contract.frame import Token
+from tokenring.contract.protocol import default_protocol
 from tokenring.errors import ChannelError
-from tokenring.frame import Token
-from tokenring.protocol import default_protocol
 
 
 @pytest.fixture

@@ -27,10 +27,10 @@ from ringutil import (
     write_probe_programs,
 )
 
-from tokenring import keys
-from tokenring.frame import Token
-from tokenring.protocol import default_protocol
-from tokenring.ring import EPOCH_MASK
+from tokenring.contract import keys
+from tokenring.contract.frame import Token
+from tokenring.contract.protocol import default_protocol
+from tokenring.contract.ring import EPOCH_MASK
 
 PROTOCOL = default_protocol()
 ALL_IDS = [n.id for n in PROTOCOL.nodes.values()]

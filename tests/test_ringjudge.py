@@ -165,7 +165,7 @@ def test_members_must_each_pass_to_their_successor_in_one_epoch():
 
 
 def test_the_tap_keeps_every_frame_under_token_with_its_arrival_time():
-    from tokenring.zconfig import make_config, open_session
+    from tokenring.transport.zenoh_config import make_config, open_session
 
     session = open_session(make_config())
     ring = f"j{uuid.uuid4().hex[:8]}"

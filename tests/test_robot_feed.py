@@ -24,9 +24,8 @@ from ringjudge import crc16_arc  # the judge's own CRC, not tokenring's
 
 from modules.pc.feed import LcdSource, RobotSource, WorldSource, robot_feed_sources, walls_messages
 from tests.ringutil import tap, wait_until
-from tokenring.extensions import feed_sources
-from tokenring.feed import Feed, Message, RawSample
-from tokenring.protocol import default_protocol_path, load_protocol
+from tokenring.contract.protocol import default_protocol_path, load_protocol
+from tokenring.observe.feed import Feed, Message, RawSample, feed_sources
 
 PROTOCOL_YAML = yaml.safe_load(Path(default_protocol_path()).read_text())
 T0 = 1_700_000_000_123_456_789  # ns: sec 1700000000, nsec 123456789

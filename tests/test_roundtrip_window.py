@@ -22,7 +22,7 @@ def node_pids() -> list[int]:
 
 
 def test_what_follows_the_window_is_not_in_its_rounds():
-    from tokenring.roundtrip import run_ring
+    from tokenring.perf.roundtrip import run_ring
 
     stalled: list[int] = []
 

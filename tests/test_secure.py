@@ -26,7 +26,7 @@ from nethosts import Hosts, needs_namespaces
 from ringutil import wait_until
 
 PROGRAM = """
-from tokenring.program import UserProgram
+from tokenring.node.program import UserProgram
 
 
 class Program(UserProgram):
@@ -35,7 +35,7 @@ class Program(UserProgram):
 
 FORGE = """
 import sys, time
-from tokenring.zconfig import make_config, open_session
+from tokenring.transport.zenoh_config import make_config, open_session
 session = open_session(make_config(connect=[sys.argv[1]], config_file=sys.argv[2]))
 publisher = session.declare_publisher(f"tokenring/{sys.argv[3]}/token/20")
 deadline = time.monotonic() + 60

@@ -21,7 +21,7 @@ import modules.copro as copro_module
 from modules.common.algorithms import ENV
 from modules.common.vectorgen import OUR_METHOD, SEED_METHOD, Vectorizer, default_layout
 from modules.description import robot
-from tokenring.protocol import default_protocol
+from tokenring.contract.protocol import default_protocol
 
 ENUMS = default_protocol().enums
 LINEAR = ENUMS["behaviour"]["LINEAR"]

@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from modules.common.logs import DataLog, ErrorLog, LogError, convert_seed_text, read_log
-from tokenring.cli import main as cli_main
+from tokenring.cli.main import main as cli_main
 
 #: three sonars: ahead 150 mm in front, to the left 120 mm out, behind 150 mm back
 CONFIG = {"robot": {"sonars": [[150, 0, 0], [0, 120, 90], [-150, 0, 180]]}}

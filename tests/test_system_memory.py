@@ -9,12 +9,12 @@ from types import SimpleNamespace
 import pytest
 from memring import MemoryRing, wait_for
 
-from tokenring.programstore import ProgramStore
-from tokenring.system import SystemLayer
-from tokenring.syswire import State, Status, SystemCommandError
+from tokenring.node.store import ProgramStore
+from tokenring.node.system.layer import SystemLayer
+from tokenring.node.system.vocabulary import State, Status, SystemCommandError
 
 PROGRAM = """
-from tokenring.program import UserProgram
+from tokenring.node.program import UserProgram
 
 
 class Program(UserProgram):
@@ -32,7 +32,7 @@ class Program(UserProgram):
 """
 
 RAISES = """
-from tokenring.program import UserProgram
+from tokenring.node.program import UserProgram
 
 
 class Program(UserProgram):
@@ -260,7 +260,7 @@ def test_each_skip_of_the_target_gets_its_own_wait(ring, monkeypatch):
     # a long download whose target is skipped twice, the second time long after the first: the
     # first skip's wait must not carry over (the clock jumps 10 s between them, as a long
     # download would take)
-    import tokenring.sysissuer as sysissuer
+    import tokenring.node.system.issuer as sysissuer
 
     offset = [0.0]
     monkeypatch.setattr(sysissuer, "time", SimpleNamespace(monotonic=lambda: time.monotonic() + offset[0]))

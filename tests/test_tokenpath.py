@@ -1,4 +1,4 @@
-"""The token path in C against the same path in Python (tokenring/tokenpath.py)."""
+"""The token path in C against the same path in Python (tokenring/node/tokenpath.py)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ from typing import Any
 
 import pytest
 
-from tokenring import tokenpath
+from tokenring._native import payload_call
+from tokenring.node import tokenpath
 
 SCENARIO = Path(__file__).with_name("tokenpath_scenario.py")
 
@@ -32,7 +33,7 @@ def run_scenario(native: bool, *args: str) -> dict[str, Any]:
 
 def test_the_native_token_path_is_built_and_used():
     assert tokenpath.NATIVE, "tokenring/_tokenpath.c is not built: pip install -e . compiles it"
-    from tokenring.node import NodeOS
+    from tokenring.node.node_os import NodeOS
 
     assert NodeOS._on_frame.__qualname__ == "TokenPath._on_frame"
 
@@ -109,7 +110,7 @@ class _Sample:
 
 def test_the_tokens_subscriber_callback_hands_the_payload_bytes_on():
     got: list[bytes] = []
-    callback = tokenpath.payload_call(got.append)
+    callback = payload_call(got.append)
     if tokenpath.NATIVE:  # no Python frame per hop where the token path is in C
         assert type(callback).__name__ == "PayloadCall"
     callback(_Sample(b"\x01\x02"))
@@ -120,7 +121,7 @@ def test_the_tokens_subscriber_callback_hands_the_payload_bytes_on():
         raise ValueError(f"{len(frame)} bytes")
 
     with pytest.raises(ValueError, match="3 bytes"):  # the handler's error reaches Zenoh's caller
-        tokenpath.payload_call(failing)(_Sample(b"abc"))
+        payload_call(failing)(_Sample(b"abc"))
 
 
 @pytest.mark.skipif(not tokenpath.NATIVE, reason="checks of the C type itself")
@@ -137,7 +138,7 @@ def test_the_c_payload_call_refuses_what_is_not_a_sample_or_a_handler():
 
 
 def test_the_visits_counters_read_and_write_as_plain_node_stats():
-    from tokenring.node import NodeStats
+    from tokenring.node.node_os import NodeStats
 
     stats = NodeStats()
     assert stats.as_dict() == dict.fromkeys(NodeStats.FIELDS, 0)

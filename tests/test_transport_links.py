@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 from ringutil import processes, stats, wait_until
 
-from tokenring.cliutil import free_port
-from tokenring.zconfig import make_config, open_session
+from tokenring.transport.session import free_port
+from tokenring.transport.zenoh_config import make_config, open_session
 
 IDS = (10, 20, 30, 40)
 
@@ -86,7 +86,7 @@ def test_the_hop_goes_direct_and_past_a_dead_successor_through_the_router(procs,
 
 
 def test_a_launched_ring_on_direct_links_circulates():
-    from tokenring.roundtrip import run_ring
+    from tokenring.perf.roundtrip import run_ring
 
     result = run_ring(6, 100, 20, router=True, links=True, timeout=120.0)
     assert len(result.rounds_s) == 100
@@ -110,7 +110,7 @@ def test_a_nodes_threads_do_not_grow_with_the_ring():
     # a node prepares a direct sender for each node that joins near it in the ring (in a small
     # ring, every other node); each sender's matching listener once had a Python thread of its
     # own: 30 threads per node at 12 nodes, and the first nodes of 255 held 268 (40 MB of RSS)
-    from tokenring.roundtrip import run_ring
+    from tokenring.perf.roundtrip import run_ring
 
     threads: dict[int, dict[int, int]] = {}
     for n in (4, 12):
@@ -130,7 +130,7 @@ def test_a_nodes_threads_do_not_grow_with_the_ring():
 
 def test_links_are_refused_where_they_would_bypass_the_rings_rules(tmp_path):
     from tokenring.errors import UsageError
-    from tokenring.launcher import Launcher
+    from tokenring.host.launcher import Launcher
 
     for options in (
         {"links": True},
@@ -141,7 +141,7 @@ def test_links_are_refused_where_they_would_bypass_the_rings_rules(tmp_path):
 
 
 def test_the_launcher_links_each_node_to_its_successors_listener():
-    from tokenring.launcher import Launcher, NodePlan
+    from tokenring.host.launcher import Launcher, NodePlan
 
     launcher = Launcher(
         [NodePlan(i, f"node{i}", None) for i in (30, 10, 20)],

@@ -15,13 +15,13 @@ import pytest
 from memring import wait_for
 from ringutil import stats, wait_until
 
+from tokenring.contract.protocol import default_protocol
 from tokenring.errors import TransportError, UsageError
-from tokenring.node import NodeOS
-from tokenring.protocol import default_protocol
+from tokenring.node.node_os import NodeOS
 from tokenring.transport.factory import make_transport
 from tokenring.transport.registry import MembershipRegistry, RegistryClient, parse_address
 from tokenring.transport.sockets import BACKENDS
-from tokenring.zconfig import make_config, open_session
+from tokenring.transport.zenoh_config import make_config, open_session
 
 sys.setswitchinterval(0.0005)  # several nodes in one process, as in tests/memring.py
 IDS = [10, 20, 30, 40]

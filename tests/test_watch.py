@@ -14,7 +14,7 @@ from conftest import run_tokenring
 from mcap.reader import make_reader
 from ringutil import tap, wait_ring, wait_until
 
-from tokenring.cliutil import free_port
+from tokenring.transport.session import free_port
 
 
 def one_line_refusal(out, *needles: str) -> None:

@@ -15,8 +15,8 @@ import pytest
 from conftest import run_tokenring
 from ringutil import control, launcher_pids, tap, wait_ring, wait_until
 
-from tokenring.cliutil import free_port
-from tokenring.feed import Message
+from tokenring.observe.feed import Message
+from tokenring.transport.session import free_port
 from tokenring.web.hub import Hub
 from tokenring.web.server import STATIC
 

@@ -18,9 +18,9 @@ from pathlib import Path
 import pytest
 from ringutil import launcher_pids, tap, wait_ring, wait_until
 
-from tokenring import keys
-from tokenring.cliutil import query
-from tokenring.pclink import PcLink
+from tokenring.contract import keys
+from tokenring.host.pclink import PcLink
+from tokenring.transport.session import query
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMEDRIVER = Path("/usr/bin/chromedriver")

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from tokenring.frame import Token
-from tokenring.wire import chain_breaks, first_full_round, passes, settled, single_token
+from tokenring.contract.frame import Token
+from tokenring.observe.capture import chain_breaks, first_full_round, passes, settled, single_token
 
 RING = [10, 20, 30, 40]
 

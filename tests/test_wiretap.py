@@ -35,7 +35,7 @@ def test_bench_on_direct_links_times_the_rounds_on_the_wire(tmp_path):
 
 
 def test_wiretap_refuses_a_capture_it_cannot_start():
-    from tokenring.wiretap import WireTap, WireTapError
+    from tokenring.observe.pcap_tap import WireTap, WireTapError
 
     tap = WireTap.into(5, interface="no-such-interface0")
     try:
@@ -70,8 +70,8 @@ def test_crc_of_the_judge_is_arcs():
 def test_the_tap_finds_the_frame_inside_zenohs_framing_and_nothing_else():
     import random
 
-    from tokenring.protocol import default_protocol
-    from tokenring.wiretap import find_frame
+    from tokenring.contract.protocol import default_protocol
+    from tokenring.observe.pcap_tap import find_frame
 
     protocol = default_protocol()
     rng = random.Random(5)
@@ -93,10 +93,10 @@ def test_the_tap_on_direct_links_sees_every_pass_of_a_running_ring():
     import io
     import time
 
-    from tokenring.cliutil import free_port
-    from tokenring.launcher import Launcher, NodePlan
-    from tokenring.protocol import default_protocol
-    from tokenring.wiretap import WireTap
+    from tokenring.contract.protocol import default_protocol
+    from tokenring.host.launcher import Launcher, NodePlan
+    from tokenring.observe.pcap_tap import WireTap
+    from tokenring.transport.session import free_port
 
     header = default_protocol().header
     port = free_port()

@@ -10,7 +10,7 @@ import pytest
 from ringutil import launcher_pids, tap, wait_ring
 from test_world_ring import ROOM, programs
 
-from tokenring.cliutil import free_port
+from tokenring.transport.session import free_port
 
 DRIVE = [sys.executable, "-m", "tokenring", "drive"]
 

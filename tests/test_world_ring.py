@@ -16,11 +16,11 @@ from ringutil import launcher_pids, tap, wait_ring, wait_until
 from modules.description import keys as robot_keys
 from modules.description.robot import FRONT, RIGHT_FRONT, SONAR_MOUNTS, STEP_MM
 from tokenring.errors import TransportError
-from tokenring.pclink import PcLink
+from tokenring.host.pclink import PcLink
 
 REPO = Path(__file__).resolve().parent.parent
 MAIN = '''
-from tokenring.program import UserProgram
+from tokenring.node.program import UserProgram
 
 
 class Program(UserProgram):
@@ -63,7 +63,7 @@ def programs(tmp_path: Path, modules: list[str]) -> Path:
 
 def world_state(session, ring: str) -> dict:
     """The world's ground truth right now (world/state), after every hardware request so far."""
-    from tokenring.cliutil import query_one
+    from tokenring.transport.session import query_one
 
     return query_one(session, robot_keys.world(ring, "state"))
 

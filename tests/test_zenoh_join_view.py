@@ -21,9 +21,9 @@ import pytest
 import zenoh
 from ringutil import wait_until
 
-from tokenring.cliutil import free_port
+from tokenring.transport.session import free_port
 from tokenring.transport.zenoh import RingViewServer, ZenohTransport
-from tokenring.zconfig import make_config, open_session
+from tokenring.transport.zenoh_config import make_config, open_session
 
 
 def peer(listen: int | None = None, connect: int | None = None) -> zenoh.Session:

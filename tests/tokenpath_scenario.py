@@ -17,11 +17,11 @@ from typing import Any
 
 import fastcrc
 
-from tokenring import tokenpath
-from tokenring.frame import Token
-from tokenring.node import NodeOS
-from tokenring.protocol import default_protocol
-from tokenring.ring import ACK_REQUESTED
+from tokenring.contract.frame import Token
+from tokenring.contract.protocol import default_protocol
+from tokenring.contract.ring import ACK_REQUESTED
+from tokenring.node import tokenpath
+from tokenring.node.node_os import NodeOS
 from tokenring.transport.base import Transport
 
 STATE = (

@@ -2,6 +2,6 @@
 
 import sys
 
-from tokenring.cli import main
+from tokenring.cli.main import main
 
 sys.exit(main())

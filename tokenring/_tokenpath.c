@@ -1,7 +1,7 @@
 /*
- * The token path in C: the same visit as tokenring/tokenpath.py's PyTokenPath, step for step.
+ * The token path in C: the same visit as tokenring/node/tokenpath.py's PyTokenPath, step for step.
  *
- * TokenPath is the base type of tokenring.node.NodeOS. It keeps the ring state the visit
+ * TokenPath is the base type of tokenring.node.node_os.NodeOS. It keeps the ring state the visit
  * touches in C fields, exposed to Python under the attribute names the node uses (_epoch,
  * _accepted_crc, _last_sent_time, ...), so the watchdog, the acks and the user API read and
  * write them as before. The common visit (checks, copy, counter, seal, put) runs without
@@ -19,9 +19,9 @@
 #include <string.h>
 #include <time.h>
 
-static int ack_requested = 0x80; /* tokenring.ring.ACK_REQUESTED, read at import */
-static int epoch_mask = 0x7F;    /* tokenring.ring.EPOCH_MASK, read at import */
-static PyObject *epoch_order;    /* tokenring.ring.epoch_order */
+static int ack_requested = 0x80; /* tokenring.contract.ring.ACK_REQUESTED, read at import */
+static int epoch_mask = 0x7F;    /* tokenring.contract.ring.EPOCH_MASK, read at import */
+static PyObject *epoch_order;    /* tokenring.contract.ring.epoch_order */
 
 /* interned attribute and method names */
 static PyObject *s_rejected_length, *s_rejected_crc, *s_rejected_marker, *s_rejected_did,
@@ -60,7 +60,7 @@ static PyObject *s_rejected_length, *s_rejected_crc, *s_rejected_marker, *s_reje
 
 /* The counters every visit adds to, as C integers: a Python int per counter would be read,
    allocated and written back per visit, in memory the other nodes' visits have evicted.
-   tokenring.node.NodeStats reads and writes them through properties of the same names. */
+   tokenring.node.node_os.NodeStats reads and writes them through properties of the same names. */
 #define HOT_COUNTERS(X) X(frames_received) X(frames_sent) X(visits) X(rounds) X(rounds_missed)
 
 #define DECLARE_COUNTER(name) unsigned long long name;
@@ -309,7 +309,7 @@ static int forward(TokenPath *self, double t_in)
     work[self->token_size] = (unsigned char)(crc & 0xFF);
     work[self->token_size + 1] = (unsigned char)(crc >> 8);
     double hop = self->hop;
-    if (self->pacer != NULL && self->pacer != Py_None) { /* --profile: tokenring.profile */
+    if (self->pacer != NULL && self->pacer != Py_None) { /* --profile: tokenring.node.pacing */
         PyObject *py_t = PyFloat_FromDouble(t_in);
         PyObject *paced = py_t ? PyObject_CallOneArg(self->pacer, py_t) : NULL;
         Py_XDECREF(py_t);
@@ -916,7 +916,7 @@ static PyMethodDef TokenPath_methods[] = {
 static PyTypeObject TokenPathType = {
     PyVarObject_HEAD_INIT(NULL, 0)
     .tp_name = "tokenring._tokenpath.TokenPath",
-    .tp_doc = PyDoc_STR("The token path in C: the base of tokenring.node.NodeOS."),
+    .tp_doc = PyDoc_STR("The token path in C: the base of tokenring.node.node_os.NodeOS."),
     .tp_basicsize = sizeof(TokenPath),
     .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE | Py_TPFLAGS_HAVE_GC,
     .tp_new = PyType_GenericNew,
@@ -1012,7 +1012,7 @@ static PyTypeObject PayloadCallType = {
 static struct PyModuleDef tokenpath_module = {
     PyModuleDef_HEAD_INIT,
     .m_name = "tokenring._tokenpath",
-    .m_doc = "The token path in C (see tokenring/tokenpath.py).",
+    .m_doc = "The token path in C (see tokenring/node/tokenpath.py).",
     .m_size = -1,
 };
 
@@ -1059,7 +1059,7 @@ PyMODINIT_FUNC PyInit__tokenpath(void)
     for (size_t i = 0; i < sizeof(names) / sizeof(names[0]); i++)
         if (intern(names[i].slot, names[i].name) < 0)
             return NULL;
-    PyObject *ring = PyImport_ImportModule("tokenring.ring");
+    PyObject *ring = PyImport_ImportModule("tokenring.contract.ring");
     if (ring == NULL)
         return NULL;
     epoch_order = PyObject_GetAttrString(ring, "epoch_order");

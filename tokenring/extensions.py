@@ -9,7 +9,7 @@ under the entry point group ``tokenring.extensions`` (in its ``pyproject.toml``)
 and the ring asks every registered extension, and nothing else, for
 
 * **verbs** — extra ``tokenring`` subcommands: modules with ``add_parser(sub)`` and ``run(args)``,
-  exactly like :mod:`tokenring.commands`;
+  exactly like :mod:`tokenring.cli.commands`;
 * **programs** — the directory holding the programs for protocol.yaml's nodes (``up``, ``load``);
 * **up** — options of ``tokenring up``, checked before anything starts, and an :class:`UpPlan`:
   services started beside the nodes (a world simulator), how much faster emulated time runs,
@@ -18,8 +18,8 @@ and the ring asks every registered extension, and nothing else, for
   seed's ``LOAD.EXE -u``);
 * **hardware** — the client a node's program gets as ``self.hw``;
 * **resident program** — a node's own part of its OS, run from boot while no user program runs
-  (:mod:`tokenring.resident`; the robot's LCD menu before the programs start);
-* **feed** — its own topics in a live feed (:mod:`tokenring.feed`);
+  (:mod:`tokenring.node.resident`; the robot's LCD menu before the programs start);
+* **feed** — its own topics in a live feed (:mod:`tokenring.observe.feed`);
 * **web** — panels (static files, one ES module each) and buttons of the web view
   (:mod:`tokenring.web`).
 
@@ -44,10 +44,10 @@ from tokenring.errors import UsageError
 if TYPE_CHECKING:
     import zenoh
 
-    from tokenring.feed import FeedSource
-    from tokenring.launcher import Launcher, ServicePlan
-    from tokenring.protocol import Protocol
-    from tokenring.resident import ResidentProgram
+    from tokenring.contract.protocol import Protocol
+    from tokenring.host.launcher import Launcher, ServicePlan
+    from tokenring.node.resident import ResidentProgram
+    from tokenring.observe.feed import FeedSource
 
 log = logging.getLogger("tokenring.extensions")
 
@@ -142,7 +142,7 @@ class Extension:
         return None
 
     def feed_sources(self, protocol: Protocol, ring: str) -> list[FeedSource]:
-        """The extension's topics in a live feed (:mod:`tokenring.feed`): ``record``, the web
+        """The extension's topics in a live feed (:mod:`tokenring.observe.feed`): ``record``, the web
         view and the Foxglove bridge show them beside the ring's."""
         return []
 
@@ -217,16 +217,6 @@ def resident_program(module: str) -> type[ResidentProgram] | None:
         if resident is not None:
             return resident
     return None
-
-
-def feed_sources(protocol: Protocol, ring: str) -> list[FeedSource]:
-    """The ring's own feed source followed by every extension's."""
-    from tokenring.feed import RingSource
-
-    sources: list[FeedSource] = [RingSource(protocol)]
-    for extension in loaded():
-        sources += extension.feed_sources(protocol, ring)
-    return sources
 
 
 def web_panels() -> list[WebPanel]:

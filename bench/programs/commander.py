@@ -15,7 +15,7 @@ import os
 import time
 from typing import Any
 
-from tokenring.program import UserProgram
+from tokenring import UserProgram
 
 
 class Program(UserProgram):

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tokenring.errors import UsageError
+from tokenring import UsageError
 
 MAX_SPEED_MM_S = 100.0  # 100 % = 10 cm/s, the start-stop limit
 #: after a turn, wait this long at rest before judging it by the fused heading: the compass skips
@@ -120,7 +120,7 @@ def parse_actions(text: str, source: str = "<actions>", seed: bool = False) -> l
 
 def load_actions(path: str | Path, seed: bool = False) -> list[Action]:
     """Read and parse an action file (``seed``: as :func:`parse_actions`)."""
-    from tokenring.inputfile import read_text
+    from tokenring import read_text
 
     file = Path(path)
     text = read_text(file, "action file")

@@ -17,7 +17,7 @@ from __future__ import annotations
 import os
 
 from modules.description.robot import SonarMount, sonar_mounts
-from tokenring.errors import UsageError
+from tokenring import UsageError
 
 #: the modules that have both the seed's algorithm and ours
 MODULES = ("sonar", "copro", "main", "motor")

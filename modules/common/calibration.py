@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from tokenring.errors import UsageError
+from tokenring import UsageError
 
 #: a drive counts as having measured the floor when its σ at the end is at most this share of the
 #: prior's (on the tuning drives: 0.75 kept 22 of 30, which had had a wall ahead on straight legs)

@@ -23,7 +23,7 @@ import numpy as np
 
 from modules.common.odometry import step_rate_hz
 from modules.description.robot import MOTOR_TICK_MS
-from tokenring.protocol import default_protocol
+from tokenring import default_protocol
 
 ADC_MID = 2048
 COUNTS_PER_UT = 20.0  # bridge + amplifier: the module's datasheet value

@@ -22,7 +22,7 @@ from typing import Any
 from modules.common.navigator import NAV, Navigator
 from modules.common.pilot import REASON, TURN_LEFT, TURN_RIGHT, Move, Outcome, Sensors
 from modules.common.vectorgen import SonarLayout
-from tokenring.protocol import default_protocol
+from tokenring import default_protocol
 
 COMPASS_STATE = default_protocol().enums["compass_state"]
 COMPASS_STATE_NAMES = {v: k for k, v in COMPASS_STATE.items()}

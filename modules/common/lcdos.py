@@ -5,7 +5,7 @@ On the seed robot this menu belonged to the LCD node's operating system, not to 
 there before anything was downloaded, "1 Start Robbi" started every node's program
 (ARCNET_START_SYSTEM), "2 Components" listed every node on the network with name, ID and the date
 of its software. Here the robot plugs it into the LCD node as a resident program
-(:mod:`tokenring.resident`, registered by :mod:`modules.plugin`): it draws
+(:mod:`tokenring.node.resident`, registered by :mod:`modules.plugin`): it draws
 :class:`~modules.common.lcdui.OsMenu` on the display and reads the keypad (``self.hw``, the same
 hardware the lcd program gets) while no program runs, and leaves both to the lcd program once it
 runs, whose own "Main Menu" takes over.
@@ -17,8 +17,7 @@ import logging
 from typing import Any
 
 from modules.common.lcdui import BOOT, MENU_NAMES, OsMenu, Screen, program_date
-from tokenring.errors import TokenRingError
-from tokenring.resident import ResidentProgram
+from tokenring import ResidentProgram, TokenRingError
 
 log = logging.getLogger("tokenring.lcd")
 KEY_POLL_S = 0.05  # how often the keypad is read while the menu is shown

@@ -19,8 +19,7 @@ from typing import Any
 
 import yaml
 
-from tokenring.errors import UsageError
-from tokenring.yamlfile import NumberLoader, one_line
+from tokenring import NumberLoader, UsageError, one_line
 
 SENSOR_NAMES = ("odometry", "compass", "sonar", "battery", "truth")
 
@@ -135,7 +134,7 @@ def load_config(source: str | Path | dict | None = None) -> dict[str, Any]:
         return copy.deepcopy(DEFAULTS)
     if isinstance(source, dict):
         return validate(source, "<config>", {})
-    from tokenring.inputfile import message_error, read_text
+    from tokenring import message_error, read_text
 
     path = Path(source)
     text = read_text(path, "configuration file", message_error(ConfigError))

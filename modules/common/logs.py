@@ -45,7 +45,7 @@ from typing import Any
 
 import msgpack
 
-from tokenring.errors import UsageError
+from tokenring import UsageError
 
 FORMAT_VERSION = 1
 SOURCES = {
@@ -327,7 +327,7 @@ def read_log(path: str | Path, expect: str | None = None, salvage: bool = False)
     resynchronises past it: two records in a row decode again), ``damaged`` lists the byte
     ranges skipped, and without ``salvage`` the read fails with one line saying where and how
     much; with it the readable records are returned."""
-    from tokenring.inputfile import message_error, read_bytes
+    from tokenring import message_error, read_bytes
 
     file = Path(path)
     data = read_bytes(file, "log file", message_error(LogError), limit=MAX_LOG_BYTES)
@@ -680,7 +680,7 @@ def sort_log(source: str | Path, target: str | Path, salvage: bool = False) -> i
     log = read_log(source, salvage=salvage)
     key = (lambda r: r[0]) if log.kind in ("data", "errors") else None
     records = sorted(log.records, key=key)
-    from tokenring.inputfile import replacing
+    from tokenring import replacing
 
     with replacing(target) as temp, _Stream(temp, log.header) as stream:
         for record in records:

@@ -11,7 +11,7 @@ import time
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from tokenring.node import NodeOS
+    from tokenring import NodeOS
 
 
 class MapCollector:

@@ -49,7 +49,7 @@ from modules.common.pilot import (
 from modules.common.units import pose_to_wire
 from modules.common.vectorgen import SonarLayout
 from modules.description.robot import SONAR_MOUNTS, SonarMount, sonar_world_pose
-from tokenring.protocol import default_protocol
+from tokenring import default_protocol
 
 NAV = default_protocol().enums["navigator"]
 CLOSE_CM = 12  # the CLOSE area's upper edge

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from modules.common.vectorgen import NO_CONTACT_CM, SonarLayout
-from tokenring.protocol import default_protocol
+from tokenring import default_protocol
 
 _E = default_protocol().enums
 STOPPED = _E["direction"]["STOPPED"]

@@ -9,7 +9,7 @@ from __future__ import annotations
 import logging
 import time
 
-from tokenring.program import UserProgram
+from tokenring import UserProgram
 
 log = logging.getLogger("tokenring.program")
 

@@ -34,7 +34,7 @@ from typing import Any
 
 from modules.common.units import pose_from_wire, pose_to_wire
 from modules.common.vectorgen import PoseHistory
-from tokenring.protocol import default_protocol
+from tokenring import default_protocol
 
 log = logging.getLogger("tokenring.main")
 

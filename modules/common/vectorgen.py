@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from modules.description.robot import SONAR_MOUNTS, SonarMount
-from tokenring.protocol import default_protocol
+from tokenring import default_protocol
 
 _ENUMS = default_protocol().enums
 LINEAR = _ENUMS["behaviour"]["LINEAR"]

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from tokenring.errors import UsageError
+from tokenring import UsageError
 
 TWO_PI = 2.0 * math.pi
 

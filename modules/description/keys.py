@@ -1,4 +1,4 @@
-"""The robot's Zenoh keys, beside the ring's (:mod:`tokenring.keys`) under the same prefix.
+"""The robot's Zenoh keys, beside the ring's (:mod:`tokenring.contract.keys`) under the same prefix.
 
 =======================================  ========================================================
 key                                      what travels on it
@@ -17,16 +17,16 @@ key                                      what travels on it
 
 from __future__ import annotations
 
-from tokenring.keys import PREFIX
+from tokenring import keys
 
 
 def hardware(ring: str, module: str, what: str) -> str:
-    return f"{PREFIX}/{ring}/hw/{module}/{what}"
+    return f"{keys.PREFIX}/{ring}/hw/{module}/{what}"
 
 
 def world(ring: str, what: str) -> str:
-    return f"{PREFIX}/{ring}/world/{what}"
+    return f"{keys.PREFIX}/{ring}/world/{what}"
 
 
 def lcd(ring: str, what: str) -> str:
-    return f"{PREFIX}/{ring}/lcd/{what}"
+    return f"{keys.PREFIX}/{ring}/lcd/{what}"

@@ -36,8 +36,7 @@ from typing import Any
 import yaml
 
 from modules.description.room import Anomaly, Batteries, Circle, Floor, Pose, Wall, World
-from tokenring.errors import TokenRingError, UsageError
-from tokenring.yamlfile import NumberLoader, one_line
+from tokenring import NumberLoader, TokenRingError, UsageError, one_line
 
 ROOMS_DIR = Path(__file__).resolve().parent / "rooms"
 DEFAULT_WORLD = "office"
@@ -82,7 +81,7 @@ def resolve_world(name_or_path: str | Path) -> Path:
 
 def load_world(name_or_path: str | Path) -> World:
     """Load a bundled room by name (``office``) or a world file (YAML, or a seed wall file)."""
-    from tokenring.inputfile import message_error, read_text
+    from tokenring import message_error, read_text
 
     path = resolve_world(name_or_path)
     text = read_text(path, "world file", message_error(WorldError))
@@ -270,7 +269,7 @@ def parse_world_yaml(text: str, source: str, default_name: str = "world", base: 
         wall_path = Path(str(doc["wall_file"]))
         if not wall_path.is_absolute() and base is not None:
             wall_path = base / wall_path
-        from tokenring.inputfile import read_text
+        from tokenring import read_text
 
         def unreadable(where: str, problem: str) -> TokenRingError:
             return r.fail(top, f"wall_file {where}: {problem}")

@@ -1,4 +1,4 @@
-"""The robot's topics in a live feed (:mod:`tokenring.feed`): poses, sonar, map, walls, LCD.
+"""The robot's topics in a live feed (:mod:`tokenring.observe.feed`): poses, sonar, map, walls, LCD.
 
 What ``record``, the web view and the Foxglove bridge show of the robot. Foxglove-shaped topics
 carry Foxglove's well-known JSON shapes (metres, radians, quaternions, ``timestamp`` as
@@ -50,10 +50,8 @@ from modules.common.algorithms import body_mounts
 from modules.common.units import cdeg_cw_to_rad_ccw, wrap_angle
 from modules.description import keys as robot_keys
 from modules.description.robot import SONAR_NO_CONTACT, SONAR_RANGE_MM, SonarMount, sonar_world_pose
-from tokenring import keys
-from tokenring.feed import FeedSource, Message, Topic, decode_msgpack
-from tokenring.frame import frame_problem
-from tokenring.protocol import CommandChannel, Protocol
+from tokenring import CommandChannel, Protocol, frame_problem, keys
+from tokenring.observe import FeedSource, Message, Topic, decode_msgpack
 
 FRAME_ROOM = "room"
 FRAME_ROBOT = "robot"
@@ -620,7 +618,7 @@ class WorldSource(FeedSource):
         return [t for t in robot_topics(self.protocol) if t.name in self.NAMES]
 
     def poll(self, session: Any, ring: str, time_ns: int) -> list[Message]:
-        from tokenring.cliutil import query
+        from tokenring.transport import query
 
         for _, reply in query(session, robot_keys.world(ring, "info"), timeout=1.0):
             if reply.get("ok"):
@@ -684,7 +682,7 @@ class LcdSource(FeedSource):
         return [Message("/robot/lcd/image", time_ns, lcd_image(payload, time_ns))]
 
     def poll(self, session: Any, ring: str, time_ns: int) -> list[Message]:
-        from tokenring.cliutil import query
+        from tokenring.transport import query
 
         node = self.protocol.node("lcd").id
         for verb in ("program", "resident"):

@@ -22,7 +22,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from modules.common.logs import KINDS, SOURCES, LogFile
-from tokenring.feed import Message, Topic
+from tokenring.observe import Message, Topic
 
 POSE_TOPICS = {
     "L": "/robot/pose/true",
@@ -115,7 +115,7 @@ def log_messages(log: LogFile) -> list[Message]:
 def convert_mcap(log: LogFile, out: str | Path) -> Counter[str]:
     """Write ``log`` as an MCAP file (via the ring's recorder: FILE.part, renamed when whole);
     the message count per topic."""
-    from tokenring.recording import McapRecorder
+    from tokenring.observe import McapRecorder
 
     recorder = McapRecorder(
         out,

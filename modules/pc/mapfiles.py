@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from modules.description import keys as robot_keys
-from tokenring.errors import UsageError
+from tokenring import UsageError
 
 FORMATS = (".json", ".dxf", ".png")
 
@@ -27,7 +27,7 @@ def check_out(path: str) -> str:
 
 def fetch_map(session: Any, ring: str, timeout: float = 60.0) -> np.ndarray:
     """The ring's map in mm, via main's PC link."""
-    from tokenring.pclink import open_link
+    from tokenring.host import open_link
 
     link = open_link(session, ring)
     got = link.request("get_map", timeout=timeout)
@@ -36,7 +36,7 @@ def fetch_map(session: Any, ring: str, timeout: float = 60.0) -> np.ndarray:
 
 def live_world(session: Any, ring: str) -> dict[str, Any] | None:
     """The running simulator's room (``world/info``), or None without a simulator."""
-    from tokenring.cliutil import query
+    from tokenring.transport import query
 
     for _, reply in query(session, robot_keys.world(ring, "info"), timeout=1.0):
         if reply.get("ok"):
@@ -46,7 +46,7 @@ def live_world(session: Any, ring: str) -> dict[str, Any] | None:
 
 def true_pose(session: Any, ring: str) -> dict[str, Any] | None:
     """The world simulator's ground truth (``world/state``), or None when no world runs."""
-    from tokenring.cliutil import query
+    from tokenring.transport import query
 
     for _, reply in query(session, robot_keys.world(ring, "state"), timeout=1.0):
         if reply.get("ok"):
@@ -92,7 +92,7 @@ def load_truth(world: str) -> tuple[str, np.ndarray]:
 
 def load_map_file(path: str) -> np.ndarray:
     """Vectors (mm) from a map written by ``tokenring map`` (.json) or any DXF's LINE entities."""
-    from tokenring.inputfile import check_input, read_text
+    from tokenring import check_input, read_text
 
     file = Path(path)
     if file.suffix.lower() == ".dxf":

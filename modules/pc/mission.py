@@ -7,12 +7,12 @@ import threading
 import time
 from typing import Any
 
-from tokenring.errors import UsageError
-from tokenring.pclink import open_link
+from tokenring import UsageError
+from tokenring.host import open_link
 
 
 def request(link: Any, action: str) -> dict[str, Any]:
-    """Send one exploration request over a :class:`~tokenring.pclink.PcLink`."""
+    """Send one exploration request over a :class:`~tokenring.host.pclink.PcLink`."""
     if action in ("1", "2"):
         return link.request("explore", mode=int(action))
     if action == "stop":

@@ -16,10 +16,9 @@ from modules.description.robot import BODIES
 from modules.description.roomfile import DEFAULT_WORLD, load_world
 from modules.world.service import WorldService
 from modules.world.sim import Simulator
-from tokenring import keys
-from tokenring.cliutil import StopEvent, wait_for_stop
-from tokenring.errors import TokenRingError, UsageError
-from tokenring.zconfig import make_config, open_session
+from tokenring import TokenRingError, UsageError, keys
+from tokenring.cli import StopEvent, wait_for_stop
+from tokenring.transport import make_config, open_session
 
 
 def parse_speed(text: str) -> float:

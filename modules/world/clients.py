@@ -19,7 +19,7 @@ import zenoh
 from modules.description import keys as robot_keys
 from modules.world.clock import SimClock
 from modules.world.service import hw_key
-from tokenring.errors import TokenRingError
+from tokenring import TokenRingError
 
 DEFAULT_TIMEOUT_S = 2.0
 WORLD_WAIT_S = 10.0  # how long the first request waits for a world that is still starting

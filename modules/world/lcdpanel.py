@@ -2,7 +2,7 @@
 
 The display and keypad are hardware, not the ring: the lcd program writes its framebuffer here
 and reads key presses from here; ``tokenring lcd`` shows the screen in a terminal and presses
-keys. Keys (all under ``tokenring/<ring>/``, see :mod:`tokenring.keys`):
+keys. Keys (all under ``tokenring/<ring>/``, see :mod:`tokenring.contract.keys`):
 
 =====================  =======================================================================
 ``lcd/screen``         the screen: 1024 bytes (64 rows × 16 bytes, MSB = leftmost pixel), put

@@ -3,7 +3,7 @@
 import os
 from pathlib import Path
 
-from tokenring.program import UserProgram
+from tokenring import UserProgram
 
 
 class Program(UserProgram):

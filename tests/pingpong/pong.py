@@ -1,6 +1,6 @@
 """Returns the ball: every n from ping goes back as n + 1."""
 
-from tokenring.program import UserProgram
+from tokenring import UserProgram
 
 
 class Program(UserProgram):

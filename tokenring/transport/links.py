@@ -22,11 +22,11 @@ from collections.abc import Callable
 
 import zenoh
 
-from tokenring import keys
-from tokenring.tokenpath import payload_call
+from tokenring._native import payload_call
+from tokenring.contract import keys
 from tokenring.transport.base import FrameHandler, FrameSender, MembershipHandler, MessageHandler
 from tokenring.transport.zenoh import ZenohTransport
-from tokenring.zconfig import hop_callback
+from tokenring.transport.zenoh_config import hop_callback
 
 
 class LinkedZenohTransport(ZenohTransport):

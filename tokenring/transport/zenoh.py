@@ -15,10 +15,10 @@ import time
 
 import zenoh
 
-from tokenring import keys
-from tokenring.tokenpath import payload_call
+from tokenring._native import payload_call
+from tokenring.contract import keys
 from tokenring.transport.base import FrameHandler, MembershipHandler, MessageHandler, Transport
-from tokenring.zconfig import hop_callback
+from tokenring.transport.zenoh_config import hop_callback
 
 log = logging.getLogger("tokenring.transport")
 

@@ -17,7 +17,7 @@ import threading
 from collections import deque
 from typing import Any
 
-from tokenring.feed import Message
+from tokenring.observe.feed import Message
 
 #: the derived topic of the token's passes
 TOKEN_TOPIC = "/web/token"

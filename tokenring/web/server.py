@@ -4,7 +4,7 @@
 
     Zenoh ──► Feed (its thread) ──► Hub (latest value per topic) ──► every 100 ms, what changed
                                                                       ──► each browser's WebSocket
-    browser ──► POST /api/fault  ──► tokenring.faults.FaultClient (as ``tokenring fault``)
+    browser ──► POST /api/fault  ──► tokenring.host.faults.FaultClient (as ``tokenring fault``)
             ──► POST /api/action/<name> ──► an extension's WebAction (e.g. Explore 2)
 
 It is a tool on the ring like ``monitor``: it subscribes to the token's key expressions and asks
@@ -25,12 +25,13 @@ from typing import Any
 
 from aiohttp import WSMsgType, web
 
-from tokenring.cliutil import json_default
+from tokenring._util.tables import json_default
+from tokenring.contract.faults import KINDS, NEEDS_VALUE, parse_partition, validate
+from tokenring.contract.protocol import Protocol
 from tokenring.errors import TokenRingError, UsageError
 from tokenring.extensions import WebAction, WebPanel
-from tokenring.faults import KINDS, NEEDS_VALUE, FaultClient, parse_partition, validate
-from tokenring.feed import Feed, FeedSource
-from tokenring.protocol import Protocol
+from tokenring.host.faults import FaultClient
+from tokenring.observe.feed import Feed, FeedSource
 from tokenring.web.hub import Hub
 
 log = logging.getLogger("tokenring.web")

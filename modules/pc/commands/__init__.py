@@ -1,2 +1,2 @@
 """The robot's ``tokenring`` verbs, added through :mod:`modules.plugin`: each module has
-``add_parser(sub)`` and ``run(args)``, like :mod:`tokenring.commands`."""
+``add_parser(sub)`` and ``run(args)``, like :mod:`tokenring.cli.commands`."""

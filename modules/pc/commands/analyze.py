@@ -7,7 +7,7 @@ import sys
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cliutil import add_json_option
+    from tokenring.cli import add_json_option
 
     p = sub.add_parser(
         "analyze",
@@ -29,8 +29,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from modules.pc.analysis import analyse
-    from tokenring.cliutil import print_json
-    from tokenring.inputfile import check_output
+    from tokenring import check_output
+    from tokenring.cli import print_json
 
     if args.out:
         check_output(args.out, (args.log,), directory=True)  # before the log is read and plotted

@@ -19,7 +19,7 @@ LEAST_SUGGESTED_SIGMA = 0.002
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cliutil import add_json_option, with_examples
+    from tokenring.cli import add_json_option, with_examples
 
     p = sub.add_parser(
         "calibrate",
@@ -36,7 +36,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from modules.common.calibration import calibrate_logs
-    from tokenring.cliutil import print_json
+    from tokenring.cli import print_json
 
     found, mm_per_step = calibrate_logs(args.logs)
     suggested_sigma = max(found.sigma, LEAST_SUGGESTED_SIGMA)

@@ -23,15 +23,15 @@ import sys
 import time
 from typing import Any
 
-from tokenring.cliutil import seconds
-from tokenring.errors import TokenRingError, UsageError
+from tokenring import TokenRingError, UsageError
+from tokenring.cli import seconds
 
 MOVING, STALLED, COLLISION = 1, 2, 3
 STATE_NAMES = {0: "idle", 1: "moving", 2: "stalled", 3: "collision"}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cliutil import add_json_option, add_ring_options
+    from tokenring.cli import add_json_option, add_ring_options
 
     p = sub.add_parser(
         "drive",
@@ -137,8 +137,8 @@ def expected_steps(name: str, args: dict[str, Any], glide_cfactor: int) -> int |
 
 def run(args: argparse.Namespace) -> int:
     from modules.common.units import pose_from_wire
-    from tokenring.cliutil import print_json, tap_session
-    from tokenring.pclink import PcLink
+    from tokenring.cli import print_json, tap_session
+    from tokenring.host import PcLink
 
     name, command_args = build_command(args.action, args.values, args.speed)
     with tap_session(args) as session:
@@ -193,7 +193,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _first_read(link: Any, patience: float = 3.0) -> dict[str, Any]:
     """motor.data from main; a fresh Zenoh session may need a moment before main's PC link is routed."""
-    from tokenring.errors import TransportError
+    from tokenring import TransportError
 
     deadline = time.monotonic() + patience
     while True:

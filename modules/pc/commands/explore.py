@@ -10,14 +10,14 @@ from __future__ import annotations
 import argparse
 import time
 
-from tokenring.cliutil import seconds
-from tokenring.errors import UsageError
+from tokenring import UsageError
+from tokenring.cli import seconds
 
 ACTIONS = ("1", "2", "stop", "calibrate", "state")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cliutil import add_json_option, add_ring_options
+    from tokenring.cli import add_json_option, add_ring_options
 
     p = sub.add_parser(
         "explore",
@@ -33,14 +33,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tokenring.cliutil import print_json, tap_session
+    from tokenring.cli import print_json, tap_session
 
     if args.action not in ACTIONS:
         raise UsageError(f"explore: {args.action!r} is not one of {', '.join(ACTIONS)}")
     if args.timeout <= 0:
         raise UsageError("--timeout must be positive")
     from modules.pc.mission import describe, describe_map, request
-    from tokenring.pclink import open_link
+    from tokenring.host import open_link
 
     with tap_session(args) as session:
         link = open_link(session, args.ring)

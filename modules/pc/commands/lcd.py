@@ -18,15 +18,15 @@ from pathlib import Path
 from typing import Any
 
 from modules.description import keys as robot_keys
-from tokenring.cliutil import non_negative_seconds
-from tokenring.errors import TransportError, UsageError
+from tokenring import TransportError, UsageError
+from tokenring.cli import non_negative_seconds
 
 KEYPAD = "0123456789ABCD*#"
 ARROWS = {"A": "2", "B": "8", "C": "6", "D": "4"}  # ESC [ A = up -> pan up (2) ...
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cliutil import add_ring_options
+    from tokenring.cli import add_ring_options
 
     p = sub.add_parser(
         "lcd",
@@ -103,7 +103,7 @@ def parse_keys(text: str) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from tokenring import keys
-    from tokenring.cliutil import tap_session
+    from tokenring.cli import tap_session
 
     if args.scale < 1 or args.scale > 32:
         raise UsageError("--scale must be 1..32")

@@ -8,7 +8,7 @@ from pathlib import Path
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cliutil import add_json_option
+    from tokenring.cli import add_json_option
 
     p = sub.add_parser(
         "log",
@@ -53,8 +53,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def check_outputs(args: argparse.Namespace) -> None:
     """Before anything is read: an output is never the input, never silently replaced."""
-    from tokenring.errors import UsageError
-    from tokenring.inputfile import check_output
+    from tokenring import UsageError, check_output
 
     if args.log_verb == "convert" and args.to == "mcap" and not args.out:
         raise UsageError("--to mcap writes one file: give it with --out FILE.mcap")
@@ -80,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
         sort_log,
         summary,
     )
-    from tokenring.inputfile import write_atomically
+    from tokenring import write_atomically
 
     check_outputs(args)
     if args.log_verb == "sort":
@@ -100,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     if args.log_verb == "info":
         info = summary(log)
         if args.json:
-            from tokenring.cliutil import print_json
+            from tokenring.cli import print_json
 
             print_json(info)
         else:

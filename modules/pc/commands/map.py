@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import argparse
 
-from tokenring.cliutil import seconds
-from tokenring.errors import UsageError
+from tokenring import UsageError
+from tokenring.cli import seconds
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cliutil import add_ring_options
+    from tokenring.cli import add_ring_options
 
     p = sub.add_parser(
         "map",
@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
         truth_from_info,
         write_map,
     )
-    from tokenring.cliutil import tap_session
+    from tokenring.cli import tap_session
 
     check_out(args.out)
     if args.timeout <= 0:

@@ -7,7 +7,7 @@ import sys
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cliutil import add_json_option
+    from tokenring.cli import add_json_option
 
     p = sub.add_parser(
         "replay",
@@ -42,7 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from modules.pc.replay import replay
-    from tokenring.cliutil import print_json
+    from tokenring.cli import print_json
 
     def progress(done: int, total: int) -> None:
         if sys.stderr.isatty():

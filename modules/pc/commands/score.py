@@ -11,7 +11,7 @@ import argparse
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cliutil import add_json_option
+    from tokenring.cli import add_json_option
 
     p = sub.add_parser(
         "score",
@@ -27,7 +27,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from modules.common.mapscore import score_map
     from modules.pc.mapfiles import load_map_file, load_truth
-    from tokenring.cliutil import print_json
+    from tokenring.cli import print_json
 
     world, truth = load_truth(args.world)
     vectors = load_map_file(args.map)

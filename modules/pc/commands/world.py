@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import re
 
-from tokenring.cliutil import int_within
+from tokenring.cli import int_within
 
 EXAMPLES = """\
 examples:
@@ -34,7 +34,7 @@ legs = int_within(1, 100)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cliutil import with_examples
+    from tokenring.cli import with_examples
 
     p = sub.add_parser(
         "world",
@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         return run_drive(args)
     from modules.description.generate import generate_room, room_yaml
     from modules.description.roomfile import parse_world_yaml
-    from tokenring.inputfile import check_output, write_atomically
+    from tokenring import check_output, write_atomically
 
     if args.out:
         check_output(args.out, force=args.force)
@@ -85,8 +85,7 @@ def run(args: argparse.Namespace) -> int:
 def run_drive(args: argparse.Namespace) -> int:
     from modules.description import WorldError, load_world
     from modules.description.drives import DriveError, drive_text, generate_drive
-    from tokenring.errors import UsageError
-    from tokenring.inputfile import check_output, write_atomically
+    from tokenring import UsageError, check_output, write_atomically
 
     if args.out:
         check_output(args.out, force=args.force)

@@ -9,7 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from tokenring.extensions import WebAction, WebPanel
+from tokenring import WebAction, WebPanel
 
 STATIC = Path(__file__).resolve().parent / "static"
 
@@ -24,7 +24,7 @@ def _explore(action: str) -> Callable[[Any, str], dict[str, Any]]:
 
     def run(session: Any, ring: str) -> dict[str, Any]:
         from modules.pc.mission import describe, request
-        from tokenring.pclink import open_link
+        from tokenring.host import open_link
 
         state = request(open_link(session, ring), action)
         return {"summary": describe(state), "state": state}

@@ -1,0 +1,1 @@
+"""Small helpers that know nothing of the ring: files, strict YAML, process lifetime, tables."""

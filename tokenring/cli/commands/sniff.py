@@ -1,0 +1,231 @@
+"""``tokenring sniff``: decode every frame on the wire (read-only); the decoding is
+:mod:`tokenring.observe.sniff`'s."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import sys
+import time
+import uuid
+from typing import Any
+
+import zenoh
+
+from tokenring.cli.args import add_ring_options, node_id, positive_int, seconds, tap_session, with_examples
+from tokenring.cli.output import check_option_output
+from tokenring.contract import keys
+from tokenring.contract.protocol import Protocol, load_protocol
+from tokenring.errors import TransportError, UsageError
+from tokenring.observe.feed import RawSample
+from tokenring.observe.sniff import decode_frame, format_line
+
+EXAMPLES = """examples:
+  tokenring sniff --channels motor.data,sonar.data
+  tokenring sniff --json -n 100 --to 20
+  tokenring sniff --write frames.mcap --duration 30     # capture while showing
+  tokenring sniff --read frames.mcap --json             # decode a capture offline
+"""
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "sniff",
+        help="decode every frame on the wire (read-only), or of an MCAP recording",
+        description="Decode every token frame of a running ring with protocol.yaml; --write also "
+        "captures them to an MCAP file (raw and decoded), --read decodes such a file offline "
+        "(like candump -l and cantools decode).",
+        **with_examples(EXAMPLES),
+    )
+    p.add_argument("--json", action="store_true", help="one JSON object per frame")
+    p.add_argument("-n", "--count", type=positive_int, metavar="N", help="stop after N frames")
+    p.add_argument(
+        "--wait",
+        type=seconds,
+        default=10.0,
+        metavar="S",
+        help="give up when no frame has come within S seconds of starting (default %(default)s)",
+    )
+    p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds")
+    p.add_argument("--to", type=node_id, metavar="ID", help="only frames addressed to node ID")
+    p.add_argument(
+        "--channels",
+        metavar="LIST",
+        help="comma-separated channels to decode (e.g. sonar.data,motor.command); default: all non-empty",
+    )
+    p.add_argument("--header-only", action="store_true", help="decode only the header")
+    capture = p.add_mutually_exclusive_group()
+    capture.add_argument(
+        "--write", metavar="FILE.mcap", help="also capture the frames (raw and decoded) to an MCAP file"
+    )
+    capture.add_argument(
+        "--read", metavar="FILE.mcap", help="decode the frames of an MCAP recording instead of the wire"
+    )
+    p.add_argument("--force", action="store_true", help="replace an existing --write FILE")
+    add_ring_options(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.read:
+        return read_file(args)
+    if args.write:
+        check_option_output("--write", args.write, force=args.force)
+    protocol = load_protocol(args.protocol)
+    ring = keys.check_ring_name(args.ring)
+    channels = None
+    if args.channels:
+        channels = [c.strip() for c in args.channels.split(",") if c.strip()]
+        for name in channels:
+            try:
+                protocol.channel(name)
+            except Exception as exc:
+                raise UsageError(str(exc)) from None
+    key = keys.token(ring, args.to if args.to is not None else "*")
+    seen = 0
+    last_frame: dict[int | None, bytes] = {}
+    ended = False
+    started = time.monotonic()
+    deadline = None if args.duration is None else started + args.duration
+    with tap_session(args) as session:
+        # opened once the session is: a refused endpoint leaves no FILE.part behind
+        capture = open_capture(args, protocol, ring)
+        subscriber = session.declare_subscriber(key, zenoh.handlers.FifoChannel(8192))
+        # Zenoh's receiving thread hands the question on only after the frames that came before
+        # it are in the channel above: `play` asks before it closes, so nothing queued towards
+        # this sniff is lost
+        tap_id = uuid.uuid4().hex
+        drained_key = keys.tap_drained(ring, tap_id)  # the reply names this tap (play counts them)
+        drained = session.declare_queryable(drained_key, lambda query: query.reply(drained_key, b""))
+        # declared after the queryable: whoever sees the token can already ask it
+        alive = session.liveliness().declare_token(keys.tap(ring, tap_id))
+        try:
+            while True:
+                if deadline is not None and time.monotonic() >= deadline:
+                    break
+                sample = subscriber.try_recv()
+                if sample is None:
+                    if not seen and time.monotonic() - started > args.wait:
+                        raise TransportError(
+                            f"no frame on {key} within {args.wait:g} s (is the ring running, and are "
+                            "--ring and --connect right?)"
+                        )
+                    time.sleep(0.002)
+                    continue
+                frame = sample.payload.to_bytes()
+                did = keys.id_from_key(str(sample.key_expr))
+                if capture is not None:
+                    capture.feed_raw(RawSample(str(sample.key_expr), time.time_ns(), frame))
+                record = decode_frame(frame, did, protocol, channels, args.header_only)
+                # a pass repeated because its acknowledgement was late: same bytes, same receiver
+                # (every byte: two different passes share a CRC-16 once in 65536)
+                record["retransmission"] = "crc" in record and last_frame.get(did) == frame
+                if "crc" in record:
+                    last_frame[did] = frame
+                if args.json:
+                    sys.stdout.write(json.dumps(record) + "\n")
+                else:
+                    sys.stdout.write(format_line(record) + "\n")
+                seen += 1
+                if args.count is not None and seen >= args.count:
+                    break
+            sys.stdout.flush()
+            ended = True
+        finally:
+            with contextlib.suppress(zenoh.ZError):  # stopped on purpose: nothing was cut
+                session.put(keys.tap_left(ring, tap_id), b"")
+            alive.undeclare()
+            drained.undeclare()
+            subscriber.undeclare()
+            if capture is not None:
+                capture.finish(seen, ended)
+    return 0
+
+
+class Capture:
+    """``--write``: every frame raw and decoded (the feed's ring topics) into an MCAP file."""
+
+    def __init__(self, recorder: Any, source: Any) -> None:
+        self.recorder = recorder
+        self.source = source
+
+    def feed_raw(self, raw: Any) -> None:
+        self.recorder.on_raw(raw)
+        for message in self.source.translate(raw.key, raw.payload, raw.time_ns):
+            self.recorder.on_message(message)
+        self.recorder.tick()
+
+    def finish(self, frames: int, ended: bool) -> None:
+        """Finalise the file (``ended``: the run was not cut short by an error or Ctrl-C). One
+        without a frame is not kept: a failed or empty run must not leave a FILE that a retry
+        without ``--force`` is refused over."""
+        if frames:
+            path = self.recorder.close()
+            print(f"{path}: {frames} frames, {self.recorder.messages} messages captured", file=sys.stderr)
+            return
+        self.recorder.discard()
+        if ended:
+            print(f"{self.recorder.path}: no frame came; nothing written", file=sys.stderr)
+
+
+def open_capture(args: argparse.Namespace, protocol: Protocol, ring: str) -> Capture | None:
+    if not args.write:
+        return None
+    from pathlib import Path
+
+    from tokenring.contract.protocol import default_protocol_path
+    from tokenring.observe.feed import RingSource
+    from tokenring.observe.recording import McapRecorder
+
+    source = RingSource(protocol)
+    text = Path(args.protocol or default_protocol_path()).read_text(encoding="utf-8")
+    recorder = McapRecorder(args.write, ring=ring, topics=source.topics(), protocol_text=text)
+    return Capture(recorder, source)
+
+
+def read_file(args: argparse.Namespace) -> int:
+    """``--read``: the recording's frames decoded as live, in log-time order (``t`` = log time)."""
+    import os
+
+    from tokenring.contract.protocol import parse_protocol
+    from tokenring.observe.recording import iter_raw, open_recording
+
+    recording = open_recording(args.read)
+    if args.protocol is None and not os.environ.get("TOKENRING_PROTOCOL") and recording.protocol_text:
+        protocol = parse_protocol(recording.protocol_text, f"{args.read} (its protocol.yaml)")
+    else:
+        protocol = load_protocol(args.protocol)
+    channels = None
+    if args.channels:
+        channels = [c.strip() for c in args.channels.split(",") if c.strip()]
+        for name in channels:
+            try:
+                protocol.channel(name)
+            except Exception as exc:
+                raise UsageError(str(exc)) from None
+    frames = [key for key in recording.raw_keys() if key.rsplit("/", 2)[-2:-1] == ["token"]]
+    if args.to is not None:
+        frames = [key for key in frames if keys.id_from_key(key) == args.to]
+    if not frames:
+        raise UsageError(f"{args.read}: no frames recorded" + (f" to node {args.to}" if args.to else ""))
+    first = None
+    seen = 0
+    last_frame: dict[int | None, bytes] = {}
+    for raw in iter_raw(recording, None, None, None):
+        if raw.key not in frames:
+            continue
+        first = raw.time_ns if first is None else first
+        if args.duration is not None and raw.time_ns - first > args.duration * 1e9:
+            break
+        did = keys.id_from_key(raw.key)
+        record = decode_frame(raw.payload, did, protocol, channels, args.header_only)
+        record["t"] = raw.time_ns / 1e9
+        record["retransmission"] = "crc" in record and last_frame.get(did) == raw.payload
+        if "crc" in record:
+            last_frame[did] = raw.payload
+        sys.stdout.write((json.dumps(record) if args.json else format_line(record)) + "\n")
+        seen += 1
+        if args.count is not None and seen >= args.count:
+            break
+    sys.stdout.flush()
+    return 0

@@ -1,0 +1,78 @@
+"""``tokenring status``: membership and counters of a running ring."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from tokenring.cli.args import seconds
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring.cli.args import add_json_option, add_ring_options
+
+    p = sub.add_parser("status", help="membership and counters of a running ring")
+    p.add_argument("--timeout", type=seconds, default=2.0, help="seconds to wait for answers")
+    add_json_option(p)
+    add_ring_options(p, listen=False)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tokenring._util.tables import format_table
+    from tokenring.cli.args import tap_session
+    from tokenring.cli.output import print_json
+    from tokenring.contract import keys
+    from tokenring.host.regeneration import format_rates, ring_rates
+    from tokenring.transport.session import discover, query
+
+    with tap_session(args) as session:
+        discover(session, args.ring, timeout=args.timeout + 3.0)
+        replies = query(session, keys.control(args.ring, "*", "stats"), timeout=args.timeout)
+    nodes = sorted((r["result"] for _, r in replies if r.get("ok")), key=lambda n: n["id"])
+    rates = ring_rates(nodes)
+    if args.json:
+        print_json({"ring": args.ring, "regenerations": rates, "nodes": nodes})
+        return 0 if nodes else 1
+    if not nodes:
+        print(f"no node of ring {args.ring!r} answered", file=sys.stderr)
+        return 1
+    rows = [
+        [
+            n["id"],
+            n["name"],
+            n["successor"],
+            n["counter"],
+            f"{n['round_ms']['median']:.3f}",
+            f"{n['round_ms']['p99']:.3f}",
+            f"{n['handler_us']['median']:.1f}",
+            f"{n['send_us']['median']:.0f}",
+            n["stats"]["rejected_crc"],
+            n["stats"]["reconfigurations"],
+            n["stats"]["tokens_regenerated"],
+            n["regenerations"]["spurious"] if "regenerations" in n else "?",
+            n["program"] or "-",
+        ]
+        for n in nodes
+    ]
+    print(
+        format_table(
+            rows,
+            [
+                "id",
+                "name",
+                "next",
+                "counter",
+                "rtt ms",
+                "p99 ms",
+                "handler us",
+                "put us",
+                "crc rej",
+                "reconf",
+                "regen",
+                "spurious",
+                "program",
+            ],
+        )
+    )
+    print(format_rates(rates))
+    return 0

@@ -1,0 +1,313 @@
+"""``tokenring up``: launch the whole ring, every node its own process."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from tokenring import extensions
+from tokenring.cli.args import int_within, seconds
+from tokenring.errors import UsageError
+
+DEFAULT_BITRATE = "2.5M"
+EXAMPLES = """examples:
+  tokenring up                     boot, download the programs over the ring, start them
+  tokenring up --no-start          boot and download; the programs wait for ARCNET_START_SYSTEM
+  tokenring load --start           ... which this sends (or the application's own way, said at boot)
+  tokenring up --no-download       every node starts its program from its file, no download
+  tokenring up --router --links -l tcp/127.0.0.1:7447
+                                   the nodes clients of this launcher, the token on direct links
+"""
+
+if TYPE_CHECKING:
+    from tokenring.host.launcher import Launcher, ServicePlan
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring.cli.args import add_ring_options, with_examples
+
+    p = sub.add_parser(
+        "up",
+        help="launch the whole ring (every node its own process)",
+        description="Launch every node of protocol.yaml as its own OS process on one Zenoh network "
+        "and supervise them until Ctrl-C, SIGTERM or --duration.",
+        **with_examples(EXAMPLES),
+    )
+    p.add_argument("--nodes", help="comma-separated subset of nodes (names or IDs); default all")
+    p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds")
+    p.add_argument(
+        "--bitrate",
+        help=f"emulated ARCNET bitrate, e.g. 2.5M, 10M or max (default {DEFAULT_BITRATE})",
+    )
+    p.add_argument(
+        "--ack",
+        default="adaptive",
+        choices=("adaptive", "always", "never"),
+        help="pass acknowledgement policy",
+    )
+    p.add_argument(
+        "--programs",
+        metavar="DIR",
+        help="directory of user programs, <node>.py each (default: the installed application's)",
+    )
+    p.add_argument("--no-programs", action="store_true", help="start the nodes with the OS only")
+    p.add_argument(
+        "--no-download",
+        action="store_true",
+        help="give each node its program file at start instead of booting bare and loading over the ring",
+    )
+    p.add_argument(
+        "--no-start",
+        action="store_true",
+        help="boot and download the programs but send no ARCNET_START_SYSTEM: the programs wait "
+        "until 'tokenring load --start' (or the application's own start) sends it",
+    )
+    p.add_argument(
+        "--store",
+        metavar="DIR",
+        help="root of the nodes' program stores (default $TOKENRING_STORE or ~/.local/state/tokenring)",
+    )
+    p.add_argument("--respawn", action="store_true", help="restart nodes that die, like a supervisor")
+    p.add_argument(
+        "--profile",
+        choices=("arcnet",),
+        help="emulate the seed robot's hardware timing on top of the wire: the 8051s' per-visit work and "
+        "channel copies, the sonar's interrupt lock (tokenring/node/pacing.py; needs a bitrate, not max)",
+    )
+    p.add_argument(
+        "--router",
+        action="store_true",
+        help="this launcher is its host's Zenoh router (needs --listen); its nodes are clients of it. "
+        "For rings across hosts: only router-to-router links cross between hosts",
+    )
+    p.add_argument(
+        "--links",
+        action="store_true",
+        help="with --router: each node also passes the token on a direct link to its successor "
+        "(a second Zenoh session per node; the router carries everything else)",
+    )
+    p.add_argument(
+        "--boot-wave",
+        type=int,
+        metavar="N",
+        help="at most N nodes booting at a time; a bigger ring starts in waves, a new node as each "
+        "booting one comes live (default: 8 per core)",
+    )
+    web = p.add_argument_group("web view")
+    web.add_argument("--web", action="store_true", help="serve the live web view too (as 'tokenring web')")
+    web.add_argument(
+        "--web-port",
+        type=int_within(1, 65535),
+        default=8080,
+        metavar="N",
+        help="its port (default %(default)s)",
+    )
+    fox = p.add_argument_group("Foxglove")
+    fox.add_argument(
+        "--foxglove",
+        action="store_true",
+        help="serve the ring to Foxglove too (as 'tokenring foxglove')",
+    )
+    fox.add_argument(
+        "--foxglove-port",
+        type=int_within(1, 65535),
+        default=8765,
+        metavar="N",
+        help="its WebSocket port (default %(default)s)",
+    )
+    rec = p.add_argument_group("recording")
+    rec.add_argument(
+        "--record",
+        metavar="FILE.mcap",
+        help="record the whole run to a new MCAP file (as 'tokenring record'; one watcher process serves"
+        " --web, --record and --foxglove together)",
+    )
+    for extension in extensions.loaded():
+        extension.add_up_options(p)
+    add_ring_options(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tokenring.contract.protocol import load_protocol
+    from tokenring.contract.ring import format_bitrate, parse_bitrate
+    from tokenring.host.launcher import (
+        BOOT_CONCURRENCY,
+        Launcher,
+        install_signal_handlers,
+        plans_from_protocol,
+    )
+
+    protocol = load_protocol(args.protocol)
+    bitrate_given = args.bitrate is not None
+    args.bitrate = args.bitrate or DEFAULT_BITRATE
+    bitrate = parse_bitrate(args.bitrate)  # refuse a bad value before anything starts
+    if args.duration is not None and args.duration <= 0:
+        raise UsageError("--duration must be positive")
+    if args.profile and bitrate is None:
+        raise UsageError(
+            f"--profile {args.profile} emulates hardware timing: give a bitrate such as 2.5M, not max"
+        )
+    if args.store:
+        from tokenring.node.store import check_store_root
+
+        check_store_root(Path(args.store))  # before any node starts (a node would fail mid-download)
+    selection = [s.strip() for s in args.nodes.split(",") if s.strip()] if args.nodes else None
+    programs = None if args.no_programs else (args.programs or extensions.programs_dir())
+    if programs is not None and not Path(programs).is_dir():
+        raise UsageError(f"--programs {programs}: no such directory")
+    main_id = protocol.nodes["main"].id if "main" in protocol.nodes else None
+    download = programs is not None and not args.no_download
+    plans = plans_from_protocol(protocol, selection, None if download else programs)
+    if download and main_id not in {p.node_id for p in plans}:
+        download = False  # no main, no PC link: the programs start from their files
+        plans = plans_from_protocol(protocol, selection, programs)
+    if args.no_start and not download:
+        why = "main, the PC link, is not among --nodes"
+        if programs is None or args.no_download:
+            why = "--no-programs" if programs is None else "--no-download"
+        raise UsageError(
+            f"--no-start holds the programs downloaded over the ring, and there is no download ({why})"
+        )
+    # every extension checks its options before anything starts
+    plans_up = [extension.plan_up(args, protocol) for extension in extensions.loaded()]
+    speedup = 1.0
+    node_env: dict[str, str] = {}
+    for plan in plans_up:
+        speedup *= plan.speedup
+        node_env.update(plan.env)
+        if plan.profile and not (args.profile or bitrate_given):
+            args.profile = plan.profile  # e.g. the seed's algorithms at the seed's pace
+    # everything emulated runs K times faster with a speed-up K, the wire included: a round
+    # of the ring must stay as short in emulated time as it is on the real hardware
+    wire = args.bitrate if bitrate is None or speedup == 1.0 else format_bitrate(bitrate * speedup)
+    services = [service for plan in plans_up for service in plan.services]
+    if args.web or args.record or args.foxglove:
+        services.append(watch_service(args))
+    launcher = Launcher(
+        plans,
+        ring=args.ring,
+        bitrate=wire,
+        ack_mode=args.ack,
+        connect=args.connect or [],
+        listen=args.listen or [],
+        zenoh_config=args.zenoh_config,
+        protocol_path=args.protocol,
+        log_level=args.log_level,
+        respawn=args.respawn,
+        router=args.router,
+        links=args.links,
+        profile=args.profile,
+        services=services,
+        extra_node_args=["--store", args.store] if args.store else [],
+        boot_concurrency=BOOT_CONCURRENCY if args.boot_wave is None else args.boot_wave,
+        env=node_env,
+    )
+    install_signal_handlers(launcher)
+    launcher.start()
+    boot_ok = True
+    if download and programs is not None:
+        boot_ok = boot_load(launcher, Path(programs), {p.node_id for p in plans}, start=not args.no_start)
+    if args.no_start:
+        say_waiting(launcher, plans_up)
+    for plan in plans_up:
+        if plan.on_started is not None and not args.no_start:
+            plan.on_started(launcher)
+    limit = args.duration
+    grace = max((plan.grace_s for plan in plans_up), default=0.0)
+    if limit is not None:
+        limit += grace
+    code = launcher.run(limit)
+    failures = [plan.failure() for plan in plans_up if plan.failure is not None]
+    if any(failures) and code == 0:
+        code = 1
+    if not boot_ok and code == 0:
+        code = 1
+    launcher.say("stopped (interrupted)" if code == 130 else f"stopped (exit code {code})")
+    launcher.flush_output()
+    return code
+
+
+def boot_load(
+    launcher: Launcher, programs: Path, ids: set[int], wait: float = 30.0, start: bool = True
+) -> bool:
+    """The seed's boot: the nodes run their OS only; scan them, load every program that is newer
+    than the node's (``load -i``: a restarted ring finds them in its stores and sends nothing)
+    through main's PC link, then ARCNET_START_SYSTEM (unless not ``start``). False if a node
+    failed (named in the output)."""
+    from tokenring.errors import TokenRingError
+    from tokenring.host.loader import Loader, run_load
+    from tokenring.host.pclink import open_link
+
+    launcher.booting = True
+    try:
+        assert launcher.session is not None
+        link = open_link(launcher.session, launcher.ring, wait=wait)
+        loader = Loader(
+            link,
+            progress=False,
+            say=lambda text: launcher.say(text, name="load"),
+            cancelled=lambda: launcher.stopping,
+        )
+        result = run_load(
+            loader, mode="incremental", programs_dir=programs, start=start, expect=ids, wait=wait
+        )
+        return not result["failed"]
+    except TokenRingError as exc:
+        launcher.say(f"loading the programs failed: {exc}", name="load")
+        return False
+    finally:
+        launcher.booting = False
+
+
+def say_waiting(launcher: Launcher, plans_up: list[extensions.UpPlan]) -> None:
+    """``--no-start``: the programs are loaded and wait; say how to start them."""
+    command = " ".join(["tokenring", "load", *launcher.tool_options(), "--start"])
+    launcher.say(f"--no-start: the programs wait for ARCNET_START_SYSTEM; start them with: {command}")
+    for plan in plans_up:
+        hint = plan.start_hint(launcher) if plan.start_hint is not None else None
+        if hint:
+            launcher.say(hint)
+
+
+def check_port(option: str, port: int) -> None:
+    """Refuse ``option``'s port on 127.0.0.1 if it cannot be had, before anything starts."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the servers will
+        try:
+            probe.bind(("127.0.0.1", port))
+        except OSError as exc:
+            raise UsageError(f"{option} {port}: cannot listen on 127.0.0.1:{port} ({exc.strerror})") from None
+
+
+def watch_service(args: argparse.Namespace) -> ServicePlan:
+    """``--web``, ``--record`` and ``--foxglove`` as one launcher service, ``tokenring watch``:
+    one process, one Zenoh session and one feed for all three (three tools would each decode
+    every frame again, on the cores the nodes need). Ports and the file are checked here, before
+    anything starts; the launcher waits until it serves and records, so the file holds the boot,
+    and stops it (SIGTERM: the recording is finalised) after the nodes."""
+    import os
+
+    from tokenring.cli.output import check_option_output
+    from tokenring.contract import keys
+    from tokenring.host.launcher import ServicePlan
+
+    argv = ["tokenring", "watch", "--ring", "{ring}", "--connect", "{connect}"]
+    if args.web:
+        check_port("--web-port", args.web_port)
+        argv += ["--web", "--web-port", str(args.web_port)]
+    if args.foxglove:
+        check_port("--foxglove-port", args.foxglove_port)
+        argv += ["--foxglove", "--foxglove-port", str(args.foxglove_port)]
+    if args.record:
+        check_option_output("--record", args.record)
+        argv += ["--record", args.record]
+    tag = f"up{os.getpid()}"
+    argv += ["--ready-token", tag]
+    if args.zenoh_config:
+        argv += ["--zenoh-config", args.zenoh_config]
+    if args.protocol:
+        argv += ["--protocol", args.protocol]
+    return ServicePlan("watch", argv, ready_key=keys.watch_ready(args.ring, tag))

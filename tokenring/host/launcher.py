@@ -1,0 +1,708 @@
+"""``tokenring up``: every node as its own OS process on one Zenoh network, supervised.
+
+The launcher holds the ring's tap endpoint (``tcp/127.0.0.1:7447`` unless ``--listen`` says
+otherwise; if that port is taken by another ring it joins that network instead — rings are
+namespaces), starts one ``tokenring node`` process per node with its log lines prefixed by the
+node's name, reports any node that dies with its exit code, and on Ctrl-C, SIGTERM or the end
+of ``--duration`` stops every process it started within 2 s. Children also carry
+``PR_SET_PDEATHSIG`` so that even a killed launcher leaves no orphans.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import zenoh
+
+from tokenring._util.process import die_with_parent
+from tokenring.contract import keys
+from tokenring.contract.faults import CRASH_EXIT_CODE
+from tokenring.contract.ring import EVENT_RING_STOPPING, RING_EVENT
+from tokenring.errors import TransportError, UsageError
+from tokenring.host.children import ExitWatch, PrefixedOutput
+from tokenring.transport.control import answer_query
+from tokenring.transport.session import free_port
+from tokenring.transport.zenoh import RingViewServer, peer_to_peer
+from tokenring.transport.zenoh_config import make_config, node_environment, open_session
+
+STOP_TIMEOUT_S = 1.5
+#: a ring bigger than this boots in waves of at most this many nodes at a time (8 per core)
+BOOT_CONCURRENCY = 8 * max(1, os.cpu_count() or 1)
+#: how often the supervisor checks its children when their pidfds wake it (a safety net), and
+#: when they cannot (no pidfd_open)
+EXIT_CHECK_S = 1.0
+CHILD_POLL_S = 0.05
+#: ``--respawn`` starts a dead node again this long after its exit (systemd's RestartSec default):
+#: the ring heals around it first, instead of sharing two cores with a booting interpreter
+RESPAWN_DELAY_S = 0.1
+KILL_REAP_S = 10.0  # after SIGKILL, how long the kernel may take to reap them all
+
+
+def describe_exit(code: int | None) -> str:
+    """'exited with code 3', 'killed by SIGKILL', 'crashed on purpose (fault)'."""
+    if code is None:
+        return "still running"
+    if code == CRASH_EXIT_CODE:
+        return f"crashed on purpose (crash fault, exit code {code})"
+    if code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exited with code {code}"
+
+
+@dataclass
+class NodePlan:
+    """One node the launcher runs."""
+
+    node_id: int
+    name: str
+    program: str | None = None
+    extra_args: list[str] = field(default_factory=list)
+
+
+@dataclass
+class ServicePlan:
+    """A helper process the ring needs (e.g. the world simulator): started before the nodes,
+    stopped after them, its output prefixed with ``name``. ``argv`` follows ``python -m``;
+    ``{endpoint}``, ``{ring}`` and ``{connect}`` in it are filled in by the launcher."""
+
+    name: str
+    argv: list[str]
+    ready_key: str | None = None  # a liveliness key the launcher waits for before the nodes start
+    ready_timeout: float = 15.0
+
+
+@dataclass
+class Child:
+    plan: NodePlan
+    process: subprocess.Popen
+    started: float
+    restarts: int = 0
+    reported: bool = False
+
+
+class Launcher:
+    """Starts, watches and stops the node processes of one ring."""
+
+    def __init__(
+        self,
+        plans: Sequence[NodePlan],
+        *,
+        ring: str = keys.DEFAULT_RING,
+        bitrate: str = "2.5M",
+        ack_mode: str = "adaptive",
+        connect: Sequence[str] = (),
+        listen: Sequence[str] = (),
+        zenoh_config: str | None = None,
+        protocol_path: str | None = None,
+        log_level: str = "info",
+        respawn: bool = False,
+        output: IO[str] | None = None,
+        extra_node_args: Sequence[str] = (),
+        services: Sequence[ServicePlan] = (),
+        router: bool = False,
+        links: bool = False,
+        transport: str = "zenoh",
+        profile: str | None = None,
+        boot_concurrency: int = BOOT_CONCURRENCY,
+        env: Mapping[str, str] | None = None,
+        residents: bool = True,
+    ) -> None:
+        if boot_concurrency < 1:
+            raise UsageError(f"--boot-wave {boot_concurrency}: at least one node must boot at a time")
+        self.plans = list(plans)
+        self.boot_concurrency = boot_concurrency
+        self.extra_env = dict(env or {})  # added to every node's environment (chaos: the ledger)
+        #: False: no node loads an application's resident program (a bare ring: the benchmark's)
+        self.residents = residents
+        if transport != "zenoh":
+            from tokenring.transport.factory import require_backend
+
+            require_backend(transport)  # before any node starts
+        self.transport = transport  # udp/zmq: the token path over sockets, membership from our registry
+        self.profile = profile  # tokenring.node.pacing: emulated hardware timing on every node
+        self.registry: Any = None
+        self.router = router  # this launcher is its host's Zenoh router; its nodes are clients
+        if links and not router:
+            raise UsageError("direct links to the ring successor need the launcher as the nodes' router")
+        if links and transport != "zenoh":
+            raise UsageError(f"direct links are Zenoh links; --transport {transport} has its own")
+        if links and (zenoh_config or os.environ.get("ZENOH_CONFIG")):
+            # the links are plain TCP on loopback, outside the config's (a secured ring's) rules
+            raise UsageError("direct links (--links) are plain TCP: not on a ring with a Zenoh config file")
+        #: the token's hop also on a direct link from each node to its successor (a second
+        #: session per node, see :mod:`tokenring.transport.links`); their ports, by node ID
+        self.links = links
+        self.link_ports: dict[int, int] = {}
+        self.services = list(services)
+        self.service_children: dict[str, subprocess.Popen] = {}
+        self.ring = keys.check_ring_name(ring)
+        self.bitrate = bitrate
+        self.ack_mode = ack_mode
+        self.connect = list(connect)
+        self.listen = list(listen)
+        self.zenoh_config = zenoh_config
+        self.protocol_path = protocol_path
+        self._protocol_cache: Any = None
+        self.log_level = log_level
+        self.respawn = respawn
+        self.extra_node_args = list(extra_node_args)
+        self.session: zenoh.Session | None = None
+        self.endpoint: str | None = None
+        self.joined_existing = False
+        self.children: dict[int, Child] = {}
+        self.deaths: list[tuple[str, int, int | None]] = []
+        self._stop = threading.Event()
+        self._children_lock = threading.RLock()
+        self._supervisor: threading.Thread | None = None
+        self._booter: threading.Thread | None = None
+        self._children_gone = threading.Event()
+        self._supervision_ended = threading.Event()  # the supervisor touches no child any more
+        # children's exits wake the supervisor through their pidfds (readable once a process
+        # exits); polling 255 children 20 times a second took CPU from the router in this process
+        self._exits = ExitWatch()
+        self._respawn_due: dict[int, float] = {}  # node ID -> when --respawn starts it again
+        self._stop_signal: int | None = None
+        self._queryable: Any = None
+        self._view_server: RingViewServer | None = None
+        self.shutdown_reason: str | None = None
+        self.booting = False  # programs are being downloaded over the ring (``up``)
+        width = max(
+            (len(name) for name in [*(p.name for p in self.plans), *(s.name for s in self.services)]),
+            default=4,
+        )
+        self.output = PrefixedOutput(output or sys.stdout, width)
+
+    # -- output ---------------------------------------------------------------------------------
+    def say(self, text: str, name: str = "up") -> None:
+        """One prefixed line of output (never blocks: see :class:`PrefixedOutput`)."""
+        self.output.say(text, name)
+
+    def flush_output(self, timeout: float = 1.0) -> None:
+        """Wait until the queued lines are written (for a clean end of the run)."""
+        self.output.flush(timeout)
+
+    @property
+    def stopping(self) -> bool:
+        """A stop was requested (or is under way)."""
+        return self._stop.is_set()
+
+    # -- session --------------------------------------------------------------------------------
+    def _open_session(self) -> None:
+        if self.router:
+            if not self.listen:
+                raise UsageError(
+                    "--router needs --listen ENDPOINT (where this host's nodes and other routers reach it)"
+                )
+            config = make_config(
+                mode="router", listen=self.listen, connect=self.connect, config_file=self.zenoh_config
+            )
+            self.session = open_session(config)
+            self.endpoint = self.listen[0]
+            return
+        if self.listen:
+            config = make_config(listen=self.listen, connect=self.connect, config_file=self.zenoh_config)
+            self.session = open_session(config)
+            self.endpoint = self.listen[0]
+            return
+        if self.connect:
+            config = make_config(connect=self.connect, config_file=self.zenoh_config)
+            self.session = open_session(config)
+            self.endpoint = None
+            self.joined_existing = True
+            return
+        try:
+            config = make_config(listen=[keys.default_endpoint()], config_file=self.zenoh_config)
+            self.session = open_session(config)
+            self.endpoint = keys.default_endpoint()
+        except TransportError as exc:
+            if "in use" not in str(exc):
+                raise
+            config = make_config(connect=[keys.default_endpoint()], config_file=self.zenoh_config)
+            self.session = open_session(config)
+            self.endpoint = None
+            self.joined_existing = True
+            self.say(f"{keys.default_endpoint()} is taken: joining that Zenoh network (ring {self.ring!r})")
+
+    def tool_options(self) -> list[str]:
+        """The options a tool (``tokenring load``, ...) needs to reach this ring: ``--ring`` and
+        ``-e`` where they differ from the tools' defaults."""
+        options = [] if self.ring == keys.DEFAULT_RING else ["--ring", self.ring]
+        endpoint = self.node_connect()[0]
+        return options if endpoint == keys.default_endpoint() else [*options, "-e", endpoint]
+
+    def node_connect(self) -> list[str]:
+        return [self.endpoint] if self.endpoint else list(self.connect or [keys.default_endpoint()])
+
+    def node_listen(self) -> list[str]:
+        if self.router:
+            return []  # clients of this host's router listen nowhere
+        scheme, host = "tcp", "127.0.0.1"
+        if self.endpoint:
+            # the tap's scheme too: a secured ring (tls/) must not open plain TCP listeners
+            scheme, rest = self.endpoint.split("/", 1)
+            host = rest.rsplit(":", 1)[0]
+            if host in ("0.0.0.0", "[::]"):
+                host = "0.0.0.0"
+        return [f"{scheme}/{host}:0"]
+
+    # -- children -------------------------------------------------------------------------------
+    def command_for(self, plan: NodePlan) -> list[str]:
+        cmd = [sys.executable, "-m", "tokenring", "--log-level", self.log_level, "node"]
+        cmd += ["--id", str(plan.node_id), "--ring", self.ring, "--bitrate", self.bitrate]
+        cmd += ["--ack", self.ack_mode, "--expect", str(len(self.plans))]
+        if plan.name and not plan.name.startswith("node"):
+            cmd += ["--name", plan.name]
+        if self.protocol_path:
+            cmd += ["--protocol", self.protocol_path]
+        if self.zenoh_config:
+            cmd += ["--zenoh-config", self.zenoh_config]
+        for endpoint in self.node_connect():
+            cmd += ["--connect", endpoint]
+        for endpoint in self.node_listen():
+            cmd += ["--listen", endpoint]
+        if self.router:
+            cmd += ["--mode", "client"]
+        if self.links:
+            cmd += self.link_options(plan.node_id)
+        if plan.program:
+            cmd += ["--program", plan.program]
+        if self.registry is not None:
+            cmd += ["--transport", self.transport, "--registry", self.registry.address]
+        if self.profile:
+            cmd += ["--profile", self.profile]
+        if not self.has_resident(plan):
+            cmd += ["--no-resident"]  # the node then loads no application before a program starts
+        return cmd + self.extra_node_args + plan.extra_args
+
+    def link_options(self, node_id: int) -> list[str]:
+        """A node's direct link: where it listens and its ring successor's endpoint. Ports stay
+        with their node ID, so a respawned node listens where its predecessor reconnects; a
+        node that joins later is reached through the router until it is someone's successor
+        at launch."""
+        ids = sorted({p.node_id for p in self.plans} | {node_id})
+        successor = ids[(ids.index(node_id) + 1) % len(ids)]
+        for wanted in (node_id, successor):
+            if wanted not in self.link_ports:
+                self.link_ports[wanted] = free_port(avoid=self.link_ports.values())
+        options = ["--link-listen", f"tcp/127.0.0.1:{self.link_ports[node_id]}"]
+        if successor != node_id:
+            options += ["--link-connect", f"tcp/127.0.0.1:{self.link_ports[successor]}"]
+        return options
+
+    def has_resident(self, plan: NodePlan) -> bool:
+        """Whether an application adds a resident program to this node's OS (asked here, once
+        per ring, so that the other nodes need not load the applications at boot)."""
+        if not self.residents:
+            return False
+        if "TOKENRING_EXTENSIONS" in self.extra_env:
+            return True  # the nodes have their own choice of applications: let them look
+        from tokenring import extensions
+
+        name = plan.name
+        if name.startswith("node"):  # a generated plan: the node takes protocol.yaml's name
+            spec = self._protocol().by_id.get(plan.node_id)
+            name = spec.name if spec is not None else name
+        return extensions.resident_program(name) is not None
+
+    def _protocol(self) -> Any:
+        if self._protocol_cache is None:
+            from tokenring.contract.protocol import default_protocol, load_protocol
+
+            self._protocol_cache = (
+                load_protocol(self.protocol_path) if self.protocol_path else default_protocol()
+            )
+        return self._protocol_cache
+
+    def _popen(self, argv: list[str], name: str) -> subprocess.Popen:
+        env = node_environment()
+        env.update(self.extra_env)
+        process = subprocess.Popen(
+            argv,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            bufsize=1,
+            env=env,
+            preexec_fn=die_with_parent,  # only prctl in the child: async-signal-safe
+        )
+        assert process.stdout is not None
+        self.output.watch(process.stdout, name)
+        return process
+
+    def start_service(self, service: ServicePlan) -> subprocess.Popen:
+        """Start a service process and wait until its ``ready_key`` liveliness token appears."""
+        fill = {
+            "endpoint": self.endpoint or "",
+            "ring": self.ring,
+            "connect": (self.node_connect() or [""])[0],
+        }
+        argv = [sys.executable, "-m", *(a.format(**fill) for a in service.argv)]
+        process = self._popen(argv, service.name)
+        self.service_children[service.name] = process
+        if service.ready_key and self.session is not None:
+            deadline = time.monotonic() + service.ready_timeout
+            while time.monotonic() < deadline:
+                if any(r.ok for r in self.session.liveliness().get(service.ready_key, timeout=0.5)):
+                    break
+                if process.poll() is not None:
+                    raise UsageError(f"{service.name} {describe_exit(process.poll())} while starting")
+                time.sleep(0.05)
+            else:
+                raise TransportError(f"{service.name} did not come up within {service.ready_timeout:.0f} s")
+        return process
+
+    def child_list(self) -> list[Child]:
+        """The node processes started so far (a big ring is still adding them while it boots)."""
+        with self._children_lock:
+            return list(self.children.values())
+
+    def spawn(self, plan: NodePlan) -> Child:
+        previous = self.children.get(plan.node_id)
+        command = self.command_for(plan)
+        if previous is not None and not plan.program:
+            command.append("--autostart")  # a respawned bare node runs the program in its store
+        child = Child(plan, self._popen(command, plan.name), time.monotonic())
+        if previous is not None:
+            child.restarts = previous.restarts + 1
+        self.children[plan.node_id] = child
+        self._exits.add(child.process.pid, child)
+        return child
+
+    def start(self) -> None:
+        """Open the tap session and start every node; if that fails, stop what did start (the
+        session's callback threads would otherwise keep the process alive after the error)."""
+        try:
+            self._start()
+        except BaseException:
+            self.stop()
+            raise
+
+    def _start(self) -> None:
+        self._open_session()
+        assert self.session is not None
+        verbs = LauncherVerbs(self)
+        self._queryable = self.session.declare_queryable(
+            keys.control(self.ring, "launcher", "*"),
+            lambda query: answer_query(query, verbs.handlers, "the launcher"),
+        )
+        if self.transport == "zenoh" and peer_to_peer(self.session):
+            self._view_server = RingViewServer(self.session, self.ring)
+        where = self.endpoint or ", ".join(self.node_connect())
+        self.say(
+            f"ring {self.ring!r}: starting {len(self.plans)} nodes "
+            f"({', '.join(f'{p.name}={p.node_id}' for p in self.plans)}) on {where}, "
+            f"bitrate {self.bitrate}" + (f", profile {self.profile}" if self.profile else "")
+        )
+        self.output.start_reading(self._stop)
+        for service in self.services:
+            self.start_service(service)
+        if self.transport != "zenoh":
+            from tokenring.transport.registry import MembershipRegistry
+
+            self.registry = MembershipRegistry().start()
+        if self.transport == "zenoh" and len(self.plans) > self.boot_concurrency:
+            self.say(f"booting in waves: at most {self.boot_concurrency} nodes starting at a time")
+            self._booter = threading.Thread(target=self._boot_in_waves, name="launcher-boot", daemon=True)
+            self._booter.start()
+        else:
+            for plan in self.plans:
+                self.spawn(plan)
+        # supervision (death reports, --respawn) runs beside whoever owns the launcher: `up`'s
+        # run() loop as well as in-process users such as chaos and the benchmarks
+        self._supervisor = threading.Thread(target=self._supervise, name="launcher-supervisor", daemon=True)
+        self._supervisor.start()
+
+    def _boot_in_waves(self) -> None:
+        """Start a big ring's nodes so that at most ``boot_concurrency`` are booting (started,
+        not yet live) at a time: 255 interpreters importing at once on two cores starve each
+        other and the router, whose handshakes then time out (nodes exit unable to connect)."""
+        assert self.session is not None
+        live: set[int] = set()
+        changed = threading.Condition()
+
+        def on_liveliness(sample: zenoh.Sample) -> None:
+            node_id = keys.id_from_key(str(sample.key_expr))
+            if node_id is not None and sample.kind == zenoh.SampleKind.PUT:
+                with changed:
+                    live.add(node_id)
+                    changed.notify()
+
+        subscriber = self.session.liveliness().declare_subscriber(keys.node(self.ring, "*"), on_liveliness)
+        try:
+            for plan in self.plans:
+                with changed:
+                    while not self._stop.is_set():
+                        booting = [
+                            c
+                            for c in self.child_list()
+                            if c.plan.node_id not in live and c.process.poll() is None
+                        ]
+                        if len(booting) < self.boot_concurrency:
+                            break
+                        changed.wait(0.2)
+                with self._children_lock:  # stop() lists the children under this lock
+                    if self._stop.is_set():
+                        break
+                    self.spawn(plan)
+        finally:
+            with contextlib.suppress(zenoh.ZError):
+                subscriber.undeclare()
+        # the nodes' parent-death signal fires when the *thread* that started them ends: this
+        # one must outlive them, so it waits until stop() has seen them all exit
+        self._children_gone.wait()
+
+    def _supervise(self) -> None:
+        """Report exits and respawn until the stop; then outlive the nodes this thread respawned
+        (their parent-death signal fires when the *thread* that started them ends: a respawned
+        node was SIGKILLed at every stop instead of leaving the ring)."""
+        try:
+            while not self._stop.is_set():
+                timeout = EXIT_CHECK_S if self._exits.works else CHILD_POLL_S
+                if self._respawn_due:
+                    timeout = max(0.0, min(timeout, min(self._respawn_due.values()) - time.monotonic()))
+                exited = self._exits.wait(timeout)
+                if self._stop.is_set():
+                    break
+                for child in exited:
+                    # reap it here: Popen.poll() answers None while another thread is inside
+                    # poll() (status queries, run()), and the exit would wait for the next check
+                    with contextlib.suppress(subprocess.TimeoutExpired):
+                        child.process.wait(timeout=1.0)
+                with self._children_lock:
+                    self.check_children()
+        finally:
+            self._exits.close_reading()
+            self._supervision_ended.set()
+        self._children_gone.wait()
+
+    def check_children(self) -> None:
+        """Report nodes that died; with ``--respawn`` start them again RESPAWN_DELAY_S later."""
+        for child in self.child_list():
+            code = child.process.poll()
+            if code is None or child.reported:
+                continue
+            child.reported = True
+            plan = child.plan
+            self.deaths.append((plan.name, plan.node_id, code))
+            self.say(f"node {plan.name} (id {plan.node_id}) {describe_exit(code)}")
+            if self.respawn and not self._stop.is_set():
+                self._respawn_due.setdefault(plan.node_id, time.monotonic() + RESPAWN_DELAY_S)
+        now = time.monotonic()
+        for node_id, due in list(self._respawn_due.items()):
+            if now >= due and not self._stop.is_set():
+                del self._respawn_due[node_id]
+                plan = self.children[node_id].plan
+                self.say(f"respawning {plan.name} (id {plan.node_id})")
+                self.spawn(plan)
+
+    def request_stop(self, signum: int | None = None) -> None:
+        if self._stop_signal is None:
+            self._stop_signal = signum
+        self._stop.set()
+
+    def run(self, duration: float | None = None) -> int:
+        """Supervise until the duration ends or a stop is requested; returns the exit code."""
+        deadline = None if duration is None else time.monotonic() + duration
+        while not self._stop.is_set():
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+            if (
+                self.children
+                and all(c.process.poll() is not None for c in self.child_list())
+                and not self.respawn
+            ):
+                self.say("every node has exited")
+                break
+            self._stop.wait(0.1)
+        self.stop()
+        if self._stop_signal == signal.SIGINT:
+            return 130
+        unexpected = [d for d in self.deaths if d[2] != CRASH_EXIT_CODE]
+        return 1 if unexpected else 0
+
+    def stop(self) -> None:
+        """Stop every child: SIGTERM (clean leave), then SIGKILL whatever is left after 1.5 s."""
+        self._stop.set()
+        self._exits.wake()  # the supervisor sleeps on its children's exits
+        if self._supervisor is None:
+            self._exits.close_reading()  # never started
+        elif self._supervisor is not threading.current_thread():
+            self._supervision_ended.wait(timeout=1.0)
+        if self._supervisor is None or self._supervision_ended.is_set():
+            self._exits.close_waking()
+        with self._children_lock:
+            self.check_children()  # report what died before the stop
+        running = [c for c in self.child_list() if c.process.poll() is None]
+        if running and self.session is not None:
+            with contextlib.suppress(zenoh.ZError):  # nobody needs a handover: all are leaving
+                self.session.put(keys.ring_event(self.ring), RING_EVENT.pack(EVENT_RING_STOPPING, 0, 0, 0, 0))
+            time.sleep(0.02)
+        for child in running:
+            with contextlib.suppress(ProcessLookupError):
+                child.process.send_signal(signal.SIGTERM)
+        # 255 nodes leaving at once on two cores need longer than the robot's eight
+        stop_timeout = max(STOP_TIMEOUT_S, 0.02 * len(running))
+        deadline = time.monotonic() + stop_timeout
+        stubborn = []
+        for child in running:
+            try:
+                child.process.wait(max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                stubborn.append(child)
+            child.reported = True
+        if stubborn:  # all at once: a big ring on a loaded machine may have many of them
+            names = ", ".join(c.plan.name for c in stubborn[:8]) + (" ..." if len(stubborn) > 8 else "")
+            self.say(f"{len(stubborn)} node(s) did not stop in {stop_timeout:.1f} s: killing {names}")
+            for child in stubborn:
+                with contextlib.suppress(ProcessLookupError):
+                    child.process.kill()
+            reap_deadline = time.monotonic() + KILL_REAP_S
+            for child in stubborn:
+                try:
+                    child.process.wait(max(0.1, reap_deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    self.say(f"node {child.plan.name} (pid {child.process.pid}) survived SIGKILL")
+        self._children_gone.set()
+        if self._booter is not None:
+            self._booter.join(timeout=1.0)
+        for name, process in self.service_children.items():
+            if process.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    process.send_signal(signal.SIGTERM)
+                try:
+                    process.wait(STOP_TIMEOUT_S)
+                except subprocess.TimeoutExpired:
+                    self.say(f"{name} did not stop in {STOP_TIMEOUT_S} s: killing it")
+                    with contextlib.suppress(ProcessLookupError):
+                        process.kill()
+                    try:  # a loaded machine may take seconds to reap it; the stop goes on
+                        process.wait(KILL_REAP_S)
+                    except subprocess.TimeoutExpired:
+                        self.say(f"{name} (pid {process.pid}) survived SIGKILL")
+        self.output.join_reader(timeout=1.0)
+        for process in [c.process for c in self.child_list()] + list(self.service_children.values()):
+            if process.stdout is not None:
+                process.stdout.close()
+        self.flush_output()
+        if self.registry is not None:
+            self.registry.close()
+            self.registry = None
+        if self._queryable is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self._queryable.undeclare()
+            self._queryable = None
+        if self._view_server is not None:
+            self._view_server.close()
+            self._view_server = None
+        if self.session is not None:
+            self.session.close()
+            self.session = None
+
+
+class LauncherVerbs:
+    """The launcher's control verbs on ``ctl/launcher/*``: ``status``, ``shutdown`` (the
+    charger's deep-discharge cut), ``signal`` (how a SIGSTOPped node is resumed)."""
+
+    def __init__(self, launcher: Launcher) -> None:
+        self.launcher = launcher
+        self.handlers = {"status": lambda _: self.status(), "shutdown": self.shutdown, "signal": self.signal}
+
+    def status(self) -> dict[str, Any]:
+        """The ring, its endpoint and every node and service process."""
+        launcher = self.launcher
+        return {
+            "ring": launcher.ring,
+            "endpoint": launcher.endpoint,
+            "booting": launcher.booting,
+            "nodes": [
+                {
+                    "id": c.plan.node_id,
+                    "name": c.plan.name,
+                    "pid": c.process.pid,
+                    "running": c.process.poll() is None,
+                    "exit": describe_exit(c.process.poll()) if c.process.poll() is not None else None,
+                    "restarts": c.restarts,
+                }
+                for c in launcher.child_list()
+            ],
+            "services": [
+                {"name": name, "pid": p.pid, "running": p.poll() is None}
+                for name, p in launcher.service_children.items()
+            ],
+        }
+
+    def shutdown(self, request: dict[str, Any]) -> dict[str, Any]:
+        """Stop the whole ring cleanly (the charger's deep-discharge cut asks for it)."""
+        reason = str(request.get("reason", "asked to"))
+        self.launcher.say(f"ring shutdown requested: {reason}")
+        self.launcher.shutdown_reason = reason
+        self.launcher.request_stop()
+        return {"stopping": True}
+
+    def signal(self, request: dict[str, Any]) -> dict[str, Any]:
+        """Send a signal (CONT, STOP, TERM, KILL) to one of our nodes: how a SIGSTOPped node
+        is resumed, since it can no longer answer anything itself."""
+        name = str(request.get("signal", "")).upper().removeprefix("SIG")
+        allowed = {
+            "CONT": signal.SIGCONT,
+            "STOP": signal.SIGSTOP,
+            "TERM": signal.SIGTERM,
+            "KILL": signal.SIGKILL,
+        }
+        if name not in allowed:
+            raise UsageError(f"signal must be one of {', '.join(allowed)}")
+        child = self.launcher.children.get(int(request.get("id", -1)))
+        if child is None or child.process.poll() is not None:
+            raise UsageError(f"node {request.get('id')} is not a running node of this launcher")
+        os.kill(child.process.pid, allowed[name])
+        return {"id": child.plan.node_id, "pid": child.process.pid, "signal": name}
+
+
+def plans_from_protocol(
+    protocol: Any, selection: Sequence[str] | None, programs_dir: str | Path | None
+) -> list[NodePlan]:
+    """Nodes to start: all of ``protocol.yaml`` or the ``--nodes`` selection (names or IDs)."""
+    if selection:
+        specs = []
+        for item in selection:
+            try:
+                specs.append(protocol.node(int(item) if item.isdigit() else item))
+            except Exception as exc:
+                raise UsageError(str(exc)) from None
+    else:
+        specs = list(protocol.nodes.values())
+    plans = []
+    seen: set[int] = set()
+    for spec in specs:
+        if spec.id in seen:
+            continue
+        seen.add(spec.id)
+        program = None
+        if programs_dir is not None:
+            candidate = Path(programs_dir) / f"{spec.name}.py"
+            if candidate.exists():
+                program = str(candidate)
+        plans.append(NodePlan(spec.id, spec.name, program))
+    return sorted(plans, key=lambda p: p.node_id)
+
+
+def install_signal_handlers(launcher: Launcher) -> None:
+    def handler(signum: int, _frame: Any) -> None:
+        launcher.request_stop(signum)
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)

@@ -1,0 +1,163 @@
+"""Program hosting and introspection: a node runs one user program on a thread of its own,
+and describes itself for ``stats`` queries (``tokenring status``, ``monitor``).
+
+:class:`ProgramHost` is mixed into :class:`~tokenring.node.node_os.NodeOS`, which sets up the state
+it declares.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+import threading
+import traceback
+from collections.abc import Callable
+from typing import Any
+
+from tokenring.contract import ring as R
+from tokenring.node.channels import DataRegistration, Inbox, Outbox
+from tokenring.node.tokenpath import TokenPathHost
+
+log = logging.getLogger("tokenring.node")
+
+
+class ProgramHost(TokenPathHost):
+    """Runs a node's user program and reports on the node (mixed into NodeOS)."""
+
+    name: str
+    timing: R.Timing
+    on_program_error: Callable[[], None] | None
+    program_error: str | None
+    _halt: threading.Event
+    _program: Any
+    _program_thread: threading.Thread | None
+    _program_set_up: bool  # the current program's setup() has returned
+    _regs: dict[str, DataRegistration]
+    _inbox: Inbox | None
+    _regs_lock: threading.Lock
+    _visit_cond: threading.Condition
+
+    def _rebuild_active(self, exclude: list[Any] | None = None) -> None:
+        raise NotImplementedError
+
+    @property
+    def counter(self) -> int:
+        raise NotImplementedError
+
+    def start_program(self, program_class: type, *args: Any) -> None:
+        """Instantiate and run a user program in its own thread (``setup`` then ``run``)."""
+        self.stop_program()
+        self._halt.clear()
+        self.program_error = None
+        program = program_class(self, *args)
+        self._program = program
+        self._program_set_up = False
+
+        def runner() -> None:
+            try:
+                program.setup()
+                self._program_set_up = program is self._program
+                program.run()
+            except Exception as exc:  # a user program's bug must not take the node down
+                last = traceback.format_exception_only(type(exc), exc)[-1].strip()
+                self.program_error = last
+                log.error("user program %s failed: %s", type(program).__name__, last)
+                log.debug("traceback:\n%s", traceback.format_exc())
+                if self.on_program_error is not None:
+                    self.on_program_error()
+            finally:
+                try:
+                    program.teardown()
+                except Exception as exc:
+                    log.error("user program teardown failed: %s", exc)
+
+        self._program_thread = threading.Thread(target=runner, name=f"program-{self.name}", daemon=True)
+        self._program_thread.start()
+
+    def stop_program(self, timeout: float = 1.0) -> bool:
+        """Ask the running program to stop, wait for it, drop its registrations."""
+        program, thread = self._program, self._program_thread
+        if program is None:
+            return True
+        program.stop_requested.set()
+        self._halt.set()
+        with self._visit_cond:
+            self._visit_cond.notify_all()
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout)
+        stopped = thread is None or not thread.is_alive()
+        if not stopped:
+            log.warning("user program %s did not stop within %.1f s", type(program).__name__, timeout)
+        with self._regs_lock:
+            self._regs = {k: r for k, r in self._regs.items() if r.owner != "program"}
+            self._inbox = None
+            for outbox in self._outboxes.values():
+                if outbox.state == Outbox.WAITING:
+                    outbox.cancel()
+            self._rebuild_active()
+        self._program = None
+        self._program_thread = None
+        self._halt.clear()  # only the stopping program's blocking calls were to return early
+        return stopped
+
+    @property
+    def program(self) -> Any:
+        return self._program
+
+    @property
+    def program_set_up(self) -> bool:
+        """The current program's ``setup()`` has returned: requests to it (the PC link's) may
+        use what it set up."""
+        return self._program is not None and self._program_set_up
+
+    # =========================================================================================
+    # introspection
+
+    def snapshot(self) -> dict[str, Any]:
+        """Counters, membership and timing for ``stats`` queries, the monitor and benchmarks."""
+        timing = self.timing
+        t = timing.current
+        rounds = timing.rounds.recent(512)  # recent: a status must follow what happens now
+        handler = timing.handler.recent(512)
+        send = timing.send.recent(512)
+
+        def pct(values: list[float], q: float) -> float:
+            return R.percentiles(values, (q,))[0] * 1e3  # plain Python: no numpy in a node
+
+        return {
+            "id": self.node_id,
+            "name": self.name,
+            "pid": os.getpid(),
+            "host": socket.gethostname(),
+            "epoch": [self._epoch, self._origin],
+            "counter": self.counter,
+            "master": min(self.membership.active),
+            "successor": self.membership.successor,
+            "live": sorted(self.membership.live),
+            "active": list(self.membership.active),
+            "excluded": sorted(self.membership.excluded),
+            "stats": self.stats.as_dict(),
+            "timeouts_ms": {
+                "hop": t.hop * 1e3,
+                "ack": t.ack * 1e3,
+                "recon": t.recon * 1e3,
+                "slot": t.slot * 1e3,
+                "ack_interval": t.ack_interval * 1e3,
+            },
+            "round_ms": {"median": pct(rounds, 50), "p99": pct(rounds, 99), "n": len(rounds)},
+            "handler_us": {
+                "median": pct(handler, 50) * 1e3,
+                "p99": pct(handler, 99) * 1e3,
+                "n": len(handler),
+            },
+            "send_us": {"median": pct(send, 50) * 1e3, "p99": pct(send, 99) * 1e3},
+            "program": type(self._program).__name__ if self._program is not None else None,
+            "program_error": self.program_error,
+            "bitrate": timing.bitrate,
+            "ack_mode": timing.ack_mode,
+        }
+
+    def round_times(self) -> list[float]:
+        """Seconds between this node's last visits (up to 1024)."""
+        return self.timing.rounds.as_list()

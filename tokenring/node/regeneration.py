@@ -1,0 +1,175 @@
+"""Which token regenerations had a cause: the ledger behind "spurious regenerations per hour".
+
+A node regenerates the token when it has not seen it for the reconfiguration timeout (its rank's
+slot later). On a healthy ring that should never happen: a regeneration is *explained* when
+
+* a fault was active on any node of the ring at that moment, or one started or ended within
+  the last :data:`QUIET_S` seconds (or :data:`QUIET_RECONS` reconfiguration times, if longer):
+  its own faults it sees in its :class:`~tokenring.node.faults.FaultInjector`, the others' faults
+  every node announces on ``ctl/*/faultnote`` when they change (a query to the queryables the
+  nodes already have: no declaration, no traffic while nothing changes);
+* a node came or went (liveliness) within that time: a crash, a leave, a restart.
+
+The ring's first token (main's seed, counted by ``tokens_regenerated`` too) is a ``seed``, not a
+regeneration. Every other regeneration is **spurious**: nothing was wrong, the token was only
+late (on a loaded machine) and the watchdog gave up on it.
+
+The ledger wraps the node's ``_regenerate`` (called by its watchdog, never on the token path), so
+the node OS needs no hook for it. ``tokenring status`` and ``monitor`` turn the nodes' counts
+and uptimes into a ring-wide rate per hour with :func:`ring_rates`.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from tokenring.node.faults import FaultInjector
+    from tokenring.node.node_os import NodeOS
+
+
+log = logging.getLogger("tokenring.regeneration")
+
+
+#: a fault that started or ended this long ago (at least) still explains a regeneration
+QUIET_S = 5.0
+
+
+#: ... or this many reconfiguration times, if longer (a slow bitrate, a backed-off streak)
+QUIET_RECONS = 10.0
+
+
+CAUSES = ("fault", "membership", "spurious")
+
+
+RECENT = 16  # the last regenerations kept with their time and cause
+
+
+def per_hour(count: float, seconds: float) -> float | None:
+    """``count`` events in ``seconds`` as a rate per hour; None without any time observed."""
+    return count * 3600.0 / seconds if seconds > 0 else None
+
+
+class RegenerationLedger:
+    """Counts one node's regenerations by cause: seed, fault, membership change or spurious."""
+
+    def __init__(
+        self,
+        os_: NodeOS,
+        faults: FaultInjector | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.os = os_
+        self.faults = faults
+        self.clock = clock
+        self.started = clock()
+        self.seeds = 0
+        self.counts = dict.fromkeys(CAUSES, 0)
+        #: node ID -> (when its last fault notice arrived, whether it had a fault active)
+        self.remote: dict[int, tuple[float, bool]] = {}
+        self.recent: collections.deque[dict[str, Any]] = collections.deque(maxlen=RECENT)
+        self._lock = threading.Lock()
+
+    def install(self) -> None:
+        """Wrap the node's ``_regenerate`` (its watchdog's call) so every regeneration is counted here."""
+        original = self.os._regenerate
+
+        def regenerate(now: float) -> None:
+            seed = self._is_seed()
+            before = self.os.stats.tokens_regenerated
+            state = self._state(now)
+            original(now)
+            if self.os.stats.tokens_regenerated != before:
+                try:
+                    self.record(seed, state)
+                except Exception:  # the watchdog must survive its bookkeeping
+                    log.exception("counting a regeneration failed")
+
+        self.os._regenerate = regenerate  # type: ignore[method-assign]
+
+    def _state(self, now: float) -> dict[str, Any]:
+        """What the node saw as it decided to regenerate (read before it does): how long since
+        its last visit, how many frames already wait for its token thread (a token in hand, not
+        yet visited), its rank and timeout, whether its watchdog woke more than a slot late."""
+        os_ = self.os
+        try:
+            timeouts = os_.timing.current
+            last_seen = getattr(os_, "_last_seen", 0.0)
+            return {
+                "since_seen_ms": round((now - last_seen) * 1e3, 1) if last_seen else None,
+                "queued": getattr(os_, "_deferred_pending", None),
+                "rank": os_.membership.rank(),
+                "recon_ms": round(timeouts.recon * 1e3, 1),
+                "stalled": getattr(os_, "_stall_wake", 0.0) == now,
+            }
+        except Exception:  # diagnostics only
+            return {}
+
+    def _is_seed(self) -> bool:
+        # node.py's own test for the ring's first token: this node never had a visit nor sent
+        return getattr(self.os, "_last_visit", 1.0) == 0.0 and not getattr(self.os, "_has_sent", True)
+
+    def note(self, request: dict[str, Any]) -> dict[str, Any]:
+        """Control verb ``faultnote``: node ``id`` says its faults changed (``faults``: those active now)."""
+        node_id = int(request.get("id", 0))
+        if node_id and node_id != self.os.node_id:
+            with self._lock:
+                self.remote[node_id] = (self.clock(), bool(request.get("faults")))
+        return {"ok": True}
+
+    def quiet_s(self) -> float:
+        """How long after a fault or a membership change a regeneration is still explained by it."""
+        return max(QUIET_S, QUIET_RECONS * self.os.timing.current.recon)
+
+    def cause(self) -> str:
+        """Why a regeneration happening now happened: ``fault``, ``membership`` or ``spurious``."""
+        now = self.clock()
+        quiet = self.quiet_s()
+        faults = self.faults
+        if faults is not None and (faults.active or now - faults.changed_at < quiet):
+            return "fault"
+        live = self.os.membership.live
+        with self._lock:
+            for node_id, (at, active) in self.remote.items():
+                if now - at < quiet or (active and node_id in live):
+                    return "fault"
+        changed = getattr(self.os, "_live_changed_at", 0.0)  # perf_counter time
+        if changed and time.perf_counter() - changed < quiet:
+            return "membership"
+        return "spurious"
+
+    def record(self, seed: bool, state: dict[str, Any] | None = None) -> str:
+        """Count one regeneration that just happened; returns its cause (``seed`` for the first
+        token). ``state``: what the node saw as it decided (kept with the recent ones)."""
+        cause = "seed" if seed else self.cause()
+        with self._lock:
+            if seed:
+                self.seeds += 1
+            else:
+                self.counts[cause] += 1
+            self.recent.append({"t": round(time.time(), 3), "cause": cause, **(state or {})})
+        if cause == "spurious":
+            log.info(
+                "spurious regeneration (no fault, no membership change in the last %.1f s): %s",
+                self.quiet_s(),
+                state,
+            )
+        return cause
+
+    def report(self) -> dict[str, Any]:
+        """The counts for ``stats`` queries: seeds, regenerations by cause, uptime, the recent ones."""
+        with self._lock:
+            regenerated = sum(self.counts.values())
+            return {
+                "uptime_s": round(self.clock() - self.started, 3),
+                "seeds": self.seeds,
+                "regenerated": regenerated,
+                **self.counts,
+                "quiet_s": round(self.quiet_s(), 3),
+                "recent": list(self.recent),
+            }
