@@ -36,19 +36,31 @@ def test_the_wings_keep_their_contracts():
 
 
 def test_a_wrong_arrow_fails_the_contracts(tmp_path: Path):
-    """A copy of the tree where the ring imports the world: the linter must say so and fail."""
+    """A copy of the tree where the ring imports the world, a node module the launcher and a
+    program a module path behind the ring's face: the linter must name each and fail."""
     for name in ("tokenring", "modules", "bench"):
         shutil.copytree(
             REPO / name, tmp_path / name, ignore=shutil.ignore_patterns("__pycache__", "*.so", "results")
         )
     shutil.copy(REPO / "pyproject.toml", tmp_path / "pyproject.toml")
-    keys = tmp_path / "tokenring" / "contract" / "keys.py"
-    keys.write_text(keys.read_text() + "\nimport modules.world.sim  # a wrong arrow\n")
+    wrong_arrows = {
+        "tokenring/contract/keys.py": "import modules.world.sim",  # the ring imports the robot
+        "tokenring/node/recovery.py": "import tokenring.host.launcher",  # a node imports the host side
+        "modules/motor.py": "from tokenring.node.program import UserProgram",  # past the public face
+    }
+    for name, line in wrong_arrows.items():
+        module = tmp_path / name
+        module.write_text(module.read_text() + f"\n{line}  # a wrong arrow\n")
     env = dict(os.environ, PYTHONPATH=str(tmp_path))  # the copy, not the installed tree
     result = lint(tmp_path, env)
     assert result.returncode != 0, result.stdout
     assert "The ring knows nothing of the robot BROKEN" in result.stdout, result.stdout
     assert "tokenring.contract.keys -> modules.world.sim" in result.stdout, result.stdout
+    assert "The ring's rooms are layered BROKEN" in result.stdout, result.stdout
+    assert "tokenring.node.recovery -> tokenring.host.launcher" in result.stdout, result.stdout
+    assert "The robot and the benchmarks import only the ring's public faces BROKEN" in result.stdout
+    assert "modules.motor -> tokenring.node.program" in result.stdout, result.stdout
+    assert "The ring ships without its benchmarks: tokenring never imports bench KEPT" in result.stdout
 
 
 def test_the_bare_ring_loads_no_robot_code():
