@@ -30,8 +30,8 @@ from tokenring.contract.faults import CRASH_EXIT_CODE
 from tokenring.contract.ring import EVENT_RING_STOPPING, RING_EVENT
 from tokenring.errors import TransportError, UsageError
 from tokenring.host.children import ExitWatch, PrefixedOutput
+from tokenring.host.node_commands import NodeCommandLines
 from tokenring.transport.control import answer_query
-from tokenring.transport.session import free_port
 from tokenring.transport.zenoh import RingViewServer, peer_to_peer
 from tokenring.transport.zenoh_config import make_config, node_environment, open_session
 
@@ -93,7 +93,7 @@ class Child:
     reported: bool = False
 
 
-class Launcher:
+class Launcher(NodeCommandLines):
     """Starts, watches and stops the node processes of one ring."""
 
     def __init__(
@@ -236,96 +236,7 @@ class Launcher:
             self.joined_existing = True
             self.say(f"{keys.default_endpoint()} is taken: joining that Zenoh network (ring {self.ring!r})")
 
-    def tool_options(self) -> list[str]:
-        """The options a tool (``tokenring load``, ...) needs to reach this ring: ``--ring`` and
-        ``-e`` where they differ from the tools' defaults."""
-        options = [] if self.ring == keys.DEFAULT_RING else ["--ring", self.ring]
-        endpoint = self.node_connect()[0]
-        return options if endpoint == keys.default_endpoint() else [*options, "-e", endpoint]
-
-    def node_connect(self) -> list[str]:
-        return [self.endpoint] if self.endpoint else list(self.connect or [keys.default_endpoint()])
-
-    def node_listen(self) -> list[str]:
-        if self.router:
-            return []  # clients of this host's router listen nowhere
-        scheme, host = "tcp", "127.0.0.1"
-        if self.endpoint:
-            # the tap's scheme too: a secured ring (tls/) must not open plain TCP listeners
-            scheme, rest = self.endpoint.split("/", 1)
-            host = rest.rsplit(":", 1)[0]
-            if host in ("0.0.0.0", "[::]"):
-                host = "0.0.0.0"
-        return [f"{scheme}/{host}:0"]
-
     # -- children -------------------------------------------------------------------------------
-    def command_for(self, plan: NodePlan) -> list[str]:
-        cmd = [sys.executable, "-m", "tokenring", "--log-level", self.log_level, "node"]
-        cmd += ["--id", str(plan.node_id), "--ring", self.ring, "--bitrate", self.bitrate]
-        cmd += ["--ack", self.ack_mode, "--expect", str(len(self.plans))]
-        if plan.name and not plan.name.startswith("node"):
-            cmd += ["--name", plan.name]
-        if self.protocol_path:
-            cmd += ["--protocol", self.protocol_path]
-        if self.zenoh_config:
-            cmd += ["--zenoh-config", self.zenoh_config]
-        for endpoint in self.node_connect():
-            cmd += ["--connect", endpoint]
-        for endpoint in self.node_listen():
-            cmd += ["--listen", endpoint]
-        if self.router:
-            cmd += ["--mode", "client"]
-        if self.links:
-            cmd += self.link_options(plan.node_id)
-        if plan.program:
-            cmd += ["--program", plan.program]
-        if self.registry is not None:
-            cmd += ["--transport", self.transport, "--registry", self.registry.address]
-        if self.profile:
-            cmd += ["--profile", self.profile]
-        if not self.has_resident(plan):
-            cmd += ["--no-resident"]  # the node then loads no application before a program starts
-        return cmd + self.extra_node_args + plan.extra_args
-
-    def link_options(self, node_id: int) -> list[str]:
-        """A node's direct link: where it listens and its ring successor's endpoint. Ports stay
-        with their node ID, so a respawned node listens where its predecessor reconnects; a
-        node that joins later is reached through the router until it is someone's successor
-        at launch."""
-        ids = sorted({p.node_id for p in self.plans} | {node_id})
-        successor = ids[(ids.index(node_id) + 1) % len(ids)]
-        for wanted in (node_id, successor):
-            if wanted not in self.link_ports:
-                self.link_ports[wanted] = free_port(avoid=self.link_ports.values())
-        options = ["--link-listen", f"tcp/127.0.0.1:{self.link_ports[node_id]}"]
-        if successor != node_id:
-            options += ["--link-connect", f"tcp/127.0.0.1:{self.link_ports[successor]}"]
-        return options
-
-    def has_resident(self, plan: NodePlan) -> bool:
-        """Whether an application adds a resident program to this node's OS (asked here, once
-        per ring, so that the other nodes need not load the applications at boot)."""
-        if not self.residents:
-            return False
-        if "TOKENRING_EXTENSIONS" in self.extra_env:
-            return True  # the nodes have their own choice of applications: let them look
-        from tokenring import extensions
-
-        name = plan.name
-        if name.startswith("node"):  # a generated plan: the node takes protocol.yaml's name
-            spec = self._protocol().by_id.get(plan.node_id)
-            name = spec.name if spec is not None else name
-        return extensions.resident_program(name) is not None
-
-    def _protocol(self) -> Any:
-        if self._protocol_cache is None:
-            from tokenring.contract.protocol import default_protocol, load_protocol
-
-            self._protocol_cache = (
-                load_protocol(self.protocol_path) if self.protocol_path else default_protocol()
-            )
-        return self._protocol_cache
-
     def _popen(self, argv: list[str], name: str) -> subprocess.Popen:
         env = node_environment()
         env.update(self.extra_env)
