@@ -118,7 +118,7 @@ import time
 
 import numpy as np
 
-from tokenring.node.program import UserProgram
+from tokenring import UserProgram
 
 
 class Program(UserProgram):

@@ -380,7 +380,7 @@ def test_the_memory_never_mistakes_a_new_command_for_a_repeat_after_a_full_wrap(
 
 PROGRAMS = {
     "main": """
-from tokenring.node.program import UserProgram
+from tokenring import UserProgram
 
 class Program(UserProgram):
     def setup(self):
@@ -412,7 +412,7 @@ class Program(UserProgram):
         return {"acked": self.acked, "unclear": self.unclear, "finished": self.finished}
 """,
     "receiver": """
-from tokenring.node.program import UserProgram
+from tokenring import UserProgram
 
 class Program(UserProgram):
     def setup(self):

@@ -28,7 +28,7 @@ from tokenring.transport.session import query_one
 MODULES = Path(__file__).resolve().parent.parent / "modules"
 
 VERSIONED = """
-from tokenring.node.program import UserProgram
+from tokenring import UserProgram
 
 
 class Program(UserProgram):
@@ -40,7 +40,7 @@ class Program(UserProgram):
 {padding}"""
 
 RAISES = """
-from tokenring.node.program import UserProgram
+from tokenring import UserProgram
 
 
 class Program(UserProgram):
@@ -98,7 +98,13 @@ def test_scan_incremental_all_corrupt_start_stop_upload_and_bad_input(procs, rin
     with tap(endpoint) as session:
         wait_ring(session, ring_name, ids)
         procs.watch(launcher_pids(session, ring_name))
-        # up loaded every program over the ring into the stores and started them
+        # up loaded every program over the ring into the stores and started them (the start is
+        # the last step of up's download: the ring can be whole before it reaches every node)
+        wait_until(
+            lambda: all(system(session, ring_name, i)["state"] == "RUNNING" for i in ids),
+            60,
+            "up to start every program it loaded",
+        )
         for i in ids:
             report = system(session, ring_name, i)
             assert report["stats"]["installs"] == 1 and report["state"] == "RUNNING", (i, report)
@@ -112,7 +118,10 @@ def test_scan_incremental_all_corrupt_start_stop_upload_and_bad_input(procs, rin
         ]  # fmt: skip
         assert all(n["stamp_ms"] == file_stamp(programs / f"{n['name']}.py") for n in scan)
         code, text = load(ring_name, endpoint)
-        assert code == 0 and re.search(r"motor +20 +\d{4}-\d\d-\d\d [\d:.]+ +174 +\w{8} +RUNNING", text), text
+        size = (programs / "motor.py").stat().st_size
+        assert code == 0 and re.search(
+            rf"motor +20 +\d{{4}}-\d\d-\d\d [\d:.]+ +{size} +\w{{8}} +RUNNING", text
+        ), text
 
         # -i after editing one module: only that one travels, and the new code runs
         before = chunks(session, ring_name, ids)

@@ -11,7 +11,7 @@ from tokenring.errors import UsageError
 from tokenring.host.pclink import PcLink
 
 RECEIVER = """
-from tokenring.node.program import UserProgram
+from tokenring import UserProgram
 
 
 class Program(UserProgram):
@@ -32,7 +32,7 @@ class Program(UserProgram):
 """
 
 MAIN = """
-from tokenring.node.program import UserProgram
+from tokenring import UserProgram
 
 
 class Program(UserProgram):
@@ -82,7 +82,7 @@ def test_pc_link_relays_commands_reads_data_and_program_requests(procs, ring_nam
 
 SLOW_MAIN = """
 import os, time
-from tokenring.node.program import UserProgram
+from tokenring import UserProgram
 
 
 class Program(UserProgram):

@@ -26,7 +26,7 @@ from nethosts import Hosts, needs_namespaces
 from ringutil import wait_until
 
 PROGRAM = """
-from tokenring.node.program import UserProgram
+from tokenring import UserProgram
 
 
 class Program(UserProgram):

@@ -14,7 +14,7 @@ from tokenring.node.system.layer import SystemLayer
 from tokenring.node.system.vocabulary import State, Status, SystemCommandError
 
 PROGRAM = """
-from tokenring.node.program import UserProgram
+from tokenring import UserProgram
 
 
 class Program(UserProgram):
@@ -32,7 +32,7 @@ class Program(UserProgram):
 """
 
 RAISES = """
-from tokenring.node.program import UserProgram
+from tokenring import UserProgram
 
 
 class Program(UserProgram):

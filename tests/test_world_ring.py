@@ -20,7 +20,7 @@ from tokenring.host.pclink import PcLink
 
 REPO = Path(__file__).resolve().parent.parent
 MAIN = '''
-from tokenring.node.program import UserProgram
+from tokenring import UserProgram
 
 
 class Program(UserProgram):

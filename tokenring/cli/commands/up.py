@@ -204,6 +204,9 @@ def run(args: argparse.Namespace) -> int:
         env=node_env,
     )
     install_signal_handlers(launcher)
+    # the status says so from its first answer: nodes that are live before the download starts
+    # are not yet running their programs
+    launcher.booting = download and programs is not None
     launcher.start()
     boot_ok = True
     if download and programs is not None:
