@@ -1,5 +1,5 @@
 """The generated report: the Zenoh runtime comparison and the aims it qualifies; its tables from a
-run's summary alone, its plots from the raw record, the hand-written sections it keeps."""
+run's summary alone, its plots from the raw record, nothing kept of the file it replaces."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from bench.report import aims, kept_sections, nemesis_md, runtime_md, write_report
+from bench.report import aims, nemesis_md, runtime_md, write_report
 from bench.sections import summary_of
 from bench.suite import (
     FULL_SIZES,
@@ -341,34 +341,26 @@ def test_plots_are_drawn_from_the_raw_record_and_kept_without_it(tmp_path, capsy
     assert "profile from 2026-11-23T10:00:00 (2026-11-23.json)" in (tmp_path / "RESULTS.md").read_text()
 
 
-NEMESIS = """## Nemesis: seeded random faults (`python -m bench.nemesis`)
-
-Hand-written: what seed 5 found, the commit that fixed it.
-
-| seed | s |
-|---|---|
-| 1 | 60 |
-"""
-
-
-def test_a_rewrite_keeps_the_hand_written_nemesis_section_and_marked_blocks(tmp_path):
+def test_a_rewrite_keeps_nothing_of_the_file_it_replaces_and_names_its_own_command(tmp_path):
     out = tmp_path / "results"
     out.mkdir()
     md = tmp_path / "RESULTS.md"
-    block = "<!-- keep:notes -->\nA note by hand.\n\n## Not a section of its own\n<!-- /keep:notes -->"
+    path, _ = write_results(suite_run(), out / "2026-11-21.json")
+    fresh = write_report(json.loads(path.read_text()), out, current=path).read_text()
     md.write_text(
-        f"# old\n\n## Round trip vs ring size\n\nold table\n\n{NEMESIS}\n{block}\n\n## The robot's own benchmarks\n\nold\n"
+        "# old\n\n## Nemesis: seeded random faults\n\nHand-written: what seed 5 found.\n\n"
+        "<!-- keep:notes -->\nA note by hand.\n<!-- /keep:notes -->\n"
     )
-    assert kept_sections(md.read_text()) == [NEMESIS, block + "\n"]
-    write_report(summary_of(suite_run()), out)
+    write_report(json.loads(path.read_text()), out, current=path)
     text = md.read_text()
-    assert NEMESIS + "\n" + block + "\n\n## The robot's own benchmarks" in text
-    assert "old table" not in text and text.count("## Nemesis") == 1
-    write_report(summary_of(suite_run()), out)
-    assert md.read_text() == text  # and again
+    assert text == fresh  # the report is its result files' alone
+    assert "by hand" not in text and "keep:" not in text and "## Nemesis" not in text
+    # its top names the command that writes it again from that file, and the one that measures
+    assert f".venv/bin/python -m bench.report --out {out} {path}" in text.split("## ")[0]
+    assert ".venv/bin/python -m bench " in text.split("## ")[0]
 
 
-def test_without_a_hand_written_one_the_nemesis_section_is_rendered_from_its_results(tmp_path):
+def test_the_nemesis_section_is_rendered_from_its_results(tmp_path):
     out = tmp_path / "results"
     out.mkdir()
     run = {
@@ -396,7 +388,7 @@ def test_without_a_hand_written_one_the_nemesis_section_is_rendered_from_its_res
     md = tmp_path / "RESULTS.md"
     assert row in md.read_text()
     (out / "nemesis-reruns.json").write_text(json.dumps({"runs": [run | {"seed": 5}, run | {"seed": 10}]}))
-    write_report(summary_of(suite_run()), out)  # its own rendering is not kept: the new file shows
+    write_report(summary_of(suite_run()), out)  # the new file shows
     text = md.read_text()
     assert (
         text.count("## Nemesis") == 1
