@@ -11,9 +11,8 @@ later) over the router, as ``ZenohTransport`` sends it. Each put goes over one s
 so no frame arrives twice.
 
 Two sessions because Zenoh offers nothing simpler: a router routes for its clients, not between
-peers, and a peer's links are fixed when its session opens (bench/RESULTS.md, "Direct links
-instead of a router": a 255-process bare ring's p99 103-108 ms through the router, 70-77 ms on
-direct links).
+peers, and a peer's links are fixed when its session opens (docs/big-rings.md, "Direct links":
+a 255-process ring's tail round trip is shorter on direct links than through the router).
 """
 
 from __future__ import annotations

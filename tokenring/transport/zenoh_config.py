@@ -21,10 +21,9 @@ from tokenring.errors import TransportError, UsageError
 #: housekeeping (net, acc, app) keeps its own threads: handed over to the same worker too, a
 #: node leaving the ring lost the token about once in 30 handovers (tests/test_ring_zenoh.py,
 #: the late joiner), never in 80 with them apart. ``acc`` alone handed over makes a 64-node
-#: ring's hop ~13 % faster but lost the token in 1 of 80 late joins (bench/RESULTS.md, run 5);
-#: with joiners waiting for a whole view it lost none in 125, but twice the leave cost a
-#: regeneration (the token unseen for 63 ms after the leaver's session closed).
-#: bench/RESULTS.md measures this against Zenoh's defaults; a user's own ``$ZENOH_RUNTIME`` wins.
+#: ring's hop faster but a late join then lost the token now and then, and a leave cost a
+#: regeneration (the token unseen after the leaver's session closed): a speed-up that trades a
+#: loss is not taken. A user's own ``$ZENOH_RUNTIME`` wins.
 NODE_RUNTIME = "(rx:(worker_threads:1),tx:(handover:rx))"
 
 #: the runtime of a process that hosts a router or many sessions (``tokenring up``, ``bench``,
