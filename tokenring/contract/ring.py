@@ -160,7 +160,7 @@ class RollingStats:
 
     def recent(self, count: int) -> list[float]:
         """The last ``count`` samples (newest first), touching only those: copying a full
-        16 384-sample deque cost the watchdog ~50 µs a time. The token path may append between
+        16 384-sample deque on every call was a real cost to the watchdog. The token path may append between
         making the iterator and reading it ("deque mutated during iteration"): then read again."""
         while True:
             try:
@@ -175,8 +175,8 @@ class RollingStats:
     def percentiles(self, qs: tuple[float, ...], default: float = 0.0, last: int = 512) -> list[float]:
         """Percentiles of the last ``last`` samples from one sort, interpolated as numpy's
         default. Plain Python: every node's watchdog calls this twice a second, and numpy's
-        machinery, cold in a process that mostly sleeps, cost ~0.5 ms a call - at 255 nodes a
-        quarter of a core, on a ring whose round time is bound by the machine's CPU."""
+        machinery, cold in a process that mostly sleeps, costs far more a call - in a big ring
+        on few cores, a visible share of a CPU that bounds the round time."""
         return percentiles(self.recent(last), qs, default)
 
 

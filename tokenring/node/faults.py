@@ -24,9 +24,8 @@ log = logging.getLogger("tokenring.faults")
 
 
 #: a crash or hard hang stops the process this long after its answer was handed to Zenoh: the
-#: answer's batch must leave before the process stops (it was 10 ms from *before* the reply,
-#: and on a loaded machine the stop won the race: chaos saw "nobody answered" for faults that
-#: had taken effect)
+#: answer's batch must leave before the process stops (timed from before the reply, a loaded
+#: machine's stop won the race and chaos heard nobody answer a fault that had taken effect)
 AFTER_REPLY_S = 0.05
 
 
@@ -103,7 +102,7 @@ class FaultInjector:
 
     def _resume(self) -> None:
         # a resume within AFTER_REPLY_S of its hang: the SIGSTOP would come after the SIGCONT
-        # and stop the node for good (chaos: hang and resume 18 ms apart, node 70 never answered)
+        # and stop the node for good
         if self._pending_stop is not None:
             self._pending_stop.cancel()
             self._pending_stop = None

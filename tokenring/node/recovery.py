@@ -37,8 +37,8 @@ REGENERATION_BACKOFF_MAX = 7  # reconfiguration times added after fruitless rege
 #: pinging every excluded node ten times a second, each answer re-announced to all, is a storm)
 FAR_PROBE_S = 2.0
 #: the watchdog's timeout refresh waits up to this long for a wake it has anyway (a pass's ack
-#: timer, the token-loss timer) instead of waking for it alone: at 64 nodes the watchdogs' wakes
-#: cost the ring ~20 µs of CPU per hop on two cores, at 255 ~16 µs after the first cut
+#: timer, the token-loss timer) instead of waking for it alone: in a big ring on few cores the
+#: watchdogs' own wakes are a measurable share of every hop's CPU
 REFRESH_SLACK_S = 1.5
 #: the watchdog sleeps at most this many reconfiguration times, so a missed wake costs no more
 WATCH_MAX_SLEEP_RECONS = 4.0

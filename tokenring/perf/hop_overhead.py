@@ -4,9 +4,9 @@ Zenoh forwarder, and how much of the CPUs the host took meanwhile.
 A pair (a ring measured against a bare Zenoh ring of the same size and topology) gives
 ``(ring median - bare median) / N``; on two shared cores one pair says little, so pairs are
 repeated and given as their mean with a Student-t 95 % interval. On a virtual machine the slow
-seconds are the hypervisor's (``/proc/stat``'s steal time rose from 2-9 % to 15-30 % exactly while
-a bare ring slowed 2-3x, 2026-11-30), so every measure records its steal and a pair that lost more
-than :data:`STEAL_LIMIT_PCT` is set apart. ``tokenring bench`` and the suite (``bench/``) share
+seconds are the hypervisor's (``/proc/stat``'s steal time rises exactly while a bare ring slows),
+so every measure records its steal and a pair that lost more than :data:`STEAL_LIMIT_PCT` is set
+apart. ``tokenring bench`` and the suite (``bench/``) share
 these figures.
 """
 

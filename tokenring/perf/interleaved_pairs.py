@@ -1,9 +1,9 @@
 """tokenring's own share per hop with both rings in the same seconds: interleaved windows.
 
 Separate runs of the ring and of the bare Zenoh ring land in different seconds of the host, and
-on this virtual machine the host takes CPUs for seconds at a time (steal 15-30 % against 2-9 %,
-the bare 64-node ring 21 ms or 41-60 ms a round): even pairs of runs screened by their steal
-spread 86 µs per hop at 64 routers. So here both rings are up at once and take turns: the
+a virtual machine's host takes CPUs for seconds at a time (steal time): even pairs of runs
+screened by their steal spread too widely to tell a few microseconds per hop. So here both
+rings are up at once and take turns: the
 one not measured is frozen (SIGSTOP to each of its processes, SIGCONT to resume). The windows
 go bare, ring, bare, ..., bare, and each ring window is paired with the bare windows on either
 side of it, so a steady drift of the host's speed cancels. A pair's own share is
@@ -14,8 +14,8 @@ windows lost at most :data:`~tokenring.perf.hop_overhead.STEAL_LIMIT_PCT` to the
 A window is short enough that a frozen ring hardly notices: a node whose watchdog wakes more
 than :data:`tokenring.node.recovery.FROZEN_AFTER_S` late announces a rejoin (255 of them at once
 would be a storm no ring sees in use). A watchdog due just before a resume does not see its
-process was frozen and can regenerate the token ("no token for 619 ms", 0-2 times in 100 pairs
-here); the record counts the nodes' warnings and keeps the first few. The round that spans a
+process was frozen and can regenerate the token (now and then in a hundred pairs); the record
+counts the nodes' warnings and keeps the first few. The round that spans a
 freeze and the next ``settle`` rounds are dropped; the ring's rounds are its round master's (the time between two of
 its visits, as ``tokenring bench`` reports them), the bare ring's are its process 0's.
 
