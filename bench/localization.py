@@ -33,8 +33,8 @@ from typing import Any
 
 import yaml
 
-from modules.common.algorithms import algorithm
 from modules.description import keys as robot_keys
+from modules.variants import algorithm
 from tokenring.transport import free_port
 
 
@@ -154,7 +154,7 @@ def run_experiment(
 def repository_config() -> dict[str, Any]:
     """config/localization.yaml as a plain dict: the runs use its settings (the sonar model and
     noise it turns on beyond the built-in defaults), with the log directory and walls set per run."""
-    from modules.common.locconfig import default_config_path
+    from modules.localization.config import default_config_path
 
     return yaml.safe_load(default_config_path().read_text()) or {}
 
@@ -175,7 +175,7 @@ def align(link: Any, speed_pct: int, timeout: float) -> None:
     that, the hall's start faces +X): an empty one; then whatever is left, turned relatively."""
     import math
 
-    from modules.common.units import cdeg_cw_to_rad_ccw
+    from modules.units import cdeg_cw_to_rad_ccw
 
     run_actions(link, "e\n", "square-up.act", speed_pct, timeout)
     copro = link.read("copro.data")
@@ -202,7 +202,7 @@ def drive_only(log_path: Path, start_ms: int) -> dict[str, float]:
 
     import numpy as np
 
-    from modules.common.logs import read_log
+    from modules.localization.logs import read_log
     from modules.pc.analysis import Series
 
     series = Series(read_log(log_path))

@@ -93,8 +93,8 @@ def replay(
 ) -> np.ndarray:
     """The vectors copro's :class:`Vectorizer` makes from a recording (mm); ``poses`` collects
     the pose each sweep was mapped with."""
-    from modules.common.units import pose_from_wire
-    from modules.common.vectorgen import OUR_METHOD, PoseHistory, Vectorizer, default_layout
+    from modules.mapping.vectorgen import OUR_METHOD, PoseHistory, Vectorizer, default_layout
+    from modules.units import pose_from_wire
     from tokenring import default_protocol
 
     forward = default_protocol().enums["direction"]["FORWARD"]
@@ -212,7 +212,7 @@ def pose_error(result: dict[str, Any]) -> dict[str, float]:
     import bisect
     import math
 
-    from modules.common.units import pose_from_wire
+    from modules.units import pose_from_wire
 
     truth = sorted(result.get("truth", []))
     stamps = [t[0] for t in truth]
@@ -334,7 +334,7 @@ def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any
     import bisect
     import math
 
-    from modules.common.units import cdeg_to_heading
+    from modules.units import cdeg_to_heading
 
     truth = sorted(result.get("truth", []))
     stamps = [t[0] for t in truth]
@@ -393,9 +393,9 @@ def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any
 
 
 def main(argv: list[str] | None = None) -> int:
-    from modules.common.mapscore import score_map
-    from modules.common.vectorgen import OUR_METHOD, SEED_METHOD
+    from modules.mapping.vectorgen import OUR_METHOD, SEED_METHOD
     from modules.pc.mapfiles import load_map_file, load_truth, write_map
+    from modules.pc.mapscore import score_map
     from tokenring.transport import free_port
 
     parser = argparse.ArgumentParser(prog="python -m bench.mapping", description=__doc__.split("\n\n")[0])

@@ -24,7 +24,7 @@ import numpy as np
 
 from bench.closedloop import parse_seeds
 from bench.seedreport import maps_table
-from modules.common.algorithms import PARTS
+from modules.variants import PARTS
 from tokenring.transport import free_port
 
 #: every configuration a table row is about: the two robots, then each module seed alone
@@ -76,8 +76,8 @@ def explore(
 def drift(map_file: Path, world: str) -> dict[str, Any]:
     """Orientation error (°, length-weighted) of the map's early and late thirds of vectors, in
     the order they were recorded: the seed's dead-reckoned heading error grows along the drive."""
-    from modules.common.mapscore import angle_diff, directions, point_segment_distance
     from modules.pc.mapfiles import load_map_file, load_truth
+    from modules.pc.mapscore import angle_diff, directions, point_segment_distance
 
     vectors = np.asarray(load_map_file(str(map_file)), dtype=float).reshape(-1, 4)
     walls = np.asarray(load_truth(world)[1], dtype=float).reshape(-1, 4)

@@ -50,7 +50,7 @@ Say = Callable[[str], None]
 @contextlib.contextmanager
 def algorithms_env(value: str) -> Iterator[None]:
     """Every program started inside runs ``--algorithms value`` (the variable `up` sets for them)."""
-    from modules.common.algorithms import ENV
+    from modules.variants import ENV
 
     before = os.environ.get(ENV)
     os.environ[ENV] = value
@@ -64,7 +64,7 @@ def algorithms_env(value: str) -> Iterator[None]:
 
 
 def part_classifier(args: argparse.Namespace, say: Say) -> dict[str, Any]:
-    from modules.common.sonar import make_classifier
+    from modules.sensors.sonar import make_classifier
 
     names = ["NONE", "LINEAR", "PROGRESSIVE", "DEGRESSIVE"]  # protocol.yaml's enums.behaviour
     out: dict[str, Any] = {"readings_cm": SEED_TABLE, "seed_documented": SEED_TABLE_BEHAVIOURS}

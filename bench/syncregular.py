@@ -85,7 +85,7 @@ def odometry_gaps(log: Path) -> dict[str, Any]:
     """How the step counters reached copro: p99 and largest gap between the new samples it saw
     (sensor time), and how many gaps exceeded 1 s (a stall of the loaded machine: no trigger can
     hold a cycle through it; the period trigger catches up to 1 s and skips grid times beyond)."""
-    from modules.common.logs import read_log
+    from modules.localization.logs import read_log
 
     stamps = [r[0] for r in read_log(log).records if r[1] == "O" and r[2] == "R"]
     gaps = sorted(b - a for a, b in itertools.pairwise(stamps))

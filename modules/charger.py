@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import logging
 
-from modules.common.battery import (
+from modules.sensors.battery import (
     CURRENT_FULL_SCALE_A,
     ELECTRONICS_CURRENT_A,
     ELECTRONICS_FULL_SCALE_V,

@@ -20,11 +20,11 @@ turn (main's CALIBRATE_COMPASS); main tells the compass to listen (CALIBRATE_LIS
 and its pilot turns the robot once round in eight 45° turns on the spot, waiting at each stop
 for the compass's samples. The compass never commands the motor: it watches motor.data, takes
 its readings at rest at each stop and those taken while turning
-(:class:`~modules.common.compass.CalibrationListener`); a circle fit through the eight stops'
+(:class:`~modules.sensors.compass.CalibrationListener`); a circle fit through the eight stops'
 readings gives the static field (centre) and the Earth's field (radius); the readings taken
 while turning lie on a circle round static + running field, which gives the running field;
 every straight move afterwards measures it again (the field driving minus the field at rest
-before and after: :class:`~modules.common.compass.RunningFieldLearner`). State:
+before and after: :class:`~modules.sensors.compass.RunningFieldLearner`). State:
 UNCALIBRATED, CALIBRATING, OK, DISTURBED (the field strength, averaged like the heading, is off
 by more than 0.8 % from the calibrated one: an anomaly, iron nearby; a flip measurement's strength
 scatters by about 0.5 %, the mean of three by 0.3 %, and an anomaly across the Earth's field bends
@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from modules.common.compass import (
+from modules.sensors.compass import (
     FLIP_SAMPLES,
     MAX_COMPENSATION_ROUNDS,
     STOPPED,
@@ -58,7 +58,7 @@ from modules.common.compass import (
     phase_compensation,
     symmetric,
 )
-from modules.common.units import heading_to_cdeg
+from modules.units import heading_to_cdeg
 from tokenring import UserProgram
 
 log = logging.getLogger("tokenring.compass")

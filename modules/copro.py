@@ -7,7 +7,7 @@ and sent to map — by the seed's edge following (SET_METHOD 0) or by ours (SET_
 default): robust straight runs of global points, collinear merge and corner closing (held-back
 vectors go out on FLUSH).
 
-The pose: the filtered pose of :class:`modules.common.localizer.Localizer` when that module
+The pose: the filtered pose of :class:`modules.localization.localizer.Localizer` when that module
 exists (hosted here, stepped every token visit), else dead reckoning from ``motor.data``; both
 are published in the ``pose_*`` fields (source 2 = EKF, 1 = dead reckoning), and the filter's
 standard deviations in ``sigma_*`` (0 without a filter) so tools can draw its uncertainty.
@@ -26,10 +26,10 @@ import queue
 import threading
 from typing import Any
 
-from modules.common.algorithms import algorithm
-from modules.common.units import pose_from_wire, pose_to_wire
-from modules.common.vectorgen import OUR_METHOD, SEED_METHOD, PoseHistory, Vector, Vectorizer, default_layout
-from modules.common.vectormap import vector_to_wire
+from modules.mapping.vectorgen import OUR_METHOD, SEED_METHOD, PoseHistory, Vector, Vectorizer, default_layout
+from modules.mapping.vectormap import vector_to_wire
+from modules.units import pose_from_wire, pose_to_wire
+from modules.variants import algorithm
 from tokenring import UserProgram
 
 log = logging.getLogger("tokenring.copro")
@@ -81,14 +81,14 @@ EXPLORATION_CONFIG: dict[str, Any] = {
 
 
 def open_localizer(os: Any, truth: Any = None) -> Any | None:
-    """The EKF localizer (modules.common.localizer), configured for exploration; None without it.
+    """The EKF localizer (modules.localization.localizer), configured for exploration; None without it.
 
     ``$TOKENRING_LOCALIZER_CONFIG`` names another configuration file; ``$TOKENRING_LOCALIZER=off``
     maps on dead reckoning alone (the benchmark compares both)."""
     if _os.environ.get("TOKENRING_LOCALIZER", "").lower() in ("off", "0", "no"):
         return None
     try:
-        from modules.common.localizer import Localizer
+        from modules.localization.localizer import Localizer
     except ImportError:
         return None
     config: Any = _os.environ.get("TOKENRING_LOCALIZER_CONFIG") or EXPLORATION_CONFIG

@@ -2,8 +2,8 @@
 
 Keys come from the keypad hardware (``self.hw``: ``tokenring lcd`` in a terminal presses them).
 Before this program runs, the LCD node's OS shows its "OS V2.0 Main Menu" on the same hardware
-(:mod:`modules.common.lcdos`); once it runs, its "Main Menu" takes over: the menus
-(:mod:`modules.common.lcdui`) start explorations and clear the map through main,
+(:mod:`modules.display.boot_menu`); once it runs, its "Main Menu" takes over: the menus
+(:mod:`modules.display.menus`) start explorations and clear the map through main,
 show every module's live data decoded with protocol.yaml, and draw the map (GET_MAP to the map
 module) with pan and zoom. ``lcd.data`` carries the last key, a key counter, the menu and the
 selection. SHOW_TEXT puts a line of text under the menu.
@@ -17,9 +17,9 @@ import threading
 import time
 from typing import Any
 
-from modules.common.lcdui import MENU_NAMES, Menus, Screen
-from modules.common.mapclient import MapCollector
-from modules.common.units import pose_from_wire
+from modules.display.menus import MENU_NAMES, Menus, Screen
+from modules.mapping.map_request import MapCollector
+from modules.units import pose_from_wire
 from tokenring import UserProgram
 
 log = logging.getLogger("tokenring.lcd")

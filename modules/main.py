@@ -27,10 +27,11 @@ import queue
 import time
 from typing import Any
 
-from modules.common.algorithms import algorithm
-from modules.common.compasscal import CompassCalibration
-from modules.common.mapclient import MapCollector
-from modules.common.navigator import (
+from modules.localization.pose_correction import CorrectionSettings, PoseCorrector
+from modules.mapping.map_request import MapCollector
+from modules.mapping.vectorgen import SonarLayout, default_layout
+from modules.navigation.compass_turn import CompassCalibration
+from modules.navigation.navigator import (
     NAV,
     Calibrate,
     ExploreAvoid,
@@ -40,7 +41,7 @@ from modules.common.navigator import (
     SeedExploreAvoid,
     SeedLeftWall,
 )
-from modules.common.pilot import (
+from modules.navigation.pilot import (
     MOTOR_STATE,
     REASON,
     REASON_NAMES,
@@ -52,9 +53,8 @@ from modules.common.pilot import (
     Send,
     Sensors,
 )
-from modules.common.poseupdate import CorrectionSettings, PoseCorrector
-from modules.common.units import pose_from_wire
-from modules.common.vectorgen import SonarLayout, default_layout
+from modules.units import pose_from_wire
+from modules.variants import algorithm
 from tokenring import UsageError, UserProgram, default_protocol
 
 log = logging.getLogger("tokenring.main")
@@ -285,7 +285,7 @@ class Program(UserProgram):
             pilot.abort("USER")
             self._drain_pilot()
         self._leave_compass_calibration()
-        from modules.common.actions import ActionNavigator
+        from modules.navigation.actions import ActionNavigator
 
         if isinstance(nav, ActionNavigator) and nav.plan_steps.holding is not None:
             self._send("motor", "STOP")  # the seed's non-queueing v/c runs until stopped (§6.7)
@@ -368,7 +368,7 @@ class Program(UserProgram):
             self.start(CompassCalibration(self.layout), 1)
             return self.state()
         if verb == "actions":  # an action file (seed 000 §6.7), run by pair 1's pilot
-            from modules.common.actions import ActionNavigator, parse_actions
+            from modules.navigation.actions import ActionNavigator, parse_actions
 
             name = str(payload.get("name", "<actions>"))
             actions = parse_actions(str(payload.get("text", "")), name, seed=self.seed)

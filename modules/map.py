@@ -14,7 +14,7 @@ import queue
 import threading
 from typing import Any
 
-from modules.common.vectormap import CAPACITY, MapFull, VectorStore
+from modules.mapping.vectormap import CAPACITY, MapFull, VectorStore
 from tokenring import UserProgram
 
 log = logging.getLogger("tokenring.map")

@@ -36,8 +36,8 @@ import math
 import time
 from collections import deque
 
-from modules.common.algorithms import algorithm
-from modules.common.odometry import (
+from modules.description.robot import DEFAULT_MOTOR_CURRENT_MA, MAX_SPEED_MM_S, MOTOR_TICK_MS, STEP_MM
+from modules.sensors.odometry import (
     DeadReckoning,
     Move,
     recalc_glide_factor,
@@ -45,8 +45,8 @@ from modules.common.odometry import (
     steps_for_angle,
     steps_for_distance,
 )
-from modules.common.units import cdeg_to_rad, pose_to_wire
-from modules.description.robot import DEFAULT_MOTOR_CURRENT_MA, MAX_SPEED_MM_S, MOTOR_TICK_MS, STEP_MM
+from modules.units import cdeg_to_rad, pose_to_wire
+from modules.variants import algorithm
 from tokenring import ChannelError, UserProgram
 
 log = logging.getLogger("tokenring.motor")

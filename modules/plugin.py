@@ -10,7 +10,7 @@ Registered in ``pyproject.toml`` under the entry point group ``tokenring.extensi
   (``--explore``, ``--map-out``, ``--actions``, ``--localizer``), all checked before anything
   starts;
 * each program's hardware client (:mod:`modules.world.hardware`);
-* the LCD node's OS menu before the programs start (:mod:`modules.common.lcdos`);
+* the LCD node's OS menu before the programs start (:mod:`modules.display.boot_menu`);
 * its topics in a live feed (:mod:`modules.pc.feed`).
 """
 
@@ -109,7 +109,7 @@ class RobotExtension(Extension):
         )
 
     def plan_up(self, args: argparse.Namespace, protocol: Protocol) -> UpPlan:
-        from modules.common.algorithms import ENV, all_seed, format_algorithms, parse_algorithms
+        from modules.variants import ENV, all_seed, format_algorithms, parse_algorithms
         from modules.world.__main__ import parse_speed
 
         plan = UpPlan()
@@ -122,7 +122,7 @@ class RobotExtension(Extension):
             plan.services.append(world_service(args, choice["body"]))
             plan.speedup = speed
         if args.localizer:
-            from modules.common.locconfig import load_config
+            from modules.localization.config import load_config
 
             load_config(args.localizer)  # a bad file is refused (file:line, key) before anything starts
             plan.env["TOKENRING_LOCALIZER_CONFIG"] = str(Path(args.localizer).resolve())
@@ -142,7 +142,7 @@ class RobotExtension(Extension):
             check_out(args.map_out)
         actions = None
         if args.actions:
-            from modules.common.actions import load_actions
+            from modules.navigation.actions import load_actions
 
             # a bad file is refused (file:line) before anything starts; the seed's main takes
             # v/c without a time (non-queued)
@@ -198,7 +198,7 @@ class RobotExtension(Extension):
         """The LCD node's OS V2.0 Main Menu, shown from boot until the programs run."""
         if module != "lcd":
             return None
-        from modules.common.lcdos import LcdOs
+        from modules.display.boot_menu import LcdOs
 
         return LcdOs
 

@@ -21,15 +21,15 @@ from __future__ import annotations
 
 import logging
 
-from modules.common.algorithms import algorithm
-from modules.common.sonar import (
+from modules.description.robot import SONAR_COUNT, SONAR_SLOT_MS
+from modules.sensors.sonar import (
     NO_CONTACT,
     contact_method,
     distance_area,
     make_classifier,
     seed_distance_area,
 )
-from modules.description.robot import SONAR_COUNT, SONAR_SLOT_MS
+from modules.variants import algorithm
 from tokenring import UserProgram
 
 log = logging.getLogger("tokenring.sonar")

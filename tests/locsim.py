@@ -13,9 +13,9 @@ from collections.abc import Callable, Iterator
 
 import numpy as np
 
-from modules.common.sync import Sample
 from modules.description import load_world
 from modules.description.robot import SONAR_BEAM_RAD, SONAR_MOUNTS, SONAR_RANGE_MM, STEP_MM, sonar_world_pose
+from modules.localization.sync import Sample
 from modules.world.physics import TrackedRobot, cast_rays
 
 

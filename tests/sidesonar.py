@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from modules.common.vectorgen import DEGRESSIVE, LINEAR, NO_CONTACT_CM, PROGRESSIVE, SideSensors
+from modules.mapping.vectorgen import DEGRESSIVE, LINEAR, NO_CONTACT_CM, PROGRESSIVE, SideSensors
 
 BEHAVIOUR_NONE = 0
 HALF_BEAM = math.radians(15.0)

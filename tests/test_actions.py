@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from modules.common.actions import (
+from modules.mapping.vectorgen import default_layout
+from modules.navigation.actions import (
     WAIT,
     ActionNavigator,
     ActionPlan,
@@ -17,8 +18,7 @@ from modules.common.actions import (
     load_actions,
     parse_actions,
 )
-from modules.common.pilot import FORWARD, REASON, REVERSE, TURN_LEFT, TURN_RIGHT, Outcome, Sensors
-from modules.common.vectorgen import default_layout
+from modules.navigation.pilot import FORWARD, REASON, REVERSE, TURN_LEFT, TURN_RIGHT, Outcome, Sensors
 from tokenring.errors import UsageError
 
 SQUARE = """\

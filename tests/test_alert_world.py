@@ -37,10 +37,10 @@ import yaml
 from ringjudge import Header
 from ringutil import tap, wait_main_answers, wait_until
 
-from modules.common.sonar import contact_seed_tangent, contact_tangent
 from modules.description import keys as robot_keys
 from modules.description import load_world
 from modules.description.robot import FRONT, FRONT_LEFT, FRONT_RIGHT, MAX_STEP_RATE_HZ, REAR
+from modules.sensors.sonar import contact_seed_tangent, contact_tangent
 from modules.world.sim import Simulator
 from tokenring.host.pclink import PcLink, open_link
 from tokenring.transport.session import query

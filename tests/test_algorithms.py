@@ -1,4 +1,4 @@
-"""``--algorithms seed|ours|MODULE=...`` (modules/common/algorithms.py): the grammar, what a
+"""``--algorithms seed|ours|MODULE=...`` (modules/variants.py): the grammar, what a
 program reads from its environment, and ``up``'s refusals and implied seed pace."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 from conftest import run_tokenring
 
-from modules.common.algorithms import (
+from modules.variants import (
     ENV,
     algorithm,
     all_seed,

@@ -8,9 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from bench.closedloop import ClosedLoop, explore, merged, write_json
-from modules.common.locconfig import ConfigError
+from bench.closedloop import write_json
 from modules.copro import EXPLORATION_CONFIG
+from modules.localization.config import ConfigError
+from modules.sim.closedloop import ClosedLoop, explore, merged
 
 
 def test_overrides_merge_into_nested_settings_and_leave_the_base_alone() -> None:

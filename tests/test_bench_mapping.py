@@ -7,7 +7,7 @@ import math
 import pytest
 
 from bench.mapping import compass_error
-from modules.common.units import heading_to_cdeg
+from modules.units import heading_to_cdeg
 
 
 def test_the_compass_error_on_straight_moves_is_fitted_as_a_harmonic_of_the_heading() -> None:

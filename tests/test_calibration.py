@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from modules.common.calibration import CalibrationError, FloorEstimate, pool
-from modules.common.ekf import EkfParams, PoseEKF
-from modules.common.locconfig import ConfigError, load_config, parse_config
-from modules.common.logs import DataLog
+from modules.localization.config import ConfigError, load_config, parse_config
+from modules.localization.ekf import EkfParams, PoseEKF
+from modules.localization.logs import DataLog
+from modules.pc.calibration import CalibrationError, FloorEstimate, pool
 from tokenring.cli.main import main as cli_main
 
 DRAW_SD, NOISE_SD, PRIOR_SD = 0.005, 0.002, 0.02

@@ -9,8 +9,8 @@ import pytest
 from hwprograms import program
 from memring import MemoryRing, wait_for
 
-from modules.common import battery as algo
 from modules.description import Batteries, load_world
+from modules.sensors import battery as algo
 from modules.world.battery import MOTOR_PACK_A_PER_MOTOR_A, Battery
 from modules.world.clients import ChargerHardware, MotorHardware
 from modules.world.sim import Simulator

@@ -15,16 +15,16 @@ import pytest
 from hwprograms import program
 from memring import MemoryRing, wait_for
 
-from modules.common.compass import (
+from modules.description import load_world
+from modules.description.robot import MAX_STEP_RATE_HZ
+from modules.sensors.compass import (
     CalibrationListener,
     angle_difference,
     fit_circle,
     flip_measurement,
     heading_from_bridges,
 )
-from modules.common.units import cdeg_to_heading
-from modules.description import load_world
-from modules.description.robot import MAX_STEP_RATE_HZ
+from modules.units import cdeg_to_heading
 from modules.world.clients import CompassHardware, MotorHardware
 from modules.world.magnetics import CompassBridges
 from modules.world.sim import Simulator
@@ -310,7 +310,7 @@ def test_listening_gives_up_without_a_stop() -> None:
 
 
 def test_robust_circle_fit_leaves_out_readings_of_another_circle() -> None:
-    from modules.common.compass import fit_circle_robust
+    from modules.sensors.compass import fit_circle_robust
 
     rng = np.random.default_rng(5)
     angles = rng.uniform(0, 2 * math.pi, 200)
@@ -360,7 +360,7 @@ def straight_moves_timeline(
 
 @pytest.mark.parametrize("lag_ms", [50.0, 130.0, 400.0])
 def test_running_field_is_learned_again_on_straight_moves(lag_ms: float) -> None:
-    from modules.common.compass import RunningFieldLearner
+    from modules.sensors.compass import RunningFieldLearner
 
     true_running = np.array([2.0, 1.5])
     learner = RunningFieldLearner(np.array([1.8, 1.3]))  # a calibration 10-13 % short
@@ -385,7 +385,7 @@ def test_running_field_is_learned_again_on_straight_moves(lag_ms: float) -> None
 def test_running_field_is_learned_with_short_rests_between_the_moves(rest_ms: float) -> None:
     """The pilot starts the next segment a few readings after the last: the readings at rest
     before a move are proven by the move's own start (its stamp less the steps made since)."""
-    from modules.common.compass import RunningFieldLearner
+    from modules.sensors.compass import RunningFieldLearner
 
     learner = RunningFieldLearner(np.array([1.8, 1.3]))
     moves, t = [], 1000.0
@@ -399,7 +399,7 @@ def test_running_field_is_learned_with_short_rests_between_the_moves(rest_ms: fl
 
 
 def test_running_field_is_not_learned_where_the_field_changed_or_on_turns() -> None:
-    from modules.common.compass import RunningFieldLearner
+    from modules.sensors.compass import RunningFieldLearner
 
     first = np.array([1.8, 1.3])
     learner = RunningFieldLearner(first)

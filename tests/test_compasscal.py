@@ -12,11 +12,11 @@ import pytest
 from fakenode import FakeOS
 
 from modules import main as main_module
-from modules.common.algorithms import ENV as ALGORITHMS_ENV
-from modules.common.compasscal import CompassCalibration
-from modules.common.pilot import Move, Outcome, Sensors
-from modules.common.poseupdate import ENV as SETPOS_ENV
-from modules.common.vectorgen import default_layout
+from modules.localization.pose_correction import ENV as SETPOS_ENV
+from modules.mapping.vectorgen import default_layout
+from modules.navigation.compass_turn import CompassCalibration
+from modules.navigation.pilot import Move, Outcome, Sensors
+from modules.variants import ENV as ALGORITHMS_ENV
 from tokenring.contract.protocol import default_protocol
 from tokenring.errors import UsageError
 

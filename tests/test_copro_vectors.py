@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from sidesonar import BEHAVIOUR_NONE, SeedClassifier, side_readings
 
-from modules.common.vectorgen import (
+from modules.mapping.vectorgen import (
     CORNER,
     DEGRESSIVE,
     LINEAR,
@@ -205,7 +205,7 @@ def test_pose_history_interpolates_position_and_heading_across_the_wrap():
 
 
 def test_pose_history_carries_a_pose_by_the_recorded_motion_in_its_own_frame() -> None:
-    from modules.common.vectorgen import PoseHistory
+    from modules.mapping.vectorgen import PoseHistory
 
     history = PoseHistory()
     history.add(0, (0.0, 0.0, 0.0))

@@ -8,8 +8,8 @@ from pathlib import Path
 from conftest import run_tokenring
 from shapely.geometry import LineString, Point, Polygon
 
-from modules.common.actions import parse_actions
 from modules.description.generate import generate_room, room_yaml
+from modules.navigation.actions import parse_actions
 
 
 def room_shapes(data: dict) -> tuple[Polygon, list]:

@@ -6,10 +6,11 @@ import math
 
 import numpy as np
 
-from bench.drivesim import DriveSim, chance_beyond, judge, repository_config, summarise
+from bench.drivesim import chance_beyond, summarise
 from bench.rooms import generated_room
 from modules.description import load_world
 from modules.description.drives import drive_text, generate_drive
+from modules.sim.drivesim import DriveSim, judge, repository_config
 
 
 def test_short_drive_is_judged_against_the_simulators_truth(tmp_path):

@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 from filterpy import kalman as filterpy_kalman
 
-from modules.common.ekf import EkfParams, PoseEKF, chi2_quantile
-from modules.common.sync import OdometryParams
-from modules.common.walls import KnownWall, wrap
+from modules.localization.ekf import EkfParams, PoseEKF, chi2_quantile
+from modules.localization.sync import OdometryParams
+from modules.localization.walls import KnownWall, wrap
 
 
 def reference_motion(
     state: np.ndarray, dl: float, dr: float, names: list[str], odo: OdometryParams, new_move: bool = False
 ) -> np.ndarray:
-    """The seed's odometry model written out independently of modules.common.ekf; a new straight
+    """The seed's odometry model written out independently of modules.localization.ekf; a new straight
     or arc move with a mean step scale in the state starts from that mean."""
     values = dict(zip(names, state, strict=True))
     state = state.copy()

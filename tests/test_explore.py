@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from modules.common.mapscore import score_map
 from modules.description import load_world
+from modules.pc.mapscore import score_map
 
 
 def test_up_explores_with_explore_2_and_writes_the_scored_map(procs, ring_name, endpoint, tmp_path):

@@ -9,9 +9,9 @@ from pathlib import Path
 
 from shapely.geometry import LineString, Polygon
 
-from bench.closedloop import ClosedLoop
-from modules.common.navigator import WallSettings, interior_goal
 from modules.description.generate import generate_room, room_yaml
+from modules.navigation.navigator import WallSettings, interior_goal
+from modules.sim.closedloop import ClosedLoop
 
 #: a generated room (outside the tuning and evaluation sets) whose one square pillar stands
 #: 1.58 m from every wall and stub: farther than the side sonars see from the lap

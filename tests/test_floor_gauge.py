@@ -1,6 +1,6 @@
 """Explore 2 gauges the floor's step at the first wall, so that its lap is drawn on a measured step.
 
-The closed loop (bench/closedloop.py: main's navigator and pilot, copro's filter, the simulated
+The closed loop (modules/sim/closedloop.py: main's navigator and pilot, copro's filter, the simulated
 robot) explores a bundled room; the filter's step scale is read when the lap's first follow segment
 is planned and judged against the floor the world simulates (ground truth, for judging only).
 """
@@ -12,8 +12,8 @@ from typing import Any
 
 import pytest
 
-from bench.closedloop import ClosedLoop
-from modules.common.navigator import WallSettings
+from modules.navigation.navigator import WallSettings
+from modules.sim.closedloop import ClosedLoop
 
 
 def step_scale_as_the_lap_begins(room: str, gauge_mm: int) -> dict[str, Any]:

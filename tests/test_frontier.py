@@ -1,5 +1,5 @@
 """What the sonars saw, where the seen space ends, which walls nobody mapped, and the way there
-through space seen free (modules/common/frontier.py, issue 21). Readings are made up here from
+through space seen free (modules/navigation/frontier.py, issue 21). Readings are made up here from
 plain geometry: a robot at a pose, one sonar's axis, the distance to a wall along it."""
 
 from __future__ import annotations
@@ -12,11 +12,11 @@ import pytest
 from shapely.geometry import LineString, Point, Polygon
 from shapely.geometry.base import BaseGeometry
 
-from bench.closedloop import ClosedLoop
-from modules.common.frontier import FrontierSettings, SeenGrid
-from modules.common.navigator import WallSettings
 from modules.description.generate import generate_room, room_yaml
 from modules.description.robot import SONAR_OUTLINE_MM, SonarMount
+from modules.navigation.frontier import FrontierSettings, SeenGrid
+from modules.navigation.navigator import WallSettings
+from modules.sim.closedloop import ClosedLoop
 
 NO_ECHO = 255
 #: one sonar at the robot's centre looking straight ahead: the grid's geometry without the body's
@@ -155,9 +155,9 @@ def test_a_wall_the_lap_cut_off_is_visited_and_mapped(tmp_path: Path) -> None:
 
 
 def test_the_way_home_goes_round_a_wall_the_lap_left_inside_it_by_space_seen_free() -> None:
-    from modules.common.navigator import ExploreLeftWall, route_home
-    from modules.common.pilot import FORWARD, REASON, STOPPED, Move, Outcome, Sensors
-    from modules.common.vectorgen import default_layout
+    from modules.mapping.vectorgen import default_layout
+    from modules.navigation.navigator import ExploreLeftWall, route_home
+    from modules.navigation.pilot import FORWARD, REASON, STOPPED, Move, Outcome, Sensors
 
     # a partition from the left wall (y = 1000, x up to 2500); the lap cut across the room, so
     # the whole rectangle it drew counts as free and the straight way home runs through the wall
@@ -208,9 +208,9 @@ def test_open_floor_the_robot_drove_over_is_a_way_though_no_echo_showed_it_free(
 
 
 def test_a_long_way_to_a_place_left_gets_three_moves_per_waypoint() -> None:
-    from modules.common.navigator import ExploreLeftWall
-    from modules.common.pilot import FORWARD, REASON, STOPPED, Move, Outcome, Sensors
-    from modules.common.vectorgen import default_layout
+    from modules.mapping.vectorgen import default_layout
+    from modules.navigation.navigator import ExploreLeftWall
+    from modules.navigation.pilot import FORWARD, REASON, STOPPED, Move, Outcome, Sensors
 
     # a snake of floor the robot drove, between four partitions it mapped; at its far end a
     # wall seen but not mapped. The way there has many waypoints: more than a fixed 12 moves
@@ -256,9 +256,9 @@ def test_a_long_way_to_a_place_left_gets_three_moves_per_waypoint() -> None:
 
 
 def test_a_mapped_wall_across_the_way_there_is_gone_round_by_a_new_plan_then_given_up() -> None:
-    from modules.common.navigator import ExploreLeftWall
-    from modules.common.pilot import FORWARD, REASON, STOPPED, Move, Outcome, Sensors
-    from modules.common.vectorgen import default_layout
+    from modules.mapping.vectorgen import default_layout
+    from modules.navigation.navigator import ExploreLeftWall
+    from modules.navigation.pilot import FORWARD, REASON, STOPPED, Move, Outcome, Sensors
 
     # floor driven all over a 6 x 4 m area, a wall seen but not mapped at its far end: the way
     # there is planned straight. Then a partition across it (x = 2 m, |y| < 1 m) blocks the way,

@@ -14,10 +14,10 @@ import yaml
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from modules.common.actions import load_actions
-from modules.common.locconfig import load_config
-from modules.common.logs import read_log
 from modules.description import load_world
+from modules.localization.config import load_config
+from modules.localization.logs import read_log
+from modules.navigation.actions import load_actions
 from tokenring.chaos.runner import load_scenario
 from tokenring.contract.protocol import load_protocol
 from tokenring.errors import TokenRingError
@@ -163,7 +163,7 @@ def test_records_of_the_right_shape_with_junk_inside_are_a_clean_error(records, 
     types) is damage the reader reports; whatever it accepts, every converter takes."""
     import msgpack
 
-    from modules.common.logs import DataLog, convert_csv, convert_text, summary
+    from modules.localization.logs import DataLog, convert_csv, convert_text, summary
     from modules.pc.analysis import Series, summarise
 
     path = tmp_path_factory.mktemp("fuzz") / "junk.trlog"

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from modules.common.lcdui import (
+from modules.display.menus import (
     COMPONENT,
     COMPONENTS,
     HEIGHT,

@@ -31,8 +31,8 @@ from luma.core.legacy.font import LCD_FONT, proportional
 from luma.core.render import canvas
 from ringutil import control, launcher_pids, tap, wait_until
 
-from modules.common.lcdos import LcdOs
-from modules.common.lcdui import OsMenu, Screen
+from modules.display.boot_menu import LcdOs
+from modules.display.menus import OsMenu, Screen
 from modules.pc.feed import LcdSource
 from tokenring.contract.protocol import default_protocol
 from tokenring.node.resident import ResidentHost

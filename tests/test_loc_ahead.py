@@ -15,9 +15,9 @@ from typing import Any
 import pytest
 import yaml
 
-from modules.common.localizer import LocalizationCore
-from modules.common.locconfig import default_config_path, load_config
-from modules.common.walls import KnownWall, beam_echoes
+from modules.localization.config import default_config_path, load_config
+from modules.localization.localizer import LocalizationCore
+from modules.localization.walls import KnownWall, beam_echoes
 
 FRONT = 1
 REAR = 5

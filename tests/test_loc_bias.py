@@ -15,9 +15,9 @@ from typing import Any
 
 import yaml
 
-from modules.common.localizer import LocalizationCore
-from modules.common.locconfig import default_config_path, load_config
-from modules.common.walls import KnownWall
+from modules.localization.config import default_config_path, load_config
+from modules.localization.localizer import LocalizationCore
+from modules.localization.walls import KnownWall
 
 START = (1000.0, 1000.0, 0.0)  # x, y (mm), heading (rad): driving along +x
 WALL_Y = 2000.0  # the known wall, parallel to the drive, on the robot's left

@@ -10,9 +10,9 @@ import pytest
 import yaml
 from locsim import drive
 
-from modules.common.localizer import LocalizationCore
-from modules.common.locconfig import default_config_path, load_config
-from modules.common.walls import DetectorParams, GaugeParams, SonarMount, TravelGauge, WallDetector
+from modules.localization.config import default_config_path, load_config
+from modules.localization.localizer import LocalizationCore
+from modules.localization.walls import DetectorParams, GaugeParams, SonarMount, TravelGauge, WallDetector
 
 #: along the square's bottom wall, then 3 m up the middle of the hall — every wall and the box
 #: more than 1.8 m from the side sonars (their range is 1.4 m) — then left to the top wall

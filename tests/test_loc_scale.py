@@ -18,9 +18,9 @@ from typing import Any
 
 import yaml
 
-from modules.common.localizer import LocalizationCore
-from modules.common.locconfig import default_config_path, load_config
-from modules.common.walls import KnownWall
+from modules.localization.config import default_config_path, load_config
+from modules.localization.localizer import LocalizationCore
+from modules.localization.walls import KnownWall
 
 WALL_X = 5000.0  # the known wall ahead, square across the drive along +x
 START = (0.0, 1000.0, 0.0)

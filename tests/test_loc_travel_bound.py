@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import copy
 
-from modules.common.localizer import LocalizationCore
-from modules.common.locconfig import load_config
+from modules.localization.config import load_config
+from modules.localization.localizer import LocalizationCore
 
 FRONT = 1
 

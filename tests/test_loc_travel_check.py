@@ -10,9 +10,9 @@ from __future__ import annotations
 import copy
 import math
 
-from modules.common.localizer import LocalizationCore
-from modules.common.locconfig import load_config
-from modules.common.walls import KnownWall
+from modules.localization.config import load_config
+from modules.localization.localizer import LocalizationCore
+from modules.localization.walls import KnownWall
 
 REAR = 5
 TILT = math.radians(20)

@@ -13,9 +13,9 @@ from typing import Any
 
 import yaml
 
-from modules.common.localizer import LocalizationCore
-from modules.common.locconfig import default_config_path, load_config
-from modules.common.walls import KnownWall
+from modules.localization.config import default_config_path, load_config
+from modules.localization.localizer import LocalizationCore
+from modules.localization.walls import KnownWall
 
 LEFT_PAIR = [7, 6]  # left-front, left-rear (robot.py indices)
 SHORT_WALL = KnownWall.segment(1000.0, 1400.0, 1600.0, 1400.0)  # 600 mm long, on the robot's left

@@ -10,14 +10,14 @@ import pytest
 from locsim import drive, square_moves
 from memring import MemoryRing, wait_for
 
-from modules.common.localizer import LocalizationCore, Localizer
-from modules.common.locconfig import load_config
-from modules.common.logs import read_log
-from modules.common.sync import Sample
-from modules.common.units import cdeg_cw_to_rad_ccw
-from modules.common.walls import segments_to_walls
 from modules.description import load_world
+from modules.localization.config import load_config
+from modules.localization.localizer import LocalizationCore, Localizer
+from modules.localization.logs import read_log
+from modules.localization.sync import Sample
+from modules.localization.walls import segments_to_walls
 from modules.pc.replay import replay
+from modules.units import cdeg_cw_to_rad_ccw
 
 
 def run_core(core: LocalizationCore, moves, seed: int, tamper=None) -> dict:

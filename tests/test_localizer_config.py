@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 from conftest import run_tokenring
 
-from modules.common.locconfig import (
+from modules.localization.config import (
     DEFAULTS,
     REPOSITORY_SETTINGS,
     ConfigError,

@@ -11,8 +11,8 @@ import yaml
 from ringutil import tap, wait_main_answers
 
 from bench.localization import run_actions, wait_for_compass, world_now
-from modules.common.logs import read_log
 from modules.description import keys as robot_keys
+from modules.localization.logs import read_log
 from modules.pc.analysis import analyse
 from modules.pc.replay import replay
 from tokenring.host.pclink import open_link

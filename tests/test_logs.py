@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from modules.common.logs import (
+from modules.localization.logs import (
     DataLog,
     ErrorLog,
     LogError,
@@ -90,7 +90,7 @@ def test_error_log_classes(tmp_path: Path) -> None:
 WRITER = textwrap.dedent(
     """
     import sys, time
-    from modules.common.logs import DataLog
+    from modules.localization.logs import DataLog
     log = DataLog(sys.argv[1], "now", {})
     i = 0
     while True:

@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 from locsim import drive
 
-from modules.common.localizer import LocalizationCore
-from modules.common.locconfig import load_config
-from modules.common.logs import DataLog, LogError
+from modules.localization.config import load_config
+from modules.localization.localizer import LocalizationCore
+from modules.localization.logs import DataLog, LogError
 from modules.pc.analysis import analyse
 from tokenring.cli.main import main as cli_main
 
@@ -63,7 +63,7 @@ def test_analyze_command_line(log_path: Path, tmp_path: Path, capsys: pytest.Cap
 def test_the_filter_is_judged_by_its_own_three_sigma(log_path: Path, tmp_path: Path) -> None:
     """``within_3sigma``: the share of filter positions within 3σ of the truth on both axes,
     counted here straight from the log's records (truth at the same stamp, no interpolation)."""
-    from modules.common.logs import read_log
+    from modules.localization.logs import read_log
 
     records = read_log(log_path).records
     truth = {stamp: p for stamp, source, kind, p in records if kind == "P" and source == "L"}

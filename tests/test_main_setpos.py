@@ -14,13 +14,13 @@ import pytest
 from fakenode import FakeOS
 
 from modules import main as main_module
-from modules.common.algorithms import ENV as ALGORITHMS_ENV
-from modules.common.navigator import Navigator
-from modules.common.pilot import FORWARD, Move, Outcome, Sensors
-from modules.common.poseupdate import ENV as SETPOS_ENV
-from modules.common.poseupdate import CorrectionSettings, PoseCorrector
-from modules.common.sync import OdometryParams, OdometrySync, OdometryTrack, Sample
-from modules.common.vectorgen import default_layout
+from modules.localization.pose_correction import ENV as SETPOS_ENV
+from modules.localization.pose_correction import CorrectionSettings, PoseCorrector
+from modules.localization.sync import OdometryParams, OdometrySync, OdometryTrack, Sample
+from modules.mapping.vectorgen import default_layout
+from modules.navigation.navigator import Navigator
+from modules.navigation.pilot import FORWARD, Move, Outcome, Sensors
+from modules.variants import ENV as ALGORITHMS_ENV
 from tokenring.contract.protocol import default_protocol
 
 ENUMS = default_protocol().enums

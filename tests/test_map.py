@@ -5,8 +5,9 @@ from __future__ import annotations
 import pytest
 from memring import MemoryRing, wait_for
 
-from modules.common.mapclient import request_map
-from modules.common.vectormap import (
+from modules.map import Program as MapProgram
+from modules.mapping.map_request import request_map
+from modules.mapping.vectormap import (
     CAPACITY,
     MapFull,
     VectorStore,
@@ -15,7 +16,6 @@ from modules.common.vectormap import (
     unpack_vectors,
     vector_to_wire,
 )
-from modules.map import Program as MapProgram
 
 
 def test_vector_format_is_eight_bytes_of_int16_centimetres():

@@ -9,10 +9,10 @@ import pytest
 from hwprograms import program
 from memring import MemoryRing, wait_for
 
-from modules.common.odometry import DeadReckoning, recalc_glide_factor, steps_for_angle, steps_for_distance
-from modules.common.units import cdeg_to_rad, pose_from_wire
 from modules.description import load_world
 from modules.description.robot import STEP_MM
+from modules.sensors.odometry import DeadReckoning, recalc_glide_factor, steps_for_angle, steps_for_distance
+from modules.units import cdeg_to_rad, pose_from_wire
 from modules.world.clients import MotorHardware
 from modules.world.sim import Simulator
 

@@ -6,8 +6,9 @@ import math
 
 import pytest
 
-from modules.common.navigator import NAV, Calibrate, ExploreAvoid, ExploreLeftWall, WallSettings
-from modules.common.pilot import (
+from modules.mapping.vectorgen import default_layout
+from modules.navigation.navigator import NAV, Calibrate, ExploreAvoid, ExploreLeftWall, WallSettings
+from modules.navigation.pilot import (
     FORWARD,
     MOTOR_STATE,
     MOVE_STATUS,
@@ -23,7 +24,6 @@ from modules.common.pilot import (
     Sensors,
     side_slope,
 )
-from modules.common.vectorgen import default_layout
 
 LAYOUT = default_layout()
 FAR = 255
@@ -233,7 +233,7 @@ def test_explore1_follows_the_seed_pseudo_code():
     drive = nav.plan(None, s, STOPPED)
     assert drive[0].direction == FORWARD and drive[0].scan and drive[0].abort[0].kind == "front_within"
     assert nav.state == NAV["TURN"]
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     turn = nav.plan(Outcome(REASON["CLOSE"], drive[0]), s, STOPPED)
     assert turn[0].direction == TURN_RIGHT and turn[0].amount == 90  # more room on the right
@@ -245,7 +245,7 @@ def test_explore1_follows_the_seed_pseudo_code():
 
 
 def test_explore2_follows_the_left_wall_and_turns_at_corners():
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     nav = ExploreLeftWall(LAYOUT, NO_GAUGE)
     s = sensors_with(left_front=30, left_rear=30)
@@ -389,7 +389,7 @@ def test_explore2_first_faces_the_nearest_echo_around_then_drives_to_it():
 
 
 def test_explore2_leaves_an_island_it_went_round_and_finds_the_room_wall():
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     nav = ExploreLeftWall(LAYOUT, NO_GAUGE)
     nav.phase = "follow"
@@ -408,7 +408,7 @@ def test_explore2_leaves_an_island_it_went_round_and_finds_the_room_wall():
 
 
 def test_wall_angle_from_the_left_pair_inside_and_beyond_the_beam():
-    from modules.common.navigator import wall_angle_deg
+    from modules.navigation.navigator import wall_angle_deg
 
     for degrees in (-12.0, 0.0, 5.0, 14.0):  # inside ±15°: both read the perpendicular distance
         diff = 160.0 * math.sin(math.radians(degrees))
@@ -472,7 +472,7 @@ def _with(index: int, cm: int) -> list[int]:
 
 
 def test_explore2_ends_after_one_lap():
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     nav = ExploreLeftWall(LAYOUT, NO_GAUGE)
     nav.phase = "follow"
@@ -487,7 +487,7 @@ def test_explore2_ends_after_one_lap():
 
 
 def test_calibration_turns_360_and_asks_for_the_glide_factor_correction():
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     nav = Calibrate(LAYOUT)
     s = Sensors(heading_cdeg=1000)
@@ -506,7 +506,7 @@ def test_calibration_turns_360_and_asks_for_the_glide_factor_correction():
 def test_calibration_without_a_filter_tells_the_motor_the_heading_it_turned_back_to():
     """Dead reckoning believes the 360° turn was exact; turned back by the error, the robot
     faces its start heading while the motor's pose is off by the error: SET_GLOBAL_POSITION."""
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     nav = Calibrate(LAYOUT)
     s = Sensors(heading_cdeg=9000, pose=(800.0, 800.0, 0.0), pose_filtered=False)
@@ -538,7 +538,7 @@ def test_a_move_is_not_finished_before_the_motor_was_seen_running_it():
 
 
 def test_explore2_corrects_a_turn_the_floor_let_slip_by_the_compass():
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     nav = ExploreLeftWall(LAYOUT, NO_GAUGE)
     s = sensors_with(left_front=30, left_rear=30)
@@ -578,7 +578,7 @@ def _leg(start: tuple[float, float], heading_deg: float, length: int, right_cm=N
 def _room_lap(nav: ExploreLeftWall, s: Sensors, right_cm=None) -> list[Move] | None:
     """Follow a 4 m x 3 m room's walls clockwise at 40 cm (legs west, north, east, south),
     back to where following began; the plan after the lap."""
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     s.pose = (3600.0, 400.0, math.pi)
     seg = nav.plan(None, s, STOPPED)
@@ -601,7 +601,7 @@ def _room_lap(nav: ExploreLeftWall, s: Sensors, right_cm=None) -> list[Move] | N
 
 
 def test_explore2_goes_round_a_free_standing_obstacle_seen_on_the_right_after_the_lap():
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     # islands only: no way home, and no places left to explore (the made-up echoes here leave
     # most of the room unseen; tests/test_frontier.py has those)
@@ -642,7 +642,7 @@ def test_explore2_goes_round_a_free_standing_obstacle_seen_on_the_right_after_th
 
 
 def test_explore2_ends_at_the_lap_when_nothing_stood_inside_it():
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     nav = ExploreLeftWall(LAYOUT, WallSettings(gauge_mm=0, max_frontiers=0))  # the lap, the interior, home
     nav.phase = "follow"
@@ -687,7 +687,7 @@ def test_explore2_ends_at_the_lap_when_nothing_stood_inside_it():
 
 
 def test_explore2_does_not_visit_an_island_again_whose_echoes_lie_just_outside_its_path_round():
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     # islands only: no way home, and no places left to explore (the made-up echoes here leave
     # most of the room unseen; tests/test_frontier.py has those)
@@ -711,7 +711,7 @@ def test_explore2_does_not_visit_an_island_again_whose_echoes_lie_just_outside_i
 
 
 def test_sightings_link_into_groups_through_their_neighbours():
-    from modules.common.navigator import linked_groups
+    from modules.navigation.navigator import linked_groups
 
     chain = [(x, 0.0) for x in range(0, 1500, 300)]  # 300 mm apart: one obstacle end to end
     apart = [(5000.0, 0.0), (5200.0, 100.0)]
@@ -749,7 +749,7 @@ def _crosses(
 
 
 def test_the_way_home_goes_round_a_partition_the_straight_line_runs_into():
-    from modules.common.navigator import route_home
+    from modules.navigation.navigator import route_home
 
     # a lap round a partition from the left wall (x = 0, y = 1000, 2.5 m long): out along the
     # bottom, up the right, back along the top; the start lies straight below the robot
@@ -770,7 +770,7 @@ def test_the_way_home_goes_round_a_partition_the_straight_line_runs_into():
 
 
 def test_the_way_home_is_straight_across_an_open_lap_and_round_an_island_gone_round():
-    from modules.common.navigator import route_home
+    from modules.navigation.navigator import route_home
 
     lap = [(300.0, 300.0), (3700.0, 300.0), (3700.0, 2700.0), (300.0, 2700.0)]
     trail = [(300.0 + x, 300.0) for x in range(0, 3401, 50)] + [
@@ -790,7 +790,7 @@ def test_the_way_home_is_straight_across_an_open_lap_and_round_an_island_gone_ro
 
 
 def test_no_lap_ends_on_the_way_home_where_the_way_passes_the_lap_s_start():
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     nav = ExploreLeftWall(LAYOUT)
     s = sensors_with()
@@ -808,7 +808,7 @@ def test_no_lap_ends_on_the_way_home_where_the_way_passes_the_lap_s_start():
 
 
 def test_a_turn_alerted_again_after_its_escape_backs_off_before_turning_once_more():
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     # the nose at a wall's end: the turn toward home touches it, the escape turn the other way
     # is all the lock allows, and aiming again touches it again — unless the robot backs off
@@ -829,7 +829,7 @@ def test_a_turn_alerted_again_after_its_escape_backs_off_before_turning_once_mor
 
 
 def test_an_inner_turn_that_touches_the_corner_backs_off_and_turns_again_from_there():
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     # the nose at the end of a notch's wall: the inner turn (right) touches it with the
     # front-left pair, the escape turns back left. Driving on first (reacquire) would take the
@@ -855,7 +855,7 @@ def test_an_inner_turn_that_touches_the_corner_backs_off_and_turns_again_from_th
 
 
 def test_a_back_off_that_runs_into_something_is_a_collision_not_another_inner_turn():
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     # the inner turn touched the corner; backing off from it the robot's tail hit something
     # behind: turning into the corner again would ignore what it hit
@@ -872,7 +872,7 @@ def test_a_back_off_that_runs_into_something_is_a_collision_not_another_inner_tu
 
 
 def test_an_alert_behind_is_backed_off_forwards_not_into_it_again():
-    from modules.common.pilot import Outcome
+    from modules.navigation.pilot import Outcome
 
     # evaluation room 20 seed 3: after a rear sonar's ALERT the lock allows only forward; backing
     # off in reverse drove into the same thing again, 974 times until the time was up

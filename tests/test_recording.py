@@ -259,7 +259,7 @@ time.sleep(60)
 
 
 def test_a_trlog_converts_to_mcap(tmp_path):
-    from modules.common.logs import DataLog, ErrorLog
+    from modules.localization.logs import DataLog, ErrorLog
 
     path = tmp_path / "run.trlog"
     with DataLog(path, "20040120-130535", {"sensors": {}}) as log:

@@ -7,9 +7,9 @@ import math
 import pytest
 from locsim import drive, square_moves
 
-from modules.common.localizer import LocalizationCore
-from modules.common.locconfig import load_config
-from modules.common.logs import DataLog, ErrorLog, LogError, read_log
+from modules.localization.config import load_config
+from modules.localization.localizer import LocalizationCore
+from modules.localization.logs import DataLog, ErrorLog, LogError, read_log
 from modules.pc.replay import replay
 from tokenring.cli.main import main as cli_main
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from conftest import run_tokenring
 
-from modules.common.mapscore import score_map, true_corners
 from modules.pc.mapfiles import load_map_file, write_map
+from modules.pc.mapscore import score_map, true_corners
 
 SQUARE = np.array([[0, 0, 4000, 0], [4000, 0, 4000, 3000], [4000, 3000, 0, 3000], [0, 3000, 0, 0]], float)
 

@@ -9,7 +9,9 @@ import pytest
 from hwprograms import program
 from memring import MemoryRing, wait_for
 
-from modules.common.actions import (
+from modules.description import load_world
+from modules.mapping.vectorgen import default_layout
+from modules.navigation.actions import (
     WAIT,
     ActionNavigator,
     ActionPlan,
@@ -18,9 +20,7 @@ from modules.common.actions import (
     Wheels,
     parse_actions,
 )
-from modules.common.pilot import FORWARD, REASON, Outcome, Sensors
-from modules.common.vectorgen import default_layout
-from modules.description import load_world
+from modules.navigation.pilot import FORWARD, REASON, Outcome, Sensors
 from modules.world.clients import MotorHardware
 from modules.world.sim import Simulator
 from tokenring.errors import UsageError

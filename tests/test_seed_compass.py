@@ -16,8 +16,8 @@ import pytest
 from hwprograms import program
 from memring import MemoryRing, wait_for
 
-from modules.common.compass import compensate_until_symmetric, heading_from_bridges
 from modules.description import load_world
+from modules.sensors.compass import compensate_until_symmetric, heading_from_bridges
 from modules.world.clients import CompassHardware
 from modules.world.magnetics import CompassBridges
 from modules.world.sim import Simulator

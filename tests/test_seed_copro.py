@@ -18,9 +18,9 @@ import pytest
 from fakenode import FakeOS
 
 import modules.copro as copro_module
-from modules.common.algorithms import ENV
-from modules.common.vectorgen import OUR_METHOD, SEED_METHOD, Vectorizer, default_layout
 from modules.description import robot
+from modules.mapping.vectorgen import OUR_METHOD, SEED_METHOD, Vectorizer, default_layout
+from modules.variants import ENV
 from tokenring.contract.protocol import default_protocol
 
 ENUMS = default_protocol().enums

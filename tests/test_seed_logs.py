@@ -14,7 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from modules.common.logs import DataLog, ErrorLog, LogError, convert_seed_text, read_log
+from modules.localization.logs import DataLog, ErrorLog, LogError, convert_seed_text, read_log
 from tokenring.cli.main import main as cli_main
 
 #: three sonars: ahead 150 mm in front, to the left 120 mm out, behind 150 mm back
@@ -158,7 +158,7 @@ def test_a_start_time_the_seed_cannot_show_is_one_line_and_exit_2(
 
 
 def test_a_wall_parallel_to_x_gives_y_and_the_heading_x_invalid() -> None:
-    from modules.common.walls import KnownWall, wall_position
+    from modules.localization.walls import KnownWall, wall_position
 
     # the robot is truly at (1000, 500) heading 0.1 rad; the filter believes (1030, 480, 0.08)
     top = KnownWall.segment(0, 2000, 4000, 2000)  # y = 2000: 1500 mm above the robot
@@ -171,7 +171,7 @@ def test_a_wall_parallel_to_x_gives_y_and_the_heading_x_invalid() -> None:
 
 
 def test_two_walls_in_a_corner_give_both_coordinates_errors_averaged() -> None:
-    from modules.common.walls import KnownWall, wall_position
+    from modules.localization.walls import KnownWall, wall_position
 
     top = KnownWall.segment(0, 2000, 4000, 2000)
     right = KnownWall.segment(3000, 0, 3000, 4000)  # x = 3000: 2000 mm right of the robot
@@ -188,8 +188,8 @@ def run_at_rest(tmp_path: Path, log_wall_position: bool) -> list:
     """A short drive in the square room then rest beside its walls, logged."""
     from locsim import drive
 
-    from modules.common.localizer import LocalizationCore
-    from modules.common.locconfig import load_config
+    from modules.localization.config import load_config
+    from modules.localization.localizer import LocalizationCore
 
     config = load_config({"sensors": {"sonar": {"log_position": log_wall_position}}})
     with DataLog(tmp_path / "w.trlog", "20261124-120000", config) as log:

@@ -13,7 +13,8 @@ from typing import Any
 import pytest
 from fakenode import FakeOS
 
-from modules.common.navigator import (
+from modules.mapping.vectorgen import default_layout
+from modules.navigation.navigator import (
     NAV,
     ExploreAvoid,
     ExploreLeftWall,
@@ -21,7 +22,7 @@ from modules.common.navigator import (
     SeedExploreAvoid,
     SeedLeftWall,
 )
-from modules.common.pilot import (
+from modules.navigation.pilot import (
     FORWARD,
     MOTOR_STATE,
     MOVE_STATUS,
@@ -36,7 +37,6 @@ from modules.common.pilot import (
     SeedPilot,
     Sensors,
 )
-from modules.common.vectorgen import default_layout
 
 LAYOUT = default_layout()
 FAR = 255

@@ -17,8 +17,8 @@ import pytest
 from hwprograms import program
 from memring import MemoryRing, wait_for
 
-from modules.common.algorithms import ENV
 from modules.description import load_world
+from modules.variants import ENV
 from modules.world.clients import MotorHardware
 from modules.world.sim import Simulator
 

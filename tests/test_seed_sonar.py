@@ -15,9 +15,9 @@ import pytest
 from hwprograms import program
 from memring import MemoryRing, wait_for
 
-from modules.common import sonar as algo
-from modules.common.algorithms import ENV
 from modules.description.room import Pose, Wall, World
+from modules.sensors import sonar as algo
+from modules.variants import ENV
 from modules.world import echo
 from modules.world.clock import SimClock
 

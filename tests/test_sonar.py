@@ -11,7 +11,6 @@ import pytest
 from hwprograms import program
 from memring import MemoryRing, wait_for
 
-from modules.common import sonar as algo
 from modules.description import load_world
 from modules.description.robot import (
     FRONT,
@@ -23,6 +22,7 @@ from modules.description.robot import (
     sonar_world_pose,
 )
 from modules.description.room import Pose, Wall, World
+from modules.sensors import sonar as algo
 from modules.world import echo
 from modules.world.clients import SonarHardware
 from modules.world.sim import Simulator

@@ -7,7 +7,7 @@ import threading
 
 import pytest
 
-from modules.common.sync import (
+from modules.localization.sync import (
     CompassSync,
     NewestSync,
     OdometryParams,
@@ -20,7 +20,7 @@ from modules.common.sync import (
     Trigger,
     sync_stamp,
 )
-from modules.common.walls import DetectorParams, SonarMount, WallDetector
+from modules.localization.walls import DetectorParams, SonarMount, WallDetector
 
 
 def odo(stamp: int, left: int, right: int) -> Sample:

@@ -17,10 +17,10 @@ import pytest
 from conftest import run_tokenring
 from locsim import drive, square_moves
 
-from modules.common.localizer import LocalizationCore
-from modules.common.locconfig import ConfigError, load_config, parse_config
-from modules.common.logs import DataLog, read_log
-from modules.common.sync import CATCH_UP_PERIODS, Sample, ShadowBuffer, Trigger, TruthSync
+from modules.localization.config import ConfigError, load_config, parse_config
+from modules.localization.localizer import LocalizationCore
+from modules.localization.logs import DataLog, read_log
+from modules.localization.sync import CATCH_UP_PERIODS, Sample, ShadowBuffer, Trigger, TruthSync
 from modules.pc.analysis import analyse
 from modules.pc.replay import replay
 

@@ -14,7 +14,7 @@ import pytest
 import yaml
 from conftest import run_tokenring
 
-from modules.common.logs import read_log
+from modules.localization.logs import read_log
 
 
 @pytest.mark.timeout(600)  # its hang guard: the ring boots, calibrates and drives on a loaded machine

@@ -12,12 +12,13 @@ import numpy as np
 import pytest
 from locsim import drive
 
-from modules.common.ekf import EkfParams, PoseEKF
-from modules.common.localizer import LocalizationCore, _beam_hit
-from modules.common.locconfig import load_config
-from modules.common.walls import KnownWall, SonarMount, TravelGauge
 from modules.copro import EXPLORATION_CONFIG
 from modules.description.robot import SONAR_MOUNTS
+from modules.localization.config import load_config
+from modules.localization.ekf import EkfParams, PoseEKF
+from modules.localization.localizer import LocalizationCore
+from modules.localization.travel_corrections import _beam_hit
+from modules.localization.walls import KnownWall, SonarMount, TravelGauge
 
 MOUNTS = [SonarMount(m.x, m.y, m.angle) for m in SONAR_MOUNTS]
 FRONT, REAR = 1, 5
@@ -172,9 +173,9 @@ def test_a_fit_with_no_wall_known_yet_waits_for_the_robots_own_map() -> None:
 def front_series_toward_a_wall(true_scale: float, start_mm: float, end_mm: float) -> list[tuple[float, int]]:
     """(nominal travel, front range mm) of the simulated sonar (echo envelopes, threshold and
     tangent contact) while the robot drives square on toward the wall x = 0 of the empty room."""
-    from modules.common.sonar import contact_tangent
     from modules.description import load_world
     from modules.description.robot import sonar_world_pose
+    from modules.sensors.sonar import contact_tangent
     from modules.world import echo
 
     world = load_world("empty")

@@ -69,7 +69,7 @@ def generate_drive(
 
 
 def drive_text(moves: list[tuple[str, int]], title: str) -> str:
-    """An action file (seed 000's syntax, :mod:`modules.common.actions`) for the moves."""
+    """An action file (seed 000's syntax, :mod:`modules.navigation.actions`) for the moves."""
     return "\n".join([f"# {title}", "e", *(f"{kind} {amount}" for kind, amount in moves)]) + "\n"
 
 

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from modules.common.logs import SOURCE_SENSOR, LogError, LogFile, read_log
+from modules.localization.logs import SOURCE_SENSOR, LogError, LogFile, read_log
 
 POSITION_NAMES = {"K": "filter (EKF)", "O": "dead reckoning", "G": "compass", "L": "truth", "W": "walls"}
 COLOURS = {"K": "tab:blue", "O": "tab:red", "G": "tab:green", "L": "black", "W": "tab:purple"}

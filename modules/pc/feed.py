@@ -29,7 +29,7 @@ topic                       schema                  from
 Frames: ``room`` is the world's frame (the walls', x/y as in the world file, metres); ``robot``
 is the robot's body (x forward, y left), placed by ``/robot/tf``. All three poses are in
 ``room``: the motor's dead reckoning starts at the world's start pose, and wire angles
-(1/100 degree clockwise) are turned counter-clockwise (:mod:`modules.common.units`).
+(1/100 degree clockwise) are turned counter-clockwise (:mod:`modules.units`).
 
 Why the sonar is a SceneUpdate and not a LaserScan: a LaserScan has one origin and evenly
 spaced angles; the robot's eight pairs sit at eight different places on the body and look in
@@ -46,10 +46,10 @@ from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
 
-from modules.common.algorithms import body_mounts
-from modules.common.units import cdeg_cw_to_rad_ccw, wrap_angle
 from modules.description import keys as robot_keys
 from modules.description.robot import SONAR_NO_CONTACT, SONAR_RANGE_MM, SonarMount, sonar_world_pose
+from modules.units import cdeg_cw_to_rad_ccw, wrap_angle
+from modules.variants import body_mounts
 from tokenring import CommandChannel, Protocol, frame_problem, keys
 from tokenring.observe import FeedSource, Message, Topic, decode_msgpack
 

@@ -21,7 +21,7 @@ from collections import Counter
 from datetime import UTC, datetime
 from pathlib import Path
 
-from modules.common.logs import KINDS, SOURCES, LogFile
+from modules.localization.logs import KINDS, SOURCES, LogFile
 from tokenring.observe import Message, Topic
 
 POSE_TOPICS = {

@@ -151,7 +151,7 @@ def write_map(
     """Write ``vectors`` (mm) in the format of ``path``'s extension; returns the score if known.
     ``paths``: robot paths (name -> N×2 mm) drawn thinly in a PNG (the true one, the mapping pose);
     ``end``: the robot's end pose against the truth (:func:`end_pose`), kept in a .json map."""
-    from modules.common.mapscore import score_map
+    from modules.pc.mapscore import score_map
 
     suffix = check_out(path)
     score = score_map(vectors, truth) if truth is not None else None

@@ -16,10 +16,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from modules.common.localizer import LocalizationCore
-from modules.common.locconfig import load_config
-from modules.common.logs import SOURCE_SENSOR, DataLog, ErrorLog, LogError, LogFile, read_log
-from modules.common.sync import Sample
+from modules.localization.config import load_config
+from modules.localization.localizer import LocalizationCore
+from modules.localization.logs import SOURCE_SENSOR, DataLog, ErrorLog, LogError, LogFile, read_log
+from modules.localization.sync import Sample
 
 EVENT_KINDS = {("S", "E"), ("W", "W")}
 

@@ -1,5 +1,5 @@
 """``tokenring calibrate LOG...``: the floor's mean step scale pooled over earlier drives' data
-logs (:mod:`modules.common.calibration`), for a later drive to start from."""
+logs (:mod:`modules.pc.calibration`), for a later drive to start from."""
 
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from modules.common.calibration import calibrate_logs
+    from modules.pc.calibration import calibrate_logs
     from tokenring.cli import print_json
 
     found, mm_per_step = calibrate_logs(args.logs)

@@ -110,7 +110,7 @@ def build_command(action: str, values: list[str], speed: float) -> tuple[str, di
         return "STOP", {}
     if action == "set-pose":
         x, y, angle = _expect(values, ["X_MM", "Y_MM", "ANGLE_DEG"], action)
-        from modules.common.units import pose_to_wire
+        from modules.units import pose_to_wire
 
         if not (-(2**31) <= x < 2**31 and -(2**31) <= y < 2**31):
             raise UsageError("x and y must fit in 32 bits of millimetres")
@@ -126,7 +126,7 @@ def build_command(action: str, values: list[str], speed: float) -> tuple[str, di
 
 def expected_steps(name: str, args: dict[str, Any], glide_cfactor: int) -> int | None:
     """Half-steps per track the move should take (None: not a counted move)."""
-    from modules.common.odometry import steps_for_angle, steps_for_distance
+    from modules.sensors.odometry import steps_for_angle, steps_for_distance
 
     if name in ("MOVE_FORWARD", "MOVE_REVERSE"):
         return steps_for_distance(args["distance_mm"])
@@ -136,7 +136,7 @@ def expected_steps(name: str, args: dict[str, Any], glide_cfactor: int) -> int |
 
 
 def run(args: argparse.Namespace) -> int:
-    from modules.common.units import pose_from_wire
+    from modules.units import pose_from_wire
     from tokenring.cli import print_json, tap_session
     from tokenring.host import PcLink
 

@@ -51,7 +51,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def render(frame: bytes) -> str:
     """The screen as 32 lines of 128 half-block characters."""
-    from modules.common.lcdui import unpack_pixels
+    from modules.display.menus import unpack_pixels
 
     px = unpack_pixels(frame)
     chars = {(False, False): " ", (True, False): "▀", (False, True): "▄", (True, True): "█"}
@@ -80,7 +80,7 @@ def save_png(frame: bytes, path: str | Path, scale: int = 4) -> None:
     """The screen as a PNG: lit pixels dark on the LCD's pale green, ``scale`` px per pixel."""
     from PIL import Image
 
-    from modules.common.lcdui import unpack_pixels
+    from modules.display.menus import unpack_pixels
 
     px = unpack_pixels(frame)
     image = Image.new("RGB", (px.shape[1], px.shape[0]), (170, 200, 150))

@@ -71,7 +71,7 @@ def check_outputs(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from modules.common.logs import (
+    from modules.localization.logs import (
         convert_csv,
         convert_seed_text,
         convert_text,

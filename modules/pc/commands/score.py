@@ -25,8 +25,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from modules.common.mapscore import score_map
     from modules.pc.mapfiles import load_map_file, load_truth
+    from modules.pc.mapscore import score_map
     from tokenring.cli import print_json
 
     world, truth = load_truth(args.world)

@@ -6,7 +6,7 @@ bitmap fonts); :class:`Screen` packs it into the 1024 bytes the display hardware
 Keys: ``0``–``9``, ``A``–``D``, ``*`` (Escape: leave a menu) and ``#`` (Enter/refresh).
 Menus as in the seed's figure 4.8. After power-on the LCD node's OS shows :class:`OsMenu`,
 "OS V2.0 Main Menu" (1 Start Robbi: ARCNET_START_SYSTEM; 2 Components: every node's name, ID and
-program date), before any program runs (:mod:`modules.common.lcdos`). Once the programs run, the
+program date), before any program runs (:mod:`modules.display.boot_menu`). Once the programs run, the
 lcd program shows :class:`Menus`, "Main Menu" (1 Explore 1, 2 Explore 2, 3 Clear Map,
 4 Components, 5 Debug-Info; ours: 6 Stop). Its Components lists the modules; picking one shows its
 live data decoded with protocol.yaml (2/8 scroll); ROBMAP shows the map: 2/4/6/8 pan, A zoom in,

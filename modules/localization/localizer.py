@@ -44,18 +44,23 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from modules.common.algorithms import algorithm
-from modules.common.ekf import EkfParams, PoseEKF
-from modules.common.locconfig import load_config
-from modules.common.logs import SENSOR_SOURCE, DataLog, ErrorLog
-from modules.common.sync import (
+from modules.localization.config import load_config
+from modules.localization.ekf import PoseEKF
+from modules.localization.logs import SENSOR_SOURCE, DataLog, ErrorLog
+from modules.localization.params import (
+    detector_params,
+    ekf_params,
+    odometry_params,
+    sonar_mounts,
+    start_pose_of,
+    trigger_of,
+    with_body,
+)
+from modules.localization.sync import (
     CATCH_UP_PERIODS,
     SENSORS,
     CompassSync,
     NewestSync,
-    OdometryParams,
     OdometrySync,
     OdometryTrack,
     Sample,
@@ -63,32 +68,23 @@ from modules.common.sync import (
     ShadowBuffer,
     SonarSync,
     SyncResult,
-    Trigger,
     TruthSync,
     advance,
     step_motion,
 )
-from modules.common.walls import (
-    DetectorParams,
+from modules.localization.travel_corrections import TravelCorrections
+from modules.localization.wall_corrections import WallCorrections
+from modules.localization.walls import (
     GaugeParams,
     KnownWall,
-    SonarMount,
     TravelGauge,
     WallDetector,
-    beam_echoes,
-    circle_in_beam,
-    from_frame,
     load_known_room,
-    off_axis_lateness_mm,
-    range_lateness_mm,
-    ray_crossing,
-    wall_position,
     wrap,
 )
+from modules.variants import algorithm
 
 SOURCE_CODES = {"none": 0, "odometry": 1, "ekf": 2}
-#: a step-scale fit waits this long (sensor time) for the robot's own map to show its wall
-PENDING_TRAVEL_MS = 300_000
 #: data channels read for each sensor, and the field that numbers their samples
 CHANNELS = {
     "odometry": "motor.data",
@@ -126,117 +122,17 @@ class LocalizedPose:
         return int(self.valid_x) | int(self.valid_y) << 1 | int(self.valid_heading) << 2
 
 
-def with_body(config: dict[str, Any], body: str) -> dict[str, Any]:
-    """``config`` with ``robot.sonars: robot`` spelled out as ``body``'s mounts when the ring's
-    robot is not today's, so the filter and the data log place readings where this robot has its
-    sonars (``robot`` alone means today's body, :data:`modules.description.robot.SONAR_MOUNTS`)."""
-    if config["robot"]["sonars"] != "robot" or body == "ours":
-        return config
-    from modules.description.robot import sonar_mounts as body_mounts
-
-    mounts = [[m.x, m.y, math.degrees(m.angle)] for m in body_mounts(body)]
-    return {**config, "robot": {**config["robot"], "sonars": mounts}}
-
-
-def sonar_mounts(config: dict[str, Any]) -> list[SonarMount]:
-    """The sonar geometry: modules/description/robot.py, or the config's list of [x, y, angle_deg]."""
-    spec = config["robot"]["sonars"]
-    if spec == "robot":
-        from modules.description.robot import SONAR_MOUNTS
-
-        return [SonarMount(m.x, m.y, m.angle) for m in SONAR_MOUNTS]
-    return [SonarMount(float(x), float(y), math.radians(a)) for x, y, a in spec]
-
-
-def odometry_params(config: dict[str, Any]) -> OdometryParams:
-    robot = config["robot"]
-    return OdometryParams(robot["mm_per_step"], robot["steps_per_degree"], config["filter"]["odometry_model"])
-
-
-def ekf_params(config: dict[str, Any]) -> EkfParams:
-    f = config["filter"]
-    noise, initial = f["noise"], f["initial"]
-    return EkfParams(
-        odometry=odometry_params(config),
-        estimate=tuple(f["estimate"]),
-        distance_noise_rel=noise["distance_rel"],
-        rotation_noise_rel=noise["rotation_rel"],
-        rotation_noise_rad_per_mm=noise["rotation_rad_per_mm"],
-        glide_per_move_rel=noise["glide_per_move_rel"],
-        step_scale_per_move=noise["step_scale_per_move"],
-        glide_walk_per_deg=noise["glide_walk_per_deg"],
-        compass_offset_walk_deg_per_s=noise["compass_offset_walk_deg_per_s"],
-        step_scale_walk_per_m=noise["step_scale_walk_per_m"],
-        step_scale_mean_walk_per_move=noise["step_scale_mean_walk_per_move"],
-        initial_sigma_mm=initial["sigma_mm"],
-        initial_sigma_deg=initial["sigma_deg"],
-        initial_glide_sigma=initial["glide_sigma"],
-        initial_compass_offset_sigma_deg=initial["compass_offset_sigma_deg"],
-        initial_step_scale_sigma=initial["step_scale_sigma"],
-        initial_step_scale=initial["step_scale"],
-        initial_step_scale_mean_sigma=initial["step_scale_mean_sigma"],
-        compass_sigma_deg=f["compass"]["sigma_deg"],
-        gate_probability=f["gate_probability"],
-        valid_sigma_mm=f["valid_sigma_mm"],
-        valid_sigma_deg=f["valid_sigma_deg"],
-    )
-
-
-def detector_params(config: dict[str, Any]) -> DetectorParams:
-    w = config["walls"]
-    return DetectorParams(
-        history=w["history"],
-        max_distance_mm=w["max_distance_mm"],
-        side_sensors=tuple(w["side_sensors"]),
-        pairs=tuple(tuple(p) for p in w["pairs"]),
-        min_points_side=w["min_points_side"],
-        min_span_side_mm=w["min_span_side_mm"],
-        max_sigma_side_mm=w["max_sigma_side_mm"],
-        min_points_pairs=w["min_points_pairs"],
-        max_sigma_d_pairs_mm=w["max_sigma_d_pairs_mm"],
-        max_sigma_alpha_pairs_deg=w["max_sigma_alpha_pairs_deg"],
-        noise_floor_mm=w["noise_floor_mm"],
-        max_turn_deg=w["max_turn_deg"],
-        min_sigma_d_mm=w["min_sigma_d_mm"],
-        min_sigma_alpha_deg=w["min_sigma_alpha_deg"],
-        range_model=w["range_model"],
-        max_beam_off_deg=w["max_beam_off_deg"],
-        late_from_mm=w["sonar_late"]["from_mm"],
-        late_mm_per_m=w["sonar_late"]["mm_per_m"],
-        late_mm_per_deg2=w["sonar_late"]["mm_per_deg2"],
-        shared_sigma_mm=w["shared_sigma_mm"],
-    )
-
-
-def trigger_of(config: dict[str, Any]) -> Trigger:
-    """The synchronisation trigger the config names (``sync.trigger``)."""
-    trig = config["sync"]["trigger"]
-    if trig["rounds"] > 0:
-        return Trigger(sensor=None, rounds=trig["rounds"])
-    if trig["mode"] == "period":
-        return Trigger(trig["sensor"], period_ms=trig["period_ms"])
-    return Trigger(trig["sensor"], trig["count"], min_period_ms=trig["min_period_ms"])
-
-
-def start_pose_of(config: dict[str, Any]) -> tuple[float, float, float] | None:
-    """The initial pose the config names (None: wait for the motor's first pose)."""
-    spec = config["filter"]["initial_pose"]
-    if isinstance(spec, dict):
-        return float(spec["x_mm"]), float(spec["y_mm"]), math.radians(spec["heading_deg"])
-    if spec == "world":
-        from modules.description import load_world
-
-        start = load_world(config["walls"]["file"]).start
-        return float(start.x), float(start.y), float(start.theta)
-    return None
-
-
-class LocalizationCore:
+class LocalizationCore(WallCorrections, TravelCorrections):
     """Samples in; synchronised data, EKF, positions and log records out. No ring, no clock.
 
     Everything it computes depends only on the samples fed, the order they were fed in, the
     buffer generation each went into and the events (pose set, map walls) — all of which the
     data log records, so :mod:`modules.pc.replay` can run it again to the same bits.
+
+    The sonar's corrections are parts of their own: against the known walls
+    (:class:`~modules.localization.wall_corrections.WallCorrections`) and of the floor's step scale
+    (:class:`~modules.localization.travel_corrections.TravelCorrections`); what the configuration
+    makes of the filter, the detector and the trigger is :mod:`modules.localization.params`.
     """
 
     def __init__(
@@ -519,260 +415,6 @@ class LocalizationCore:
                 stamp, "S", "S", {"gen": generation, "period_ms": period, "counts": counts or {}}
             )
 
-    def _correct_wall(self, wall: dict[str, Any], stamp: int) -> list[int]:
-        """Associate one fitted wall with a known wall and correct; returns [wall index, accepted]."""
-        ekf = self.ekf
-        assert ekf is not None
-        assoc = self.config["walls"]["association"]
-        pose = ekf.pose
-        p1, p2 = from_frame(tuple(wall["p1"]), pose), from_frame(tuple(wall["p2"]), pose)
-        cov = np.array([[wall["cov"][0], wall["cov"][1]], [wall["cov"][1], wall["cov"][2]]])
-        sensors = self._sensors_at(wall.get("sensors", []), pose)
-        best: tuple[float, KnownWall] | None = None
-        for known in self.known_walls:
-            if known.length < assoc["min_wall_length_mm"] or not known.visible_from(pose[0], pose[1]):
-                continue
-            if not known.contains(p1, p2, assoc["margin_mm"]):
-                continue
-            predicted, _ = ekf.line_model(known)
-            if abs(wall["d"] - predicted[1]) > assoc["max_d_mm"]:
-                continue
-            if abs(math.degrees(wrap(wall["alpha"] - predicted[0]))) > assoc["max_alpha_deg"]:
-                continue
-            if sensors and not known.contains(sensors[0], sensors[-1], 0.0):
-                # the sensors are past the wall's end: their nearest echo is the end, not the foot
-                # of a perpendicular (a fit on a corner's ranges, tilted, read up to 50 mm long;
-                # 100 mm past it, 15° off)
-                self.walls_past_end += 1
-                continue
-            nis = ekf.line_nis(wall["alpha"], wall["d"], cov, known)
-            if best is None or nis < best[0]:
-                best = (nis, known)
-        if best is None:
-            self.walls_unassociated += 1
-            return [-1, 0]
-        self.walls_associated += 1
-        repeat_mm = self.config["walls"]["repeat_after_mm"]
-        last = self.wall_corrected_at.get(best[1].index)
-        if (
-            repeat_mm > 0
-            and last is not None
-            and math.hypot(pose[0] - last[0], pose[1] - last[1]) < repeat_mm
-            and abs(wrap(pose[2] - last[2])) < math.radians(5.0)
-        ):
-            # the same sonar, range and incidence err alike: a second fit is no new information
-            self.walls_repeated += 1
-            return [best[1].index, 0]
-        accepted = ekf.correct_line(wall["alpha"], wall["d"], cov, best[1], kind=f"wall_{wall['kind']}")
-        if accepted:
-            self.wall_corrected_at[best[1].index] = pose
-            self._keep_bias_floor(best[1])
-        self.message(
-            "D",
-            stamp,
-            f"{wall['kind']} wall (sonar {wall['sensors']}) -> wall {best[1].index}: NIS {best[0]:.1f}",
-        )
-        if not accepted:
-            self.message(
-                "W",
-                stamp,
-                f"{wall['kind']} wall (sonar {wall['sensors']}) rejected by the gate for wall {best[1].index}",
-            )
-        return [best[1].index, int(accepted)]
-
-    def _sensors_at(self, indices: list[int], pose: tuple[float, float, float]) -> list[tuple[float, float]]:
-        """Where the sonars ``indices`` are with the robot at ``pose``: with the tangent model, whose
-        ranges are to the wall's nearest point, the points a fitted wall's perpendiculars start at.
-        Only against a wall file's walls, which end where the room's do; a map's end where mapped."""
-        walls = self.config["walls"]
-        if walls["range_model"] != "tangent" or walls["mode"] != "darmstadt":
-            return []
-        mounts = sonar_mounts(self.config)
-        return [from_frame((mounts[i].x, mounts[i].y), pose) for i in indices if i < len(mounts)]
-
-    def _correct_ahead(self, sonar: dict[str, Any], stamp: int) -> None:
-        """Each ``walls.ahead`` sonar's range to the known wall it meets square on: a position
-        measurement along its beam. On a long leg towards a wall it is what bounds the error the
-        floor's step scale leaves; side walls cannot see it. Used only where the wall is the
-        nearest thing in the cone by a margin and its perpendicular is near the beam's axis."""
-        ekf = self.ekf
-        assert ekf is not None
-        settings = self.config["walls"]["ahead"]
-        walls = self.config["walls"]
-        late = walls["sonar_late"] if walls["range_model"] == "tangent" else None
-        distances = sonar.get("distances_mm", [])
-        at_x, at_y, at_heading = sonar.get("at", (0.0, 0.0, 0.0))  # where they were read
-        mounts = sonar_mounts(self.config)
-        x, y, psi = ekf.pose
-        c, s = math.cos(psi), math.sin(psi)
-        half_width = math.radians(walls["max_beam_off_deg"])
-        for index in settings["sensors"]:
-            measured = distances[index] if index < len(distances) else None
-            if measured is None or measured > settings["max_range_mm"]:
-                continue
-            mount = mounts[index]
-            # the sensor when it read, as a lever from the pose at the synchronisation (robot frame)
-            lever_x, lever_y = from_frame((mount.x, mount.y), (at_x, at_y, at_heading))
-            origin = from_frame((lever_x, lever_y), (x, y, psi))
-            beam = psi + at_heading + mount.angle
-            echoes = beam_echoes(origin, beam, half_width, self.known_walls)
-            first = echoes[0] if echoes else None
-            if (
-                first is None
-                or first.foot_off is None
-                or abs(first.foot_off) > math.radians(settings["max_off_deg"])
-                or first.wall.length < walls["association"]["min_wall_length_mm"]
-                or not first.wall.visible_from(x, y)
-            ):
-                self.ahead["not_square"] += 1
-                continue
-            nearest_other = echoes[1].range_mm if len(echoes) > 1 else math.inf
-            for circle in self.known_circles:
-                met = circle_in_beam(origin, beam, half_width, circle)
-                if met is not None:
-                    nearest_other = min(nearest_other, met)
-            if nearest_other - first.range_mm < settings["clear_mm"]:
-                self.ahead["ambiguous"] += 1  # another wall (a corner) or a pillar about as near
-                continue
-            corrected = float(measured)
-            if late is not None:
-                corrected -= range_lateness_mm(corrected, late["from_mm"], late["mm_per_m"])
-                corrected -= off_axis_lateness_mm(first.foot_off, late["mm_per_deg2"])
-            if abs(corrected - first.range_mm) > settings["max_innovation_mm"]:
-                self.ahead["unexpected"] += 1  # something the map does not have, or a lost pose
-                continue
-            wall = first.wall
-            innovation = corrected - first.range_mm
-            previous = self.ahead_candidate.get((index, wall.index))
-            self.ahead_candidate[(index, wall.index)] = (stamp, innovation)
-            if (
-                previous is None
-                or stamp - previous[0] > settings["confirm_within_ms"]
-                or abs(innovation - previous[1]) > settings["confirm_mm"]
-            ):
-                self.ahead["unconfirmed"] += 1  # a range that its predecessor does not bear out
-                continue
-            last = self.ahead_corrected_at.get(wall.index)
-            if last is not None and math.hypot(x - last[0], y - last[1]) < settings["repeat_after_mm"]:
-                self.ahead["repeated"] += 1  # the same range and incidence err alike
-                continue
-            ca, sa = math.cos(wall.alpha), math.sin(wall.alpha)
-            signed = wall.d - origin[0] * ca - origin[1] * sa
-            sign = 1.0 if signed >= 0 else -1.0
-            H = np.zeros((1, len(ekf.x)))
-            H[0, 0], H[0, 1] = -sign * ca, -sign * sa
-            H[0, 2] = -sign * (ca * (-s * lever_x - c * lever_y) + sa * (c * lever_x - s * lever_y))
-            oblique = abs(first.foot_off) > math.radians(settings["oblique_from_deg"])
-            R = np.array([[settings["oblique_sigma_mm" if oblique else "sigma_mm"] ** 2]])
-            if ekf.update("ahead", np.array([corrected]), np.array([abs(signed)]), H, R):
-                self.ahead["used"] += 1
-                self.ahead_corrected_at[wall.index] = (x, y)
-                self._keep_bias_floor(wall)
-            else:
-                self.ahead["rejected"] += 1
-
-    def _keep_bias_floor(self, wall: KnownWall) -> None:
-        """Keep the pose's variance across ``wall`` at ``walls.bias_floor_mm``² at least: its fits
-        share an error (the sonar model's residue at that range and incidence) that the filter,
-        taking them as independent, would otherwise average away."""
-        floor = self.config["walls"]["bias_floor_mm"]
-        ekf = self.ekf
-        if floor <= 0 or ekf is None:
-            return
-        normal = np.array([math.cos(wall.alpha), math.sin(wall.alpha)])
-        variance = float(normal @ ekf.P[:2, :2] @ normal)
-        if variance < floor * floor:
-            ekf.P[:2, :2] += (floor * floor - variance) * np.outer(normal, normal)
-
-    def _correct_travel(self, travel: dict[str, Any], stamp: int) -> None:
-        """A straight drive's step scale from a sonar's range series; the beam's incidence on the
-        known wall it meets (if any) turns the range's change back into the distance driven."""
-        ekf = self.ekf
-        assert ekf is not None
-        mount = sonar_mounts(self.config)[travel["sensor"]]
-        pose = ekf.pose
-        ex, ey, eh = travel.get("end", (0.0, 0.0, 0.0))
-        end = (*from_frame((ex, ey), pose), pose[2] + eh)  # the robot where the run ended
-        settings = self.config["filter"]["travel"]
-        range_mm = travel["range_end_mm"]
-        if settings["check_at"] == "points" and "back_mm" in travel:
-            # the wall the ranges came from, seen from the middle of its points: extrapolated to the
-            # run's end a rear beam's range can reach another wall, met squarely, far beyond them
-            back = travel["back_mm"]
-            end = (end[0] - back * math.cos(end[2]), end[1] - back * math.sin(end[2]), end[2])
-            range_mm = travel["range_mm"]
-        origin = from_frame((mount.x, mount.y), end)
-        incidence = _beam_hit(origin, end[2] + mount.angle, range_mm, self.known_walls)
-        if incidence is None and settings["wait_for_map"] and self.config["walls"]["mode"] == "exploration":
-            # the wall ahead is mapped once the robot has gone along it: its incidence then
-            self._expire_pending_travel(stamp)
-            self.pending_travel.append((stamp, origin, end[2] + mount.angle, travel))
-            return
-        self._use_travel(travel, incidence, stamp)
-
-    def _retry_pending_travel(self, wall: KnownWall, stamp: int) -> None:
-        """A wall new to the robot's own map: the waiting fits whose beam met it are used now."""
-        self._expire_pending_travel(stamp)
-        waiting = []
-        for pending in self.pending_travel:
-            _, origin, direction, travel = pending
-            incidence = _beam_hit(origin, direction, travel["range_end_mm"], [wall])
-            if incidence is None:
-                waiting.append(pending)
-            else:
-                self.travel["waited"] += 1
-                self._use_travel(travel, incidence, stamp)
-        self.pending_travel = waiting
-
-    def _expire_pending_travel(self, stamp: int) -> None:
-        """Fits that waited ``PENDING_TRAVEL_MS`` for their wall in vain: counted as unknown."""
-        kept = [p for p in self.pending_travel if stamp - p[0] < PENDING_TRAVEL_MS]
-        self.travel["unknown"] += len(self.pending_travel) - len(kept)
-        self.pending_travel = kept
-
-    def _use_travel(self, travel: dict[str, Any], incidence: float | None, stamp: int) -> None:
-        """Correct the step scale with one fit, its wall met at ``incidence`` (None: not known)."""
-        ekf = self.ekf
-        assert ekf is not None
-        settings = self.config["filter"]["travel"]
-        sigma = math.hypot(travel["sigma"], settings["model_sigma"])
-        if incidence is None:
-            # a short or scattered series on such a wall reads the scale low on average
-            if not settings["unknown_wall"] or travel["sigma"] > settings["unknown_wall_max_sigma"]:
-                self.travel["unknown"] += 1
-                return
-            # a wall met φ off square reads the scale low by cos φ: a fit on a wall of unknown
-            # incidence bounds the scale from below; one far below the filter's says nothing
-            bound = ekf.step_scale - settings["unknown_wall_bound_sigma"] * sigma
-            if settings["unknown_wall_bound"] and travel["scale"] < bound:
-                self.travel["below_bound"] += 1
-                return
-            self.travel["assumed_square"] += 1
-            incidence = 0.0  # no wall of the map there: taken as square on
-        if incidence > math.radians(settings["max_incidence_deg"]):
-            self.travel["oblique"] += 1
-            return
-        scale = travel["scale"] / math.cos(incidence)
-        if ekf.correct_step_scale(scale, sigma):
-            self.travel["used"] += 1
-            self.message(
-                "D", stamp, f"sonar {travel['sensor']}: step scale {scale:.4f} ± {travel['sigma']:.4f}"
-            )
-        else:
-            self.travel["rejected"] += 1
-
-    def _wall_fix(
-        self, reference: tuple[float, float, float], walls: list[dict[str, Any]], results: list[list[int]]
-    ) -> dict[str, Any] | None:
-        """The position the associated walls give alone (seed 000 §6.2.4), for the store."""
-        known = {wall.index: wall for wall in self.known_walls}
-        fits = [
-            (wall["alpha"], wall["d"], known[index])
-            for wall, (index, _) in zip(walls, results, strict=False)
-            if index in known
-        ]
-        return wall_position(reference, fits)
-
     def _store_positions(
         self,
         stamp: int,
@@ -882,27 +524,6 @@ class LocalizationCore:
                 log.close()
 
 
-def _beam_hit(
-    origin: tuple[float, float], direction: float, range_mm: float, walls: list[KnownWall]
-) -> float | None:
-    """The incidence (rad, 0 = square on) of a beam on the nearest known wall it meets near the
-    measured range (within 25 % or 150 mm); None when it meets none there."""
-    best: tuple[float, float] | None = None
-    for wall in walls:
-        crossing = ray_crossing(origin, direction, wall)
-        if crossing is None:
-            continue
-        t, u, sine = crossing  # along the beam, along the wall (0..1 on it)
-        if t <= 0 or not -0.05 <= u <= 1.05:
-            continue
-        if abs(t - range_mm) > max(150.0, 0.25 * range_mm) and abs(t * sine - range_mm) > 150.0:
-            continue
-        incidence = math.acos(min(1.0, sine))
-        if best is None or t < best[0]:
-            best = (t, incidence)
-    return best[1] if best is not None else None
-
-
 def open_logs(
     config: dict[str, Any], directory: str | Path | None = None, meta: dict[str, Any] | None = None
 ):
@@ -933,7 +554,7 @@ class Localizer:
         truth: Any = None,
     ) -> None:
         if config is None:
-            from modules.common.locconfig import default_config_path
+            from modules.localization.config import default_config_path
 
             path = default_config_path()
             config = path if path.exists() else None
@@ -1004,7 +625,7 @@ class Localizer:
 
     def copro_fields(self) -> dict[str, int]:
         """The ``pose_*`` fields of copro.data (wire units: mm, 1/100 degree clockwise)."""
-        from modules.common.units import rad_ccw_to_cdeg_cw
+        from modules.units import rad_ccw_to_cdeg_cw
 
         pose = self.pose()
         clamp = 2**31 - 1

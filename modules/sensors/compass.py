@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from modules.common.odometry import step_rate_hz
 from modules.description.robot import MOTOR_TICK_MS
+from modules.sensors.odometry import step_rate_hz
 from tokenring import default_protocol
 
 ADC_MID = 2048

@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from modules.common.sync import OdometryParams
-from modules.common.walls import KnownWall, wrap
+from modules.localization.sync import OdometryParams
+from modules.localization.walls import KnownWall, wrap
 
 OPTIONAL_STATES = ("glide", "compass_offset", "step_scale", "step_scale_mean")
 

@@ -115,7 +115,7 @@ def pool(estimates: Iterable[FloorEstimate]) -> FloorCalibration:
 def estimate_from_log(path: str | Path) -> tuple[FloorEstimate, float]:
     """The floor estimate a localisation data log ends with, and the nominal step (mm) it is
     relative to. Raises :class:`CalibrationError` for a log whose filter had no such state."""
-    from modules.common.logs import read_log
+    from modules.localization.logs import read_log
 
     log = read_log(path, expect="data")
     config: Any = log.header.get("config")

@@ -6,7 +6,7 @@ there before anything was downloaded, "1 Start Robbi" started every node's progr
 (ARCNET_START_SYSTEM), "2 Components" listed every node on the network with name, ID and the date
 of its software. Here the robot plugs it into the LCD node as a resident program
 (:mod:`tokenring.node.resident`, registered by :mod:`modules.plugin`): it draws
-:class:`~modules.common.lcdui.OsMenu` on the display and reads the keypad (``self.hw``, the same
+:class:`~modules.display.menus.OsMenu` on the display and reads the keypad (``self.hw``, the same
 hardware the lcd program gets) while no program runs, and leaves both to the lcd program once it
 runs, whose own "Main Menu" takes over.
 """
@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from modules.common.lcdui import BOOT, MENU_NAMES, OsMenu, Screen, program_date
+from modules.display.menus import BOOT, MENU_NAMES, OsMenu, Screen, program_date
 from tokenring import ResidentProgram, TokenRingError
 
 log = logging.getLogger("tokenring.lcd")

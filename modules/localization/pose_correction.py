@@ -32,8 +32,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from modules.common.units import pose_from_wire, pose_to_wire
-from modules.common.vectorgen import PoseHistory
+from modules.mapping.vectorgen import PoseHistory
+from modules.units import pose_from_wire, pose_to_wire
 from tokenring import default_protocol
 
 log = logging.getLogger("tokenring.main")

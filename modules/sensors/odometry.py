@@ -11,8 +11,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from modules.common.units import wrap_angle
 from modules.description.robot import DEFAULT_GLIDE_FACTOR, MAX_STEP_RATE_HZ, STEP_MM
+from modules.units import wrap_angle
 
 GLIDE_MIN, GLIDE_MAX = 1.0, 60.0  # a glide factor outside this is a measuring mistake
 

@@ -19,9 +19,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from modules.common.navigator import NAV, Navigator
-from modules.common.pilot import REASON, TURN_LEFT, TURN_RIGHT, Move, Outcome, Sensors
-from modules.common.vectorgen import SonarLayout
+from modules.mapping.vectorgen import SonarLayout
+from modules.navigation.navigator import NAV, Navigator
+from modules.navigation.pilot import REASON, TURN_LEFT, TURN_RIGHT, Move, Outcome, Sensors
 from tokenring import default_protocol
 
 COMPASS_STATE = default_protocol().enums["compass_state"]

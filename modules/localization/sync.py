@@ -40,7 +40,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
-from modules.common.walls import to_frame, wrap
+from modules.localization.walls import to_frame, wrap
 
 #: sensors the synchronisation knows, in the order their synchronisers run
 SENSORS = ("odometry", "compass", "sonar", "battery", "truth")

@@ -392,7 +392,7 @@ class ActionPlan:
 
 
 def _navigator_base() -> type:
-    from modules.common.navigator import Navigator
+    from modules.navigation.navigator import Navigator
 
     return Navigator
 
@@ -419,7 +419,7 @@ class ActionNavigator(_navigator_base()):  # type: ignore[misc]
         start_heading: float | None = None,
         seed: bool = False,
     ) -> None:
-        from modules.common.navigator import NAV
+        from modules.navigation.navigator import NAV
 
         super().__init__(layout)
         self.plan_steps = ActionPlan(
@@ -431,7 +431,15 @@ class ActionNavigator(_navigator_base()):  # type: ignore[misc]
         self.retries = 0
 
     def plan(self, last: Any, sensors: Any, alert_lock: int) -> list[Any] | None:
-        from modules.common.pilot import FORWARD, MOTOR_STATE, REASON, REVERSE, TURN_LEFT, TURN_RIGHT, Move
+        from modules.navigation.pilot import (
+            FORWARD,
+            MOTOR_STATE,
+            REASON,
+            REVERSE,
+            TURN_LEFT,
+            TURN_RIGHT,
+            Move,
+        )
 
         names = {FORWARD: "forward", REVERSE: "reverse", TURN_LEFT: "left", TURN_RIGHT: "right"}
         codes = {name: code for code, name in names.items()}

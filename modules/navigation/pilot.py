@@ -22,7 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from modules.common.vectorgen import NO_CONTACT_CM, SonarLayout
+from modules.mapping.vectorgen import NO_CONTACT_CM, SonarLayout
 from tokenring import default_protocol
 
 _E = default_protocol().enums
