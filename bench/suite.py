@@ -75,8 +75,8 @@ FULL_SIZES = {"peer": [2, 4, 8, 16, 32, 64], "router": [8, 16, 32, 64, 128, 255]
 QUICK_SIZES = {"peer": [2, 4, 8], "router": [8]}
 #: ring sizes at which issue 23 judges tokenring's own share per hop: interleaved there by default
 OWN_SHARE_SIZES = (8, 64, 255)
-#: pairs of interleaved windows per size: at 64 routers 100 pairs (52 of them within the steal
-#: limit) gave an interval 12 µs wide, separate runs 24 pairs one 72 µs wide (2026-11-30)
+#: pairs of interleaved windows per size: enough for an interval a few microseconds per hop wide
+#: at 64 routers, which separate runs do not reach even with many more pairs
 INTERLEAVED_PAIRS = 100
 INTERLEAVED_PAIRS_QUICK = 6
 SEED_NODES = ["main", "motor", "sonar", "compass", "copro", "map", "lcd"]  # the seed's 7 computers
