@@ -17,24 +17,36 @@ Registered in ``pyproject.toml`` under the entry point group ``tokenring.extensi
 from __future__ import annotations
 
 import argparse
-import importlib
-import pkgutil
 from collections.abc import Callable
-from pathlib import Path
-from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
-from tokenring import Extension, UpPlan, UsageError, WebAction, WebPanel
+from tokenring import Extension, UpPlan, UsageError
 from tokenring.cli import seconds
 
 if TYPE_CHECKING:
+    from pathlib import Path
+    from types import ModuleType
+
     import zenoh
 
-    from tokenring import Protocol, ResidentProgram
+    from tokenring import Protocol, ResidentProgram, WebAction, WebPanel
     from tokenring.host import Launcher, ServicePlan
     from tokenring.observe import FeedSource
 
-PROGRAMS_DIR = Path(__file__).resolve().parent
+
+def programs_dir() -> Path:
+    """Where the programs are: this package's directory."""
+    from pathlib import Path
+
+    return Path(__file__).resolve().parent
+
+
+def __getattr__(name: str) -> Any:
+    """``PROGRAMS_DIR`` (:func:`programs_dir`), made when first asked for: listing the robot's
+    verbs (``tokenring --help``) imports no pathlib."""
+    if name == "PROGRAMS_DIR":
+        return programs_dir()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class RobotExtension(Extension):
@@ -43,13 +55,14 @@ class RobotExtension(Extension):
     name = "robot"
 
     def commands(self) -> list[ModuleType]:
+        """The verbs of :mod:`modules.pc.commands`, a module each (listed by their ``HELP``)."""
         from modules.pc import commands
+        from tokenring.cli import verb_modules
 
-        names = sorted(m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_"))
-        return [importlib.import_module(f"{commands.__name__}.{n}") for n in names]
+        return verb_modules(commands)
 
     def programs_dir(self) -> Path:
-        return PROGRAMS_DIR
+        return programs_dir()
 
     def add_up_options(self, parser: argparse.ArgumentParser) -> None:
         world = parser.add_argument_group("simulated world (the robot's hardware)")
@@ -109,6 +122,8 @@ class RobotExtension(Extension):
         )
 
     def plan_up(self, args: argparse.Namespace, protocol: Protocol) -> UpPlan:
+        from pathlib import Path
+
         from modules.variants import ENV, all_seed, format_algorithms, parse_algorithms
         from modules.world.__main__ import parse_speed
 

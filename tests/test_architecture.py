@@ -81,11 +81,15 @@ def test_the_bare_ring_loads_no_robot_code():
 
 
 def test_an_unknown_extension_is_one_clear_line():
-    result = run_tokenring("status", env=dict(os.environ, TOKENRING_EXTENSIONS="robot,nosuch"))
-    assert result.returncode == 2, result.stdout + result.stderr
-    assert result.stderr.strip().splitlines() == [
-        "tokenring: error: TOKENRING_EXTENSIONS: no extension named nosuch is installed"
-    ]
+    env = dict(os.environ, TOKENRING_EXTENSIONS="robot,nosuch")
+    for args in (["up", "--help"], ["--help"], ["explore", "1"]):  # where the extensions are loaded
+        result = run_tokenring(*args, env=env)
+        assert result.returncode == 2, result.stdout + result.stderr
+        assert result.stderr.strip().splitlines() == [
+            "tokenring: error: TOKENRING_EXTENSIONS: no extension named nosuch is installed"
+        ], args
+    # a ring verb whose options need no extension loads none
+    assert run_tokenring("status", "--help", env=env).returncode == 0
 
 
 def test_a_system_that_is_not_a_robot_runs_on_the_ring(procs, ring_name, endpoint, tmp_path):

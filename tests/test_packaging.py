@@ -13,10 +13,18 @@ from tokenring.transport.factory import require_backend
 
 
 def test_version_names_the_installed_distribution():
+    import importlib.metadata
+
+    import tokenring
+
     result = run_tokenring("--version")
     assert result.returncode == 0
-    project = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
-    assert result.stdout.strip() == f"tokenring {project['version']}"
+    # one version: tokenring/__init__.py's, which pyproject.toml reads ([tool.hatch.version])
+    config = tomllib.loads((REPO / "pyproject.toml").read_text())
+    assert "version" in config["project"]["dynamic"] and "version" not in config["project"]
+    assert config["tool"]["hatch"]["version"]["path"] == "tokenring/__init__.py"
+    assert result.stdout.strip() == f"tokenring {tokenring.__version__}"
+    assert importlib.metadata.version("tokenring") == tokenring.__version__
 
 
 def test_a_missing_optional_backend_is_one_clear_line(monkeypatch):

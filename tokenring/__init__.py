@@ -11,6 +11,9 @@ from typing import TYPE_CHECKING
 
 from tokenring._face import lazy_face
 
+#: the one version: pyproject.toml's ([tool.hatch.version]) and ``tokenring --version``'s
+__version__ = "0.1.0"
+
 if TYPE_CHECKING:
     from tokenring._util.files import (
         check_input,

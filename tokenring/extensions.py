@@ -106,7 +106,9 @@ class Extension:
     name = ""
 
     def commands(self) -> list[ModuleType]:
-        """Verb modules (``add_parser(sub)``, ``run(args)``) added to ``tokenring``."""
+        """Verb modules (``add_parser(sub)``, ``run(args)``) added to ``tokenring``. They are
+        imported to list them (``tokenring --help``): cheap to import, each with its one-line
+        help as ``HELP``, they are listed without building their options (:mod:`tokenring.cli.verbs`)."""
         return []
 
     def programs_dir(self) -> Path | None:

@@ -19,9 +19,8 @@ from typing import Any
 
 import yaml
 
-#: what --kinds accepts; each names an operation
-OPERATIONS = ("crash", "crashloop", "hang", "softhang", "delay", "drop", "corrupt", "duplicate", "lose", "leave",
-              "partition")  # fmt: skip
+from tokenring.chaos.operations import OPERATIONS
+
 MAX_DOWN = 3  # at most this many nodes hung, left or restarting at once (of the ring's nodes)
 RESPAWN_S = 2.5  # how long a crashed node is left alone while it restarts
 

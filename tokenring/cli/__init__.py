@@ -23,6 +23,7 @@ if TYPE_CHECKING:
         with_examples,
     )
     from tokenring.cli.output import check_json_target, check_option_output, print_json, write_json
+    from tokenring.cli.verbs import verb_modules
 else:  # each name is imported on first use
     __getattr__, __dir__ = lazy_face(
         __name__,
@@ -41,6 +42,7 @@ else:  # each name is imported on first use
             "seconds": "tokenring.cli.args",
             "StopEvent": "tokenring._util.process",
             "tap_session": "tokenring.cli.args",
+            "verb_modules": "tokenring.cli.verbs",
             "wait_for_stop": "tokenring._util.process",
             "with_examples": "tokenring.cli.args",
             "write_json": "tokenring.cli.output",
@@ -62,6 +64,7 @@ __all__ = [
     "print_json",
     "seconds",
     "tap_session",
+    "verb_modules",
     "wait_for_stop",
     "with_examples",
     "write_json",

@@ -1,33 +1,35 @@
 """The ``tokenring`` command line: the ring's verbs live in :mod:`tokenring.cli.commands`, an
 application's (the robot's) come through :mod:`tokenring.extensions`.
 
+It answers at once: ``--version`` is answered before any parser is built; a verb of the ring's own
+is the parser's only verb (its module alone imported, no extension loaded unless its options come
+from one); ``--help`` lists every verb by its one-line help without building its options
+(:mod:`tokenring.cli.verbs`). What a verb does is imported when it runs.
+
 Exit codes: 0 success; 1 the run failed (a node died, an invariant broke, nobody answered);
 2 bad input (options, files, protocol.yaml); 130 stopped by Ctrl-C.
 """
 
 from __future__ import annotations
 
-import argparse
-import faulthandler
-import importlib
-import logging
-import signal
 import sys
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
+from tokenring import __version__
 from tokenring.errors import TokenRingError
-from tokenring.transport.zenoh_config import use_host_runtime, use_node_runtime
 
-Runner = Callable[[argparse.Namespace], int]
+if TYPE_CHECKING:
+    import argparse
 
-#: verbs parsed without the other verbs or any extension loaded: ``node`` is the process ``up``
-#: starts per module, which should import what a node needs and nothing else (no plotting, no
-#: other verbs, no package metadata): 25 MB less per node process
-LEAN_VERBS = ("node",)
+Runner = Callable[["argparse.Namespace"], int]
+
+LOG_LEVELS = ("debug", "info", "warning", "error")
 
 
 def _setup_logging(level: str) -> None:
+    import logging
+
     logging.basicConfig(
         level=getattr(logging, level.upper(), logging.INFO),
         format="%(asctime)s.%(msecs)03d %(levelname)-5s %(message)s",
@@ -37,29 +39,31 @@ def _setup_logging(level: str) -> None:
 
 
 def version() -> str:
-    """The installed distribution's version (``tokenring --version``)."""
-    from importlib.metadata import PackageNotFoundError
-    from importlib.metadata import version as dist_version
-
-    try:
-        return dist_version("tokenring")
-    except PackageNotFoundError:
-        return "unknown (not installed)"
+    """This tokenring's version (``tokenring --version``): :data:`tokenring.__version__`, the one
+    the distribution is built with (pyproject.toml reads it), so no package metadata is read."""
+    return __version__
 
 
-class _VersionAction(argparse.Action):
-    """``--version``, asking the package metadata only when given (importlib.metadata is heavy)."""
+def asks_version(argv: Sequence[str]) -> bool:
+    """Whether ``argv`` asks for the version before anything argparse would act on first: only
+    ``--log-level LEVEL`` (a valid one) may come before ``--version``. Anything else is left to the
+    parser, which answers ``--version`` too, only later."""
+    words = iter(argv)
+    for word in words:
+        if word == "--version":
+            return True
+        if word == "--log-level":
+            level = next(words, None)
+        elif word.startswith("--log-level="):
+            level = word.partition("=")[2]
+        else:
+            return False
+        if level not in LOG_LEVELS:
+            return False
+    return False
 
-    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, **kwargs: Any) -> None:
-        kwargs.setdefault("help", "show the version and exit")
-        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
 
-    def __call__(self, parser: argparse.ArgumentParser, *_: Any) -> None:
-        print(f"{parser.prog} {version()}")
-        parser.exit()
-
-
-def requested_verb(argv: list[str]) -> str | None:
+def requested_verb(argv: Sequence[str]) -> str | None:
     """The verb ``argv`` names: its first word past the global options (None for none, or when
     help or the version is asked for first)."""
     words = iter(argv)
@@ -74,9 +78,14 @@ def requested_verb(argv: list[str]) -> str | None:
 
 
 def build_parser(verb: str | None = None) -> tuple[argparse.ArgumentParser, dict[str, Runner]]:
-    """The parser and each verb's runner: every verb, or only ``verb`` if it is a lean one
-    (:data:`LEAN_VERBS`), which then needs neither the other verbs nor the extensions."""
+    """The parser and each verb's runner. A verb of the ring's own (:mod:`tokenring.cli.commands`)
+    is built alone: neither the other verbs nor the extensions are loaded for it (its own options
+    may ask for them: ``up``'s and ``load``'s come partly from the extensions). For no verb, or one
+    the ring does not know (an application's, or a typo), every verb is listed, the ring's and the
+    extensions', each built only once the command line picks it (:class:`tokenring.cli.verbs.Verbs`)."""
+    from tokenring.cli import commands
     from tokenring.cli.args import OneLineParser
+    from tokenring.cli.verbs import Verbs
 
     parser = OneLineParser(
         prog="tokenring",
@@ -84,24 +93,24 @@ def build_parser(verb: str | None = None) -> tuple[argparse.ArgumentParser, dict
         "around a ring of OS processes over Zenoh.",
         epilog="Run 'tokenring COMMAND --help' for a command's options.",
     )
-    parser.add_argument("--version", action=_VersionAction)
-    parser.add_argument("--log-level", default="info", choices=("debug", "info", "warning", "error"))
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    parser.add_argument(
+        "--version", action="version", version=f"%(prog)s {version()}", help="show the version and exit"
+    )
+    parser.add_argument("--log-level", default="info", choices=LOG_LEVELS)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", action=Verbs)
+    assert isinstance(sub, Verbs)
     runners: dict[str, Runner] = {}
-    if verb in LEAN_VERBS:
-        verbs = [importlib.import_module(f"tokenring.cli.commands.{verb.replace('-', '_')}")]
-    else:
-        from tokenring import extensions
-        from tokenring.cli.commands import discover
+    own = commands.names()
+    if verb is not None and verb.replace("-", "_") in own:
+        module = commands.verb_module(verb.replace("-", "_"))
+        runners.update(dict.fromkeys(sub.build_verb(module), module.run))
+        return parser, runners
+    from tokenring import extensions
 
-        verbs = discover() + [module for extension in extensions.loaded() for module in extension.commands()]
-    for module in verbs:
-        name = module.__name__.rsplit(".", 1)[-1].replace("_", "-")
-        before = set(sub.choices)
-        module.add_parser(sub)
-        for added in set(sub.choices) - before:
-            runners[added] = module.run
-        runners.setdefault(name, module.run)
+    modules = [commands.verb_module(name) for name in own]
+    modules += [module for extension in extensions.loaded() for module in extension.commands()]
+    for module in modules:
+        runners.update(dict.fromkeys(sub.add_verb(module), module.run))
     return parser, runners
 
 
@@ -113,21 +122,30 @@ def _stacks_on_sigusr1() -> None:
         sys.stderr.fileno()
     except (AttributeError, OSError, ValueError):  # io.UnsupportedOperation is an OSError
         return
+    import faulthandler
+    import signal
+
     faulthandler.register(signal.SIGUSR1, all_threads=True)
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
+    words = list(sys.argv[1:] if argv is None else argv)
+    if asks_version(words):  # no parser, no verb: the version alone
+        print(f"tokenring {version()}")
+        return 0
     try:
-        parser, runners = build_parser(requested_verb(sys.argv[1:] if argv is None else argv))
+        parser, runners = build_parser(requested_verb(words))
+        args = parser.parse_args(words)
     except TokenRingError as exc:  # an application (extension) that fails to load
         print(f"tokenring: error: {exc}", file=sys.stderr)
         return exc.exit_code
-    args = parser.parse_args(argv)
     if not args.command:
         parser.print_help()
         return 2
     _setup_logging(args.log_level)
     _stacks_on_sigusr1()
+    from tokenring.transport.zenoh_config import use_host_runtime, use_node_runtime
+
     if args.command == "node":  # a node started by hand (a launcher's nodes get it through their environment)
         use_node_runtime()
     else:

@@ -30,11 +30,12 @@ import foxglove
 from foxglove.websocket import ChannelView, Client, ServerListener
 
 from tokenring.errors import UsageError
+from tokenring.observe.defaults import FOXGLOVE_PORT
 from tokenring.observe.feed import Message, Topic
 
 log = logging.getLogger("tokenring.foxglove")
 
-DEFAULT_PORT = 8765
+DEFAULT_PORT = FOXGLOVE_PORT
 
 
 class FoxgloveBridge:

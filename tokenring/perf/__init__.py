@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 from tokenring._face import lazy_face
 
 if TYPE_CHECKING:
+    from tokenring.perf.defaults import ROUTER_FROM
     from tokenring.perf.hop_overhead import (
         STEAL_LIMIT_PCT,
         cpu_jiffies,
@@ -19,7 +20,7 @@ if TYPE_CHECKING:
         within_steal_limit,
     )
     from tokenring.perf.interleaved_pairs import interleave
-    from tokenring.perf.roundtrip import ROUTER_FROM, RingRun, run_bare, run_ring, summarize
+    from tokenring.perf.roundtrip import RingRun, run_bare, run_ring, summarize
     from tokenring.perf.running_rings import BareRing, LiveRing
 else:  # each name is imported on first use
     __getattr__, __dir__ = lazy_face(
@@ -34,7 +35,7 @@ else:  # each name is imported on first use
             "LiveRing": "tokenring.perf.running_rings",
             "pair_share_us": "tokenring.perf.hop_overhead",
             "RingRun": "tokenring.perf.roundtrip",
-            "ROUTER_FROM": "tokenring.perf.roundtrip",
+            "ROUTER_FROM": "tokenring.perf.defaults",
             "run_bare": "tokenring.perf.roundtrip",
             "run_ring": "tokenring.perf.roundtrip",
             "STEAL_LIMIT_PCT": "tokenring.perf.hop_overhead",

@@ -34,9 +34,6 @@ from tokenring.transport.session import free_port, query
 from tokenring.transport.zenoh_config import hop_callback, make_config, node_environment, open_session
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
-#: from this ring size on, ``--topology auto`` makes the nodes clients of a Zenoh router: a full
-#: mesh of N peers keeps N(N-1)/2 links (bench/RESULTS.md measures both)
-ROUTER_FROM = 32
 
 
 def generated_ids(n: int) -> list[int]:

@@ -5,13 +5,15 @@ from __future__ import annotations
 import argparse
 import sys
 
+HELP = "plot a localisation data log (paths, errors, steps, heading, sonar, time module)"
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring.cli import add_json_option
 
     p = sub.add_parser(
         "analyze",
-        help="plot a localisation data log (paths, errors, steps, heading, sonar, time module)",
+        help=HELP,
         description="Write PNG plots of a data log like the seed's logfileanalyser — the paths of every "
         "position source against the truth, errors over time, step increments, heading, sonar distances "
         "and the time module (each sensor's and the synchronisation's cycle times, missed samples) — and "

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+HELP = "the floor's step scale learnt by earlier drives (odometry calibration from data logs)"
+
 EXAMPLES = """\
 examples:
   tokenring calibrate logs/localization-*.trlog
@@ -23,7 +25,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "calibrate",
-        help="the floor's step scale learnt by earlier drives (odometry calibration from data logs)",
+        help=HELP,
         description="Pool the floor's mean step scale that the localisation filter learnt in earlier "
         "drives (their data logs, .trlog) into one calibration for later drives to start from. Drives "
         "that never had a wall ahead or behind in sonar range on a straight leg learnt nothing and are "

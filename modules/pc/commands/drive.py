@@ -26,6 +26,8 @@ from typing import Any
 from tokenring import TokenRingError, UsageError
 from tokenring.cli import seconds
 
+HELP = "move the robot by hand (motor commands through main's PC link)"
+
 MOVING, STALLED, COLLISION = 1, 2, 3
 STATE_NAMES = {0: "idle", 1: "moving", 2: "stalled", 3: "collision"}
 
@@ -35,7 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "drive",
-        help="move the robot by hand (motor commands through main's PC link)",
+        help=HELP,
         description="Send a motor command through main's PC link, follow the move and print the "
         "dead-reckoned and the true pose.",
         epilog="Examples: drive forward 500 --speed 50; drive turn left 90; drive wheels 40 -40 1500; "

@@ -13,6 +13,8 @@ import time
 from tokenring import UsageError
 from tokenring.cli import seconds
 
+HELP = "start (1 = avoid, 2 = left wall) or stop the exploration"
+
 ACTIONS = ("1", "2", "stop", "calibrate", "state")
 
 
@@ -21,7 +23,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "explore",
-        help="start (1 = avoid, 2 = left wall) or stop the exploration",
+        help=HELP,
         description="Start Explore 1 (avoid) or Explore 2 (left-wall following), the calibration run, "
         "or stop — through main's PC link; 'state' prints the navigator's state.",
     )

@@ -10,16 +10,17 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
-import select
 import sys
-import threading
 import time
-from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from modules.description import keys as robot_keys
 from tokenring import TransportError, UsageError
 from tokenring.cli import non_negative_seconds
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+HELP = "show the LCD screen in the terminal and type on its keypad"
 
 KEYPAD = "0123456789ABCD*#"
 ARROWS = {"A": "2", "B": "8", "C": "6", "D": "4"}  # ESC [ A = up -> pan up (2) ...
@@ -30,7 +31,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "lcd",
-        help="show the LCD screen in the terminal and type on its keypad",
+        help=HELP,
         description="Open the robot's 128x64 LCD in the terminal (half-block pixels) and map the keyboard "
         "to its 4x4 keypad: 0-9 a-d * #, Esc = *, Enter = #, arrows pan, + - zoom, q quits.",
     )
@@ -65,6 +66,7 @@ def render(frame: bytes) -> str:
 
 def fetch_screen(session: Any, ring: str, timeout: float = 3.0) -> bytes:
     """The current screen; retried while a freshly opened session has not found the LCD yet."""
+    from modules.description import keys as robot_keys
 
     deadline = time.monotonic() + timeout
     while True:
@@ -102,6 +104,7 @@ def parse_keys(text: str) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from modules.description import keys as robot_keys
     from tokenring import keys
     from tokenring.cli import tap_session
 
@@ -129,8 +132,12 @@ def run(args: argparse.Namespace) -> int:
 
 def interactive(session: Any, ring: str, key_pub: Any) -> int:
     """Live view: redraw on every new screen, keyboard → keypad, until q or Ctrl-C."""
+    import select
     import termios
+    import threading
     import tty
+
+    from modules.description import keys as robot_keys
 
     latest = {"frame": fetch_screen(session, ring)}
     changed = threading.Event()
@@ -180,6 +187,8 @@ def translate_key(char: str, fd: int | None = None) -> str | None:
     if char in ("q", "Q"):
         return "quit"
     if char == "\x1b":
+        import select
+
         if fd is not None and select.select([fd], [], [], 0.02)[0]:
             rest = os.read(fd, 2).decode("latin-1")
             if len(rest) == 2 and rest[0] == "[" and rest[1] in ARROWS:

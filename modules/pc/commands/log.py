@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
+
+HELP = "convert, sort or summarise a localisation data or error log"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -12,7 +13,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "log",
-        help="convert, sort or summarise a localisation data or error log",
+        help=HELP,
         description="Data and error logs are msgpack streams (crash-safe, compact). 'convert' writes the "
         "seed's line-per-entry text (--to text; --to seed: exactly the seed's appendix B line "
         "formats) or, for a data log, data.csv and sonar.csv with one line per synchronisation "
@@ -53,6 +54,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def check_outputs(args: argparse.Namespace) -> None:
     """Before anything is read: an output is never the input, never silently replaced."""
+    from pathlib import Path
+
     from tokenring import UsageError, check_output
 
     if args.log_verb == "convert" and args.to == "mcap" and not args.out:
@@ -71,6 +74,8 @@ def check_outputs(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
     from modules.localization.logs import (
         convert_csv,
         convert_seed_text,

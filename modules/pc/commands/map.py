@@ -14,13 +14,15 @@ import argparse
 from tokenring import UsageError
 from tokenring.cli import seconds
 
+HELP = "fetch the robot's vector map and write it as DXF, PNG or JSON"
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring.cli import add_ring_options
 
     p = sub.add_parser(
         "map",
-        help="fetch the robot's vector map and write it as DXF, PNG or JSON",
+        help=HELP,
         description="Ask main for the map (GET_MAP to the map module) and write it; the format "
         "follows the extension of --out (.json, .dxf, .png).",
     )

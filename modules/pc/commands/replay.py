@@ -5,13 +5,15 @@ from __future__ import annotations
 import argparse
 import sys
 
+HELP = "run the synchronisation and EKF again on a recorded data log (offline mode)"
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring.cli import add_json_option
 
     p = sub.add_parser(
         "replay",
-        help="run the synchronisation and EKF again on a recorded data log (offline mode)",
+        help=HELP,
         description="Replay a data log as if its samples came from the sensors (--from raw, the default: "
         "every synchronisation again on exactly the samples it had online) or feed its synchronised "
         "records to the filter (--from sync). With the log's own configuration the positions equal "

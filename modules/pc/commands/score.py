@@ -9,13 +9,15 @@ from __future__ import annotations
 
 import argparse
 
+HELP = "score a map against the true walls of a world"
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring.cli import add_json_option
 
     p = sub.add_parser(
         "score",
-        help="score a map against the true walls of a world",
+        help=HELP,
         description="Coverage, precision, orientation error and closed corners of a map (.json or .dxf) "
         "against a world's true walls.",
     )

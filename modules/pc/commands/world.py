@@ -8,6 +8,8 @@ import re
 
 from tokenring.cli import int_within
 
+HELP = "world files: generate a random room, or a drive inside one"
+
 EXAMPLES = """\
 examples:
   tokenring world generate --seed 7 --out room7.yaml
@@ -38,7 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "world",
-        help="world files: generate a random room, or a drive inside one",
+        help=HELP,
         description="World files for the simulated robot.",
         **with_examples(EXAMPLES),
     )

@@ -8,22 +8,7 @@ import os
 import sys
 from typing import Any
 
-import numpy as np
-
-from tokenring._util.tables import format_table
-from tokenring.cli.output import check_json_target, write_json
-from tokenring.errors import UsageError
-from tokenring.node import tokenpath
-from tokenring.perf.hop_overhead import describe, interval
-from tokenring.perf.roundtrip import (
-    ROUTER_FROM,
-    generated_ids,
-    progress,
-    run_bare,
-    run_budget,
-    run_ring,
-    summarize,
-)
+HELP = "token round trip against a bare Zenoh ring, measured in the same run"
 
 ROUNDS, WARMUP = 2000, 300
 KINDS = {"peer": "peers", "router": "routers", "links": "direct links"}
@@ -45,9 +30,11 @@ Two or more pairs (--repeat, --interleave) give the own share per hop with its 9
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring.perf.defaults import ROUTER_FROM
+
     p = sub.add_parser(
         "bench",
-        help="token round trip against a bare Zenoh ring, measured in the same run",
+        help=HELP,
         description=__doc__,
         epilog=EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -103,6 +90,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from tokenring._util.tables import format_table
+    from tokenring.cli.output import check_json_target, write_json
+    from tokenring.errors import UsageError
+    from tokenring.node import tokenpath
+    from tokenring.perf.hop_overhead import describe, interval
+    from tokenring.perf.roundtrip import generated_ids, progress, run_bare, run_budget, run_ring, summarize
+
     check_json_target(args.json, args.force)  # before minutes of measuring
     ids = generated_ids(args.nodes)
     if args.interleave is not None:
@@ -277,6 +273,8 @@ def run(args: argparse.Namespace) -> int:
 
 def topology_of(args: argparse.Namespace) -> str:
     """peer, router or links: ``--topology``, with auto a router from :data:`ROUTER_FROM` nodes on."""
+    from tokenring.perf.defaults import ROUTER_FROM
+
     if args.topology != "auto":
         return str(args.topology)
     return "router" if args.nodes >= ROUTER_FROM else "peer"
@@ -284,9 +282,12 @@ def topology_of(args: argparse.Namespace) -> str:
 
 def run_interleaved(args: argparse.Namespace) -> int:
     """``--interleave PAIRS``: both rings up at once, taking turns (:mod:`tokenring.perf.interleaved_pairs`)."""
+    from tokenring.cli.output import write_json
     from tokenring.contract.ring import parse_bitrate
+    from tokenring.errors import UsageError
     from tokenring.node.recovery import FROZEN_AFTER_S
     from tokenring.perf.interleaved_pairs import default_window_s, interleave
+    from tokenring.perf.roundtrip import progress
 
     if not 2 <= args.interleave <= 10_000:
         raise UsageError(f"--interleave takes 2..10000 pairs of windows, not {args.interleave}")
@@ -339,6 +340,9 @@ def ms_text(value: float | None) -> str:
 
 def print_interleaved(record: dict[str, Any]) -> None:
     """The interleaved record as a person reads it: medians and tails, the own share, the host."""
+    from tokenring._util.tables import format_table
+    from tokenring.perf.hop_overhead import describe
+
     limit = record["steal_limit_pct"]
     print(
         f"token round trip, {record['nodes']} nodes ({KINDS[record['topology']]}), "

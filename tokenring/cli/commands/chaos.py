@@ -4,17 +4,16 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
-from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from tokenring.chaos.nemesis import OPERATIONS, Operation, generate, scenario_document, shrink
-from tokenring.chaos.runner import format_report, load_scenario, run_scenario
 from tokenring.cli.args import seconds
-from tokenring.cli.output import write_json
-from tokenring.contract import keys
-from tokenring.contract.protocol import default_protocol
-from tokenring.errors import UsageError
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    from tokenring.chaos.nemesis import Operation
+
+HELP = "run a timed fault scenario (or a seeded random one) against a ring and judge it"
 
 EXAMPLES = """examples:
   tokenring chaos scenarios/every-fault.yaml          every fault kind once, judged
@@ -26,9 +25,12 @@ EXAMPLES = """examples:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring.chaos.operations import OPERATIONS
+    from tokenring.contract import keys
+
     p = sub.add_parser(
         "chaos",
-        help="run a timed fault scenario (or a seeded random one) against a ring and judge it",
+        help=HELP,
         description="Run SCENARIO.yaml (a timed list of faults, see scenarios/) against a ring it "
         "launches, or against a running one with --ring, or draw a schedule of overlapping faults "
         "from a seed with --random. Reports per fault the time to recover, tokens regenerated, "
@@ -90,6 +92,11 @@ def unique_path(directory: Path, stem: str, suffix: str) -> Path:
 
 
 def _check(args: argparse.Namespace) -> list[str]:
+    from pathlib import Path
+
+    from tokenring.chaos.operations import OPERATIONS
+    from tokenring.errors import UsageError
+
     if (args.scenario is None) == (args.random is None):
         raise UsageError("give a scenario file or --random SEED (one of them)")
     if args.ledger:
@@ -123,7 +130,9 @@ def _check(args: argparse.Namespace) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tokenring.chaos.runner import load_scenario, run_scenario
     from tokenring.cli.output import check_json_target, check_option_output
+    from tokenring.contract import keys
 
     check_json_target(args.json, args.force)
     if args.logs:
@@ -146,6 +155,14 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_random(args: argparse.Namespace, kinds: list[str], progress: Any) -> int:
+    import tempfile
+    from pathlib import Path
+
+    from tokenring.chaos.nemesis import generate, scenario_document, shrink
+    from tokenring.chaos.runner import load_scenario, run_scenario
+    from tokenring.contract.protocol import default_protocol
+    from tokenring.errors import UsageError
+
     protocol = default_protocol()
     names = list(protocol.nodes)
     settle = 3.0
@@ -200,6 +217,9 @@ def _run_random(args: argparse.Namespace, kinds: list[str], progress: Any) -> in
 
 
 def _finish(args: argparse.Namespace, report: dict[str, Any]) -> int:
+    from tokenring.chaos.runner import format_report
+    from tokenring.cli.output import write_json
+
     if args.json != "-":
         sys.stdout.write(format_report(report))
     if args.json:

@@ -5,26 +5,23 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import zenoh
-
-from tokenring._util.tables import format_table
-from tokenring.cli.args import add_ring_options, positive_int, seconds, tap_session
-from tokenring.cli.output import print_json
-from tokenring.contract import keys
-from tokenring.contract.faults import KINDS, NEEDS_VALUE, parse_partition, parse_probability, validate
-from tokenring.contract.protocol import default_protocol, load_protocol
+from tokenring.cli.args import add_ring_options, positive_int, seconds
 from tokenring.errors import UsageError
-from tokenring.host.faults import FaultClient
-from tokenring.transport.session import discover, query
-from tokenring.transport.zenoh_config import unanswered_hint
+
+if TYPE_CHECKING:
+    import zenoh
+
+HELP = "inject a fault into a node of a running ring (crash, hang, delay, drop, ...)"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring.contract.faults import KINDS
+
     p = sub.add_parser(
         "fault",
-        help="inject a fault into a node of a running ring (crash, hang, delay, drop, ...)",
+        help=HELP,
         description="Inject a fault into one node of a running ring, through its control key "
         "tokenring/<ring>/ctl/<ID>/fault. Kinds: " + ", ".join(KINDS) + ". "
         "Examples: 'fault sonar crash', 'fault motor delay 5 --jitter 2', 'fault lcd drop 0.1', "
@@ -45,6 +42,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def live_nodes(session: zenoh.Session, ring: str, timeout: float) -> dict[int, str]:
     """ID → name of every live node of the ring — also a hung one that answers nothing but
     still holds its liveliness token (it must stay reachable for ``resume``)."""
+    from tokenring.contract import keys
+    from tokenring.contract.protocol import default_protocol
+    from tokenring.transport.session import discover, query
+
     expected = discover(session, ring, timeout=timeout + 3.0)
     found: dict[int, str] = {}
     deadline = time.monotonic() + timeout
@@ -75,6 +76,8 @@ def resolver(nodes: dict[int, str], which: str = "live") -> Any:
 
 
 def build_request(args: argparse.Namespace, resolve) -> dict[str, Any]:
+    from tokenring.contract.faults import NEEDS_VALUE, parse_partition, parse_probability, validate
+
     kind = args.kind
     if kind in NEEDS_VALUE and args.value is None:
         raise UsageError(f"{kind} needs a value: {kind} {NEEDS_VALUE[kind]}")
@@ -99,6 +102,13 @@ def build_request(args: argparse.Namespace, resolve) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tokenring.cli.args import tap_session
+    from tokenring.cli.output import print_json
+    from tokenring.contract import keys
+    from tokenring.contract.protocol import default_protocol, load_protocol
+    from tokenring.host.faults import FaultClient
+    from tokenring.transport.zenoh_config import unanswered_hint
+
     ring = keys.check_ring_name(args.ring)
     if not args.list and (args.node is None or args.kind is None):
         raise UsageError("give a node and a fault kind (e.g. 'fault sonar crash'), or --list")
@@ -136,6 +146,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def show_list(session: zenoh.Session, ring: str, nodes: dict[int, str], args: argparse.Namespace) -> int:
+    from tokenring._util.tables import format_table
+    from tokenring.cli.output import print_json
+    from tokenring.contract import keys
+    from tokenring.transport.session import query
+
     rows = []
     listing = []
     for node_id, name in sorted(nodes.items()):

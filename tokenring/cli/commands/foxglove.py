@@ -12,6 +12,8 @@ import argparse
 
 from tokenring.cli.args import int_within, seconds
 
+HELP = "serve a running ring to Foxglove over WebSocket (connect Foxglove to the printed ws://)"
+
 EXAMPLES = """examples:
   tokenring foxglove                          # ws://127.0.0.1:8765 for the default ring
   tokenring foxglove --ring lab -e tcp/10.0.0.5:7447 --port 9000
@@ -23,18 +25,18 @@ EXAMPLES = """examples:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring.cli.args import add_json_option, add_ring_options, with_examples
-    from tokenring.observe.foxglove import DEFAULT_PORT
+    from tokenring.observe.defaults import FOXGLOVE_PORT
 
     p = sub.add_parser(
         "foxglove",
-        help="serve a running ring to Foxglove over WebSocket (connect Foxglove to the printed ws://)",
+        help=HELP,
         description=__doc__,
         **with_examples(EXAMPLES),
     )
     p.add_argument(
         "--port",
         type=int_within(0, 65535),
-        default=DEFAULT_PORT,
+        default=FOXGLOVE_PORT,
         help="TCP port to serve on (default %(default)s, Foxglove's; 0: any free port)",
     )
     p.add_argument(
@@ -46,8 +48,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tokenring.cli.commands.watch import Watch, serve
     from tokenring.cli.output import print_json
+    from tokenring.cli.watcher import Watch, serve
     from tokenring.contract import keys
 
     def announce(watch: Watch) -> None:

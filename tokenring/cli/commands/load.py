@@ -17,9 +17,10 @@ Exit 0 when everything worked, 1 when a node failed (named with the reason), 2 o
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from tokenring.errors import UsageError
+
+HELP = "download programs over the ring (LOAD.EXE): -i, -a, -s FILE, --start, --stop"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -27,7 +28,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "load",
-        help="download programs over the ring (LOAD.EXE): -i, -a, -s FILE, --start, --stop",
+        help=HELP,
         description="Scan the ring through main's PC link (name, ID, time stamp of every node), "
         "download programs through the token with a progress bar, start or stop them (and what "
         "an installed application adds, e.g. the robot's map upload -u).",
@@ -74,6 +75,8 @@ def _node_arg(value: bool | str, option: str) -> bool | str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
     from tokenring import extensions
     from tokenring.cli.args import tap_session
     from tokenring.cli.output import print_json

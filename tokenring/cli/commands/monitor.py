@@ -12,16 +12,13 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import sys
 import time
 from typing import Any
 
-from tokenring._util.tables import format_table
-from tokenring.cli.args import add_ring_options, positive_int, seconds, tap_session
-from tokenring.contract import keys
-from tokenring.host.regeneration import format_rates, ring_rates
-from tokenring.transport.session import discover, query
+from tokenring.cli.args import add_ring_options, positive_int, seconds
+
+HELP = "live terminal view of a running ring"
 
 COUNTERS = (
     ("reconfigurations", "reconf"),
@@ -35,7 +32,7 @@ COUNTERS = (
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("monitor", help="live terminal view of a running ring", description=__doc__)
+    p = sub.add_parser("monitor", help=HELP, description=__doc__)
     p.add_argument("--interval", type=seconds, default=0.5, help="seconds between refreshes")
     p.add_argument("--once", action="store_true", help="print one snapshot and exit")
     p.add_argument("--count", type=positive_int, help="stop after this many refreshes")
@@ -44,6 +41,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def snapshot(session: Any, ring: str) -> dict[str, Any]:
+    from tokenring.contract import keys
+    from tokenring.host.regeneration import ring_rates
+    from tokenring.transport.session import query
+
     nodes = {}
     for _, reply in query(session, keys.control(ring, "*", "stats"), timeout=1.0):
         if reply.get("ok"):
@@ -96,6 +97,8 @@ def diff_events(previous: dict[str, Any] | None, current: dict[str, Any]) -> lis
 
 def header_lines(ring: str, snap: dict[str, Any]) -> list[str]:
     """The view's head: who answers, the round trip, the successor chain, regeneration rates."""
+    from tokenring.host.regeneration import format_rates, ring_rates
+
     nodes = snap["nodes"]
     lines = [
         f"tokenring monitor - ring {ring!r} - {time.strftime('%H:%M:%S')} - {len(nodes)} nodes answering"
@@ -163,6 +166,8 @@ def event_stamp(t: float) -> str:
 
 def render(ring: str, snap: dict[str, Any], events: list[tuple[float, str]]) -> str:
     """The view as plain text (a pipe, a file, ``--once``)."""
+    from tokenring._util.tables import format_table
+
     lines = header_lines(ring, snap)
     lines.append(format_table(table_rows(snap), HEADERS))
     lines.append("")
@@ -190,6 +195,8 @@ def render_rich(ring: str, snap: dict[str, Any], events: list[tuple[float, str]]
     from rich.console import Group
     from rich.table import Table
     from rich.text import Text
+
+    from tokenring.host.regeneration import ring_rates
 
     head = header_lines(ring, snap)
     parts: list[Any] = [Text(head[0], style="bold")]
@@ -223,6 +230,12 @@ def render_rich(ring: str, snap: dict[str, Any], events: list[tuple[float, str]]
 
 
 def run(args: argparse.Namespace) -> int:
+    import json
+
+    from tokenring.cli.args import tap_session
+    from tokenring.contract import keys
+    from tokenring.transport.session import discover
+
     ring = keys.check_ring_name(args.ring)
     events: list[tuple[float, str]] = []
     previous = None

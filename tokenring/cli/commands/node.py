@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import argparse
 
+HELP = "run one node (what `up` starts per module)"
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring.cli.args import add_ring_options
 
     p = sub.add_parser(
         "node",
-        help="run one node (what `up` starts per module)",
+        help=HELP,
         description="Run one node of the ring in this process until SIGINT/SIGTERM.",
     )
     add_node_arguments(p)

@@ -21,6 +21,8 @@ import time
 
 from tokenring.cli.args import add_ring_options, non_negative_seconds, seconds, with_examples
 
+HELP = "replay an MCAP recording onto Zenoh, in time, as if the ring were live"
+
 EXAMPLES = """examples:
   tokenring play run.mcap --listen tcp/127.0.0.1:7447     # then: tokenring sniff --ring <recorded>
   tokenring play run.mcap --rate 4 --start 20 --duration 10
@@ -43,7 +45,7 @@ def rate(text: str) -> float:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "play",
-        help="replay an MCAP recording onto Zenoh, in time, as if the ring were live",
+        help=HELP,
         description=__doc__,
         **with_examples(EXAMPLES),
     )

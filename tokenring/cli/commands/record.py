@@ -12,6 +12,8 @@ import sys
 
 from tokenring.cli.args import add_ring_options, seconds, with_examples
 
+HELP = "record a running ring to an MCAP file (Foxglove, PlotJuggler, tokenring play)"
+
 EXAMPLES = """examples:
   tokenring record run.mcap                          # until Ctrl-C
   tokenring record run.mcap --duration 60 --force    # one minute, replacing run.mcap
@@ -26,7 +28,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "record",
-        help="record a running ring to an MCAP file (Foxglove, PlotJuggler, tokenring play)",
+        help=HELP,
         description=__doc__,
         **with_examples(EXAMPLES),
     )
@@ -39,8 +41,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tokenring.cli.commands.watch import Watch, record_progress, recording_summary, serve
     from tokenring.cli.output import print_json
+    from tokenring.cli.watcher import Watch, record_progress, recording_summary, serve
     from tokenring.contract import keys
 
     ring = keys.check_ring_name(args.ring)

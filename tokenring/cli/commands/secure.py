@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
+
+HELP = "TLS certificates and access rules for a ring only its operator controls"
 
 EXAMPLES = """\
 examples:
@@ -33,7 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "secure",
-        help="TLS certificates and access rules for a ring only its operator controls",
+        help=HELP,
         description=(
             "Create a deployment's own certificate authority and one Zenoh config per role: "
             "node (the ring's processes), operator (may download programs, inject faults, stop "
@@ -63,6 +64,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
     from tokenring.cli.output import print_json
     from tokenring.host.secure import DEFAULT_HOSTS, create_deployment
 

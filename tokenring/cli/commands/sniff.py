@@ -5,21 +5,17 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import sys
 import time
-import uuid
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import zenoh
-
-from tokenring.cli.args import add_ring_options, node_id, positive_int, seconds, tap_session, with_examples
-from tokenring.cli.output import check_option_output
-from tokenring.contract import keys
-from tokenring.contract.protocol import Protocol, load_protocol
+from tokenring.cli.args import add_ring_options, node_id, positive_int, seconds, with_examples
 from tokenring.errors import TransportError, UsageError
-from tokenring.observe.feed import RawSample
-from tokenring.observe.sniff import decode_frame, format_line
+
+if TYPE_CHECKING:
+    from tokenring.contract.protocol import Protocol
+
+HELP = "decode every frame on the wire (read-only), or of an MCAP recording"
 
 EXAMPLES = """examples:
   tokenring sniff --channels motor.data,sonar.data
@@ -32,7 +28,7 @@ EXAMPLES = """examples:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "sniff",
-        help="decode every frame on the wire (read-only), or of an MCAP recording",
+        help=HELP,
         description="Decode every token frame of a running ring with protocol.yaml; --write also "
         "captures them to an MCAP file (raw and decoded), --read decodes such a file offline "
         "(like candump -l and cantools decode).",
@@ -67,6 +63,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import json
+    import uuid
+
+    import zenoh
+
+    from tokenring.cli.args import tap_session
+    from tokenring.cli.output import check_option_output
+    from tokenring.contract import keys
+    from tokenring.contract.protocol import load_protocol
+    from tokenring.observe.feed import RawSample
+    from tokenring.observe.sniff import decode_frame, format_line
+
     if args.read:
         return read_file(args)
     if args.write:
@@ -185,10 +193,13 @@ def open_capture(args: argparse.Namespace, protocol: Protocol, ring: str) -> Cap
 
 def read_file(args: argparse.Namespace) -> int:
     """``--read``: the recording's frames decoded as live, in log-time order (``t`` = log time)."""
+    import json
     import os
 
-    from tokenring.contract.protocol import parse_protocol
+    from tokenring.contract import keys
+    from tokenring.contract.protocol import load_protocol, parse_protocol
     from tokenring.observe.recording import iter_raw, open_recording
+    from tokenring.observe.sniff import decode_frame, format_line
 
     recording = open_recording(args.read)
     if args.protocol is None and not os.environ.get("TOKENRING_PROTOCOL") and recording.protocol_text:

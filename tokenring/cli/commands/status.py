@@ -7,11 +7,13 @@ import sys
 
 from tokenring.cli.args import seconds
 
+HELP = "membership and counters of a running ring"
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring.cli.args import add_json_option, add_ring_options
 
-    p = sub.add_parser("status", help="membership and counters of a running ring")
+    p = sub.add_parser("status", help=HELP)
     p.add_argument("--timeout", type=seconds, default=2.0, help="seconds to wait for answers")
     add_json_option(p)
     add_ring_options(p, listen=False)

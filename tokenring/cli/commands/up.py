@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import TYPE_CHECKING
 
-from tokenring import extensions
 from tokenring.cli.args import int_within, seconds
 from tokenring.errors import UsageError
 
@@ -21,15 +19,21 @@ EXAMPLES = """examples:
 """
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
+    from tokenring.extensions import UpPlan
     from tokenring.host.launcher import Launcher, ServicePlan
+
+HELP = "launch the whole ring (every node its own process)"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring import extensions  # the extensions' own options (the robot's world, missions)
     from tokenring.cli.args import add_ring_options, with_examples
 
     p = sub.add_parser(
         "up",
-        help="launch the whole ring (every node its own process)",
+        help=HELP,
         description="Launch every node of protocol.yaml as its own OS process on one Zenoh network "
         "and supervise them until Ctrl-C, SIGTERM or --duration.",
         **with_examples(EXAMPLES),
@@ -129,6 +133,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from tokenring import extensions
     from tokenring.contract.protocol import load_protocol
     from tokenring.contract.ring import format_bitrate, parse_bitrate
     from tokenring.host.launcher import (
@@ -263,7 +270,7 @@ def boot_load(
         launcher.booting = False
 
 
-def say_waiting(launcher: Launcher, plans_up: list[extensions.UpPlan]) -> None:
+def say_waiting(launcher: Launcher, plans_up: list[UpPlan]) -> None:
     """``--no-start``: the programs are loaded and wait; say how to start them."""
     command = " ".join(["tokenring", "load", *launcher.tool_options(), "--start"])
     launcher.say(f"--no-start: the programs wait for ARCNET_START_SYSTEM; start them with: {command}")

@@ -10,19 +10,14 @@ cores the ring's nodes need; ``tokenring up --web --record F --foxglove`` starts
 from __future__ import annotations
 
 import argparse
-import asyncio
-import signal
-import sys
-import time
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from tokenring.cli.args import int_within, seconds
 
 if TYPE_CHECKING:
-    from tokenring.observe.foxglove import FoxgloveBridge
-    from tokenring.observe.recording import McapRecorder, Stopper
+    from tokenring.cli.watcher import Watch
+
+HELP = "web view, MCAP recording and Foxglove bridge of a running ring, in one process"
 
 EXAMPLES = """examples:
   tokenring watch --web --record run.mcap --foxglove   # all three, one process
@@ -36,11 +31,11 @@ WEB_PORT = 8080
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring.cli.args import add_json_option, add_ring_options, with_examples
-    from tokenring.observe.foxglove import DEFAULT_PORT as FOXGLOVE_PORT
+    from tokenring.observe.defaults import FOXGLOVE_PORT
 
     p = sub.add_parser(
         "watch",
-        help="web view, MCAP recording and Foxglove bridge of a running ring, in one process",
+        help=HELP,
         description=__doc__,
         **with_examples(EXAMPLES),
     )
@@ -88,213 +83,9 @@ def add_record_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-@dataclass
-class Watch:
-    """What one watcher serves and records; filled in as it starts (URLs) and runs (sinks)."""
-
-    ring: str
-    web_port: int | None = None  # None: no web view
-    record: str | None = None
-    foxglove_port: int | None = None
-    host: str = "127.0.0.1"
-    duration: float | None = None
-    ready_token: str | None = None
-    topics: str | None = None
-    compression: str = "zstd"
-    #: what runs while it serves (the recorder's progress line), every half second
-    on_tick: Callable[[Watch, float], None] | None = None
-    #: called once everything serves and records
-    on_ready: Callable[[Watch], None] | None = None
-    web_url: str | None = None
-    foxglove_url: str | None = None
-    recorder: McapRecorder | None = None
-    bridge: FoxgloveBridge | None = None
-    dropped: int = 0
-    elapsed: float = 0.0
-    stopper: Stopper | None = None
-    #: the options that name the recording and the ports, in messages about them
-    record_option: str = "--record"
-    web_port_option: str = "--web-port"
-    foxglove_port_option: str = "--foxglove-port"
-
-
-def serve(args: argparse.Namespace, watch: Watch) -> int:
-    """Run ``watch`` on a ring until Ctrl-C, SIGTERM or its duration; 130 after Ctrl-C, else 0.
-
-    Everything that can be refused (the output file, a port in use) is refused before the
-    process joins the ring; the recording is finalised before the feed stops."""
-    from tokenring import extensions
-    from tokenring.cli.args import tap_session
-    from tokenring.cli.output import check_option_output
-    from tokenring.contract import keys
-    from tokenring.contract.protocol import load_protocol
-    from tokenring.errors import UsageError
-    from tokenring.observe.feed import Feed, feed_sources
-    from tokenring.observe.recording import McapRecorder, Selection, Stopper
-
-    if watch.web_port is None and watch.record is None and watch.foxglove_port is None:
-        raise UsageError("give at least one of --web, --record FILE.mcap, --foxglove")
-    if not watch.host.strip():
-        raise UsageError("--host: give an address to serve on, e.g. 127.0.0.1")
-    if watch.record is not None:
-        check_option_output(watch.record_option, watch.record, force=getattr(args, "force", False))
-    selection = Selection.parse(watch.topics)
-    protocol = load_protocol(args.protocol)
-    sources = feed_sources(protocol, watch.ring)
-    if watch.foxglove_port is not None:
-        from tokenring.observe.foxglove import FoxgloveBridge
-
-        topics = Feed(None, watch.ring, sources).topics()
-        # the server first: a port in use is refused before anything joins the ring
-        watch.bridge = FoxgloveBridge(
-            topics,
-            host=watch.host,
-            port=watch.foxglove_port,
-            name=f"tokenring {watch.ring}",
-            port_option=watch.foxglove_port_option,
-        )
-        host = f"[{watch.host}]" if ":" in watch.host else watch.host
-        watch.foxglove_url = f"ws://{host}:{watch.bridge.port}"
-    watch.stopper = stopper = Stopper()
-    stopper.install()
-    started = time.monotonic()
-    try:
-        with tap_session(args) as session:
-            feed = Feed(session, watch.ring, sources)
-            if watch.record is not None:
-                watch.recorder = McapRecorder(
-                    watch.record,
-                    ring=watch.ring,
-                    topics=feed.topics(),
-                    protocol_text=protocol_text(args.protocol),
-                    selection=selection,
-                    compression=watch.compression,
-                )
-                feed.add_sink(watch.recorder.on_message)
-                feed.add_raw_sink(watch.recorder.on_raw)
-            if watch.bridge is not None:
-                feed.add_sink(watch.bridge)
-            view = None
-            if watch.web_port is not None:
-                from tokenring.web.server import WebView
-
-                view = WebView(
-                    session,
-                    watch.ring,
-                    protocol,
-                    sources,
-                    panels=extensions.web_panels(),
-                    actions=extensions.web_actions(),
-                    feed=feed,
-                )
-            token = None
-            served = False
-
-            def ready() -> None:
-                nonlocal token, served
-                served = True
-                if watch.ready_token:
-                    token = session.liveliness().declare_token(
-                        keys.watch_ready(watch.ring, watch.ready_token)
-                    )
-                if watch.on_ready is not None:
-                    watch.on_ready(watch)
-                sys.stdout.flush()
-
-            def tick() -> bool:
-                """Every half second: flush the recording, report; True once it is time to stop."""
-                elapsed = time.monotonic() - started
-                if watch.recorder is not None:
-                    watch.recorder.tick()
-                if watch.on_tick is not None:
-                    watch.on_tick(watch, elapsed)
-                return stopper.event.is_set() or (watch.duration is not None and elapsed >= watch.duration)
-
-            try:
-                feed.start()
-                if view is None:
-                    ready()
-                    while not stopper.event.wait(0.5):
-                        if tick():
-                            break
-                else:
-                    asyncio.run(_serve_web(view, watch, ready, tick))
-            finally:
-                if watch.recorder is not None and not served:
-                    watch.recorder.discard()  # it never ran (a port in use): no file, FILE untouched
-                elif watch.recorder is not None:
-                    watch.recorder.close()  # the file first: a launcher stopping us waits only a moment
-                feed.stop()
-                watch.dropped = feed.dropped
-                if token is not None:
-                    token.undeclare()
-    finally:
-        if watch.bridge is not None:
-            watch.bridge.close()
-    watch.elapsed = time.monotonic() - started
-    return 130 if stopper.signal == signal.SIGINT else 0
-
-
-async def _serve_web(view: Any, watch: Watch, ready: Callable[[], None], tick: Callable[[], bool]) -> None:
-    stop = asyncio.Event()
-
-    def served(url: str) -> None:
-        watch.web_url = url
-        ready()
-
-    async def ticker() -> None:
-        while not tick():
-            await asyncio.sleep(0.5)
-        stop.set()
-
-    ticking = asyncio.create_task(ticker())
-    try:
-        await view.serve(watch.host, watch.web_port, served, stop, port_option=watch.web_port_option)
-    finally:
-        ticking.cancel()
-
-
-def protocol_text(path: str | None) -> str:
-    """protocol.yaml's text as the ring reads it (the file is checked by load_protocol first)."""
-    from pathlib import Path
-
-    from tokenring.contract.protocol import default_protocol_path
-
-    return Path(path or default_protocol_path()).read_text(encoding="utf-8")
-
-
-def recording_summary(watch: Watch) -> dict[str, Any]:
-    """The recording's figures once it is closed (file, frames, messages, channels, bytes)."""
-    recorder = watch.recorder
-    assert recorder is not None
-    frames = sum(n for k, n in recorder.counts.items() if "/token/" in k)
-    return {
-        "file": str(recorder.path),
-        "ring": watch.ring,
-        "seconds": round(watch.elapsed, 3),
-        "messages": recorder.messages,
-        "frames": frames,
-        "bytes": recorder.path.stat().st_size,
-        "dropped": watch.dropped,
-        "counts": dict(sorted(recorder.counts.items())),
-    }
-
-
-def record_progress(watch: Watch, elapsed: float) -> None:
-    """The recording's one-line progress on a terminal's stderr."""
-    recorder = watch.recorder
-    if recorder is None:
-        return
-    frames = sum(n for k, n in recorder.counts.items() if "/token/" in k)
-    sys.stderr.write(
-        f"\r{elapsed:6.1f} s  {frames} frames  {recorder.messages} messages "
-        f"on {len(recorder.counts)} channels  {recorder.raw_bytes / 1e6:.1f} MB raw "
-    )
-    sys.stderr.flush()
-
-
 def run(args: argparse.Namespace) -> int:
     from tokenring.cli.output import print_json
+    from tokenring.cli.watcher import Watch, serve
     from tokenring.contract import keys
 
     def announce(watch: Watch) -> None:
@@ -336,6 +127,8 @@ def run(args: argparse.Namespace) -> int:
 
 def report(watch: Watch) -> None:
     """One line per part of a stopped watcher: what it recorded and sent."""
+    from tokenring.cli.watcher import recording_summary
+
     if watch.recorder is not None:
         s = recording_summary(watch)
         print(

@@ -12,6 +12,8 @@ import argparse
 
 from tokenring.cli.args import int_within
 
+HELP = "live web view of a running ring (open the printed address in a browser)"
+
 EXAMPLES = """examples:
   tokenring web                               # http://127.0.0.1:8080/ for the default ring
   tokenring web --ring lab -e tcp/10.0.0.5:7447 --port 9000
@@ -28,7 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "web",
-        help="live web view of a running ring (open the printed address in a browser)",
+        help=HELP,
         description=__doc__,
         **with_examples(EXAMPLES),
     )
@@ -46,8 +48,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tokenring.cli.commands.watch import Watch, serve
     from tokenring.cli.output import print_json
+    from tokenring.cli.watcher import Watch, serve
     from tokenring.contract import keys
 
     def announce(watch: Watch) -> None:
