@@ -404,9 +404,12 @@ class Program(UserProgram):
 
     def _flush_copro(self, timeout: float) -> None:
         """FLUSH copro and wait until the vectors it still held are in the map's hands (its
-        ``flushes_done`` moves on): a GET_MAP sent at once would overtake them."""
+        ``flushes_done`` moves on): a GET_MAP sent at once would overtake them. A FLUSH that
+        copro does not acknowledge (no copro on the ring) is not waited for."""
         before = self.copro.read()["flushes_done"]
-        self._send("copro", "FLUSH")
+        if not self.os.deliver("copro", "FLUSH", timeout=3.0):
+            log.warning("copro did not take FLUSH: asking the map without it")
+            return
         deadline = time.monotonic() + timeout
         while self.copro.read()["flushes_done"] == before:
             if time.monotonic() > deadline or self.os.stopping:

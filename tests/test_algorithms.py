@@ -3,8 +3,11 @@ program reads from its environment, and ``up``'s refusals and implied seed pace.
 
 from __future__ import annotations
 
+import threading
+
 import pytest
 from conftest import run_tokenring
+from ringutil import tap, wait_until
 
 from modules.variants import (
     ENV,
@@ -15,6 +18,7 @@ from modules.variants import (
     parse_algorithms,
 )
 from tokenring.errors import UsageError
+from tokenring.host.pclink import PcLink
 
 
 def test_the_grammar_sets_every_part_then_overrides_later_items():
@@ -76,17 +80,31 @@ def test_the_seed_robot_runs_at_the_seeds_pace_unless_a_bitrate_is_given(extra, 
     assert ("profile arcnet" in starting) == profile, starting
 
 
-def test_up_runs_the_seed_robot_exploring_and_draws_its_map(ring_name, endpoint, tmp_path):
+def test_up_runs_the_seed_robot_exploring_and_draws_its_map(procs, ring_name, endpoint, tmp_path):
     """The issue's own command: ``up --algorithms seed --explore 2 --map-out m.png`` runs the seed's
     robot (its Explore 2 begins with the calibration turn) and leaves the map as a PNG."""
     png = tmp_path / "m.png"
-    out = run_tokenring(
+    launcher = procs.tokenring(
         "up", "--ring", ring_name, "--listen", endpoint, "--algorithms", "seed", "--explore", "2",
-        "--map-out", str(png), "--speed", "10", "--bitrate", "max", "--duration", "45",
-        timeout=240,
-    )  # fmt: skip
-    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
-    text = out.stdout + out.stderr
+        "--map-out", str(png), "--speed", "10", "--bitrate", "max", "--duration", "400",
+    )  # fmt: skip  # --duration: a hang guard; exploring is stopped below, as its end would
+    lines: list[str] = []
+
+    def read() -> None:
+        assert launcher.stdout is not None
+        for line in launcher.stdout:
+            lines.append(line)
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    # once the calibration turn has begun, Stop ends Explore 2: the mission then fetches the map,
+    # writes the PNG and stops the ring, as when --duration runs out
+    wait_until(lambda: "calibrate 360" in "".join(lines), 240, "the calibration turn")
+    with tap(endpoint) as session:
+        PcLink(session, ring_name, timeout=10).request("stop")
+    assert launcher.wait(120) == 0, "".join(lines)[-3000:]
+    reader.join(10)
+    text = "".join(lines)
     assert "navigator SeedCalibrated started" in text and "calibrate 360" in text, text[-3000:]
     assert "body seed" in text, text[-3000:]  # the world built the 2001 body (side pairs 10 cm apart)
     assert png.read_bytes().startswith(b"\x89PNG")

@@ -6,17 +6,29 @@ import json
 import math
 
 import pytest
+from ringutil import launcher_pids, tap, wait_ring, wait_until
 
 from modules.description import load_world
 from modules.pc.mapscore import score_map
+from tokenring.host.pclink import PcLink
 
 
 def test_up_explores_with_explore_2_and_writes_the_scored_map(procs, ring_name, endpoint, tmp_path):
     out = tmp_path / "map.json"
     launcher = procs.tokenring(
         "up", "--ring", ring_name, "--listen", endpoint, "--world", "empty", "--speed", "20",
-        "--bitrate", "max", "--explore", "2", "--duration", "45", "--map-out", str(out),
-    )  # fmt: skip
+        "--bitrate", "max", "--explore", "2", "--duration", "400", "--map-out", str(out),
+    )  # fmt: skip  # --duration: a hang guard; exploring is stopped once the map holds vectors
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10, 20, 30, 40, 50, 60, 70, 80], timeout=120)
+        procs.watch(launcher_pids(session, ring_name))
+        # Explore 2 runs (past the compass's calibration) until the map module holds a few
+        # vectors; Stop then ends it as --duration's end would: the mission fetches the map,
+        # scores it, writes it and stops the ring
+        link = PcLink(session, ring_name, timeout=10)
+        wait_until(lambda: link.request("state")["mode"] == 2, 120, "Explore 2 running (calibrated)")
+        wait_until(lambda: link.read("map.data")["vector_count"] >= 4, 240, "4 vectors in map.data", 0.5)
+        link.request("stop")
     output, _ = launcher.communicate(timeout=120)
     assert launcher.returncode == 0, output[-3000:]
     assert "Explore 2 started" in output

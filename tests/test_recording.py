@@ -73,16 +73,48 @@ def without_time(line: str) -> dict[str, Any]:
     return record
 
 
+def enough_recorded(part: Path, ring: str, after_ns: int) -> bool:
+    """True once a recording's part file holds more than the run's judgement below needs: frames,
+    round trips and poses, every node's data channel, polls naming all eight nodes (most of
+    those made while frames flowed), and frames from after ``after_ns`` (the map fetched then)."""
+    counts: dict[str, int] = {}
+    frames: list[int] = []
+    polls: list[tuple[int, int]] = []  # (time, nodes named)
+    with open(part, "rb") as stream:
+        try:
+            for _, channel, message in NonSeekingReader(stream).iter_messages(log_time_order=False):
+                topic = channel.topic
+                counts[topic] = counts.get(topic, 0) + 1
+                if topic == "/ring/frame":
+                    frames.append(message.log_time)
+                elif topic == "/ring/nodes":
+                    polls.append((message.log_time, len(json.loads(message.data)["nodes"])))
+        except Exception:
+            pass  # the torn tail, still being written
+    raw = sum(n for topic, n in counts.items() if f"tokenring/{ring}/token/" in topic)
+    if not frames or frames[-1] <= after_ns or raw < 1500:
+        return False
+    polled = [n for t, n in polls if frames[0] <= t <= frames[-1]]
+    whole = sum(n == len(NODES) for n in polled)
+    return (
+        whole >= 15
+        and whole >= 0.6 * len(polled)
+        and counts.get("/ring/roundtrip", 0) > 20
+        and min(counts.get("/robot/pose/true", 0), counts.get("/robot/pose/odometry", 0)) > 20
+        and all(counts.get(f"/channel/{node}.data", 0) >= 1 for node in NODES)
+    )
+
+
 @pytest.mark.timeout(420)
 def test_up_record_holds_the_run_and_play_gives_sniff_the_same_frames(procs, ring_name, endpoint, tmp_path):
-    """An exploring robot recorded by ``up --record`` for 60 s at speed 5: schemas, counts, the
+    """An exploring robot recorded by ``up --record`` at speed 5: schemas, counts, the
     map as ``tokenring map`` fetched it; then played into a fresh endpoint, ``sniff --json`` sees
     exactly the frames ``sniff --read`` decodes from the file."""
     recording = tmp_path / "run.mcap"
     launcher = procs.tokenring(
-        "up", "--ring", ring_name, "--listen", endpoint, "--duration", "60", "--explore", "2",
+        "up", "--ring", ring_name, "--listen", endpoint, "--duration", "600", "--explore", "2",
         "--speed", "5", "--record", str(recording),
-    )  # fmt: skip
+    )  # fmt: skip  # --duration: a hang guard (the run ends when exploring is stopped, below)
     vectors = [(100 + 10 * i, -50 * i, 300 + 10 * i, 70) for i in range(5)]  # cm on the wire
     with tap(endpoint) as session:
         wait_ring(session, ring_name, [10, 20, 30, 40, 50, 60, 70, 80], timeout=120)
@@ -91,11 +123,20 @@ def test_up_record_holds_the_run_and_play_gives_sniff_the_same_frames(procs, rin
         for x1, y1, x2, y2 in vectors:  # vectors the map certainly holds, beside exploring's
             assert link.command("map", "VECTOR", x1=x1, y1=y1, x2=x2, y2=y2)["acknowledged"]
         wait_until(lambda: link.read("map.data")["vector_count"] >= 5, 30, "5 vectors in map.data")
-    fetched = run_tokenring(
-        "map", "--out", str(tmp_path / "m.json"), "--ring", ring_name, "-e", endpoint, timeout=120
-    )
-    assert fetched.returncode == 0, fetched.stdout + fetched.stderr
-    fetched_at = time.time_ns()
+        fetched = run_tokenring(
+            "map", "--out", str(tmp_path / "m.json"), "--ring", ring_name, "-e", endpoint, timeout=120
+        )
+        assert fetched.returncode == 0, fetched.stdout + fetched.stderr
+        fetched_at = time.time_ns()
+        # the robot explores until FILE.part (flushed every second) holds what is judged below,
+        # with some to spare; then exploring is stopped as --duration's end would, and the
+        # mission ends the run itself (exit 0, the recording finalised)
+        wait_until(lambda: link.request("state")["mode"] == 2, 120, "Explore 2 running (calibrated)")
+        part = Path(f"{recording}.part")
+        wait_until(
+            lambda: enough_recorded(part, ring_name, fetched_at), 240, "enough of the run in FILE.part", 2
+        )
+        link.request("stop")
     out, _ = launcher.communicate(timeout=180)
     assert launcher.returncode == 0, out[-3000:]
     assert recording.exists() and not Path(f"{recording}.part").exists(), out[-3000:]

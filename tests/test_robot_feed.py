@@ -25,6 +25,7 @@ from ringjudge import crc16_arc  # the judge's own CRC, not tokenring's
 from modules.pc.feed import LcdSource, RobotSource, WorldSource, robot_feed_sources, walls_messages
 from tests.ringutil import tap, wait_until
 from tokenring.contract.protocol import default_protocol_path, load_protocol
+from tokenring.host.pclink import PcLink
 from tokenring.observe.feed import Feed, Message, RawSample, feed_sources
 
 PROTOCOL_YAML = yaml.safe_load(Path(default_protocol_path()).read_text())
@@ -350,12 +351,33 @@ def _nearest(messages: list[Message], t: int) -> Message:
     return min(messages, key=lambda m: abs(m.time_ns - t))
 
 
+def explored_enough(messages: list[Message]) -> bool:
+    """The feed holds, with room to spare, what the test below judges of an exploring ring."""
+    seen: dict[str, int] = {}
+    contact = False
+    vectors = 0
+    for m in list(messages):
+        seen[m.topic] = seen.get(m.topic, 0) + 1
+        if m.topic == "/robot/sonar/beams":
+            contact = contact or any(m.data["contact"])
+        elif m.topic == "/channel/map.data":
+            vectors = m.data["vector_count"]
+    topics = ("/robot/sonar", "/robot/tf", "/robot/walls", "/robot/lcd", "/robot/navigator")
+    return (
+        contact
+        and vectors >= 1
+        and min(seen.get("/robot/pose/true", 0), seen.get("/robot/pose/odometry", 0)) > 60
+        and seen.get("/robot/pose/filtered", 0) not in range(1, 20)  # none (no EKF) or plenty
+        and all(seen.get(topic) for topic in topics)
+    )
+
+
 def test_a_feed_on_an_exploring_ring_sees_poses_sonar_and_the_map(procs, ring_name, endpoint, tmp_path):
     out = tmp_path / "map.json"
     launcher = procs.tokenring(
         "up", "--ring", ring_name, "--listen", endpoint, "--world", "office", "--speed", "20",
-        "--bitrate", "max", "--explore", "2", "--duration", "20", "--map-out", str(out),
-    )  # fmt: skip
+        "--bitrate", "max", "--explore", "2", "--duration", "400", "--map-out", str(out),
+    )  # fmt: skip  # --duration: a hang guard; exploring is stopped once the feed has seen enough
     protocol = load_protocol()
     session = None
     messages: list[Message] = []
@@ -364,6 +386,13 @@ def test_a_feed_on_an_exploring_ring_sees_poses_sonar_and_the_map(procs, ring_na
         feed = Feed(session, ring_name, feed_sources(protocol, ring_name))
         feed.add_sink(messages.append)
         with feed:
+            # Explore 2 runs (past the compass's calibration) until the feed has seen more than
+            # is judged below; Stop then ends it as --duration's end would: the mission fetches
+            # the map, writes it and stops the ring
+            link = PcLink(session, ring_name, timeout=10)
+            wait_until(lambda: explored_enough(messages), 240, "the feed to see the robot explore", 0.5)
+            wait_until(lambda: link.request("state")["mode"] == 2, 120, "Explore 2 running (calibrated)")
+            link.request("stop")
             output, _ = launcher.communicate(timeout=150)
         assert launcher.returncode == 0, output[-3000:]
         assert feed.dropped == 0

@@ -16,7 +16,10 @@ import stat
 import subprocess
 import sys
 import uuid
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import pytest
 from conftest import REPO, run_tokenring, wait_gone
@@ -105,6 +108,13 @@ def test_init_refuses_a_file_where_the_directory_should_be(tmp_path):
     assert target.read_text() == "not a directory"
 
 
+def together(**calls: Callable[[], Any]) -> dict[str, Any]:
+    """Each call's result by name, the calls made side by side (each in its own thread)."""
+    with ThreadPoolExecutor(max_workers=len(calls)) as pool:
+        futures = {name: pool.submit(call) for name, call in calls.items()}
+        return {name: future.result() for name, future in futures.items()}
+
+
 class Host:
     """Runs ``tokenring`` (or Python) on one namespace of :class:`Hosts`."""
 
@@ -171,24 +181,35 @@ def test_only_the_operator_downloads_injects_and_stops_observers_only_read(procs
         assert sniffed.returncode == 0, sniffed.stderr
         assert len(sniffed.stdout.splitlines()) == 5
 
-        # ... and nothing else: no download, no fault, no frame onto the ring (no stop: below)
-        assert b.tokenring("load", "--no-progress", "-s", str(program), config=observer).returncode != 0
-        refused = b.tokenring("fault", "motor", "delay", "5", "--timeout", "3", config=observer)
-        assert refused.returncode == 2 and "certificate lack the right" in refused.stderr
+        # ... and nothing else: no download, no fault, no frame onto the ring (no stop: below);
+        # strangers get nothing at all: not even the frames. Each attempt is its own process
+        # and each refusal mostly waits out a timeout, so they are made side by side; what they
+        # leave on the ring is judged once all have ended
+        plain = Host(hosts, hosts.b, ring, endpoint.replace("tls/", "tcp/"))  # plain TCP, TLS-only ring
         forge = [sys.executable, "-c", FORGE, endpoint, str(observer), ring]
-        assert subprocess.run(hosts.run(hosts.b, *forge), timeout=90, cwd=REPO).returncode == 0
+        attempts = together(
+            observer_load=lambda: b.tokenring("load", "--no-progress", "-s", str(program), config=observer),
+            observer_fault=lambda: b.tokenring("fault", "motor", "delay", "5", "--timeout", "3", config=observer),
+            observer_forge=lambda: subprocess.run(hosts.run(hosts.b, *forge), timeout=90, cwd=REPO),
+            plain_nodes=lambda: plain.nodes(None),
+            plain_sniff=lambda: plain.tokenring("sniff", "-n", "1", "--wait", "3"),
+            stranger_nodes=lambda: b.nodes(stranger),
+            stranger_sniff=lambda: b.tokenring("sniff", "-n", "1", "--wait", "3", config=stranger),
+            stranger_load=lambda: b.tokenring("load", "--no-progress", "-s", str(program), config=stranger),
+            stranger_fault=lambda: b.tokenring("fault", "motor", "delay", "5", "--timeout", "3", config=stranger),
+        )  # fmt: skip
+        assert attempts["observer_load"].returncode != 0
+        refused = attempts["observer_fault"]
+        assert refused.returncode == 2 and "certificate lack the right" in refused.stderr
+        assert attempts["observer_forge"].returncode == 0
+        assert attempts["plain_nodes"] == {}
+        assert attempts["plain_sniff"].returncode != 0
+        assert attempts["stranger_nodes"] == {}
+        for name in ("stranger_sniff", "stranger_load", "stranger_fault"):
+            assert attempts[name].returncode != 0, name
         seen = b.nodes(operator)
         assert seen[20]["program"] is None and b.faults(operator, 20) == {}
         assert seen[20]["stats"]["rejected_length"] == 0  # the forged frames never arrived
-
-        # strangers get nothing at all: not even the frames
-        plain = Host(hosts, hosts.b, ring, endpoint.replace("tls/", "tcp/"))  # plain TCP, TLS-only ring
-        assert plain.nodes(None) == {}
-        assert plain.tokenring("sniff", "-n", "1", "--wait", "3").returncode != 0
-        assert b.nodes(stranger) == {}
-        assert b.tokenring("sniff", "-n", "1", "--wait", "3", config=stranger).returncode != 0
-        assert b.tokenring("load", "--no-progress", "-s", str(program), config=stranger).returncode != 0
-        assert b.tokenring("fault", "motor", "delay", "5", "--timeout", "3", config=stranger).returncode != 0
 
         # the operator may do all of it
         loaded = b.tokenring("load", "--no-progress", "-s", str(program), config=operator)
@@ -205,8 +226,11 @@ def test_only_the_operator_downloads_injects_and_stops_observers_only_read(procs
         )
         assert seen[20]["stats"]["rejected_length"] >= 1  # the operator's forged frames arrived
         # an observer cannot stop it, nor a stranger
-        for config in (observer, stranger):
-            assert b.tokenring("load", "--stop", "motor", config=config).returncode != 0
+        stops = together(**{
+            name: (lambda config=config: b.tokenring("load", "--stop", "motor", config=config))
+            for name, config in (("observer", observer), ("stranger", stranger))
+        })  # fmt: skip
+        assert all(done.returncode != 0 for done in stops.values()), stops
         assert b.nodes(operator)[20]["program"] == "Program"
         assert b.tokenring("fault", "motor", "clear", config=operator).returncode == 0
         assert b.tokenring("load", "--stop", "motor", config=operator).returncode == 0
