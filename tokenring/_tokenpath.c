@@ -6,7 +6,7 @@
  * _accepted_crc, _last_sent_time, ...), so the watchdog, the acks and the user API read and
  * write them as before. The common visit (checks, copy, counter, seal, put) runs without
  * executing any Python code; every rare step calls the node's Python methods, exactly where
- * the Python path calls them. tests/test_tokenpath.py compares the two paths byte for byte.
+ * the Python path calls them. tests/ring/node/test_tokenpath.py compares the two paths byte for byte.
  *
  * Why C: a visit runs in a process whose caches the other nodes' visits have evicted, and the
  * interpreter's cost grows with every object and opcode it touches there (bench/RESULTS.md).

@@ -153,7 +153,7 @@ def parse_config(text: str, source: str) -> dict[str, Any]:
             f"{where}: not valid YAML: {one_line(getattr(exc, 'problem', None) or exc)}"
         ) from None
     if data is None:
-        data = {}  # an empty configuration is the defaults (tests/test_localizer_config.py)
+        data = {}  # an empty configuration is the defaults (tests/robot/localization/test_localizer_config.py)
     lines: dict[tuple[str, ...], int] = {}
     _collect_lines(node, (), lines)
     return validate(data, source, lines)

@@ -7,7 +7,7 @@ the same steps in Python. Both keep the ring's state in the same attributes, so 
 the acks and the user API (all Python) read and write it alike; everything rare (a stale
 epoch, an excluded sender, a leaving node, hooks, commands, a failed send) calls the same
 Python methods of the node from either. ``TOKENRING_NATIVE=0`` picks the Python path;
-``tests/test_tokenpath.py`` runs one scenario through both and compares every byte sent.
+``tests/ring/node/test_tokenpath.py`` runs one scenario through both and compares every byte sent.
 
 ``_on_frame`` is the receiving thread's entry: it visits at once, or hands the frame to the
 node's token thread while the visit may wait (see its docstring). The visit (``_visit_frame``;

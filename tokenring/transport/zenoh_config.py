@@ -19,7 +19,7 @@ from tokenring.errors import TransportError, UsageError
 #: it) for a process that handles one frame at a time: one worker thread receives and sends,
 #: instead of two receiving and a third sending, handing each frame to one another. Zenoh's
 #: housekeeping (net, acc, app) keeps its own threads: handed over to the same worker too, a
-#: node leaving the ring lost the token about once in 30 handovers (tests/test_ring_zenoh.py,
+#: node leaving the ring lost the token about once in 30 handovers (tests/ring/node/test_ring_zenoh.py,
 #: the late joiner), never in 80 with them apart. ``acc`` alone handed over makes a 64-node
 #: ring's hop faster but a late join then lost the token now and then, and a leave cost a
 #: regeneration (the token unseen after the leaver's session closed): a speed-up that trades a
@@ -32,7 +32,7 @@ NODE_RUNTIME = "(rx:(worker_threads:1),tx:(handover:rx))"
 #: whose queue has no free batch waits synchronously for the tx task that would free one, which
 #: needs that same worker: the router stalls until Zenoh closes that face (5 s). It did in the
 #: recovery benchmark on direct links: a query to all nodes, one of them SIGSTOPped, and the
-#: launcher's answer to SIGCONT never came (tests/test_host_runtime.py).
+#: launcher's answer to SIGCONT never came (tests/ring/transport/test_host_runtime.py).
 HOST_RUNTIME = "(rx:(worker_threads:1))"
 
 #: batches a session's send queue holds per priority (Zenoh: 2, allocated as they are needed).
