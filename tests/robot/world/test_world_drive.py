@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from tests.robot.world.test_world_ring import ROOM, programs
+from tests.support.hallway import ROOM, programs
 from tests.support.ringutil import launcher_pids, tap, wait_ring
 from tokenring.transport.session import free_port
 
