@@ -16,9 +16,9 @@ import pytest
 
 from bench import suite
 from bench.suite import bench_cli
-from tests.bench.test_bench_report import suite_run
 from tests.support.processes import REPO, wait_gone
 from tests.support.ringutil import processes, wait_until
+from tests.support.suite_records import suite_run
 from tokenring.transport import zenoh_config as zconfig
 
 
