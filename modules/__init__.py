@@ -7,8 +7,7 @@
   correction), ``mapping/`` (vector generation, the vector store, GET_MAP), ``navigation/``
   (navigators, pilot, action files, the compass's turn, frontiers), ``sensors/`` (sonar, compass,
   motor and charger arithmetic), ``display/`` (the LCD's screen, menus and boot menu), and
-  ``units.py`` (the wire's units), ``variants.py`` (seed or ours per module), ``placeholder.py``
-  (a stand-in program);
+  ``units.py`` (the wire's units), ``variants.py`` (seed or ours per module);
 * ``description/`` — what the programs and the world both read: the robot's geometry, rooms;
 * ``world/`` — the simulated hardware and rooms (never imported by a program);
 * ``pc/`` — the robot's PC-side verbs and their library (drive, explore, map, score, lcd, log,
