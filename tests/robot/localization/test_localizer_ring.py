@@ -24,7 +24,12 @@ from tokenring.transport.session import query
 def test_action_file_drive_with_the_localizer_on_copro(procs, ring_name, endpoint, tmp_path):
     logs = tmp_path / "logs"
     config = tmp_path / "localization.yaml"
-    config.write_text(yaml.safe_dump({"logs": {"directory": str(logs)}}))
+    compass_sigma_deg = 1.5
+    config.write_text(
+        yaml.safe_dump(
+            {"logs": {"directory": str(logs)}, "filter": {"compass": {"sigma_deg": compass_sigma_deg}}}
+        )
+    )
     launcher = procs.tokenring(
         "up", "--ring", ring_name, "--listen", endpoint, "--world", "square", "--speed", "10",
         "--bitrate", "max", "--duration", "400",
@@ -58,7 +63,10 @@ def test_action_file_drive_with_the_localizer_on_copro(procs, ring_name, endpoin
     k, o = summary["sources"]["K"], summary["sources"]["O"]
     assert k["end_error_mm"] < 50.0, summary
     assert k["end_error_mm"] < o["end_error_mm"], summary
-    assert abs(k["end_heading_error_deg"]) < 2.0, summary
+    # The filter estimates the compass's offset too, so it knows the heading about as well as the
+    # compass's stated accuracy lets it split the two: far better than dead reckoning, within 2σ.
+    assert abs(k["end_heading_error_deg"]) < abs(o["end_heading_error_deg"]) / 4, summary
+    assert abs(k["end_heading_error_deg"]) < 2 * compass_sigma_deg, summary
     moved = [
         r
         for r in log.records
