@@ -139,6 +139,22 @@ def tap_session(args: argparse.Namespace, block_close_s: float | None = None) ->
     return open_session(config)
 
 
+class ExamplesHelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """A verb's help: prose paragraphs wrapped to the terminal, as argparse's default does, but
+    the examples and any indented block (a table, a command line) kept as written."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        paragraphs = []
+        for paragraph in text.strip("\n").split("\n\n"):
+            lines = paragraph.splitlines()
+            if paragraph.startswith("examples:") or any(line[:1].isspace() for line in lines):
+                paragraphs.append("\n".join(indent + line for line in lines))
+            else:
+                paragraphs.append(argparse.HelpFormatter._fill_text(self, paragraph, width, indent))
+        return "\n\n".join(paragraphs)
+
+
 def with_examples(examples: str) -> dict[str, Any]:
-    """``add_parser`` keywords for a help that ends with ``examples`` as written."""
-    return {"epilog": examples, "formatter_class": argparse.RawDescriptionHelpFormatter}
+    """``add_parser`` keywords for a help that ends with ``examples`` as written (an
+    ``examples:`` line, then one indented ``tokenring ...`` command a line)."""
+    return {"epilog": examples, "formatter_class": ExamplesHelpFormatter}

@@ -7,12 +7,19 @@ import sys
 
 HELP = "plot a localisation data log (paths, errors, steps, heading, sonar, time module)"
 
+EXAMPLES = """examples:
+  tokenring analyze logs/drive.trlog                   # the summary: end-point error, RMSE
+  tokenring analyze logs/drive.trlog --out plots/      # and the PNGs
+  tokenring analyze logs/drive.trlog --salvage --json  # a damaged log, read around the damage
+"""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cli import add_json_option
+    from tokenring.cli import add_json_option, with_examples
 
     p = sub.add_parser(
         "analyze",
+        **with_examples(EXAMPLES),
         help=HELP,
         description="Write PNG plots of a data log like the seed's logfileanalyser — the paths of every "
         "position source against the truth, errors over time, step increments, heading, sonar distances "

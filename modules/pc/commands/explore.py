@@ -15,14 +15,22 @@ from tokenring.cli import seconds
 
 HELP = "start (1 = avoid, 2 = left wall) or stop the exploration"
 
+EXAMPLES = """examples:
+  tokenring explore 2 --wait                  # left-wall following, until it finishes
+  tokenring explore 1                         # avoid obstacles; returns at once
+  tokenring explore state --json              # the navigator's state
+  tokenring explore stop
+"""
+
 ACTIONS = ("1", "2", "stop", "calibrate", "state")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cli import add_json_option, add_ring_options
+    from tokenring.cli import add_json_option, add_ring_options, with_examples
 
     p = sub.add_parser(
         "explore",
+        **with_examples(EXAMPLES),
         help=HELP,
         description="Start Explore 1 (avoid) or Explore 2 (left-wall following), the calibration run, "
         "or stop — through main's PC link; 'state' prints the navigator's state.",

@@ -22,15 +22,22 @@ if TYPE_CHECKING:
 
 HELP = "show the LCD screen in the terminal and type on its keypad"
 
+EXAMPLES = """examples:
+  tokenring lcd                               # the live screen; the keyboard is the keypad
+  tokenring lcd --keys 2                      # the boot menu's Components, printed once
+  tokenring lcd --png screen.png --scale 6    # the screen as a picture
+"""
+
 KEYPAD = "0123456789ABCD*#"
 ARROWS = {"A": "2", "B": "8", "C": "6", "D": "4"}  # ESC [ A = up -> pan up (2) ...
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cli import add_ring_options
+    from tokenring.cli import add_ring_options, with_examples
 
     p = sub.add_parser(
         "lcd",
+        **with_examples(EXAMPLES),
         help=HELP,
         description="Open the robot's 128x64 LCD in the terminal (half-block pixels) and map the keyboard "
         "to its 4x4 keypad: 0-9 a-d * #, Esc = *, Enter = #, arrows pan, + - zoom, q quits.",

@@ -7,12 +7,35 @@ import sys
 
 HELP = "convert, sort or summarise a localisation data or error log"
 
+CONVERT_EXAMPLES = """examples:
+  tokenring log convert logs/drive.trlog > drive.txt                 # the seed's text, to stdout
+  tokenring log convert logs/drive.trlog --to seed --out drive.log   # appendix B's line formats
+  tokenring log convert logs/drive.trlog --to csv --out drive-csv/   # data.csv and sonar.csv
+  tokenring log convert logs/drive.trlog --to mcap --out drive.mcap  # for Foxglove, PlotJuggler
+"""
+SORT_EXAMPLES = """examples:
+  tokenring log sort logs/drive.trlog --out sorted.trlog
+  tokenring log sort logs/drive.trlog --out sorted.trlog --force    # replace an older sorted.trlog
+"""
+INFO_EXAMPLES = """examples:
+  tokenring log info logs/drive.trlog
+  tokenring log info logs/drive.trerr --json
+  tokenring log info logs/broken.trlog --salvage                    # count around damage inside
+"""
+EXAMPLES = """examples:
+  tokenring log convert logs/drive.trlog --to csv --out drive-csv/
+  tokenring log sort logs/drive.trlog --out sorted.trlog
+  tokenring log info logs/drive.trlog
+  tokenring log convert --help                                      # each verb's own examples
+"""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cli import add_json_option
+    from tokenring.cli import add_json_option, with_examples
 
     p = sub.add_parser(
         "log",
+        **with_examples(EXAMPLES),
         help=HELP,
         description="Data and error logs are msgpack streams (crash-safe, compact). 'convert' writes the "
         "seed's line-per-entry text (--to text; --to seed: exactly the seed's appendix B line "
@@ -22,7 +45,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "into a new file (the seed's logfilesorter); 'info' counts records per source and kind.",
     )
     verbs = p.add_subparsers(dest="log_verb", metavar="VERB", required=True)
-    convert = verbs.add_parser("convert", help="to the seed's text format or CSV")
+    convert = verbs.add_parser(
+        "convert", help="to the seed's text format or CSV", **with_examples(CONVERT_EXAMPLES)
+    )
     convert.add_argument("log", help="a data (.trlog) or error (.trerr) log")
     convert.add_argument(
         "--to",
@@ -37,11 +62,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "(required; Foxglove, PlotJuggler)",
     )
     convert.add_argument("--force", action="store_true", help="replace an existing output")
-    order = verbs.add_parser("sort", help="sort by time stamp into a new log")
+    order = verbs.add_parser("sort", help="sort by time stamp into a new log", **with_examples(SORT_EXAMPLES))
     order.add_argument("log")
     order.add_argument("--out", required=True, metavar="FILE", help="the sorted log (a new file)")
     order.add_argument("--force", action="store_true", help="replace an existing output (never the input)")
-    info = verbs.add_parser("info", help="header, time range, counts per source and kind, torn tail")
+    info = verbs.add_parser(
+        "info",
+        help="header, time range, counts per source and kind, torn tail",
+        **with_examples(INFO_EXAMPLES),
+    )
     info.add_argument("log")
     add_json_option(info)
     for verb in (convert, order, info):

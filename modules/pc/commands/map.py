@@ -16,12 +16,19 @@ from tokenring.cli import seconds
 
 HELP = "fetch the robot's vector map and write it as DXF, PNG or JSON"
 
+EXAMPLES = """examples:
+  tokenring map --out office.dxf                       # the map of the running robot
+  tokenring map --out office.png --world office        # drawn over the true room
+  tokenring map --from office.json --out office.dxf    # convert a saved map, no ring
+"""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cli import add_ring_options
+    from tokenring.cli import add_ring_options, with_examples
 
     p = sub.add_parser(
         "map",
+        **with_examples(EXAMPLES),
         help=HELP,
         description="Ask main for the map (GET_MAP to the map module) and write it; the format "
         "follows the extension of --out (.json, .dxf, .png).",

@@ -7,12 +7,19 @@ import sys
 
 HELP = "run the synchronisation and EKF again on a recorded data log (offline mode)"
 
+EXAMPLES = """examples:
+  tokenring replay logs/drive.trlog --out again.trlog --check      # bit for bit as online
+  tokenring replay logs/drive.trlog --out sync.trlog --from sync
+  tokenring replay logs/drive.trlog --out tuned.trlog --config config/localization.yaml
+"""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cli import add_json_option
+    from tokenring.cli import add_json_option, with_examples
 
     p = sub.add_parser(
         "replay",
+        **with_examples(EXAMPLES),
         help=HELP,
         description="Replay a data log as if its samples came from the sensors (--from raw, the default: "
         "every synchronisation again on exactly the samples it had online) or feed its synchronised "

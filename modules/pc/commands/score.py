@@ -11,12 +11,18 @@ import argparse
 
 HELP = "score a map against the true walls of a world"
 
+EXAMPLES = """examples:
+  tokenring score office.json --world office
+  tokenring score room7.dxf --world room7.yaml --json
+"""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cli import add_json_option
+    from tokenring.cli import add_json_option, with_examples
 
     p = sub.add_parser(
         "score",
+        **with_examples(EXAMPLES),
         help=HELP,
         description="Coverage, precision, orientation error and closed corners of a map (.json or .dxf) "
         "against a world's true walls.",

@@ -20,14 +20,21 @@ examples:
 """
 
 
+#: the sides a generated room may have, in mm (``--size``)
+SIDE_MM = (2000, 20000)
+
+
 def size(text: str) -> tuple[int, int]:
-    """An argparse type: ``WIDTHxHEIGHT`` in mm, each 2000..20000."""
-    match = re.fullmatch(r"(\d{4,5})x(\d{4,5})", text.strip())
+    """An argparse type: ``WIDTHxHEIGHT`` in mm, each within :data:`SIDE_MM`."""
+    low, high = SIDE_MM
+    match = re.fullmatch(r"(\d{1,9})[xX](\d{1,9})", text.strip())
     if not match:
-        raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT in mm (e.g. 6200x4600)")
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not WIDTHxHEIGHT in whole mm, each {low}..{high} (e.g. 6200x4600)"
+        )
     width, height = int(match.group(1)), int(match.group(2))
-    if not (2000 <= width <= 20000 and 2000 <= height <= 20000):
-        raise argparse.ArgumentTypeError(f"{text!r}: width and height must be within 2000..20000 mm")
+    if not (low <= width <= high and low <= height <= high):
+        raise argparse.ArgumentTypeError(f"{text!r}: width and height must each be within {low}..{high} mm")
     return width, height
 
 
@@ -51,7 +58,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         **with_examples(EXAMPLES),
     )
     generate.add_argument("--seed", type=seed, required=True, help="which room")
-    generate.add_argument("--size", type=size, metavar="WxH", help="bounding box in mm (default: drawn)")
+    generate.add_argument(
+        "--size",
+        type=size,
+        metavar="WxH",
+        help=f"bounding box in mm, each side {SIDE_MM[0]}..{SIDE_MM[1]} (default: drawn, 4000..8000 x 3000..6000)",
+    )
     generate.add_argument("--out", metavar="FILE", help="write the world file here (default: print it)")
     generate.add_argument("--force", action="store_true", help="replace an existing --out file")
     drive = verbs.add_parser(

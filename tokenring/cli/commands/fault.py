@@ -15,17 +15,27 @@ if TYPE_CHECKING:
 
 HELP = "inject a fault into a node of a running ring (crash, hang, delay, drop, ...)"
 
+EXAMPLES = """examples:
+  tokenring fault sonar crash                  # the sonar's process exits at once (code 70)
+  tokenring fault motor delay 5 --jitter 2     # every token waits 5 ± 2 ms at the motor
+  tokenring fault lcd drop 0.1                 # one token in ten lost at the LCD
+  tokenring fault all partition 'main,motor|sonar,compass'
+  tokenring fault all heal                     # end the partition
+  tokenring fault all clear                    # end every fault on every node
+  tokenring fault --list                       # the active faults of every node
+"""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring.cli.args import with_examples
     from tokenring.contract.faults import KINDS
 
     p = sub.add_parser(
         "fault",
         help=HELP,
         description="Inject a fault into one node of a running ring, through its control key "
-        "tokenring/<ring>/ctl/<ID>/fault. Kinds: " + ", ".join(KINDS) + ". "
-        "Examples: 'fault sonar crash', 'fault motor delay 5 --jitter 2', 'fault lcd drop 0.1', "
-        "'fault all partition main,motor|sonar,compass', 'fault all heal', 'fault --list'.",
+        "tokenring/<ring>/ctl/<ID>/fault. Kinds: " + ", ".join(KINDS) + ".",
+        **with_examples(EXAMPLES),
     )
     p.add_argument("node", nargs="?", help="node name or ID, or 'all'")
     p.add_argument("kind", nargs="?", choices=KINDS, metavar="KIND", help="fault kind: " + ", ".join(KINDS))

@@ -22,9 +22,17 @@ from tokenring.errors import UsageError
 
 HELP = "download programs over the ring (LOAD.EXE): -i, -a, -s FILE, --start, --stop"
 
+EXAMPLES = """examples:
+  tokenring load                      # just the scan: name, ID, time stamp of every node
+  tokenring load -i                   # only programs newer than the node's time stamp
+  tokenring load -a --start           # every program, then ARCNET_START_SYSTEM
+  tokenring load -s modules/motor.py  # one program (its node from ``module`` or the file name)
+  tokenring load --stop motor         # ARCNET_STOP_PROGRAM of one node
+"""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cli.args import add_json_option, add_ring_options
+    from tokenring.cli.args import add_json_option, add_ring_options, with_examples
 
     p = sub.add_parser(
         "load",
@@ -32,6 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Scan the ring through main's PC link (name, ID, time stamp of every node), "
         "download programs through the token with a progress bar, start or stop them (and what "
         "an installed application adds, e.g. the robot's map upload -u).",
+        **with_examples(EXAMPLES),
     )
     what = p.add_mutually_exclusive_group()
     what.add_argument("-i", "--incremental", action="store_true", help="programs newer than the node's")

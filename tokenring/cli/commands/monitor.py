@@ -20,6 +20,12 @@ from tokenring.cli.args import add_ring_options, positive_int, seconds
 
 HELP = "live terminal view of a running ring"
 
+EXAMPLES = """examples:
+  tokenring monitor                            # refreshes twice a second until Ctrl-C
+  tokenring monitor --once                     # one snapshot, then exit
+  tokenring monitor --json --interval 5 --count 12 > minute.jsonl
+"""
+
 COUNTERS = (
     ("reconfigurations", "reconf"),
     ("successor_changes", "succ chg"),
@@ -32,7 +38,9 @@ COUNTERS = (
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("monitor", help=HELP, description=__doc__)
+    from tokenring.cli.args import with_examples
+
+    p = sub.add_parser("monitor", help=HELP, description=__doc__, **with_examples(EXAMPLES))
     p.add_argument("--interval", type=seconds, default=0.5, help="seconds between refreshes")
     p.add_argument("--once", action="store_true", help="print one snapshot and exit")
     p.add_argument("--count", type=positive_int, help="stop after this many refreshes")

@@ -6,14 +6,21 @@ import argparse
 
 HELP = "run one node (what `up` starts per module)"
 
+EXAMPLES = """examples:
+  tokenring node --id 90 --name extra          # a bare node joins the default ring; load gives it a program
+  tokenring node --id 90 --program hello.py    # a node running its program from a file, no download
+  tokenring node --id 90 --ring lab -e tcp/10.0.0.5:7447 --duration 60
+"""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cli.args import add_ring_options
+    from tokenring.cli.args import add_ring_options, with_examples
 
     p = sub.add_parser(
         "node",
         help=HELP,
         description="Run one node of the ring in this process until SIGINT/SIGTERM.",
+        **with_examples(EXAMPLES),
     )
     add_node_arguments(p)
     p.add_argument("--bitrate", default="2.5M", help="emulated ARCNET bitrate or max (default %(default)s)")

@@ -9,11 +9,17 @@ from tokenring.cli.args import seconds
 
 HELP = "membership and counters of a running ring"
 
+EXAMPLES = """examples:
+  tokenring status                             # the default ring, through tcp/127.0.0.1:7447
+  tokenring status --ring lab -e tcp/10.0.0.5:7447
+  tokenring status --json | jq '.nodes[].successor'
+"""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cli.args import add_json_option, add_ring_options
+    from tokenring.cli.args import add_json_option, add_ring_options, with_examples
 
-    p = sub.add_parser("status", help=HELP)
+    p = sub.add_parser("status", help=HELP, **with_examples(EXAMPLES))
     p.add_argument("--timeout", type=seconds, default=2.0, help="seconds to wait for answers")
     add_json_option(p)
     add_ring_options(p, listen=False)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 
-from tokenring.cli.args import int_within
+from tokenring.cli.args import int_within, seconds
 
 HELP = "live web view of a running ring (open the printed address in a browser)"
 
@@ -19,6 +19,7 @@ EXAMPLES = """examples:
   tokenring web --ring lab -e tcp/10.0.0.5:7447 --port 9000
   tokenring web --host 0.0.0.0                # open to the network (it can inject faults!)
   tokenring web --port 0 --json               # any free port; prints {"ring": ..., "url": ...}
+  tokenring web --duration 600                # serve for ten minutes, then exit 0
   tokenring up --explore 2 --web              # the ring and its web view in one command
 """
 
@@ -43,6 +44,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--host", default="127.0.0.1", help="address to serve on (default %(default)s: this machine only)"
     )
+    p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds (default: Ctrl-C)")
     add_json_option(p)
     add_ring_options(p, listen=False)
 
@@ -63,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
         web_port=args.port,
         host=args.host,
         web_port_option="--port",
+        duration=args.duration,
         on_ready=announce,
     )
     return serve(args, watch)
