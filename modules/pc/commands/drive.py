@@ -4,7 +4,7 @@
     tokenring drive reverse 200
     tokenring drive turn left 90                # degrees
     tokenring drive wheels 40 -40 1500          # left %, right %, ms
-    tokenring drive stop
+    tokenring drive stop                        # ends the move under way; at rest, answers at once
     tokenring drive set-pose 1000 600 90        # x mm, y mm, angle degrees counter-clockwise from +X
     tokenring drive glide 90 -12.5              # RECALC_GLIDE_FACTOR: target degrees, error degrees
     tokenring drive pose                        # just print the poses
@@ -28,20 +28,29 @@ from tokenring.cli import seconds
 
 HELP = "move the robot by hand (motor commands through main's PC link)"
 
+EXAMPLES = """examples:
+  tokenring drive forward 500 --speed 50      # mm, % of 10 cm/s
+  tokenring drive turn left 90                # degrees
+  tokenring drive wheels 40 -40 1500          # left %, right %, ms
+  tokenring drive stop                        # ends the move under way; at rest, answers at once
+  tokenring drive set-pose 1000 600 90        # x mm, y mm, angle degrees counter-clockwise from +X
+  tokenring drive glide 90 -12.5              # RECALC_GLIDE_FACTOR: target degrees, error degrees
+  tokenring drive pose --json                 # just the poses
+"""
+
 MOVING, STALLED, COLLISION = 1, 2, 3
 STATE_NAMES = {0: "idle", 1: "moving", 2: "stalled", 3: "collision"}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from tokenring.cli import add_json_option, add_ring_options
+    from tokenring.cli import add_json_option, add_ring_options, with_examples
 
     p = sub.add_parser(
         "drive",
         help=HELP,
         description="Send a motor command through main's PC link, follow the move and print the "
         "dead-reckoned and the true pose.",
-        epilog="Examples: drive forward 500 --speed 50; drive turn left 90; drive wheels 40 -40 1500; "
-        "drive set-pose 1000 600 90; drive glide 90 -12.5; drive stop; drive pose",
+        **with_examples(EXAMPLES),
     )
     p.add_argument(
         "action",
@@ -152,7 +161,10 @@ def run(args: argparse.Namespace) -> int:
             if not reply.get("acknowledged"):
                 raise TokenRingError(f"motor did not take {name} (transmitted: {reply.get('transmitted')})")
         after = before
-        if name and not args.no_wait and name not in ("SET_GLOBAL_POSITION", "RECALC_GLIDE_FACTOR"):
+        if name == "STOP" and not args.no_wait:
+            after = _until_at_rest(link, args.timeout)  # at rest already: at once
+            status = "done"
+        elif name and not args.no_wait and name not in ("SET_GLOBAL_POSITION", "RECALC_GLIDE_FACTOR"):
             after = _follow(link, before, name, args.timeout)
             expected = expected_steps(name, command_args, before["glide_cfactor"])
             done = abs(after["steps_left"] - before["steps_left"])
@@ -228,6 +240,19 @@ def _follow(link: Any, before: dict[str, Any], name: str, timeout: float) -> dic
     if tty:
         print("\r" + " " * 60 + "\r", end="", file=sys.stderr)
     return data
+
+
+def _until_at_rest(link: Any, timeout: float) -> dict[str, Any]:
+    """motor.data once the motor no longer moves: a STOP starts no move to follow (no new
+    ``move_seq``), it ends the one under way, if any."""
+    deadline = time.monotonic() + timeout
+    while True:
+        data = link.read("motor.data")
+        if data["state"] != MOVING:
+            return data
+        if time.monotonic() >= deadline:
+            raise TokenRingError(f"the robot did not come to rest within {timeout:g} s of the STOP")
+        time.sleep(0.05)
 
 
 def _print(result: dict[str, Any]) -> None:
