@@ -158,8 +158,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.localizer:
         import yaml
 
+        from tokenring import NumberLoader
+
         text = Path(args.localizer).read_text() if Path(args.localizer).is_file() else args.localizer
-        overrides = yaml.safe_load(text) or {}
+        overrides = yaml.load(text, Loader=NumberLoader) or {}  # bounded: no alias bombs
     options = dict(
         seed_method=args.seed_method,
         dead_reckoning=args.dead_reckoning,

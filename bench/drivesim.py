@@ -25,6 +25,7 @@ import yaml
 from bench.closedloop import parse_seeds
 from modules.sim import drivesim as simulation
 from modules.sim.drivesim import judged_drive
+from tokenring import NumberLoader
 
 
 def run_drive(
@@ -133,7 +134,7 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for item in items:
         key, _, value = item.partition("=")
-        out[key.strip()] = yaml.safe_load(value)
+        out[key.strip()] = yaml.load(value, Loader=NumberLoader)  # bounded: no alias bombs
     return out
 
 

@@ -35,6 +35,7 @@ import yaml
 
 from modules.description import keys as robot_keys
 from modules.variants import algorithm
+from tokenring import NumberLoader
 from tokenring.transport import free_port
 
 
@@ -268,7 +269,9 @@ def main(argv: list[str] | None = None) -> int:
         "--set", action="append", default=[], metavar="KEY=VALUE", help="override config/localization.yaml"
     )
     args = parser.parse_args(argv)
-    args.overrides = {k.strip(): yaml.safe_load(v) for k, _, v in (item.partition("=") for item in args.set)}
+    args.overrides = {
+        k.strip(): yaml.load(v, Loader=NumberLoader) for k, _, v in (item.partition("=") for item in args.set)
+    }
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     workdir = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bench-localization-"))
     if args.generated:

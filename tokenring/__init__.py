@@ -24,7 +24,7 @@ if TYPE_CHECKING:
         replacing,
         write_atomically,
     )
-    from tokenring._util.strict_yaml import NumberLoader, one_line
+    from tokenring._util.strict_yaml import NumberLoader, YAMLStructureError, one_line, yaml_problem
     from tokenring.contract import keys
     from tokenring.contract.frame import frame_problem
     from tokenring.contract.protocol import CommandChannel, Protocol, default_protocol, load_protocol
@@ -79,6 +79,8 @@ else:  # each name is imported on first use
             "WebAction": "tokenring.extensions",
             "WebPanel": "tokenring.extensions",
             "write_atomically": "tokenring._util.files",
+            "YAMLStructureError": "tokenring._util.strict_yaml",
+            "yaml_problem": "tokenring._util.strict_yaml",
         },
     )
 
@@ -101,6 +103,7 @@ __all__ = [
     "UserProgram",
     "WebAction",
     "WebPanel",
+    "YAMLStructureError",
     "check_input",
     "check_output",
     "default_protocol",
@@ -115,4 +118,5 @@ __all__ = [
     "read_text",
     "replacing",
     "write_atomically",
+    "yaml_problem",
 ]

@@ -36,7 +36,7 @@ from typing import Any
 import yaml
 
 from modules.description.room import Anomaly, Batteries, Circle, Floor, Pose, Wall, World
-from tokenring import NumberLoader, TokenRingError, UsageError, one_line
+from tokenring import NumberLoader, TokenRingError, UsageError, one_line, yaml_problem
 
 ROOMS_DIR = Path(__file__).resolve().parent / "rooms"
 DEFAULT_WORLD = "office"
@@ -160,7 +160,7 @@ def _compose(text: str, source: str) -> Any:
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         where = f"{source}:{mark.line + 1}" if mark else source
-        raise WorldError(f"{where}: YAML syntax error: {exc.problem or exc.context}") from None
+        raise WorldError(f"{where}: {yaml_problem(exc)}") from None
     except yaml.YAMLError as exc:
         raise WorldError(f"{source}: not YAML text: {one_line(exc)}") from None
     return _convert(node, source) if node is not None else None

@@ -19,7 +19,7 @@ from typing import Any
 
 import yaml
 
-from tokenring import NumberLoader, UsageError, one_line
+from tokenring import NumberLoader, UsageError, YAMLStructureError, one_line
 
 SENSOR_NAMES = ("odometry", "compass", "sonar", "battery", "truth")
 
@@ -149,6 +149,8 @@ def parse_config(text: str, source: str) -> dict[str, Any]:
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{source}:{mark.line + 1}" if mark is not None else source
+        if isinstance(exc, YAMLStructureError):  # a recursive or exploding document, not a typo
+            raise ConfigError(f"{where}: {exc.problem}") from None
         raise ConfigError(
             f"{where}: not valid YAML: {one_line(getattr(exc, 'problem', None) or exc)}"
         ) from None

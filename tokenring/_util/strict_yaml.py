@@ -3,6 +3,12 @@
 PyYAML silently keeps the last of two equal keys; a typo'd scenario or config must not be
 half-read. :func:`load_yaml` returns the data and, for error messages, the line of each entry
 by its dotted path (``faults.2.kind`` → 14).
+
+Every loader here refuses, while it composes and before anything is built, a document that
+would take unbounded time or memory to use: an alias inside the collection it names (a
+recursive structure: walking it never ends), aliases that expand the document far beyond what
+its text spells out (a "billion laughs": 545 bytes that stand for a billion nodes), and
+nesting deeper than :data:`MAX_DEPTH` (PyYAML's composer recurses once per level).
 """
 
 from __future__ import annotations
@@ -21,9 +27,86 @@ def one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split())
 
 
+#: the deepest nesting of collections a document may have (tokenring's files need a handful)
+MAX_DEPTH = 64
+#: how many nodes the aliases of one document may add to the nodes its text spells out
+MAX_ALIAS_NODES = 100_000
+
+
+class YAMLStructureError(yaml.composer.ComposerError):
+    """A document refused for its shape, not its syntax: recursive, exploding or too deep."""
+
+    def __init__(self, problem: str, mark: yaml.Mark | None) -> None:
+        super().__init__(None, None, problem, mark)
+
+
+def yaml_problem(exc: yaml.MarkedYAMLError) -> str:
+    """What is wrong, for a message after ``file:line:``: a syntax error says so."""
+    if isinstance(exc, YAMLStructureError):
+        return str(exc.problem)
+    return f"YAML syntax error: {exc.problem or exc.context}"
+
+
 class NumberLoader(yaml.SafeLoader):
     """SafeLoader reading numbers as YAML 1.2 does: PyYAML (YAML 1.1) takes ``1e9`` and
-    ``1e300`` for text, because its floats need a dot; a user who writes them means numbers."""
+    ``1e300`` for text, because its floats need a dot; a user who writes them means numbers.
+
+    It composes within bounds (:class:`YAMLStructureError`): no alias inside the collection it
+    names, at most :data:`MAX_ALIAS_NODES` nodes added by aliases, at most :data:`MAX_DEPTH`
+    levels."""
+
+    def __init__(self, stream: Any) -> None:
+        super().__init__(stream)
+        self._depth = 0
+        self._open: set[str] = set()  # anchors of the collections being composed
+        self._sizes: dict[str, int] = {}  # anchor -> nodes of its node with every alias expanded
+        self._expanded = 0  # nodes composed so far, each alias counted as the nodes it stands for
+        self._added = 0  # of these, the ones aliases add to what the text spells out
+
+    def compose_document(self) -> yaml.Node | None:
+        node = super().compose_document()
+        self._sizes.clear()
+        self._expanded = self._added = 0
+        return node
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node:
+        event = self.peek_event()
+        anchor = event.anchor
+        if isinstance(event, yaml.AliasEvent):
+            if anchor in self._open:
+                raise YAMLStructureError(
+                    f"alias *{anchor} is inside the collection &{anchor} it names: "
+                    "a recursive structure, which tokenring does not read",
+                    event.start_mark,
+                )
+            node = super().compose_node(parent, index)  # (an undefined alias: PyYAML's error)
+            size = self._sizes.get(str(anchor), 1)
+            self._expanded += size
+            self._added += size - 1
+            if self._added > MAX_ALIAS_NODES:
+                raise YAMLStructureError(
+                    f"aliases expand this document by more than {MAX_ALIAS_NODES} nodes beyond its "
+                    f"text (*{anchor} stands for {size}): an alias bomb, which tokenring does not read",
+                    event.start_mark,
+                )
+            return node
+        if self._depth >= MAX_DEPTH:
+            raise YAMLStructureError(f"nested deeper than {MAX_DEPTH} levels", event.start_mark)
+        collection = isinstance(event, yaml.CollectionStartEvent)
+        if collection and anchor is not None:
+            self._open.add(anchor)
+        before = self._expanded
+        self._expanded += 1
+        self._depth += 1
+        try:
+            node = super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+            if collection and anchor is not None:
+                self._open.discard(anchor)
+        if anchor is not None:
+            self._sizes[anchor] = self._expanded - before
+        return node
 
 
 NumberLoader.add_implicit_resolver(
@@ -85,7 +168,7 @@ def load_yaml(text: str, source: str = "<yaml>") -> tuple[Any, dict[str, int]]:
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark
         where = f":{mark.line + 1}:{mark.column + 1}" if mark else ""
-        raise UsageError(f"{source}{where}: YAML syntax error: {exc.problem}") from None
+        raise UsageError(f"{source}{where}: {yaml_problem(exc)}") from None
     except yaml.YAMLError as exc:  # e.g. a control character the YAML reader refuses
         raise UsageError(f"{source}: not YAML text: {one_line(exc)}") from None
     lines: dict[str, int] = {}

@@ -444,14 +444,14 @@ def keep_document(doc: Any, text: str, path: Path) -> None:
 def _read_yaml(text: str, source: str) -> Any:
     import yaml
 
-    from tokenring._util.strict_yaml import one_line, strict_loader
+    from tokenring._util.strict_yaml import one_line, strict_loader, yaml_problem
 
     try:
         return yaml.load(text, Loader=strict_loader(ProtocolError, source))
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise ProtocolError(source, where, f"YAML syntax error: {exc.problem}") from None
+        raise ProtocolError(source, where, yaml_problem(exc)) from None
     except yaml.YAMLError as exc:
         raise ProtocolError(source, "", f"not YAML text: {one_line(exc)}") from None
 
