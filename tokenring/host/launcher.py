@@ -2,7 +2,8 @@
 
 The launcher holds the ring's tap endpoint (``tcp/127.0.0.1:7447`` unless ``--listen`` says
 otherwise; if that port is taken by another ring it joins that network instead — rings are
-namespaces), starts one ``tokenring node`` process per node with its log lines prefixed by the
+namespaces — but it refuses a ring another launcher holds there, naming it, and always node IDs
+that are live there), starts one ``tokenring node`` process per node with its log lines prefixed by the
 node's name, reports any node that dies with its exit code, and on Ctrl-C, SIGTERM or the end
 of ``--duration`` stops every process it started within 2 s. Children also carry
 ``PR_SET_PDEATHSIG`` so that even a killed launcher leaves no orphans.
@@ -13,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -22,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+import msgpack
 import zenoh
 
 from tokenring._util.process import die_with_parent
@@ -32,7 +35,7 @@ from tokenring.errors import TransportError, UsageError
 from tokenring.host.children import ExitWatch, PrefixedOutput
 from tokenring.host.node_commands import NodeCommandLines
 from tokenring.transport.control import answer_query
-from tokenring.transport.zenoh import RingViewServer, peer_to_peer
+from tokenring.transport.zenoh import RingViewServer, peer_to_peer, ring_view
 from tokenring.transport.zenoh_config import make_config, node_environment, open_session
 
 STOP_TIMEOUT_S = 1.5
@@ -46,6 +49,18 @@ CHILD_POLL_S = 0.05
 #: the ring heals around it first, instead of sharing two cores with a booting interpreter
 RESPAWN_DELAY_S = 0.1
 KILL_REAP_S = 10.0  # after SIGKILL, how long the kernel may take to reap them all
+#: how long a launcher asks who holds its ring before it starts anything (answers end it early)
+RING_CHECK_TIMEOUT_S = 2.0
+
+
+def describe_holder(status: Mapping[str, Any]) -> str:
+    """'the launcher pid 123 on host h (tcp/127.0.0.1:7447, nodes 10, 20)', from its status."""
+    running = [str(n.get("id")) for n in status.get("nodes", ()) if n.get("running")]
+    where = [status["endpoint"]] if status.get("endpoint") else []
+    if running:
+        where.append(f"nodes {', '.join(running)}")
+    detail = f" ({', '.join(where)})" if where else ""
+    return f"the launcher pid {status.get('pid', '?')} on host {status.get('host', '?')}{detail}"
 
 
 def describe_exit(code: int | None) -> str:
@@ -178,6 +193,9 @@ class Launcher(NodeCommandLines):
         self._queryable: Any = None
         self._view_server: RingViewServer | None = None
         self.shutdown_reason: str | None = None
+        #: this launcher among others on the network (its own status answers its own question)
+        self.instance = os.urandom(8).hex()
+        self.started_at = time.time()
         self.booting = False  # programs are being downloaded over the ring (``up``)
         width = max(
             (len(name) for name in [*(p.name for p in self.plans), *(s.name for s in self.services)]),
@@ -306,10 +324,12 @@ class Launcher(NodeCommandLines):
         self._open_session()
         assert self.session is not None
         verbs = LauncherVerbs(self)
+        self.started_at = time.time()  # before its status answers: the older of two launchers wins
         self._queryable = self.session.declare_queryable(
             keys.control(self.ring, "launcher", "*"),
             lambda query: answer_query(query, verbs.handlers, "the launcher"),
         )
+        self._refuse_a_ring_in_use()
         if self.transport == "zenoh" and peer_to_peer(self.session):
             self._view_server = RingViewServer(self.session, self.ring)
         where = self.endpoint or ", ".join(self.node_connect())
@@ -336,6 +356,75 @@ class Launcher(NodeCommandLines):
         # run() loop as well as in-process users such as chaos and the benchmarks
         self._supervisor = threading.Thread(target=self._supervise, name="launcher-supervisor", daemon=True)
         self._supervisor.start()
+
+    def _refuse_a_ring_in_use(self) -> None:
+        """Refuse a ring that another launcher holds on this Zenoh network, naming it; and
+        always refuse IDs that are live there (two nodes under one ID both take its token).
+
+        ``--connect`` joins a ring on purpose (one launcher per host, docs/hosts.md): then only
+        live IDs are refused. Two launchers that start at once both see each other; the younger
+        refuses (by start time, then host and PID)."""
+        assert self.session is not None
+        holders = [h for h in self._launchers_of_the_ring() if h.get("instance") != self.instance]
+        live = {int(n["id"]) for h in holders for n in h.get("nodes", ()) if n.get("running")}
+        live |= self._live_node_ids()
+        mine = {p.node_id for p in self.plans}
+        held_by = "; ".join(describe_holder(h) for h in holders)
+        taken = sorted(mine & live)
+        if taken:
+            raise UsageError(
+                f"ring {self.ring!r} is in use: node ID(s) {', '.join(map(str, taken))} live there"
+                + (f", held by {held_by}" if held_by else "")
+                + "; an ID joins a ring once: pick another --ring, or --nodes not live there"
+            )
+        me = (self.started_at, socket.gethostname(), os.getpid())
+        older = [h for h in holders if (h.get("started", 0.0), h.get("host", ""), h.get("pid", 0)) < me]
+        if older and not self.connect:
+            raise UsageError(
+                f"ring {self.ring!r} is in use on this Zenoh network, held by "
+                + "; ".join(describe_holder(h) for h in older)
+                + ": pick another --ring (or join it on purpose: --connect ENDPOINT and --nodes it does not run)"
+            )
+
+    def _launchers_of_the_ring(self) -> list[dict[str, Any]]:
+        """Every launcher's status answer on this ring (this one's too)."""
+        assert self.session is not None
+        answers = []
+        try:
+            replies = self.session.get(
+                keys.control(self.ring, "launcher", "status"),
+                target=zenoh.QueryTarget.ALL,
+                consolidation=zenoh.ConsolidationMode.NONE,
+                timeout=RING_CHECK_TIMEOUT_S,
+            )
+            for reply in replies:
+                if reply.ok is None:
+                    continue
+                with contextlib.suppress(ValueError, TypeError, msgpack.ExtraData):
+                    answer = msgpack.unpackb(reply.ok.payload.to_bytes())
+                    if isinstance(answer, dict) and isinstance(answer.get("result"), dict):
+                        answers.append(answer["result"])
+        except zenoh.ZError as exc:
+            raise TransportError(f"asking who holds ring {self.ring!r} failed: {exc}") from exc
+        return answers
+
+    def _live_node_ids(self) -> set[int]:
+        """The ring's node IDs live on this network: liveliness (through a router) and a peer
+        ring's own view (a peer answers liveliness queries only for itself)."""
+        assert self.session is not None
+        ids: set[int] = set()
+        if self.transport != "zenoh":
+            return ids
+        with contextlib.suppress(zenoh.ZError):
+            for reply in self.session.liveliness().get(
+                keys.node(self.ring, "*"), timeout=RING_CHECK_TIMEOUT_S
+            ):
+                if reply.ok is not None:
+                    node_id = keys.id_from_key(str(reply.ok.key_expr))
+                    if node_id is not None:
+                        ids.add(node_id)
+            ids |= ring_view(self.session, self.ring)
+        return ids
 
     def _boot_in_waves(self) -> None:
         """Start a big ring's nodes so that at most ``boot_concurrency`` are booting (started,
@@ -538,6 +627,10 @@ class LauncherVerbs:
         return {
             "ring": launcher.ring,
             "endpoint": launcher.endpoint,
+            "host": socket.gethostname(),
+            "pid": os.getpid(),
+            "started": launcher.started_at,
+            "instance": launcher.instance,
             "booting": launcher.booting,
             "nodes": [
                 {

@@ -197,11 +197,12 @@ class NodeProcess:
 
     def start(self) -> None:
         self.os.request_ring_shutdown = self._request_ring_shutdown
+        self.system.install()
+        self.os.start()
+        # once it is in the ring: a joiner refused its ID must not answer for the node that holds it
         self._queryable = self.session.declare_queryable(
             keys.control(self.ring, self.os.node_id, "*"), self._on_query
         )
-        self.system.install()
-        self.os.start()
         if self.os.node_id == self.os.preferred_master:  # main holds the PC's serial line
             from tokenring.node.pclink.server import PcLinkServer
             from tokenring.node.pclink.system_verbs import PcSystemVerbs

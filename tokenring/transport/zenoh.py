@@ -17,6 +17,7 @@ import zenoh
 
 from tokenring._native import payload_call
 from tokenring.contract import keys
+from tokenring.errors import TokenRingError, UsageError
 from tokenring.transport.base import FrameHandler, MembershipHandler, MessageHandler, Transport
 from tokenring.transport.zenoh_config import hop_callback
 
@@ -26,6 +27,9 @@ log = logging.getLogger("tokenring.transport")
 JOIN_WAIT_S = 3.0
 #: how often it asks the ring again meanwhile (a liveliness change wakes it at once)
 VIEW_POLL_S = 0.05
+#: how long a joiner whose ID is live waits for that token to go before it refuses the ID: the
+#: process that held it may just have died (a respawn), and its link closes within milliseconds
+ID_RELEASE_WAIT_S = 1.5
 
 
 def peer_to_peer(session: zenoh.Session) -> bool:
@@ -131,6 +135,12 @@ class ZenohTransport(Transport):
         self._keep.append(
             session.liveliness().declare_subscriber(keys.node(ring, "*"), liveliness_callback, history=True)
         )
+        wanted: set[int] = set()
+        if peer_to_peer(session):
+            self._keep.append(session.declare_queryable(keys.ring_view(ring, self.node_id), self._tell_view))
+            wanted = self._await_whole_view()
+        # before it takes any frame: a refused joiner must not have handled the live node's token
+        self._refuse_a_live_id(wanted)
         self._keep.append(
             session.declare_subscriber(keys.token(ring, self.node_id), hop_callback(payload_call(on_frame)))
         )
@@ -139,10 +149,37 @@ class ZenohTransport(Transport):
         self._event_publisher = session.declare_publisher(
             keys.ring_event(ring), express=True, congestion_control=zenoh.CongestionControl.DROP
         )
-        if peer_to_peer(session):
-            self._keep.append(session.declare_queryable(keys.ring_view(ring, self.node_id), self._tell_view))
-            self._await_whole_view()
         return self._seen.snapshot() - {self.node_id}
+
+    def _refuse_a_live_id(self, wanted: set[int]) -> None:
+        """Refuse to join under an ID that another process holds live: two nodes under one ID
+        would both take its token (a second ``up`` of the ring, a node started by hand).
+        ``wanted`` is what the ring's members said they see (a peer ring's view)."""
+        deadline = time.monotonic() + ID_RELEASE_WAIT_S
+        while self.node_id in wanted or self.node_id in self._seen.snapshot():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise UsageError(
+                    f"node ID {self.node_id} is already live in ring {self.ring!r}{self._holder()}: "
+                    "a node must not join under an ID in use (stop that node or pick another --id)"
+                )
+            with self._seen.changed:
+                self._seen.changed.wait(min(10 * VIEW_POLL_S, left))
+            wanted = ring_view(self.session, self.ring) if wanted else set()
+
+    def _holder(self) -> str:
+        """' (pid P on host H)': who holds this node's ID, as its ``stats`` answer says."""
+        from tokenring.transport.session import query
+
+        try:
+            replies = query(self.session, keys.control(self.ring, self.node_id, "stats"), timeout=1.0)
+        except TokenRingError:
+            return ""
+        for _, reply in replies:
+            result = reply.get("result") if isinstance(reply, dict) else None
+            if isinstance(result, dict) and "pid" in result:
+                return f" (pid {result['pid']} on host {result.get('host', '?')})"
+        return ""
 
     def _tell_view(self, query: zenoh.Query) -> None:
         """Answer a joiner with the IDs this node passes among, once it is in the ring itself."""
@@ -151,13 +188,13 @@ class ZenohTransport(Transport):
         view = set(self.active_view()) if self.active_view is not None else self._seen.snapshot()
         query.reply(keys.ring_view(self.ring, self.node_id), bytes(sorted(view | {self.node_id})))
 
-    def _await_whole_view(self) -> None:
+    def _await_whole_view(self) -> set[int]:
         """Wait until liveliness shows every node the ring's members (else its launcher) see.
 
         A peer answers liveliness queries with its own token only, so a joiner that has not yet
         linked to every node (gossip links them one by one) would see part of the ring, pass the
         token to the wrong successor and so lose it. Gives up after :attr:`join_wait_s`, saying
-        which nodes it never saw."""
+        which nodes it never saw. Returns the IDs the ring listed."""
         deadline = time.monotonic() + self.join_wait_s
         while True:
             wanted = ring_view(self.session, self.ring)
@@ -165,7 +202,7 @@ class ZenohTransport(Transport):
                 missing = wanted - self._seen.ids - {self.node_id}
                 left = deadline - time.monotonic()
                 if not missing:
-                    return
+                    return wanted
                 if left <= 0:
                     break
                 self._seen.changed.wait(min(VIEW_POLL_S, left))
@@ -175,6 +212,7 @@ class ZenohTransport(Transport):
             sorted(missing),
             self.join_wait_s,
         )
+        return wanted
 
     def _publisher(self, did: int, table: dict[int, zenoh.Publisher], key: str) -> zenoh.Publisher:
         publisher = table.get(did)
