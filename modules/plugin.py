@@ -158,11 +158,12 @@ class RobotExtension(Extension):
         actions = None
         if args.actions:
             from modules.navigation.actions import load_actions
+            from tokenring import read_text
 
             # a bad file is refused (file:line) before anything starts; the seed's main takes
             # v/c without a time (non-queued)
             load_actions(args.actions, seed=choice["main"] == "seed")
-            text = Path(args.actions).read_text(encoding="utf-8")
+            text = read_text(args.actions, "action file")  # as load_actions read it (no byte-order mark)
             actions = (Path(args.actions).name, text, args.action_speed)
         missions: list[Any] = []
 

@@ -84,7 +84,8 @@ def parse_actions(text: str, source: str = "<actions>", seed: bool = False) -> l
 
     ``seed``: also accept the seed's non-queueing ``v``/``c`` without the time (seed 000 §6.7)."""
     actions: list[Action] = []
-    for number, raw in enumerate(text.splitlines(), 1):
+    # a Windows editor's byte-order mark is no action (the PC strips it; a text sent over the ring may not)
+    for number, raw in enumerate(text.removeprefix("\ufeff").splitlines(), 1):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue

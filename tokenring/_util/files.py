@@ -5,6 +5,10 @@ program, a map) is read through :func:`read_text` or :func:`read_bytes`, which r
 line naming the file and what is wrong — a missing file, a directory, a FIFO or device (reading
 one may block for ever or never end: ``/dev/zero``), a file over the size that kind of file can
 sensibly have, and text that is not UTF-8. Nothing is parsed before these checks pass.
+
+Text as Windows editors save it reads as any other: a UTF-8 byte-order mark is dropped and
+the parsers take CRLF line ends; UTF-16 or UTF-32 text (which starts with its own mark) is
+refused by name.
 """
 
 from __future__ import annotations
@@ -123,16 +127,31 @@ def read_bytes(
         os.close(fd)
 
 
+#: byte-order marks of the Unicode encodings that are not UTF-8 (UTF-32's first: it begins like UTF-16's)
+_OTHER_UNICODE = (
+    (b"\xff\xfe\x00\x00", "UTF-32"),
+    (b"\x00\x00\xfe\xff", "UTF-32"),
+    (b"\xff\xfe", "UTF-16"),
+    (b"\xfe\xff", "UTF-16"),
+)
+
+
 def read_text(
     path: str | os.PathLike[str],
     what: str = "file",
     error: ErrorFactory = USAGE_ERROR,
     limit: int | None = None,
 ) -> str:
-    """:func:`read_bytes`, decoded as UTF-8 (a byte that is not: the error says where)."""
+    """:func:`read_bytes`, decoded as UTF-8 without a leading byte-order mark (a byte that is
+    not UTF-8: the error says where; UTF-16 or UTF-32 text: the error names the encoding)."""
     data = read_bytes(path, what, error, limit)
+    for mark, encoding in _OTHER_UNICODE:
+        if data.startswith(mark):
+            raise error(
+                str(Path(path)), f"is {encoding} text (it starts with a byte-order mark); save it as UTF-8"
+            )
     try:
-        return data.decode("utf-8")
+        return data.decode("utf-8").removeprefix("\ufeff")
     except UnicodeDecodeError as exc:
         line = data.count(b"\n", 0, exc.start) + 1
         raise error(

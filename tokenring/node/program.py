@@ -70,7 +70,8 @@ def program_digest(source: bytes) -> str:
 
 def load_program(source: bytes | str, filename: str = "<program>") -> type[UserProgram]:
     """Compile a program's source and return its ``Program`` class; raises :class:`ProgramError`."""
-    text = source.decode("utf-8") if isinstance(source, bytes) else source
+    # a byte-order mark (Windows editors write one) is no Python: compile() refuses U+FEFF in text
+    text = source.decode("utf-8-sig") if isinstance(source, bytes) else source.removeprefix("\ufeff")
     module_name = f"tokenring_program_{Path(filename).stem}"
     module = types.ModuleType(module_name)
     module.__file__ = filename
@@ -100,12 +101,12 @@ def inspect_program(source: bytes | str, filename: str = "<program>") -> str:
 
     if isinstance(source, bytes):
         try:
-            text = source.decode("utf-8")
+            text = source.decode("utf-8-sig")
         except UnicodeDecodeError as exc:
             line = source.count(b"\n", 0, exc.start) + 1
             raise ProgramError(f"{filename}:{line}: not UTF-8 text (byte {exc.start})") from None
     else:
-        text = source
+        text = source.removeprefix("\ufeff")
     try:
         tree = ast.parse(text, filename)
     except SyntaxError as exc:
