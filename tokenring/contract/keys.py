@@ -33,18 +33,28 @@ def default_endpoint() -> str:
     return os.environ.get("TOKENRING_ENDPOINT") or DEFAULT_ENDPOINT
 
 
-def check_ring_name(ring: str) -> str:
-    """Ring names become one key chunk and one folder of the program store: letters, digits,
-    ``_ - .``, starting with a letter or digit, at most 64 (so never ``..`` or ``/``)."""
+def check_name(name: str, what: str = "ring name") -> str:
+    """A name that becomes one key chunk and one folder (of the program store): letters,
+    digits, ``_ - .``, starting with a letter or digit, at most 64 (so never ``..`` or ``/``)."""
     import re
 
-    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}", ring or ""):
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}", name):
         from tokenring.errors import UsageError
 
         raise UsageError(
-            f"ring name {ring!r}: letters, digits, _ - . only, starting with a letter or digit, at most 64"
+            f"{what} {name!r}: letters, digits, _ - . only, starting with a letter or digit, at most 64"
         )
-    return ring
+    return name
+
+
+def check_ring_name(ring: str) -> str:
+    """A ring's name: it is a key chunk and a folder of the program store (:func:`check_name`)."""
+    return check_name(ring, "ring name")
+
+
+def check_node_name(name: str) -> str:
+    """A node's name: a folder of its ring's program store, like a ring name (:func:`check_name`)."""
+    return check_name(name, "node name")
 
 
 def token(ring: str, did: int | str) -> str:
@@ -119,5 +129,17 @@ def check_ring_name_type(ring: str) -> str:
 
     try:
         return check_ring_name(ring)
+    except UsageError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def check_node_name_type(name: str) -> str:
+    """:func:`check_node_name` as an argparse type."""
+    import argparse
+
+    from tokenring.errors import UsageError
+
+    try:
+        return check_node_name(name)
     except UsageError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None

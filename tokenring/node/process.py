@@ -76,6 +76,8 @@ class NodeProcess:
         resident: bool = True,
         stop_event: StopEvent | None = None,
     ) -> None:
+        if name is not None:
+            keys.check_node_name(name)  # it becomes a folder of the store: never '../..'
         self.protocol = protocol
         #: look for an application's resident program at boot (``--no-resident``: the launcher
         #: found none, and the node loads no application before a program needs its hardware)

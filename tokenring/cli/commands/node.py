@@ -31,12 +31,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def add_node_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of one node process (the launcher passes them to every node)."""
     from tokenring.cli.args import seconds
+    from tokenring.contract import keys
     from tokenring.node.pacing import PROFILES
     from tokenring.node.system.vocabulary import DEFAULT_CAPACITY
     from tokenring.transport.factory import TRANSPORTS
 
     parser.add_argument("--id", type=int, required=True, help="node ID 1..255")
-    parser.add_argument("--name", help="node name (default: from protocol.yaml, else nodeID)")
+    parser.add_argument(
+        "--name",
+        type=keys.check_node_name_type,
+        help="node name (default: from protocol.yaml, else nodeID); a folder of the program store: "
+        "letters, digits, _ - . only",
+    )
     parser.add_argument("--program", help="user program file to run on this node (no download)")
     parser.add_argument(
         "--store",
