@@ -243,11 +243,19 @@ def test_delay_slows_the_round_and_clear_restores_it(ring):
 
 @pytest.mark.slow
 def test_drop_corrupt_and_duplicate_are_survived_with_one_token(ring):
-    before = {i: ring.node_stats(i) for i in (20, 30, 40)}
+    before = {i: ring.node_stats(i) for i in (20, 30, 40, 50)}
     ring.fault("motor", "drop", "0.3")
     ring.fault("sonar", "corrupt", "0.3")
     ring.fault("compass", "duplicate")
-    time.sleep(3)
+
+    def faults_acted() -> bool:
+        now = {i: ring.node_stats(i) for i in (40, 50)}
+        return (
+            now[40]["rejected_crc"] > before[40]["rejected_crc"]
+            and now[50]["duplicate_passes"] > before[50]["duplicate_passes"]
+        )
+
+    wait_until(faults_acted, 30, "a corrupt frame rejected and a doubled pass recognised")
     ring.one_token_through(IDS, timeout=20)
     for kind in ("motor", "sonar", "compass"):
         ring.fault(kind, "clear")

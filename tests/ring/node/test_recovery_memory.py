@@ -10,6 +10,7 @@ import pytest
 
 from tests.support.memring import MemoryRing, wait_for
 from tests.support.ringjudge import Header, one_token
+from tokenring.contract.ring import MIN_ROUND_SAMPLES
 
 IDS = [10, 20, 30, 40, 50, 60, 70, 80]
 HEADER = Header.from_protocol()
@@ -91,7 +92,11 @@ def test_a_lost_token_is_regenerated_once_by_the_highest_node():
     ring = MemoryRing(IDS, bitrate=2.5e6, ack_mode="never")
     try:
         ring.wait_rounds(30)
-        time.sleep(0.3)  # every node's timeouts follow its measurements by now
+        wait_for(
+            lambda: all(n.timing.samples_used >= MIN_ROUND_SAMPLES for n in ring.nodes.values()),
+            5,
+            "every node's timeouts to follow its measurements",
+        )
         before = {i: n.stats.tokens_regenerated for i, n in ring.nodes.items()}
         ring.hub.drop_frames(1)
         wait_for(lambda: ring.nodes[80].stats.tokens_regenerated > before[80], 5, "node 80 to regenerate")
@@ -168,8 +173,8 @@ def test_a_partition_forms_two_rings_and_heals_into_one(ring):
         5,
         "each side to close its own ring",
     )
-    time.sleep(0.2)
-    assert ring.nodes[10].stats.visits and ring.nodes[50].stats.visits
+    visits = {i: ring.nodes[i].stats.visits for i in (10, 50)}
+    wait_for(lambda: all(ring.nodes[i].stats.visits > visits[i] for i in visits), 5, "both rings to run")
     ring.hub.heal()
     wait_for(
         lambda: all(n.membership.active == tuple(IDS) for n in ring.nodes.values()), 8, "the sides to merge"

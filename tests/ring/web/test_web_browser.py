@@ -12,7 +12,6 @@ from __future__ import annotations
 import io
 import json
 import threading
-import time
 from pathlib import Path
 
 import pytest
@@ -143,7 +142,10 @@ def test_chromium_follows_the_ring_injects_and_clears_a_fault_and_draws_the_map(
             count = driver.find_element(By.ID, "robot-map-count")
             wait_until(lambda: int(count.get_attribute("data-vectors") or 0) >= 2, 60, "the page's map")
             canvas = driver.find_element(By.ID, "robot-room")
-            time.sleep(0.5)  # the next animation frame paints it
+            # two animation frames later the page has painted what it counted
+            driver.execute_async_script(
+                "const done = arguments[0];requestAnimationFrame(() => requestAnimationFrame(() => done()));"
+            )
             png = driver.get_screenshot_as_png()
             (tmp_path / "web.png").write_bytes(png)
             ratio = driver.execute_script("return window.devicePixelRatio") or 1

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 import signal
-import time
 
 import pytest
 import yaml
@@ -15,7 +14,7 @@ from modules.description import keys as robot_keys
 from modules.localization.logs import read_log
 from modules.pc.analysis import analyse
 from modules.pc.replay import replay
-from tests.support.ringutil import tap, wait_main_answers
+from tests.support.ringutil import tap, wait_main_answers, wait_until
 from tokenring.host.pclink import open_link
 from tokenring.transport.session import query
 
@@ -42,7 +41,16 @@ def test_action_file_drive_with_the_localizer_on_copro(procs, ring_name, endpoin
             wait_main_answers(link)
             link.command("compass", "CALIBRATE", timeout=10.0)
             wait_for_compass(link, 90.0)
-            time.sleep(1.0)
+            # the filter's pose is one made after the calibration turn ended, heading included
+            calibrated_ms = world_now(session, ring_name)
+            wait_until(
+                lambda: (
+                    (pose := link.read("copro.data"))["pose_stamp_ms"] > calibrated_ms
+                    and pose["pose_valid"] == 7
+                ),
+                60,
+                "a fused pose from after the calibration",
+            )
             start_ms = world_now(session, ring_name)
             state = run_actions(link, "e\ns 1000\nr 90\ns 600\n", "test.act", 60, 120.0)
             assert not state["running"], state
