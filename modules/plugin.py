@@ -154,7 +154,7 @@ class RobotExtension(Extension):
         if args.map_out:
             from modules.pc.mapfiles import check_out
 
-            check_out(args.map_out)
+            check_out(args.map_out, "--map-out", force=getattr(args, "force", False))
         actions = None
         if args.actions:
             from modules.navigation.actions import load_actions
@@ -184,12 +184,13 @@ class RobotExtension(Extension):
             "-u", "--upload", metavar="FILE", help="upload the map into FILE (.dxf, .png, .json)"
         )
         parser.add_argument("--timeout", type=seconds, default=60.0, help="seconds to wait for the map (-u)")
+        parser.add_argument("--force", action="store_true", help="replace an existing -u FILE")
 
     def check_load(self, args: argparse.Namespace) -> None:
         if args.upload:
             from modules.pc.mapfiles import check_out
 
-            check_out(args.upload)
+            check_out(args.upload, "--upload", force=args.force)
 
     def after_load(
         self, args: argparse.Namespace, session: zenoh.Session, say: Callable[[str], None]
@@ -201,7 +202,7 @@ class RobotExtension(Extension):
         vectors = fetch_map(session, args.ring, args.timeout)
         info = live_world(session, args.ring)
         world, truth = truth_from_info(info) if info else (None, None)
-        write_map(vectors, args.upload, truth, world)
+        write_map(vectors, args.upload, truth, world, option="--upload")
         say(f"map: {len(vectors)} vectors written to {args.upload}")
         return {"upload": {"file": args.upload, "vectors": len(vectors)}}
 

@@ -19,10 +19,12 @@ if TYPE_CHECKING:
         check_input,
         check_output,
         message_error,
+        option_error,
         read_bytes,
         read_text,
         replacing,
         write_atomically,
+        write_failed,
     )
     from tokenring._util.strict_yaml import NumberLoader, YAMLStructureError, one_line, yaml_problem
     from tokenring.contract import keys
@@ -62,6 +64,7 @@ else:  # each name is imported on first use
             "NodeOS": "tokenring.node.node_os",
             "NumberLoader": "tokenring._util.strict_yaml",
             "one_line": "tokenring._util.strict_yaml",
+            "option_error": "tokenring._util.files",
             "parse_bitrate": "tokenring.contract.ring",
             "ProgramError": "tokenring.errors",
             "Protocol": "tokenring.contract.protocol",
@@ -79,6 +82,7 @@ else:  # each name is imported on first use
             "WebAction": "tokenring.extensions",
             "WebPanel": "tokenring.extensions",
             "write_atomically": "tokenring._util.files",
+            "write_failed": "tokenring._util.files",
             "YAMLStructureError": "tokenring._util.strict_yaml",
             "yaml_problem": "tokenring._util.strict_yaml",
         },
@@ -113,10 +117,12 @@ __all__ = [
     "load_protocol",
     "message_error",
     "one_line",
+    "option_error",
     "parse_bitrate",
     "read_bytes",
     "read_text",
     "replacing",
     "write_atomically",
+    "write_failed",
     "yaml_problem",
 ]

@@ -167,21 +167,35 @@ def _known_walls(log: LogFile) -> np.ndarray:
         return np.zeros((0, 4))
 
 
+#: the files :func:`plot_all` may write (those the log has data for)
+PLOTS = ("paths.png", "errors.png", "steps.png", "heading.png", "sonar.png", "time.png")
+
+
 def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None = None) -> list[Path]:
-    """Write every plot into ``out``; returns the files written."""
+    """Write every plot into ``out``; returns the files written. Each is written beside its
+    name and renamed once whole: a full disk is one line naming the plot (``--out DIR/NAME``),
+    and a plot that was there before stays as it was."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out.mkdir(parents=True, exist_ok=True)
+    from tokenring import option_error, replacing, write_failed
+
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise write_failed(out, exc, option_error("--out")) from None
     written: list[Path] = []
 
     def save(fig: Any, name: str) -> None:
         path = out / name
-        fig.tight_layout()
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
+        try:
+            fig.tight_layout()
+            with replacing(path, option_error("--out")) as temp:
+                fig.savefig(temp, dpi=110, format="png")  # the format said: the temporary name has none
+        finally:
+            plt.close(fig)
         written.append(path)
         if progress is not None:
             progress(name)

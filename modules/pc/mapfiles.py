@@ -18,10 +18,21 @@ from tokenring import UsageError
 FORMATS = (".json", ".dxf", ".png")
 
 
-def check_out(path: str) -> str:
+def map_format(path: str, option: str = "--out") -> str:
+    """The format of a map file to write, from its extension; ``option`` names it in the error."""
     suffix = Path(path).suffix.lower()
     if suffix not in FORMATS:
-        raise UsageError(f"--out {path}: unknown format {suffix or '(none)'}; use .json, .dxf or .png")
+        raise UsageError(f"{option} {path}: unknown format {suffix or '(none)'}; use .json, .dxf or .png")
+    return suffix
+
+
+def check_out(path: str, option: str = "--out", force: bool = False, inputs: tuple[str, ...] = ()) -> str:
+    """Refuse the map file ``option`` names before anything starts: an unknown format, an
+    existing file (unless ``force``), one of the ``inputs``, a folder missing or not writable."""
+    from tokenring import check_output, option_error
+
+    suffix = map_format(path, option)
+    check_output(path, inputs, force=force, error=option_error(option))
     return suffix
 
 
@@ -147,31 +158,37 @@ def write_map(
     title: str = "",
     paths: dict[str, np.ndarray] | None = None,
     end: dict[str, Any] | None = None,
+    option: str = "--out",
 ) -> dict[str, Any] | None:
     """Write ``vectors`` (mm) in the format of ``path``'s extension; returns the score if known.
     ``paths``: robot paths (name -> N×2 mm) drawn thinly in a PNG (the true one, the mapping pose);
-    ``end``: the robot's end pose against the truth (:func:`end_pose`), kept in a .json map."""
+    ``end``: the robot's end pose against the truth (:func:`end_pose`), kept in a .json map.
+    The map goes to a temporary file renamed over ``path`` once whole: a failed write (a full
+    disk) is one line naming ``option`` and leaves the file that was there as it was."""
     from modules.pc.mapscore import score_map
+    from tokenring import option_error, replacing
 
-    suffix = check_out(path)
+    suffix = map_format(path, option)
     score = score_map(vectors, truth) if truth is not None else None
-    try:
+    with replacing(path, option_error(option)) as temp:
         if suffix == ".json":
             doc = {"units": "mm", "world": world, "vectors": np.round(vectors, 1).tolist(), "score": score}
             if end is not None:
                 doc["end_pose"] = end
-            Path(path).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+            temp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
         elif suffix == ".dxf":
-            write_dxf(vectors, path, truth)
+            write_dxf(vectors, temp, truth)
         else:
-            write_png(vectors, path, truth, title or (world or "map"), score, paths)
-    except OSError as exc:
-        raise UsageError(f"--out {path}: cannot write: {exc.strerror or exc}") from None
+            write_png(vectors, temp, truth, title or (world or "map"), score, paths)
     return score
 
 
-def write_dxf(vectors: np.ndarray, path: str, truth: np.ndarray | None) -> None:
+def write_dxf(vectors: np.ndarray, path: str | Path, truth: np.ndarray | None) -> None:
+    import logging
+
     import ezdxf
+
+    logging.getLogger("ezdxf").setLevel(logging.WARNING)  # its INFO lines say what it builds, not news
 
     doc = ezdxf.new("R2010", units=ezdxf.units.MM)
     doc.layers.add("MAP", color=1)
@@ -187,7 +204,7 @@ def write_dxf(vectors: np.ndarray, path: str, truth: np.ndarray | None) -> None:
 
 def write_png(
     vectors: np.ndarray,
-    path: str,
+    path: str | Path,
     truth: np.ndarray | None,
     title: str,
     score: dict[str, Any] | None,
@@ -244,5 +261,7 @@ def write_png(
     ax.plot([], [], color="tab:red", lw=1.8, label="mapped vectors")
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    try:
+        fig.savefig(path, format="png")  # the format said: a temporary file's name has no .png
+    finally:
+        plt.close(fig)

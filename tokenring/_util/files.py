@@ -45,6 +45,12 @@ def message_error(kind: Callable[[str], TokenRingError]) -> ErrorFactory:
 USAGE_ERROR = message_error(UsageError)
 
 
+def option_error(option: str) -> ErrorFactory:
+    """An :data:`ErrorFactory` whose message starts with the option that named the file
+    (``--map-out FILE: exists; ...``): the user reads which of their words it is about."""
+    return lambda where, problem: UsageError(f"{option} {where}: {problem}")
+
+
 def _kind(mode: int) -> str:
     if stat.S_ISDIR(mode):
         return "a directory"
@@ -193,25 +199,52 @@ def check_output(
     return out
 
 
+def write_failed(
+    path: str | os.PathLike[str], exc: OSError, error: ErrorFactory = USAGE_ERROR
+) -> TokenRingError:
+    """The error for a write to ``path`` that failed (a full disk, a quota, an I/O error)."""
+    return error(str(path), f"cannot write: {exc.strerror or exc}")
+
+
 @contextlib.contextmanager
-def replacing(path: str | os.PathLike[str]) -> Iterator[Path]:
+def replacing(path: str | os.PathLike[str], error: ErrorFactory | None = USAGE_ERROR) -> Iterator[Path]:
     """A temporary path beside ``path`` to write; renamed over ``path`` when the block ends
     normally, removed if it raises: a reader (or a crash) never sees half a file, and a failed
-    write leaves the old one."""
+    write leaves the old one. An :class:`OSError` of the block or of the rename (a full disk)
+    becomes ``error(path, "cannot write: ...")``, one line (``error=None``: raised as it is)."""
     out = Path(path)
-    fd, name = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent if str(out.parent) else ".")
+    try:
+        fd, name = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent if str(out.parent) else ".")
+    except OSError as exc:
+        if error is None:
+            raise
+        raise write_failed(out, exc, error) from None
     os.close(fd)
     temp = Path(name)
     try:
         yield temp
+        _sync(temp)  # the data is on the disk before the name is: a crash never leaves an empty file
         os.replace(temp, out)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             temp.unlink()
+        if isinstance(exc, OSError) and error is not None:
+            raise write_failed(out, exc, error) from None
         raise
 
 
-def write_atomically(path: str | os.PathLike[str], data: bytes | str) -> None:
-    """Write ``data`` to ``path`` through :func:`replacing`."""
-    with replacing(path) as temp:
+def _sync(path: Path) -> None:
+    """fsync ``path``'s data (a file system that reports a full disk only then reports it here)."""
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def write_atomically(
+    path: str | os.PathLike[str], data: bytes | str, error: ErrorFactory | None = USAGE_ERROR
+) -> None:
+    """Write ``data`` to ``path`` through :func:`replacing` (a failed write: ``error``)."""
+    with replacing(path, error) as temp:
         temp.write_bytes(data.encode("utf-8") if isinstance(data, str) else data)

@@ -28,6 +28,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("log", help="data log (.trlog)")
     p.add_argument("--out", metavar="DIR", help="directory for the PNGs (default: only the summary)")
+    p.add_argument("--force", action="store_true", help="replace plots already in --out DIR")
     p.add_argument(
         "--salvage",
         action="store_true",
@@ -37,12 +38,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from modules.pc.analysis import analyse
-    from tokenring import check_output
+    from pathlib import Path
+
+    from modules.pc.analysis import PLOTS, analyse
+    from tokenring import check_output, option_error
     from tokenring.cli import print_json
 
-    if args.out:
-        check_output(args.out, (args.log,), directory=True)  # before the log is read and plotted
+    if args.out:  # before the log is read and plotted
+        check_output(args.out, (args.log,), directory=True, error=option_error("--out"))
+        for name in PLOTS:
+            if (Path(args.out) / name).exists():
+                check_output(
+                    Path(args.out) / name, (args.log,), force=args.force, error=option_error("--out")
+                )
 
     def progress(name: str) -> None:
         if not args.json:

@@ -85,21 +85,22 @@ def check_outputs(args: argparse.Namespace) -> None:
     """Before anything is read: an output is never the input, never silently replaced."""
     from pathlib import Path
 
-    from tokenring import UsageError, check_output
+    from tokenring import UsageError, check_output, option_error
 
+    out = option_error("--out")
     if args.log_verb == "convert" and args.to == "mcap" and not args.out:
         raise UsageError("--to mcap writes one file: give it with --out FILE.mcap")
     if args.log_verb == "sort" or (
         args.log_verb == "convert" and args.to in ("text", "seed", "mcap") and args.out
     ):
-        check_output(args.out, (args.log,), force=args.force)
+        check_output(args.out, (args.log,), force=args.force, error=out)
     elif args.log_verb == "convert" and args.to == "csv":
         if not args.out:
             raise UsageError("--to csv writes data.csv and sonar.csv: give the directory with --out")
-        check_output(args.out, (args.log,), directory=True)
+        check_output(args.out, (args.log,), directory=True, error=out)
         for name in ("data.csv", "sonar.csv"):
             if (Path(args.out) / name).exists():
-                check_output(Path(args.out) / name, (args.log,), force=args.force)
+                check_output(Path(args.out) / name, (args.log,), force=args.force, error=out)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -113,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         sort_log,
         summary,
     )
-    from tokenring import write_atomically
+    from tokenring import option_error, write_atomically
 
     check_outputs(args)
     if args.log_verb == "sort":
@@ -154,15 +155,28 @@ def run(args: argparse.Namespace) -> int:
     if args.to in ("text", "seed"):
         text = convert_text(log) if args.to == "text" else convert_seed_text(log)
         if args.out:
-            write_atomically(args.out, text)
+            write_atomically(args.out, text, option_error("--out"))
             print(f"{args.out}: {len(log.records)} entries")
         else:
             sys.stdout.write(text)
         return 0
     data, sonar = convert_csv(log)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_atomically(out / "data.csv", data)
-    write_atomically(out / "sonar.csv", sonar)
+    made = not out.exists()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        write_atomically(out / "data.csv", data, None)
+        write_atomically(out / "sonar.csv", sonar, None)
+    except OSError as exc:  # a full disk: a folder this run made goes again, with what it holds
+        import contextlib
+
+        from tokenring import write_failed
+
+        if made:
+            with contextlib.suppress(OSError):
+                for name in ("data.csv", "sonar.csv"):
+                    (out / name).unlink(missing_ok=True)
+                out.rmdir()
+        raise write_failed(out, exc, option_error("--out")) from None
     print(f"{out}/data.csv: {data.count(chr(10)) - 1} synchronisations; {out}/sonar.csv")
     return 0

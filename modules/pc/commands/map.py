@@ -34,6 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "follows the extension of --out (.json, .dxf, .png).",
     )
     p.add_argument("--out", required=True, metavar="FILE", help="where to write the map (.json, .dxf, .png)")
+    p.add_argument("--force", action="store_true", help="replace an existing --out file")
     p.add_argument("--world", metavar="NAME|FILE", help="the true room, drawn faintly for comparison")
     p.add_argument("--from", dest="source", metavar="MAP", help="convert a saved map (.json or .dxf)")
     p.add_argument("--timeout", type=seconds, default=60.0, help="seconds to wait for the map (default 60)")
@@ -52,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     )
     from tokenring.cli import tap_session
 
-    check_out(args.out)
+    check_out(args.out, "--out", force=args.force, inputs=(args.source,) if args.source else ())
     if args.timeout <= 0:
         raise UsageError("--timeout must be positive")
     world_name, truth = load_truth(args.world) if args.world else (None, None)
@@ -66,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
                 info = live_world(session, args.ring)
                 if info is not None:
                     world_name, truth = truth_from_info(info)
-    score = write_map(vectors, args.out, truth, world_name)
+    score = write_map(vectors, args.out, truth, world_name, option="--out")
     line = f"wrote {len(vectors)} vectors to {args.out}"
     if score is not None:
         line += (

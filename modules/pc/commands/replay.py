@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 HELP = "run the synchronisation and EKF again on a recorded data log (offline mode)"
@@ -40,6 +41,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "config's trigger (default %(default)s)",
     )
     p.add_argument("--errors", metavar="FILE", help="also write an error log")
+    p.add_argument("--force", action="store_true", help="replace an existing --out or --errors file")
     p.add_argument(
         "--salvage",
         action="store_true",
@@ -52,6 +54,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from modules.pc.replay import replay
     from tokenring.cli import print_json
+
+    check_outputs(args)
 
     def progress(done: int, total: int) -> None:
         if sys.stderr.isatty():
@@ -93,3 +97,17 @@ def run(args: argparse.Namespace) -> int:
                 f"heading {pose['heading_deg']:.2f}°"
             )
     return 1 if args.check and not result.identical else 0
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Before the log is read: neither output is the input or the other output, nor an existing
+    file without ``--force``, and both folders are writable."""
+    from tokenring import UsageError, check_output, option_error
+
+    check_output(args.out, (args.log,), force=args.force, error=option_error("--out"))
+    if args.errors:
+        check_output(args.errors, (args.log,), force=args.force, error=option_error("--errors"))
+        if os.path.abspath(args.errors) == os.path.abspath(args.out):
+            raise UsageError(
+                f"--errors {args.errors}: is the --out file too; give the error log its own path"
+            )

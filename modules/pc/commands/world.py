@@ -83,14 +83,14 @@ def run(args: argparse.Namespace) -> int:
         return run_drive(args)
     from modules.description.generate import generate_room, room_yaml
     from modules.description.roomfile import parse_world_yaml
-    from tokenring import check_output, write_atomically
+    from tokenring import check_output, option_error, write_atomically
 
     if args.out:
-        check_output(args.out, force=args.force)
+        check_output(args.out, force=args.force, error=option_error("--out"))
     text = room_yaml(generate_room(args.seed, args.size))
     parse_world_yaml(text, f"generated room {args.seed}")  # the loader's checks, as for any file
     if args.out:
-        write_atomically(args.out, text)
+        write_atomically(args.out, text, option_error("--out"))
     else:
         print(text, end="")
     return 0
@@ -99,10 +99,10 @@ def run(args: argparse.Namespace) -> int:
 def run_drive(args: argparse.Namespace) -> int:
     from modules.description import WorldError, load_world
     from modules.description.drives import DriveError, drive_text, generate_drive
-    from tokenring import UsageError, check_output, write_atomically
+    from tokenring import UsageError, check_output, option_error, write_atomically
 
     if args.out:
-        check_output(args.out, force=args.force)
+        check_output(args.out, force=args.force, error=option_error("--out"))
     try:
         world = load_world(args.world)
         moves = generate_drive(world, args.seed, legs=args.legs)
@@ -112,7 +112,7 @@ def run_drive(args: argparse.Namespace) -> int:
         raise UsageError(f"--world {args.world}: no drive fits: {exc}") from None
     text = drive_text(moves, f"a random drive (seed {args.seed}, {args.legs} legs) in {world.name}")
     if args.out:
-        write_atomically(args.out, text)
+        write_atomically(args.out, text, option_error("--out"))
     else:
         print(text, end="")
     return 0

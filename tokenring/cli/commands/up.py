@@ -127,6 +127,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="record the whole run to a new MCAP file (as 'tokenring record'; one watcher process serves"
         " --web, --record and --foxglove together)",
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace existing output files (--record, and an application's, e.g. the robot's --map-out)",
+    )
     for extension in extensions.loaded():
         extension.add_up_options(p)
     add_ring_options(p)
@@ -312,8 +317,8 @@ def watch_service(args: argparse.Namespace) -> ServicePlan:
         check_port("--foxglove-port", args.foxglove_port)
         argv += ["--foxglove", "--foxglove-port", str(args.foxglove_port)]
     if args.record:
-        check_option_output("--record", args.record)
-        argv += ["--record", args.record]
+        check_option_output("--record", args.record, force=args.force)
+        argv += ["--record", args.record] + (["--force"] if args.force else [])
     tag = f"up{os.getpid()}"
     argv += ["--ready-token", tag]
     if args.zenoh_config:
