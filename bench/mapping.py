@@ -143,7 +143,7 @@ def run_room(
     cmd = [
         sys.executable, "-m", "tokenring", "--log-level", args.ring_log_level, "up", "--ring", ring, "--listen", endpoint,
         "--world", world, "--speed", str(args.speed), "--seed", str(seed), "--bitrate", args.bitrate,
-        "--explore", "2", "--duration", str(args.duration), "--map-out", str(live),
+        "--explore", "2", "--duration", str(args.duration), "--map-out", str(live), "--force",
     ]  # fmt: skip
     if args.programs:
         cmd += ["--programs", args.programs]
