@@ -9,9 +9,11 @@ collected). A program's time stamp is its file's modification time in ms.
 from __future__ import annotations
 
 import contextlib
+import errno
+import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -79,6 +81,41 @@ def check_program_file(path: Path, node_name: str | None = None) -> tuple[bytes,
     if node_name is not None and module != node_name:
         raise UsageError(f"{path} is the program of {module!r}, not of node {node_name!r}")
     return source, module
+
+
+def check_program_dir(programs_dir: Path, names: Iterable[str]) -> dict[str, Path]:
+    """Each node's program file in ``programs_dir`` (``<name>.py``), by name; a ``<name>.py``
+    that is there but cannot be a program (a symbolic link loop, a link to nothing, a
+    directory) is refused naming it, where leaving it out would skip the node's program
+    without a word. The files are not read or parsed here."""
+    found = {}
+    for name in names:
+        path = programs_dir / f"{name}.py"
+        if not os.path.lexists(path):
+            continue
+        try:
+            path.stat()
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                raise UsageError(f"{path}: a symbolic link loop, not the program of node {name!r}") from None
+            if path.is_symlink():
+                raise UsageError(
+                    f"{path}: a symbolic link to {os.readlink(path)}, which does not exist"
+                ) from None
+            raise UsageError(f"{path}: cannot read: {exc.strerror}") from None
+        if not path.is_file():
+            kind = "a directory" if path.is_dir() else "not a regular file"
+            raise UsageError(f"{path}: {kind}, not the program of node {name!r}")
+        found[name] = path
+    return found
+
+
+def programs_in(programs_dir: Path) -> list[str]:
+    """The program files (``*.py``) ``programs_dir`` holds, by name (for saying why nothing is sent)."""
+    try:
+        return sorted(entry.name for entry in os.scandir(programs_dir) if entry.name.endswith(".py"))
+    except OSError:
+        return []
 
 
 class Loader:
@@ -155,9 +192,10 @@ class Loader:
             items.append(PlanItem(node, file, source, file_stamp(file), "download", "asked for"))
             return items
         assert programs_dir is not None
+        files = check_program_dir(programs_dir, [n["name"] for n in nodes])
         for node in nodes:
-            path = programs_dir / f"{node['name']}.py"
-            if not path.is_file():
+            path = files.get(node["name"])
+            if path is None:
                 continue
             source, _ = check_program_file(path, node["name"])
             stamp = file_stamp(path)
@@ -333,7 +371,7 @@ def run_load(
     for item in sending:
         if loader.cancelled():
             break
-        restart = item.node["state"] in ("RUNNING", "FAILED") and start is not True
+        restart = item.node["state"] in ("RUNNING", "SETTING_UP", "FAILED") and start is not True
         outcome = loader.download(item, start=restart)
         result["outcomes"].append(outcome)
         if not outcome.ok:
@@ -376,11 +414,26 @@ def run_load(
         for line in report_table(result["outcomes"]).splitlines():
             loader.say("  " + line)
     elif mode:
-        loader.say("nothing to send: every program is up to date")
+        loader.say("nothing to send: " + nothing_sent(items, programs_dir, nodes))
     for failure in result["failed"]:
         if failure.get("id") is not None:
             loader.say(f"FAILED: {failure['name']} ({failure['id']}): {failure['error']}")
     return result
+
+
+def nothing_sent(items: list[PlanItem], programs_dir: Path | None, nodes: list[dict[str, Any]]) -> str:
+    """Why ``load -i``/``-a`` sent nothing: every program up to date, or no program to send at all
+    (an empty directory, or none of its files for a node on the ring)."""
+    if items:
+        if all(i.reason == "up to date" for i in items):
+            return "every program is up to date"
+        return "no program there is newer than its node's"
+    held = programs_in(programs_dir) if programs_dir is not None else []
+    if not held:
+        return f"{programs_dir} holds no programs (one <node>.py per node)"
+    ring = ", ".join(n["name"] for n in nodes) or "none"
+    shown = ", ".join(held[:8]) + (", ..." if len(held) > 8 else "")
+    return f"no program in {programs_dir} is for a node on the ring ({shown}; the ring: {ring})"
 
 
 def _names(nodes: list[dict[str, Any]], ids: list[int]) -> str:

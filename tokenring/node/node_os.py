@@ -287,6 +287,7 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         self._program: Any = None
         self._program_thread: threading.Thread | None = None
         self._program_set_up = False
+        self._program_started = 0.0
         self.program_error: str | None = None
 
     # =========================================================================================

@@ -11,6 +11,7 @@ import logging
 import os
 import socket
 import threading
+import time
 import traceback
 from collections.abc import Callable
 from typing import Any
@@ -20,6 +21,10 @@ from tokenring.node.channels import DataRegistration, Inbox, Outbox
 from tokenring.node.tokenpath import TokenPathHost
 
 log = logging.getLogger("tokenring.node")
+
+#: a program's ``setup()`` that has not returned after this long is reported (the log, the
+#: launcher's output): until it returns the program shows as setting up, and its run() waits
+SETUP_WARNING_S = 10.0
 
 
 class ProgramHost(TokenPathHost):
@@ -33,6 +38,7 @@ class ProgramHost(TokenPathHost):
     _program: Any
     _program_thread: threading.Thread | None
     _program_set_up: bool  # the current program's setup() has returned
+    _program_started: float  # time.monotonic() when the current program was started
     _regs: dict[str, DataRegistration]
     _inbox: Inbox | None
     _regs_lock: threading.Lock
@@ -53,10 +59,14 @@ class ProgramHost(TokenPathHost):
         program = program_class(self, *args)
         self._program = program
         self._program_set_up = False
+        self._program_started = time.monotonic()
+        warning = threading.Timer(SETUP_WARNING_S, self._warn_setting_up, (program,))
+        warning.daemon = True
 
         def runner() -> None:
             try:
                 program.setup()
+                warning.cancel()
                 self._program_set_up = program is self._program
                 program.run()
             except Exception as exc:  # a user program's bug must not take the node down
@@ -67,6 +77,7 @@ class ProgramHost(TokenPathHost):
                 if self.on_program_error is not None:
                     self.on_program_error()
             finally:
+                warning.cancel()
                 try:
                     program.teardown()
                 except Exception as exc:
@@ -74,6 +85,17 @@ class ProgramHost(TokenPathHost):
 
         self._program_thread = threading.Thread(target=runner, name=f"program-{self.name}", daemon=True)
         self._program_thread.start()
+        warning.start()
+
+    def _warn_setting_up(self, program: Any) -> None:
+        """Say that ``program``'s setup() has not returned yet (it may never: a blocking call)."""
+        if program is self._program and not self._program_set_up and not program.stop_requested.is_set():
+            log.warning(
+                "user program %s: setup() has not returned after %.0f s, so its run() has not "
+                "started (it shows as SETTING_UP in 'tokenring status' and 'tokenring load')",
+                type(program).__name__,
+                time.monotonic() - self._program_started,
+            )
 
     def stop_program(self, timeout: float = 1.0) -> bool:
         """Ask the running program to stop, wait for it, drop its registrations."""
@@ -104,6 +126,29 @@ class ProgramHost(TokenPathHost):
     @property
     def program(self) -> Any:
         return self._program
+
+    @property
+    def setting_up(self) -> bool:
+        """The current program is inside its ``setup()`` (its thread alive, setup not returned)."""
+        thread = self._program_thread
+        return (
+            self._program is not None
+            and not self._program_set_up
+            and self.program_error is None
+            and thread is not None
+            and thread.is_alive()
+        )
+
+    def program_status(self) -> str | None:
+        """``setting up``, ``running``, ``failed`` or ``stopped``; None without a program."""
+        if self._program is None:
+            return None
+        if self.program_error is not None:
+            return "failed"
+        if self.setting_up:
+            return "setting up"
+        thread = self._program_thread
+        return "running" if thread is not None and thread.is_alive() else "stopped"
 
     @property
     def program_set_up(self) -> bool:
@@ -153,6 +198,8 @@ class ProgramHost(TokenPathHost):
             },
             "send_us": {"median": pct(send, 50) * 1e3, "p99": pct(send, 99) * 1e3},
             "program": type(self._program).__name__ if self._program is not None else None,
+            "program_state": self.program_status(),
+            "setup_s": round(time.monotonic() - self._program_started, 1) if self.setting_up else None,
             "program_error": self.program_error,
             "bitrate": timing.bitrate,
             "ack_mode": timing.ack_mode,

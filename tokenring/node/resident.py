@@ -15,8 +15,6 @@ import threading
 import traceback
 from typing import TYPE_CHECKING, Any
 
-from tokenring.node.system.vocabulary import State
-
 if TYPE_CHECKING:
     from tokenring.node.node_os import NodeOS
     from tokenring.node.system.layer import SystemLayer
@@ -43,7 +41,7 @@ class ResidentProgram:
     @property
     def program_running(self) -> bool:
         """A user program runs on this node now (it has the hardware)."""
-        return self.system.program_state() == State.RUNNING
+        return self.system.program_state().runs
 
     def wait(self, seconds: float) -> bool:
         """Sleep unless asked to stop; False if the resident should end."""

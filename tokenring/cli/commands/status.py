@@ -25,6 +25,31 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_ring_options(p, listen=False)
 
 
+def program_cell(node: dict) -> str:
+    """A node's program and, unless it simply runs, its state: ``Probe (SETTING_UP 12 s)``."""
+    name = node.get("program")
+    if not name:
+        return "-"
+    state = node.get("program_state")
+    if state == "setting up":
+        return f"{name} (SETTING_UP {node.get('setup_s') or 0:.0f} s)"
+    if state in ("failed", "stopped"):
+        return f"{name} ({state.upper()})"
+    return str(name)
+
+
+def setup_warnings(nodes: list[dict]) -> list[str]:
+    """A line for every program whose setup() has not returned after SETUP_WARNING_S."""
+    from tokenring.node.program_host import SETUP_WARNING_S
+
+    return [
+        f"{n['name']} ({n['id']}): setup() of {n['program']} has not returned after {n['setup_s']:.0f} s; "
+        "its run() has not started"
+        for n in nodes
+        if n.get("program_state") == "setting up" and (n.get("setup_s") or 0) >= SETUP_WARNING_S
+    ]
+
+
 def run(args: argparse.Namespace) -> int:
     from tokenring._util.tables import format_table
     from tokenring.cli.args import tap_session
@@ -58,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
             n["stats"]["reconfigurations"],
             n["stats"]["tokens_regenerated"],
             n["regenerations"]["spurious"] if "regenerations" in n else "?",
-            n["program"] or "-",
+            program_cell(n),
         ]
         for n in nodes
     ]
@@ -83,4 +108,6 @@ def run(args: argparse.Namespace) -> int:
         )
     )
     print(format_rates(rates))
+    for line in setup_warnings(nodes):
+        print(f"warning: {line}", file=sys.stderr)
     return 0

@@ -174,6 +174,10 @@ def run(args: argparse.Namespace) -> int:
     if download and main_id not in {p.node_id for p in plans}:
         download = False  # no main, no PC link: the programs start from their files
         plans = plans_from_protocol(protocol, selection, programs)
+    if programs is not None:  # a <node>.py that cannot be one (a link loop) is named, not skipped
+        from tokenring.host.loader import check_program_dir
+
+        check_program_dir(Path(programs), [p.name for p in plans])
     if args.no_start and not download:
         why = "main, the PC link, is not among --nodes"
         if programs is None or args.no_download:

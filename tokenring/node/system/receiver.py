@@ -261,7 +261,7 @@ class SystemReceiver(SystemParts):
             if job is not None:
                 job.detail, job.status = "no program installed", Status.NO_PROGRAM
             return
-        if self.program_state() == State.RUNNING and self._running_digest == installed.digest:
+        if self.program_state().runs and self._running_digest == installed.digest:
             if job is not None:
                 job.status = Status.OK
             return
@@ -378,15 +378,15 @@ class SystemReceiver(SystemParts):
             return State.STOPPED if self.installed is not None else State.NONE
         if os_.program_error is not None:
             return State.FAILED
+        if os_.setting_up:
+            return State.SETTING_UP
         thread = os_._program_thread
         return State.RUNNING if thread is not None and thread.is_alive() else State.STOPPED
 
     def _runs_installed(self) -> bool:
         installed = self.installed
         return bool(
-            installed is not None
-            and self._running_digest == installed.digest
-            and self.program_state() == State.RUNNING
+            installed is not None and self._running_digest == installed.digest and self.program_state().runs
         )
 
     def adopt(self, source: bytes, stamp_ms: int, filename: str, program_class: type) -> None:

@@ -96,6 +96,12 @@ class State(enum.IntEnum):
     STOPPED = 1
     RUNNING = 2
     FAILED = 3
+    SETTING_UP = 4  # started, its setup() has not returned (its run() has not begun)
+
+    @property
+    def runs(self) -> bool:
+        """The program has been started and neither failed nor stopped (set up or not)."""
+        return self in (State.RUNNING, State.SETTING_UP)
 
 
 ENCODINGS = {0: "raw", 1: "zlib"}
