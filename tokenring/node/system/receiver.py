@@ -21,6 +21,7 @@ from tokenring.node.system.vocabulary import (
     Status,
     Step,
     SystemParts,
+    _clipped,
     _Download,
     _Job,
     _short,
@@ -43,7 +44,7 @@ class SystemReceiver(SystemParts):
     def _answer(self, work: bytearray, status: Status, detail: str = "") -> None:
         work[self.w0] = status
         if detail or status != Status.OK:
-            raw = _short(detail, self.wsize - 1)
+            raw = _clipped(detail, self.wsize - 1)
             work[self.w0 + 1 : self.w1] = raw + bytes(self.wsize - 1 - len(raw))
 
     def _take_scan(self, work: bytearray) -> None:
@@ -62,7 +63,7 @@ class SystemReceiver(SystemParts):
     def _take_get_status(self, work: bytearray) -> None:
         error = self.os.program_error or ""
         work[self.w0 : self.w1] = self.layouts.STATUS.pack(
-            Status.OK, self.program_state(), self._runs_installed(), _short(error, 29)
+            Status.OK, self.program_state(), self._runs_installed(), _clipped(error, 29)
         )
 
     def _take_begin(self, work: bytearray) -> None:
@@ -238,8 +239,10 @@ class SystemReceiver(SystemParts):
         try:
             filename = self.store.save(program.source, program.digest, stamp_ms)
         except OSError as exc:
-            job.detail = f"store: {exc.strerror or exc}"
+            job.detail = f"store: {exc.strerror or exc}"  # the answer's 31 bytes; the report has all
             job.status = Status.STORE_ERROR
+            log.error("cannot store the program: %s", exc)
+            self._send_error(self.TERMINATED, f"cannot store the program: {exc}")
             return
         if self.installed is not None and self.installed.digest != program.digest:
             self._previous = self.installed  # what runs again if this one fails to start
@@ -341,7 +344,7 @@ class SystemReceiver(SystemParts):
 
     def _send_error(self, about: int, text: str) -> None:
         """ARCNET_ERROR to the master: ``text`` in 30-byte parts (up to 240 bytes)."""
-        raw = text.encode("utf-8", "replace")[: 30 * ERROR_PARTS] or b"?"
+        raw = _clipped(text, 30 * ERROR_PARTS) or b"?"
         parts = [raw[i : i + 30] for i in range(0, len(raw), 30)]
         master = self.os.preferred_master or self.me
         steps = [

@@ -112,7 +112,25 @@ def _text(raw: bytes) -> str:
 
 
 def _short(text: str, size: int) -> bytes:
-    return text.encode("utf-8", "replace")[:size]
+    """``text`` in at most ``size`` bytes of UTF-8, cut at a character's boundary (a name)."""
+    return text.encode("utf-8", "replace")[:size].decode("utf-8", "ignore").encode("utf-8")
+
+
+ELLIPSIS = b"..."
+
+
+def _clipped(text: str, size: int) -> bytes:
+    """A message for a fixed text field of ``size`` bytes: whole if it fits, else cut at a word
+    (or at least a character) and ended with ``...``, never mid-character or mid-word unseen.
+    Where the field is too small, the full text goes elsewhere (an ARCNET_ERROR, the log)."""
+    raw = text.encode("utf-8", "replace")
+    if len(raw) <= size:
+        return raw
+    cut = _short(text, size - len(ELLIPSIS))
+    space = cut.rfind(b" ")
+    if space >= 2 * len(cut) // 3:  # a word boundary near the end: do not show half a word
+        cut = cut[:space]
+    return cut.rstrip(b" :,;") + ELLIPSIS
 
 
 @dataclass(slots=True)
