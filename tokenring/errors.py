@@ -7,7 +7,8 @@
     ├── ChannelError               a user program misused a channel (unknown name, wrong kind, size)
     ├── ProgramError               a user program cannot be loaded or started
     └── TransportError             the transport below the ring failed (Zenoh, sockets)
-        └── TransportClosed        an operation on a transport that is already closed
+        ├── TransportClosed        an operation on a transport that is already closed
+        └── AddressInUse           a listen endpoint another process holds; exit 2
 
 Backend exceptions are translated once, where they cross the transport seam
 (``raise TransportError(...) from exc``), so callers above never see Zenoh's own types.
@@ -63,3 +64,9 @@ class TransportError(TokenRingError):
 
 class TransportClosed(TransportError):
     """The transport was used after it was closed."""
+
+
+class AddressInUse(TransportError):
+    """An endpoint to listen on is held by another process: the user's choice, so exit 2."""
+
+    exit_code = 2

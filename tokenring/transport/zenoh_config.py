@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Callable, Mapping, MutableMapping, Sequence
 from typing import Any
 
 import zenoh
 
-from tokenring.errors import TransportError, UsageError
+from tokenring.errors import AddressInUse, TransportError, UsageError
 
 #: Zenoh's async runtimes (RON, read by Zenoh from ``$ZENOH_RUNTIME`` when a process first uses
 #: it) for a process that handles one frame at a time: one worker thread receives and sends,
@@ -181,13 +182,34 @@ def use_host_runtime() -> None:
         os.environ["ZENOH_RUNTIME"] = os.environ[RUNTIME_CHOSEN] = HOST_RUNTIME
 
 
+#: where Zenoh's error texts say which of its Rust sources raised them (`` at /root/.cargo/...rs:61.``)
+_RUST_LOCATION = re.compile(r"\s+at \S+\.rs:\d+\.?")
+#: Zenoh's "Can not create a new TCP listener bound to tcp/H:P: [H:P: Address already in use ...]"
+_LISTENER_IN_USE = re.compile(r"listener bound to (\S+?):? \[.*Address already in use", re.IGNORECASE)
+
+
+def zenoh_message(exc: BaseException) -> str:
+    """Zenoh's error as one line for a user: its Rust source locations left out, and a listen
+    endpoint another process holds said in so many words."""
+    text = " ".join(_RUST_LOCATION.sub("", str(exc)).split())
+    busy = _LISTENER_IN_USE.search(text)
+    if busy:
+        return (
+            f"cannot listen on {busy.group(1)}: the address is in use by another process "
+            "(give another --listen endpoint, or stop that process)"
+        )
+    return text
+
+
 def open_session(config: zenoh.Config) -> zenoh.Session:
     """Open a session; Zenoh's own errors become :class:`TransportError` here, once (a malformed
     ``$ZENOH_RUNTIME``, which Zenoh reports by panicking, a :class:`UsageError`)."""
     try:
         return zenoh.open(config)
     except zenoh.ZError as exc:
-        raise TransportError(f"cannot open a Zenoh session: {exc}") from exc
+        message = zenoh_message(exc)
+        kind = AddressInUse if _LISTENER_IN_USE.search(" ".join(str(exc).split())) else TransportError
+        raise kind(f"cannot open a Zenoh session: {message}") from exc
     except BaseException as exc:  # Zenoh's Rust panics arrive as pyo3's PanicException
         if type(exc).__name__ != "PanicException":
             raise
@@ -196,4 +218,4 @@ def open_session(config: zenoh.Config) -> zenoh.Session:
                 f"$ZENOH_RUNTIME={os.environ.get('ZENOH_RUNTIME', '')!r} is not a Zenoh runtime "
                 f"configuration (RON, e.g. {NODE_RUNTIME!r}): {exc}"
             ) from None
-        raise TransportError(f"Zenoh failed while opening a session: {exc}") from None
+        raise TransportError(f"Zenoh failed while opening a session: {zenoh_message(exc)}") from None
