@@ -24,6 +24,7 @@ import math
 import os as _os
 import queue
 import threading
+from collections.abc import Callable
 from typing import Any
 
 from modules.mapping.vectorgen import OUR_METHOD, SEED_METHOD, PoseHistory, Vector, Vectorizer, default_layout
@@ -93,12 +94,34 @@ def open_localizer(os: Any, truth: Any = None) -> Any | None:
         return None
     config: Any = _os.environ.get("TOKENRING_LOCALIZER_CONFIG") or EXPLORATION_CONFIG
     try:
-        localizer = Localizer(os, config, truth=truth)
+        localizer = Localizer(os, config, truth=truth, on_log_failure=incomplete_flag(truth, os.name, "logs"))
         localizer.setup()
     except Exception as exc:  # the map still works on dead reckoning
         log.error("localizer unavailable, using dead reckoning: %s", exc)
         return None
     return localizer
+
+
+def incomplete_flag(hardware: Any, module: str, what: str) -> Callable[[str], None] | None:
+    """What tells ``tokenring up`` that this module's run is not whole (a log cut short by a full
+    disk): a liveliness token ``robot/incomplete/<module>/<what>`` on the hardware's Zenoh
+    session, held while the node runs (``up`` then exits 1). None without a session."""
+    session, ring = getattr(hardware, "session", None), getattr(hardware, "ring", None)
+    if session is None or ring is None:
+        return None
+    from modules.description import keys as robot_keys
+
+    held: list[Any] = []
+
+    def flag(_line: str) -> None:
+        if held:
+            return
+        try:
+            held.append(session.liveliness().declare_token(robot_keys.incomplete(ring, module, what)))
+        except Exception as exc:  # a closing session: the node's own line still says what was lost
+            log.warning("could not tell the launcher that the %s are incomplete: %s", what, exc)
+
+    return flag
 
 
 def localizer_pose(

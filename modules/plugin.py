@@ -144,6 +144,9 @@ class RobotExtension(Extension):
         if args.explore and args.actions:
             raise UsageError("--explore and --actions both drive the robot: give one of them")
         plan.start_hint = lcd_start_hint
+        incomplete = incomplete_watch()
+        plan.on_started = incomplete.start
+        plan.failure = incomplete.failure
         if not (args.explore or args.map_out or args.actions):
             return plan
         if getattr(args, "no_start", False):
@@ -170,12 +173,16 @@ class RobotExtension(Extension):
         def start_mission(launcher: Launcher) -> None:
             from modules.pc.mission import Mission
 
+            incomplete.start(launcher)
             mission = Mission(launcher, args.explore, args.map_out, args.duration, actions=actions)
             missions.append(mission)
             mission.start()  # it follows the exploration, writes the map and stops the launcher
 
+        def failure() -> str | None:
+            return (missions[0].failure() if missions else None) or incomplete.failure()
+
         plan.on_started = start_mission
-        plan.failure = lambda: missions[0].error if missions else None
+        plan.failure = failure
         plan.grace_s = 30.0  # the mission stops the ring itself; this only caps a stuck map fetch
         return plan
 
@@ -236,6 +243,14 @@ class RobotExtension(Extension):
         from modules.pc.web import actions
 
         return actions()
+
+
+def incomplete_watch() -> Any:
+    """What names a module whose run is not whole (copro's logs cut short by a full disk) and
+    makes ``up`` exit 1: :class:`modules.pc.mission.IncompleteWatch`."""
+    from modules.pc.mission import IncompleteWatch
+
+    return IncompleteWatch()
 
 
 def lcd_start_hint(launcher: Launcher) -> str | None:

@@ -12,6 +12,9 @@ key                                      what travels on it
                                          ``world/state``, ``world/info``, ``world/control/*``,
                                          ``world/alive`` (liveliness: the world is up)
 ``tokenring/<ring>/lcd/<what>``          the LCD's screen and keypad (hardware, not the ring)
+``tokenring/<ring>/robot/incomplete/*``  liveliness ``<module>/<what>`` while a module runs
+                                         without what it was to keep (``copro/logs``: a log that
+                                         a full disk cut short); ``up`` then exits 1
 =======================================  ========================================================
 """
 
@@ -30,3 +33,8 @@ def world(ring: str, what: str) -> str:
 
 def lcd(ring: str, what: str) -> str:
     return f"{keys.PREFIX}/{ring}/lcd/{what}"
+
+
+def incomplete(ring: str, module: str = "*", what: str = "*") -> str:
+    """Liveliness while ``module`` runs without something it was to keep (``what``: ``logs``)."""
+    return f"{keys.PREFIX}/{ring}/robot/incomplete/{module}/{what}"

@@ -37,9 +37,11 @@ writer of the shadow buffer — and is logged as the seed's LOPS reference, neve
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -83,6 +85,8 @@ from modules.localization.walls import (
     wrap,
 )
 from modules.variants import algorithm
+
+logger = logging.getLogger("tokenring.localization")
 
 SOURCE_CODES = {"none": 0, "odometry": 1, "ekf": 2}
 #: data channels read for each sensor, and the field that numbers their samples
@@ -525,16 +529,22 @@ class LocalizationCore(WallCorrections, TravelCorrections):
 
 
 def open_logs(
-    config: dict[str, Any], directory: str | Path | None = None, meta: dict[str, Any] | None = None
-):
-    """The data and error logs named by the config (``{start}`` = the start time); or (None, None)."""
+    config: dict[str, Any],
+    directory: str | Path | None = None,
+    meta: dict[str, Any] | None = None,
+    on_failure: Callable[[str], None] | None = None,
+) -> tuple[DataLog | None, ErrorLog | None]:
+    """The data and error logs named by the config (``{start}`` = the start time); or (None, None).
+    ``on_failure``: a log that cannot be written (a full disk) says so there and ends, whole."""
     logs = config["logs"]
     if not logs["enabled"]:
         return None, None
     start = time.strftime("%Y%m%d-%H%M%S")
     base = Path(directory if directory is not None else logs["directory"])
-    data = DataLog(base / logs["data"].format(start=start), start, config, meta)
-    errors = ErrorLog(base / logs["errors"].format(start=start), start, debug=logs["debug"])
+    data = DataLog(base / logs["data"].format(start=start), start, config, meta, on_failure=on_failure)
+    errors = ErrorLog(
+        base / logs["errors"].format(start=start), start, debug=logs["debug"], on_failure=on_failure
+    )
     return data, errors
 
 
@@ -552,6 +562,7 @@ class Localizer:
         *,
         log_dir: str | Path | None = None,
         truth: Any = None,
+        on_log_failure: Callable[[str], None] | None = None,
     ) -> None:
         if config is None:
             from modules.localization.config import default_config_path
@@ -569,12 +580,18 @@ class Localizer:
         self.buffers: dict[str, Any] = {}
         self.last_seen: dict[str, tuple[Any, ...]] = {}
         self._truth_sub: Any = None
+        #: a log that could not be written (a full disk): its one line each; told to ``on_log_failure``
+        self.log_failures: list[str] = []
+        self.on_log_failure = on_log_failure
 
     def setup(self) -> None:
         """Open the logs, build the core and register the data channels the config uses."""
         ring = getattr(getattr(self.os, "transport", None), "ring", None)
         data_log, error_log = open_logs(
-            self.config, self.log_dir, {"node": getattr(self.os, "name", "?"), "ring": ring}
+            self.config,
+            self.log_dir,
+            {"node": getattr(self.os, "name", "?"), "ring": ring},
+            on_failure=self._log_failed,
         )
         self.core = LocalizationCore(self.config, data_log=data_log, error_log=error_log)
         for sensor, channel in CHANNELS.items():
@@ -582,6 +599,13 @@ class Localizer:
                 self.buffers[sensor] = self.os.subscribe(channel)
         if self.truth_feed is not None and "truth" in self.core.sensors:
             self._subscribe_truth()
+
+    def _log_failed(self, line: str) -> None:
+        """A log that cannot be written ends whole; one line says so and the localisation goes on."""
+        self.log_failures.append(line)
+        logger.error("%s; the localisation goes on without it", line)
+        if self.on_log_failure is not None:
+            self.on_log_failure(line)
 
     def _subscribe_truth(self) -> None:
         self._truth_sub = self.truth_feed.subscribe(self.feed_truth)

@@ -26,13 +26,15 @@ lost), F (fatal), D (debug).
 
 Crash safety: every record is one ``write()`` on an unbuffered descriptor, so a killed process
 leaves every record written before the kill; a reader stops cleanly at a torn last record and
-says so. ``convert_*`` produce the seed's line-per-entry text (:func:`convert_seed_text`: exactly
+says so. A full disk costs only the log: the writer cuts the file back to its last whole record,
+says so in one line and writes nothing more (never after a torn record). ``convert_*`` produce the seed's line-per-entry text (:func:`convert_seed_text`: exactly
 appendix B's line formats) and CSV (the seed's logfileconverter, one line per synchronisation);
 :func:`sort_log` is the seed's logfilesorter.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import math
@@ -77,15 +79,40 @@ class LogError(UsageError):
 
 
 class _Stream:
-    """An append-only msgpack stream: one unbuffered write per record, thread-safe."""
+    """An append-only msgpack stream: one unbuffered write per record, thread-safe.
 
-    def __init__(self, path: str | Path, header: dict[str, Any]) -> None:
+    A write that fails (a full disk, a quota, an I/O error) cuts the file back to its last whole
+    record and ends the stream: nothing is ever appended after a torn record, even once there is
+    room again. With ``on_failure`` the stream tells it once, in one line naming the file, and
+    drops every later record (the writer goes on without its log); without it the
+    :class:`OSError` is raised. ``name``: what messages call the file (the target of a
+    temporary file that is renamed once whole)."""
+
+    def __init__(
+        self,
+        path: str | Path,
+        header: dict[str, Any],
+        on_failure: Callable[[str], None] | None = None,
+        name: str | Path | None = None,
+    ) -> None:
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+        self.name = Path(name) if name is not None else self.path  # the file's name in messages
+        self.on_failure = on_failure
+        #: why the stream ended early (one line naming the file), or None
+        self.failure: str | None = None
         self._lock = threading.Lock()
         self._packer = msgpack.Packer(use_bin_type=True)
-        self.records = 0
+        self.records = 0  # entries written whole, the header included
+        self._size = 0  # bytes of those entries: where a torn write is cut back to
+        self._fd = -1
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND | getattr(os, "O_CLOEXEC", 0)
+            self._fd = os.open(self.path, flags, 0o644)
+        except OSError as exc:
+            with self._lock:
+                self._fail(exc, opened=False)
+            return
         self._write(header)
 
     def _write(self, obj: Any) -> None:
@@ -94,10 +121,36 @@ class _Stream:
             if self._fd < 0:
                 return
             view = memoryview(data)
-            while view:
-                written = os.write(self._fd, view)
-                view = view[written:]
+            try:
+                while view:
+                    written = os.write(self._fd, view)
+                    view = view[written:]
+            except OSError as exc:
+                self._fail(exc)
+                return
             self.records += 1
+            self._size += len(data)
+
+    def _fail(self, exc: OSError, opened: bool = True) -> None:
+        """End the stream at its last whole record (called with the lock held)."""
+        if self._fd >= 0:
+            with contextlib.suppress(OSError):
+                os.ftruncate(self._fd, self._size)  # shrinking needs no space
+            with contextlib.suppress(OSError):
+                os.close(self._fd)
+            self._fd = -1
+        if opened and self._size == 0:  # not even the header is whole: no empty file is left
+            with contextlib.suppress(OSError):
+                self.path.unlink()
+        kept = (
+            f"it ends at its last whole record ({self.records - 1} records)"
+            if self.records
+            else "no log kept"
+        )
+        self.failure = f"{self.name}: cannot write: {exc.strerror or exc}; {kept}"
+        if self.on_failure is None:
+            raise exc
+        self.on_failure(self.failure)
 
     def close(self) -> None:
         with self._lock:
@@ -116,7 +169,13 @@ class DataLog(_Stream):
     """The data log: raw, synchronised and position records per source."""
 
     def __init__(
-        self, path: str | Path, start: str, config: dict[str, Any], meta: dict[str, Any] | None = None
+        self,
+        path: str | Path,
+        start: str,
+        config: dict[str, Any],
+        meta: dict[str, Any] | None = None,
+        on_failure: Callable[[str], None] | None = None,
+        name: str | Path | None = None,
     ):
         header = {
             "tokenring_log": "data",
@@ -125,7 +184,7 @@ class DataLog(_Stream):
             "config": config,
             "meta": meta or {},
         }
-        super().__init__(path, header)
+        super().__init__(path, header, on_failure, name)
 
     def write(self, stamp_ms: int, source: str, kind: str, payload: Any) -> None:
         self._write([int(stamp_ms), source, kind, payload])
@@ -134,9 +193,17 @@ class DataLog(_Stream):
 class ErrorLog(_Stream):
     """The error log: class, time stamp, text."""
 
-    def __init__(self, path: str | Path, start: str, debug: bool = False) -> None:
-        super().__init__(path, {"tokenring_log": "errors", "version": FORMAT_VERSION, "start": start})
+    def __init__(
+        self,
+        path: str | Path,
+        start: str,
+        debug: bool = False,
+        on_failure: Callable[[str], None] | None = None,
+        name: str | Path | None = None,
+    ) -> None:
         self.debug = debug
+        header = {"tokenring_log": "errors", "version": FORMAT_VERSION, "start": start}
+        super().__init__(path, header, on_failure, name)
 
     def message(self, cls: str, stamp_ms: int, text: str) -> None:
         if cls not in ERROR_CLASSES:

@@ -22,6 +22,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from modules.localization.logs import KINDS, SOURCES, LogFile
+from tokenring import UsageError
 from tokenring.observe import Message, Topic
 
 POSE_TOPICS = {
@@ -126,10 +127,15 @@ def convert_mcap(log: LogFile, out: str | Path) -> Counter[str]:
             "log_kind": log.kind,
             "log_start": str(log.header.get("start", "")),
         },
+        keep_partial=False,  # a conversion that failed leaves no file: it can be run again
     )
     try:
         for message in log_messages(log):
             recorder.on_message(message)
+            if recorder.failure:
+                break
     finally:
         recorder.close()
+    if recorder.failure:
+        raise UsageError(f"--out {recorder.failure}")
     return recorder.counts

@@ -65,6 +65,7 @@ class Mission:
         self.duration = duration
         self.error: str | None = None
         self.score: dict[str, Any] | None = None
+        self.map_written = False
         self.thread = threading.Thread(target=self._run, name="mission", daemon=True)
 
     def start(self) -> None:
@@ -73,6 +74,19 @@ class Mission:
 
     def say(self, text: str) -> None:
         self.launcher.say(text, name="explore")
+
+    def failure(self, wait: float = 5.0) -> str | None:
+        """Why the mission did not do its job (the run's exit code 1), or None: asked once the
+        ring has stopped, it waits a moment for a map being written; a ``--map-out`` that was
+        never written is a failure, whatever stopped the ring first."""
+        self.thread.join(wait)
+        if self.error is not None:
+            return self.error
+        if self.map_out and not self.map_written:
+            text = f"--map-out {self.map_out}: no map written (the ring stopped before it was fetched)"
+            self.say(text)
+            return text
+        return None
 
     def _stopping(self) -> bool:
         return self.launcher.stopping
@@ -165,7 +179,8 @@ class Mission:
             info = live_world(self.launcher.session, self.launcher.ring)
             world, truth = truth_from_info(info) if info is not None else (None, None)
             end = end_pose(self.launcher.session, self.launcher.ring, link.request("state").get("pose"))
-            self.score = write_map(vectors, self.map_out, truth, world, end=end)
+            self.score = write_map(vectors, self.map_out, truth, world, end=end, option="--map-out")
+            self.map_written = True
             line = f"wrote {len(vectors)} vectors to {self.map_out}"
             if self.score is not None:
                 s = self.score
@@ -177,3 +192,37 @@ class Mission:
             if end is not None:
                 line += f"; the robot's pose ends {end['error_mm']:.0f} mm, {end['heading_error_deg']:+.1f}° off the truth"
             self.say(line)
+
+
+class IncompleteWatch:
+    """The modules that said their run is not whole (liveliness ``robot/incomplete/<module>/<what>``:
+    copro's logs cut short by a full disk): each is named once as it appears, and makes the run's
+    exit code 1 (:meth:`failure`). Tokens declared before :meth:`start` are seen too (history)."""
+
+    def __init__(self) -> None:
+        self.seen: list[str] = []
+        self._lock = threading.Lock()
+        self._subscriber: Any = None
+
+    def start(self, launcher: Any) -> None:
+        import zenoh
+
+        from modules.description import keys as robot_keys
+
+        def on_token(sample: zenoh.Sample) -> None:
+            if sample.kind != zenoh.SampleKind.PUT:
+                return
+            module, what = str(sample.key_expr).split("/")[-2:]
+            text = f"{module}'s {what} were cut short (its line above names the file): this run is not whole"
+            with self._lock:
+                if text in self.seen:
+                    return
+                self.seen.append(text)
+            launcher.say(text, name="robot")
+
+        key = robot_keys.incomplete(launcher.ring)
+        self._subscriber = launcher.session.liveliness().declare_subscriber(key, on_token, history=True)
+
+    def failure(self) -> str | None:
+        with self._lock:
+            return "; ".join(self.seen) or None

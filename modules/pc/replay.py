@@ -10,6 +10,7 @@ Events (a pose set, walls added to the map) are re-applied at the synchronisatio
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -20,6 +21,7 @@ from modules.localization.config import load_config
 from modules.localization.localizer import LocalizationCore
 from modules.localization.logs import SOURCE_SENSOR, DataLog, ErrorLog, LogError, LogFile, read_log
 from modules.localization.sync import Sample
+from tokenring import message_error, replacing
 
 EVENT_KINDS = {("S", "E"), ("W", "W")}
 
@@ -56,22 +58,38 @@ def replay(
         raise LogError(f"{output}: the replay must write a new log, not overwrite its input")
     start = time.strftime("%Y%m%d-%H%M%S")
     meta = {"replay_of": str(source), "mode": mode, "original_start": log.header.get("start")}
-    data_log = DataLog(output, start, settings, meta)
-    error_log = ErrorLog(errors, start, debug=settings["logs"]["debug"]) if errors else None
-    core = LocalizationCore(settings, data_log=data_log, error_log=error_log)
-    try:
-        if mode == "sync":
-            _from_synchronised(core, log, progress)
-        elif mode == "retrigger":
-            if settings["sync"]["trigger"]["rounds"] > 0:
-                raise LogError("retrigger needs a sensor trigger: token rounds are not in the log")
-            _retrigger(core, log, progress)
-        else:
-            _from_raw(core, log, progress)
-        report = core.report()
-    finally:
-        core.close()
-    return _compare(log, read_log(output), Path(output), core.syncs, report)
+    # both logs are written beside their targets and renamed once whole: a failed write (a full
+    # disk) is one line naming the target, and leaves what was there
+    fail = message_error(LogError)
+    with contextlib.ExitStack() as files:
+        data_path = files.enter_context(replacing(output, fail))
+        error_path = files.enter_context(replacing(errors, fail)) if errors else None
+        data_log = DataLog(data_path, start, settings, meta, on_failure=_refuse, name=output)
+        error_log = None
+        if error_path is not None:
+            debug = settings["logs"]["debug"]
+            error_log = ErrorLog(error_path, start, debug=debug, on_failure=_refuse, name=errors)
+        core = LocalizationCore(settings, data_log=data_log, error_log=error_log)
+        try:
+            if mode == "sync":
+                _from_synchronised(core, log, progress)
+            elif mode == "retrigger":
+                if settings["sync"]["trigger"]["rounds"] > 0:
+                    raise LogError("retrigger needs a sensor trigger: token rounds are not in the log")
+                _retrigger(core, log, progress)
+            else:
+                _from_raw(core, log, progress)
+            report = core.report()
+        finally:
+            core.close()
+        replayed = read_log(data_path)
+    return _compare(log, replayed, Path(output), core.syncs, report)
+
+
+def _refuse(line: str) -> None:
+    """A replayed log that cannot be written (a full disk) ends the replay, naming that log (its
+    temporary file is removed: what the stream kept of it is not said)."""
+    raise LogError(line.partition("; ")[0])
 
 
 def _raw_sample(record: list[Any]) -> tuple[int, int, Sample] | None:

@@ -41,6 +41,7 @@ class Watch:
     bridge: FoxgloveBridge | None = None
     dropped: int = 0
     elapsed: float = 0.0
+    failure_told: bool = False  # the recording's failure was said
     stopper: Stopper | None = None
     #: the options that name the recording and the ports, in messages about them
     record_option: str = "--record"
@@ -49,10 +50,13 @@ class Watch:
 
 
 def serve(args: argparse.Namespace, watch: Watch) -> int:
-    """Run ``watch`` on a ring until Ctrl-C, SIGTERM or its duration; 130 after Ctrl-C, else 0.
+    """Run ``watch`` on a ring until Ctrl-C, SIGTERM or its duration; 130 after Ctrl-C, 1 if the
+    recording failed (a full disk), else 0.
 
     Everything that can be refused (the output file, a port in use) is refused before the
-    process joins the ring; the recording is finalised before the feed stops."""
+    process joins the ring; the recording is finalised before the feed stops. A recording that
+    cannot be written is named in one line as it fails; the web view and the Foxglove bridge
+    go on without it, and a watcher that only recorded stops."""
     from tokenring import extensions
     from tokenring.cli.args import tap_session
     from tokenring.cli.output import check_option_output
@@ -136,6 +140,8 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
                 elapsed = time.monotonic() - started
                 if watch.recorder is not None:
                     watch.recorder.tick()
+                    if recording_failed(args, watch) and view is None and watch.bridge is None:
+                        return True  # it only recorded: nothing left to do
                 if watch.on_tick is not None:
                     watch.on_tick(watch, elapsed)
                 return stopper.event.is_set() or (watch.duration is not None and elapsed >= watch.duration)
@@ -154,6 +160,7 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
                     watch.recorder.discard()  # it never ran (a port in use): no file, FILE untouched
                 elif watch.recorder is not None:
                     watch.recorder.close()  # the file first: a launcher stopping us waits only a moment
+                    recording_failed(args, watch)
                 feed.stop()
                 watch.dropped = feed.dropped
                 if token is not None:
@@ -162,7 +169,21 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
         if watch.bridge is not None:
             watch.bridge.close()
     watch.elapsed = time.monotonic() - started
-    return 130 if stopper.signal == signal.SIGINT else 0
+    if stopper.signal == signal.SIGINT:
+        return 130
+    return 1 if watch.recorder is not None and watch.recorder.failure else 0
+
+
+def recording_failed(args: argparse.Namespace, watch: Watch) -> bool:
+    """Whether the recording failed; the first time, its one line on stderr."""
+    recorder = watch.recorder
+    if recorder is None or recorder.failure is None:
+        return False
+    if not watch.failure_told:
+        watch.failure_told = True
+        verb = getattr(args, "command", None) or "watch"
+        print(f"tokenring {verb}: error: {recorder.failure}", file=sys.stderr, flush=True)
+    return True
 
 
 async def _serve_web(view: Any, watch: Watch, ready: Callable[[], None], tick: Callable[[], bool]) -> None:
@@ -202,9 +223,10 @@ def recording_summary(watch: Watch) -> dict[str, Any]:
         "file": str(recorder.path),
         "ring": watch.ring,
         "seconds": round(watch.elapsed, 3),
-        "messages": recorder.messages,
+        "messages": recorder.messages_kept,
         "frames": frames,
-        "bytes": recorder.path.stat().st_size,
+        "bytes": recorder.path.stat().st_size if recorder.path.exists() else 0,
+        "failure": recorder.failure,
         "dropped": watch.dropped,
         "counts": dict(sorted(recorder.counts.items())),
     }

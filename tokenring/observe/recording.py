@@ -112,11 +112,54 @@ def encode_json(data: Any) -> bytes:
     return json.dumps(data, separators=(",", ":"), default=json_default).encode()
 
 
+class _WholeRecords:
+    """The recording's file, unbuffered: each write (the MCAP writer hands over whole records)
+    is on the disk whole, or cut back off it when it fails (a full disk), so the file always
+    ends at a record boundary and nothing is written after a torn record."""
+
+    def __init__(self, path: Path) -> None:
+        flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_CLOEXEC", 0)
+        self.fd = os.open(path, flags, 0o644)
+        self.size = 0
+
+    def write(self, data: bytes | memoryview) -> int:
+        view = memoryview(data)
+        try:
+            while view:
+                view = view[os.write(self.fd, view) :]
+        except OSError:
+            with contextlib.suppress(OSError):
+                os.ftruncate(self.fd, self.size)  # shrinking needs no space
+            raise
+        self.size += len(data)
+        return len(data)
+
+    def tell(self) -> int:
+        return self.size
+
+    def flush(self) -> None:
+        """Every write is already in the kernel's hands."""
+
+    def fileno(self) -> int:
+        return self.fd
+
+    def close(self) -> None:
+        if self.fd >= 0:
+            os.close(self.fd)
+            self.fd = -1
+
+
 class McapRecorder:
     """An MCAP file being written: a message sink and a raw sink for :class:`tokenring.observe.feed.Feed`.
 
     Thread-safe (the feed's thread writes while a command's loop calls :meth:`tick`). Channels
-    are registered at their first message, each schema once per schema name."""
+    are registered at their first message, each schema once per schema name.
+
+    A write that fails (a full disk) ends the recording at once: :attr:`failure` says so in one
+    line naming the file, later messages are dropped, and what was written whole (the chunks
+    before the failure, readable as a recording without an index, as a killed recorder leaves
+    it) becomes ``FILE`` — a live ring's data cannot be had again; ``keep_partial=False`` (a
+    conversion, which can be run again) or no message kept: no file at all, ``FILE`` as it was."""
 
     def __init__(
         self,
@@ -129,6 +172,7 @@ class McapRecorder:
         compression: str = "zstd",
         metadata: dict[str, str] | None = None,
         flush_interval_s: float = FLUSH_INTERVAL_S,
+        keep_partial: bool = True,
     ) -> None:
         from mcap.writer import CompressionType, Writer
 
@@ -141,23 +185,41 @@ class McapRecorder:
         self.raw_bytes = 0
         self.started_ns = time.time_ns()
         self.flush_interval_s = flush_interval_s
+        self.keep_partial = keep_partial
         self._lock = threading.Lock()
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._sequence: Counter[int] = Counter()
         self._last_flush = time.monotonic()
         self._closed = False
-        try:
-            self._file = open(self.part, "wb")  # noqa: SIM115 (closed by close())
-        except OSError as exc:
-            raise UsageError(f"{self.path}: cannot write the recording: {exc.strerror or exc}") from None
+        #: why the recording ended early (one line naming the file), or None
+        self.failure: str | None = None
+        self._messages_on_disk = 0  # messages in the chunks written whole
+        self._seconds_on_disk = 0.0
+        self._size_on_disk = 0
         kind = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
         if compression not in kind:
             raise UsageError(f"compression {compression!r}: use zstd, lz4 or none")
-        self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, compression=kind[compression])
+        try:
+            self._file = _WholeRecords(self.part)
+        except OSError as exc:
+            raise UsageError(f"{self.path}: cannot write the recording: {exc.strerror or exc}") from None
+        try:
+            self._start(Writer, kind[compression], protocol_text, metadata)
+        except OSError as exc:  # not even the file's start fits: no file at all
+            self._file.close()
+            with contextlib.suppress(OSError):
+                self.part.unlink()
+            raise UsageError(f"{self.path}: cannot write the recording: {exc.strerror or exc}") from None
+        self._size_on_disk = self._file.size
+
+    def _start(
+        self, writer: Any, compression: Any, protocol_text: str | None, metadata: dict[str, str] | None
+    ) -> None:
+        self._writer = writer(self._file, chunk_size=CHUNK_SIZE, compression=compression)
         self._writer.start(profile="", library=f"tokenring {tokenring_version()}")
         meta = {
-            "ring": ring,
+            "ring": self.ring,
             "tokenring_version": tokenring_version(),
             "started": datetime.fromtimestamp(self.started_ns / 1e9, UTC).isoformat(),
             "raw_encoding": RAW_ENCODING,
@@ -173,6 +235,7 @@ class McapRecorder:
             )
         meta.update(metadata or {})
         self._writer.add_metadata(METADATA_NAME, meta)
+        self._writer.flush()
 
     # sinks ---------------------------------------------------------------------------------
 
@@ -184,10 +247,13 @@ class McapRecorder:
         with self._lock:
             if self._closed:
                 return
-            channel = self._channels.get(message.topic)
-            if channel is None:
-                channel = self._json_channel(message.topic)
-            self._add(channel, message.topic, message.time_ns, data)
+            try:
+                channel = self._channels.get(message.topic)
+                if channel is None:
+                    channel = self._json_channel(message.topic)
+                self._add(channel, message.topic, message.time_ns, data)
+            except OSError as exc:  # a chunk went out and did not fit
+                self._fail(exc)
 
     def on_raw(self, raw: RawSample) -> None:
         """Write one raw Zenoh sample on the channel named by its key (a raw sink)."""
@@ -196,14 +262,20 @@ class McapRecorder:
         with self._lock:
             if self._closed:
                 return
-            channel = self._channels.get(raw.key)
-            if channel is None:
-                channel = self._writer.register_channel(
-                    topic=raw.key, message_encoding=RAW_ENCODING, schema_id=0, metadata={"ring": self.ring}
-                )
-                self._channels[raw.key] = channel
-            self.raw_bytes += len(raw.payload)
-            self._add(channel, raw.key, raw.time_ns, raw.payload)
+            try:
+                channel = self._channels.get(raw.key)
+                if channel is None:
+                    channel = self._writer.register_channel(
+                        topic=raw.key,
+                        message_encoding=RAW_ENCODING,
+                        schema_id=0,
+                        metadata={"ring": self.ring},
+                    )
+                    self._channels[raw.key] = channel
+                self.raw_bytes += len(raw.payload)
+                self._add(channel, raw.key, raw.time_ns, raw.payload)
+            except OSError as exc:  # a chunk went out and did not fit
+                self._fail(exc)
 
     def _json_channel(self, name: str) -> int:
         topic = self.topics.get(name)
@@ -234,13 +306,46 @@ class McapRecorder:
         )
         self._sequence[channel] += 1
         self.counts[name] += 1
+        if self._file.size != self._size_on_disk:  # a full chunk went out
+            self._on_disk()
         self._maybe_flush()
+
+    def _on_disk(self) -> None:
+        """Note what the file holds whole: every message so far."""
+        self._size_on_disk = self._file.size
+        self._messages_on_disk = self.messages
+        self._seconds_on_disk = (time.time_ns() - self.started_ns) / 1e9
 
     def _maybe_flush(self) -> None:
         now = time.monotonic()
         if now - self._last_flush >= self.flush_interval_s:
             self._last_flush = now
+            self._flush()
+
+    def _flush(self) -> None:
+        """Write the open chunk out (with the lock held); a failure ends the recording."""
+        try:
             self._writer.flush()
+        except OSError as exc:
+            self._fail(exc)
+            return
+        self._on_disk()
+
+    def _fail(self, exc: OSError) -> None:
+        """End the recording at its last whole record (the lock held): nothing more is written."""
+        self._closed = True
+        self._file.close()
+        if self._messages_on_disk and self.keep_partial:
+            os.replace(self.part, self.path)
+            kept = (
+                f"the recording ends at its last whole chunk ({self._seconds_on_disk:.1f} s, "
+                f"{self._messages_on_disk} messages; without an index, as a killed recorder leaves it)"
+            )
+        else:
+            with contextlib.suppress(OSError):
+                self.part.unlink()
+            kept = "nothing was kept" + (" (the file there is as it was)" if self.path.exists() else "")
+        self.failure = f"{self.path}: cannot write the recording: {exc.strerror or exc}; {kept}"
 
     def tick(self) -> None:
         """Flush a chunk that has waited :attr:`flush_interval_s` (call it now and then when idle)."""
@@ -254,16 +359,24 @@ class McapRecorder:
     def messages(self) -> int:
         return sum(self.counts.values())
 
+    @property
+    def messages_kept(self) -> int:
+        """The messages in the file: all of them, or those before a failure (:attr:`failure`)."""
+        return self._messages_on_disk if self.failure else self.messages
+
     def close(self) -> Path:
-        """Write the summary, sync, and move the file to its final name."""
+        """Write the summary, sync, and move the file to its final name (a recording that
+        failed: see :attr:`failure`; what it kept is already there)."""
         with self._lock:
             if self._closed:
                 return self.path
+            try:
+                self._writer.finish()
+                os.fsync(self._file.fileno())  # a file system may report a full disk only here
+            except OSError as exc:
+                self._fail(exc)
+                return self.path
             self._closed = True
-            self._writer.finish()
-            self._file.flush()
-            with contextlib.suppress(OSError):
-                os.fsync(self._file.fileno())
             self._file.close()
             os.replace(self.part, self.path)
         return self.path

@@ -68,12 +68,12 @@ def run(args: argparse.Namespace) -> int:
         sys.stderr.write("\n")
     if args.json:
         print_json(summary)
-    elif not args.quiet:
+    elif not args.quiet and not summary["failure"]:  # a failure's one line is said as it happens
         print(
             f"{summary['file']}: {summary['seconds']:.1f} s, {summary['frames']} frames, "
             f"{summary['messages']} messages on {len(summary['counts'])} channels, {summary['bytes'] / 1e6:.1f} MB"
             + (f"; {watch.dropped} samples dropped (the recorder fell behind)" if watch.dropped else "")
         )
-    if not summary["messages"] and not args.quiet:
+    if not summary["messages"] and not summary["failure"] and not args.quiet:
         print(f"nothing was recorded: is ring {ring!r} running, and is --connect right?", file=sys.stderr)
     return code

@@ -124,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
                 did = keys.id_from_key(str(sample.key_expr))
                 if capture is not None:
                     capture.feed_raw(RawSample(str(sample.key_expr), time.time_ns(), frame))
+                    if capture.recorder.failure:  # a full disk: the capture is over, and so is the sniff
+                        break
                 record = decode_frame(frame, did, protocol, channels, args.header_only)
                 # a pass repeated because its acknowledgement was late: same bytes, same receiver
                 # (every byte: two different passes share a CRC-16 once in 65536)
@@ -147,6 +149,9 @@ def run(args: argparse.Namespace) -> int:
             subscriber.undeclare()
             if capture is not None:
                 capture.finish(seen, ended)
+    if capture is not None and capture.recorder.failure:
+        print(f"tokenring sniff: error: --write {capture.recorder.failure}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -166,10 +171,14 @@ class Capture:
     def finish(self, frames: int, ended: bool) -> None:
         """Finalise the file (``ended``: the run was not cut short by an error or Ctrl-C). One
         without a frame is not kept: a failed or empty run must not leave a FILE that a retry
-        without ``--force`` is refused over."""
+        without ``--force`` is refused over. A capture that failed (a full disk) keeps what it
+        wrote whole and is named by the caller."""
+        if self.recorder.failure:
+            return  # it is closed, what it kept is FILE
         if frames:
             path = self.recorder.close()
-            print(f"{path}: {frames} frames, {self.recorder.messages} messages captured", file=sys.stderr)
+            if not self.recorder.failure:
+                print(f"{path}: {frames} frames, {self.recorder.messages} messages captured", file=sys.stderr)
             return
         self.recorder.discard()
         if ended:

@@ -129,7 +129,7 @@ def report(watch: Watch) -> None:
     """One line per part of a stopped watcher: what it recorded and sent."""
     from tokenring.cli.watcher import recording_summary
 
-    if watch.recorder is not None:
+    if watch.recorder is not None and not watch.recorder.failure:  # a failure is said as it happens
         s = recording_summary(watch)
         print(
             f"{s['file']}: {s['seconds']:.1f} s, {s['frames']} frames, {s['messages']} messages on "
