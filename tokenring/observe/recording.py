@@ -19,7 +19,9 @@ Crash safety: the file is written as ``FILE.part`` beside its target and renamed
 only once its summary is written, so ``FILE`` is always a whole recording. Chunks (zstd) are
 closed and flushed at least every :data:`FLUSH_INTERVAL_S`: a recorder that is killed outright
 leaves ``FILE.part`` holding everything up to the last flush, readable by any MCAP reader
-(``mcap recover``, or ``play`` itself: a file without a summary is read front to back).
+(``mcap recover``, or ``play`` itself: a file without a summary is read front to back). A full
+disk ends a recording at its last whole record: the file is written unbuffered, a torn write is
+cut off again, and what was kept becomes ``FILE`` (without a summary) — see :class:`McapRecorder`.
 """
 
 from __future__ import annotations

@@ -3,6 +3,8 @@
 Every frame raw, every channel decoded, round trips, ring events, the nodes' counters and
 faults, and every extension's topics (the robot's poses, sonar, map) with their schemas. Ctrl-C
 or SIGTERM ends the recording and finalises the file; ``FILE`` appears only when it is whole.
+A full disk ends it too, in one line, exit 1: what was written whole before stays ``FILE`` (a
+recording without an index, as ``play`` and any MCAP reader read it), no ``FILE.part`` is left.
 """
 
 from __future__ import annotations
