@@ -21,7 +21,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from tokenring import Extension, UpPlan, UsageError
-from tokenring.cli import seconds
+from tokenring.cli import int_within, seconds
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -32,6 +32,10 @@ if TYPE_CHECKING:
     from tokenring import Protocol, ResidentProgram, WebAction, WebPanel
     from tokenring.host import Launcher, ServicePlan
     from tokenring.observe import FeedSource
+
+
+#: a world's random seed (numpy's generators take 0..2**32-1 and fail on a negative one)
+MAX_SEED = 2**32 - 1
 
 
 def programs_dir() -> Path:
@@ -76,10 +80,13 @@ class RobotExtension(Extension):
             "--speed",
             default="1",
             metavar="K",
-            help="simulation speed-up factor (default 1); the emulated wire runs K times faster too",
+            help="simulation speed-up factor, 0.01..1000 (default 1); the emulated wire runs K times faster too",
         )
         world.add_argument(
-            "--seed", type=int, default=1, help="the world's random seed (default %(default)s)"
+            "--seed",
+            type=int_within(0, MAX_SEED),
+            default=1,
+            help=f"the world's random seed, 0..{MAX_SEED} (default %(default)s)",
         )
         world.add_argument("--no-world", action="store_true", help="start no world simulator (no hardware)")
         world.add_argument(
@@ -111,7 +118,11 @@ class RobotExtension(Extension):
             "after the compass calibration, then stop the ring",
         )
         mission.add_argument(
-            "--action-speed", type=int, default=50, metavar="PCT", help="speed of the action file's moves"
+            "--action-speed",
+            type=int_within(1, 100),
+            default=50,
+            metavar="PCT",
+            help="speed of the action file's moves, 1..100 %% of 10 cm/s (default %(default)s)",
         )
         mission.add_argument(
             "--localizer",

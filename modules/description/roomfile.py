@@ -211,6 +211,8 @@ class _Reader:
     ) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
             raise self.fail(line, f"{what} must be a number, not {value!r}")
+        if lo is None and hi is None:  # no value of a room is beyond a room's size (1e300 is a typo)
+            lo, hi = (0.0 if positive else -MAX_COORDINATE_MM), MAX_COORDINATE_MM
         if positive and value <= 0:
             raise self.fail(line, f"{what} must be positive, not {value!r}")
         if (lo is not None and value < lo) or (hi is not None and value > hi):
@@ -351,7 +353,7 @@ def parse_world_yaml(text: str, source: str, default_name: str = "world", base: 
         start = Pose(
             r.number(m["x"], line, "start x"),
             r.number(m["y"], line, "start y"),
-            math.radians(r.number(m.get("angle_deg", 0.0), line, "start angle_deg")),
+            math.radians(r.number(m.get("angle_deg", 0.0), line, "start angle_deg", lo=-360, hi=360)),
         )
     world = World(
         name=str(doc.get("name", default_name)),
@@ -359,7 +361,7 @@ def parse_world_yaml(text: str, source: str, default_name: str = "world", base: 
         walls=tuple(walls),
         circles=tuple(circles),
         start=start or Pose(0, 0, 0),
-        north=math.radians(r.number(doc.get("north_deg", 90.0), top, "north_deg")),
+        north=math.radians(r.number(doc.get("north_deg", 90.0), top, "north_deg", lo=-360, hi=360)),
         earth_field_ut=r.number(doc.get("earth_field_ut", 18.0), top, "earth_field_ut", positive=True),
         anomalies=tuple(anomalies),
         floor=floor,

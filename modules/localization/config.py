@@ -22,6 +22,9 @@ import yaml
 from tokenring import NumberLoader, UsageError, YAMLStructureError, one_line
 
 SENSOR_NAMES = ("odometry", "compass", "sonar", "battery", "truth")
+#: the largest number a setting may have: every one is a distance, angle, time, count or
+#: sigma of a room-sized robot (the defaults are at most 1400), and 1e300 is a typo
+MAX_VALUE = 1e9
 
 # fmt: off
 DEFAULTS: dict[str, Any] = {
@@ -217,12 +220,16 @@ class _Checker:
                 raise self.fail(path, f"expected a whole number, got {value!r}")
             if value < 0:
                 raise self.fail(path, f"must not be negative, got {value}")
+            if value > MAX_VALUE:
+                raise self.fail(path, f"must be within 0..{MAX_VALUE:g}, got {value}")
             return value
         if isinstance(default, float):
             if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
                 raise self.fail(path, f"expected a number, got {value!r}")
             if value < 0:
                 raise self.fail(path, f"must not be negative, got {value}")
+            if value > MAX_VALUE:
+                raise self.fail(path, f"must be within 0..{MAX_VALUE:g}, got {value:g}")
             return float(value)
         if isinstance(default, str):
             return self.text_or_special(value, path)

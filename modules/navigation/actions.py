@@ -42,6 +42,8 @@ MAX_SPEED_MM_S = 100.0  # 100 % = 10 cm/s, the start-stop limit
 #: slip) until a reading or two at rest came in (400 ms judged a 12° miss as on target)
 SETTLE_MS = 1200
 MAX_WHEELS_MS = 60_000  # one SET_WHEEL_SPEEDS lasts at most this long (duration_ms is u16)
+#: the longest timed ``v``/``c`` action (an hour; main sends it as SET_WHEEL_SPEEDS of MAX_WHEELS_MS each)
+MAX_ACTION_MS = 3_600_000
 TRACK_HALF_WIDTH_MM = 6.5 * 0.5419 * 180.0 / math.pi  # track travel per radian of turn, glide 6.5
 #: after a non-queueing SET_WHEEL_SPEEDS the next action waits until motor.data shows it running,
 #: at most this long: the pilot takes the move number it sees as the old move's, and the wheels'
@@ -133,8 +135,8 @@ def _check(kind: str, args: tuple[float, ...], where: str) -> None:
         raise UsageError(f"{where}: a straight move is 1..65535 mm (either sign), got {args[0]:g}")
     if kind == "r" and not 0 < abs(args[0]) <= 3600:
         raise UsageError(f"{where}: a turn is up to 3600 degrees (either sign, not 0), got {args[0]:g}")
-    if kind in "vc" and len(args) == 3 and args[2] <= 0:
-        raise UsageError(f"{where}: the time must be positive, got {args[2]:g} ms")
+    if kind in "vc" and len(args) == 3 and not 1 <= args[2] <= MAX_ACTION_MS:
+        raise UsageError(f"{where}: the time must be positive, 1..{MAX_ACTION_MS} ms, got {args[2]:g} ms")
     if kind == "v":
         left, right = args[0], args[1]
         if max(abs(left), abs(right)) > MAX_SPEED_MM_S:

@@ -17,18 +17,22 @@ from modules.description.roomfile import DEFAULT_WORLD, load_world
 from modules.world.service import WorldService
 from modules.world.sim import Simulator
 from tokenring import TokenRingError, UsageError, keys
-from tokenring.cli import StopEvent, wait_for_stop
+from tokenring.cli import StopEvent, int_within, wait_for_stop
 from tokenring.transport import make_config, open_session
+
+#: the slowest and fastest simulation: below 0.01 the emulated wire (K times the bitrate)
+#: crawls and the token hardly moves; above 1000 a simulated step outruns the real machine
+MIN_SPEED, MAX_SPEED = 0.01, 1000.0
 
 
 def parse_speed(text: str) -> float:
-    """A speed-up factor: a positive number (``20``, ``0.5``)."""
+    """A speed-up factor within :data:`MIN_SPEED`..:data:`MAX_SPEED` (``20``, ``0.5``)."""
     try:
         value = float(text)
     except ValueError:
-        raise UsageError(f"--speed {text!r} is not a number") from None
-    if not 0 < value <= 1000:
-        raise UsageError(f"--speed {text}: give a factor above 0 and at most 1000 (1 = real time)")
+        raise UsageError(f"--speed {text!r} is not a number (give {MIN_SPEED:g}..{MAX_SPEED:g})") from None
+    if not MIN_SPEED <= value <= MAX_SPEED:  # (NaN fails every comparison: refused too)
+        raise UsageError(f"--speed {text}: give a factor within {MIN_SPEED:g}..{MAX_SPEED:g} (1 = real time)")
     return value
 
 
@@ -40,7 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--world", default=DEFAULT_WORLD, help="bundled room name or world file (default %(default)s)"
     )
     p.add_argument("--speed", default="1", help="simulated seconds per real second (default %(default)s)")
-    p.add_argument("--seed", type=int, default=1, help="random seed (default %(default)s)")
+    p.add_argument(
+        "--seed", type=int_within(0, 2**32 - 1), default=1, help="random seed (default %(default)s)"
+    )
     p.add_argument(
         "--body",
         choices=BODIES,

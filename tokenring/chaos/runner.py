@@ -48,6 +48,8 @@ from tokenring.transport.session import free_port, query
 from tokenring.transport.zenoh_config import make_config, open_session
 
 RING_KEYS = {"nodes", "bitrate", "ack", "respawn", "workload"}
+#: the latest a fault may be scheduled, seconds from the start (a day, as chaos --duration)
+MAX_AT_S = 86_400.0
 FAULT_KEYS = {"at", "node", "kind", "value", "jitter", "count", "soft"}
 LEDGER_ENV = "TOKENRING_PROBE_LEDGER"  # where the probe programs write their ledgers
 INJECT_S = 5.0  # a starved node may take seconds to answer its fault query
@@ -139,7 +141,10 @@ def load_scenario(path: str | Path, protocol: Protocol | None = None) -> Scenari
     scenario.ack = str(ring.get("ack", "adaptive"))
     if scenario.ack not in ("adaptive", "always", "never"):
         raise fail("ring.ack", f"{scenario.ack!r} is not adaptive, always or never")
-    scenario.respawn = bool(ring.get("respawn", False))
+    respawn = ring.get("respawn", False)
+    if not isinstance(respawn, bool):
+        raise fail("ring.respawn", f"{respawn!r} is not true or false")
+    scenario.respawn = respawn
     scenario.workload = str(ring.get("workload", "probe"))
     if scenario.workload not in ("probe", "modules", "none"):
         raise fail("ring.workload", f"{scenario.workload!r} is not probe, modules or none")
@@ -161,8 +166,8 @@ def load_scenario(path: str | Path, protocol: Protocol | None = None) -> Scenari
             key = sorted(unknown)[0]
             raise fail(f"{entry}.{key}", f"unknown key (allowed: {', '.join(sorted(FAULT_KEYS))})")
         at = raw.get("at")
-        if not isinstance(at, int | float) or isinstance(at, bool) or at < 0:
-            raise fail(f"{entry}.at", f"{at!r} must be a time in seconds from the start")
+        if not isinstance(at, int | float) or isinstance(at, bool) or not 0 <= at <= MAX_AT_S:
+            raise fail(f"{entry}.at", f"{at!r} must be a time in seconds from the start, 0..{MAX_AT_S:.0f}")
         if at < last:
             raise fail(f"{entry}.at", f"{at} comes before the previous fault at {last}")
         last = float(at)
@@ -191,7 +196,10 @@ def load_scenario(path: str | Path, protocol: Protocol | None = None) -> Scenari
             elif kind == "lose":
                 request["count"] = raw.get("count", 1)
             elif kind == "hang":
-                request["soft"] = bool(raw.get("soft", False))
+                soft = raw.get("soft", False)
+                if not isinstance(soft, bool):
+                    raise UsageError(f"soft {soft!r} is not true or false")
+                request["soft"] = soft
             request = validate(request)
         except UsageError as exc:
             raise fail(entry, str(exc)) from None

@@ -55,9 +55,26 @@ def int_within(low: int, high: int) -> Callable[[str], int]:
         try:
             value = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number (give {low}..{high})") from None
         if not low <= value <= high:
             raise argparse.ArgumentTypeError(f"{value} is not within {low}..{high}")
+        return value
+
+    return parse
+
+
+def number_within(low: float, high: float, unit: str = "") -> Callable[[str], float]:
+    """An argparse type: a finite number within ``low``..``high`` (NaN and infinities are
+    refused: a comparison with NaN is always false, so no later check would catch it)."""
+    span = f"{low:g}..{high:g}{f' {unit}' if unit else ''}"
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number (give {span})") from None
+        if not (math.isfinite(value) and low <= value <= high):
+            raise argparse.ArgumentTypeError(f"{text}: give a number within {span}")
         return value
 
     return parse
@@ -68,7 +85,7 @@ def positive_int(text: str) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number (give 1 or more)") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"{value}: give at least 1")
     return value

@@ -28,6 +28,7 @@ This is the vocabulary both sides share: the kinds, their checks, the crash's ex
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -60,15 +61,30 @@ KINDS = (
 
 NEEDS_VALUE = {"delay": "MS", "drop": "P", "corrupt": "P", "partition": "A,B|C,D"}
 
+#: the longest delay (and jitter) a node's token may be held, in ms: longer is a hang
+MAX_DELAY_MS = 60_000
+#: the most tokens one ``lose`` takes (each costs the ring a regeneration)
+MAX_LOSE = 10_000
+
+
+def number_within(value: Any, what: str, low: float, high: float, unit: str = "") -> float:
+    """``value`` as a finite float within ``low``..``high``, else a :class:`UsageError` naming
+    ``what`` and the range: NaN, infinities, booleans and numbers too large for a float are
+    refused here, on the tool's side and on the node's alike (a node must never die of one)."""
+    span = f"{low:g}..{high:g}{f' {unit}' if unit else ''}"
+    try:
+        if isinstance(value, bool) or not isinstance(value, int | float | str):
+            raise TypeError
+        number = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise UsageError(f"{what} {value!r} is not a number (give {span})") from None
+    if not (math.isfinite(number) and low <= number <= high):
+        raise UsageError(f"{what} {value!r} is outside {span}")
+    return number
+
 
 def parse_probability(text: Any, kind: str) -> float:
-    try:
-        value = float(text)
-    except (TypeError, ValueError):
-        raise UsageError(f"{kind}: probability {text!r} is not a number") from None
-    if not 0.0 <= value <= 1.0:
-        raise UsageError(f"{kind}: probability {value} is outside 0..1")
-    return value
+    return number_within(text, f"{kind}: probability", 0.0, 1.0)
 
 
 def parse_partition(text: str, resolve: Callable[[str], int]) -> list[list[int]]:
@@ -90,34 +106,41 @@ def parse_partition(text: str, resolve: Callable[[str], int]) -> list[list[int]]
 
 def validate(request: dict[str, Any]) -> dict[str, Any]:
     """Check a fault request before anything is injected; raises :class:`UsageError`."""
+    if not isinstance(request, dict):
+        raise UsageError(
+            f"a fault request is a mapping like {{'kind': 'delay', 'ms': 5}}, not {type(request).__name__}"
+        )
     kind = request.get("kind")
     if kind not in KINDS:
         raise UsageError(f"unknown fault kind {kind!r} (kinds: {', '.join(KINDS)})")
     out = {"kind": kind}
     if kind == "delay":
-        try:
-            out["ms"] = float(request.get("ms", request.get("value")))  # type: ignore[arg-type]  # None: TypeError below
-            out["jitter_ms"] = float(request.get("jitter_ms") or 0.0)
-        except (TypeError, ValueError):
-            raise UsageError("delay needs a number of milliseconds, e.g. 'delay 5'") from None
-        if out["ms"] < 0 or out["jitter_ms"] < 0 or out["ms"] > 60_000:
-            raise UsageError(f"delay {out['ms']} ms (jitter {out['jitter_ms']}) must be 0..60000 ms")
+        ms = request.get("ms", request.get("value"))
+        if ms is None:
+            raise UsageError("delay needs a number of milliseconds, e.g. 'delay 5'")
+        out["ms"] = number_within(ms, "delay", 0, MAX_DELAY_MS, "ms")
+        out["jitter_ms"] = number_within(request.get("jitter_ms") or 0.0, "--jitter", 0, MAX_DELAY_MS, "ms")
     elif kind in ("drop", "corrupt"):
         out["p"] = parse_probability(request.get("p", request.get("value")), kind)
     elif kind == "duplicate":
         out["p"] = parse_probability(request.get("p", 1.0), kind)
     elif kind == "lose":
-        count = request.get("count") or 1
-        if not isinstance(count, int) or count < 1:
-            raise UsageError(f"lose --count must be a positive integer, not {count!r}")
+        count = 1 if request.get("count") is None else request["count"]
+        if isinstance(count, bool) or not isinstance(count, int) or not 1 <= count <= MAX_LOSE:
+            raise UsageError(f"lose --count {count!r}: give a whole number within 1..{MAX_LOSE}")
         out["count"] = count
     elif kind == "partition":
         groups = request.get("groups")
         if not (
-            isinstance(groups, list) and len(groups) == 2 and all(isinstance(g, list) and g for g in groups)
+            isinstance(groups, list)
+            and len(groups) == 2
+            and all(isinstance(g, list) and 0 < len(g) <= 255 for g in groups)
+            and all(
+                isinstance(i, int) and not isinstance(i, bool) and 1 <= i <= 255 for g in groups for i in g
+            )
         ):
-            raise UsageError("partition needs two groups of node IDs")
-        out["groups"] = [[int(i) for i in g] for g in groups]
+            raise UsageError("partition needs two groups of node IDs (each 1..255)")
+        out["groups"] = [list(g) for g in groups]
     elif kind == "hang":
         out["soft"] = bool(request.get("soft", False))
     return out

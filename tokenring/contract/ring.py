@@ -70,12 +70,18 @@ EVENT_REGENERATED = b"R"
 EVENT_RING_STOPPING = b"Q"  # the launcher stops the whole ring: leave without a handover  # ARCNET's reconfiguration burst: everyone restarts its lost-token timer
 
 
+#: the slowest and fastest wire to emulate, bit/s: below 10k a pass takes over half a second
+#: (ARCNET's slowest rate was 19.5 kbit/s); above 100G pacing is nothing ('max' says so)
+MIN_BITRATE, MAX_BITRATE = 10e3, 100e9
+
+
 def parse_bitrate(text: str | float | int | None) -> float | None:
-    """``max`` (or None) means no pacing; otherwise bits per second, e.g. ``2.5M``, ``500k``."""
+    """``max`` (or None) means no pacing; otherwise bits per second, e.g. ``2.5M``, ``500k``,
+    within :data:`MIN_BITRATE`..:data:`MAX_BITRATE`."""
     if text is None:
         return None
     if isinstance(text, int | float):
-        value = float(text)
+        value = float(text) if abs(text) < MAX_BITRATE * 10 else math.inf  # (an int may not fit a float)
     else:
         raw = text.strip().lower().removesuffix("bit/s").removesuffix("bps")
         if raw in ("max", "inf", "unlimited"):
@@ -93,10 +99,10 @@ def parse_bitrate(text: str | float | int | None) -> float | None:
             from tokenring.errors import UsageError
 
             raise UsageError(f"bitrate {text!r}: expected 'max' or a rate like 2.5M, 500k") from None
-    if not math.isfinite(value) or value <= 0:
+    if not (math.isfinite(value) and MIN_BITRATE <= value <= MAX_BITRATE):
         from tokenring.errors import UsageError
 
-        raise UsageError(f"bitrate must be positive, got {text!r}")
+        raise UsageError(f"bitrate {text!r}: give 'max' or a rate within 10k..100G bit/s (e.g. 2.5M)")
     return value
 
 

@@ -123,15 +123,25 @@ class ProgramStore:
 
 def check_store_root(root: Path) -> Path:
     """Make sure the program store root can hold programs, before any node starts: it is
-    created if missing; a root that cannot be created or written is one clear error."""
+    created if missing; a root that cannot be created or written is one clear error. Writing
+    is tried, not asked: ``os.access`` says yes to root everywhere, ``/proc`` included, where a
+    node found out only when its first download failed."""
+    import tempfile
+
     from tokenring.errors import UsageError
 
+    if root.exists() and not root.is_dir():
+        raise UsageError(f"--store {root}: not a directory")
     try:
         root.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UsageError(f"--store {root}: cannot create it: {exc.strerror}") from None
-    if not root.is_dir():
-        raise UsageError(f"--store {root}: not a directory")
-    if not os.access(root, os.W_OK | os.X_OK):
-        raise UsageError(f"--store {root}: not writable")
+    try:  # what a node does with it: a folder per ring and node, a file in it
+        probe = Path(tempfile.mkdtemp(prefix=".tokenring-probe-", dir=root))
+        try:
+            (probe / "program.json").write_bytes(b"{}")
+        finally:
+            shutil.rmtree(probe, ignore_errors=True)
+    except OSError as exc:
+        raise UsageError(f"--store {root}: cannot write in it: {exc.strerror or exc}") from None
     return root

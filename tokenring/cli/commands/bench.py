@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from typing import Any
@@ -11,6 +12,8 @@ from typing import Any
 HELP = "token round trip against a bare Zenoh ring, measured in the same run"
 
 ROUNDS, WARMUP = 2000, 300
+MAX_WARMUP = 10**9  # a warm-up that never ends on any machine is a test's hang guard
+MAX_REPEAT = 1000
 KINDS = {"peer": "peers", "router": "routers", "links": "direct links"}
 
 EXAMPLES = """examples:
@@ -29,7 +32,35 @@ Two or more pairs (--repeat, --interleave) give the own share per hop with its 9
 """
 
 
+def whole(span: str) -> Any:
+    """An argparse type: a whole number, else an error that says the option's range ``span``."""
+
+    def parse(text: str) -> int:
+        try:
+            return int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number (give {span})") from None
+
+    return parse
+
+
+def real(span: str) -> Any:
+    """An argparse type: a finite number, else an error that says the option's range ``span``."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{text!r} is not a finite number (give {span})")
+        return value
+
+    return parse
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring.cli.args import int_within, seconds
     from tokenring.perf.defaults import ROUTER_FROM
 
     p = sub.add_parser(
@@ -39,16 +70,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         epilog=EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--nodes", type=int, default=8, help="ring size 2..255 (default %(default)s)")
+    # their ranges are checked in run(), which says them (--nodes must be 2..255); these types
+    # only say the range when the value is no whole number at all
+    p.add_argument("--nodes", type=whole("2..255"), default=8, help="ring size 2..255 (default %(default)s)")
     # rounds, warmup and repeat default to None so that --interleave can refuse them when given
-    p.add_argument("--rounds", type=int, help=f"rounds measured per run (default {ROUNDS})")
-    p.add_argument("--warmup", type=int, help=f"rounds discarded first (default {WARMUP})")
+    p.add_argument(
+        "--rounds", type=whole("10..16000"), help=f"rounds measured per run, 10..16000 (default {ROUNDS})"
+    )
+    p.add_argument(
+        "--warmup",
+        type=int_within(0, MAX_WARMUP),
+        help=f"rounds discarded first, 0..{MAX_WARMUP} (default {WARMUP})",
+    )
     p.add_argument("--bitrate", default="max", help="emulated bitrate of the ring (default %(default)s)")
     p.add_argument("--ack", default="adaptive", choices=("adaptive", "always", "never"))
-    p.add_argument("--repeat", type=int, help="alternate bare/ring runs this many times (default 1)")
+    p.add_argument(
+        "--repeat",
+        type=int_within(1, MAX_REPEAT),
+        help=f"alternate bare/ring runs this many times, 1..{MAX_REPEAT} (default 1)",
+    )
     p.add_argument(
         "--timeout",
-        type=float,
+        type=seconds,
         help="seconds allowed per run (default: 120 plus 1 ms per node and round, plus the wire time)",
     )
     p.add_argument("--json", metavar="FILE", help="write the results as JSON ('-' for stdout)")
@@ -76,14 +119,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--interleave",
-        type=int,
+        type=whole("2..10000"),
         metavar="PAIRS",
         help="instead of separate runs, both rings up at once taking turns: PAIRS ring windows, each "
         "set against the bare windows either side (the ring not measured is frozen)",
     )
     p.add_argument(
         "--window",
-        type=float,
+        type=real("0.05..1 s"),
         metavar="S",
         help="with --interleave: seconds per window (default 0.6 of the freeze a node sleeps through)",
     )

@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import TYPE_CHECKING, Any
 
-from tokenring.cli.args import seconds
+from tokenring.cli.args import int_within, seconds
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -14,6 +14,9 @@ if TYPE_CHECKING:
     from tokenring.chaos.nemesis import Operation
 
 HELP = "run a timed fault scenario (or a seeded random one) against a ring and judge it"
+
+MAX_SEED = 2**32 - 1  # a seed's range, as the world's
+MAX_SHRINK_RUNS = 1000  # each run is a whole scenario: more would take weeks
 
 EXAMPLES = """examples:
   tokenring chaos scenarios/every-fault.yaml          every fault kind once, judged
@@ -43,7 +46,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("scenario", nargs="?", help="scenario file (YAML); or use --random")
-    p.add_argument("--random", metavar="SEED", type=int, help="draw the schedule from this seed")
+    p.add_argument(
+        "--random",
+        metavar="SEED",
+        type=int_within(0, MAX_SEED),
+        help=f"draw the schedule from this seed (0..{MAX_SEED})",
+    )
     p.add_argument(
         "--duration", type=seconds, default=60.0, help="--random: seconds of faults and settling (default 60)"
     )
@@ -59,10 +67,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--shrink-runs",
-        type=int,
+        type=int_within(0, MAX_SHRINK_RUNS),
         default=6,
         metavar="N",
-        help="--random: at most N runs to shrink a failing schedule (default 6; 0: no shrinking)",
+        help=f"--random: at most N runs to shrink a failing schedule (default 6, at most {MAX_SHRINK_RUNS}; "
+        "0: no shrinking)",
     )
     p.add_argument("--dry-run", action="store_true", help="--random: write the schedule, run nothing")
     p.add_argument("--ring", help="use this running ring instead of launching one")

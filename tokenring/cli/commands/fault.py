@@ -7,7 +7,7 @@ import sys
 import time
 from typing import TYPE_CHECKING, Any
 
-from tokenring.cli.args import add_ring_options, positive_int, seconds
+from tokenring.cli.args import add_ring_options, int_within, number_within, seconds
 from tokenring.errors import UsageError
 
 if TYPE_CHECKING:
@@ -28,7 +28,7 @@ EXAMPLES = """examples:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring.cli.args import with_examples
-    from tokenring.contract.faults import KINDS
+    from tokenring.contract.faults import KINDS, MAX_DELAY_MS, MAX_LOSE
 
     p = sub.add_parser(
         "fault",
@@ -39,9 +39,25 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("node", nargs="?", help="node name or ID, or 'all'")
     p.add_argument("kind", nargs="?", choices=KINDS, metavar="KIND", help="fault kind: " + ", ".join(KINDS))
-    p.add_argument("value", nargs="?", help="delay: ms; drop/corrupt: probability 0..1; partition: A,B|C,D")
-    p.add_argument("--jitter", type=float, default=0.0, metavar="MS", help="delay jitter (± ms)")
-    p.add_argument("--count", type=positive_int, default=1, metavar="N", help="lose: how many tokens")
+    p.add_argument(
+        "value",
+        nargs="?",
+        help=f"delay: ms 0..{MAX_DELAY_MS}; drop/corrupt: probability 0..1; partition: A,B|C,D",
+    )
+    p.add_argument(
+        "--jitter",
+        type=number_within(0, MAX_DELAY_MS, "ms"),
+        default=0.0,
+        metavar="MS",
+        help=f"delay jitter (± ms, 0..{MAX_DELAY_MS})",
+    )
+    p.add_argument(
+        "--count",
+        type=int_within(1, MAX_LOSE),
+        default=1,
+        metavar="N",
+        help=f"lose: how many tokens (1..{MAX_LOSE})",
+    )
     p.add_argument("--soft", action="store_true", help="hang: freeze the node OS only (across hosts)")
     p.add_argument("--list", action="store_true", help="show the active faults of every node")
     p.add_argument("--json", action="store_true", help="machine-readable output")
@@ -95,10 +111,7 @@ def build_request(args: argparse.Namespace, resolve) -> dict[str, Any]:
         raise UsageError(f"{kind} takes no value (got {args.value!r})")
     request: dict[str, Any] = {"kind": kind}
     if kind == "delay":
-        try:
-            request["ms"] = float(args.value)
-        except ValueError:
-            raise UsageError(f"delay {args.value!r}: expected milliseconds") from None
+        request["ms"] = args.value  # validate() checks it: a finite number of ms within range
         request["jitter_ms"] = args.jitter
     elif kind in ("drop", "corrupt"):
         request["p"] = parse_probability(args.value, kind)

@@ -30,13 +30,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def add_node_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of one node process (the launcher passes them to every node)."""
-    from tokenring.cli.args import seconds
+    from tokenring._util.files import LIMITS
+    from tokenring.cli.args import int_within, node_id, seconds
     from tokenring.contract import keys
     from tokenring.node.pacing import PROFILES
     from tokenring.node.system.vocabulary import DEFAULT_CAPACITY
     from tokenring.transport.factory import TRANSPORTS
 
-    parser.add_argument("--id", type=int, required=True, help="node ID 1..255")
+    parser.add_argument("--id", type=node_id, required=True, help="node ID 1..255")
     parser.add_argument(
         "--name",
         type=keys.check_node_name_type,
@@ -53,18 +54,19 @@ def add_node_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-store", action="store_true", help="keep downloaded programs in memory only")
     parser.add_argument(
         "--capacity",
-        type=int,
+        type=int_within(1, LIMITS["program file"]),
         default=DEFAULT_CAPACITY,
         metavar="BYTES",
-        help="largest program this node accepts (default %(default)s, the 8051's code space)",
+        help=f"largest program this node accepts, 1..{LIMITS['program file']} (default %(default)s, "
+        "the 8051's code space)",
     )
     parser.add_argument("--autostart", action="store_true", help="start the stored program at boot")
     parser.add_argument("--duration", type=seconds, help="leave after this many seconds")
     parser.add_argument(
         "--expect",
-        type=int,
+        type=int_within(1, 255),
         metavar="N",
-        help="N nodes are booting together (the launcher says so): the first token waits until "
+        help="N nodes (1..255) are booting together (the launcher says so): the first token waits until "
         "all N are live, at most 5 s or 0.5 s per node",
     )
     parser.add_argument(

@@ -93,10 +93,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--boot-wave",
-        type=int,
+        type=int_within(1, 255),
         metavar="N",
-        help="at most N nodes booting at a time; a bigger ring starts in waves, a new node as each "
-        "booting one comes live (default: 8 per core)",
+        help="at most N nodes (1..255) booting at a time; a bigger ring starts in waves, a new node as "
+        "each booting one comes live (default: 8 per core)",
     )
     web = p.add_argument_group("web view")
     web.add_argument("--web", action="store_true", help="serve the live web view too (as 'tokenring web')")
@@ -164,7 +164,14 @@ def run(args: argparse.Namespace) -> int:
         from tokenring.node.store import check_store_root
 
         check_store_root(Path(args.store))  # before any node starts (a node would fail mid-download)
-    selection = [s.strip() for s in args.nodes.split(",") if s.strip()] if args.nodes else None
+    selection = None
+    if args.nodes is not None:
+        selection = [s.strip() for s in args.nodes.split(",") if s.strip()]
+        if not selection:  # ',,,' or '' once meant every node, silently
+            raise UsageError(
+                f"--nodes {args.nodes!r} names no node: give names or IDs (e.g. main,sonar), or leave "
+                "--nodes out for all of them"
+            )
     programs = None if args.no_programs else (args.programs or extensions.programs_dir())
     if programs is not None and not Path(programs).is_dir():
         raise UsageError(f"--programs {programs}: no such directory")
@@ -211,6 +218,14 @@ def run(args: argparse.Namespace) -> int:
         protocol_path=args.protocol,
         log_level=args.log_level,
         respawn=args.respawn,
+    if wire != args.bitrate:
+        try:
+            parse_bitrate(wire)  # every node would refuse it, after the boot
+        except UsageError:
+            raise UsageError(
+                f"--bitrate {args.bitrate} with a speed-up of {speedup:g} (--speed) is a wire of {wire} bit/s; "
+                "the emulated wire must be within 10k..100G bit/s (give another --bitrate or --speed)"
+            ) from None
         router=args.router,
         links=args.links,
         profile=args.profile,
