@@ -9,6 +9,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -127,3 +128,19 @@ def test_map_out_onto_a_full_disk_exits_1_and_keeps_the_older_map(ring_name, end
         failed = [line for line in out.splitlines() if "cannot write" in line]
         assert len(failed) == 1 and f"--map-out {target}: cannot write: {NO_SPACE}" in failed[0], failed
         assert target.read_bytes() == OLDER and listing(disk) == ["office.png"]
+
+
+def test_a_map_out_the_ring_stopped_before_is_a_failure(monkeypatch):
+    """``up --map-out`` whose map was never written (the ring stopped first: its duration, a
+    signal, every node gone) does not end with exit code 0: the mission names --map-out."""
+    from modules.pc.mission import Mission
+
+    said: list[str] = []
+    launcher = SimpleNamespace(
+        stopping=True, say=lambda text, name="": said.append(text), request_stop=lambda: None
+    )
+    mission = Mission(launcher, 2, "m.png", 30.0)
+    monkeypatch.setattr(mission, "_mission", lambda: None)  # the ring stopped before the map was fetched
+    mission.start()
+    text = "--map-out m.png: no map written (the ring stopped before it was fetched)"
+    assert mission.failure() == text and said == [text]
