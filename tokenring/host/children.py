@@ -1,5 +1,6 @@
-"""The launcher's plumbing: its children's output, prefixed and never blocking, and their exits,
-watched through pidfds so that supervising 255 children costs no polling."""
+"""The launcher's plumbing: its children's output, prefixed and never blocking, their exits,
+watched through pidfds so that supervising 255 children costs no polling, and the end of what
+each child started (every child leads a process group of its own)."""
 
 from __future__ import annotations
 
@@ -7,9 +8,14 @@ import contextlib
 import os
 import queue
 import selectors
+import signal
 import threading
 import time
+from collections.abc import Collection
 from typing import IO, Any
+
+#: how often a group being ended is looked at in /proc (only while one is)
+GROUP_CHECK_S = 0.05
 
 
 class PrefixedOutput:
@@ -155,3 +161,85 @@ class ExitWatch:
             with contextlib.suppress(OSError):
                 os.close(self._wake_w)
             self._wake_w = -1
+
+
+def live_group_members(pgids: Collection[int]) -> dict[int, list[int]]:
+    """The processes (zombies not counted) in each of these process groups, from ``/proc``."""
+    wanted = set(pgids)
+    members: dict[int, list[int]] = {}
+    if not wanted:
+        return members
+    with contextlib.suppress(OSError):
+        for entry in os.scandir("/proc"):
+            if not entry.name.isdigit():
+                continue
+            try:
+                with open(f"/proc/{entry.name}/stat", "rb") as stat:
+                    fields = stat.read().rsplit(b")", 1)[1].split()
+            except (OSError, IndexError):
+                continue  # gone meanwhile
+            if len(fields) > 2 and fields[0] != b"Z" and int(fields[2]) in wanted:
+                members.setdefault(int(fields[2]), []).append(int(entry.name))
+    return members
+
+
+class GroupEnder:
+    """Ends what is left of a child's process group once the child (its leader) has exited: a
+    node's program and whatever it started end with the node. SIGTERM at once, SIGKILL to what
+    still lives ``grace`` seconds later (as systemd stops what is left of a unit)."""
+
+    def __init__(self, grace: float) -> None:
+        self.grace = grace
+        self._due: dict[int, float] = {}  # process group -> when what is left of it is killed
+        self._killed: set[int] = set()  # groups that were sent SIGKILL
+        self._changed = threading.Condition()
+        self._thread: threading.Thread | None = None
+
+    def end(self, pgid: int) -> None:
+        """SIGTERM to group ``pgid`` (its leader exited); SIGKILL ``grace`` seconds later."""
+        try:
+            os.killpg(pgid, signal.SIGTERM)
+        except (ProcessLookupError, PermissionError):
+            return  # nothing is left of it
+        with self._changed:
+            self._due.setdefault(pgid, time.monotonic() + self.grace)
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name="launcher-groups", daemon=True)
+                self._thread.start()
+            self._changed.notify_all()
+
+    def finish(self, timeout: float) -> list[int]:
+        """Wait (at most ``timeout`` past the last group's SIGKILL) until every group handed over
+        is gone; returns the PIDs still alive then (none, unless the kernel is slow)."""
+        with self._changed:
+            while self._due:
+                self._changed.wait(GROUP_CHECK_S)
+                self._kill_due()
+        deadline = time.monotonic() + timeout
+        while True:
+            left = [pid for pids in live_group_members(self._killed).values() for pid in pids]
+            if not left or time.monotonic() >= deadline:
+                return left
+            time.sleep(GROUP_CHECK_S)
+
+    def _run(self) -> None:
+        with self._changed:
+            while True:
+                self._changed.wait(GROUP_CHECK_S if self._due else None)
+                self._kill_due()
+
+    def _kill_due(self) -> None:
+        """(Under the lock.) Forget the groups that are gone; SIGKILL the ones that are due."""
+        if not self._due:
+            return
+        alive = live_group_members(self._due)
+        now = time.monotonic()
+        for pgid, due in list(self._due.items()):
+            if pgid not in alive:
+                del self._due[pgid]
+            elif now >= due:
+                with contextlib.suppress(ProcessLookupError, PermissionError):
+                    os.killpg(pgid, signal.SIGKILL)
+                del self._due[pgid]
+                self._killed.add(pgid)
+        self._changed.notify_all()

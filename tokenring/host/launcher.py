@@ -31,9 +31,10 @@ from tokenring._util.process import die_with_parent
 from tokenring.contract import keys
 from tokenring.contract.faults import CRASH_EXIT_CODE
 from tokenring.contract.ring import EVENT_RING_STOPPING, RING_EVENT
-from tokenring.errors import TransportError, UsageError
-from tokenring.host.children import ExitWatch, PrefixedOutput
+from tokenring.errors import TokenRingError, TransportError, UsageError
+from tokenring.host.children import ExitWatch, GroupEnder, PrefixedOutput
 from tokenring.host.node_commands import NodeCommandLines
+from tokenring.host.stall import StallWatch
 from tokenring.transport.control import answer_query
 from tokenring.transport.zenoh import RingViewServer, peer_to_peer, ring_view
 from tokenring.transport.zenoh_config import make_config, node_environment, open_session
@@ -49,8 +50,19 @@ CHILD_POLL_S = 0.05
 #: the ring heals around it first, instead of sharing two cores with a booting interpreter
 RESPAWN_DELAY_S = 0.1
 KILL_REAP_S = 10.0  # after SIGKILL, how long the kernel may take to reap them all
+#: what a child started gets this long after SIGTERM (once the child exited) before SIGKILL
+GROUP_GRACE_S = 1.0
 #: how long a launcher asks who holds its ring before it starts anything (answers end it early)
 RING_CHECK_TIMEOUT_S = 2.0
+
+
+def process_stopped(pid: int) -> bool:
+    """Whether process ``pid`` is stopped (SIGSTOP: a hang fault), from ``/proc``."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as stat:
+            return stat.read().rsplit(b")", 1)[1].split()[0] in (b"T", b"t")
+    except (OSError, IndexError):
+        return False
 
 
 def describe_holder(status: Mapping[str, Any]) -> str:
@@ -97,6 +109,9 @@ class ServicePlan:
     argv: list[str]
     ready_key: str | None = None  # a liveliness key the launcher waits for before the nodes start
     ready_timeout: float = 15.0
+    #: ``--respawn`` may start it again after a death: it keeps nothing a new one would lack
+    #: (a world simulator keeps the robot's pose, a recorder its file: they are not restarted)
+    restart: bool = False
 
 
 @dataclass
@@ -106,6 +121,18 @@ class Child:
     started: float
     restarts: int = 0
     reported: bool = False
+    group_ended: bool = False  # what is left of its process group was told to end
+
+
+@dataclass
+class ServiceChild:
+    """A service process the launcher supervises (its ``service_children`` entry's record)."""
+
+    plan: ServicePlan
+    process: subprocess.Popen
+    restarts: int = 0
+    reported: bool = False
+    group_ended: bool = False
 
 
 class Launcher(NodeCommandLines):
@@ -163,6 +190,12 @@ class Launcher(NodeCommandLines):
         self.link_ports: dict[int, int] = {}
         self.services = list(services)
         self.service_children: dict[str, subprocess.Popen] = {}
+        self._service_records: dict[str, ServiceChild] = {}
+        #: why this run is not whole, one line each (a service died, a program failed): exit 1
+        self.failures: list[str] = []
+        self._service_due: dict[str, float] = {}  # service -> when --respawn starts it again
+        # what each child started ends with it: its process group is ended once it exits
+        self._groups = GroupEnder(GROUP_GRACE_S)
         self.ring = keys.check_ring_name(ring)
         self.bitrate = bitrate
         self.ack_mode = ack_mode
@@ -192,6 +225,7 @@ class Launcher(NodeCommandLines):
         self._stop_signal: int | None = None
         self._queryable: Any = None
         self._view_server: RingViewServer | None = None
+        self._stall_watch: StallWatch | None = None  # says when the launcher itself stood still
         self.shutdown_reason: str | None = None
         #: this launcher among others on the network (its own status answers its own question)
         self.instance = os.urandom(8).hex()
@@ -267,13 +301,17 @@ class Launcher(NodeCommandLines):
             bufsize=1,
             env=env,
             preexec_fn=die_with_parent,  # only prctl in the child: async-signal-safe
+            # a group of its own, ended once the child exits (GroupEnder): what a node's program
+            # started ends with the node, even when the node was killed
+            process_group=0,
         )
         assert process.stdout is not None
         self.output.watch(process.stdout, name)
         return process
 
-    def start_service(self, service: ServicePlan) -> subprocess.Popen:
-        """Start a service process and wait until its ``ready_key`` liveliness token appears."""
+    def start_service(self, service: ServicePlan, wait_ready: bool = True) -> subprocess.Popen:
+        """Start a service process and wait until its ``ready_key`` liveliness token appears
+        (not when ``--respawn`` starts it again: the supervisor does not wait)."""
         fill = {
             "endpoint": self.endpoint or "",
             "ring": self.ring,
@@ -282,7 +320,11 @@ class Launcher(NodeCommandLines):
         argv = [sys.executable, "-m", *(a.format(**fill) for a in service.argv)]
         process = self._popen(argv, service.name)
         self.service_children[service.name] = process
-        if service.ready_key and self.session is not None:
+        previous = self._service_records.get(service.name)
+        record = ServiceChild(service, process, restarts=previous.restarts + 1 if previous else 0)
+        self._service_records[service.name] = record
+        self._exits.add(process.pid, record)
+        if wait_ready and service.ready_key and self.session is not None:
             deadline = time.monotonic() + service.ready_timeout
             while time.monotonic() < deadline:
                 if any(r.ok for r in self.session.liveliness().get(service.ready_key, timeout=0.5)):
@@ -332,6 +374,7 @@ class Launcher(NodeCommandLines):
         self._refuse_a_ring_in_use()
         if self.transport == "zenoh" and peer_to_peer(self.session):
             self._view_server = RingViewServer(self.session, self.ring)
+        self._stall_watch = StallWatch(self.session, self.ring, self.say, router=self.router).start()
         where = self.endpoint or ", ".join(self.node_connect())
         self.say(
             f"ring {self.ring!r}: starting {len(self.plans)} nodes "
@@ -472,8 +515,9 @@ class Launcher(NodeCommandLines):
         try:
             while not self._stop.is_set():
                 timeout = EXIT_CHECK_S if self._exits.works else CHILD_POLL_S
-                if self._respawn_due:
-                    timeout = max(0.0, min(timeout, min(self._respawn_due.values()) - time.monotonic()))
+                due = [*self._respawn_due.values(), *self._service_due.values()]
+                if due:
+                    timeout = max(0.0, min(timeout, min(due) - time.monotonic()))
                 exited = self._exits.wait(timeout)
                 if self._stop.is_set():
                     break
@@ -490,17 +534,26 @@ class Launcher(NodeCommandLines):
         self._children_gone.wait()
 
     def check_children(self) -> None:
-        """Report nodes that died; with ``--respawn`` start them again RESPAWN_DELAY_S later."""
+        """Report nodes and services that died and end what they started; with ``--respawn``
+        start them again RESPAWN_DELAY_S later (a service only if that is safe)."""
         for child in self.child_list():
             code = child.process.poll()
             if code is None or child.reported:
                 continue
             child.reported = True
+            self._end_group(child)
             plan = child.plan
             self.deaths.append((plan.name, plan.node_id, code))
             self.say(f"node {plan.name} (id {plan.node_id}) {describe_exit(code)}")
             if self.respawn and not self._stop.is_set():
                 self._respawn_due.setdefault(plan.node_id, time.monotonic() + RESPAWN_DELAY_S)
+        for record in list(self._service_records.values()):
+            code = record.process.poll()
+            if code is None or record.reported or self._stop.is_set():
+                continue
+            record.reported = True
+            self._end_group(record)
+            self._service_died(record, code)
         now = time.monotonic()
         for node_id, due in list(self._respawn_due.items()):
             if now >= due and not self._stop.is_set():
@@ -508,6 +561,51 @@ class Launcher(NodeCommandLines):
                 plan = self.children[node_id].plan
                 self.say(f"respawning {plan.name} (id {plan.node_id})")
                 self.spawn(plan)
+        for name, due in list(self._service_due.items()):
+            if now >= due and not self._stop.is_set():
+                del self._service_due[name]
+                self.say(f"respawning {name}")
+                try:
+                    self.start_service(self._service_records[name].plan, wait_ready=False)
+                except (OSError, TokenRingError) as exc:
+                    self.failure(f"{name} could not be started again: {exc}")
+
+    def _service_died(self, record: ServiceChild, code: int) -> None:
+        """A service died mid-run: say so, restart it if ``--respawn`` and it is safe, count it."""
+        name, pid = record.plan.name, record.process.pid
+        if self.respawn and record.plan.restart:
+            self.failure(f"service {name} (pid {pid}) {describe_exit(code)}; restarting it")
+            self._service_due.setdefault(name, time.monotonic() + RESPAWN_DELAY_S)
+            return
+        why = (
+            "--respawn does not restart it: a new one would not have its state"
+            if self.respawn
+            else "the ring goes on without it"
+        )
+        self.failure(f"service {name} (pid {pid}) {describe_exit(code)}: {why}")
+
+    def signal_groups(self, signum: int, pgids: Sequence[int] | None = None) -> list[int]:
+        """Send ``signum`` to the process group of every running node and service (or to
+        ``pgids``), skipping a node a fault holds stopped; returns the groups signalled."""
+        if pgids is None:
+            leaders = [c.process for c in self.child_list()] + list(self.service_children.values())
+            pgids = [p.pid for p in leaders if p.poll() is None and not process_stopped(p.pid)]
+        for pgid in pgids:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(pgid, signum)
+        return list(pgids)
+
+    def failure(self, line: str) -> None:
+        """Say why the run is not whole; it ends with exit code 1."""
+        self.failures.append(line)
+        self.say(line)
+
+    def _end_group(self, child: Child | ServiceChild) -> None:
+        """End what is left of a child's process group, once: its leader has exited (a PID,
+        and so a group ID, may be reused once nothing holds it)."""
+        if not child.group_ended:
+            child.group_ended = True
+            self._groups.end(child.process.pid)
 
     def request_stop(self, signum: int | None = None) -> None:
         if self._stop_signal is None:
@@ -532,7 +630,7 @@ class Launcher(NodeCommandLines):
         if self._stop_signal == signal.SIGINT:
             return 130
         unexpected = [d for d in self.deaths if d[2] != CRASH_EXIT_CODE]
-        return 1 if unexpected else 0
+        return 1 if unexpected or self.failures else 0
 
     def stop(self) -> None:
         """Stop every child: SIGTERM (clean leave), then SIGKILL whatever is left after 1.5 s."""
@@ -576,23 +674,17 @@ class Launcher(NodeCommandLines):
                     child.process.wait(max(0.1, reap_deadline - time.monotonic()))
                 except subprocess.TimeoutExpired:
                     self.say(f"node {child.plan.name} (pid {child.process.pid}) survived SIGKILL")
+        for child in running:
+            if child.process.poll() is not None:
+                self._end_group(child)
+        self._stop_services()
+        # the supervisor, which may have started nodes and services again, outlives them
         self._children_gone.set()
         if self._booter is not None:
             self._booter.join(timeout=1.0)
-        for name, process in self.service_children.items():
-            if process.poll() is None:
-                with contextlib.suppress(ProcessLookupError):
-                    process.send_signal(signal.SIGTERM)
-                try:
-                    process.wait(STOP_TIMEOUT_S)
-                except subprocess.TimeoutExpired:
-                    self.say(f"{name} did not stop in {STOP_TIMEOUT_S} s: killing it")
-                    with contextlib.suppress(ProcessLookupError):
-                        process.kill()
-                    try:  # a loaded machine may take seconds to reap it; the stop goes on
-                        process.wait(KILL_REAP_S)
-                    except subprocess.TimeoutExpired:
-                        self.say(f"{name} (pid {process.pid}) survived SIGKILL")
+        left = self._groups.finish(timeout=KILL_REAP_S)
+        if left:
+            self.say(f"processes the nodes or services started survived SIGKILL: pids {left}")
         self.output.join_reader(timeout=1.0)
         for process in [c.process for c in self.child_list()] + list(self.service_children.values()):
             if process.stdout is not None:
@@ -605,6 +697,9 @@ class Launcher(NodeCommandLines):
             with contextlib.suppress(zenoh.ZError):
                 self._queryable.undeclare()
             self._queryable = None
+        if self._stall_watch is not None:
+            self._stall_watch.close()
+            self._stall_watch = None
         if self._view_server is not None:
             self._view_server.close()
             self._view_server = None
@@ -612,14 +707,46 @@ class Launcher(NodeCommandLines):
             self.session.close()
             self.session = None
 
+    def _stop_services(self) -> None:
+        """SIGTERM each service, SIGKILL it after 1.5 s; one that failed to stop cleanly (an
+        exit code, or not stopping in time: a recorder may not have finished its file) counts."""
+        for name, process in self.service_children.items():
+            record = self._service_records.get(name)
+            if process.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    process.send_signal(signal.SIGTERM)
+                try:
+                    code = process.wait(STOP_TIMEOUT_S)
+                    if code not in (0, -signal.SIGTERM) and record is not None and not record.reported:
+                        self.failure(
+                            f"service {name} (pid {process.pid}) {describe_exit(code)} as it stopped"
+                        )
+                except subprocess.TimeoutExpired:
+                    self.failure(f"service {name} did not stop in {STOP_TIMEOUT_S} s: killing it")
+                    with contextlib.suppress(ProcessLookupError):
+                        process.kill()
+                    try:  # a loaded machine may take seconds to reap it; the stop goes on
+                        process.wait(KILL_REAP_S)
+                    except subprocess.TimeoutExpired:
+                        self.say(f"{name} (pid {process.pid}) survived SIGKILL")
+            if record is not None and record.process is process and process.poll() is not None:
+                record.reported = True
+                self._end_group(record)
+
 
 class LauncherVerbs:
     """The launcher's control verbs on ``ctl/launcher/*``: ``status``, ``shutdown`` (the
-    charger's deep-discharge cut), ``signal`` (how a SIGSTOPped node is resumed)."""
+    charger's deep-discharge cut), ``signal`` (how a SIGSTOPped node is resumed),
+    ``programfailed`` (a node tells that its program raised: the run's exit code becomes 1)."""
 
     def __init__(self, launcher: Launcher) -> None:
         self.launcher = launcher
-        self.handlers = {"status": lambda _: self.status(), "shutdown": self.shutdown, "signal": self.signal}
+        self.handlers = {
+            "status": lambda _: self.status(),
+            "shutdown": self.shutdown,
+            "signal": self.signal,
+            "programfailed": self.program_failed,
+        }
 
     def status(self) -> dict[str, Any]:
         """The ring, its endpoint and every node and service process."""
@@ -644,10 +771,35 @@ class LauncherVerbs:
                 for c in launcher.child_list()
             ],
             "services": [
-                {"name": name, "pid": p.pid, "running": p.poll() is None}
+                {
+                    "name": name,
+                    "pid": p.pid,
+                    "running": p.poll() is None,
+                    "restarts": record.restarts if (record := launcher._service_records.get(name)) else 0,
+                }
                 for name, p in launcher.service_children.items()
             ],
+            "failures": list(launcher.failures),
         }
+
+    def program_failed(self, request: dict[str, Any]) -> dict[str, Any]:
+        """One of this launcher's nodes says its program raised (``setup()`` or ``run()``):
+        one line naming the program and why, and the run ends with exit code 1. A node this
+        launcher did not start (same ID, other PID) is not counted."""
+        launcher = self.launcher
+        try:
+            node_id, pid = int(request.get("id", -1)), int(request.get("pid", -1))
+        except (TypeError, ValueError):
+            raise UsageError("programfailed needs the node's id and pid") from None
+        child = launcher.children.get(node_id)
+        if child is None or child.process.pid != pid:
+            return {"counted": False}
+        program = str(request.get("program") or "program")
+        phase = str(request.get("phase") or "run")
+        error = str(request.get("error") or "failed")
+        how = "failed to load" if phase == "load" else f"failed in {phase}()"
+        launcher.failure(f"program {program} on node {child.plan.name} (id {node_id}) {how}: {error}")
+        return {"counted": True}
 
     def shutdown(self, request: dict[str, Any]) -> dict[str, Any]:
         """Stop the whole ring cleanly (the charger's deep-discharge cut asks for it)."""
@@ -705,8 +857,21 @@ def plans_from_protocol(
 
 
 def install_signal_handlers(launcher: Launcher) -> None:
+    """SIGINT, SIGTERM and SIGHUP (a closed terminal) stop the ring cleanly; Ctrl-Z (SIGTSTP)
+    suspends it whole: the children lead process groups of their own, out of the terminal's
+    reach, so the launcher stops and continues them itself."""
+
     def handler(signum: int, _frame: Any) -> None:
         launcher.request_stop(signum)
 
+    def suspend(_signum: int, _frame: Any) -> None:
+        stopped = launcher.signal_groups(signal.SIGSTOP)
+        signal.signal(signal.SIGTSTP, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGTSTP)  # stops here until the shell continues us
+        signal.signal(signal.SIGTSTP, suspend)
+        launcher.signal_groups(signal.SIGCONT, stopped)
+
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
+    signal.signal(signal.SIGHUP, handler)
+    signal.signal(signal.SIGTSTP, suspend)

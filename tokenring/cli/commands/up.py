@@ -16,6 +16,20 @@ EXAMPLES = """examples:
   tokenring up --no-download       every node starts its program from its file, no download
   tokenring up --router --links -l tcp/127.0.0.1:7447
                                    the nodes clients of this launcher, the token on direct links
+  tokenring up --ring lab2         a second ring beside a running one (a ring runs once per network)
+
+exit codes:
+  0  the run was whole; 130 after Ctrl-C
+  1  something failed while it ran, each said in one line: a module program that failed (raised
+     in setup() or run(), or would not load: a syntax error), a node that died, a service (the
+     world simulator, the recorder) that died or did not stop cleanly, a download that failed
+  2  bad input, refused before anything started: an option, a file, a ring name that another
+     launcher holds on this Zenoh network (named; --connect joins it on purpose, with --nodes
+     that are not live there)
+
+supervision: every node and service is its own process group; what a program starts ends with
+its node. --respawn starts a dead node again, and a dead service where that is safe (the web
+view, Foxglove; not the world simulator or a recording, whose state would be lost).
 """
 
 if TYPE_CHECKING:
@@ -344,4 +358,5 @@ def watch_service(args: argparse.Namespace) -> ServicePlan:
         argv += ["--zenoh-config", args.zenoh_config]
     if args.protocol:
         argv += ["--protocol", args.protocol]
-    return ServicePlan("watch", argv, ready_key=keys.watch_ready(args.ring, tag))
+    # a recording is not started again after a death: a new recorder would need a new file
+    return ServicePlan("watch", argv, ready_key=keys.watch_ready(args.ring, tag), restart=not args.record)
