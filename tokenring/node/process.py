@@ -11,6 +11,7 @@ import argparse
 import contextlib
 import gc
 import logging
+import os
 import signal
 import sys
 import time
@@ -27,7 +28,7 @@ from tokenring._util.process_memory import memory_report
 from tokenring.contract import keys
 from tokenring.contract.protocol import Protocol, load_protocol
 from tokenring.contract.ring import parse_bitrate
-from tokenring.errors import UsageError
+from tokenring.errors import ProgramError, UsageError
 from tokenring.node.channels import CommandMemory
 from tokenring.node.faults import FaultInjector
 from tokenring.node.node_os import NodeOS
@@ -155,6 +156,22 @@ class NodeProcess:
         except zenoh.ZError as exc:
             log.warning("could not tell the ring of a fault change: %s", exc)
 
+    def _tell_launcher_program_failed(self, program: str, phase: str, error: str, wait: bool = False) -> None:
+        """Tell the launcher that this node's program failed (``phase``: load, setup, run): its
+        run ends with exit code 1. ``wait``: until it answered (the node is about to exit)."""
+        request = {"id": self.os.node_id, "pid": os.getpid(), "program": program, "phase": phase}
+        request["error"] = error
+        options: dict[str, Any] = {"target": zenoh.QueryTarget.ALL, "payload": msgpack.packb(request)}
+        key = keys.control(self.ring, "launcher", "programfailed")
+        try:
+            if wait:
+                for _reply in self.session.get(key, timeout=2.0, **options):
+                    pass
+            else:  # nobody waits for the answer: a node started by hand has no launcher
+                self.session.get(key, lambda _reply: None, timeout=2.0, **options)
+        except zenoh.ZError as exc:
+            log.warning("could not tell the launcher that the program failed: %s", exc)
+
     def _peers(self) -> dict[str, Any]:
         """The Zenoh links of this node (diagnostics: who it reaches directly)."""
         info = self.session.info
@@ -199,6 +216,7 @@ class NodeProcess:
 
     def start(self) -> None:
         self.os.request_ring_shutdown = self._request_ring_shutdown
+        self.os.on_program_failed = self._tell_launcher_program_failed
         self.system.install()
         self.os.start()
         # once it is in the ring: a joiner refused its ID must not answer for the node that holds it
@@ -227,7 +245,11 @@ class NodeProcess:
             return
         from tokenring.node.program import load_program_file
 
-        program_class, source = load_program_file(path)
+        try:
+            program_class, source = load_program_file(path)
+        except ProgramError as exc:
+            self._tell_launcher_program_failed(str(path), "load", str(exc), wait=True)
+            raise
         wanted = getattr(program_class, "module", "")
         if wanted and wanted != self.os.name:
             raise UsageError(f"{path} is the program of {wanted!r}, not of node {self.os.name!r}")

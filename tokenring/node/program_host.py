@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import os
 import socket
+import sys
 import threading
 import time
 import traceback
@@ -27,12 +28,21 @@ log = logging.getLogger("tokenring.node")
 SETUP_WARNING_S = 10.0
 
 
+def program_file(program: Any) -> str:
+    """The file a program was loaded from (``motor.py`` when downloaded), else its class name."""
+    module = sys.modules.get(type(program).__module__)
+    return str(getattr(module, "__file__", None) or type(program).__name__)
+
+
 class ProgramHost(TokenPathHost):
     """Runs a node's user program and reports on the node (mixed into NodeOS)."""
 
     name: str
     timing: R.Timing
     on_program_error: Callable[[], None] | None
+    #: told (program file, "setup" or "run", the error's last line) when a program raises
+    #: before it was asked to stop: the node process tells its launcher (the run's exit code)
+    on_program_failed: Callable[[str, str, str], None] | None = None
     program_error: str | None
     _halt: threading.Event
     _program: Any
@@ -64,10 +74,12 @@ class ProgramHost(TokenPathHost):
         warning.daemon = True
 
         def runner() -> None:
+            phase = "setup"
             try:
                 program.setup()
                 warning.cancel()
                 self._program_set_up = program is self._program
+                phase = "run"
                 program.run()
             except Exception as exc:  # a user program's bug must not take the node down
                 last = traceback.format_exception_only(type(exc), exc)[-1].strip()
@@ -76,6 +88,12 @@ class ProgramHost(TokenPathHost):
                 log.debug("traceback:\n%s", traceback.format_exc())
                 if self.on_program_error is not None:
                     self.on_program_error()
+                # one that raises because it was being stopped (a blocking call cut short) is
+                # logged, not counted
+                if self.on_program_failed is not None and not (
+                    program.stop_requested.is_set() or self._halt.is_set()
+                ):
+                    self.on_program_failed(program_file(program), phase, last)
             finally:
                 warning.cancel()
                 try:

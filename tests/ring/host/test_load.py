@@ -208,7 +208,13 @@ def test_scan_incremental_all_corrupt_start_stop_upload_and_bad_input(procs, rin
         wait_until(lambda: version(session, ring_name, 30) == 1, 10, "sonar's previous program running again")
         assert [n["id"] for n in load_json(ring_name, endpoint)["scan"]] == ids
     launcher.send_signal(signal.SIGTERM)
-    assert launcher.wait(30) == 0
+    output, _ = launcher.communicate(timeout=30)
+    # the program that failed makes up's run not whole either (the exit-code rule, issue 52)
+    assert launcher.returncode == 1, output[-3000:]
+    said = [line.split("|", 1)[1].strip() for line in output.splitlines() if line.lstrip().startswith("up |")]
+    assert [line for line in said if " failed " in line] == [
+        "program sonar.py on node sonar (id 30) failed in setup(): ZeroDivisionError: sonar divided by zero"
+    ], said
 
 
 @pytest.mark.slow
