@@ -17,7 +17,7 @@ def ring_rates(nodes: Iterable[dict[str, Any]]) -> dict[str, Any]:
     spurious count then covers the nodes that have one (``nodes_counted``)."""
     nodes = list(nodes)
     uptime = 0.0
-    regenerated = spurious = fault = membership = counted = 0
+    regenerated = spurious = fault = membership = network = counted = 0
     for n in nodes:
         ledger = n.get("regenerations")
         if ledger is None:
@@ -29,11 +29,13 @@ def ring_rates(nodes: Iterable[dict[str, Any]]) -> dict[str, Any]:
         spurious += int(ledger["spurious"])
         fault += int(ledger["fault"])
         membership += int(ledger["membership"])
+        network += int(ledger.get("network", 0))  # a stalled router (older ledgers: none)
     return {
         "uptime_s": uptime,
         "regenerated": regenerated,
         "fault": fault,
         "membership": membership,
+        "network": network,
         "spurious": spurious,
         "per_hour": per_hour(regenerated, uptime),
         "spurious_per_hour": per_hour(spurious, uptime),
@@ -54,6 +56,8 @@ def format_rates(rates: dict[str, Any]) -> str:
         f"regenerations: {rates['regenerated']} in {span} ({rate(rates['per_hour'])}); "
         f"spurious (no fault, no membership change): {rates['spurious']} ({rate(rates['spurious_per_hour'])})"
     )
+    if rates.get("network"):
+        text += f"; the network's (a stalled router): {rates['network']}"
     if rates["nodes_counted"] < rates["nodes"]:
         text += f" - {rates['nodes'] - rates['nodes_counted']} node(s) do not count causes"
     return text

@@ -8,7 +8,11 @@ slot later). On a healthy ring that should never happen: a regeneration is *expl
   its own faults it sees in its :class:`~tokenring.node.faults.FaultInjector`, the others' faults
   every node announces on ``ctl/*/faultnote`` when they change (a query to the queryables the
   nodes already have: no declaration, no traffic while nothing changes);
-* a node came or went (liveliness) within that time: a crash, a leave, a restart.
+* a node came or went (liveliness) within that time: a crash, a leave, a restart;
+* the network stalled: the ring's router (``up --router``: the launcher, through which every
+  frame passes) did not run for a while — stopped by SIGSTOP or Ctrl-Z, or starved — and says so
+  once it runs again (``ctl/*/faultnote`` with the ``stalled`` span), so the regenerations in that
+  span and within :data:`QUIET_S` after it are ``network``, counted again out of ``spurious``.
 
 The ring's first token (main's seed, counted by ``tokens_regenerated`` too) is a ``seed``, not a
 regeneration. Every other regeneration is **spurious**: nothing was wrong, the token was only
@@ -44,7 +48,7 @@ QUIET_S = 5.0
 QUIET_RECONS = 10.0
 
 
-CAUSES = ("fault", "membership", "spurious")
+CAUSES = ("fault", "membership", "network", "spurious")
 
 
 RECENT = 16  # the last regenerations kept with their time and cause
@@ -73,6 +77,10 @@ class RegenerationLedger:
         #: node ID -> (when its last fault notice arrived, whether it had a fault active)
         self.remote: dict[int, tuple[float, bool]] = {}
         self.recent: collections.deque[dict[str, Any]] = collections.deque(maxlen=RECENT)
+        #: the spurious ones' entries (wall-clock ``t``), for a stall told about afterwards
+        self._spurious: collections.deque[dict[str, Any]] = collections.deque(maxlen=1024)
+        #: spans (wall-clock start, end) in which the network stalled, as the router told them
+        self.stalls: collections.deque[tuple[float, float]] = collections.deque(maxlen=16)
         self._lock = threading.Lock()
 
     def install(self) -> None:
@@ -115,12 +123,33 @@ class RegenerationLedger:
         return getattr(self.os, "_last_visit", 1.0) == 0.0 and not getattr(self.os, "_has_sent", True)
 
     def note(self, request: dict[str, Any]) -> dict[str, Any]:
-        """Control verb ``faultnote``: node ``id`` says its faults changed (``faults``: those active now)."""
+        """Control verb ``faultnote``: node ``id`` says its faults changed (``faults``: those active
+        now); or the ring's router says the network stalled (``stalled``: [start, end], wall clock)."""
+        stalled = request.get("stalled")
+        if isinstance(stalled, (list, tuple)) and len(stalled) == 2:
+            return {"ok": True, "recounted": self.network_stalled(float(stalled[0]), float(stalled[1]))}
         node_id = int(request.get("id", 0))
         if node_id and node_id != self.os.node_id:
             with self._lock:
                 self.remote[node_id] = (self.clock(), bool(request.get("faults")))
         return {"ok": True}
+
+    def network_stalled(self, start: float, end: float) -> int:
+        """The network did not carry anything from ``start`` to ``end`` (wall clock): the
+        spurious regenerations in that span and up to :meth:`quiet_s` after it become
+        ``network``; returns how many."""
+        until = end + self.quiet_s()
+        with self._lock:
+            self.stalls.append((start, end))
+            moved = [e for e in self._spurious if start <= e["t"] <= until]
+            for entry in moved:
+                entry["cause"] = "network"
+                self._spurious.remove(entry)
+            self.counts["spurious"] -= len(moved)
+            self.counts["network"] += len(moved)
+        if moved:
+            log.info("%d regeneration(s) were the network's: it stalled for %.1f s", len(moved), end - start)
+        return len(moved)
 
     def quiet_s(self) -> float:
         """How long after a fault or a membership change a regeneration is still explained by it."""
@@ -141,6 +170,10 @@ class RegenerationLedger:
         changed = getattr(self.os, "_live_changed_at", 0.0)  # perf_counter time
         if changed and time.perf_counter() - changed < quiet:
             return "membership"
+        wall = time.time()
+        with self._lock:
+            if any(start <= wall <= end + quiet for start, end in self.stalls):
+                return "network"
         return "spurious"
 
     def record(self, seed: bool, state: dict[str, Any] | None = None) -> str:
@@ -152,7 +185,10 @@ class RegenerationLedger:
                 self.seeds += 1
             else:
                 self.counts[cause] += 1
-            self.recent.append({"t": round(time.time(), 3), "cause": cause, **(state or {})})
+            entry = {"t": round(time.time(), 3), "cause": cause, **(state or {})}
+            self.recent.append(entry)
+            if cause == "spurious":
+                self._spurious.append(entry)
         if cause == "spurious":
             log.info(
                 "spurious regeneration (no fault, no membership change in the last %.1f s): %s",

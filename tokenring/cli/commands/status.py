@@ -4,8 +4,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
+from typing import TYPE_CHECKING
 
 from tokenring.cli.args import seconds
+
+if TYPE_CHECKING:
+    import zenoh
 
 HELP = "membership and counters of a running ring"
 
@@ -19,7 +24,16 @@ EXAMPLES = """examples:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring.cli.args import add_json_option, add_ring_options, with_examples
 
-    p = sub.add_parser("status", help=HELP, **with_examples(EXAMPLES))
+    p = sub.add_parser(
+        "status",
+        help=HELP,
+        description="Every node's membership, round trip and counters, and the ring's regenerations "
+        "by cause. Exit 0 when nodes answered, 1 when none did. When the endpoint answers nothing, "
+        "status says what holds it on this host; a launcher stopped there (SIGSTOP, Ctrl-Z) still "
+        "has live nodes, and they are asked directly (exit 0, a line on stderr says so), unless it "
+        "is their router (up --router).",
+        **with_examples(EXAMPLES),
+    )
     p.add_argument("--timeout", type=seconds, default=2.0, help="seconds to wait for answers")
     add_json_option(p)
     add_ring_options(p, listen=False)
@@ -50,24 +64,71 @@ def setup_warnings(nodes: list[dict]) -> list[str]:
     ]
 
 
+def ask_nodes(session: zenoh.Session, args: argparse.Namespace) -> list[dict]:
+    """Every node's ``stats``, by ID, once the session sees the ring's nodes settle."""
+    from tokenring.contract import keys
+    from tokenring.transport.session import discover, query
+
+    discover(session, args.ring, timeout=args.timeout + 3.0)
+    replies = query(session, keys.control(args.ring, "*", "stats"), timeout=args.timeout)
+    return sorted((r["result"] for _, r in replies if r.get("ok")), key=lambda n: n["id"])
+
+
+def past_the_endpoint(args: argparse.Namespace) -> tuple[list[dict], str | None]:
+    """When the endpoint answered nothing: the nodes asked directly if a stopped launcher holds
+    it on this host (they go on without it), and a line saying what holds it; no nodes and
+    None when there is nothing to look at (an endpoint on another host)."""
+    from tokenring.contract import keys
+    from tokenring.transport.reach import diagnose
+    from tokenring.transport.zenoh_config import make_config, open_session
+
+    endpoint = (args.connect or [keys.default_endpoint()])[0]
+    silence = diagnose(endpoint)
+    if silence is None:
+        return [], None
+    if not (silence.stopped and silence.node_endpoints):
+        return [], silence.describe()
+    # no gossip: it would link this session to the stopped launcher too, whose handshake never ends
+    config = make_config(connect=silence.node_endpoints, config_file=args.zenoh_config, gossip=False)
+    with open_session(config) as direct:
+        nodes = ask_nodes(direct, args)
+    if not nodes:
+        return [], silence.describe()
+    return nodes, (
+        f"{silence.who} holds {endpoint} but is stopped (SIGSTOP or Ctrl-Z), so its {len(nodes)} "
+        f"node(s) were asked directly; resume it with: kill -CONT {silence.pid}"
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     from tokenring._util.tables import format_table
     from tokenring.cli.args import tap_session
     from tokenring.cli.output import print_json
-    from tokenring.contract import keys
     from tokenring.host.regeneration import format_rates, ring_rates
-    from tokenring.transport.session import discover, query
+    from tokenring.transport.reach import answered
 
-    with tap_session(args) as session:
-        discover(session, args.ring, timeout=args.timeout + 3.0)
-        replies = query(session, keys.control(args.ring, "*", "stats"), timeout=args.timeout)
-    nodes = sorted((r["result"] for _, r in replies if r.get("ok")), key=lambda n: n["id"])
+    session = tap_session(args)
+    linked = False
+    try:
+        linked = answered(session, wait=args.timeout)
+        nodes = ask_nodes(session, args) if linked else []
+    finally:
+        if linked:
+            session.close()
+        else:  # a session shaking hands with a stopped peer takes Zenoh's handshake timeout to close
+            threading.Thread(target=session.close, name="close-unanswered", daemon=True).start()
+    note = None
+    if not linked:  # nobody answered at the endpoint: say who holds it, and go past a stopped launcher
+        nodes, note = past_the_endpoint(args)
     rates = ring_rates(nodes)
+    if note is not None:
+        print(f"status: {note}", file=sys.stderr)
     if args.json:
-        print_json({"ring": args.ring, "regenerations": rates, "nodes": nodes})
+        print_json({"ring": args.ring, "regenerations": rates, "nodes": nodes, "note": note})
         return 0 if nodes else 1
     if not nodes:
-        print(f"no node of ring {args.ring!r} answered", file=sys.stderr)
+        if note is None:
+            print(f"no node of ring {args.ring!r} answered", file=sys.stderr)
         return 1
     rows = [
         [
