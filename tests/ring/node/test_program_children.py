@@ -3,7 +3,8 @@ that outlived its own parent, one that ignores SIGTERM — none survives the nod
 stops or the node is killed (``kill -9``) while the ring runs.
 
 motor's program starts them in ``setup()`` and writes their PIDs to a file; the test judges
-those PIDs.
+those PIDs. Each node leads a process group of its own for that, so the launcher forwards a
+Ctrl-Z (SIGTSTP) and its continue to them itself.
 """
 
 from __future__ import annotations
@@ -85,3 +86,35 @@ def test_what_a_program_started_ends_when_its_node_is_killed(procs, ring_name, e
     output, _ = launcher.communicate(timeout=60)
     assert "node motor (id 20) killed by SIGKILL" in output, output[-3000:]
     assert launcher.returncode == 1  # a node died
+
+
+def state(pid: int) -> str:
+    return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+
+
+def test_ctrl_z_suspends_the_whole_ring_and_its_continue_resumes_it(procs, ring_name, endpoint):
+    # the nodes lead their own process groups, out of the terminal's reach: the launcher
+    # forwards the suspension, as the terminal did when they shared its group
+    launcher = procs.tokenring(
+        "up",
+        "--ring",
+        ring_name,
+        "--listen",
+        endpoint,
+        "--nodes",
+        "main,motor",
+        "--no-world",
+        "--no-programs",
+    )
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10, 20], timeout=120)
+        nodes = launcher_pids(session, ring_name)
+        procs.watch(nodes)
+        launcher.send_signal(signal.SIGTSTP)
+        wait_until(lambda: {state(p) for p in [launcher.pid, *nodes]} == {"T"}, 60, "the ring suspended")
+        launcher.send_signal(signal.SIGCONT)
+        wait_until(lambda: "T" not in {state(p) for p in [launcher.pid, *nodes]}, 60, "the ring continued")
+        wait_ring(session, ring_name, [10, 20], timeout=60)
+    launcher.send_signal(signal.SIGTERM)
+    output, _ = launcher.communicate(timeout=60)
+    assert launcher.returncode == 0, output[-3000:]
