@@ -218,6 +218,14 @@ def run(args: argparse.Namespace) -> int:
     # everything emulated runs K times faster with a speed-up K, the wire included: a round
     # of the ring must stay as short in emulated time as it is on the real hardware
     wire = args.bitrate if bitrate is None or speedup == 1.0 else format_bitrate(bitrate * speedup)
+    if wire != args.bitrate:
+        try:
+            parse_bitrate(wire)  # every node would refuse it, after the boot
+        except UsageError:
+            raise UsageError(
+                f"--bitrate {args.bitrate} with a speed-up of {speedup:g} (--speed) is a wire of {wire} bit/s; "
+                "the emulated wire must be within 10k..100G bit/s (give another --bitrate or --speed)"
+            ) from None
     services = [service for plan in plans_up for service in plan.services]
     if args.web or args.record or args.foxglove:
         services.append(watch_service(args))
@@ -232,14 +240,6 @@ def run(args: argparse.Namespace) -> int:
         protocol_path=args.protocol,
         log_level=args.log_level,
         respawn=args.respawn,
-    if wire != args.bitrate:
-        try:
-            parse_bitrate(wire)  # every node would refuse it, after the boot
-        except UsageError:
-            raise UsageError(
-                f"--bitrate {args.bitrate} with a speed-up of {speedup:g} (--speed) is a wire of {wire} bit/s; "
-                "the emulated wire must be within 10k..100G bit/s (give another --bitrate or --speed)"
-            ) from None
         router=args.router,
         links=args.links,
         profile=args.profile,
