@@ -111,7 +111,7 @@ def test_the_api_refuses_bad_and_hostile_requests_and_stops_cleanly(procs, ring_
         (b'{"node": "nemo", "kind": "crash"}', JSON, 400, "unknown node 'nemo'"),
         (b'{"node": "lcd", "kind": "explode"}', JSON, 400, "unknown fault kind"),
         (b'{"node": "lcd", "kind": "delay"}', JSON, 400, "delay needs a value"),
-        (b'{"node": "lcd", "kind": "delay", "value": "1e9"}', JSON, 400, "must be 0..60000"),
+        (b'{"node": "lcd", "kind": "delay", "value": "1e9"}', JSON, 400, "outside 0..60000 ms"),
         (b'{"node": "lcd", "kind": "drop", "value": 7}', JSON, 400, "outside 0..1"),
         (b'{"node": "all", "kind": "partition"}', JSON, 400, "partition needs a value"),
         (b'{"node": "all", "kind": "partition", "value": "main|nemo"}', JSON, 400, "nemo"),
