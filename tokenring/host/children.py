@@ -9,6 +9,8 @@ import os
 import queue
 import selectors
 import signal
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Collection
@@ -183,23 +185,103 @@ def live_group_members(pgids: Collection[int]) -> dict[int, list[int]]:
     return members
 
 
+#: the keeper's program (no site, no tokenring: it starts in milliseconds): ``+PGID`` and
+#: ``-PGID`` lines hold and release a group; at the end of its input — the launcher exited, even
+#: by SIGKILL — it SIGKILLs every group it still holds
+KEEPER_PROGRAM = """
+import os, signal, sys
+signal.signal(signal.SIGINT, signal.SIG_IGN)
+signal.signal(signal.SIGTERM, signal.SIG_IGN)
+held = set()
+for line in sys.stdin:
+    (held.add if line[0] == "+" else held.discard)(int(line[1:]))
+for pgid in held:
+    try:
+        os.killpg(pgid, signal.SIGKILL)
+    except OSError:
+        pass
+"""
+
+
+class GroupKeeper:
+    """A small process that outlives a killed launcher to end its children's process groups.
+
+    A node's parent-death signal kills the node with its launcher, but not what the node's
+    program started: that lives on in the node's group. The keeper holds the launcher's groups
+    over a pipe; when the pipe closes it kills those the launcher did not release. It leads a
+    group of its own, out of the terminal's Ctrl-C and Ctrl-Z."""
+
+    def __init__(self) -> None:
+        self._process: subprocess.Popen[str] | None = None
+        self._lock = threading.Lock()
+        self._closed = False
+        self.failed: str | None = None  # why the keeper is gone, once it is
+
+    def hold(self, pgid: int) -> None:
+        """Kill group ``pgid`` if the launcher dies before it releases it."""
+        self._send(f"+{pgid}\n")
+
+    def release(self, pgid: int) -> None:
+        """Group ``pgid`` is gone: its number may be reused, the keeper must forget it."""
+        self._send(f"-{pgid}\n")
+
+    def close(self) -> None:
+        """Release everything and let the keeper exit (the launcher ended its groups itself)."""
+        with self._lock:
+            process, self._process = self._process, None
+            self._closed = True
+        if process is None or process.stdin is None:
+            return
+        with contextlib.suppress(OSError):
+            process.stdin.close()  # at its end of input it kills what it still holds: nothing
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            process.wait(5.0)
+
+    def _send(self, line: str) -> None:
+        with self._lock:
+            if self._closed or self.failed is not None:
+                return
+            try:
+                if self._process is None:
+                    self._process = subprocess.Popen(
+                        [sys.executable, "-I", "-S", "-c", KEEPER_PROGRAM],
+                        stdin=subprocess.PIPE,
+                        text=True,
+                        process_group=0,
+                    )
+                assert self._process.stdin is not None
+                self._process.stdin.write(line)
+                self._process.stdin.flush()
+            except OSError as exc:
+                self.failed = (
+                    f"the process-group keeper is gone ({exc}): a killed launcher may leave processes"
+                )
+
+
 class GroupEnder:
     """Ends what is left of a child's process group once the child (its leader) has exited: a
     node's program and whatever it started end with the node. SIGTERM at once, SIGKILL to what
-    still lives ``grace`` seconds later (as systemd stops what is left of a unit)."""
+    still lives ``grace`` seconds later (as systemd stops what is left of a unit). Each group is
+    also held by a :class:`GroupKeeper` until it is gone, for the launcher that is killed."""
 
     def __init__(self, grace: float) -> None:
         self.grace = grace
+        self.keeper = GroupKeeper()
         self._due: dict[int, float] = {}  # process group -> when what is left of it is killed
-        self._killed: set[int] = set()  # groups that were sent SIGKILL
+        self._killed: set[int] = set()  # groups that were sent SIGKILL and may not be gone yet
         self._changed = threading.Condition()
         self._thread: threading.Thread | None = None
+
+    def adopt(self, pgid: int) -> None:
+        """A child started, leading group ``pgid``: it ends with the launcher, however that ends."""
+        self.keeper.hold(pgid)
 
     def end(self, pgid: int) -> None:
         """SIGTERM to group ``pgid`` (its leader exited); SIGKILL ``grace`` seconds later."""
         try:
             os.killpg(pgid, signal.SIGTERM)
         except (ProcessLookupError, PermissionError):
+            self.keeper.release(pgid)
             return  # nothing is left of it
         with self._changed:
             self._due.setdefault(pgid, time.monotonic() + self.grace)
@@ -217,26 +299,37 @@ class GroupEnder:
                 self._kill_due()
         deadline = time.monotonic() + timeout
         while True:
-            left = [pid for pids in live_group_members(self._killed).values() for pid in pids]
+            with self._changed:
+                self._kill_due()
+                left = [pid for pids in live_group_members(self._killed).values() for pid in pids]
             if not left or time.monotonic() >= deadline:
                 return left
             time.sleep(GROUP_CHECK_S)
 
+    def close(self) -> None:
+        """Every group has been ended: the keeper may go."""
+        self.keeper.close()
+
     def _run(self) -> None:
         with self._changed:
             while True:
-                self._changed.wait(GROUP_CHECK_S if self._due else None)
+                self._changed.wait(GROUP_CHECK_S if self._due or self._killed else None)
                 self._kill_due()
 
     def _kill_due(self) -> None:
-        """(Under the lock.) Forget the groups that are gone; SIGKILL the ones that are due."""
-        if not self._due:
+        """(Under the lock.) Forget (and release) the groups that are gone; SIGKILL the ones that
+        are due."""
+        if not self._due and not self._killed:
             return
-        alive = live_group_members(self._due)
+        alive = live_group_members(set(self._due) | self._killed)
+        for pgid in [g for g in self._killed if g not in alive]:
+            self._killed.discard(pgid)
+            self.keeper.release(pgid)
         now = time.monotonic()
         for pgid, due in list(self._due.items()):
             if pgid not in alive:
                 del self._due[pgid]
+                self.keeper.release(pgid)
             elif now >= due:
                 with contextlib.suppress(ProcessLookupError, PermissionError):
                     os.killpg(pgid, signal.SIGKILL)

@@ -6,7 +6,8 @@ namespaces — but it refuses a ring another launcher holds there, naming it, an
 that are live there), starts one ``tokenring node`` process per node with its log lines prefixed by the
 node's name, reports any node that dies with its exit code, and on Ctrl-C, SIGTERM or the end
 of ``--duration`` stops every process it started within 2 s. Children also carry
-``PR_SET_PDEATHSIG`` so that even a killed launcher leaves no orphans.
+``PR_SET_PDEATHSIG``, and a keeper process holds their process groups, so that even a killed
+launcher leaves no orphans — nor anything a node's program started.
 """
 
 from __future__ import annotations
@@ -196,6 +197,7 @@ class Launcher(NodeCommandLines):
         self._service_due: dict[str, float] = {}  # service -> when --respawn starts it again
         # what each child started ends with it: its process group is ended once it exits
         self._groups = GroupEnder(GROUP_GRACE_S)
+        self._keeper_reported = False
         self.ring = keys.check_ring_name(ring)
         self.bitrate = bitrate
         self.ack_mode = ack_mode
@@ -305,6 +307,10 @@ class Launcher(NodeCommandLines):
             # started ends with the node, even when the node was killed
             process_group=0,
         )
+        self._groups.adopt(process.pid)
+        if self._groups.keeper.failed and not self._keeper_reported:
+            self._keeper_reported = True
+            self.say(self._groups.keeper.failed)
         assert process.stdout is not None
         self.output.watch(process.stdout, name)
         return process
@@ -685,6 +691,7 @@ class Launcher(NodeCommandLines):
         left = self._groups.finish(timeout=KILL_REAP_S)
         if left:
             self.say(f"processes the nodes or services started survived SIGKILL: pids {left}")
+        self._groups.close()
         self.output.join_reader(timeout=1.0)
         for process in [c.process for c in self.child_list()] + list(self.service_children.values()):
             if process.stdout is not None:

@@ -1,6 +1,6 @@
 """What a node's program starts ends with the node (issue 52): a child it forks, a grandchild
 that outlived its own parent, one that ignores SIGTERM — none survives the node, whether the ring
-stops or the node is killed (``kill -9``) while the ring runs.
+stops, the node is killed (``kill -9``) while the ring runs, or the launcher itself is killed.
 
 motor's program starts them in ``setup()`` and writes their PIDs to a file; the test judges
 those PIDs. Each node leads a process group of its own for that, so the launcher forwards a
@@ -86,6 +86,17 @@ def test_what_a_program_started_ends_when_its_node_is_killed(procs, ring_name, e
     output, _ = launcher.communicate(timeout=60)
     assert "node motor (id 20) killed by SIGKILL" in output, output[-3000:]
     assert launcher.returncode == 1  # a node died
+
+
+def test_what_a_program_started_ends_when_the_launcher_is_killed(procs, ring_name, endpoint, tmp_path):
+    # kill -9 of `up`: the nodes die of their parent-death signal, which cannot reach what their
+    # programs started; the launcher's group keeper ends those
+    launcher, session, started = start_ring(procs, ring_name, endpoint, tmp_path)
+    nodes = launcher_pids(session, ring_name)
+    session.close()
+    launcher.kill()
+    launcher.communicate(timeout=60)
+    assert wait_gone([*nodes, *started], 60) == [], "processes outlived their killed launcher"
 
 
 def state(pid: int) -> str:
