@@ -873,9 +873,10 @@ def install_signal_handlers(launcher: Launcher) -> None:
 
     def suspend(_signum: int, _frame: Any) -> None:
         stopped = launcher.signal_groups(signal.SIGSTOP)
-        signal.signal(signal.SIGTSTP, signal.SIG_DFL)
-        os.kill(os.getpid(), signal.SIGTSTP)  # stops here until the shell continues us
-        signal.signal(signal.SIGTSTP, suspend)
+        # SIGSTOP, not SIGTSTP again: the kernel drops a default-handled SIGTSTP to a process of
+        # an orphaned group (a launcher started by a script or service), and the launcher would
+        # leave its nodes stopped and run on
+        os.kill(os.getpid(), signal.SIGSTOP)  # stops here until the shell continues us
         launcher.signal_groups(signal.SIGCONT, stopped)
 
     signal.signal(signal.SIGINT, handler)
