@@ -219,10 +219,6 @@ class NodeProcess:
         self.os.on_program_failed = self._tell_launcher_program_failed
         self.system.install()
         self.os.start()
-        # once it is in the ring: a joiner refused its ID must not answer for the node that holds it
-        self._queryable = self.session.declare_queryable(
-            keys.control(self.ring, self.os.node_id, "*"), self._on_query
-        )
         if self.os.node_id == self.os.preferred_master:  # main holds the PC's serial line
             from tokenring.node.pclink.server import PcLinkServer
             from tokenring.node.pclink.system_verbs import PcSystemVerbs
@@ -239,6 +235,11 @@ class NodeProcess:
             self.resident = ResidentHost(resident, self.os, self.system, self.hardware)
             self.control["resident"] = self.resident.control
             self.resident.start()
+        # once it is in the ring (a joiner refused its ID must not answer for the node that holds
+        # it) and whole: every verb it has answers from the first query on
+        self._queryable = self.session.declare_queryable(
+            keys.control(self.ring, self.os.node_id, "*"), self._on_query
+        )
 
     def run_program(self, path: str | Path | None) -> None:
         if path is None:
