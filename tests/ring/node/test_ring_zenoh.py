@@ -426,9 +426,10 @@ def test_bench_cli_writes_the_promised_json(procs, tmp_path):
     report = json.loads(out.read_text())
     assert report["nodes"] == 3 and report["rounds"] == 400
     # the outside tap times the same rounds from another process: it sees nearly all of them, and
-    # a vantage point cannot move the median of the same rounds by a quarter
+    # they span the same time, so a vantage point cannot move their mean by a quarter (a median of
+    # rounds a fifth of a millisecond long moves with the other core's load)
     assert report["tap_rtt_ms"]["n"] >= 0.9 * 400
-    assert 0.8 < report["tap_rtt_ms"]["median"] / report["rtt_ms"]["median"] < 1.25
+    assert 0.8 < report["tap_rtt_ms"]["mean"] / report["rtt_ms"]["mean"] < 1.25
     assert len(report["own_share_us"]["pairs"]) == 2 and "tokenring's own share: " in result.stdout
     # two pairs give an interval around their mean (Student's t, 1 degree of freedom: 12.7 sd/√2)
     share = report["own_share_us"]
