@@ -30,7 +30,6 @@ none (the bare ring: what the ring's own tests of a non-robot system run).
 from __future__ import annotations
 
 import argparse
-import logging
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -45,11 +44,10 @@ if TYPE_CHECKING:
     import zenoh
 
     from tokenring.contract.protocol import Protocol
-    from tokenring.host.launcher import Launcher, ServicePlan
+    from tokenring.host.launcher import Launcher
+    from tokenring.host.services import ServicePlan
     from tokenring.node.resident import ResidentProgram
     from tokenring.observe.feed import FeedSource
-
-log = logging.getLogger("tokenring.extensions")
 
 GROUP = "tokenring.extensions"
 ENV = "TOKENRING_EXTENSIONS"

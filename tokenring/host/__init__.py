@@ -10,10 +10,11 @@ from tokenring._face import lazy_face
 if TYPE_CHECKING:
     from tokenring._util.process import die_with_parent
     from tokenring.host.faults import FaultClient
-    from tokenring.host.launcher import Launcher, NodePlan, ServicePlan, plans_from_protocol
+    from tokenring.host.launcher import Launcher, NodePlan, plans_from_protocol
     from tokenring.host.loader import Loader
     from tokenring.host.pclink import PcLink, open_link
     from tokenring.host.regeneration import format_rates, ring_rates
+    from tokenring.host.services import ServicePlan
     from tokenring.node.regeneration import per_hour
 else:  # each name is imported on first use
     __getattr__, __dir__ = lazy_face(
@@ -30,7 +31,7 @@ else:  # each name is imported on first use
             "per_hour": "tokenring.node.regeneration",
             "plans_from_protocol": "tokenring.host.launcher",
             "ring_rates": "tokenring.host.regeneration",
-            "ServicePlan": "tokenring.host.launcher",
+            "ServicePlan": "tokenring.host.services",
         },
     )
 

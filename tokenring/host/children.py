@@ -16,8 +16,30 @@ import time
 from collections.abc import Collection
 from typing import IO, Any
 
+from tokenring.contract.faults import CRASH_EXIT_CODE
+
 #: how often a group being ended is looked at in /proc (only while one is)
 GROUP_CHECK_S = 0.05
+#: a child gets this long after SIGTERM before SIGKILL, and the kernel this long to reap it
+STOP_TIMEOUT_S = 1.5
+KILL_REAP_S = 10.0
+#: ``--respawn`` starts a dead node again this long after its exit (systemd's RestartSec default):
+#: the ring heals around it first, instead of sharing two cores with a booting interpreter
+RESPAWN_DELAY_S = 0.1
+
+
+def describe_exit(code: int | None) -> str:
+    """'exited with code 3', 'killed by SIGKILL', 'crashed on purpose (fault)'."""
+    if code is None:
+        return "still running"
+    if code == CRASH_EXIT_CODE:
+        return f"crashed on purpose (crash fault, exit code {code})"
+    if code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exited with code {code}"
 
 
 class PrefixedOutput:

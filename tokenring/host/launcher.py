@@ -25,36 +25,39 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-import msgpack
 import zenoh
 
 from tokenring._util.process import die_with_parent
 from tokenring.contract import keys
 from tokenring.contract.faults import CRASH_EXIT_CODE
 from tokenring.contract.ring import EVENT_RING_STOPPING, RING_EVENT
-from tokenring.errors import TokenRingError, TransportError, UsageError
-from tokenring.host.children import ExitWatch, GroupEnder, PrefixedOutput
+from tokenring.errors import UsageError
+from tokenring.host.children import (
+    KILL_REAP_S,
+    RESPAWN_DELAY_S,
+    STOP_TIMEOUT_S,
+    ExitWatch,
+    GroupEnder,
+    PrefixedOutput,
+    describe_exit,
+)
+from tokenring.host.network import open_launcher_session
 from tokenring.host.node_commands import NodeCommandLines
+from tokenring.host.ring_claim import refuse_a_ring_in_use
+from tokenring.host.services import ServiceChild, ServicePlan, ServiceSupervisor
 from tokenring.host.stall import StallWatch
 from tokenring.transport.control import answer_query
-from tokenring.transport.zenoh import RingViewServer, peer_to_peer, ring_view
-from tokenring.transport.zenoh_config import make_config, node_environment, open_session
+from tokenring.transport.zenoh import RingViewServer, peer_to_peer
+from tokenring.transport.zenoh_config import node_environment
 
-STOP_TIMEOUT_S = 1.5
 #: a ring bigger than this boots in waves of at most this many nodes at a time (8 per core)
 BOOT_CONCURRENCY = 8 * max(1, os.cpu_count() or 1)
 #: how often the supervisor checks its children when their pidfds wake it (a safety net), and
 #: when they cannot (no pidfd_open)
 EXIT_CHECK_S = 1.0
 CHILD_POLL_S = 0.05
-#: ``--respawn`` starts a dead node again this long after its exit (systemd's RestartSec default):
-#: the ring heals around it first, instead of sharing two cores with a booting interpreter
-RESPAWN_DELAY_S = 0.1
-KILL_REAP_S = 10.0  # after SIGKILL, how long the kernel may take to reap them all
 #: what a child started gets this long after SIGTERM (once the child exited) before SIGKILL
 GROUP_GRACE_S = 1.0
-#: how long a launcher asks who holds its ring before it starts anything (answers end it early)
-RING_CHECK_TIMEOUT_S = 2.0
 
 
 def process_stopped(pid: int) -> bool:
@@ -64,30 +67,6 @@ def process_stopped(pid: int) -> bool:
             return stat.read().rsplit(b")", 1)[1].split()[0] in (b"T", b"t")
     except (OSError, IndexError):
         return False
-
-
-def describe_holder(status: Mapping[str, Any]) -> str:
-    """'the launcher pid 123 on host h (tcp/127.0.0.1:7447, nodes 10, 20)', from its status."""
-    running = [str(n.get("id")) for n in status.get("nodes", ()) if n.get("running")]
-    where = [status["endpoint"]] if status.get("endpoint") else []
-    if running:
-        where.append(f"nodes {', '.join(running)}")
-    detail = f" ({', '.join(where)})" if where else ""
-    return f"the launcher pid {status.get('pid', '?')} on host {status.get('host', '?')}{detail}"
-
-
-def describe_exit(code: int | None) -> str:
-    """'exited with code 3', 'killed by SIGKILL', 'crashed on purpose (fault)'."""
-    if code is None:
-        return "still running"
-    if code == CRASH_EXIT_CODE:
-        return f"crashed on purpose (crash fault, exit code {code})"
-    if code < 0:
-        try:
-            return f"killed by {signal.Signals(-code).name}"
-        except ValueError:
-            return f"killed by signal {-code}"
-    return f"exited with code {code}"
 
 
 @dataclass
@@ -101,21 +80,6 @@ class NodePlan:
 
 
 @dataclass
-class ServicePlan:
-    """A helper process the ring needs (e.g. the world simulator): started before the nodes,
-    stopped after them, its output prefixed with ``name``. ``argv`` follows ``python -m``;
-    ``{endpoint}``, ``{ring}`` and ``{connect}`` in it are filled in by the launcher."""
-
-    name: str
-    argv: list[str]
-    ready_key: str | None = None  # a liveliness key the launcher waits for before the nodes start
-    ready_timeout: float = 15.0
-    #: ``--respawn`` may start it again after a death: it keeps nothing a new one would lack
-    #: (a world simulator keeps the robot's pose, a recorder its file: they are not restarted)
-    restart: bool = False
-
-
-@dataclass
 class Child:
     plan: NodePlan
     process: subprocess.Popen
@@ -123,17 +87,6 @@ class Child:
     restarts: int = 0
     reported: bool = False
     group_ended: bool = False  # what is left of its process group was told to end
-
-
-@dataclass
-class ServiceChild:
-    """A service process the launcher supervises (its ``service_children`` entry's record)."""
-
-    plan: ServicePlan
-    process: subprocess.Popen
-    restarts: int = 0
-    reported: bool = False
-    group_ended: bool = False
 
 
 class Launcher(NodeCommandLines):
@@ -190,11 +143,9 @@ class Launcher(NodeCommandLines):
         self.links = links
         self.link_ports: dict[int, int] = {}
         self.services = list(services)
-        self.service_children: dict[str, subprocess.Popen] = {}
-        self._service_records: dict[str, ServiceChild] = {}
+        self.service_supervisor = ServiceSupervisor(self)
         #: why this run is not whole, one line each (a service died, a program failed): exit 1
         self.failures: list[str] = []
-        self._service_due: dict[str, float] = {}  # service -> when --respawn starts it again
         # what each child started ends with it: its process group is ended once it exits
         self._groups = GroupEnder(GROUP_GRACE_S)
         self._keeper_reported = False
@@ -255,43 +206,25 @@ class Launcher(NodeCommandLines):
 
     # -- session --------------------------------------------------------------------------------
     def _open_session(self) -> None:
-        if self.router:
-            if not self.listen:
-                raise UsageError(
-                    "--router needs --listen ENDPOINT (where this host's nodes and other routers reach it)"
-                )
-            config = make_config(
-                mode="router", listen=self.listen, connect=self.connect, config_file=self.zenoh_config
-            )
-            self.session = open_session(config)
-            self.endpoint = self.listen[0]
-            return
-        if self.listen:
-            config = make_config(listen=self.listen, connect=self.connect, config_file=self.zenoh_config)
-            self.session = open_session(config)
-            self.endpoint = self.listen[0]
-            return
-        if self.connect:
-            config = make_config(connect=self.connect, config_file=self.zenoh_config)
-            self.session = open_session(config)
-            self.endpoint = None
-            self.joined_existing = True
-            return
-        try:
-            config = make_config(listen=[keys.default_endpoint()], config_file=self.zenoh_config)
-            self.session = open_session(config)
-            self.endpoint = keys.default_endpoint()
-        except TransportError as exc:
-            if "in use" not in str(exc):
-                raise
-            config = make_config(connect=[keys.default_endpoint()], config_file=self.zenoh_config)
-            self.session = open_session(config)
-            self.endpoint = None
-            self.joined_existing = True
-            self.say(f"{keys.default_endpoint()} is taken: joining that Zenoh network (ring {self.ring!r})")
+        opened = open_launcher_session(
+            router=self.router,
+            listen=self.listen,
+            connect=self.connect,
+            zenoh_config=self.zenoh_config,
+            ring=self.ring,
+        )
+        self.session, self.endpoint, self.joined_existing = (
+            opened.session,
+            opened.endpoint,
+            opened.joined_existing,
+        )
+        if opened.note:
+            self.say(opened.note)
 
     # -- children -------------------------------------------------------------------------------
-    def _popen(self, argv: list[str], name: str) -> subprocess.Popen:
+    def popen_child(self, argv: list[str], name: str) -> subprocess.Popen:
+        """Start a child (a node or a service) in a process group of its own, its output prefixed
+        with ``name``, ended with the launcher however that ends."""
         env = node_environment()
         env.update(self.extra_env)
         process = subprocess.Popen(
@@ -315,32 +248,14 @@ class Launcher(NodeCommandLines):
         self.output.watch(process.stdout, name)
         return process
 
-    def start_service(self, service: ServicePlan, wait_ready: bool = True) -> subprocess.Popen:
-        """Start a service process and wait until its ``ready_key`` liveliness token appears
-        (not when ``--respawn`` starts it again: the supervisor does not wait)."""
-        fill = {
-            "endpoint": self.endpoint or "",
-            "ring": self.ring,
-            "connect": (self.node_connect() or [""])[0],
-        }
-        argv = [sys.executable, "-m", *(a.format(**fill) for a in service.argv)]
-        process = self._popen(argv, service.name)
-        self.service_children[service.name] = process
-        previous = self._service_records.get(service.name)
-        record = ServiceChild(service, process, restarts=previous.restarts + 1 if previous else 0)
-        self._service_records[service.name] = record
-        self._exits.add(process.pid, record)
-        if wait_ready and service.ready_key and self.session is not None:
-            deadline = time.monotonic() + service.ready_timeout
-            while time.monotonic() < deadline:
-                if any(r.ok for r in self.session.liveliness().get(service.ready_key, timeout=0.5)):
-                    break
-                if process.poll() is not None:
-                    raise UsageError(f"{service.name} {describe_exit(process.poll())} while starting")
-                time.sleep(0.05)
-            else:
-                raise TransportError(f"{service.name} did not come up within {service.ready_timeout:.0f} s")
-        return process
+    @property
+    def service_children(self) -> dict[str, subprocess.Popen]:
+        """The running process of each service, by name."""
+        return self.service_supervisor.children
+
+    def watch_exit(self, pid: int, record: Child | ServiceChild) -> None:
+        """Wake the supervisor when child ``pid`` exits."""
+        self._exits.add(pid, record)
 
     def child_list(self) -> list[Child]:
         """The node processes started so far (a big ring is still adding them while it boots)."""
@@ -352,7 +267,7 @@ class Launcher(NodeCommandLines):
         command = self.command_for(plan)
         if previous is not None and not plan.program:
             command.append("--autostart")  # a respawned bare node runs the program in its store
-        child = Child(plan, self._popen(command, plan.name), time.monotonic())
+        child = Child(plan, self.popen_child(command, plan.name), time.monotonic())
         if previous is not None:
             child.restarts = previous.restarts + 1
         self.children[plan.node_id] = child
@@ -377,7 +292,15 @@ class Launcher(NodeCommandLines):
             keys.control(self.ring, "launcher", "*"),
             lambda query: answer_query(query, verbs.handlers, "the launcher"),
         )
-        self._refuse_a_ring_in_use()
+        refuse_a_ring_in_use(
+            self.session,
+            self.ring,
+            instance=self.instance,
+            started_at=self.started_at,
+            node_ids=[p.node_id for p in self.plans],
+            joining=bool(self.connect),
+            zenoh_membership=self.transport == "zenoh",
+        )
         if self.transport == "zenoh" and peer_to_peer(self.session):
             self._view_server = RingViewServer(self.session, self.ring)
         self._stall_watch = StallWatch(self.session, self.ring, self.say, router=self.router).start()
@@ -389,7 +312,7 @@ class Launcher(NodeCommandLines):
         )
         self.output.start_reading(self._stop)
         for service in self.services:
-            self.start_service(service)
+            self.service_supervisor.start(service)
         if self.transport != "zenoh":
             from tokenring.transport.registry import MembershipRegistry
 
@@ -405,75 +328,6 @@ class Launcher(NodeCommandLines):
         # run() loop as well as in-process users such as chaos and the benchmarks
         self._supervisor = threading.Thread(target=self._supervise, name="launcher-supervisor", daemon=True)
         self._supervisor.start()
-
-    def _refuse_a_ring_in_use(self) -> None:
-        """Refuse a ring that another launcher holds on this Zenoh network, naming it; and
-        always refuse IDs that are live there (two nodes under one ID both take its token).
-
-        ``--connect`` joins a ring on purpose (one launcher per host, docs/hosts.md): then only
-        live IDs are refused. Two launchers that start at once both see each other; the younger
-        refuses (by start time, then host and PID)."""
-        assert self.session is not None
-        holders = [h for h in self._launchers_of_the_ring() if h.get("instance") != self.instance]
-        live = {int(n["id"]) for h in holders for n in h.get("nodes", ()) if n.get("running")}
-        live |= self._live_node_ids()
-        mine = {p.node_id for p in self.plans}
-        held_by = "; ".join(describe_holder(h) for h in holders)
-        taken = sorted(mine & live)
-        if taken:
-            raise UsageError(
-                f"ring {self.ring!r} is in use: node ID(s) {', '.join(map(str, taken))} live there"
-                + (f", held by {held_by}" if held_by else "")
-                + "; an ID joins a ring once: pick another --ring, or --nodes not live there"
-            )
-        me = (self.started_at, socket.gethostname(), os.getpid())
-        older = [h for h in holders if (h.get("started", 0.0), h.get("host", ""), h.get("pid", 0)) < me]
-        if older and not self.connect:
-            raise UsageError(
-                f"ring {self.ring!r} is in use on this Zenoh network, held by "
-                + "; ".join(describe_holder(h) for h in older)
-                + ": pick another --ring (or join it on purpose: --connect ENDPOINT and --nodes it does not run)"
-            )
-
-    def _launchers_of_the_ring(self) -> list[dict[str, Any]]:
-        """Every launcher's status answer on this ring (this one's too)."""
-        assert self.session is not None
-        answers = []
-        try:
-            replies = self.session.get(
-                keys.control(self.ring, "launcher", "status"),
-                target=zenoh.QueryTarget.ALL,
-                consolidation=zenoh.ConsolidationMode.NONE,
-                timeout=RING_CHECK_TIMEOUT_S,
-            )
-            for reply in replies:
-                if reply.ok is None:
-                    continue
-                with contextlib.suppress(ValueError, TypeError, msgpack.ExtraData):
-                    answer = msgpack.unpackb(reply.ok.payload.to_bytes())
-                    if isinstance(answer, dict) and isinstance(answer.get("result"), dict):
-                        answers.append(answer["result"])
-        except zenoh.ZError as exc:
-            raise TransportError(f"asking who holds ring {self.ring!r} failed: {exc}") from exc
-        return answers
-
-    def _live_node_ids(self) -> set[int]:
-        """The ring's node IDs live on this network: liveliness (through a router) and a peer
-        ring's own view (a peer answers liveliness queries only for itself)."""
-        assert self.session is not None
-        ids: set[int] = set()
-        if self.transport != "zenoh":
-            return ids
-        with contextlib.suppress(zenoh.ZError):
-            for reply in self.session.liveliness().get(
-                keys.node(self.ring, "*"), timeout=RING_CHECK_TIMEOUT_S
-            ):
-                if reply.ok is not None:
-                    node_id = keys.id_from_key(str(reply.ok.key_expr))
-                    if node_id is not None:
-                        ids.add(node_id)
-            ids |= ring_view(self.session, self.ring)
-        return ids
 
     def _boot_in_waves(self) -> None:
         """Start a big ring's nodes so that at most ``boot_concurrency`` are booting (started,
@@ -521,7 +375,7 @@ class Launcher(NodeCommandLines):
         try:
             while not self._stop.is_set():
                 timeout = EXIT_CHECK_S if self._exits.works else CHILD_POLL_S
-                due = [*self._respawn_due.values(), *self._service_due.values()]
+                due = [*self._respawn_due.values(), *self.service_supervisor.due()]
                 if due:
                     timeout = max(0.0, min(timeout, min(due) - time.monotonic()))
                 exited = self._exits.wait(timeout)
@@ -547,19 +401,13 @@ class Launcher(NodeCommandLines):
             if code is None or child.reported:
                 continue
             child.reported = True
-            self._end_group(child)
+            self.end_group(child)
             plan = child.plan
             self.deaths.append((plan.name, plan.node_id, code))
             self.say(f"node {plan.name} (id {plan.node_id}) {describe_exit(code)}")
             if self.respawn and not self._stop.is_set():
                 self._respawn_due.setdefault(plan.node_id, time.monotonic() + RESPAWN_DELAY_S)
-        for record in list(self._service_records.values()):
-            code = record.process.poll()
-            if code is None or record.reported or self._stop.is_set():
-                continue
-            record.reported = True
-            self._end_group(record)
-            self._service_died(record, code)
+        self.service_supervisor.check(stopping=self._stop.is_set())
         now = time.monotonic()
         for node_id, due in list(self._respawn_due.items()):
             if now >= due and not self._stop.is_set():
@@ -567,28 +415,6 @@ class Launcher(NodeCommandLines):
                 plan = self.children[node_id].plan
                 self.say(f"respawning {plan.name} (id {plan.node_id})")
                 self.spawn(plan)
-        for name, due in list(self._service_due.items()):
-            if now >= due and not self._stop.is_set():
-                del self._service_due[name]
-                self.say(f"respawning {name}")
-                try:
-                    self.start_service(self._service_records[name].plan, wait_ready=False)
-                except (OSError, TokenRingError) as exc:
-                    self.failure(f"{name} could not be started again: {exc}")
-
-    def _service_died(self, record: ServiceChild, code: int) -> None:
-        """A service died mid-run: say so, restart it if ``--respawn`` and it is safe, count it."""
-        name, pid = record.plan.name, record.process.pid
-        if self.respawn and record.plan.restart:
-            self.failure(f"service {name} (pid {pid}) {describe_exit(code)}; restarting it")
-            self._service_due.setdefault(name, time.monotonic() + RESPAWN_DELAY_S)
-            return
-        why = (
-            "--respawn does not restart it: a new one would not have its state"
-            if self.respawn
-            else "the ring goes on without it"
-        )
-        self.failure(f"service {name} (pid {pid}) {describe_exit(code)}: {why}")
 
     def signal_groups(self, signum: int, pgids: Sequence[int] | None = None) -> list[int]:
         """Send ``signum`` to the process group of every running node and service (or to
@@ -606,7 +432,7 @@ class Launcher(NodeCommandLines):
         self.failures.append(line)
         self.say(line)
 
-    def _end_group(self, child: Child | ServiceChild) -> None:
+    def end_group(self, child: Child | ServiceChild) -> None:
         """End what is left of a child's process group, once: its leader has exited (a PID,
         and so a group ID, may be reused once nothing holds it)."""
         if not child.group_ended:
@@ -682,8 +508,8 @@ class Launcher(NodeCommandLines):
                     self.say(f"node {child.plan.name} (pid {child.process.pid}) survived SIGKILL")
         for child in running:
             if child.process.poll() is not None:
-                self._end_group(child)
-        self._stop_services()
+                self.end_group(child)
+        self.service_supervisor.stop()
         # the supervisor, which may have started nodes and services again, outlives them
         self._children_gone.set()
         if self._booter is not None:
@@ -713,32 +539,6 @@ class Launcher(NodeCommandLines):
         if self.session is not None:
             self.session.close()
             self.session = None
-
-    def _stop_services(self) -> None:
-        """SIGTERM each service, SIGKILL it after 1.5 s; one that failed to stop cleanly (an
-        exit code, or not stopping in time: a recorder may not have finished its file) counts."""
-        for name, process in self.service_children.items():
-            record = self._service_records.get(name)
-            if process.poll() is None:
-                with contextlib.suppress(ProcessLookupError):
-                    process.send_signal(signal.SIGTERM)
-                try:
-                    code = process.wait(STOP_TIMEOUT_S)
-                    if code not in (0, -signal.SIGTERM) and record is not None and not record.reported:
-                        self.failure(
-                            f"service {name} (pid {process.pid}) {describe_exit(code)} as it stopped"
-                        )
-                except subprocess.TimeoutExpired:
-                    self.failure(f"service {name} did not stop in {STOP_TIMEOUT_S} s: killing it")
-                    with contextlib.suppress(ProcessLookupError):
-                        process.kill()
-                    try:  # a loaded machine may take seconds to reap it; the stop goes on
-                        process.wait(KILL_REAP_S)
-                    except subprocess.TimeoutExpired:
-                        self.say(f"{name} (pid {process.pid}) survived SIGKILL")
-            if record is not None and record.process is process and process.poll() is not None:
-                record.reported = True
-                self._end_group(record)
 
 
 class LauncherVerbs:
@@ -782,7 +582,9 @@ class LauncherVerbs:
                     "name": name,
                     "pid": p.pid,
                     "running": p.poll() is None,
-                    "restarts": record.restarts if (record := launcher._service_records.get(name)) else 0,
+                    "restarts": record.restarts
+                    if (record := launcher.service_supervisor.records.get(name))
+                    else 0,
                 }
                 for name, p in launcher.service_children.items()
             ],

@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 import tokenring.host.launcher as launcher_module
+import tokenring.host.services as services_module
 from tests.support.memring import wait_for
 from tokenring.host.launcher import Launcher, NodePlan
 
@@ -200,7 +201,7 @@ def test_a_service_that_never_comes_up_leaves_nothing_running(ring_name: str, en
     """``up`` whose world never appears ends with the error: the service is stopped and the
     session closed, so no Zenoh callback thread keeps the process alive after it (it did)."""
     from tokenring.errors import TransportError
-    from tokenring.host.launcher import ServicePlan
+    from tokenring.host.services import ServicePlan
 
     silent = ServicePlan(
         "silent",
@@ -249,8 +250,8 @@ class SlowToReap:
 
 
 def test_a_service_slow_to_reap_after_sigkill_does_not_break_the_stop(ring_name, endpoint, monkeypatch):
-    monkeypatch.setattr(launcher_module, "STOP_TIMEOUT_S", 0.01)
-    monkeypatch.setattr(launcher_module, "KILL_REAP_S", 0.01)
+    monkeypatch.setattr(services_module, "STOP_TIMEOUT_S", 0.01)
+    monkeypatch.setattr(services_module, "KILL_REAP_S", 0.01)
     output = io.StringIO()
     launcher = Launcher([], ring=ring_name, listen=[endpoint], output=output)
     slow = SlowToReap()

@@ -36,7 +36,8 @@ if TYPE_CHECKING:
     from pathlib import Path
 
     from tokenring.extensions import UpPlan
-    from tokenring.host.launcher import Launcher, ServicePlan
+    from tokenring.host.launcher import Launcher
+    from tokenring.host.services import ServicePlan
 
 HELP = "launch the whole ring (every node its own process)"
 
@@ -340,7 +341,7 @@ def watch_service(args: argparse.Namespace) -> ServicePlan:
 
     from tokenring.cli.output import check_option_output
     from tokenring.contract import keys
-    from tokenring.host.launcher import ServicePlan
+    from tokenring.host.services import ServicePlan
 
     argv = ["tokenring", "watch", "--ring", "{ring}", "--connect", "{connect}"]
     if args.web:
