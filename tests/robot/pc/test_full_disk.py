@@ -92,7 +92,7 @@ def test_a_full_disk_under_the_localisation_log_costs_only_the_log(ring_name, en
         env = dict(os.environ, TOKENRING_LOG_DIR=str(disk))
         result = subprocess.run(
             [sys.executable, "-m", "tokenring", "up", "--ring", ring_name, "--listen", endpoint,
-             "--localizer", "config/localization.yaml", "--speed", "5", "--duration", "25"],
+             "--localizer", "config/localization.yaml", "--speed", "5", "--duration", "12"],
             capture_output=True, text=True, timeout=240, env=env, cwd=Path(__file__).resolve().parents[3],
         )  # fmt: skip
         out = result.stdout
@@ -119,7 +119,7 @@ def test_map_out_onto_a_full_disk_exits_1_and_keeps_the_older_map(ring_name, end
         fill(disk)
         result = run_tokenring(
             "up", "--ring", ring_name, "--listen", endpoint, "--explore", "2", "--speed", "10",
-            "--bitrate", "max", "--duration", "30", "--map-out", str(target), "--force",
+            "--bitrate", "max", "--duration", "10", "--map-out", str(target), "--force",
             timeout=300,
         )  # fmt: skip
         out = result.stdout
