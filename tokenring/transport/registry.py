@@ -70,6 +70,18 @@ class _Reader:
         return out
 
 
+def _closed(sock: socket.socket) -> bool:
+    """Whether the peer of ``sock`` has closed it (its end is waiting to be read), without
+    taking anything from it."""
+    try:
+        sock.settimeout(0.0)  # a timeout would first wait for it to be readable
+        return sock.recv(1, socket.MSG_PEEK) == b""
+    except BlockingIOError:
+        return False
+    except OSError:
+        return True
+
+
 class MembershipRegistry:
     """The registry server: one thread, one TCP connection per node."""
 
@@ -139,11 +151,16 @@ class MembershipRegistry:
         op = message.get("op")
         if op == "hello":
             node_id = int(message["id"])
-            client.update(id=node_id, addr=message["addr"], live=False)
             old = self._by_id.get(node_id)
-            self._by_id[node_id] = sock
             if old is not None and old is not sock and self._clients.get(old, {}).get("live"):
-                self._clients[old]["live"] = False
+                if _closed(old):  # a crashed holder whose end is not handled yet: a respawn
+                    self._drop(old)
+                else:  # two nodes under one ID would both take its token
+                    self._send(sock, {"op": "refused", "id": node_id})
+                    self._drop(sock)
+                    return
+            client.update(id=node_id, addr=message["addr"], live=False)
+            self._by_id[node_id] = sock
             self._send(sock, self._table())
             self._tell_all({"op": "addr", "id": node_id, "addr": message["addr"]}, but=sock)
         elif op in ("announce", "withdraw") and client.get("id") is not None:
@@ -204,6 +221,7 @@ class RegistryClient:
         self._have_table = threading.Event()
         self._thread: threading.Thread | None = None
         self._closing = False
+        self.refused = False  # the registry refused this node's ID: another node holds it live
 
     def connect(self) -> set[int]:
         """Connect, register the data address; returns the IDs live right now."""
@@ -220,6 +238,12 @@ class RegistryClient:
         self._send({"op": "hello", "id": self.node_id, "addr": self.data_address})
         if not self._have_table.wait(self._timeout):
             raise TransportError(f"the membership registry at {self.address} did not answer")
+        if self.refused:
+            self.close()
+            raise UsageError(
+                f"node ID {self.node_id} is already live at the membership registry {self.address}: "
+                "a node must not join under an ID in use (stop that node or pick another --id)"
+            )
         return set(self.live) - {self.node_id}
 
     def announce(self) -> None:
@@ -260,6 +284,11 @@ class RegistryClient:
 
     def _apply(self, message: dict[str, Any]) -> None:
         op = message.get("op")
+        if op == "refused":
+            self.refused = True
+            self._closing = True  # the registry closes the connection: no warning for that
+            self._have_table.set()
+            return
         if op == "table":
             self.addrs.update({int(k): v for k, v in message["addrs"].items()})
             self.live = {int(i) for i in message["live"]}

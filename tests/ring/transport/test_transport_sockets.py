@@ -214,7 +214,7 @@ def test_registry_addresses_and_errors():
         make_transport("carrier-pigeon", None, "r", 5, 514)
 
 
-def test_registry_takes_a_respawned_node_and_reports_live_changes():
+def test_registry_refuses_a_live_id_takes_a_respawned_node_and_reports_live_changes():
     registry = MembershipRegistry().start()
     seen: list[tuple[int, bool]] = []
     try:
@@ -225,19 +225,26 @@ def test_registry_takes_a_respawned_node_and_reports_live_changes():
         first.connect()
         first.announce()
         wait_for(lambda: (7, True) in seen, 30.0, "7 announced")
-        second = RegistryClient(registry.address, 7, "127.0.0.1:2007")  # respawned before 'first' closed
+        # a second process under a live ID (a second ring, a node started by hand) is refused
+        twin = RegistryClient(registry.address, 7, "127.0.0.1:3007")
+        with pytest.raises(UsageError, match="node ID 7 is already live"):
+            twin.connect()
+        assert watcher.addrs.get(7) == "127.0.0.1:1007" and registry.live() == [7]
+        # a crashed holder whose connection's end the registry has not read yet: its respawn
+        # is taken, and the old end withdraws nothing of the new process
+        first._sock.shutdown(socket.SHUT_RDWR)  # type: ignore[union-attr]
+        second = RegistryClient(registry.address, 7, "127.0.0.1:2007")
         second.connect()
         second.announce()
         wait_for(lambda: watcher.addrs.get(7) == "127.0.0.1:2007", 30.0, "the new address")
-        first.close()  # the old connection's end must not withdraw the new process
-        # a barrier instead of a sleep: first's end reached the registry before this new
-        # connection did, so the registry has handled it once it has told the watcher about 8
-        # (and it tells the watcher everything in order: a wrong "7 gone" would come first)
+        first.close()
+        # a barrier instead of a sleep: the registry tells the watcher everything in order, so
+        # once it has told it about 8, 7's last change before it is known
         barrier = RegistryClient(registry.address, 8, "127.0.0.1:1008")
         barrier.connect()
         barrier.announce()
         wait_for(lambda: (8, True) in seen, 30.0, "8 announced")
-        assert (7, False) not in seen
+        assert seen[-3:] == [(7, False), (7, True), (8, True)], seen  # the crash, the respawn
         assert registry.live() == [7, 8]
         barrier.close()
         wait_for(lambda: seen[-1] == (8, False), 30.0, "8 gone")
