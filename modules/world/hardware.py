@@ -23,8 +23,14 @@ def _open_lcd(session: zenoh.Session, ring: str) -> Any:
     return open_lcd(session, ring)
 
 
+def _open_gyro(session: zenoh.Session, ring: str) -> Any:
+    from modules.world.gyroclient import GyroHardware
+
+    return GyroHardware(session, ring)
+
+
 #: module name -> factory(session, ring) returning that module's hardware client
-FACTORIES: dict[str, Any] = {**CLIENTS, "lcd": _open_lcd, "copro": TruthFeed}
+FACTORIES: dict[str, Any] = {**CLIENTS, "lcd": _open_lcd, "copro": TruthFeed, "gyro": _open_gyro}
 
 
 def open_hardware(module: str, session: zenoh.Session, ring: str) -> Any | None:

@@ -22,6 +22,10 @@ key                             request → result
 ``hw/charger/adc``              ``{}`` → ``{electronics, motors, current}`` 10-bit counts,
                                 ``full_scale``, ``relay``, ``stamp_ms``
 ``hw/charger/relay``            ``{on: bool, reason}`` → ``{relay}``; off cuts all hardware
+``hw/gyro/read``                ``{}`` → ``{raw: [counts...], stamps_ms, temperature_c, lost,
+                                period_ms, power}``: every 20.48 ms sample since the last read
+                                (:mod:`modules.world.gyroscope`; the devices of
+                                :mod:`modules.world.devices`)
 ``world/truth``                 published ~10× per simulated second (at most 50 Hz real):
                                 ground truth for logs and scoring only — ``stamp_ms`` (simulated
                                 ms, int), ``t_ms`` (float), ``x_mm``, ``y_mm``, ``theta_rad`` (CCW
@@ -72,7 +76,10 @@ class WorldService:
     """Serves one :class:`Simulator` on a Zenoh session."""
 
     def __init__(self, sim: Simulator, session: zenoh.Session, ring: str) -> None:
+        from modules.world.devices import attach_devices  # (they import the clients, which import us)
+
         self.sim = sim
+        self.devices = attach_devices(sim)
         self.session = session
         self.ring = ring
         self.stop = threading.Event()
@@ -113,6 +120,9 @@ class WorldService:
 
     def _hardware(self, what: str, request: dict[str, Any]) -> Any:
         self.requests += 1
+        device = self.devices.get(what.split("/", 1)[0])
+        if device is not None:
+            return device.handle(what, request)
         return self.sim.handle(what, request)
 
     def _world(self, what: str, request: dict[str, Any]) -> Any:

@@ -29,10 +29,12 @@ def broken(mutate) -> ProtocolError:
 
 
 def test_real_protocol_compiles_with_eight_nodes_in_id_order():
+    """The Hamburg robot's eight, then the Darmstadt sensors' nodes (``up --sensors darmstadt``)."""
     protocol = load_protocol(REPO / "protocol.yaml")
-    assert list(protocol.nodes) == ["main", "motor", "sonar", "compass", "copro", "map", "lcd", "charger"]
+    hamburg = ["main", "motor", "sonar", "compass", "copro", "map", "lcd", "charger"]
+    assert list(protocol.nodes) == [*hamburg, "gyro"]
     ids = [n.id for n in protocol.nodes.values()]
-    assert ids == sorted(ids) and len(set(ids)) == 8
+    assert ids == sorted(ids) and len(set(ids)) == 9
     assert [n.seed_name for n in protocol.nodes.values()][:2] == ["ROBMAIN", "ROBMOTOR"]
     assert protocol.header.sid == 0 and protocol.header.counter == 4 and protocol.header_size == 12
     assert protocol.system_data_offset == 12 and protocol.system_data_size == 32

@@ -1,0 +1,144 @@
+"""The gyro on the whole ring: ``tokenring up --sensors darmstadt`` adds node gyro (90) to the
+Hamburg eight; read from the token frames a tap hears (at gyro.data's address in protocol.yaml,
+a PyYAML/struct reader, nothing from tokenring), it calibrates at rest and then publishes rates
+with advancing sample counters and sensor stamps. Without ``--sensors`` the ring is the eight."""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import signal
+import struct
+import threading
+from typing import Any
+
+import pytest
+import yaml
+
+from tests.support.processes import REPO
+from tests.support.ringjudge import Header
+from tests.support.ringutil import control, tap, wait_until
+
+PROTOCOL = yaml.safe_load((REPO / "protocol.yaml").read_text())
+GYRO = PROTOCOL["nodes"]["gyro"]
+STATES = PROTOCOL["enums"]["gyro_state"]
+FORMATS = {"u8": "B", "i8": "b", "u16": "H", "i16": "h", "u32": "I", "i32": "i"}
+HAMBURG = ["main", "motor", "sonar", "compass", "copro", "map", "lcd", "charger"]
+
+
+def field_type(spec: Any) -> str:
+    return spec if isinstance(spec, str) else spec["type"]
+
+
+class GyroReader:
+    """gyro.data as every valid frame the tap hears carries it, in arrival order."""
+
+    def __init__(self, session: Any, ring: str) -> None:
+        self.header = Header.from_protocol()
+        fields = GYRO["data"]["fields"]
+        self.names = list(fields)
+        self.format = "<" + "".join(FORMATS[field_type(f)] for f in fields.values())
+        self.address = GYRO["data"]["address"]
+        self.seen: list[dict[str, int]] = []
+        self.members: set[int] = set()
+        self.lock = threading.Lock()
+        self.sub = session.declare_subscriber(f"tokenring/{ring}/token/*", self._on)
+
+    def _on(self, sample: Any) -> None:
+        frame = sample.payload.to_bytes()
+        if not self.header.valid(frame):
+            return
+        data = dict(zip(self.names, struct.unpack_from(self.format, frame, self.address), strict=True))
+        with self.lock:
+            self.members.add(frame[0])  # SID: the sender
+            if not self.seen or self.seen[-1] != data:
+                self.seen.append(data)
+
+    def values(self) -> list[dict[str, int]]:
+        with self.lock:
+            return list(self.seen)
+
+    def close(self) -> None:
+        self.sub.undeclare()
+
+
+def test_the_default_ring_is_the_hamburg_eight_and_darmstadt_adds_the_gyro() -> None:
+    """``up``'s node selection as the robot's extension leaves it (the same parser options)."""
+    from modules.plugin import RobotExtension, check_sensors
+    from tokenring.contract.protocol import load_protocol
+    from tokenring.host.launcher import plans_from_protocol
+
+    protocol = load_protocol(REPO / "protocol.yaml")
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--nodes")
+    RobotExtension().add_up_options(parser)
+
+    def ring(*argv: str) -> list[str]:
+        args = parser.parse_args(list(argv))
+        check_sensors(args, protocol)
+        selection = [s for s in args.nodes.split(",") if s] if args.nodes is not None else None
+        return [plan.name for plan in plans_from_protocol(protocol, selection, None)]
+
+    assert ring() == HAMBURG
+    assert ring("--sensors", "hamburg") == HAMBURG
+    assert ring("--sensors", "darmstadt") == [*HAMBURG, "gyro"]
+    assert ring("--nodes", "main,gyro", "--sensors", "darmstadt") == ["main", "gyro"]
+    from tokenring import UsageError
+
+    with pytest.raises(UsageError, match="gyro"):
+        ring("--sensors", "darmstadt", "--nodes", "main,motor")
+
+
+@pytest.mark.slow
+def test_up_with_the_darmstadt_sensors_runs_a_calibrated_gyro_on_the_ring(
+    procs: Any, ring_name: str, endpoint: str
+) -> None:
+    launcher = procs.tokenring(
+        "up", "--ring", ring_name, "--listen", endpoint, "--world", "empty", "--speed", "10",
+        "--bitrate", "10M", "--sensors", "darmstadt", "--duration", "120",
+    )  # fmt: skip
+    try:
+        with tap(endpoint) as session:
+            reader = GyroReader(session, ring_name)
+
+            def running_a_while() -> bool:
+                seen = reader.values()
+                running = [v for v in seen if v["state"] == STATES["RUNNING"]]
+                return len(running) >= 20 and running[-1]["sample"] - running[0]["sample"] >= 100
+
+            wait_until(running_a_while, 90, "gyro RUNNING for 100 samples", interval=0.2)
+            seen = reader.values()
+            members = set(reader.members)
+            reader.close()
+            report = control(session, ring_name, GYRO["id"], "program")["report"]
+    finally:
+        if launcher.poll() is None:
+            launcher.send_signal(signal.SIGINT)
+    output, _ = launcher.communicate(timeout=60)
+    assert "Traceback" not in output, output[-3000:]
+
+    assert GYRO["id"] in members, members  # the gyro passed the token on
+    states = [v["state"] for v in seen]
+    # it calibrated first (the robot stands: no --explore), then ran: the states only go forward
+    # (UNCALIBRATED before the program, CALIBRATING for 2 simulated s, which the tap may miss)
+    assert states == sorted(states) and set(states) <= {0, 1, 2}, states
+    calibration = report["calibration"]
+    assert calibration["samples"] == 100 and report["calibration_restarts"] == 0, report
+    assert calibration["spread"] < 1.0, report  # at rest: noise of a fraction of a count
+    running = [v for v in seen if v["state"] == STATES["RUNNING"]]
+    zero = {v["zero_mcounts"] for v in running}
+    assert len(zero) == 1, zero  # one calibration, kept
+    (zero_mcounts,) = zero
+    # the world's zero point: mid-scale ± 20 counts (plus the warm-up's fraction of a count)
+    assert abs(zero_mcounts / 1000 - 2048) < 21, zero_mcounts
+    # at rest: raw values within a bit or two of the zero point, rates within their few bits
+    # (one bit = 851 µrad/s), the sum of rates small
+    assert all(abs(v["raw"] - zero_mcounts / 1000) < 2.5 for v in running), running[-5:]
+    assert all(abs(v["rate_urad_s"]) < 2.5 * 851.4 for v in running), running[-5:]
+    assert abs(running[-1]["angle_mrad"]) < 20, running[-1]
+    # samples and their sensor stamps advance, 20.48 ms a sample
+    for a, b in itertools.pairwise(running):
+        assert b["stamp_ms"] > a["stamp_ms"] and (b["sample"] - a["sample"]) % 65536 > 0, (a, b)
+    span = running[-1]["stamp_ms"] - running[0]["stamp_ms"]
+    taken = (running[-1]["sample"] - running[0]["sample"]) % 65536
+    assert abs(span - 20.48 * taken) <= 21, (span, taken)
