@@ -49,7 +49,7 @@ def run_bitrate(bitrate: str, repeat: int, store: Path) -> dict[str, Any]:
         assert launcher.session is not None
         link = open_link(launcher.session, ring, wait=30.0)
         loader = Loader(link, progress=False, say=lambda _: None, poll_s=0.02)
-        ids = {n.id for n in protocol.nodes.values()}
+        ids = {n.id for n in protocol.default_nodes}
         nodes = loader.scan(ids, wait=30.0)
         if {n["id"] for n in nodes} != ids:
             raise SystemExit(f"{bitrate}: only {sorted(n['id'] for n in nodes)} answered the scan")

@@ -257,7 +257,7 @@ def run_config(
     from tokenring.host import die_with_parent
     from tokenring.transport import free_port, make_config, open_session, query
 
-    ids = [n.id for n in default_protocol().nodes.values()]
+    ids = [n.id for n in default_protocol().default_nodes]
     ring = f"spur{os.getpid()}{config.key.replace('+', 'h')}"
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     record: dict[str, Any] = {"key": config.key, "label": config.label, "up_args": list(config.up_args)}

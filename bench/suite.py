@@ -511,7 +511,7 @@ def section_load(ctx: Context) -> dict[str, Any]:
     from tokenring import default_protocol
     from tokenring.perf import run_ring
 
-    names = list(default_protocol().nodes)
+    names = [n.name for n in default_protocol().default_nodes]
     rounds, warmup = (1500, 500) if not ctx.quick else (600, 200)
     out: dict[str, Any] = {"nodes": names, "bitrate": "max", "runs": []}
     for label, programs in (("idle", False), ("eight programs", True)):
@@ -542,7 +542,7 @@ def section_commands(ctx: Context) -> dict[str, Any]:
     from tokenring.transport import query
 
     protocol = default_protocol()
-    names = list(protocol.nodes)
+    names = [n.name for n in protocol.default_nodes]
     n = len(names)
     count = 10 if ctx.quick else 40
     program = str(HERE / "programs" / "commander.py")

@@ -37,44 +37,9 @@ if TYPE_CHECKING:
 #: a world's random seed (numpy's generators take 0..2**32-1 and fail on a negative one)
 MAX_SEED = 2**32 - 1
 
-#: ``up --sensors``: the nodes of protocol.yaml each sensor set adds to the Hamburg robot's eight;
-#: a node named here runs only with its set (LOPS and the floor correlator join "darmstadt" later)
+#: ``up --sensors``: the optional nodes of protocol.yaml each sensor set adds to the Hamburg
+#: robot's eight (LOPS and the floor correlator join "darmstadt" later)
 SENSOR_SETS: dict[str, tuple[str, ...]] = {"hamburg": (), "darmstadt": ("gyro",)}
-
-
-def sensor_nodes() -> set[str]:
-    """Every node some sensor set adds: left out of the default ring."""
-    return {name for names in SENSOR_SETS.values() for name in names}
-
-
-class DefaultNodes(str):
-    """``up``'s default ``--nodes``: protocol.yaml's nodes but the sensor sets' (the Hamburg eight);
-    a ``str`` the ring's ``up`` reads like a given ``--nodes``, known here as the default."""
-
-
-def default_nodes() -> DefaultNodes | None:
-    """The default protocol's nodes without the sensor sets', or None (all nodes: a protocol
-    without such nodes, or one that does not load, which ``up`` then reports itself)."""
-    from tokenring import ProtocolError, default_protocol
-
-    try:
-        names = list(default_protocol().nodes)
-    except (ProtocolError, OSError):
-        return None
-    if not sensor_nodes() & set(names):
-        return None
-    return DefaultNodes(",".join(n for n in names if n not in sensor_nodes()))
-
-
-class SensorsAction(argparse.Action):
-    """``--sensors SET``: the set's nodes join the default ring (a ``--nodes`` given names its own)."""
-
-    def __call__(self, parser: Any, namespace: Any, values: Any, option_string: Any = None) -> None:
-        setattr(namespace, self.dest, values)
-        nodes = getattr(namespace, "nodes", None)
-        if isinstance(nodes, DefaultNodes):
-            names = [n for n in nodes.split(",") if n]
-            namespace.nodes = DefaultNodes(",".join([*names, *SENSOR_SETS[values]]))
 
 
 def programs_dir() -> Path:
@@ -132,14 +97,9 @@ class RobotExtension(Extension):
             "--sensors",
             choices=sorted(SENSOR_SETS),
             default="hamburg",
-            action=SensorsAction,
-            help="the robot's sensors: the Hamburg robot's eight modules (default; without --nodes the "
-            "ring leaves the other sets' nodes out) or with the Darmstadt sensors' nodes as well "
-            "(darmstadt: the gyroscope, node gyro)",
+            help="the robot's sensors: the Hamburg robot's eight modules (default) or with the "
+            "Darmstadt sensors' nodes as well (darmstadt: the gyroscope, node gyro)",
         )
-        defaults = default_nodes()
-        if defaults is not None:  # the sensor sets' nodes run only with their --sensors
-            parser.set_defaults(nodes=defaults)
         world.add_argument(
             "--algorithms",
             default="ours",
@@ -182,6 +142,10 @@ class RobotExtension(Extension):
             "setup: compass + walls of the wall file, data and error logs); default: exploration "
             "mode without logs",
         )
+
+    def up_nodes(self, args: argparse.Namespace, protocol: Protocol) -> list[str]:
+        check_sensors(args, protocol)
+        return list(SENSOR_SETS[getattr(args, "sensors", "hamburg")])
 
     def plan_up(self, args: argparse.Namespace, protocol: Protocol) -> UpPlan:
         from pathlib import Path
@@ -309,21 +273,13 @@ class RobotExtension(Extension):
 
 
 def check_sensors(args: argparse.Namespace, protocol: Protocol) -> None:
-    """A ``--nodes`` given with ``--sensors`` must name the set's nodes (or the sensors would
-    silently not run); a set whose nodes this protocol lacks is refused."""
+    """A set whose nodes this protocol lacks is refused; a ``--nodes`` given with ``--sensors``
+    must name the set's nodes (or the sensors would silently not run)."""
     wanted = SENSOR_SETS[getattr(args, "sensors", "hamburg")]
     missing = [name for name in wanted if name not in protocol.nodes]
     if missing:
         raise UsageError(f"--sensors {args.sensors}: this protocol has no node {', '.join(missing)}")
     nodes = getattr(args, "nodes", None)
-    if isinstance(nodes, DefaultNodes):  # made from the default protocol: --protocol may differ
-        left = set(protocol.nodes) - sensor_nodes() - set(nodes.split(","))
-        if left:
-            raise UsageError(
-                f"this protocol's nodes {', '.join(sorted(left))} are not in the default ring "
-                f"({nodes}): name the nodes to start with --nodes"
-            )
-        return
     if not wanted or nodes is None:
         return
     given = set()

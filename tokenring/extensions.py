@@ -11,7 +11,8 @@ and the ring asks every registered extension, and nothing else, for
 * **verbs** — extra ``tokenring`` subcommands: modules with ``add_parser(sub)`` and ``run(args)``,
   exactly like :mod:`tokenring.cli.commands`;
 * **programs** — the directory holding the programs for protocol.yaml's nodes (``up``, ``load``);
-* **up** — options of ``tokenring up``, checked before anything starts, and an :class:`UpPlan`:
+* **up** — options of ``tokenring up``, checked before anything starts, the optional nodes they
+  start, and an :class:`UpPlan`:
   services started beside the nodes (a world simulator), how much faster emulated time runs,
   environment for the nodes, work to do once the ring runs (a mission);
 * **load** — options of ``tokenring load`` and a step after it (the robot's map upload, the
@@ -115,6 +116,12 @@ class Extension:
 
     def add_up_options(self, parser: argparse.ArgumentParser) -> None:
         """Options of ``tokenring up`` (in argument groups of their own)."""
+
+    def up_nodes(self, args: argparse.Namespace, protocol: Protocol) -> list[str]:
+        """Optional nodes of protocol.yaml that this ``up``'s options start beside the default
+        ring when ``--nodes`` is not given (a given ``--nodes`` names every node itself; raise
+        :class:`UsageError` if it leaves out one the options need)."""
+        return []
 
     def plan_up(self, args: argparse.Namespace, protocol: Protocol) -> UpPlan:
         """Check this extension's ``up`` options (raise :class:`UsageError`) and plan its part."""

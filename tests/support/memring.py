@@ -37,7 +37,7 @@ class MemoryRing:
         self.hub = MemoryHub()
         self.options = node_options
         self.nodes: dict[int, NodeOS] = {}
-        for node_id in ids if ids is not None else [n.id for n in self.protocol.nodes.values()]:
+        for node_id in ids if ids is not None else [n.id for n in self.protocol.default_nodes]:
             self.add(node_id)
 
     def add(self, node_id: int) -> NodeOS:

@@ -125,7 +125,7 @@ def load_scenario(path: str | Path, protocol: Protocol | None = None) -> Scenari
 
     node_list = ring.get("nodes", "all")
     if node_list == "all":
-        nodes = [n.id for n in protocol.nodes.values()]
+        nodes = [n.id for n in protocol.default_nodes]
     elif isinstance(node_list, list) and node_list:
         nodes = sorted({resolve(item, "ring.nodes") for item in node_list})
     else:

@@ -187,6 +187,9 @@ class NodeSpec:
     seed_name: str
     command: CommandChannel
     data: Channel
+    #: a station ``up`` starts only when asked for (``--nodes``, or an application's option):
+    #: its place in the token is reserved, the ring forms without it
+    optional: bool = False
 
 
 @dataclass(frozen=True)
@@ -230,6 +233,11 @@ class Protocol:
     @property
     def frame_size(self) -> int:
         return self.token_size + 2
+
+    @property
+    def default_nodes(self) -> tuple[NodeSpec, ...]:
+        """The nodes a ring starts with when none are named: all but the optional ones."""
+        return tuple(n for n in self.nodes.values() if not n.optional)
 
     def node(self, name_or_id: str | int) -> NodeSpec:
         """A node by short name, seed name or ID; :class:`ChannelError` lists the known ones."""
@@ -744,7 +752,7 @@ class _Compiler:
             if not isinstance(name, str) or not re.fullmatch(r"[a-z][a-z0-9_]*", name):
                 raise self.fail(where, "node names are lower-case identifiers")
             spec = self.mapping(spec, where)
-            self.only_keys(spec, {"id", "seed_name", "command", "data"}, where)
+            self.only_keys(spec, {"id", "seed_name", "optional", "command", "data"}, where)
             node_id = self.integer(self.get(spec, "id", where), f"{where}.id", 1, 255)
             if node_id in by_id:
                 raise self.fail(
@@ -768,7 +776,10 @@ class _Compiler:
                             f"{other.name} (bytes {other.address}..{other.end - 1})",
                         )
                 channels[ch.name] = ch
-            node = NodeSpec(name, node_id, seed, command, data)
+            optional = spec.get("optional", False)
+            if not isinstance(optional, bool):
+                raise self.fail(f"{where}.optional", f"expected true or false, got {optional!r}")
+            node = NodeSpec(name, node_id, seed, command, data, optional)
             nodes[name] = node
             by_id[node_id] = node
         return nodes, by_id, channels

@@ -640,7 +640,8 @@ class LauncherVerbs:
 def plans_from_protocol(
     protocol: Any, selection: Sequence[str] | None, programs_dir: str | Path | None
 ) -> list[NodePlan]:
-    """Nodes to start: all of ``protocol.yaml`` or the ``--nodes`` selection (names or IDs)."""
+    """Nodes to start: the ``--nodes`` selection (names or IDs), or without one protocol.yaml's
+    nodes but the optional ones."""
     if selection:
         specs = []
         for item in selection:
@@ -649,7 +650,7 @@ def plans_from_protocol(
             except Exception as exc:
                 raise UsageError(str(exc)) from None
     else:
-        specs = list(protocol.nodes.values())
+        specs = list(protocol.default_nodes)
     plans = []
     seen: set[int] = set()
     for spec in specs:

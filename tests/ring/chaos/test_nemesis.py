@@ -13,7 +13,7 @@ from tokenring.chaos.nemesis import OPERATIONS, Operation, generate, scenario_do
 from tokenring.chaos.runner import load_scenario
 from tokenring.contract.protocol import default_protocol
 
-NAMES = list(default_protocol().nodes)
+NAMES = [n.name for n in default_protocol().default_nodes]
 
 
 def test_the_same_seed_gives_the_same_schedule_and_another_seed_another():

@@ -41,6 +41,16 @@ def test_real_protocol_compiles_with_eight_nodes_in_id_order():
     assert protocol.frame_size == 514
     for ch in protocol.channels.values():
         assert ch.address >= 12 and ch.end <= 512, ch.name
+    # the Darmstadt nodes are optional: a ring named by nobody starts without them
+    assert [n.name for n in protocol.nodes.values() if n.optional] == ["gyro"]
+    assert [n.name for n in protocol.default_nodes] == hamburg
+
+
+def test_optional_must_be_a_boolean():
+    def mutate(doc):
+        doc["nodes"]["gyro"]["optional"] = "yes"
+
+    assert "nodes.gyro.optional" in str(broken(mutate))
 
 
 def test_channel_views_are_zero_copy_over_the_token():

@@ -27,7 +27,7 @@ from tokenring.errors import UsageError
 from tokenring.host.launcher import Launcher, NodePlan
 from tokenring.transport.session import free_port
 
-IDS = sorted(n.id for n in default_protocol().nodes.values())
+IDS = sorted(n.id for n in default_protocol().default_nodes)
 HEADER = Header.from_protocol()
 
 pytestmark = pytest.mark.slow

@@ -16,7 +16,7 @@ from tokenring.contract.protocol import default_protocol
 from tokenring.host.regeneration import format_rates, ring_rates
 from tokenring.node.regeneration import QUIET_S, RegenerationLedger, per_hour
 
-IDS = [n.id for n in default_protocol().nodes.values()]
+IDS = [n.id for n in default_protocol().default_nodes]
 
 
 def node(uptime_s: float, regenerated: int, spurious: int, fault: int = 0, seeds: int = 0) -> dict:

@@ -33,7 +33,7 @@ from tokenring.contract.protocol import default_protocol
 from tokenring.contract.ring import EPOCH_MASK
 
 PROTOCOL = default_protocol()
-ALL_IDS = [n.id for n in PROTOCOL.nodes.values()]
+ALL_IDS = [n.id for n in PROTOCOL.default_nodes]  # optional nodes start only when named
 
 
 def up(procs, ring, endpoint, *extra, env=None):
@@ -95,7 +95,7 @@ def test_ring_of_eight_forms_counts_rounds_shares_data_and_delivers_commands(
         reports = {}
 
         def all_reported():
-            for node in PROTOCOL.nodes.values():
+            for node in PROTOCOL.default_nodes:
                 reports[node.name] = control(session, ring_name, node.id, "program")["report"]
             return (
                 all(r.get("seen") for r in reports.values())
@@ -108,6 +108,8 @@ def test_ring_of_eight_forms_counts_rounds_shares_data_and_delivers_commands(
                 owner = PROTOCOL.channel(channel).node
                 if reader == "lcd" and owner == "sonar":
                     assert value == 0, "lcd never unlocked sonar.data, yet it was copied"
+                elif PROTOCOL.nodes[owner].id not in ALL_IDS:
+                    assert value == 0, (reader, channel, "an optional node's data, yet it is not running")
                 else:
                     assert value == PROTOCOL.nodes[owner].id, (reader, channel, value)
         # commands: exactly once; a locked inbox gives transmitted without acknowledged
@@ -289,7 +291,7 @@ def test_sigint_stops_every_node_by_its_own_leave_not_a_kill(procs, ring_name, e
     code = launcher.wait(60)  # a hang guard
     output = launcher.stdout.read()
     assert code == 130, output[-3000:]
-    for node in PROTOCOL.nodes.values():
+    for node in PROTOCOL.default_nodes:
         assert f"node {node.name} left the ring" in output, output[-3000:]
     assert "did not stop" not in output, output[-3000:]
     assert "stopped (interrupted)" in output

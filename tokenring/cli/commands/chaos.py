@@ -173,7 +173,7 @@ def _run_random(args: argparse.Namespace, kinds: list[str], progress: Any) -> in
     from tokenring.errors import UsageError
 
     protocol = default_protocol()
-    names = list(protocol.nodes)
+    names = [n.name for n in protocol.default_nodes]
     settle = 3.0
     ops = generate(args.random, names, duration=args.duration, settle=settle, kinds=kinds)
     if not ops:

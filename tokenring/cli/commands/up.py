@@ -35,6 +35,7 @@ view, Foxglove; not the world simulator or a recording, whose state would be los
 if TYPE_CHECKING:
     from pathlib import Path
 
+    from tokenring.contract.protocol import Protocol
     from tokenring.extensions import UpPlan
     from tokenring.host.launcher import Launcher
     from tokenring.host.services import ServicePlan
@@ -53,7 +54,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "and supervise them until Ctrl-C, SIGTERM or --duration.",
         **with_examples(EXAMPLES),
     )
-    p.add_argument("--nodes", help="comma-separated subset of nodes (names or IDs); default all")
+    p.add_argument(
+        "--nodes",
+        help="comma-separated nodes to start (names or IDs); default protocol.yaml's nodes but the optional ones",
+    )
     p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds")
     p.add_argument(
         "--bitrate",
@@ -152,6 +156,24 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_ring_options(p)
 
 
+def node_selection(args: argparse.Namespace, protocol: Protocol) -> list[str] | None:
+    """The nodes ``up`` starts as names or IDs: ``--nodes``; without it None (protocol.yaml's
+    nodes but the optional ones) unless the extensions' options add optional nodes to those."""
+    from tokenring import extensions
+
+    # asked with or without --nodes: an extension checks a given --nodes against its options
+    added = [name for extension in extensions.loaded() for name in extension.up_nodes(args, protocol)]
+    if args.nodes is not None:
+        selection = [s.strip() for s in args.nodes.split(",") if s.strip()]
+        if not selection:  # ',,,' or '' once meant every node, silently
+            raise UsageError(
+                f"--nodes {args.nodes!r} names no node: give names or IDs (e.g. main,sonar), or leave "
+                "--nodes out for the default ring"
+            )
+        return selection
+    return [n.name for n in protocol.default_nodes] + added if added else None
+
+
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -179,14 +201,7 @@ def run(args: argparse.Namespace) -> int:
         from tokenring.node.store import check_store_root
 
         check_store_root(Path(args.store))  # before any node starts (a node would fail mid-download)
-    selection = None
-    if args.nodes is not None:
-        selection = [s.strip() for s in args.nodes.split(",") if s.strip()]
-        if not selection:  # ',,,' or '' once meant every node, silently
-            raise UsageError(
-                f"--nodes {args.nodes!r} names no node: give names or IDs (e.g. main,sonar), or leave "
-                "--nodes out for all of them"
-            )
+    selection = node_selection(args, protocol)
     programs = None if args.no_programs else (args.programs or extensions.programs_dir())
     if programs is not None and not Path(programs).is_dir():
         raise UsageError(f"--programs {programs}: no such directory")
