@@ -21,7 +21,10 @@ from tests.support.ringutil import control, launcher_pids, stats, tap, wait_ring
 from tokenring.contract.protocol import default_protocol
 from tokenring.transport.session import free_port
 
-IDS = [n.id for n in default_protocol().nodes.values()]
+# one worker runs them all, in order: the last test judges the ledgers of every fault before it
+pytestmark = pytest.mark.xdist_group("faults")
+
+IDS = [n.id for n in default_protocol().default_nodes]
 PROBE = str(REPO / "tokenring" / "chaos" / "probe.py")
 HEADER = Header.from_protocol()
 LEDGER_ENV = "TOKENRING_PROBE_LEDGER"  # the probe's ledger directory (tokenring/chaos/probe.py)
