@@ -98,7 +98,8 @@ class RobotExtension(Extension):
             choices=sorted(SENSOR_SETS),
             default="hamburg",
             help="the robot's sensors: the Hamburg robot's eight modules (default) or with the "
-            "Darmstadt sensors' nodes as well (darmstadt: the gyroscope, node gyro)",
+            "Darmstadt sensors as well (darmstadt: the gyroscope, node gyro, and LOPS, the positioning "
+            "system beside the ring)",
         )
         world.add_argument(
             "--algorithms",
@@ -162,6 +163,8 @@ class RobotExtension(Extension):
         speed = parse_speed(args.speed)
         if not args.no_world:
             plan.services.append(world_service(args, choice["body"]))
+            if args.sensors == "darmstadt":  # LOPS beside the ring, measuring in that world
+                plan.services.append(lops_service(args))
             plan.speedup = speed
         if args.localizer:
             from modules.localization.config import load_config
@@ -310,6 +313,17 @@ def lcd_start_hint(launcher: Launcher) -> str | None:
         return None
     command = " ".join(["tokenring", "lcd", *launcher.tool_options(), "--keys", "1"])
     return f"the LCD waits at its OS V2.0 Main Menu: 1 (Start Robbi) starts the programs: {command}"
+
+
+def lops_service(args: argparse.Namespace) -> ServicePlan:
+    """LOPS, the Darmstadt positioning system, as a launcher service started after the world
+    (it measures in that world): its packets reach the robot beside the token, never in it. A
+    new LOPS after a death only starts its filter afresh, as the seed's lopscpp did: restartable."""
+    from modules.lops.service import ready_key, service_argv
+    from tokenring.host import ServicePlan
+
+    argv = service_argv(seed=args.seed, log_level=args.log_level, zenoh_config=args.zenoh_config)
+    return ServicePlan("lops", argv, ready_key=ready_key(args.ring), restart=True)
 
 
 def world_service(args: argparse.Namespace, body: str = "ours") -> ServicePlan:

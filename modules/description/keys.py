@@ -12,6 +12,11 @@ key                                      what travels on it
                                          ``world/state``, ``world/info``, ``world/control/*``,
                                          ``world/alive`` (liveliness: the world is up)
 ``tokenring/<ring>/lcd/<what>``          the LCD's screen and keypad (hardware, not the ring)
+``tokenring/<ring>/robot/lops/<what>``   LOPS, the external positioning system beside the ring
+                                         (:mod:`modules.lops`): ``robot/lops/packets`` (each put
+                                         one packet of seed 000 tables 6.1/6.2, raw bytes, as
+                                         the robot receives them over WLAN), ``robot/lops/alive``
+                                         (liveliness: LOPS is up)
 ``tokenring/<ring>/robot/incomplete/*``  liveliness ``<module>/<what>`` while a module runs
                                          without what it was to keep (``copro/logs``: a log that
                                          a full disk cut short); ``up`` then exits 1
@@ -33,6 +38,11 @@ def world(ring: str, what: str) -> str:
 
 def lcd(ring: str, what: str) -> str:
     return f"{keys.PREFIX}/{ring}/lcd/{what}"
+
+
+def lops(ring: str, what: str) -> str:
+    """``tokenring/<ring>/robot/lops/<what>``: LOPS's packets and its liveliness (``packets``, ``alive``)."""
+    return f"{keys.PREFIX}/{ring}/robot/lops/{what}"
 
 
 def incomplete(ring: str, module: str = "*", what: str = "*") -> str:

@@ -1,8 +1,8 @@
 """The gyro on the whole ring: ``tokenring up --sensors darmstadt`` adds node gyro (90) to the
 Hamburg eight. Read from the frames the gyro sends on (gyro.data at its address in
 protocol.yaml, a PyYAML/struct reader, nothing from tokenring), it calibrates at rest and then
-publishes rates with advancing sample counters and sensor stamps. Without ``--sensors`` the ring
-is the eight."""
+publishes rates with advancing sample counters and sensor stamps; LOPS, a service beside the
+ring, puts its packets on its own key. Without ``--sensors`` the ring is the eight."""
 
 from __future__ import annotations
 
@@ -88,7 +88,7 @@ def test_the_default_ring_is_the_hamburg_eight_and_darmstadt_adds_the_gyro() -> 
 
 
 @pytest.mark.slow
-def test_up_with_the_darmstadt_sensors_runs_a_calibrated_gyro_on_the_ring(
+def test_up_with_the_darmstadt_sensors_runs_a_calibrated_gyro_and_lops(
     procs: Any, ring_name: str, endpoint: str
 ) -> None:
     launcher = procs.tokenring(
@@ -98,6 +98,11 @@ def test_up_with_the_darmstadt_sensors_runs_a_calibrated_gyro_on_the_ring(
     try:
         with tap(endpoint) as session:
             reader = GyroReader(session, ring_name)
+            lops_packets: list[bytes] = []  # LOPS beside the ring: tables 6.1/6.2, never in the token
+            lops = session.declare_subscriber(
+                f"tokenring/{ring_name}/robot/lops/packets",
+                lambda s: lops_packets.append(s.payload.to_bytes()),
+            )
 
             def running_a_while() -> bool:
                 seen = reader.values()
@@ -107,12 +112,16 @@ def test_up_with_the_darmstadt_sensors_runs_a_calibrated_gyro_on_the_ring(
             wait_until(running_a_while, 90, "gyro RUNNING for 100 samples", interval=0.2)
             seen = reader.values()
             reader.close()
+            wait_until(lambda: sum(p[:2] == b"SD" for p in list(lops_packets)) >= 10, 30, "LOPS data packets")
+            lops.undeclare()
             report = control(session, ring_name, GYRO["id"], "program")["report"]
     finally:
         if launcher.poll() is None:
             launcher.send_signal(signal.SIGINT)
     output, _ = launcher.communicate(timeout=60)
     assert "Traceback" not in output, output[-3000:]
+    assert "service lops" not in output, output[-3000:]  # it never died
+    assert all(len(p) == 47 for p in lops_packets if p[:2] == b"SD"), lops_packets[:3]
 
     assert seen, "no frame from the gyro"  # it passed the token on
     states = [v["state"] for v in seen]
