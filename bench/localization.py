@@ -207,7 +207,7 @@ def drive_only(log_path: Path, start_ms: int) -> dict[str, float]:
     from modules.pc.analysis import Series
 
     series = Series(read_log(log_path))
-    truth = series.array("L")
+    truth = series.array("T")
     out: dict[str, float] = {}
     for source in ("O", "K"):
         a = series.array(source)

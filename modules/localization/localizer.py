@@ -31,7 +31,7 @@ Two layers:
 Samples are stamped by the sensors (``stamp_ms`` of each data channel); a new sample is seen when
 a channel's stamp (or sequence number) changes between two token visits. The ground truth, when
 a world simulator runs, arrives over Zenoh (``world/truth``) from a second thread — a concurrent
-writer of the shadow buffer — and is logged as the seed's LOPS reference, never fused.
+writer of the shadow buffer — and is logged as a reference (source ``T``), never fused.
 """
 
 from __future__ import annotations
@@ -440,7 +440,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             }
         truth = data.get("truth")
         if truth is not None:
-            store["L"] = {
+            store["T"] = {
                 "x": truth["x"],
                 "y": truth["y"],
                 "psi": truth["theta"],
@@ -464,7 +464,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             }
         if wall_fix is not None:
             store["W"] = wall_fix  # one coordinate and the heading, the other invalid (seed §6.2.4)
-        letters = {"O": "odometry", "G": "compass", "L": "truth", "K": None, "W": "sonar"}
+        letters = {"O": "odometry", "G": "compass", "T": "truth", "K": None, "W": "sonar"}
         for letter, position in store.items():
             position["stamp_ms"] = stamp
             self.positions[letter] = position
@@ -611,7 +611,7 @@ class Localizer:
         self._truth_sub = self.truth_feed.subscribe(self.feed_truth)
 
     def feed_truth(self, stamp_ms: int, x: float, y: float, theta: float) -> None:
-        """Ground truth (mm, rad CCW) for the logs — the seed's LOPS role; never fused."""
+        """The world's ground truth (mm, rad CCW) for the logs (source ``T``); never fused."""
         if self.core is not None:
             self.core.feed(Sample("truth", stamp_ms, {"x": x, "y": y, "theta": theta}))
 

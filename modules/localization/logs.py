@@ -16,9 +16,15 @@ O        odometry (motor steps)        C      synchronised data
 G        compass (the gyro's slot)     P      position
 W        sonar and wall detection      S      synchronisation finished
 B        battery (ours)                T      program start time
-L        ground truth (LOPS's role)    W      wall data (known walls, map walls)
+L        LOPS                          W      wall data (known walls, map walls)
 K        Kalman filter                 E      event (ours: pose set, walls loaded)
+C        floor correlator
+T        the world's truth (ours)
 =======  ============================  =====  =====================================
+
+``T`` is the simulator's ground truth, for scoring and plots only, never fused. Logs of format
+version 1 carried it under ``L`` (LOPS's letter, while there was no LOPS): the reader takes their
+``L`` records as ``T``.
 
 An **error log** has a header map (``tokenring_log: errors``) and records ``[stamp_ms, class,
 text]`` with the seed's classes I (information), W (warning: no data lost), E (error: data
@@ -49,14 +55,17 @@ import msgpack
 
 from tokenring import UsageError
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: what a log of an older format version called a source that has another letter now
+RENAMED_SOURCES: dict[int, dict[str, str]] = {1: {"L": "T"}}
 SOURCES = {
     "S": "system",
     "O": "odometry",
     "G": "compass",
     "W": "sonar",
     "B": "battery",
-    "L": "truth",
+    "L": "LOPS",
+    "T": "truth",
     "K": "filter",
     "C": "correlator",
 }
@@ -70,7 +79,7 @@ KINDS = {
     "E": "event",
 }
 ERROR_CLASSES = {"I": "information", "W": "warning", "E": "error", "F": "fatal", "D": "debug"}
-SENSOR_SOURCE = {"odometry": "O", "compass": "G", "sonar": "W", "battery": "B", "truth": "L"}
+SENSOR_SOURCE = {"odometry": "O", "compass": "G", "sonar": "W", "battery": "B", "truth": "T"}
 SOURCE_SENSOR = {v: k for k, v in SENSOR_SOURCE.items()}
 
 
@@ -296,14 +305,14 @@ PAYLOADS: dict[tuple[str, str], Check] = {
     ("O", "R"): _fields(**_RAW, v=_odometry),
     ("G", "R"): _fields(**_RAW, v=_fields(heading_cdeg=_number)),
     ("W", "R"): _fields(**_RAW, v=_fields(distances=_integers)),
-    ("L", "R"): _fields(**_RAW, v=_fields(x=_number, y=_number, theta=_number)),
+    ("T", "R"): _fields(**_RAW, v=_fields(x=_number, y=_number, theta=_number)),
     ("B", "R"): _fields(**_RAW, v=_mapping),
     ("O", "C"): _fields(dl=_number, dr=_number, count=_integer),
     ("G", "C"): _fields(heading=_number, count=_integer),
     ("W", "C"): lambda p: (
         _fields(distances_mm=_numbers_or_none, count=_integer)(p) and _walls(p.get("walls", []))
     ),
-    ("L", "C"): _fields(x=_number, y=_number, theta=_number, count=_integer),
+    ("T", "C"): _fields(x=_number, y=_number, theta=_number, count=_integer),
     ("B", "C"): _mapping,
     ("S", "S"): _fields(gen=_integer, period_ms=_number, counts=_mapping),
     ("S", "E"): _fields(gen=_integer, event=_text),
@@ -365,23 +374,31 @@ def _entry_at(data: bytes, offset: int) -> tuple[Any, int] | str | None:
             return None
 
 
-def _record_at(data: bytes, offset: int, kind: str) -> tuple[Any, int] | None:
-    """The record that starts at ``offset`` and where it ends, or None."""
+def _record_at(
+    data: bytes, offset: int, kind: str, renamed: dict[str, str] | None = None
+) -> tuple[Any, int] | None:
+    """The record that starts at ``offset`` and where it ends, or None; a data record's source
+    letter as ``renamed`` says (an older format's)."""
     entry = _entry_at(data, offset)
-    if not isinstance(entry, tuple) or not _is_record(entry[0], kind):
+    if not isinstance(entry, tuple):
+        return None
+    record = entry[0]
+    if renamed and isinstance(record, list) and len(record) == 4 and isinstance(record[1], str):
+        record[1] = renamed.get(record[1], record[1])
+    if not _is_record(record, kind):
         return None
     return entry
 
 
-def _resync(data: bytes, start: int, kind: str) -> int | None:
+def _resync(data: bytes, start: int, kind: str, renamed: dict[str, str] | None = None) -> int | None:
     """The first offset after ``start`` where two records in a row (or one at the very end)
     decode: where reading goes on after damage. None: nothing readable follows."""
     for offset in range(start + 1, len(data)):
-        first = _record_at(data, offset, kind)
+        first = _record_at(data, offset, kind, renamed)
         if first is None:
             continue
         end = first[1]
-        if end == len(data) or _record_at(data, end, kind) is not None:
+        if end == len(data) or _record_at(data, end, kind, renamed) is not None:
             return offset
     return None
 
@@ -411,17 +428,19 @@ def read_log(path: str | Path, expect: str | None = None, salvage: bool = False)
     kind = str(header["tokenring_log"])
     if expect is not None and kind != expect:
         raise LogError(f"{path}: this is a {kind} log, not a {expect} log")
+    version = header.get("version", FORMAT_VERSION)
+    renamed = RENAMED_SOURCES.get(version) if kind == "data" and isinstance(version, int) else None
     records: list[list[Any]] = []
     damaged: list[tuple[int, int]] = []
     offset = unpacker.tell()
     truncated = False
     while offset < len(data):
-        found = _record_at(data, offset, kind)
+        found = _record_at(data, offset, kind, renamed)
         if found is not None:
             records.append(found[0])
             offset = found[1]
             continue
-        resume = _resync(data, offset, kind)
+        resume = _resync(data, offset, kind, renamed)
         if resume is None:
             if _entry_at(data, offset) == _TORN:
                 truncated = True  # the writer was killed in the middle of its last record
@@ -493,7 +512,7 @@ def _record_body(source: str, kind: str, p: Any) -> str:
         for w in p.get("walls", []):
             parts.append(f"1 {w['alpha']:.5f} {w['d']:.1f} {w.get('assoc', -1):>2}")
         return " ".join(parts) + f" {p['count']}"
-    if source == "L" and kind in "RC":
+    if source == "T" and kind in "RC":
         return f"{_num(v['x'])} {_num(v['y'])} {_num(v['theta'], 8, 5)}" + (
             f" {p['count']}" if kind == "C" else ""
         )
@@ -675,7 +694,7 @@ def convert_seed_text(log: LogFile) -> str:
             body = f"{math.radians(float(p['v']['heading_cdeg']) / 100.0):15.12f}"
         elif source == "G" and kind == "C":
             body = f"{float(p['heading']):15.12f} {p['count']}"
-        elif source == "L" and kind in "RC":
+        elif source == "T" and kind in "RC":
             v = p.get("v", p)
             body = seed_position({"x": v["x"], "y": v["y"], "psi": v["theta"]})
             if kind == "C":
@@ -713,7 +732,7 @@ def convert_csv(log: LogFile) -> tuple[str, str]:
             row["compass_rad"] = p["heading"]
         elif kind == "C" and source == "W":
             distances = p["distances_mm"]
-        elif kind == "P" and source == "L":
+        elif kind == "P" and source == "T":
             row.update(truth_x=p["x"], truth_y=p["y"], truth_psi=p["psi"], truth_valid=1)
         elif kind == "P" and source == "O":
             row.update(odo_x=p["x"], odo_y=p["y"], odo_psi=p["psi"])

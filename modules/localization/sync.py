@@ -14,7 +14,7 @@ odometry    sum of the step increments since the last sync (from cumulative coun
 compass     newest heading, or circular mean — each carried to the sync time         gyroscope
 sonar       newest distance of every sensor, plus every wall fitted in the period    walls
 battery     newest voltages                                                          (ours)
-truth       newest ground-truth pose (the seed's LOPS: reference only, never fused)  LOPS
+truth       newest ground-truth pose (the world's: reference only, never fused)     (ours)
 ==========  ======================================================================  ==========
 
 Every sample carries the time stamp *of the sensor* (ms of simulated time), not of its arrival:
@@ -553,7 +553,7 @@ def relative_pose(pose: tuple[float, float, float], reference: tuple[float, floa
 
 
 class NewestSync:
-    """The newest sample's values (battery, and the ground truth in the seed's LOPS role)."""
+    """The newest sample's values (battery; the truth when no period trigger stamps the syncs)."""
 
     def __init__(self, sensor: str) -> None:
         self.sensor = sensor
@@ -569,7 +569,7 @@ class TruthSync:
     """The ground truth at the sync time: interpolated between the samples around it (the
     period trigger stamps a synchronisation before the newest samples), else the nearest one.
 
-    A reference for the logs only (the seed's LOPS); its time must match the other records'.
+    A reference for the logs only (source ``T``); its time must match the other records'.
     """
 
     sensor = "truth"

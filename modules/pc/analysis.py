@@ -29,8 +29,8 @@ import numpy as np
 
 from modules.localization.logs import SOURCE_SENSOR, LogError, LogFile, read_log
 
-POSITION_NAMES = {"K": "filter (EKF)", "O": "dead reckoning", "G": "compass", "L": "truth", "W": "walls"}
-COLOURS = {"K": "tab:blue", "O": "tab:red", "G": "tab:green", "L": "black", "W": "tab:purple"}
+POSITION_NAMES = {"K": "filter (EKF)", "O": "dead reckoning", "G": "compass", "T": "truth", "W": "walls"}
+COLOURS = {"K": "tab:blue", "O": "tab:red", "G": "tab:green", "T": "black", "W": "tab:purple"}
 
 
 class Series:
@@ -82,12 +82,12 @@ def _wrap_deg(values: np.ndarray) -> np.ndarray:
 
 def summarise(series: Series) -> dict[str, Any]:
     """End-point error and RMSE of every position source against the truth, and the timing."""
-    truth = series.array("L")
+    truth = series.array("T")
     sources: dict[str, Any] = {}
     if len(truth):
         t_truth = truth[:, 0]
         for source, rows in series.positions.items():
-            if source == "L":
+            if source == "T":
                 continue
             a = series.array(source)
             tx = np.interp(a[:, 0], t_truth, truth[:, 1])
@@ -206,10 +206,10 @@ def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None =
     fig, ax = plt.subplots(figsize=(7, 7))
     for x1, y1, x2, y2 in _known_walls(series.log):
         ax.plot([x1, x2], [y1, y2], color="0.75", lw=2)
-    for source in ("L", "O", "K"):
+    for source in ("T", "O", "K"):
         a = series.array(source)
         if len(a) and a[:, 4].any():
-            ax.plot(a[:, 1], a[:, 2], color=COLOURS[source], lw=1.0 if source != "L" else 1.6,
+            ax.plot(a[:, 1], a[:, 2], color=COLOURS[source], lw=1.0 if source != "T" else 1.6,
                     label=POSITION_NAMES[source])  # fmt: skip
             ax.plot(a[-1, 1], a[-1, 2], "o", color=COLOURS[source], ms=4)
     ax.set_aspect("equal")
@@ -220,7 +220,7 @@ def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None =
     save(fig, "paths.png")
 
     # errors against the truth
-    truth = series.array("L")
+    truth = series.array("T")
     if len(truth):
         fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
         tpsi = np.unwrap(truth[:, 3])
@@ -268,7 +268,7 @@ def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None =
             color=COLOURS["G"],
             label="compass (raw, from north cw)",
         )
-    for source in ("L", "O", "K"):
+    for source in ("T", "O", "K"):
         a = series.array(source)
         if len(a):
             ax.plot((a[:, 0] - t0) / 1000.0, np.degrees(a[:, 3]) % 360.0, lw=0.8, color=COLOURS[source],

@@ -26,7 +26,7 @@ from tokenring import UsageError
 from tokenring.observe import Message, Topic
 
 POSE_TOPICS = {
-    "L": "/robot/pose/true",
+    "T": "/robot/pose/true",
     "O": "/robot/pose/odometry",
     "K": "/robot/pose/filtered",
     "G": "/robot/pose/compass",

@@ -39,7 +39,7 @@ class Records(DataLog):
     (K), dead reckoning (O) and the truth (L), as the ring's log would hold them; no file."""
 
     def __init__(self) -> None:  # (no stream opened: the core only writes and closes)
-        self.positions: dict[str, list[tuple[int, dict[str, Any]]]] = {"K": [], "O": [], "L": []}
+        self.positions: dict[str, list[tuple[int, dict[str, Any]]]] = {"K": [], "O": [], "T": []}
 
     def write(self, stamp_ms: int, source: str, kind: str, payload: Any) -> None:
         if kind == "P" and source in self.positions:

@@ -186,8 +186,8 @@ class ChargerHardware(HardwareClient):
 
 
 class TruthFeed:
-    """Copro's outside observer: the world's ground truth, for its logs only (the seed's external
-    positioning system, LOPS, logged beside the sensors and never fused)."""
+    """Copro's outside observer: the world's ground truth, for its logs only (source ``T``,
+    logged beside the sensors and never fused)."""
 
     def __init__(self, session: zenoh.Session, ring: str) -> None:
         self.session = session

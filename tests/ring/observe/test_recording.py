@@ -312,7 +312,7 @@ def test_a_trlog_converts_to_mcap(tmp_path):
             stamp = 100 * i
             log.write(stamp, "O", "R", {"gen": i, "n": 0, "v": {"steps_left": i, "steps_right": 2 * i}})
             log.write(stamp, "O", "P", {"x": 1000.0 + i, "y": 500.0, "psi": 0.0, "valid": [True] * 3})
-            log.write(stamp, "L", "P", {"x": 1000.0 + i, "y": 501.0, "psi": 0.01, "valid": [True] * 3})
+            log.write(stamp, "T", "P", {"x": 1000.0 + i, "y": 501.0, "psi": 0.01, "valid": [True] * 3})
             if i % 3 == 0:
                 log.write(
                     stamp, "K", "P",

@@ -36,7 +36,7 @@ def small_log(path: Path) -> None:
         log.write(
             100, "W", "C", {"gen": 0, "distances_mm": [500, None], "walls": [], "count": 1, "stamp_ms": 95}
         )
-        log.write(100, "L", "P", {"x": 1000.0, "y": 1000.0, "psi": 0.0, "valid": [True, True, True]})
+        log.write(100, "T", "P", {"x": 1000.0, "y": 1000.0, "psi": 0.0, "valid": [True, True, True]})
         log.write(100, "K", "P", {"x": 1003.2, "y": 998.1, "psi": 0.01, "valid": [True, False, True]})
         log.write(100, "S", "S", {"gen": 0, "period_ms": 100, "counts": {"odometry": 1, "compass": 1}})
 
@@ -236,3 +236,28 @@ def test_a_record_with_a_payload_no_reader_can_take_is_damage_not_a_crash(tmp_pa
             capture_output=True, text=True, timeout=60,
         )  # fmt: skip
         assert convert.returncode == 0 and "Traceback" not in convert.stderr, convert.stderr
+
+
+def test_a_version_1_log_reads_its_truth_under_l_as_t(tmp_path: Path) -> None:
+    """Format 1 logged the world's truth under ``L`` (LOPS's letter while there was no LOPS);
+    format 2 has it under ``T``. An old log, written here byte by byte with msgpack, reads back
+    with its truth as ``T`` and converts to CSV truth columns as a new one does."""
+    import msgpack
+
+    header = {"tokenring_log": "data", "version": 1, "start": "20261201-120000", "config": {}}
+    records = [
+        [100, "L", "R", {"gen": 0, "n": 0, "v": {"x": 1000.0, "y": 900.0, "theta": 0.5}}],
+        [100, "L", "P", {"x": 1000.0, "y": 900.0, "psi": 0.5, "valid": [True, True, True]}],
+        [100, "S", "S", {"gen": 0, "period_ms": 100, "counts": {"truth": 1}}],
+    ]
+    path = tmp_path / "old.trlog"
+    path.write_bytes(b"".join(msgpack.packb(entry) for entry in [header, *records]))
+    log = read_log(path, expect="data")
+    assert [(r[1], r[2]) for r in log.records] == [("T", "R"), ("T", "P"), ("S", "S")]
+    data, _ = convert_csv(log)
+    row = dict(zip(*[line.split(",") for line in data.splitlines()[:2]], strict=True))
+    assert (row["truth_x"], row["truth_y"], row["truth_valid"]) == ("1000.0", "900.0", "1")
+    # a new log keeps L for LOPS: nothing is renamed
+    with DataLog(tmp_path / "new.trlog", "20261206-120000", {}) as new:
+        new.write(5, "L", "P", {"x": 1.0, "y": 2.0, "psi": 0.0, "valid": [True, True, False]})
+    assert [r[1] for r in read_log(tmp_path / "new.trlog").records] == ["L"]

@@ -207,7 +207,7 @@ def test_the_localizer_logs_the_wall_position_when_the_seeds_switch_says_so(tmp_
 
     records = run_at_rest(tmp_path, True)
     segments = [(w.x1, w.y1, w.x2, w.y2) for w in load_world("square").walls]
-    truth = {r[0]: r[3] for r in records if r[1] == "L" and r[2] == "P"}
+    truth = {r[0]: r[3] for r in records if r[1] == "T" and r[2] == "P"}
     filtered = {r[0]: r[3] for r in records if r[1] == "K" and r[2] == "P"}
     seen = {r[0]: r[3]["walls"] for r in records if r[1] == "W" and r[2] == "C"}
     fixes = [r for r in records if r[1] == "W" and r[2] == "P"]
@@ -285,7 +285,7 @@ def test_any_readable_log_converts_to_one_line_per_record(
         log.write(1, "W", "R", {"gen": 0, "n": 2, "v": {"distances": sonar}})
         wall = {"alpha": e, "d": f, "assoc": junk}
         log.write(1, "W", "C", {"gen": 0, "distances_mm": synced, "walls": [wall] * 10, "count": 1})
-        log.write(1, "L", "C", {"gen": 0, "x": a, "y": b, "theta": c, "count": 1})
+        log.write(1, "T", "C", {"gen": 0, "x": a, "y": b, "theta": c, "count": 1})
         log.write(1, "K", "P", {"x": d, "y": e, "psi": f, "valid": [True, 0, 1], "walls": junk})
         log.write(1, "S", "S", {"gen": 0, "period_ms": 0, "counts": {}})
         log.write(1, "S", "E", {"gen": 0, "event": "set_pose", "x": junk})
@@ -294,5 +294,5 @@ def test_any_readable_log_converts_to_one_line_per_record(
     assert (
         lines.pop() == ""
         and len(lines) == 11
-        and all(line[:2] in ("S ", "O ", "G ", "W ", "L ", "K ") for line in lines)
+        and all(line[:2] in ("S ", "O ", "G ", "W ", "T ", "K ") for line in lines)
     )

@@ -67,7 +67,7 @@ def test_the_filter_is_judged_by_its_own_three_sigma(log_path: Path, tmp_path: P
     from modules.localization.logs import read_log
 
     records = read_log(log_path).records
-    truth = {stamp: p for stamp, source, kind, p in records if kind == "P" and source == "L"}
+    truth = {stamp: p for stamp, source, kind, p in records if kind == "P" and source == "T"}
     filtered = [(stamp, p) for stamp, source, kind, p in records if kind == "P" and source == "K"]
     inside = [
         abs(p["x"] - truth[stamp]["x"]) <= 3 * p["sigma"][0]

@@ -82,7 +82,7 @@ def test_replay_with_other_settings_differs_and_retrigger_runs(online_log, tmp_p
     config = load_config({"filter": {"compass": {"sigma_deg": 3.0}, "estimate": ["glide", "step_scale"]}})
     other = replay(path, tmp_path / "straight.trlog", config, mode="sync")
     assert not other.identical
-    truth = core.positions["L"]
+    truth = core.positions["T"]
     replayed = [r for r in read_log(tmp_path / "straight.trlog").records if r[1] == "K" and r[2] == "P"][-1][
         3
     ]
