@@ -110,9 +110,13 @@ class PositionFilter:
     ``RP̂_akt = RP_alt + (t_akt − t_alt) / (t_neu − t_alt) · (RP_neu − RP_alt)``; a measured
     RP_mess farther from RP̂_akt than the Vertrauensabstand ``dist_ok = (t_akt − t_alt) · Grundwert``
     is rejected. The older the history, the larger dist_ok: after a run of rejections the filter
-    widens until a measurement gets through again. A rejected position does not enter the
-    history. Until the history is full, positions are taken unjudged (the seed does not say how
-    the filter starts); with an odd length the older half is the smaller.
+    widens — but only while the extrapolated track moves slower than ``Grundwert``: a history
+    holding an outlier extrapolates a fast track that outruns dist_ok for ever. A rejected
+    position does not enter the history. How the filter starts and recovers the seed does not
+    say; here, until the history is full, positions are taken unjudged, and when as many
+    positions in a row as the history is long were rejected while the track it extrapolates runs
+    at ``Grundwert`` or faster (so that widening can never catch up), the history starts again
+    from the newest one (:attr:`restarts`). With an odd length the older half is the smaller.
     """
 
     def __init__(self, history_length: int, grundwert: float) -> None:
@@ -120,6 +124,8 @@ class PositionFilter:
             raise ValueError("the filter needs a history of at least two positions")
         self.history: deque[tuple[float, float, float]] = deque(maxlen=history_length)
         self.grundwert = grundwert
+        self.rejected_in_row = 0
+        self.restarts = 0
 
     def estimate(self, t_akt: float) -> tuple[Point, float] | None:
         """RP̂_akt at ``t_akt`` and t_alt, or None while the history is not full."""
@@ -131,6 +137,16 @@ class PositionFilter:
         t_alt, t_neu = float(alt[0]), float(neu[0])
         f = (t_akt - t_alt) / (t_neu - t_alt)
         return (float(alt[1] + f * (neu[1] - alt[1])), float(alt[2] + f * (neu[2] - alt[2]))), t_alt
+
+    def track_speed(self) -> float:
+        """How fast RP̂_akt moves (mm/ms): RP_alt to RP_neu over t_alt to t_neu (0 while filling)."""
+        if len(self.history) < (self.history.maxlen or 0):
+            return 0.0
+        h = np.asarray(self.history, dtype=float)
+        half = len(h) // 2
+        alt, neu = h[:half].mean(axis=0), h[half:].mean(axis=0)
+        span = float(neu[0] - alt[0])
+        return math.hypot(neu[1] - alt[1], neu[2] - alt[2]) / span if span > 0 else math.inf
 
     def judge(self, t_akt: float, rp_mess: Point) -> Verdict:
         """Take or reject RP_mess measured at ``t_akt`` (ms); a taken one joins the history."""
@@ -144,6 +160,14 @@ class PositionFilter:
         accepted = distance <= dist_ok
         if accepted:
             self.history.append((t_akt, *rp_mess))
+            self.rejected_in_row = 0
+        else:
+            self.rejected_in_row += 1
+            if self.rejected_in_row >= (self.history.maxlen or 0) and self.track_speed() >= self.grundwert:
+                self.history.clear()  # the track was wrong: start again from what is measured now
+                self.history.append((t_akt, *rp_mess))
+                self.rejected_in_row = 0
+                self.restarts += 1
         return Verdict(accepted, estimate, distance, dist_ok)
 
 
@@ -193,7 +217,14 @@ class Lopscpp:
             return Measurement(counter, t_ms, dist, rp, None, INCONSISTENT)
         if not c.position_filter:
             return Measurement(counter, t_ms, dist, rp, rp, POSITION)
+        restarts = self.filter.restarts
         verdict = self.filter.judge(t_ms, rp)
+        if self.filter.restarts != restarts:
+            self.messages.append(
+                MessagePacket(
+                    f"W position filter restarted: {c.history_length} positions in a row off its track"
+                )
+            )
         if not verdict.accepted:
             return Measurement(counter, t_ms, dist, rp, None, FILTERED, verdict)
         return Measurement(counter, t_ms, dist, rp, rp, POSITION, verdict)

@@ -107,6 +107,19 @@ def test_the_filter_widens_with_age_until_a_position_gets_through():
     assert 40 < k < 60  # 500 mm at 0.1 mm/ms: t_akt − t_alt ≈ 5 s
 
 
+def test_an_outlier_taken_while_the_history_filled_does_not_lock_the_filter_for_ever():
+    """A late echo taken at the start extrapolates a track faster than Grundwert, which widening
+    never catches: after a history's length of rejections the filter starts again from what it
+    measures (ours: the seed does not say how the filter starts or recovers)."""
+    f = PositionFilter(history_length=10, grundwert=0.1)
+    for k in range(9):
+        assert f.judge(k * 98.0, (1000.0, 1500.0)).accepted
+    assert f.judge(9 * 98.0, (1723.0, 2480.0)).accepted  # unjudged: the history was not full yet
+    accepted = [f.judge(k * 98.0, (1000.0, 1500.0)).accepted for k in range(10, 40)]
+    assert not any(accepted[:10]) and f.restarts == 1
+    assert all(accepted[10:]), accepted  # the history refilled with the robot where it stands
+
+
 def test_a_wall_between_robot_and_receiver_shadows_it():
     room = World(
         "hall",
