@@ -244,6 +244,10 @@ class RobotExtension(Extension):
         return {"upload": {"file": args.upload, "vectors": len(vectors)}}
 
     def open_hardware(self, module: str, session: zenoh.Session, ring: str) -> Any | None:
+        if module == "copro":  # the world's truth and the WLAN receiver of LOPS's packets
+            from modules.lops.receiver import CoproHardware
+
+            return CoproHardware(session, ring)
         from modules.world.hardware import open_hardware
 
         return open_hardware(module, session, ring)

@@ -21,7 +21,7 @@ import yaml
 
 from tokenring import NumberLoader, UsageError, YAMLStructureError, one_line
 
-SENSOR_NAMES = ("odometry", "compass", "sonar", "battery", "truth")
+SENSOR_NAMES = ("odometry", "compass", "sonar", "battery", "truth", "lops")
 #: the largest number a setting may have: every one is a distance, angle, time, count or
 #: sigma of a room-sized robot (the defaults are at most 1400), and 1e300 is a typo
 MAX_VALUE = 1e9
@@ -34,6 +34,7 @@ DEFAULTS: dict[str, Any] = {
         "sonar":    {"use": True, "log_raw": True, "log_sync": True, "log_position": False, "filter": True, "period_ms": 0},
         "battery":  {"use": True, "log_raw": True, "log_sync": True, "log_position": False, "filter": False, "period_ms": 0},
         "truth":    {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": False, "period_ms": 0},
+        "lops":     {"use": False, "log_raw": True, "log_sync": True, "log_position": True, "filter": False, "period_ms": 0},
     },
     "sync": {"enabled": True, "trigger": {"mode": "period", "sensor": "odometry", "period_ms": 100, "count": 1, "min_period_ms": 100, "rounds": 0}},
     "filter": {
@@ -302,6 +303,11 @@ class _Checker:
             raise self.fail(
                 ("sensors", "truth", "filter"),
                 "the ground truth is a reference only, never fed to the filter",
+            )
+        if c["sensors"]["lops"]["filter"]:
+            raise self.fail(
+                ("sensors", "lops", "filter"),
+                "LOPS is logged, not fed to the filter yet: its distances are not in the EKF's model",
             )
         p = c["filter"]["gate_probability"]
         if not 0.5 <= p < 1.0:

@@ -175,6 +175,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             "sonar": SonarSync(self.track, self.detector, self._travel_gauge(config)),
             "battery": NewestSync("battery"),
             "truth": TruthSync() if on_grid else NewestSync("truth"),
+            "lops": NewestSync("lops"),  # table 3.1: the newest distances and position
         }
         self.timing = {
             name: SampleTiming(name, float(config["sensors"][name]["period_ms"]) or None) for name in SENSORS
@@ -446,6 +447,9 @@ class LocalizationCore(WallCorrections, TravelCorrections):
                 "psi": truth["theta"],
                 "valid": [True, True, True],
             }
+        lops = data.get("lops")
+        if lops is not None and lops.get("x") is not None and lops.get("y") is not None:
+            store["L"] = {"x": lops["x"], "y": lops["y"], "psi": 0.0, "valid": [True, True, False]}
         if self.ekf is not None:
             x, y, psi = self.ekf.pose
             sx, sy, spsi = self.ekf.sigmas()
@@ -464,7 +468,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             }
         if wall_fix is not None:
             store["W"] = wall_fix  # one coordinate and the heading, the other invalid (seed §6.2.4)
-        letters = {"O": "odometry", "G": "compass", "T": "truth", "K": None, "W": "sonar"}
+        letters = {"O": "odometry", "G": "compass", "T": "truth", "L": "lops", "K": None, "W": "sonar"}
         for letter, position in store.items():
             position["stamp_ms"] = stamp
             self.positions[letter] = position
@@ -580,6 +584,7 @@ class Localizer:
         self.buffers: dict[str, Any] = {}
         self.last_seen: dict[str, tuple[Any, ...]] = {}
         self._truth_sub: Any = None
+        self._lops_sub: Any = None
         #: a log that could not be written (a full disk): its one line each; told to ``on_log_failure``
         self.log_failures: list[str] = []
         self.on_log_failure = on_log_failure
@@ -599,6 +604,8 @@ class Localizer:
                 self.buffers[sensor] = self.os.subscribe(channel)
         if self.truth_feed is not None and "truth" in self.core.sensors:
             self._subscribe_truth()
+        if "lops" in self.core.sensors and hasattr(self.truth_feed, "subscribe_lops"):
+            self._lops_sub = self.truth_feed.subscribe_lops(self.feed_lops, self.lops_message)
 
     def _log_failed(self, line: str) -> None:
         """A log that cannot be written ends whole; one line says so and the localisation goes on."""
@@ -606,6 +613,16 @@ class Localizer:
         logger.error("%s; the localisation goes on without it", line)
         if self.on_log_failure is not None:
             self.on_log_failure(line)
+
+    def feed_lops(self, stamp_ms: int, values: dict[str, Any]) -> None:
+        """One LOPS data packet as copro's WLAN receiver took it (stamped on arrival)."""
+        if self.core is not None:
+            self.core.feed(Sample("lops", stamp_ms, values))
+
+    def lops_message(self, stamp_ms: int, letter: str, text: str) -> None:
+        """lopscpp's message, to the error log (seed §6.2.5: "Fehlermeldungen ... weitergeleitet")."""
+        if self.core is not None:
+            self.core.message(letter, stamp_ms, text)
 
     def _subscribe_truth(self) -> None:
         self._truth_sub = self.truth_feed.subscribe(self.feed_truth)
@@ -689,9 +706,10 @@ class Localizer:
         return self.core.data_log.path if self.core is not None and self.core.data_log is not None else None
 
     def close(self) -> None:
-        if self._truth_sub is not None:
-            with contextlib.suppress(Exception):
-                self._truth_sub.undeclare()
-            self._truth_sub = None
+        for sub in (self._truth_sub, self._lops_sub):
+            if sub is not None:
+                with contextlib.suppress(Exception):
+                    sub.undeclare()
+        self._truth_sub = self._lops_sub = None
         if self.core is not None:
             self.core.close()

@@ -79,7 +79,7 @@ KINDS = {
     "E": "event",
 }
 ERROR_CLASSES = {"I": "information", "W": "warning", "E": "error", "F": "fatal", "D": "debug"}
-SENSOR_SOURCE = {"odometry": "O", "compass": "G", "sonar": "W", "battery": "B", "truth": "T"}
+SENSOR_SOURCE = {"odometry": "O", "compass": "G", "sonar": "W", "battery": "B", "truth": "T", "lops": "L"}
 SOURCE_SENSOR = {v: k for k, v in SENSOR_SOURCE.items()}
 
 
@@ -298,6 +298,17 @@ def _odometry(values: Any) -> bool:
     return steps and ("x_mm" not in values or pose(values))
 
 
+def _lops(values: Any) -> bool:
+    """LOPS's counter, its three distances and its position (mm; None where it has none)."""
+    if not _fields(counter=_integer)(values):
+        return False
+    return all(
+        values.get(k) is None
+        or (isinstance(values.get(k), int | float) and not isinstance(values.get(k), bool))
+        for k in ("d1", "d2", "d3", "x", "y")
+    )
+
+
 _RAW = {"gen": _integer, "n": _integer}
 #: what the readers (convert, analyse, replay) take from each kind of data record: a record
 #: whose payload lacks it is damage, reported like unreadable bytes, never a crash later
@@ -306,6 +317,7 @@ PAYLOADS: dict[tuple[str, str], Check] = {
     ("G", "R"): _fields(**_RAW, v=_fields(heading_cdeg=_number)),
     ("W", "R"): _fields(**_RAW, v=_fields(distances=_integers)),
     ("T", "R"): _fields(**_RAW, v=_fields(x=_number, y=_number, theta=_number)),
+    ("L", "R"): _fields(**_RAW, v=_lops),
     ("B", "R"): _fields(**_RAW, v=_mapping),
     ("O", "C"): _fields(dl=_number, dr=_number, count=_integer),
     ("G", "C"): _fields(heading=_number, count=_integer),
@@ -313,6 +325,7 @@ PAYLOADS: dict[tuple[str, str], Check] = {
         _fields(distances_mm=_numbers_or_none, count=_integer)(p) and _walls(p.get("walls", []))
     ),
     ("T", "C"): _fields(x=_number, y=_number, theta=_number, count=_integer),
+    ("L", "C"): lambda p: _lops(p) and _fields(count=_integer)(p),
     ("B", "C"): _mapping,
     ("S", "S"): _fields(gen=_integer, period_ms=_number, counts=_mapping),
     ("S", "E"): _fields(gen=_integer, event=_text),
@@ -476,6 +489,11 @@ def _num(value: Any, width: int = 8, digits: int = 0) -> str:
     return f"{round(float(value)):>{width}d}" if math.isfinite(float(value)) else f"{'nan':>{width}}"
 
 
+def _lops_text(v: dict[str, Any]) -> str:
+    """LOPS's three distances (mm; 0 where nothing was heard) and its counter, appendix B's order."""
+    return " ".join(_num(v.get(k)) for k in ("d1", "d2", "d3")) + f" {v.get('counter', 0):>8}"
+
+
 def _position_text(p: dict[str, Any]) -> str:
     valid = p.get("valid", [True, True, True])
     return f"{_num(p.get('x'))} {_num(p.get('y'))} {_num(p.get('psi'), 8, 5)} " + " ".join(
@@ -512,6 +530,8 @@ def _record_body(source: str, kind: str, p: Any) -> str:
         for w in p.get("walls", []):
             parts.append(f"1 {w['alpha']:.5f} {w['d']:.1f} {w.get('assoc', -1):>2}")
         return " ".join(parts) + f" {p['count']}"
+    if source == "L" and kind in "RC":
+        return _lops_text(v if kind == "R" else p) + (f" {p['count']}" if kind == "C" else "")
     if source == "T" and kind in "RC":
         return f"{_num(v['x'])} {_num(v['y'])} {_num(v['theta'], 8, 5)}" + (
             f" {p['count']}" if kind == "C" else ""
@@ -694,6 +714,8 @@ def convert_seed_text(log: LogFile) -> str:
             body = f"{math.radians(float(p['v']['heading_cdeg']) / 100.0):15.12f}"
         elif source == "G" and kind == "C":
             body = f"{float(p['heading']):15.12f} {p['count']}"
+        elif source == "L" and kind in "RC":
+            body = _lops_text(p.get("v", p)) + (f" {p['count']}" if kind == "C" else "")
         elif source == "T" and kind in "RC":
             v = p.get("v", p)
             body = seed_position({"x": v["x"], "y": v["y"], "psi": v["theta"]})

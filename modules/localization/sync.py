@@ -43,7 +43,7 @@ from typing import Any
 from modules.localization.walls import to_frame, wrap
 
 #: sensors the synchronisation knows, in the order their synchronisers run
-SENSORS = ("odometry", "compass", "sonar", "battery", "truth")
+SENSORS = ("odometry", "compass", "sonar", "battery", "truth", "lops")
 
 NO_CONTACT_CM = 255
 #: a compass sample this much newer than the newest step-counter sample is not judged yet

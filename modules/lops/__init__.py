@@ -13,6 +13,7 @@ robot over WLAN. Here:
 * :mod:`modules.lops.wlan` — the WLAN link's delay, so that the cycle seen on the robot is the seed's;
 * :mod:`modules.lops.system` — the chain in one piece, and the seed's test drive;
 * :mod:`modules.lops.service` — ``python -m modules.lops``: the chain as a Zenoh process.
+* :mod:`modules.lops.receiver` — the robot's side: copro's WLAN receiver of the packets.
 
 This package imports nothing at its top, so that importing the packets pulls in no world.
 """

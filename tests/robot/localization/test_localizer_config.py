@@ -51,7 +51,10 @@ def test_partial_file_overrides_only_what_it_names() -> None:
             "x.yaml:2: sensors.compass.use: expected true or false, got 'maybe'",
         ),
         ("sensors:\n  truth: {filter: true}\n", "sensors.truth.filter: the ground truth is a reference only"),
-        ("sync:\n  trigger:\n    sensor: lops\n", "x.yaml:3: sync.trigger.sensor: must be one of odometry"),
+        (
+            "sync:\n  trigger:\n    sensor: sextant\n",
+            "x.yaml:3: sync.trigger.sensor: must be one of odometry",
+        ),
         ("sync:\n  trigger:\n    count: 0\n", "x.yaml:3: sync.trigger.count: must be at least 1"),
         ("sync:\n  trigger: {count: 1.5}\n", "sync.trigger.count: expected a whole number, got 1.5"),
         ("sensors:\n  odometry: {use: false}\n", "sync.trigger.sensor: odometry is not used"),

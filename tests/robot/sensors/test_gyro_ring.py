@@ -11,6 +11,7 @@ import itertools
 import signal
 import struct
 import threading
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -89,11 +90,14 @@ def test_the_default_ring_is_the_hamburg_eight_and_darmstadt_adds_the_gyro() -> 
 
 @pytest.mark.slow
 def test_up_with_the_darmstadt_sensors_runs_a_calibrated_gyro_and_lops(
-    procs: Any, ring_name: str, endpoint: str
+    procs: Any, ring_name: str, endpoint: str, tmp_path: Path
 ) -> None:
+    logs = tmp_path / "logs"
+    config = tmp_path / "localization.yaml"  # copro logs LOPS's packets as its WLAN takes them
+    config.write_text(yaml.safe_dump({"logs": {"directory": str(logs)}, "sensors": {"lops": {"use": True}}}))
     launcher = procs.tokenring(
         "up", "--ring", ring_name, "--listen", endpoint, "--world", "empty", "--speed", "10",
-        "--bitrate", "10M", "--sensors", "darmstadt", "--duration", "120",
+        "--bitrate", "10M", "--sensors", "darmstadt", "--localizer", str(config), "--duration", "120",
     )  # fmt: skip
     try:
         with tap(endpoint) as session:
@@ -148,3 +152,17 @@ def test_up_with_the_darmstadt_sensors_runs_a_calibrated_gyro_and_lops(
     span = running[-1]["stamp_ms"] - running[0]["stamp_ms"]
     taken = (running[-1]["sample"] - running[0]["sample"]) % 65536
     assert abs(span - 20.48 * taken) <= 21, (span, taken)
+
+    # copro's log: LOPS's packets as L records, stamped on arrival, counters in order; the
+    # standing robot's position where the empty room starts it (lopscpp's messages: the unit test)
+    from modules.localization.logs import read_log
+
+    (data_log,) = sorted(logs.glob("*.trlog"))
+    records = read_log(data_log).records
+    counters = [r[3]["v"]["counter"] for r in records if r[1] == "L" and r[2] == "R"]
+    assert len(counters) >= 10 and counters == sorted(counters), counters
+    start = yaml.safe_load((REPO / "modules/description/rooms/empty.yaml").read_text())["start"]
+    positions = [r[3] for r in records if r[1] == "L" and r[2] == "P"]
+    assert positions and all(
+        abs(p["x"] - start["x"]) < 60 and abs(p["y"] - start["y"]) < 60 for p in positions
+    )

@@ -1,0 +1,130 @@
+"""The robot's side of LOPS: copro's WLAN receiver takes the packets apart and stamps them, and
+the Localizer logs them as appendix B's ``L`` records (raw, synchronised, position) and
+lopscpp's messages in its error log. Packets are written here with a struct format from table
+6.1, not with :mod:`modules.lops.packets`."""
+
+from __future__ import annotations
+
+import math
+import struct
+from pathlib import Path
+from typing import Any
+
+from modules.localization.config import load_config
+from modules.localization.localizer import LocalizationCore
+from modules.localization.logs import DataLog, ErrorLog, convert_text, read_log
+from modules.localization.sync import Sample
+from modules.lops.receiver import LopsReceiver
+
+DATA = struct.Struct("<2si3d2d1s")  # table 6.1
+
+
+def data_packet(counter: int, d: tuple[float, float, float], x: float, y: float) -> bytes:
+    return DATA.pack(b"SD", counter, *d, x, y, b"E")
+
+
+def message_packet(text: str) -> bytes:
+    body = text.encode("latin-1")
+    return b"SM" + bytes([len(body)]) + body + b"E"
+
+
+class FakeSession:
+    """Hands the subscriber's callback to the test, which puts the samples itself."""
+
+    def __init__(self) -> None:
+        self.keys: list[str] = []
+        self.callback: Any = None
+
+    def declare_subscriber(self, key: str, callback: Any) -> Any:
+        self.keys.append(key)
+        self.callback = callback
+        return self
+
+    def put(self, raw: bytes) -> None:
+        class Payload:
+            def to_bytes(self) -> bytes:
+                return raw
+
+        class Sample:
+            payload = Payload()
+
+        self.callback(Sample())
+
+
+class StepClock:
+    def __init__(self) -> None:
+        self.t = 1000.0
+
+    def now_ms(self) -> float:
+        self.t += 98.0
+        return self.t
+
+
+def test_the_receiver_stamps_data_resyncs_past_a_lost_byte_and_passes_messages() -> None:
+    session, clock = FakeSession(), StepClock()
+    data: list[tuple[int, dict[str, Any]]] = []
+    messages: list[tuple[int, str, str]] = []
+    LopsReceiver(session, "r1", clock).subscribe(
+        lambda s, v: data.append((s, v)), lambda *m: messages.append(m)
+    )
+    assert session.keys == ["tokenring/r1/robot/lops/packets"]
+
+    first = data_packet(7, (1131.4, 3883.3, math.nan), 1000.5, 999.5)
+    session.put(first)
+    session.put(first[:20])  # one packet over two puts, as a byte stream may cut it
+    session.put(first[20:])
+    session.put(b"\x00" + data_packet(8, (1.0, 2.0, 3.0), math.nan, math.nan))  # a stray byte first
+    session.put(message_packet("W receiver 3: no signal for 10 triggers"))
+    session.put(message_packet("a message without a class"))
+
+    assert [v["counter"] for _, v in data] == [7, 7, 8]
+    stamp, values = data[0]
+    assert stamp == 1098 and values == {
+        "counter": 7,
+        "d1": 1131.4,
+        "d2": 3883.3,
+        "d3": None,
+        "x": 1000.5,
+        "y": 999.5,
+    }
+    assert data[2][1]["x"] is None and data[2][1]["y"] is None and data[2][1]["d3"] == 3.0
+    assert [(c, t) for _, c, t in messages] == [
+        ("W", "LOPS: receiver 3: no signal for 10 triggers"),
+        ("I", "LOPS: a message without a class"),
+    ]
+
+
+def test_the_localizer_logs_lops_as_l_records_and_its_messages_as_errors(tmp_path: Path) -> None:
+    config = load_config({"sensors": {"lops": {"use": True}, "truth": {"use": False}}})
+    data_log = DataLog(tmp_path / "data.trlog", "20261206-120000", config)
+    error_log = ErrorLog(tmp_path / "errors.trlog", "20261206-120000")
+    core = LocalizationCore(config, data_log=data_log, error_log=error_log, start_pose=(1000.0, 1000.0, 0.0))
+    for i in range(12):
+        t = 100 * i
+        core.feed(Sample("odometry", t, {"steps_left": 0, "steps_right": 0}))
+        if i % 3 == 1:  # a position; then one with a receiver lost and no position
+            lops = {"counter": i, "d1": 1131.0, "d2": 3883.0, "d3": 3884.0, "x": 1001.0, "y": 998.0}
+            if i % 2:
+                lops = {**lops, "d3": None, "x": None, "y": None}
+            core.feed(Sample("lops", t + 40, lops))
+        core.maybe_sync()
+    core.message("W", 450, "LOPS: receiver 3: no signal for 10 triggers")
+    core.close()
+
+    records = read_log(tmp_path / "data.trlog").records
+    raw = [r for r in records if r[1] == "L" and r[2] == "R"]
+    assert [r[3]["v"]["counter"] for r in raw] == [1, 4, 7, 10]
+    synced = [r for r in records if r[1] == "L" and r[2] == "C"]
+    assert synced and all(r[3]["count"] == 1 for r in synced)
+    positions = [r[3] for r in records if r[1] == "L" and r[2] == "P"]
+    # a position only while the newest packet had one; the heading is not LOPS's to give
+    assert positions and all(
+        p["valid"] == [True, True, False] and (p["x"], p["y"]) == (1001.0, 998.0) for p in positions
+    )
+    assert len(positions) < len(synced)
+    lines = convert_text(read_log(tmp_path / "data.trlog")).splitlines()
+    lops_raw = [line.split() for line in lines if line.startswith("L R")]
+    assert lops_raw[0][3:] == ["1131", "3883", "0", "1"]  # nothing heard: 0; then the counter
+    assert lops_raw[1][3:] == ["1131", "3883", "3884", "4"]
+    errors = read_log(tmp_path / "errors.trlog").records
+    assert [450, "W", "LOPS: receiver 3: no signal for 10 triggers"] in errors
