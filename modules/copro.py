@@ -85,15 +85,20 @@ def open_localizer(os: Any, truth: Any = None) -> Any | None:
     """The EKF localizer (modules.localization.localizer), configured for exploration; None without it.
 
     ``$TOKENRING_LOCALIZER_CONFIG`` names another configuration file; ``$TOKENRING_LOCALIZER=off``
-    maps on dead reckoning alone (the benchmark compares both)."""
+    maps on dead reckoning alone (the benchmark compares both). ``$TOKENRING_SENSORS`` (``up
+    --sensors``) lays its set's sensors beneath the configuration, whose keys win."""
     if _os.environ.get("TOKENRING_LOCALIZER", "").lower() in ("off", "0", "no"):
         return None
     try:
+        from modules.localization.config import SENSOR_SET_CONFIG, load_config
         from modules.localization.localizer import Localizer
     except ImportError:
         return None
     config: Any = _os.environ.get("TOKENRING_LOCALIZER_CONFIG") or EXPLORATION_CONFIG
     try:
+        under = SENSOR_SET_CONFIG.get(_os.environ.get("TOKENRING_SENSORS", "hamburg"), {})
+        if under:
+            config = load_config(config, under=under)
         localizer = Localizer(os, config, truth=truth, on_log_failure=incomplete_flag(truth, os.name, "logs"))
         localizer.setup()
     except Exception as exc:  # the map still works on dead reckoning

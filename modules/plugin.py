@@ -165,6 +165,8 @@ class RobotExtension(Extension):
             plan.services.append(world_service(args, choice["body"]))
             if args.sensors == "darmstadt":  # LOPS beside the ring, measuring in that world
                 plan.services.append(lops_service(args))
+        if args.sensors != "hamburg":  # copro's Localizer takes the set's sensors too
+            plan.env["TOKENRING_SENSORS"] = args.sensors
             plan.speedup = speed
         if args.localizer:
             from modules.localization.config import load_config

@@ -132,20 +132,41 @@ def default_config_path() -> Path:
     return Path(__file__).resolve().parents[2] / "config" / "localization.yaml"
 
 
-def load_config(source: str | Path | dict | None = None) -> dict[str, Any]:
-    """A validated configuration: ``None`` gives the defaults, else a file path or a dict."""
+#: what each of ``tokenring up --sensors``'s sets turns on in the Localizer, laid under the
+#: configuration given (whose keys win): the Darmstadt robot's LOPS
+SENSOR_SET_CONFIG: dict[str, dict[str, Any]] = {
+    "hamburg": {},
+    "darmstadt": {"sensors": {"lops": {"use": True}}},
+}
+
+
+def layered(under: dict[str, Any], over: Any) -> Any:
+    """``over`` laid on ``under``, mapping by mapping: a key ``over`` names wins, whole."""
+    if not isinstance(under, dict) or not isinstance(over, dict):
+        return copy.deepcopy(over)
+    out = copy.deepcopy(under)
+    for key, value in over.items():
+        out[key] = layered(out[key], value) if key in out else copy.deepcopy(value)
+    return out
+
+
+def load_config(
+    source: str | Path | dict | None = None, under: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """A validated configuration: ``None`` gives the defaults, else a file path or a dict;
+    ``under`` (a partial configuration, e.g. a sensor set's) lies beneath it."""
     if source is None:
-        return copy.deepcopy(DEFAULTS)
+        return validate(under, "<config>", {}) if under else copy.deepcopy(DEFAULTS)
     if isinstance(source, dict):
-        return validate(source, "<config>", {})
+        return validate(layered(under or {}, source), "<config>", {})
     from tokenring import message_error, read_text
 
     path = Path(source)
     text = read_text(path, "configuration file", message_error(ConfigError))
-    return parse_config(text, str(path))
+    return parse_config(text, str(path), under)
 
 
-def parse_config(text: str, source: str) -> dict[str, Any]:
+def parse_config(text: str, source: str, under: dict[str, Any] | None = None) -> dict[str, Any]:
     """Parse and validate YAML text; errors carry ``source:line``."""
     try:
         node = yaml.compose(text, Loader=NumberLoader)
@@ -162,7 +183,7 @@ def parse_config(text: str, source: str) -> dict[str, Any]:
         data = {}  # an empty configuration is the defaults (tests/robot/localization/test_localizer_config.py)
     lines: dict[tuple[str, ...], int] = {}
     _collect_lines(node, (), lines)
-    return validate(data, source, lines)
+    return validate(layered(under, data) if under else data, source, lines)
 
 
 def _collect_lines(node: Any, path: tuple[str, ...], out: dict[tuple[str, ...], int]) -> None:

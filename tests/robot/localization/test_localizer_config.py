@@ -120,3 +120,28 @@ def test_up_refuses_a_bad_localizer_file_before_starting_anything(tmp_path: Path
     assert f"{bad}:2: filter.enabled" in result.stderr
     assert "Traceback" not in result.stderr
     assert "starting" not in result.stdout  # refused before the launcher started a node
+
+
+def test_a_sensor_set_lies_beneath_the_configuration_whose_keys_win(tmp_path) -> None:
+    """``up --sensors darmstadt`` turns LOPS on in copro's Localizer; a file given beside it
+    overrides only the keys it names."""
+    from modules.localization.config import SENSOR_SET_CONFIG
+
+    darmstadt = SENSOR_SET_CONFIG["darmstadt"]
+    assert load_config()["sensors"]["lops"]["use"] is False  # off without the set
+    assert load_config(None, under=darmstadt)["sensors"]["lops"]["use"] is True
+    names_other_keys = tmp_path / "a.yaml"
+    names_other_keys.write_text("sensors:\n  lops:\n    log_raw: false\nsync:\n  enabled: true\n")
+    config = load_config(names_other_keys, under=darmstadt)
+    assert config["sensors"]["lops"]["use"] is True and config["sensors"]["lops"]["log_raw"] is False
+    turns_it_off = tmp_path / "b.yaml"
+    turns_it_off.write_text("sensors:\n  lops: {use: false}\n")
+    assert load_config(turns_it_off, under=darmstadt)["sensors"]["lops"]["use"] is False
+    from modules.copro import EXPLORATION_CONFIG  # copro's own settings, a dict, take it the same way
+
+    config = load_config(EXPLORATION_CONFIG, under=darmstadt)
+    assert config["sensors"]["lops"]["use"] is True and config["logs"]["enabled"] is False
+    broken = tmp_path / "c.yaml"
+    broken.write_text("sensors:\n  lops: {use: maybe}\n")
+    with pytest.raises(ConfigError, match=r"c.yaml:2: sensors.lops.use"):
+        load_config(broken, under=darmstadt)

@@ -93,8 +93,8 @@ def test_up_with_the_darmstadt_sensors_runs_a_calibrated_gyro_and_lops(
     procs: Any, ring_name: str, endpoint: str, tmp_path: Path
 ) -> None:
     logs = tmp_path / "logs"
-    config = tmp_path / "localization.yaml"  # copro logs LOPS's packets as its WLAN takes them
-    config.write_text(yaml.safe_dump({"logs": {"directory": str(logs)}, "sensors": {"lops": {"use": True}}}))
+    config = tmp_path / "localization.yaml"  # the logs' folder; --sensors darmstadt turns LOPS on
+    config.write_text(yaml.safe_dump({"logs": {"directory": str(logs)}}))
     launcher = procs.tokenring(
         "up", "--ring", ring_name, "--listen", endpoint, "--world", "empty", "--speed", "10",
         "--bitrate", "10M", "--sensors", "darmstadt", "--localizer", str(config), "--duration", "120",
