@@ -8,6 +8,9 @@ Plots (one PNG each, like the seed's per-module gnuplot directories):
 - ``steps.png`` — synchronised step increments of both motors (the seed's encoder module);
 - ``heading.png`` — compass heading, the filter's and dead reckoning's heading and the truth;
 - ``sonar.png`` — sonar distances over time (no contact is not drawn);
+- ``lops.png`` — LOPS's three distances over time, one per receiver (the seed's LOPS module,
+  table B.9 ``LOPS/Empfaenger n``; nothing heard is not drawn), and which packets gave no
+  position; only for a log with LOPS's ``L R`` records;
 - ``time.png`` — the **time module**: each sensor's cycle time (between its own time stamps) and
   the synchronisation's period, with missed samples marked.
 
@@ -29,8 +32,22 @@ import numpy as np
 
 from modules.localization.logs import SOURCE_SENSOR, LogError, LogFile, read_log
 
-POSITION_NAMES = {"K": "filter (EKF)", "O": "dead reckoning", "G": "compass", "T": "truth", "W": "walls"}
-COLOURS = {"K": "tab:blue", "O": "tab:red", "G": "tab:green", "T": "black", "W": "tab:purple"}
+POSITION_NAMES = {
+    "K": "filter (EKF)",
+    "O": "dead reckoning",
+    "G": "compass",
+    "T": "truth",
+    "W": "walls",
+    "L": "LOPS",
+}
+COLOURS = {
+    "K": "tab:blue",
+    "O": "tab:red",
+    "G": "tab:green",
+    "T": "black",
+    "W": "tab:purple",
+    "L": "tab:orange",
+}
 
 
 class Series:
@@ -45,6 +62,8 @@ class Series:
         self.steps: list[tuple[int, int, int]] = []
         self.compass_raw: list[tuple[int, float]] = []
         self.sonar: list[tuple[int, list[int]]] = []
+        #: LOPS's packets: (stamp, d1, d2, d3, has a position), NaN where nothing was heard
+        self.lops: list[tuple[int, float, float, float, bool]] = []
         self.walls_fitted = 0
         self.sigmas: dict[str, list[tuple[int, float, float, float]]] = {}  # (stamp, σx, σy, σψ)
         for stamp, source, kind, payload in log.records:
@@ -64,6 +83,9 @@ class Series:
                     self.compass_raw.append((stamp, values["heading_cdeg"] / 100.0))
                 elif sensor == "sonar" and "distances" in values:
                     self.sonar.append((stamp, list(values["distances"])))
+                elif sensor == "lops" and "counter" in values:
+                    d = [math.nan if values.get(k) is None else float(values[k]) for k in ("d1", "d2", "d3")]
+                    self.lops.append((stamp, *d, values.get("x") is not None))
             elif kind == "C" and source == "O":
                 self.steps.append((stamp, payload["dl"], payload["dr"]))
             elif kind == "C" and source == "W":
@@ -148,6 +170,13 @@ def summarise(series: Series) -> dict[str, Any]:
         "sync": sync,
         "walls_fitted": series.walls_fitted,
     }
+    if series.lops:  # the seed's 404 of 2024 without a position, and its receivers' share heard
+        lops = np.array(series.lops, dtype=float)
+        out["lops"] = {
+            "packets": len(lops),
+            "without_position": float(np.mean(lops[:, 4] == 0)),
+            "heard": [float(np.mean(~np.isnan(lops[:, i]))) for i in (1, 2, 3)],
+        }
     if "K" in sources and "O" in sources and "end_error_mm" in sources["K"]:
         dr = sources["O"]["end_error_mm"]
         out["filter_to_dead_reckoning"] = sources["K"]["end_error_mm"] / dr if dr > 0 else None
@@ -168,7 +197,7 @@ def _known_walls(log: LogFile) -> np.ndarray:
 
 
 #: the files :func:`plot_all` may write (those the log has data for)
-PLOTS = ("paths.png", "errors.png", "steps.png", "heading.png", "sonar.png", "time.png")
+PLOTS = ("paths.png", "errors.png", "steps.png", "heading.png", "sonar.png", "lops.png", "time.png")
 
 
 def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None = None) -> list[Path]:
@@ -293,10 +322,27 @@ def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None =
         ax.legend(loc="upper right", fontsize=7, ncol=4, markerscale=4)
         save(fig, "sonar.png")
 
+    # LOPS's receivers
+    if series.lops:
+        fig, ax = plt.subplots(figsize=(9, 5))
+        lops = np.array(series.lops, dtype=float)
+        times = (lops[:, 0] - t0) / 1000.0
+        for i in range(3):
+            ax.plot(times, lops[:, i + 1], ".", ms=2, label=f"receiver {i + 1}")
+        lost = lops[:, 4] == 0
+        if lost.any():
+            ax.plot(times[lost], np.zeros(int(lost.sum())), "|", color="tab:red", ms=8,
+                    label=f"no position ({lost.mean():.0%} of {len(lops)} packets)")  # fmt: skip
+        ax.set_xlabel("time [s] (on arrival)")
+        ax.set_ylabel("distance [mm]")
+        ax.set_title("LOPS: distances to the three receivers (nothing heard not drawn)")
+        ax.legend(loc="upper right", fontsize=7, markerscale=3)
+        save(fig, "lops.png")
+
     # the time module
     sensors = [
         s
-        for s in ("odometry", "compass", "sonar", "battery", "truth")
+        for s in ("odometry", "compass", "sonar", "battery", "truth", "lops")
         if len(series.raw_stamps.get(s, [])) > 1
     ]
     rows = len(sensors) + 1

@@ -15,6 +15,7 @@ from modules.localization.localizer import LocalizationCore
 from modules.localization.logs import DataLog, ErrorLog, convert_text, read_log
 from modules.localization.sync import Sample
 from modules.lops.receiver import LopsReceiver
+from modules.pc.analysis import analyse
 
 DATA = struct.Struct("<2si3d2d1s")  # table 6.1
 
@@ -128,3 +129,11 @@ def test_the_localizer_logs_lops_as_l_records_and_its_messages_as_errors(tmp_pat
     assert lops_raw[1][3:] == ["1131", "3883", "3884", "4"]
     errors = read_log(tmp_path / "errors.trlog").records
     assert [450, "W", "LOPS: receiver 3: no signal for 10 triggers"] in errors
+
+    # the analyser's LOPS module: the distances plotted, the share without a position counted
+    summary, files = analyse(tmp_path / "data.trlog", tmp_path / "plots")
+    assert summary["lops"] == {"packets": 4, "without_position": 0.5, "heard": [1.0, 1.0, 0.5]}
+    assert (tmp_path / "plots" / "lops.png") in files and (
+        tmp_path / "plots" / "lops.png"
+    ).stat().st_size > 1000
+    assert summary["timing"]["lops"]["samples"] == 4
