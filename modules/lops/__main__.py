@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import signal
 import sys
 import threading
 import time
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 from modules.description import keys as robot_keys
@@ -23,13 +23,13 @@ from modules.lops.config import LopsConfigError, for_world, parse_lops_section
 from modules.lops.service import LopsService, packets_key, world_from_info
 from modules.lops.system import LopsSystem
 from modules.world.clients import WORLD_WAIT_S, HardwareClient, HardwareError
-from tokenring import TokenRingError, UsageError, keys
-from tokenring.cli import StopEvent, int_within, wait_for_stop
+from tokenring import TokenRingError, UsageError, keys, read_text
+from tokenring.cli import OneLineParser, StopEvent, int_within, seconds, wait_for_stop
 from tokenring.transport import make_config, open_session, query_one
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = OneLineParser(
         prog="python -m modules.lops",
         description="LOPS, the Darmstadt external positioning system, beside one ring.",
     )
@@ -51,9 +51,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="X,Y",
         help="the three receivers' positions in mm (over --config's)",
     )
-    p.add_argument("--duration", type=float, help="stop after this many real seconds")
+    p.add_argument("--duration", type=seconds, help="stop after this many real seconds")
     p.add_argument("--log-level", default="info", choices=("debug", "info", "warning", "error"))
     return p
+
+
+#: a receiver's coordinates, mm: the world's own bound on its numbers
+MAX_MM = 1e8
 
 
 def parse_receivers(texts: list[str]) -> tuple[tuple[float, float], ...]:
@@ -61,6 +65,8 @@ def parse_receivers(texts: list[str]) -> tuple[tuple[float, float], ...]:
         points = tuple((float(a), float(b)) for a, b in (t.split(",") for t in texts))
     except ValueError:
         raise UsageError(f"--receivers {' '.join(texts)}: give three X,Y pairs in mm") from None
+    if not all(math.isfinite(v) and abs(v) <= MAX_MM for point in points for v in point):
+        raise UsageError(f"--receivers {' '.join(texts)}: each coordinate a number within +-{MAX_MM:g} mm")
     return points
 
 
@@ -77,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         ring = keys.check_ring_name(args.ring)
         receivers = parse_receivers(args.receivers) if args.receivers else None
-        config_text = Path(args.config).read_text() if args.config else None
+        config_text = read_text(args.config, "LOPS configuration file") if args.config else None
         config = make_config(
             connect=[c for c in args.connect if c], listen=args.listen, config_file=args.zenoh_config
         )

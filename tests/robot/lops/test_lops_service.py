@@ -92,9 +92,20 @@ def test_lops_beside_a_world_sends_the_robots_distances_and_position(
     assert errors[len(errors) // 2] < 15.0, errors[-10:]
 
 
-def test_lops_refuses_receivers_it_cannot_read_in_one_line(procs: Any) -> None:
-    proc = procs.start([sys.executable, "-m", "modules.lops", "--receivers", "1,2", "3,x", "5,6"])
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        (["--receivers", "1,2", "3,x", "5,6"], "--receivers"),
+        (["--receivers", "1,2", "nan,4", "5,6"], "--receivers"),
+        (["--receivers", "1,2", "3,1e300", "5,6"], "--receivers"),
+        (["--duration", "-1"], "--duration"),
+        (["--seed", "-1"], "--seed"),
+        (["--config", "/nonexistent/lops.cfg"], "lops.cfg"),
+    ],
+)
+def test_lops_refuses_bad_input_in_one_line(procs: Any, args: list[str], named: str) -> None:
+    proc = procs.start([sys.executable, "-m", "modules.lops", *args])
     output, _ = proc.communicate(timeout=60)
     assert proc.returncode == 2, output
     lines = [line for line in output.splitlines() if line.strip()]
-    assert len(lines) == 1 and "--receivers" in lines[0] and "Traceback" not in output, output
+    assert len(lines) == 1 and named in lines[0] and "Traceback" not in output, output
