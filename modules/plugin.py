@@ -163,11 +163,11 @@ class RobotExtension(Extension):
         speed = parse_speed(args.speed)
         if not args.no_world:
             plan.services.append(world_service(args, choice["body"]))
+            plan.speedup = speed
             if args.sensors == "darmstadt":  # LOPS beside the ring, measuring in that world
                 plan.services.append(lops_service(args))
         if args.sensors != "hamburg":  # copro's Localizer takes the set's sensors too
             plan.env["TOKENRING_SENSORS"] = args.sensors
-            plan.speedup = speed
         if args.localizer:
             from modules.localization.config import load_config
 

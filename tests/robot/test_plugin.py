@@ -1,0 +1,39 @@
+"""The robot's part of ``tokenring up`` (modules/plugin.py), planned from up's own parser: how much
+faster emulated time runs, which services start, what the nodes are told."""
+
+from __future__ import annotations
+
+import argparse
+
+import pytest
+
+from modules.plugin import RobotExtension
+from tests.support.processes import REPO
+from tokenring.contract.protocol import load_protocol
+
+
+def plan(*argv: str):
+    from tokenring.cli.commands import up
+
+    parser = argparse.ArgumentParser()
+    up.add_parser(parser.add_subparsers())
+    args = parser.parse_args(["up", *argv])
+    args.log_level = "info"  # the main parser's option, before the verb
+    return RobotExtension().plan_up(args, load_protocol(REPO / "protocol.yaml"))
+
+
+@pytest.mark.parametrize("sensors", [[], ["--sensors", "hamburg"], ["--sensors", "darmstadt"]])
+def test_the_world_s_speed_up_is_the_ring_s_whatever_the_sensors(sensors: list[str]) -> None:
+    """--speed K runs the world K times faster, and the emulated wire with it: a round of the
+    ring must stay as short in emulated time as on the real hardware."""
+    planned = plan("--speed", "10", *sensors)
+    assert planned.speedup == 10.0
+    names = [s.name for s in planned.services]
+    assert names == (["world", "lops"] if "darmstadt" in sensors else ["world"])
+    assert planned.env.get("TOKENRING_SENSORS") == ("darmstadt" if "darmstadt" in sensors else None)
+
+
+def test_without_a_world_nothing_runs_faster_and_no_lops_starts() -> None:
+    planned = plan("--speed", "10", "--no-world", "--sensors", "darmstadt")
+    assert planned.speedup == 1.0 and planned.services == []
+    assert planned.env["TOKENRING_SENSORS"] == "darmstadt"  # copro's Localizer is told all the same
