@@ -8,7 +8,7 @@ kept, and the report says so on stderr.
 
 Sections the run did not include are filled from the latest earlier result file that has them,
 and say so with that file's date; the Nemesis, seed and robot sections come from their own
-result files (``nemesis-*.json``, ``seedmode-*.json``, ``localization-*.json``,
+result files (``nemesis-*.json``, ``seedmode-*.json``, ``darmstadt-*.json``, ``localization-*.json``,
 ``mapping-*.json``). RESULTS.md is a reference, all of it generated: nothing of the file it
 replaces is kept, so never edit it by hand. Its first lines name the command that wrote it
 again from the same result file (``python -m bench.report FILE``, running nothing) and the one
@@ -1138,6 +1138,27 @@ def seed_list(seeds: list[int]) -> str:
     return ", ".join(map(str, seeds))
 
 
+def darmstadt_md(out_dir: Path) -> str:
+    """The Darmstadt sensors beside the seed, from the newest ``darmstadt-*.json``
+    (``python -m bench.darmstadt``); empty without one."""
+    from bench.darmstadt import section_md
+
+    found = []
+    for path in out_dir.glob("darmstadt-*.json"):
+        try:
+            result = json.loads(path.read_text())
+            found.append((str(result["date"]), path, result))
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    if not found:
+        return ""
+    _, path, result = max(found, key=lambda item: item[0])
+    try:
+        return section_md(result, path.name)
+    except (KeyError, TypeError):
+        return ""
+
+
 def nemesis_md(out_dir: Path) -> str:
     """The Nemesis section from ``nemesis-*.json`` (``python -m bench.nemesis``): per result file
     its runs summed; empty without one."""
@@ -1317,6 +1338,7 @@ def write_report(
         parts.append(spurious_md(sections["spurious"]))
     parts.append(nemesis_md(out_dir))
     parts.append(seedtable_md(out_dir))
+    parts.append(darmstadt_md(out_dir))
     parts.append(robot_md(out_dir))
     md_path.write_text("\n".join(p for p in parts if p).rstrip() + "\n")
     return md_path
