@@ -19,6 +19,7 @@ for it, and nothing of ours (collinear merge, corner closing) touches the vector
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import os as _os
@@ -90,13 +91,16 @@ def open_localizer(os: Any, truth: Any = None) -> Any | None:
     if _os.environ.get("TOKENRING_LOCALIZER", "").lower() in ("off", "0", "no"):
         return None
     try:
-        from modules.localization.config import SENSOR_SET_CONFIG, load_config
+        from modules.localization.config import load_config, sensor_set_layer
         from modules.localization.localizer import Localizer
     except ImportError:
         return None
     config: Any = _os.environ.get("TOKENRING_LOCALIZER_CONFIG") or EXPLORATION_CONFIG
     try:
-        under = SENSOR_SET_CONFIG.get(_os.environ.get("TOKENRING_SENSORS", "hamburg"), {})
+        receivers = _os.environ.get("TOKENRING_LOPS_RECEIVERS")
+        under = sensor_set_layer(
+            _os.environ.get("TOKENRING_SENSORS"), json.loads(receivers) if receivers else None
+        )
         if under:
             config = load_config(config, under=under)
         localizer = Localizer(os, config, truth=truth, on_log_failure=incomplete_flag(truth, os.name, "logs"))
@@ -378,4 +382,6 @@ class Program(UserProgram):
             "pending": sum(p.pending is not None for p in self.vectorizer.post.values()),
             "queued": self.outgoing.qsize(),
             **self.stats,
+            # the filter's corrections, accepted and rejected per kind (compass, walls, LOPS, ...)
+            "gates": (self.localizer.report().get("gates") if self.localizer is not None else None),
         }

@@ -17,6 +17,7 @@ Registered in ``pyproject.toml`` under the entry point group ``tokenring.extensi
 from __future__ import annotations
 
 import argparse
+import json
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -161,17 +162,23 @@ class RobotExtension(Extension):
         if all_seed(choice):
             plan.profile = "arcnet"
         speed = parse_speed(args.speed)
+        receivers: list[list[float]] | None = None
         if not args.no_world:
             plan.services.append(world_service(args, choice["body"]))
             plan.speedup = speed
             if args.sensors == "darmstadt":  # LOPS beside the ring, measuring in that world
-                plan.services.append(lops_service(args))
+                receivers = [list(r) for r in lops_receivers(args.world)]
+                plan.services.append(lops_service(args, receivers))
+                # copro's Localizer knows them as the seed's robot did, from the same [LOPS] values
+                plan.env["TOKENRING_LOPS_RECEIVERS"] = json.dumps(receivers)
         if args.sensors != "hamburg":  # copro's Localizer takes the set's sensors too
             plan.env["TOKENRING_SENSORS"] = args.sensors
         if args.localizer:
-            from modules.localization.config import load_config
+            from modules.localization.config import load_config, sensor_set_layer
 
-            load_config(args.localizer)  # a bad file is refused (file:line, key) before anything starts
+            # a bad file is refused (file:line, key) before anything starts, over what copro lays
+            # beneath it
+            load_config(args.localizer, under=sensor_set_layer(args.sensors, receivers))
             plan.env["TOKENRING_LOCALIZER_CONFIG"] = str(Path(args.localizer).resolve())
         if args.explore and args.actions:
             raise UsageError("--explore and --actions both drive the robot: give one of them")
@@ -321,7 +328,15 @@ def lcd_start_hint(launcher: Launcher) -> str | None:
     return f"the LCD waits at its OS V2.0 Main Menu: 1 (Start Robbi) starts the programs: {command}"
 
 
-def lops_service(args: argparse.Namespace) -> ServicePlan:
+def lops_receivers(world: str) -> tuple[tuple[float, float], ...]:
+    """Where LOPS's three receivers stand in the room ``up`` runs (its default: three corners)."""
+    from modules.description.roomfile import load_world
+    from modules.lops.config import default_receivers
+
+    return default_receivers(load_world(world))
+
+
+def lops_service(args: argparse.Namespace, receivers: list[list[float]]) -> ServicePlan:
     """LOPS, the Darmstadt positioning system, as a launcher service started after the world
     (it measures in that world): its packets reach the robot beside the token, never in it. A
     new LOPS after a death only starts its filter afresh, as the seed's lopscpp did: restartable."""
@@ -329,6 +344,7 @@ def lops_service(args: argparse.Namespace) -> ServicePlan:
     from tokenring.host import ServicePlan
 
     argv = service_argv(seed=args.seed, log_level=args.log_level, zenoh_config=args.zenoh_config)
+    argv += ["--receivers", *(f"{x:g},{y:g}" for x, y in receivers)]
     return ServicePlan("lops", argv, ready_key=ready_key(args.ring), restart=True)
 
 

@@ -87,6 +87,7 @@ DEFAULTS: dict[str, Any] = {
         "ahead": {"enabled": False, "sensors": [1], "max_range_mm": 1400.0, "max_off_deg": 20.0, "sigma_mm": 15.0, "oblique_from_deg": 20.0, "oblique_sigma_mm": 25.0, "clear_mm": 150.0, "max_innovation_mm": 150.0, "repeat_after_mm": 100.0, "max_turn_rate_deg_s": 2.0, "confirm_mm": 30.0, "confirm_within_ms": 1000},
     },
     "robot": {"mm_per_step": 0.5419, "steps_per_degree": 6.5, "sonars": "robot"},
+    "lops": {"receivers": [], "sigma_mm": 10.0},
     "logs": {"enabled": True, "directory": "logs", "data": "localization-{start}.trlog", "errors": "localization-{start}.trerr", "debug": False},
 }
 # fmt: on
@@ -138,6 +139,15 @@ SENSOR_SET_CONFIG: dict[str, dict[str, Any]] = {
     "hamburg": {},
     "darmstadt": {"sensors": {"lops": {"use": True}}},
 }
+
+
+def sensor_set_layer(sensors: str | None, lops_receivers: list[list[float]] | None = None) -> dict[str, Any]:
+    """What ``up --sensors`` lays beneath the Localizer's configuration: the set's sensors, and
+    where the LOPS that ``up`` started put its receivers (so the filter can take its distances)."""
+    under = copy.deepcopy(SENSOR_SET_CONFIG.get(sensors or "hamburg", {}))
+    if lops_receivers:
+        under = layered(under, {"lops": {"receivers": [list(r) for r in lops_receivers]}})
+    return under
 
 
 def layered(under: dict[str, Any], over: Any) -> Any:
@@ -325,11 +335,25 @@ class _Checker:
                 ("sensors", "truth", "filter"),
                 "the ground truth is a reference only, never fed to the filter",
             )
-        if c["sensors"]["lops"]["filter"]:
+        receivers = c["lops"]["receivers"]
+        if receivers and not (
+            len(receivers) == 3
+            and all(
+                isinstance(r, list) and len(r) == 2
+                and all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) and abs(v) <= MAX_VALUE for v in r)
+                for r in receivers
+            )
+        ):  # fmt: skip
+            raise self.fail(
+                ("lops", "receivers"), "expected three [x_mm, y_mm] pairs of numbers, LOPS's receivers"
+            )
+        if c["sensors"]["lops"]["filter"] and not receivers:
             raise self.fail(
                 ("sensors", "lops", "filter"),
-                "LOPS is logged, not fed to the filter yet: its distances are not in the EKF's model",
+                "the filter takes LOPS's distances to its receivers: give lops.receivers (up --sensors darmstadt does)",
             )
+        if c["lops"]["sigma_mm"] <= 0:
+            raise self.fail(("lops", "sigma_mm"), "must be positive")
         p = c["filter"]["gate_probability"]
         if not 0.5 <= p < 1.0:
             raise self.fail(("filter", "gate_probability"), f"must be in [0.5, 1), got {p}")

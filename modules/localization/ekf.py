@@ -343,6 +343,17 @@ class PoseEKF:
         hx, H = self.heading_model()
         return self.update("compass", np.array([heading]), hx, H, np.array([[sigma**2]]), angles=(0,))
 
+    def correct_range(self, receiver: tuple[float, float], distance: float, sigma_mm: float) -> bool:
+        """LOPS: the distance from the robot (its transmitter at the pose's x, y) to a receiver.
+        One receiver at a time, each gated: a late echo fails the gate, the others still count."""
+        dx, dy = float(self.x[0]) - receiver[0], float(self.x[1]) - receiver[1]
+        predicted = math.hypot(dx, dy)
+        if predicted < 1.0:  # on the receiver itself: no direction to correct along
+            return False
+        H = np.zeros((1, len(self.x)))
+        H[0, 0], H[0, 1] = dx / predicted, dy / predicted
+        return self.update("lops", np.array([distance]), np.array([predicted]), H, np.array([[sigma_mm**2]]))
+
     def correct_step_scale(self, scale: float, sigma: float) -> bool:
         """Correction with a measured step scale (a straight drive's true over nominal length);
         through the state's correlation with the pose it moves the pose by the length misjudged."""

@@ -270,6 +270,23 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             source, letter = ("W", "W") if kind == "map_wall" else ("S", "E")
             self.data_log.write(stamp, source, letter, {"gen": generation, "event": kind, **payload})
 
+    def _correct_lops(self, lops: dict[str, Any], stamp: int) -> None:
+        """LOPS's distances, each one a correction: a position also from one or two good receivers
+        (seed 000: the filter can use what lopscpp could not trilaterate)."""
+        assert self.ekf is not None
+        receivers = self.config["lops"]["receivers"]
+        sigma = self.config["lops"]["sigma_mm"]
+        for receiver, key in zip(receivers, ("d1", "d2", "d3"), strict=True):
+            distance = lops.get(key)
+            if distance is not None and not self.ekf.correct_range(
+                (receiver[0], receiver[1]), distance, sigma
+            ):
+                self.message(
+                    "W",
+                    stamp,
+                    f"LOPS {key} = {distance:.0f} mm rejected by the gate (NIS {self.ekf.last_nis:.1f})",
+                )
+
     def message(self, cls: str, stamp_ms: int, text: str) -> None:
         if self.error_log is not None:
             self.error_log.message(cls, stamp_ms, text)
@@ -400,6 +417,9 @@ class LocalizationCore(WallCorrections, TravelCorrections):
                     self.compass_skipped_turning += 1  # the reading lags and the motors disturb it
                 elif not self.ekf.correct_heading(compass["heading"]):
                     self.message("W", stamp, f"compass rejected by the gate (NIS {self.ekf.last_nis:.1f})")
+            lops = data.get("lops")
+            if lops is not None and use.get("lops"):
+                self._correct_lops(lops, stamp)
             sonar = data.get("sonar")
             if sonar is not None and use.get("sonar"):
                 reference = self.ekf.pose  # the seed's reference: the pose the walls were fitted at

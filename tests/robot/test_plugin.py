@@ -4,6 +4,7 @@ faster emulated time runs, which services start, what the nodes are told."""
 from __future__ import annotations
 
 import argparse
+import json
 
 import pytest
 
@@ -31,6 +32,13 @@ def test_the_world_s_speed_up_is_the_ring_s_whatever_the_sensors(sensors: list[s
     names = [s.name for s in planned.services]
     assert names == (["world", "lops"] if "darmstadt" in sensors else ["world"])
     assert planned.env.get("TOKENRING_SENSORS") == ("darmstadt" if "darmstadt" in sensors else None)
+    if "darmstadt" in sensors:  # LOPS and copro's Localizer are told the same receivers
+        lops = planned.services[1].argv
+        given = lops[lops.index("--receivers") + 1 : lops.index("--receivers") + 4]
+        told = json.loads(planned.env["TOKENRING_LOPS_RECEIVERS"])
+        assert [[float(v) for v in g.split(",")] for g in given] == told and len(told) == 3
+    else:
+        assert "TOKENRING_LOPS_RECEIVERS" not in planned.env
 
 
 def test_without_a_world_nothing_runs_faster_and_no_lops_starts() -> None:

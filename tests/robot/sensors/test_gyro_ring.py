@@ -93,10 +93,14 @@ def test_up_with_the_darmstadt_sensors_runs_a_calibrated_gyro_and_lops(
     procs: Any, ring_name: str, endpoint: str, tmp_path: Path
 ) -> None:
     logs = tmp_path / "logs"
-    config = tmp_path / "localization.yaml"  # the logs' folder; --sensors darmstadt turns LOPS on
-    config.write_text(yaml.safe_dump({"logs": {"directory": str(logs)}}))
+    # the logs' folder and LOPS in the filter; --sensors darmstadt turns LOPS on and tells copro
+    # where its receivers stand. The Darmstadt hall: the configuration's walls and start are its
+    config = tmp_path / "localization.yaml"
+    config.write_text(
+        yaml.safe_dump({"logs": {"directory": str(logs)}, "sensors": {"lops": {"filter": True}}})
+    )
     launcher = procs.tokenring(
-        "up", "--ring", ring_name, "--listen", endpoint, "--world", "empty", "--speed", "10",
+        "up", "--ring", ring_name, "--listen", endpoint, "--world", "square", "--speed", "10",
         "--bitrate", "10M", "--sensors", "darmstadt", "--localizer", str(config), "--duration", "120",
     )  # fmt: skip
     try:
@@ -119,6 +123,16 @@ def test_up_with_the_darmstadt_sensors_runs_a_calibrated_gyro_and_lops(
             wait_until(lambda: sum(p[:2] == b"SD" for p in list(lops_packets)) >= 10, 30, "LOPS data packets")
             lops.undeclare()
             report = control(session, ring_name, GYRO["id"], "program")["report"]
+            wait_until(
+                lambda: (
+                    (control(session, ring_name, 50, "program")["report"].get("gates") or {})
+                    .get("accepted", {})
+                    .get("lops", 0)
+                    >= 20
+                ),
+                60,
+                "copro's filter to take LOPS's distances",
+            )
     finally:
         if launcher.poll() is None:
             launcher.send_signal(signal.SIGINT)
@@ -154,14 +168,14 @@ def test_up_with_the_darmstadt_sensors_runs_a_calibrated_gyro_and_lops(
     assert abs(span - 20.48 * taken) <= 21, (span, taken)
 
     # copro's log: LOPS's packets as L records, stamped on arrival, counters in order; the
-    # standing robot's position where the empty room starts it (lopscpp's messages: the unit test)
+    # standing robot's position where the hall starts it (lopscpp's messages: the unit test)
     from modules.localization.logs import read_log
 
     (data_log,) = sorted(logs.glob("*.trlog"))
     records = read_log(data_log).records
     counters = [r[3]["v"]["counter"] for r in records if r[1] == "L" and r[2] == "R"]
     assert len(counters) >= 10 and counters == sorted(counters), counters
-    start = yaml.safe_load((REPO / "modules/description/rooms/empty.yaml").read_text())["start"]
+    start = yaml.safe_load((REPO / "modules/description/rooms/square.yaml").read_text())["start"]
     positions = [r[3] for r in records if r[1] == "L" and r[2] == "P"]
     assert positions and all(
         abs(p["x"] - start["x"]) < 60 and abs(p["y"] - start["y"]) < 60 for p in positions
