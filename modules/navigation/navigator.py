@@ -563,7 +563,7 @@ class Calibrate(Navigator):
     The 360° turn runs at the old glide factor, so it ends off by the very error it measures
     (about 13° on the office floor), and the motor, which counts its steps, believes
     it faces the start heading. Left so, every move after it runs that far off and the map is
-    turned by it (the seed's robot measured no error: it had no compass fitted). So the run turns
+    turned by it (the seed's robot measured no error: its compass's values went unused). So the run turns
     back by the error at the new factor and — when no filter keeps the pose (``--algorithms
     copro=seed``) — tells the motor its heading again with SET_GLOBAL_POSITION; with the filter
     the compass already carries the heading and main's self-localisation corrects the motor."""
