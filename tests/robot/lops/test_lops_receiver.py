@@ -10,6 +10,8 @@ import struct
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from modules.localization.config import load_config
 from modules.localization.localizer import LocalizationCore
 from modules.localization.logs import DataLog, ErrorLog, convert_text, read_log
@@ -177,6 +179,7 @@ def lops_drive(config: dict[str, Any], echo_every: int = 0) -> tuple[Localizatio
     return core, truth
 
 
+@pytest.mark.slow  # two laps of the hall simulated, ~20 s
 def test_the_filter_takes_lops_distances_one_receiver_at_a_time_and_gates_late_echoes() -> None:
     """With LOPS's distances in the EKF (also when a receiver is lost), one lap without walls
     ends within 2 cm of the truth, far better than without them; late echoes fail the gate."""
@@ -198,8 +201,6 @@ def test_the_filter_takes_lops_distances_one_receiver_at_a_time_and_gates_late_e
 
 
 def test_lops_in_the_filter_needs_its_receivers() -> None:
-    import pytest
-
     from modules.localization.config import ConfigError
 
     with pytest.raises(ConfigError, match=r"lops\.receivers"):
