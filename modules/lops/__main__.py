@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import logging
 import math
-import signal
 import sys
 import threading
 import time
@@ -24,7 +23,7 @@ from modules.lops.service import LopsService, packets_key, world_from_info
 from modules.lops.system import LopsSystem
 from modules.world.clients import WORLD_WAIT_S, HardwareClient, HardwareError
 from tokenring import TokenRingError, UsageError, keys, read_text
-from tokenring.cli import OneLineParser, StopEvent, int_within, seconds, wait_for_stop
+from tokenring.cli import OneLineParser, int_within, seconds, stop_on_signals, wait_for_stop
 from tokenring.transport import make_config, open_session, query_one
 
 
@@ -73,13 +72,7 @@ def parse_receivers(texts: list[str]) -> tuple[tuple[float, float], ...]:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=getattr(logging, args.log_level.upper()), format="%(levelname)-5s %(message)s")
-    stop = StopEvent()
-
-    def on_signal(_signum: int, _frame: Any) -> None:
-        stop.set()
-
-    signal.signal(signal.SIGTERM, on_signal)
-    signal.signal(signal.SIGINT, on_signal)
+    stop = stop_on_signals()  # SIGTERM (the launcher) and SIGINT end the service cleanly
     try:
         ring = keys.check_ring_name(args.ring)
         receivers = parse_receivers(args.receivers) if args.receivers else None

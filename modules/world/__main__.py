@@ -7,9 +7,7 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
-from typing import Any
 
 from modules.description import keys as robot_keys
 from modules.description.robot import BODIES
@@ -17,7 +15,7 @@ from modules.description.roomfile import DEFAULT_WORLD, load_world
 from modules.world.service import WorldService
 from modules.world.sim import Simulator
 from tokenring import TokenRingError, UsageError, keys
-from tokenring.cli import StopEvent, int_within, wait_for_stop
+from tokenring.cli import int_within, stop_on_signals, wait_for_stop
 from tokenring.transport import make_config, open_session
 
 #: the slowest and fastest simulation: below 0.01 the emulated wire (K times the bitrate)
@@ -65,13 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=getattr(logging, args.log_level.upper()), format="%(levelname)-5s %(message)s")
-    stop = StopEvent()
-
-    def on_signal(_signum: int, _frame: Any) -> None:
-        stop.set()
-
-    signal.signal(signal.SIGTERM, on_signal)
-    signal.signal(signal.SIGINT, on_signal)
+    stop = stop_on_signals()  # SIGTERM (the launcher) and SIGINT end the service cleanly
     try:
         world = load_world(args.world)
         speed = parse_speed(args.speed)

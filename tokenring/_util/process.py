@@ -41,6 +41,19 @@ class StopEvent(threading.Event):
         return self._wake_writer.fileno()
 
 
+def stop_on_signals(*signums: int) -> StopEvent:
+    """A stop flag that these signals (default SIGTERM and SIGINT) set: a service process's
+    clean end, waited for with :func:`wait_for_stop` on the main thread."""
+    stop = StopEvent()
+
+    def on_signal(_signum: int, _frame: object) -> None:
+        stop.set()
+
+    for signum in signums or (signal.SIGTERM, signal.SIGINT):
+        signal.signal(signum, on_signal)
+    return stop
+
+
 def wait_for_stop(stop: StopEvent, duration: float | None = None) -> bool:
     """Wait until ``stop`` is set (a signal handler sets it) or ``duration`` is up; True if
     stopped.

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 from tokenring._face import lazy_face
 
 if TYPE_CHECKING:
-    from tokenring._util.process import StopEvent, wait_for_stop
+    from tokenring._util.process import StopEvent, stop_on_signals, wait_for_stop
     from tokenring._util.tables import format_table
     from tokenring.cli.args import (
         OneLineParser,
@@ -43,6 +43,7 @@ else:  # each name is imported on first use
             "print_json": "tokenring.cli.output",
             "seconds": "tokenring.cli.args",
             "StopEvent": "tokenring._util.process",
+            "stop_on_signals": "tokenring._util.process",
             "tap_session": "tokenring.cli.args",
             "verb_modules": "tokenring.cli.verbs",
             "wait_for_stop": "tokenring._util.process",
@@ -66,6 +67,7 @@ __all__ = [
     "positive_int",
     "print_json",
     "seconds",
+    "stop_on_signals",
     "tap_session",
     "verb_modules",
     "wait_for_stop",
