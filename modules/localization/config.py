@@ -19,9 +19,9 @@ from typing import Any
 
 import yaml
 
+from modules.localization.sync import SENSORS as SENSOR_NAMES
 from tokenring import NumberLoader, UsageError, YAMLStructureError, one_line
 
-SENSOR_NAMES = ("odometry", "compass", "sonar", "battery", "truth", "lops")
 #: the largest number a setting may have: every one is a distance, angle, time, count or
 #: sigma of a room-sized robot (the defaults are at most 1400), and 1e300 is a typo
 MAX_VALUE = 1e9

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from modules.localization.logs import SOURCE_SENSOR, LogError, LogFile, read_log
+from modules.localization.sync import SENSORS
 
 POSITION_NAMES = {
     "K": "filter (EKF)",
@@ -340,11 +341,7 @@ def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None =
         save(fig, "lops.png")
 
     # the time module
-    sensors = [
-        s
-        for s in ("odometry", "compass", "sonar", "battery", "truth", "lops")
-        if len(series.raw_stamps.get(s, [])) > 1
-    ]
+    sensors = [s for s in SENSORS if len(series.raw_stamps.get(s, [])) > 1]
     rows = len(sensors) + 1
     fig, axes = plt.subplots(rows, 1, figsize=(9, 1.8 * rows + 0.6), sharex=True)
     axes = np.atleast_1d(axes)

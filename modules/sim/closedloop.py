@@ -576,10 +576,11 @@ def explore(
     config = None
     if walls or overrides:
         from modules.copro import EXPLORATION_CONFIG
+        from modules.localization.config import layered
 
-        config = merged(EXPLORATION_CONFIG, overrides or {})
+        config = layered(EXPLORATION_CONFIG, overrides or {})
         if walls:
-            config = merged(config, {"walls": {"mode": walls}})
+            config = layered(config, {"walls": {"mode": walls}})
     loop = ClosedLoop(
         world,
         seed,
@@ -616,14 +617,3 @@ def explore(
         "log": run.log,
         "rows": rows,
     }
-
-
-def merged(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    """``base`` with ``over`` laid on it key by key (nested mappings merged, not replaced)."""
-    out = dict(base)
-    for key, value in over.items():
-        if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = merged(out[key], value)
-        else:
-            out[key] = value
-    return out

@@ -10,13 +10,13 @@ import pytest
 
 from bench.closedloop import write_json
 from modules.copro import EXPLORATION_CONFIG
-from modules.localization.config import ConfigError
-from modules.sim.closedloop import ClosedLoop, explore, merged
+from modules.localization.config import ConfigError, layered
+from modules.sim.closedloop import ClosedLoop, explore
 
 
 def test_overrides_merge_into_nested_settings_and_leave_the_base_alone() -> None:
     base = {"walls": {"mode": "exploration", "association": {"min_wall_length_mm": 1000.0}}, "logs": {}}
-    got = merged(base, {"walls": {"association": {"max_d_mm": 300.0}}, "filter": {"travel": {}}})
+    got = layered(base, {"walls": {"association": {"max_d_mm": 300.0}}, "filter": {"travel": {}}})
     assert got["walls"] == {
         "mode": "exploration",
         "association": {"min_wall_length_mm": 1000.0, "max_d_mm": 300.0},
@@ -26,7 +26,7 @@ def test_overrides_merge_into_nested_settings_and_leave_the_base_alone() -> None
 
 
 def test_the_closed_loops_filter_runs_on_the_overridden_settings() -> None:
-    config = merged(EXPLORATION_CONFIG, {"walls": {"shared_sigma_mm": 3.0}})
+    config = layered(EXPLORATION_CONFIG, {"walls": {"shared_sigma_mm": 3.0}})
     loop = ClosedLoop("empty", seed=1, localizer_config=config)
     assert loop.core is not None
     assert loop.core.config["walls"]["shared_sigma_mm"] == 3.0
