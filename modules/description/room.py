@@ -184,6 +184,18 @@ class World:
             lines.append(" ".join(f"{v:.1f}" for v in values))
         return "\n".join(lines) + "\n"
 
+    @classmethod
+    def geometry_from_dict(cls, info: dict[str, Any]) -> World:
+        """The room's geometry back from :meth:`to_dict`'s values (``world/info``): its name,
+        walls, obstacles and start; the rest (floor, field, batteries) keeps its defaults."""
+        start = info.get("start") or [0.0, 0.0, 0.0]
+        return cls(
+            name=str(info.get("name", "world")),
+            walls=tuple(Wall(*map(float, w[:4])) for w in info.get("walls", [])),
+            start=Pose(*map(float, start[:3])),
+            circles=tuple(Circle(*map(float, c[:3])) for c in info.get("circles", [])),
+        )
+
     def to_dict(self) -> dict[str, Any]:
         """Plain values (msgpack/JSON): what ``world/info`` serves to tools."""
         return {

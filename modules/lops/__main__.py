@@ -18,8 +18,9 @@ from dataclasses import replace
 from typing import Any
 
 from modules.description import keys as robot_keys
+from modules.description.room import World
 from modules.lops.config import LopsConfigError, for_world, parse_lops_section
-from modules.lops.service import LopsService, packets_key, world_from_info
+from modules.lops.service import LopsService, packets_key
 from modules.lops.system import LopsSystem
 from modules.world.clients import WORLD_WAIT_S, HardwareClient, HardwareError
 from tokenring import TokenRingError, UsageError, keys, read_text
@@ -82,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         with open_session(config) as session:
             clock = HardwareClient(session, ring).clock  # waits for a world that is still starting
-            world = world_from_info(_query(session, robot_keys.world(ring, "info")))
+            world = World.geometry_from_dict(_query(session, robot_keys.world(ring, "info")))
             lops = parse_lops_section(config_text) if config_text is not None else for_world(world)
             if receivers is not None:
                 lops = replace(lops, receivers=receivers)

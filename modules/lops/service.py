@@ -20,7 +20,6 @@ from typing import Any
 import zenoh
 
 from modules.description import keys as robot_keys
-from modules.description.room import Circle, Pose, Wall, World
 from modules.lops.lopscpp import POSITION
 from modules.lops.packets import MessagePacket
 from modules.lops.system import LopsSystem
@@ -49,17 +48,6 @@ def service_argv(seed: int = 1, log_level: str = "info", zenoh_config: str | Non
     if zenoh_config:
         argv += ["--zenoh-config", zenoh_config]
     return argv
-
-
-def world_from_info(info: dict[str, Any]) -> World:
-    """The room as ``world/info`` serves it (:meth:`World.to_dict`): walls and obstacles."""
-    start = info.get("start") or [0.0, 0.0, 0.0]
-    return World(
-        name=str(info.get("name", "world")),
-        walls=tuple(Wall(*map(float, w[:4])) for w in info.get("walls", [])),
-        start=Pose(*map(float, start[:3])),
-        circles=tuple(Circle(*map(float, c[:3])) for c in info.get("circles", [])),
-    )
 
 
 class LopsService:

@@ -121,3 +121,25 @@ def test_bad_world_files_name_file_and_line(tmp_path, text, message):
 def test_unknown_world_name_lists_bundled_rooms():
     with pytest.raises(WorldError, match=r"no such world file or bundled world \(bundled: empty, office"):
         load_world("kitchen")
+
+
+@pytest.mark.parametrize("name", ["square", "office"])
+def test_a_rooms_geometry_comes_back_from_what_world_info_serves(name: str) -> None:
+    """LOPS rebuilds the room it measures in from ``world/info``: walls, obstacles and start."""
+    import msgpack
+
+    from modules.description.room import World
+
+    world = load_world(name)
+    served = msgpack.unpackb(msgpack.packb(world.to_dict()))  # as it crosses Zenoh
+    again = World.geometry_from_dict(served)
+
+    def segments(w: World) -> list[tuple[float, float, float, float]]:
+        return [(s.x1, s.y1, s.x2, s.y2) for s in w.walls]
+
+    assert (again.name, segments(again), again.circles, again.start) == (
+        world.name,
+        segments(world),
+        world.circles,
+        world.start,
+    )
