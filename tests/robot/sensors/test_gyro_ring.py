@@ -23,6 +23,7 @@ from tests.support.ringutil import control, tap, wait_until
 
 PROTOCOL = yaml.safe_load((REPO / "protocol.yaml").read_text())
 GYRO = PROTOCOL["nodes"]["gyro"]
+COPRO_ID = PROTOCOL["nodes"]["copro"]["id"]
 STATES = PROTOCOL["enums"]["gyro_state"]
 FORMATS = {"u8": "B", "i8": "b", "u16": "H", "i16": "h", "u32": "I", "i32": "i"}
 HAMBURG = ["main", "motor", "sonar", "compass", "copro", "map", "lcd", "charger"]
@@ -125,7 +126,7 @@ def test_up_with_the_darmstadt_sensors_runs_a_calibrated_gyro_and_lops(
             report = control(session, ring_name, GYRO["id"], "program")["report"]
             wait_until(
                 lambda: (
-                    (control(session, ring_name, 50, "program")["report"].get("gates") or {})
+                    (control(session, ring_name, COPRO_ID, "program")["report"].get("gates") or {})
                     .get("accepted", {})
                     .get("lops", 0)
                     >= 20
