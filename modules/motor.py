@@ -16,6 +16,16 @@ dead-reckoned pose is computed from the steps issued (no encoders) and starts wh
 was put down. The data channel carries the pose, direction, speed, distance driven since the last
 move command, the cumulative left/right half-step counters and the time stamp of that sample.
 
+The SIP stream (``TOKENRING_MOTOR_SIP_MS``, set by ``up --sensors darmstadt``; issue 53): the
+Darmstadt robot's Pioneer sent its encoder counts in a SIP every 100 ms of its own clock. With
+the setting, motor.data changes only at the grid times k·period of the motor's clock: each sample
+is stamped with its grid time (a multiple of the period: the stamp is the SIP's number) and holds
+the counters, pose and state as of that time; the loop wakes at each grid time and first issues
+the steps due by then, so the counters are exactly the steps due at the grid time. Stepping,
+move completion, replies and collision checks are unchanged: a move ending between grid times
+replies at its end, and its last steps appear in the next grid sample. Off (default): a sample
+on every loop tick, as before.
+
 Seed mode (``--algorithms motor=seed``, issue 20) keeps the 2001 command semantics of seed
 §4.3.3 (``move_forward``'s loop and the main loop's ``switch``): a command of the move's own kind
 during a move is ignored ("Befehl falsch"); any other command, SET_GLOBAL_POSITION and
@@ -33,10 +43,17 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import time
 from collections import deque
 
-from modules.description.robot import DEFAULT_MOTOR_CURRENT_MA, MAX_SPEED_MM_S, MOTOR_TICK_MS, STEP_MM
+from modules.description.robot import (
+    DEFAULT_MOTOR_CURRENT_MA,
+    MAX_SPEED_MM_S,
+    MOTOR_SIP_ENV,
+    MOTOR_TICK_MS,
+    STEP_MM,
+)
 from modules.sensors.odometry import (
     DeadReckoning,
     Move,
@@ -68,6 +85,20 @@ SEED_MOVE_COMMANDS = {
 }
 
 
+def sip_period_ms(environ: dict[str, str] | None = None) -> int:
+    """The SIP stream's period from :data:`MOTOR_SIP_ENV` (ms; 0: off, a sample every tick)."""
+    text = (os.environ if environ is None else environ).get(MOTOR_SIP_ENV, "").strip()
+    if not text:
+        return 0
+    try:
+        period = int(text)
+    except ValueError:
+        raise ValueError(f"{MOTOR_SIP_ENV}={text!r}: a whole number of ms expected") from None
+    if period < 0:
+        raise ValueError(f"{MOTOR_SIP_ENV}={text!r}: must not be negative")
+    return period
+
+
 class Program(UserProgram):
     module = "motor"
 
@@ -97,13 +128,24 @@ class Program(UserProgram):
         self.notices_lost = 0  # seed mode: replies the target did not take (sent once)
         self.last_move_ms = (0.0, 0.0)
         self.tick_real = max(TICK_MIN_REAL_S, self.clock.to_real(TICK_SIM_S))
+        self.sip_ms = sip_period_ms()
+        self.sips = 0  # SIP samples published
+        self.sip_last_ms: int | None = None  # the grid time of the newest SIP sample
+        self.sip_record: dict | None = None  # a SIP sample not yet written to motor.data
+        if self.sip_ms:
+            self._take_sip(self._sip_due(self.clock.now_ms()) or 0)
         self._publish()
 
     # -- the loop -------------------------------------------------------------------------------
     def run(self) -> None:
         idle_real = max(TICK_MIN_REAL_S, self.clock.to_real(IDLE_PUBLISH_SIM_S))
         while self.running:
-            command = self.os.receive_command(timeout=self.tick_real if self.move else idle_real)
+            timeout = self.tick_real if self.move else idle_real
+            if self.sip_ms:
+                timeout = min(timeout, self._until_next_sip())
+            command = self.os.receive_command(timeout=timeout)
+            if self.sip_ms:
+                self._sip_tick()
             if command is not None:
                 self._handle(command)
             if self.move is not None:
@@ -114,18 +156,55 @@ class Program(UserProgram):
             self._flush_notices()
 
     def _publish(self) -> None:
-        self.out.write(
+        """Write motor.data: the sample of now, or with the SIP stream the newest grid sample
+        (once; between grid times motor.data keeps the last one)."""
+        if not self.sip_ms:
+            self.out.write(**self._record(self.stamp_ms))
+        elif self.sip_record is not None:
+            self.out.write(**self.sip_record)
+            self.sip_record = None
+
+    def _record(self, stamp_ms: float) -> dict:
+        """motor.data's fields as they stand now, stamped ``stamp_ms``."""
+        return dict(
             **pose_to_wire(self.odometry.x, self.odometry.y, self.odometry.theta),
             direction=self.direction,
             speed_pct=self.speed_pct,
             distance_mm=round(self.distance_mm),
             steps_left=self.steps[0],
             steps_right=self.steps[1],
-            stamp_ms=int(self.stamp_ms) & 0xFFFFFFFF,
+            stamp_ms=int(stamp_ms) & 0xFFFFFFFF,
             move_seq=self.move_seq,
             state=self.state,
             glide_cfactor=min(0xFFFF, round(self.odometry.glide * 100)),
         )
+
+    # -- the SIP stream ---------------------------------------------------------------------------
+    def _sip_due(self, now_ms: float) -> int | None:
+        """The newest grid time at or before ``now_ms`` not sampled yet (None: none)."""
+        grid = int(now_ms // self.sip_ms) * self.sip_ms
+        return grid if self.sip_last_ms is None or grid > self.sip_last_ms else None
+
+    def _until_next_sip(self) -> float:
+        """Real seconds until the next grid time (a little past it, so the loop wakes after it)."""
+        last = self.sip_last_ms if self.sip_last_ms is not None else 0
+        ahead_ms = last + self.sip_ms - self.clock.now_ms()
+        return max(TICK_MIN_REAL_S / 4, self.clock.to_real(max(0.0, ahead_ms) / 1000.0) + 0.0005)
+
+    def _sip_tick(self) -> None:
+        """At a grid time passed since the last sample: issue the steps due by then, then take
+        the sample (before a command that arrived after it is carried out)."""
+        grid = self._sip_due(self.clock.now_ms())
+        if grid is None:
+            return
+        if self.move is not None:
+            self._step(grid)
+        self._take_sip(grid)
+
+    def _take_sip(self, grid: int) -> None:
+        self.sip_last_ms = grid
+        self.sip_record = self._record(grid)
+        self.sips += 1
 
     # -- commands -------------------------------------------------------------------------------
     def _handle(self, cmd) -> None:
@@ -229,12 +308,16 @@ class Program(UserProgram):
             self._finish(DONE)
 
     # -- stepping -------------------------------------------------------------------------------
-    def _step(self) -> None:
+    def _step(self, at_ms: float | None = None) -> None:
+        """Issue the steps due by ``at_ms`` (default: now); finish the move when all are."""
         move = self.move
         assert move is not None
-        now = self.clock.now_ms()
-        elapsed = (now - move.start_ms) / 1000.0
-        due = tuple(min(t, math.floor(elapsed * r)) for t, r in zip(move.total, move.rate_hz, strict=True))
+        now = self.clock.now_ms() if at_ms is None else at_ms
+        elapsed = max(0.0, (now - move.start_ms) / 1000.0)
+        due = (
+            min(move.total[0], math.floor(elapsed * move.rate_hz[0])),
+            min(move.total[1], math.floor(elapsed * move.rate_hz[1])),
+        )
         new = (due[0] - move.issued[0], due[1] - move.issued[1])
         if new != (0, 0):
             left, right = new[0] * move.sign[0], new[1] * move.sign[1]
@@ -333,6 +416,8 @@ class Program(UserProgram):
             "last_move_ms": list(self.last_move_ms),
             "max_speed_mm_s": MAX_SPEED_MM_S,
         }
+        if self.sip_ms:
+            report.update(sip_period_ms=self.sip_ms, sips=self.sips)
         if self.seed:
             report.update(algorithm="seed", ignored=self.ignored, notices_lost=self.notices_lost)
         return report

@@ -100,7 +100,8 @@ class RobotExtension(Extension):
             default="hamburg",
             help="the robot's sensors: the Hamburg robot's eight modules (default) or with the "
             "Darmstadt sensors as well (darmstadt: the gyroscope, node gyro, and LOPS, the positioning "
-            "system beside the ring)",
+            "system beside the ring; the motor sends its odometry as the Pioneer's SIPs, every "
+            "100 ms of its clock)",
         )
         world.add_argument(
             "--algorithms",
@@ -173,6 +174,12 @@ class RobotExtension(Extension):
                 plan.env["TOKENRING_LOPS_RECEIVERS"] = json.dumps(receivers)
         if args.sensors != "hamburg":  # copro's Localizer takes the set's sensors too
             plan.env["TOKENRING_SENSORS"] = args.sensors
+        if args.sensors == "darmstadt":  # the Pioneer's SIPs (an explicit setting wins, 0 = off)
+            import os
+
+            from modules.description.robot import MOTOR_SIP_ENV, SIP_PERIOD_MS
+
+            plan.env[MOTOR_SIP_ENV] = os.environ.get(MOTOR_SIP_ENV, str(SIP_PERIOD_MS))
         if args.localizer:
             from modules.localization.config import load_config, sensor_set_layer
 

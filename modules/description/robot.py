@@ -18,6 +18,12 @@ MAX_STEP_RATE_HZ = MAX_SPEED_MM_S / STEP_MM  # 184.5 half-steps per second at 10
 DEFAULT_GLIDE_FACTOR = 6.5  # half-steps per degree of turn on tiles
 DEFAULT_MOTOR_CURRENT_MA = 1000  # per motor, set through the 8-bit DAC (20 mA per count)
 MOTOR_TICK_MS = 20.0  # the motor module issues a batch of steps every 20 simulated ms
+#: the Darmstadt Pioneer's SIP (server information packet) period: its microcontroller sent the
+#: position data every 100 ms of its own clock (seed 000, §2.3, §3.4, §5.4)
+SIP_PERIOD_MS = 100
+#: the motor's setting for a SIP stream: sample and publish the counters only at the grid times
+#: k·period of its clock (ms; unset or 0: every loop tick, the Hamburg motor)
+MOTOR_SIP_ENV = "TOKENRING_MOTOR_SIP_MS"
 ROBOT_RADIUS_MM = 190.0  # the collision circle the simulator uses
 
 # -- compass (seed §3.3.3) -------------------------------------------------------------------------
