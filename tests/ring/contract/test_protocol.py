@@ -32,9 +32,9 @@ def test_real_protocol_compiles_with_eight_nodes_in_id_order():
     """The Hamburg robot's eight, then the Darmstadt sensors' nodes (``up --sensors darmstadt``)."""
     protocol = load_protocol(REPO / "protocol.yaml")
     hamburg = ["main", "motor", "sonar", "compass", "copro", "map", "lcd", "charger"]
-    assert list(protocol.nodes) == [*hamburg, "gyro"]
+    assert list(protocol.nodes) == [*hamburg, "gyro", "correlator"]
     ids = [n.id for n in protocol.nodes.values()]
-    assert ids == sorted(ids) and len(set(ids)) == 9
+    assert ids == sorted(ids) and len(set(ids)) == 10
     assert [n.seed_name for n in protocol.nodes.values()][:2] == ["ROBMAIN", "ROBMOTOR"]
     assert protocol.header.sid == 0 and protocol.header.counter == 4 and protocol.header_size == 12
     assert protocol.system_data_offset == 12 and protocol.system_data_size == 32
@@ -42,7 +42,7 @@ def test_real_protocol_compiles_with_eight_nodes_in_id_order():
     for ch in protocol.channels.values():
         assert ch.address >= 12 and ch.end <= 512, ch.name
     # the Darmstadt nodes are optional: a ring named by nobody starts without them
-    assert [n.name for n in protocol.nodes.values() if n.optional] == ["gyro"]
+    assert [n.name for n in protocol.nodes.values() if n.optional] == ["gyro", "correlator"]
     assert [n.name for n in protocol.default_nodes] == hamburg
 
 
