@@ -29,8 +29,20 @@ def _open_gyro(session: zenoh.Session, ring: str) -> Any:
     return GyroHardware(session, ring)
 
 
+def _open_correlator(session: zenoh.Session, ring: str) -> Any:
+    from modules.world.correlatorclient import CorrelatorHardware
+
+    return CorrelatorHardware(session, ring)
+
+
 #: module name -> factory(session, ring) returning that module's hardware client
-FACTORIES: dict[str, Any] = {**CLIENTS, "lcd": _open_lcd, "copro": TruthFeed, "gyro": _open_gyro}
+FACTORIES: dict[str, Any] = {
+    **CLIENTS,
+    "lcd": _open_lcd,
+    "copro": TruthFeed,
+    "gyro": _open_gyro,
+    "correlator": _open_correlator,
+}
 
 
 def open_hardware(module: str, session: zenoh.Session, ring: str) -> Any | None:

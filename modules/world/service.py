@@ -26,6 +26,9 @@ key                             request → result
                                 period_ms, power}``: every 20.48 ms sample since the last read
                                 (:mod:`modules.world.gyroscope`; the devices of
                                 :mod:`modules.world.devices`)
+``hw/correlator/read``          ``{}`` → ``{increments_um: [...], stamps_ms, lost, power,
+                                defective}``: every floor-correlator sample (40-60 ms apart)
+                                since the last read (:mod:`modules.world.correlator`)
 ``world/truth``                 published ~10× per simulated second (at most 50 Hz real):
                                 ground truth for logs and scoring only — ``stamp_ms`` (simulated
                                 ms, int), ``t_ms`` (float), ``x_mm``, ``y_mm``, ``theta_rad`` (CCW
