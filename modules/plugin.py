@@ -39,8 +39,8 @@ if TYPE_CHECKING:
 MAX_SEED = 2**32 - 1
 
 #: ``up --sensors``: the optional nodes of protocol.yaml each sensor set adds to the Hamburg
-#: robot's eight (LOPS and the floor correlator join "darmstadt" later)
-SENSOR_SETS: dict[str, tuple[str, ...]] = {"hamburg": (), "darmstadt": ("gyro",)}
+#: robot's eight (LOPS joins "darmstadt" as a service beside the ring); see :func:`sensor_nodes`
+SENSOR_SETS: dict[str, tuple[str, ...]] = {"hamburg": (), "darmstadt": ("gyro", "correlator")}
 
 
 def programs_dir() -> Path:
@@ -99,9 +99,10 @@ class RobotExtension(Extension):
             choices=sorted(SENSOR_SETS),
             default="hamburg",
             help="the robot's sensors: the Hamburg robot's eight modules (default) or with the "
-            "Darmstadt sensors as well (darmstadt: the gyroscope, node gyro, and LOPS, the positioning "
-            "system beside the ring; the motor sends its odometry as the Pioneer's SIPs, every "
-            "100 ms of its clock)",
+            "Darmstadt sensors as well (darmstadt: the gyroscope, node gyro; the floor correlator, "
+            "node correlator, except on the seed's body, --algorithms seed or body=seed, whose was "
+            "defective; LOPS, the positioning system beside the ring; the motor sends its odometry "
+            "as the Pioneer's SIPs, every 100 ms of its clock)",
         )
         world.add_argument(
             "--algorithms",
@@ -148,7 +149,7 @@ class RobotExtension(Extension):
 
     def up_nodes(self, args: argparse.Namespace, protocol: Protocol) -> list[str]:
         check_sensors(args, protocol)
-        return list(SENSOR_SETS[getattr(args, "sensors", "hamburg")])
+        return list(sensor_nodes(args))
 
     def plan_up(self, args: argparse.Namespace, protocol: Protocol) -> UpPlan:
         from pathlib import Path
@@ -298,7 +299,7 @@ class RobotExtension(Extension):
 def check_sensors(args: argparse.Namespace, protocol: Protocol) -> None:
     """A set whose nodes this protocol lacks is refused; a ``--nodes`` given with ``--sensors``
     must name the set's nodes (or the sensors would silently not run)."""
-    wanted = SENSOR_SETS[getattr(args, "sensors", "hamburg")]
+    wanted = sensor_nodes(args)
     missing = [name for name in wanted if name not in protocol.nodes]
     if missing:
         raise UsageError(f"--sensors {args.sensors}: this protocol has no node {', '.join(missing)}")
@@ -317,6 +318,18 @@ def check_sensors(args: argparse.Namespace, protocol: Protocol) -> None:
             f"--sensors {args.sensors} adds {', '.join(wanted)}, which --nodes leaves out: name "
             f"{', '.join(left_out)} in --nodes too, or drop --nodes"
         )
+
+
+def sensor_nodes(args: argparse.Namespace) -> tuple[str, ...]:
+    """The nodes ``--sensors`` adds: its set's, less the floor correlator on the seed's body
+    (``--algorithms seed`` or ``body=seed``): seed 000's was at the manufacturer and never ran
+    (§3.3); the world gives that body a defective one."""
+    from modules.variants import parse_algorithms
+
+    nodes = SENSOR_SETS[getattr(args, "sensors", "hamburg")]
+    if "correlator" in nodes and parse_algorithms(getattr(args, "algorithms", "ours"))["body"] == "seed":
+        return tuple(name for name in nodes if name != "correlator")
+    return nodes
 
 
 def incomplete_watch() -> Any:

@@ -64,7 +64,7 @@ class GyroReader:
         self.sub.undeclare()
 
 
-def test_the_default_ring_is_the_hamburg_eight_and_darmstadt_adds_the_gyro() -> None:
+def test_the_default_ring_is_the_hamburg_eight_and_darmstadt_adds_the_gyro_and_correlator() -> None:
     """``up``'s node selection with the robot's extension loaded (``up``'s own parser)."""
     from tokenring.cli.commands import up
     from tokenring.contract.protocol import load_protocol
@@ -81,12 +81,19 @@ def test_the_default_ring_is_the_hamburg_eight_and_darmstadt_adds_the_gyro() -> 
 
     assert ring() == HAMBURG
     assert ring("--sensors", "hamburg") == HAMBURG
-    assert ring("--sensors", "darmstadt") == [*HAMBURG, "gyro"]
-    assert ring("--nodes", "main,gyro", "--sensors", "darmstadt") == ["main", "gyro"]
+    assert ring("--sensors", "darmstadt") == [*HAMBURG, "gyro", "correlator"]
+    assert ring("--nodes", "main,gyro,correlator", "--sensors", "darmstadt") == ["main", "gyro", "correlator"]
+    # the seed's body has no working floor correlator (seed 000 §3.3): the set leaves it out
+    assert ring("--sensors", "darmstadt", "--algorithms", "seed") == [*HAMBURG, "gyro"]
+    assert ring("--sensors", "darmstadt", "--algorithms", "ours,body=seed") == [*HAMBURG, "gyro"]
+    assert ring("--sensors", "darmstadt", "--algorithms", "seed,body=ours")[-1] == "correlator"
+    assert ring("--nodes", "main,gyro", "--sensors", "darmstadt", "--algorithms", "seed") == ["main", "gyro"]
     from tokenring import UsageError
 
     with pytest.raises(UsageError, match="gyro"):
         ring("--sensors", "darmstadt", "--nodes", "main,motor")
+    with pytest.raises(UsageError, match="correlator"):
+        ring("--sensors", "darmstadt", "--nodes", "main,gyro")
 
 
 @pytest.mark.slow
