@@ -13,7 +13,8 @@ State: ``x, y`` (mm), ``ψ`` (rad, counter-clockwise from +X), and optionally
 
 Prediction from synchronised step increments with the seed's odometry model
 ``(x, y, ψ) += (cos(ψ+ω/2)·s, sin(ψ+ω/2)·s, ω)``, ``s`` the straight-line mean or the exact
-chord of the arc. Corrections: the compass heading (``ψ + offset``), and wall lines seen by the
+chord of the arc, optionally with the gyroscope's turn over the step (:meth:`PoseEKF.predict`).
+Corrections: the compass heading (``ψ + offset``), LOPS's distances, and wall lines seen by the
 sonars — a line measured in the robot frame as ``(α_r, d_r)`` is predicted from a known wall
 ``(α_w, d_w)`` as ``(α_w − ψ, d_w − x·cos α_w − y·sin α_w)`` (sign-normalised so ``d ≥ 0``).
 
@@ -279,14 +280,32 @@ class PoseEKF:
         T[i, m] = 1.0
         return T
 
-    def predict(self, dl: float, dr: float, dt_s: float = 0.0) -> None:
-        """Advance by ``dl``, ``dr`` half-steps of the left and right motor over ``dt_s`` seconds."""
+    def predict(
+        self, dl: float, dr: float, dt_s: float = 0.0, turn: tuple[float, float] | None = None
+    ) -> bool | None:
+        """Advance by ``dl``, ``dr`` half-steps of the left and right motor over ``dt_s`` seconds.
+
+        ``turn``: the gyroscope's turn over the same period (rad) and its σ, a correction of the
+        heading's *change*: the heading before the step is kept as a clone in the state for the
+        correction, then dropped (stochastic cloning), so the gyro's turn and the odometry's are
+        weighed with every correlation the step made (the glide factor's among them). Returns
+        whether the turn passed the gate (None: no turn given)."""
+        before = self.x
         new, A, Q = self.motion(dl, dr, dt_s)
         kind, previous = motion_kind(dl, dr), self.last_kind
         self.last_kind = kind
-        self.x = new
-        self.x[2] = wrap(self.x[2])
-        self.P = A @ self.P @ A.T + Q
+        n = len(new)
+        if turn is not None:
+            clone = np.zeros((n + 1, n))  # [the state after the step; the heading before it]
+            clone[:n] = A
+            clone[n, 2] = 1.0
+            model_turn = float(new[2] - before[2])
+            self.x = np.append(new, before[2])
+            self.P = clone @ self.P @ clone.T
+            self.P[:n, :n] += Q
+        else:
+            self.x = new
+            self.P = A @ self.P @ A.T + Q
         if kind == "straight" and previous != "straight" and "glide" in self.index:
             # the last turn's slip is fixed in the pose now: a straight move does not observe the
             # glide factor, and heading corrections on it (a bent compass) must not rewrite it —
@@ -294,6 +313,18 @@ class PoseEKF:
             i = self.index["glide"]
             self.P[i, :i] = self.P[:i, i] = 0.0
             self.P[i, i + 1 :] = self.P[i + 1 :, i] = 0.0
+        accepted = None
+        if turn is not None:
+            H = np.zeros((1, n + 1))
+            H[0, 2], H[0, n] = 1.0, -1.0
+            measured, sigma = turn
+            accepted = self.update(
+                "gyro", np.array([measured]), np.array([model_turn]), H, np.array([[sigma**2]]), angles=(0,)
+            )
+            self.x = self.x[:n]
+            self.P = self.P[:n, :n]
+        self.x[2] = wrap(self.x[2])
+        return accepted
 
     # ---------------------------------------------------------------------------------------
     # corrections

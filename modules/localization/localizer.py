@@ -62,6 +62,7 @@ from modules.localization.sync import (
     CATCH_UP_PERIODS,
     SENSORS,
     CompassSync,
+    GyroSync,
     NewestSync,
     OdometrySync,
     OdometryTrack,
@@ -93,6 +94,7 @@ SOURCE_CODES = {"none": 0, "odometry": 1, "ekf": 2}
 CHANNELS = {
     "odometry": "motor.data",
     "compass": "compass.data",
+    "gyro": "gyro.data",
     "sonar": "sonar.data",
     "battery": "charger.data",
 }
@@ -100,6 +102,7 @@ SEQ_FIELDS = {"compass": "sample", "sonar": "sweep"}
 VALUE_FIELDS = {
     "odometry": ("steps_left", "steps_right", "x_mm", "y_mm", "angle_cdeg", "state"),
     "compass": ("heading_cdeg", "state"),
+    "gyro": ("rate_urad_s", "angle_mrad", "raw", "state"),
     "sonar": ("distances",),
     "battery": ("electronics_mv", "motors_mv", "remaining_min", "state"),
 }
@@ -172,6 +175,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             "compass": CompassSync(
                 self.track, compass["mode"], compass["north_deg"], odometry_sync, compass["settle_ms"]
             ),
+            "gyro": GyroSync(self.track),
             "sonar": SonarSync(self.track, self.detector, self._travel_gauge(config)),
             "battery": NewestSync("battery"),
             "truth": TruthSync() if on_grid else NewestSync("truth"),
@@ -189,6 +193,8 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         self.ekf_params = ekf_params(config)
         self.ekf: PoseEKF | None = None
         self.dead_reckoning: tuple[float, float, float] | None = None
+        #: the heading by summing the gyroscope's turns from the start pose's (its G position)
+        self.gyro_heading: float | None = None
         if start_pose is None:
             start_pose = start_pose_of(config)
         if start_pose is not None:
@@ -287,6 +293,21 @@ class LocalizationCore(WallCorrections, TravelCorrections):
                     f"LOPS {key} = {distance:.0f} mm rejected by the gate (NIS {self.ekf.last_nis:.1f})",
                 )
 
+    def _gyro_turn(self, gyro: dict[str, Any] | None, dt_s: float) -> tuple[float, float] | None:
+        """The gyroscope's turn over the synchronisation period and its σ: the rate's noise and
+        drift over the period, the scale factor's error in proportion to the turn, and the summed
+        angle's millirad resolution at both ends."""
+        if gyro is None or dt_s <= 0:
+            return None
+        settings = self.config["filter"]["gyro"]
+        turn = float(gyro["turn"])
+        sigma = math.sqrt(
+            (math.radians(settings["sigma_deg_s"]) * dt_s) ** 2
+            + (settings["scale_rel"] * turn) ** 2
+            + 2 * (0.001 / math.sqrt(12.0)) ** 2
+        )
+        return turn, sigma
+
     def message(self, cls: str, stamp_ms: int, text: str) -> None:
         if self.error_log is not None:
             self.error_log.message(cls, stamp_ms, text)
@@ -367,6 +388,8 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             if kind == "set_pose":
                 pose = (payload["x"], payload["y"], payload["psi"])
                 self.dead_reckoning = pose
+                if self.gyro_heading is not None:
+                    self.gyro_heading = pose[2]
                 if self.ekf is None and self.config["filter"]["enabled"]:
                     self.ekf = PoseEKF(self.ekf_params, pose)
                 elif self.ekf is not None:
@@ -405,11 +428,18 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         if odo is not None and self.dead_reckoning is not None:
             x, y, psi = advance(self.dead_reckoning, s, omega)
             self.dead_reckoning = (x, y, wrap(psi))
+        gyro = data.get("gyro")
+        if gyro is not None and self.gyro_heading is None and self.dead_reckoning is not None:
+            self.gyro_heading = self.dead_reckoning[2] - float(gyro["turn"])  # its first turn was counted
+        if gyro is not None and self.gyro_heading is not None:
+            self.gyro_heading = wrap(self.gyro_heading + float(gyro["turn"]))
         wall_results: list[list[int]] = []
         wall_fix: dict[str, Any] | None = None
         if self.ekf is not None:
             if odo is not None and use.get("odometry"):
-                self.ekf.predict(odo["dl"], odo["dr"], dt_s)
+                turn = self._gyro_turn(gyro, dt_s) if use.get("gyro") else None
+                if self.ekf.predict(odo["dl"], odo["dr"], dt_s, turn) is False:
+                    self.message("W", stamp, f"gyroscope rejected by the gate (NIS {self.ekf.last_nis:.1f})")
             compass = data.get("compass")
             turn_rate = abs(math.degrees(omega)) / dt_s if odo is not None and dt_s > 0 else 0.0
             if compass is not None and use.get("compass"):
@@ -453,12 +483,14 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             x, y, psi = self.dead_reckoning
             store["O"] = {"x": x, "y": y, "psi": psi, "valid": [True, True, True]}
         if "compass" in data:
-            store["G"] = {
+            store["M"] = {
                 "x": 0.0,
                 "y": 0.0,
                 "psi": data["compass"]["heading"],
                 "valid": [False, False, True],
             }
+        if "gyro" in data and self.gyro_heading is not None:
+            store["G"] = {"x": 0.0, "y": 0.0, "psi": self.gyro_heading, "valid": [False, False, True]}
         truth = data.get("truth")
         if truth is not None:
             store["T"] = {
@@ -488,7 +520,15 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             }
         if wall_fix is not None:
             store["W"] = wall_fix  # one coordinate and the heading, the other invalid (seed §6.2.4)
-        letters = {"O": "odometry", "G": "compass", "T": "truth", "L": "lops", "K": None, "W": "sonar"}
+        letters = {
+            "O": "odometry",
+            "M": "compass",
+            "G": "gyro",
+            "T": "truth",
+            "L": "lops",
+            "K": None,
+            "W": "sonar",
+        }
         for letter, position in store.items():
             position["stamp_ms"] = stamp
             self.positions[letter] = position
@@ -524,6 +564,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             "compass_skipped": self.synchronisers["compass"].skipped,
             "compass_skipped_turning": self.compass_skipped_turning,
             "compass_skipped_settling": self.synchronisers["compass"].settling,
+            "gyro_skipped": self.synchronisers["gyro"].skipped,
             "travel": dict(self.travel),
             "ahead": dict(self.ahead),
             "grid_skipped": self.trigger.skipped,

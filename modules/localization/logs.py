@@ -13,18 +13,20 @@ source   meaning                       kind   meaning
 =======  ============================  =====  =====================================
 S        system                        R      raw data
 O        odometry (motor steps)        C      synchronised data
-G        compass (the gyro's slot)     P      position
+G        gyroscope                     P      position
 W        sonar and wall detection      S      synchronisation finished
 B        battery (ours)                T      program start time
 L        LOPS                          W      wall data (known walls, map walls)
 K        Kalman filter                 E      event (ours: pose set, walls loaded)
 C        floor correlator
+M        magnetic compass (ours)
 T        the world's truth (ours)
 =======  ============================  =====  =====================================
 
 ``T`` is the simulator's ground truth, for scoring and plots only, never fused. Logs of format
 version 1 carried it under ``L`` (LOPS's letter, while there was no LOPS): the reader takes their
-``L`` records as ``T``.
+``L`` records as ``T``. Logs of versions 1 and 2 carried the compass under ``G`` (the gyroscope's
+letter, while there was no gyroscope): the reader takes them as ``M``.
 
 An **error log** has a header map (``tokenring_log: errors``) and records ``[stamp_ms, class,
 text]`` with the seed's classes I (information), W (warning: no data lost), E (error: data
@@ -55,13 +57,16 @@ import msgpack
 
 from tokenring import UsageError
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 #: what a log of an older format version called a source that has another letter now
-RENAMED_SOURCES: dict[int, dict[str, str]] = {1: {"L": "T"}}
+RENAMED_SOURCES: dict[int, dict[str, str]] = {1: {"L": "T", "G": "M"}, 2: {"G": "M"}}
+#: the gyroscope's sample period (seed §3.2): the seed logged a rate as the angle of one sample
+GYRO_SAMPLE_S = 0.02048
 SOURCES = {
     "S": "system",
     "O": "odometry",
-    "G": "compass",
+    "G": "gyroscope",
+    "M": "compass",
     "W": "sonar",
     "B": "battery",
     "L": "LOPS",
@@ -79,7 +84,15 @@ KINDS = {
     "E": "event",
 }
 ERROR_CLASSES = {"I": "information", "W": "warning", "E": "error", "F": "fatal", "D": "debug"}
-SENSOR_SOURCE = {"odometry": "O", "compass": "G", "sonar": "W", "battery": "B", "truth": "T", "lops": "L"}
+SENSOR_SOURCE = {
+    "odometry": "O",
+    "compass": "M",
+    "gyro": "G",
+    "sonar": "W",
+    "battery": "B",
+    "truth": "T",
+    "lops": "L",
+}
 SOURCE_SENSOR = {v: k for k, v in SENSOR_SOURCE.items()}
 
 
@@ -314,13 +327,15 @@ _RAW = {"gen": _integer, "n": _integer}
 #: whose payload lacks it is damage, reported like unreadable bytes, never a crash later
 PAYLOADS: dict[tuple[str, str], Check] = {
     ("O", "R"): _fields(**_RAW, v=_odometry),
-    ("G", "R"): _fields(**_RAW, v=_fields(heading_cdeg=_number)),
+    ("M", "R"): _fields(**_RAW, v=_fields(heading_cdeg=_number)),
+    ("G", "R"): _fields(**_RAW, v=_fields(rate_urad_s=_number, angle_mrad=_number)),
     ("W", "R"): _fields(**_RAW, v=_fields(distances=_integers)),
     ("T", "R"): _fields(**_RAW, v=_fields(x=_number, y=_number, theta=_number)),
     ("L", "R"): _fields(**_RAW, v=_lops),
     ("B", "R"): _fields(**_RAW, v=_mapping),
     ("O", "C"): _fields(dl=_number, dr=_number, count=_integer),
-    ("G", "C"): _fields(heading=_number, count=_integer),
+    ("M", "C"): _fields(heading=_number, count=_integer),
+    ("G", "C"): _fields(rate=_number, turn=_number, count=_integer),
     ("W", "C"): lambda p: (
         _fields(distances_mm=_numbers_or_none, count=_integer)(p) and _walls(p.get("walls", []))
     ),
@@ -519,10 +534,14 @@ def _record_body(source: str, kind: str, p: Any) -> str:
         return f"{_num(v['steps_left'])} {_num(v['steps_right'])}"
     if source == "O" and kind == "C":
         return f"{_num(p['dl'])} {_num(p['dr'])} {p['count']}"
-    if source == "G" and kind == "R":
+    if source == "M" and kind == "R":
         return f"{_num(v['heading_cdeg'], 6)} {v.get('state', 1)}"
-    if source == "G" and kind == "C":
+    if source == "M" and kind == "C":
         return f"{_num(p['heading'], 15, 12)} {p['count']}"
+    if source == "G" and kind == "R":
+        return f"{float(v['rate_urad_s']) / 1e6:15.12f} {v.get('state', 2)}"
+    if source == "G" and kind == "C":
+        return f"{float(p['rate']):15.12f} {float(p['turn']):15.12f} {p['count']}"
     if source == "W" and kind == "R":
         return " ".join(_num(d * 10 if d != 255 else 0, 5) for d in v["distances"])
     if source == "W" and kind == "C":
@@ -710,9 +729,13 @@ def convert_seed_text(log: LogFile) -> str:
             body = f"{_seed_int(p['v']['steps_left'], 6)} {_seed_int(p['v']['steps_right'], 6)}"
         elif source == "O" and kind == "C":
             body = f"{_seed_int(p['dl'], 6)} {_seed_int(p['dr'], 6)} {p['count']}"
-        elif source == "G" and kind == "R":
+        elif source == "G" and kind == "R":  # the seed's "Drehrate": the angle of one sample
+            body = f"{float(p['v']['rate_urad_s']) / 1e6 * GYRO_SAMPLE_S:15.12f}"
+        elif source == "G" and kind == "C":  # ... and the angle of the period (figure B.3's sums)
+            body = f"{float(p['turn']):15.12f} {p['count']}"
+        elif source == "M" and kind == "R":  # ours: the compass's heading in the gyroscope's format
             body = f"{math.radians(float(p['v']['heading_cdeg']) / 100.0):15.12f}"
-        elif source == "G" and kind == "C":
+        elif source == "M" and kind == "C":
             body = f"{float(p['heading']):15.12f} {p['count']}"
         elif source == "L" and kind in "RC":
             body = _lops_text(p.get("v", p)) + (f" {p['count']}" if kind == "C" else "")
@@ -729,7 +752,7 @@ def convert_seed_text(log: LogFile) -> str:
 
 
 DATA_COLUMNS = [
-    "stamp_ms", "period_ms", "steps_left", "steps_right", "compass_rad",
+    "stamp_ms", "period_ms", "steps_left", "steps_right", "compass_rad", "gyro_rad_s",
     "truth_x", "truth_y", "truth_psi", "truth_valid",
     "odo_x", "odo_y", "odo_psi",
     "x", "y", "psi", "x_valid", "y_valid", "psi_valid",
@@ -750,8 +773,10 @@ def convert_csv(log: LogFile) -> tuple[str, str]:
     for stamp, source, kind, p in log.records:
         if kind == "C" and source == "O":
             row.update(steps_left=p["dl"], steps_right=p["dr"])
-        elif kind == "C" and source == "G":
+        elif kind == "C" and source == "M":
             row["compass_rad"] = p["heading"]
+        elif kind == "C" and source == "G":
+            row["gyro_rad_s"] = p["rate"]
         elif kind == "C" and source == "W":
             distances = p["distances_mm"]
         elif kind == "P" and source == "T":

@@ -11,7 +11,8 @@ record:
 sensor      synchronised as                                                         seed
 ==========  ======================================================================  ==========
 odometry    sum of the step increments since the last sync (from cumulative counts)  odometry
-compass     newest heading, or circular mean — each carried to the sync time         gyroscope
+compass     newest heading, or circular mean — each carried to the sync time         (ours)
+gyro        mean of the rates since the last sync, and the turn they make           gyroscope
 sonar       newest distance of every sensor, plus every wall fitted in the period    walls
 battery     newest voltages                                                          (ours)
 truth       newest ground-truth pose (the world's: reference only, never fused)     (ours)
@@ -43,11 +44,13 @@ from typing import Any
 from modules.localization.walls import to_frame, wrap
 
 #: sensors the synchronisation knows, in the order their synchronisers run
-SENSORS = ("odometry", "compass", "sonar", "battery", "truth", "lops")
+SENSORS = ("odometry", "compass", "gyro", "sonar", "battery", "truth", "lops")
 
 NO_CONTACT_CM = 255
 #: a compass sample this much newer than the newest step-counter sample is not judged yet
 UNKNOWN_MOTION_MS = 60
+#: a gyro sample this much older than the sync time is not carried to it (the gyro fell silent)
+GYRO_STALE_MS = 500
 #: the period trigger catches up at most this many grid times behind its sensor's newest sample;
 #: after a longer silence it jumps to the newest grid time (the grid times between are skipped)
 CATCH_UP_PERIODS = 10
@@ -503,6 +506,69 @@ class CompassSync:
             carried.append(heading)
         mean = math.atan2(sum(math.sin(h) for h in carried), sum(math.cos(h) for h in carried))
         return {"heading": wrap(mean), "count": len(usable), "stamp_ms": usable[-1].stamp_ms}
+
+
+class GyroSync:
+    """Table 3.1: the mean of the gyroscope's rates since the last synchronisation, with the
+    turn they make over the synchronisation period.
+
+    The gyro module sums ω·T over every raw value (``angle_mrad``) and the token carries only its
+    newest sample, about one in five. The difference of that sum between two synchronisation
+    times is the mean of *all* rates times the period, every sample counted. The sum at a sync
+    time is interpolated between the samples around it, or carried there from the nearest sample
+    along the odometry track (as the compass's heading is). A sample not RUNNING (calibrating,
+    no data) ends the sum: the next turn is measured from the next synchronisation on.
+    """
+
+    sensor = "gyro"
+    RUNNING = 2  # gyro_state RUNNING
+
+    def __init__(self, track: OdometryTrack) -> None:
+        self.track = track
+        self.recent: list[tuple[int, float]] = []  # (stamp, summed angle rad), oldest first
+        self.reference: tuple[int, float] | None = None  # the last sync's time and angle there
+        self.skipped = 0  # samples not RUNNING
+
+    def angle_at(self, sync_ms: int) -> float | None:
+        """The summed angle at ``sync_ms`` (rad); None without a recent enough sample."""
+        known = self.recent
+        if not known or sync_ms - known[-1][0] > GYRO_STALE_MS:
+            return None
+        after = next((i for i, (t, _) in enumerate(known) if t >= sync_ms), None)
+        if after is not None and after > 0:
+            (t0, a0), (t1, a1) = known[after - 1], known[after]
+            return a1 if t1 == t0 else a0 + (sync_ms - t0) / (t1 - t0) * (a1 - a0)
+        stamp, angle = known[-1] if after is None else known[0]
+        at_sync, at_sample = self.track.pose_at(sync_ms), self.track.pose_at(stamp)
+        if at_sync is not None and at_sample is not None:
+            angle += at_sync[2] - at_sample[2]
+        return angle
+
+    def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any] | None:
+        running = []
+        for sample in samples:
+            if int(sample.values.get("state", self.RUNNING)) != self.RUNNING:
+                self.recent.clear()
+                self.reference = None
+                self.skipped += 1
+                continue
+            running.append(sample)
+            self.recent.append((sample.stamp_ms, float(sample.values["angle_mrad"]) / 1000.0))
+        self.recent.sort()
+        angle = self.angle_at(sync_ms)
+        reference, self.reference = self.reference, None if angle is None else (sync_ms, angle)
+        before = [i for i, (t, _) in enumerate(self.recent) if t <= sync_ms]
+        if before:
+            del self.recent[: before[-1]]  # keep the last sample at or before the sync time
+        if angle is None or reference is None or sync_ms <= reference[0]:
+            return None
+        turn = angle - reference[1]
+        return {
+            "rate": turn / ((sync_ms - reference[0]) / 1000.0),
+            "turn": turn,
+            "count": len(running),
+            "stamp_ms": running[-1].stamp_ms if running else sync_ms,
+        }
 
 
 class SonarSync:

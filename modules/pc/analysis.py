@@ -6,7 +6,10 @@ Plots (one PNG each, like the seed's per-module gnuplot directories):
   walls of the configured room);
 - ``errors.png`` — each source's position and heading error against the truth over time;
 - ``steps.png`` — synchronised step increments of both motors (the seed's encoder module);
-- ``heading.png`` — compass heading, the filter's and dead reckoning's heading and the truth;
+- ``heading.png`` — compass heading, the filter's, dead reckoning's and the gyroscope's summed
+  heading and the truth;
+- ``gyro.png`` — the gyroscope's raw rates over time and its synchronised mean rates (the seed's
+  gyroscope module, table B.9 ``Gyroskop``); only for a log with the gyroscope's ``G R`` records;
 - ``sonar.png`` — sonar distances over time (no contact is not drawn);
 - ``lops.png`` — LOPS's three distances over time, one per receiver (the seed's LOPS module,
   table B.9 ``LOPS/Empfaenger n``; nothing heard is not drawn), and which packets gave no
@@ -36,7 +39,8 @@ from modules.localization.sync import SENSORS
 POSITION_NAMES = {
     "K": "filter (EKF)",
     "O": "dead reckoning",
-    "G": "compass",
+    "M": "compass",
+    "G": "gyroscope",
     "T": "truth",
     "W": "walls",
     "L": "LOPS",
@@ -44,7 +48,8 @@ POSITION_NAMES = {
 COLOURS = {
     "K": "tab:blue",
     "O": "tab:red",
-    "G": "tab:green",
+    "M": "tab:green",
+    "G": "tab:olive",
     "T": "black",
     "W": "tab:purple",
     "L": "tab:orange",
@@ -62,6 +67,9 @@ class Series:
         self.sync_stamps: list[int] = []
         self.steps: list[tuple[int, int, int]] = []
         self.compass_raw: list[tuple[int, float]] = []
+        #: the gyroscope's raw rates and its synchronised mean rates: (stamp, rad/s)
+        self.gyro_raw: list[tuple[int, float]] = []
+        self.gyro_sync: list[tuple[int, float]] = []
         self.sonar: list[tuple[int, list[int]]] = []
         #: LOPS's packets: (stamp, d1, d2, d3, has a position), NaN where nothing was heard
         self.lops: list[tuple[int, float, float, float, bool]] = []
@@ -82,6 +90,8 @@ class Series:
                 values = payload.get("v", {})
                 if sensor == "compass" and "heading_cdeg" in values:
                     self.compass_raw.append((stamp, values["heading_cdeg"] / 100.0))
+                elif sensor == "gyro" and "rate_urad_s" in values:
+                    self.gyro_raw.append((stamp, float(values["rate_urad_s"]) / 1e6))
                 elif sensor == "sonar" and "distances" in values:
                     self.sonar.append((stamp, list(values["distances"])))
                 elif sensor == "lops" and "counter" in values:
@@ -89,6 +99,8 @@ class Series:
                     self.lops.append((stamp, *d, values.get("x") is not None))
             elif kind == "C" and source == "O":
                 self.steps.append((stamp, payload["dl"], payload["dr"]))
+            elif kind == "C" and source == "G":
+                self.gyro_sync.append((stamp, float(payload["rate"])))
             elif kind == "C" and source == "W":
                 self.walls_fitted += len(payload.get("walls", []))
             elif source == "S" and kind == "S":
@@ -171,6 +183,13 @@ def summarise(series: Series) -> dict[str, Any]:
         "sync": sync,
         "walls_fitted": series.walls_fitted,
     }
+    if series.gyro_raw:  # at rest the seed's figure 10.2: one bit of noise around the zero point
+        rates = np.degrees(np.array([r for _, r in series.gyro_raw], dtype=float))
+        out["gyro"] = {
+            "samples": len(rates),
+            "mean_rate_deg_s": float(rates.mean()),
+            "sd_rate_deg_s": float(rates.std()),
+        }
     if series.lops:  # the seed's 404 of 2024 without a position, and its receivers' share heard
         lops = np.array(series.lops, dtype=float)
         out["lops"] = {
@@ -198,7 +217,16 @@ def _known_walls(log: LogFile) -> np.ndarray:
 
 
 #: the files :func:`plot_all` may write (those the log has data for)
-PLOTS = ("paths.png", "errors.png", "steps.png", "heading.png", "sonar.png", "lops.png", "time.png")
+PLOTS = (
+    "paths.png",
+    "errors.png",
+    "steps.png",
+    "heading.png",
+    "sonar.png",
+    "gyro.png",
+    "lops.png",
+    "time.png",
+)
 
 
 def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None = None) -> list[Path]:
@@ -295,10 +323,10 @@ def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None =
             c[:, 1],
             ".",
             ms=1,
-            color=COLOURS["G"],
+            color=COLOURS["M"],
             label="compass (raw, from north cw)",
         )
-    for source in ("T", "O", "K"):
+    for source in ("T", "O", "G", "K"):
         a = series.array(source)
         if len(a):
             ax.plot((a[:, 0] - t0) / 1000.0, np.degrees(a[:, 3]) % 360.0, lw=0.8, color=COLOURS[source],
@@ -322,6 +350,22 @@ def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None =
         ax.set_title("sonar distances (no contact not drawn)")
         ax.legend(loc="upper right", fontsize=7, ncol=4, markerscale=4)
         save(fig, "sonar.png")
+
+    # the gyroscope's rates
+    if series.gyro_raw:
+        fig, ax = plt.subplots(figsize=(9, 4))
+        raw = np.array(series.gyro_raw, dtype=float)
+        ax.plot((raw[:, 0] - t0) / 1000.0, np.degrees(raw[:, 1]), ".", ms=1.5, color=COLOURS["G"],
+                label="raw (the newest sample a token visit carried)")  # fmt: skip
+        if series.gyro_sync:
+            synced = np.array(series.gyro_sync, dtype=float)
+            ax.plot((synced[:, 0] - t0) / 1000.0, np.degrees(synced[:, 1]), lw=0.8, color="black",
+                    label="synchronised (mean of every rate since the last synchronisation)")  # fmt: skip
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("rate [°/s, ccw]")
+        ax.set_title("gyroscope: rates")
+        ax.legend(loc="best", fontsize=8)
+        save(fig, "gyro.png")
 
     # LOPS's receivers
     if series.lops:

@@ -29,7 +29,8 @@ POSE_TOPICS = {
     "T": "/robot/pose/true",
     "O": "/robot/pose/odometry",
     "K": "/robot/pose/filtered",
-    "G": "/robot/pose/compass",
+    "M": "/robot/pose/compass",
+    "G": "/robot/pose/gyroscope",
 }
 #: foxglove.LogLevel for the seed's error classes
 LOG_LEVELS = {"D": 1, "I": 2, "W": 3, "E": 4, "F": 5}

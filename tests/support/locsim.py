@@ -131,3 +131,26 @@ def truth_at_end(moves: list[tuple[str, float]], **kwargs) -> tuple[float, float
             last = s.values
     assert last is not None
     return last["x"], last["y"], last["theta"]
+
+
+def gyro_sample(stamp_ms: int, angle_rad: float, state: int = 2) -> Sample:
+    """A gyro.data sample as the token carries it: the summed angle in whole mrad (state 2:
+    RUNNING)."""
+    return Sample("gyro", stamp_ms, {"angle_mrad": round(angle_rad * 1000), "rate_urad_s": 0, "state": state})
+
+
+def with_gyro(samples: Iterator[Sample]) -> Iterator[Sample]:
+    """The drive's samples plus a gyro sample at every truth sample: the true summed turn,
+    whole mrad, as the gyro module publishes it."""
+    previous: float | None = None
+    summed = 0.0
+    for sample in samples:
+        yield sample
+        if sample.sensor != "truth":
+            continue
+        theta = sample.values["theta"]
+        if previous is None:
+            previous = theta
+        summed += math.remainder(theta - previous, 2 * math.pi)
+        previous = theta
+        yield gyro_sample(sample.stamp_ms, summed)

@@ -194,7 +194,7 @@ def test_localizer_on_the_ring_publishes_the_fused_pose_and_replays_identically(
     log_path = loc.log_path
     loc.close()
     log = read_log(log_path)
-    assert {r[1] for r in log.records if r[2] == "R"} >= {"O", "G", "W", "T"}
+    assert {r[1] for r in log.records if r[2] == "R"} >= {"O", "M", "W", "T"}
     result = replay(log_path, tmp_path / "replayed.trlog")
     assert result.identical, result.first_difference
     assert result.compared > 100

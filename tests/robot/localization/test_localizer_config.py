@@ -45,7 +45,7 @@ def test_partial_file_overrides_only_what_it_names() -> None:
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("sensors:\n  gyro: {use: true}\n", "x.yaml:2: sensors.gyro: unknown key (known here: odometry"),
+        ("sensors:\n  lidar: {use: true}\n", "x.yaml:2: sensors.lidar: unknown key (known here: odometry"),
         (
             "sensors:\n  compass: {use: maybe}\n",
             "x.yaml:2: sensors.compass.use: expected true or false, got 'maybe'",

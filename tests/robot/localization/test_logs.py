@@ -30,9 +30,9 @@ CONFIG = {"sensors": {}}
 def small_log(path: Path) -> None:
     with DataLog(path, "20040120-130535", CONFIG) as log:
         log.write(100, "O", "R", {"gen": 0, "n": 0, "v": {"steps_left": 10, "steps_right": 12}})
-        log.write(90, "G", "R", {"gen": 0, "n": 1, "v": {"heading_cdeg": 9000, "state": 1}, "seq": 4})
+        log.write(90, "M", "R", {"gen": 0, "n": 1, "v": {"heading_cdeg": 9000, "state": 1}, "seq": 4})
         log.write(100, "O", "C", {"gen": 0, "dl": 10, "dr": 12, "count": 1, "stamp_ms": 100})
-        log.write(100, "G", "C", {"gen": 0, "heading": 1.5707963, "count": 1, "stamp_ms": 90})
+        log.write(100, "M", "C", {"gen": 0, "heading": 1.5707963, "count": 1, "stamp_ms": 90})
         log.write(
             100, "W", "C", {"gen": 0, "distances_mm": [500, None], "walls": [], "count": 1, "stamp_ms": 95}
         )
@@ -150,7 +150,7 @@ def realistic_log(path: Path, records: int = 4441) -> None:
             if i % 3 == 0:
                 log.write(i * 10, "O", "C", {"dl": i * 0.5, "dr": i * 0.5, "count": 2})
             elif i % 3 == 1:
-                log.write(i * 10, "G", "R", {"gen": i, "n": 0, "v": {"heading_cdeg": i % 36000, "state": 1}})
+                log.write(i * 10, "M", "R", {"gen": i, "n": 0, "v": {"heading_cdeg": i % 36000, "state": 1}})
             else:
                 log.write(i * 10, "K", "P", {"x": float(i), "y": 2.0 * i, "psi": 0.1, "valid": [True] * 3})
 
@@ -261,3 +261,32 @@ def test_a_version_1_log_reads_its_truth_under_l_as_t(tmp_path: Path) -> None:
     with DataLog(tmp_path / "new.trlog", "20261206-120000", {}) as new:
         new.write(5, "L", "P", {"x": 1.0, "y": 2.0, "psi": 0.0, "valid": [True, True, False]})
     assert [r[1] for r in read_log(tmp_path / "new.trlog").records] == ["L"]
+
+
+@pytest.mark.parametrize("version", [1, 2])
+def test_an_older_log_reads_its_compass_under_g_as_m(tmp_path: Path, version: int) -> None:
+    """Formats 1 and 2 logged the compass under ``G`` (the gyroscope's letter while there was no
+    gyroscope); format 3 has it under ``M`` and ``G`` is the gyroscope's. An old log, written here
+    byte by byte with msgpack, reads back with its compass as ``M`` and its heading in the CSV's
+    compass column; a new log keeps ``G`` for the gyroscope."""
+    import msgpack
+
+    header = {"tokenring_log": "data", "version": version, "start": "20261201-120000", "config": {}}
+    records = [
+        [90, "G", "R", {"gen": 0, "n": 0, "v": {"heading_cdeg": 9000, "state": 1}}],
+        [100, "G", "C", {"gen": 0, "heading": 0.25, "count": 1}],
+        [100, "G", "P", {"x": 0.0, "y": 0.0, "psi": 0.25, "valid": [False, False, True]}],
+        [100, "S", "S", {"gen": 0, "period_ms": 100, "counts": {"compass": 1}}],
+    ]
+    path = tmp_path / "old.trlog"
+    path.write_bytes(b"".join(msgpack.packb(entry) for entry in [header, *records]))
+    log = read_log(path, expect="data")
+    assert [(r[1], r[2]) for r in log.records] == [("M", "R"), ("M", "C"), ("M", "P"), ("S", "S")]
+    data, _ = convert_csv(log)
+    row = dict(zip(*[line.split(",") for line in data.splitlines()[:2]], strict=True))
+    assert (row["compass_rad"], row["gyro_rad_s"]) == ("0.25", "")
+    with DataLog(tmp_path / "new.trlog", "20261207-120000", {}) as new:
+        new.write(5, "G", "C", {"gen": 0, "rate": 0.5, "turn": 0.05, "count": 5})
+    again = read_log(tmp_path / "new.trlog")
+    assert [r[1] for r in again.records] == ["G"]
+    assert convert_csv(again)[0].splitlines()[0].split(",")[5] == "gyro_rad_s"

@@ -23,9 +23,9 @@ GYRO_RAD = -0.000003835885  # figure B.3's gyro value
 NO_WALL = "0 0.00000 0.0 -1"
 
 
-def cdeg(rad: float) -> float:
-    """A heading in radians as the compass's centidegrees (the raw G R field)."""
-    return rad * 180.0 / math.pi * 100.0
+def urad_s(rad_per_sample: float) -> float:
+    """The seed's gyro value (the angle of one 20.48 ms sample) as gyro.data's rate in µrad/s."""
+    return rad_per_sample / 0.02048 * 1e6
 
 
 def position(x: float, y: float, psi: float, valid: tuple[bool, bool, bool]) -> dict:
@@ -36,18 +36,19 @@ def figure_log(path: Path) -> None:
     """Figure B.3's first two synchronisations in our record order (the positions, then S S),
     a third with a wall-derived fix (y unknown), and sonar raw and synchronised data."""
     with DataLog(path, "20040120-130535", CONFIG) as log:
-        log.write(3536, "G", "R", {"gen": 0, "n": 0, "v": {"heading_cdeg": cdeg(GYRO_RAD), "state": 1}})
+        gyro = {"rate_urad_s": urad_s(GYRO_RAD), "angle_mrad": 0, "state": 2}
+        log.write(3536, "G", "R", {"gen": 0, "n": 0, "v": gyro})
         log.write(3536, "G", "P", position(0.0, 0.0, -0.000004, (False, False, True)))
         log.write(3542, "O", "R", {"gen": 0, "n": 1, "v": {"steps_left": 0, "steps_right": 0}})
         log.write(3542, "O", "C", {"gen": 0, "dl": 0, "dr": 0, "count": 1})
-        log.write(3542, "G", "C", {"gen": 0, "heading": GYRO_RAD, "count": 1})
+        log.write(3542, "G", "C", {"gen": 0, "rate": GYRO_RAD / 0.006, "turn": GYRO_RAD, "count": 1})
         log.write(3542, "O", "P", position(0.0, 0.0, 0.0, (True, True, True)))
         log.write(3542, "K", "P", position(0.0, 0.0, 0.0, (True, True, True)) | {"walls": []})
         log.write(3542, "S", "S", {"gen": 0, "period_ms": 0, "counts": {"odometry": 1}})
         log.write(3572, "L", "P", position(0.0, 0.0, 0.0, (False, False, False)))
         log.write(3641, "W", "R", {"gen": 1, "n": 2, "v": {"distances": [100, 255, 50]}})
         log.write(3645, "W", "R", {"gen": 1, "n": 3, "v": {"distances": [100, 60, 50]}})
-        log.write(3647, "G", "C", {"gen": 1, "heading": -0.000019179423, "count": 5})
+        log.write(3647, "G", "C", {"gen": 1, "rate": -0.000182662, "turn": -0.000019179423, "count": 5})
         wall = {"alpha": 1.5708, "d": 1200.0, "kind": "side"}
         log.write(3647, "W", "C", {"gen": 1, "distances_mm": [1000, 600, None], "walls": [wall], "count": 2})
         log.write(3647, "K", "P", position(0.0, 0.0, 0.0, (True, True, True)) | {"walls": [[3, 1]]})
@@ -280,8 +281,10 @@ def test_any_readable_log_converts_to_one_line_per_record(
     with DataLog(path, "20261124-120000", {"robot": {"sonars": junk}}) as log:
         log.write(1, "O", "R", {"gen": 0, "n": 0, "v": {"steps_left": 2**40, "steps_right": -1}})
         log.write(1, "O", "C", {"gen": 0, "dl": a, "dr": b, "count": 1})
-        log.write(1, "G", "R", {"gen": 0, "n": 1, "v": {"heading_cdeg": c}})
-        log.write(1, "G", "C", {"gen": 0, "heading": d, "count": 1})
+        log.write(1, "G", "R", {"gen": 0, "n": 1, "v": {"rate_urad_s": c, "angle_mrad": d}})
+        log.write(1, "G", "C", {"gen": 0, "rate": c, "turn": d, "count": 1})
+        log.write(1, "M", "R", {"gen": 0, "n": 1, "v": {"heading_cdeg": c}})
+        log.write(1, "M", "C", {"gen": 0, "heading": d, "count": 1})
         log.write(1, "W", "R", {"gen": 0, "n": 2, "v": {"distances": sonar}})
         wall = {"alpha": e, "d": f, "assoc": junk}
         log.write(1, "W", "C", {"gen": 0, "distances_mm": synced, "walls": [wall] * 10, "count": 1})
@@ -293,6 +296,6 @@ def test_any_readable_log_converts_to_one_line_per_record(
     lines = text.split("\n")  # the seed's line ends only (splitlines would split at \x1e too)
     assert (
         lines.pop() == ""
-        and len(lines) == 11
-        and all(line[:2] in ("S ", "O ", "G ", "W ", "T ", "K ") for line in lines)
+        and len(lines) == 13
+        and all(line[:2] in ("S ", "O ", "G ", "M ", "W ", "T ", "K ") for line in lines)
     )

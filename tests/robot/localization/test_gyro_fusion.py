@@ -1,0 +1,137 @@
+"""The gyroscope in the Localizer: table 3.1's mean of the rates, and its turn in the EKF."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from modules.localization.config import load_config
+from modules.localization.ekf import EkfParams, PoseEKF
+from modules.localization.localizer import LocalizationCore
+from modules.localization.sync import GyroSync, OdometryParams, OdometryTrack
+from tests.support.locsim import drive, gyro_sample, square_moves, with_gyro
+
+CALIBRATING = 1
+
+
+def test_the_synchronised_turn_is_the_summed_angle_between_two_sync_times() -> None:
+    """A steady 0.2 rad/s, its samples every 100 ms but 37 ms off the sync grid: each
+    synchronisation's turn is 0.2 rad/s times the period, its rate 0.2 rad/s."""
+    sync = GyroSync(OdometryTrack(OdometryParams()))
+    rate = 0.2
+    results = []
+    for k in range(1, 8):
+        stamps = [100 * k - 163, 100 * k - 63]  # two samples before the sync time ...
+        samples = [gyro_sample(t, rate * t / 1000.0) for t in stamps if t >= 0]
+        samples.append(gyro_sample(100 * k + 37, rate * (100 * k + 37) / 1000.0))  # ... one after
+        results.append(sync.synchronise(samples, 100 * k))
+    assert results[0] is None  # the first sync only sets where the turn is counted from
+    for result in results[1:]:
+        assert result is not None
+        assert result["turn"] == pytest.approx(rate * 0.1, abs=0.0011)  # mrad resolution at both ends
+        assert result["rate"] == pytest.approx(rate, abs=0.011)
+    total = sum(r["turn"] for r in results[1:])
+    assert total == pytest.approx(rate * 0.6, abs=0.0011)  # the ends' rounding does not add up
+
+
+def test_a_sample_past_the_newest_is_carried_along_the_odometry_track() -> None:
+    """No gyro sample after the sync time: the newest is carried to it by the odometry's turn."""
+    track = OdometryTrack(OdometryParams())
+    track.append(0, (0.0, 0.0, 0.0))
+    track.append(200, (0.0, 0.0, 0.05))  # the odometry turned 0.05 rad in 200 ms
+    sync = GyroSync(track)
+    sync.synchronise([gyro_sample(0, 0.0)], 0)
+    result = sync.synchronise([gyro_sample(100, 0.020)], 200)
+    assert result is not None
+    # 20 mrad to the sample at 100 ms, then the track's 0.025 rad from 100 to 200 ms
+    assert result["turn"] == pytest.approx(0.020 + 0.025, abs=1e-9)
+
+
+def test_a_calibration_or_a_silence_ends_the_sum() -> None:
+    """While the gyro calibrates its sum starts again: no turn is measured across it; a gyro
+    silent for longer than half a second gives no turn at all."""
+    sync = GyroSync(OdometryTrack(OdometryParams()))
+    sync.synchronise([gyro_sample(0, 0.0)], 0)
+    assert sync.synchronise([gyro_sample(100, 0.5, CALIBRATING)], 100) is None
+    assert sync.skipped == 1
+    assert sync.synchronise([gyro_sample(200, 0.0)], 200) is None  # a new sum: counted from here
+    assert sync.synchronise([gyro_sample(300, 0.010)], 300)["turn"] == pytest.approx(0.010)
+    assert sync.synchronise([], 900) is None  # the newest sample is 600 ms old
+
+
+def test_the_filter_weighs_the_gyros_turn_against_the_odometrys_by_their_variances() -> None:
+    """Without optional states the heading's change is the odometry's turn and the gyro's,
+    weighted by the inverse of their variances (a one-dimensional fusion, worked out here)."""
+    params = EkfParams(estimate=())
+    ekf = PoseEKF(params, (0.0, 0.0, 0.3))
+    prior = ekf.P[2, 2]
+    dl, dr = -65.0, 65.0  # 10° by the nominal glide factor
+    odometry_turn = math.radians(10.0)
+    odometry_var = (params.rotation_noise_rel * odometry_turn) ** 2
+    gyro_turn, gyro_sigma = math.radians(9.7), math.radians(0.2)
+    accepted = ekf.predict(dl, dr, 0.1, (gyro_turn, gyro_sigma))
+    assert accepted is True
+    weight = odometry_var / (odometry_var + gyro_sigma**2)
+    expected = 0.3 + odometry_turn + weight * (gyro_turn - odometry_turn)
+    assert ekf.pose[2] == pytest.approx(expected, abs=1e-9)
+    increment_var = odometry_var * gyro_sigma**2 / (odometry_var + gyro_sigma**2)
+    assert ekf.P[2, 2] == pytest.approx(prior + increment_var, rel=1e-9)
+    assert ekf.gates.accepted["gyro"] == 1
+
+
+def test_a_turn_far_off_the_odometrys_is_gated_and_the_step_still_made() -> None:
+    ekf = PoseEKF(EkfParams(estimate=()), (0.0, 0.0, 0.0))
+    assert ekf.predict(-65.0, 65.0, 0.1, (math.radians(60.0), math.radians(0.1))) is False
+    assert ekf.pose[2] == pytest.approx(math.radians(10.0))
+    assert ekf.gates.rejected["gyro"] == 1 and len(ekf.x) == 3
+
+
+def heading_error_deg(position: dict, truth: dict) -> float:
+    return abs(math.degrees(math.remainder(position["psi"] - truth["theta"], 2 * math.pi)))
+
+
+def odometry_and_gyro_core(use_gyro: bool) -> LocalizationCore:
+    """The seed's early filter's sensors: odometry and gyro (compass and walls not fused)."""
+    return LocalizationCore(
+        load_config(
+            {
+                "sensors": {
+                    "compass": {"filter": False},
+                    "sonar": {"filter": False},
+                    "gyro": {"use": use_gyro},
+                },
+            }
+        )
+    )
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_lap_with_the_gyro_keeps_the_heading_the_turns_glide_loses(seed: int) -> None:
+    """One lap of the 3 m square, each turn's glide drawn ±10 %: dead reckoning ends degrees
+    off; with the gyro's turns the filter's heading ends within its resolution and scale error
+    (the filter without the gyro, ends[False][0], is what the gyro improves on: reported)."""
+    cores = {use: odometry_and_gyro_core(use) for use in (False, True)}
+    ends = {}
+    for use, core in cores.items():
+        truth = None
+        for sample in with_gyro(drive(square_moves(1, 3000), seed=seed)):
+            truth = sample.values if sample.sensor == "truth" else truth
+            core.feed(sample)
+            core.maybe_sync()
+        assert truth is not None
+        ends[use] = (
+            heading_error_deg(core.positions["K"], truth),
+            heading_error_deg(core.positions["O"], truth),
+        )
+    dead_reckoning = ends[False][1]
+    with_gyro_error = ends[True][0]
+    assert dead_reckoning > 1.0, "this seed's turns did not slip: nothing to judge"
+    assert with_gyro_error < dead_reckoning / 4, ends
+    assert with_gyro_error < 1.0, ends
+    core = cores[True]
+    assert core.report()["gates"]["accepted"]["gyro"] > 100
+    g = core.positions["G"]  # the gyro's own summed heading, the store's G position
+    assert g["valid"] == [False, False, True]
+    assert np.isfinite(g["psi"])
