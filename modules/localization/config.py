@@ -32,6 +32,7 @@ DEFAULTS: dict[str, Any] = {
         "odometry": {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": True, "period_ms": 0},
         "compass":  {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": True, "period_ms": 0},
         "gyro":     {"use": False, "log_raw": True, "log_sync": True, "log_position": True, "filter": True, "period_ms": 0},
+        "correlator": {"use": False, "log_raw": True, "log_sync": True, "log_position": False, "filter": False, "period_ms": 0},
         "sonar":    {"use": True, "log_raw": True, "log_sync": True, "log_position": False, "filter": True, "period_ms": 0},
         "battery":  {"use": True, "log_raw": True, "log_sync": True, "log_position": False, "filter": False, "period_ms": 0},
         "truth":    {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": False, "period_ms": 0},
@@ -45,6 +46,7 @@ DEFAULTS: dict[str, Any] = {
         "initial_pose": "world",
         "compass": {"mode": "newest", "sigma_deg": 1.5, "north_deg": 90.0, "max_turn_rate_deg_s": 2.0, "settle_ms": 0},
         "gyro": {"sigma_deg_s": 0.05, "scale_rel": 0.01},
+        "correlator": {"sigma_mm": 1.0, "sigma_rel": 0.03, "max_turn_rate_deg_s": 2.0},
         "travel": {"enabled": False, "max_incidence_deg": 8.0, "max_range_mm": 800.0, "model_sigma": 0.005, "unknown_wall": True, "unknown_wall_bound": False, "unknown_wall_bound_sigma": 0.0, "unknown_wall_max_sigma": 1.0, "wait_for_map": False, "check_at": "end"},
         "noise": {
             "distance_rel": 0.01,
@@ -136,10 +138,11 @@ def default_config_path() -> Path:
 
 
 #: what each of ``tokenring up --sensors``'s sets turns on in the Localizer, laid under the
-#: configuration given (whose keys win): the Darmstadt robot's gyroscope and LOPS
+#: configuration given (whose keys win): the Darmstadt robot's gyroscope, floor correlator (logged,
+#: not fused: the seed never ran one) and LOPS
 SENSOR_SET_CONFIG: dict[str, dict[str, Any]] = {
     "hamburg": {},
-    "darmstadt": {"sensors": {"gyro": {"use": True}, "lops": {"use": True}}},
+    "darmstadt": {"sensors": {"gyro": {"use": True}, "correlator": {"use": True}, "lops": {"use": True}}},
 }
 
 
@@ -354,9 +357,13 @@ class _Checker:
                 ("sensors", "lops", "filter"),
                 "the filter takes LOPS's distances to its receivers: give lops.receivers (up --sensors darmstadt does)",
             )
-        for key in ("sigma_deg_s", "scale_rel"):
-            if c["filter"]["gyro"][key] <= 0:
-                raise self.fail(("filter", "gyro", key), "must be positive")
+        for sensor, keys in (
+            ("gyro", ("sigma_deg_s", "scale_rel")),
+            ("correlator", ("sigma_mm", "sigma_rel")),
+        ):
+            for key in keys:
+                if c["filter"][sensor][key] <= 0:
+                    raise self.fail(("filter", sensor, key), "must be positive")
         if c["lops"]["sigma_mm"] <= 0:
             raise self.fail(("lops", "sigma_mm"), "must be positive")
         p = c["filter"]["gate_probability"]

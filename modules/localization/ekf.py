@@ -13,7 +13,8 @@ State: ``x, y`` (mm), ``ψ`` (rad, counter-clockwise from +X), and optionally
 
 Prediction from synchronised step increments with the seed's odometry model
 ``(x, y, ψ) += (cos(ψ+ω/2)·s, sin(ψ+ω/2)·s, ω)``, ``s`` the straight-line mean or the exact
-chord of the arc, optionally with the gyroscope's turn over the step (:meth:`PoseEKF.predict`).
+chord of the arc, optionally with the gyroscope's turn and the floor correlator's distance over
+the step (:meth:`PoseEKF.predict`).
 Corrections: the compass heading (``ψ + offset``), LOPS's distances, and wall lines seen by the
 sonars — a line measured in the robot frame as ``(α_r, d_r)`` is predicted from a known wall
 ``(α_w, d_w)`` as ``(α_w − ψ, d_w − x·cos α_w − y·sin α_w)`` (sign-normalised so ``d ≥ 0``).
@@ -281,26 +282,32 @@ class PoseEKF:
         return T
 
     def predict(
-        self, dl: float, dr: float, dt_s: float = 0.0, turn: tuple[float, float] | None = None
-    ) -> bool | None:
+        self,
+        dl: float,
+        dr: float,
+        dt_s: float = 0.0,
+        turn: tuple[float, float] | None = None,
+        travel: tuple[float, float] | None = None,
+    ) -> dict[str, bool]:
         """Advance by ``dl``, ``dr`` half-steps of the left and right motor over ``dt_s`` seconds.
 
-        ``turn``: the gyroscope's turn over the same period (rad) and its σ, a correction of the
-        heading's *change*: the heading before the step is kept as a clone in the state for the
-        correction, then dropped (stochastic cloning), so the gyro's turn and the odometry's are
-        weighed with every correlation the step made (the glide factor's among them). Returns
-        whether the turn passed the gate (None: no turn given)."""
+        ``turn``: the gyroscope's turn over the same period (rad) and its σ; ``travel``: the floor
+        correlator's distance along the robot's axis (mm) and its σ. Each corrects the step's
+        *change* of the pose: the pose before the step is kept as a clone in the state for the
+        corrections, then dropped (stochastic cloning), so they are weighed against the odometry
+        with every correlation the step made (the glide factor's and the step scale's among them).
+        Returns, per correction given (``gyro``, ``correlator``), whether it passed its gate."""
         before = self.x
         new, A, Q = self.motion(dl, dr, dt_s)
         kind, previous = motion_kind(dl, dr), self.last_kind
         self.last_kind = kind
         n = len(new)
-        if turn is not None:
-            clone = np.zeros((n + 1, n))  # [the state after the step; the heading before it]
+        cloned = turn is not None or travel is not None
+        if cloned:
+            clone = np.zeros((n + 3, n))  # [the state after the step; x, y, ψ before it]
             clone[:n] = A
-            clone[n, 2] = 1.0
-            model_turn = float(new[2] - before[2])
-            self.x = np.append(new, before[2])
+            clone[n, 0] = clone[n + 1, 1] = clone[n + 2, 2] = 1.0
+            self.x = np.append(new, before[:3])
             self.P = clone @ self.P @ clone.T
             self.P[:n, :n] += Q
         else:
@@ -313,14 +320,27 @@ class PoseEKF:
             i = self.index["glide"]
             self.P[i, :i] = self.P[:i, i] = 0.0
             self.P[i, i + 1 :] = self.P[i + 1 :, i] = 0.0
-        accepted = None
+        accepted: dict[str, bool] = {}
         if turn is not None:
-            H = np.zeros((1, n + 1))
-            H[0, 2], H[0, n] = 1.0, -1.0
-            measured, sigma = turn
-            accepted = self.update(
-                "gyro", np.array([measured]), np.array([model_turn]), H, np.array([[sigma**2]]), angles=(0,)
+            H = np.zeros((1, n + 3))
+            H[0, 2], H[0, n + 2] = 1.0, -1.0
+            model = np.array([self.x[2] - self.x[n + 2]])
+            accepted["gyro"] = self.update(
+                "gyro", np.array([turn[0]]), model, H, np.array([[turn[1] ** 2]]), angles=(0,)
             )
+        if travel is not None:
+            dx, dy = self.x[0] - self.x[n], self.x[1] - self.x[n + 1]
+            mid = self.x[n + 2] + wrap(self.x[2] - self.x[n + 2]) / 2.0
+            c, sn = math.cos(mid), math.sin(mid)
+            across = 0.5 * (-dx * sn + dy * c)
+            H = np.zeros((1, n + 3))
+            H[0, 0], H[0, 1], H[0, n], H[0, n + 1] = c, sn, -c, -sn
+            H[0, 2] = H[0, n + 2] = across
+            model = np.array([dx * c + dy * sn])
+            accepted["correlator"] = self.update(
+                "correlator", np.array([travel[0]]), model, H, np.array([[travel[1] ** 2]])
+            )
+        if cloned:
             self.x = self.x[:n]
             self.P = self.P[:n, :n]
         self.x[2] = wrap(self.x[2])

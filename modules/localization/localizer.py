@@ -62,6 +62,7 @@ from modules.localization.sync import (
     CATCH_UP_PERIODS,
     SENSORS,
     CompassSync,
+    CorrelatorSync,
     GyroSync,
     NewestSync,
     OdometrySync,
@@ -95,6 +96,7 @@ CHANNELS = {
     "odometry": "motor.data",
     "compass": "compass.data",
     "gyro": "gyro.data",
+    "correlator": "correlator.data",
     "sonar": "sonar.data",
     "battery": "charger.data",
 }
@@ -103,6 +105,7 @@ VALUE_FIELDS = {
     "odometry": ("steps_left", "steps_right", "x_mm", "y_mm", "angle_cdeg", "state"),
     "compass": ("heading_cdeg", "state"),
     "gyro": ("rate_urad_s", "angle_mrad", "raw", "state"),
+    "correlator": ("forward_um", "increment_um", "state"),
     "sonar": ("distances",),
     "battery": ("electronics_mv", "motors_mv", "remaining_min", "state"),
 }
@@ -176,6 +179,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
                 self.track, compass["mode"], compass["north_deg"], odometry_sync, compass["settle_ms"]
             ),
             "gyro": GyroSync(self.track),
+            "correlator": CorrelatorSync(self.track),
             "sonar": SonarSync(self.track, self.detector, self._travel_gauge(config)),
             "battery": NewestSync("battery"),
             "truth": TruthSync() if on_grid else NewestSync("truth"),
@@ -208,6 +212,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         self.walls_past_end = 0  # known walls passed over: the fit's sensors beyond their ends
         self.wall_corrected_at: dict[int, tuple[float, float, float]] = {}
         self.compass_skipped_turning = 0
+        self.correlator_skipped_turning = 0
         #: the walls.ahead ranges: used, or why not
         self.ahead = dict.fromkeys(
             ("used", "rejected", "repeated", "ambiguous", "not_square", "unexpected", "unconfirmed"), 0
@@ -307,6 +312,21 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             + 2 * (0.001 / math.sqrt(12.0)) ** 2
         )
         return turn, sigma
+
+    def _correlator_travel(
+        self, correlator: dict[str, Any] | None, omega: float, dt_s: float
+    ) -> tuple[float, float] | None:
+        """The floor correlator's distance over the synchronisation period and its σ; None while
+        the robot turns faster than the correlator can follow (its increments are too large then,
+        and on the spot bogus: seed §3.3)."""
+        if correlator is None or dt_s <= 0:
+            return None
+        settings = self.config["filter"]["correlator"]
+        if abs(math.degrees(omega)) / dt_s > settings["max_turn_rate_deg_s"]:
+            self.correlator_skipped_turning += 1
+            return None
+        distance = float(correlator["distance"])
+        return distance, math.hypot(settings["sigma_mm"], settings["sigma_rel"] * distance)
 
     def message(self, cls: str, stamp_ms: int, text: str) -> None:
         if self.error_log is not None:
@@ -438,8 +458,16 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         if self.ekf is not None:
             if odo is not None and use.get("odometry"):
                 turn = self._gyro_turn(gyro, dt_s) if use.get("gyro") else None
-                if self.ekf.predict(odo["dl"], odo["dr"], dt_s, turn) is False:
-                    self.message("W", stamp, f"gyroscope rejected by the gate (NIS {self.ekf.last_nis:.1f})")
+                travel = (
+                    self._correlator_travel(data.get("correlator"), omega, dt_s)
+                    if use.get("correlator")
+                    else None
+                )
+                for sensor, accepted in self.ekf.predict(odo["dl"], odo["dr"], dt_s, turn, travel).items():
+                    if not accepted:
+                        self.message(
+                            "W", stamp, f"{sensor} rejected by the gate (NIS {self.ekf.last_nis:.1f})"
+                        )
             compass = data.get("compass")
             turn_rate = abs(math.degrees(omega)) / dt_s if odo is not None and dt_s > 0 else 0.0
             if compass is not None and use.get("compass"):
@@ -565,6 +593,8 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             "compass_skipped_turning": self.compass_skipped_turning,
             "compass_skipped_settling": self.synchronisers["compass"].settling,
             "gyro_skipped": self.synchronisers["gyro"].skipped,
+            "correlator_skipped": self.synchronisers["correlator"].skipped,
+            "correlator_skipped_turning": self.correlator_skipped_turning,
             "travel": dict(self.travel),
             "ahead": dict(self.ahead),
             "grid_skipped": self.trigger.skipped,

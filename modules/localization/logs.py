@@ -88,6 +88,7 @@ SENSOR_SOURCE = {
     "odometry": "O",
     "compass": "M",
     "gyro": "G",
+    "correlator": "C",
     "sonar": "W",
     "battery": "B",
     "truth": "T",
@@ -329,6 +330,7 @@ PAYLOADS: dict[tuple[str, str], Check] = {
     ("O", "R"): _fields(**_RAW, v=_odometry),
     ("M", "R"): _fields(**_RAW, v=_fields(heading_cdeg=_number)),
     ("G", "R"): _fields(**_RAW, v=_fields(rate_urad_s=_number, angle_mrad=_number)),
+    ("C", "R"): _fields(**_RAW, v=_fields(forward_um=_number, increment_um=_number)),
     ("W", "R"): _fields(**_RAW, v=_fields(distances=_integers)),
     ("T", "R"): _fields(**_RAW, v=_fields(x=_number, y=_number, theta=_number)),
     ("L", "R"): _fields(**_RAW, v=_lops),
@@ -336,6 +338,7 @@ PAYLOADS: dict[tuple[str, str], Check] = {
     ("O", "C"): _fields(dl=_number, dr=_number, count=_integer),
     ("M", "C"): _fields(heading=_number, count=_integer),
     ("G", "C"): _fields(rate=_number, turn=_number, count=_integer),
+    ("C", "C"): _fields(distance=_number, speed=_number, count=_integer),
     ("W", "C"): lambda p: (
         _fields(distances_mm=_numbers_or_none, count=_integer)(p) and _walls(p.get("walls", []))
     ),
@@ -542,6 +545,12 @@ def _record_body(source: str, kind: str, p: Any) -> str:
         return f"{float(v['rate_urad_s']) / 1e6:15.12f} {v.get('state', 2)}"
     if source == "G" and kind == "C":
         return f"{float(p['rate']):15.12f} {float(p['turn']):15.12f} {p['count']}"
+    if source == "C" and kind == "R":
+        return (
+            f"{_num(float(v['increment_um']) / 1000.0, 8, 3)} {_num(float(v['forward_um']) / 1000.0, 10, 3)}"
+        )
+    if source == "C" and kind == "C":
+        return f"{_num(p['distance'], 8, 3)} {p['count']}"
     if source == "W" and kind == "R":
         return " ".join(_num(d * 10 if d != 255 else 0, 5) for d in v["distances"])
     if source == "W" and kind == "C":
@@ -733,6 +742,10 @@ def convert_seed_text(log: LogFile) -> str:
             body = f"{float(p['v']['rate_urad_s']) / 1e6 * GYRO_SAMPLE_S:15.12f}"
         elif source == "G" and kind == "C":  # ... and the angle of the period (figure B.3's sums)
             body = f"{float(p['turn']):15.12f} {p['count']}"
+        elif source == "C" and kind == "R":  # the increment (mm): table B.6 names no format
+            body = f"{float(p['v']['increment_um']) / 1000.0:8.3f}"
+        elif source == "C" and kind == "C":  # ... the sum of the increments (table 3.1)
+            body = f"{float(p['distance']):8.3f} {p['count']}"
         elif source == "M" and kind == "R":  # ours: the compass's heading in the gyroscope's format
             body = f"{math.radians(float(p['v']['heading_cdeg']) / 100.0):15.12f}"
         elif source == "M" and kind == "C":

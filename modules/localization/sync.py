@@ -13,6 +13,7 @@ sensor      synchronised as                                                     
 odometry    sum of the step increments since the last sync (from cumulative counts)  odometry
 compass     newest heading, or circular mean — each carried to the sync time         (ours)
 gyro        mean of the rates since the last sync, and the turn they make           gyroscope
+correlator  sum of the translation increments since the last sync                  correlator
 sonar       newest distance of every sensor, plus every wall fitted in the period    walls
 battery     newest voltages                                                          (ours)
 truth       newest ground-truth pose (the world's: reference only, never fused)     (ours)
@@ -44,13 +45,13 @@ from typing import Any
 from modules.localization.walls import to_frame, wrap
 
 #: sensors the synchronisation knows, in the order their synchronisers run
-SENSORS = ("odometry", "compass", "gyro", "sonar", "battery", "truth", "lops")
+SENSORS = ("odometry", "compass", "gyro", "correlator", "sonar", "battery", "truth", "lops")
 
 NO_CONTACT_CM = 255
 #: a compass sample this much newer than the newest step-counter sample is not judged yet
 UNKNOWN_MOTION_MS = 60
-#: a gyro sample this much older than the sync time is not carried to it (the gyro fell silent)
-GYRO_STALE_MS = 500
+#: a summed sensor's sample this much older than the sync time is not carried to it (it fell silent)
+SUM_STALE_MS = 500
 #: the period trigger catches up at most this many grid times behind its sensor's newest sample;
 #: after a longer silence it jumps to the newest grid time (the grid times between are skipped)
 CATCH_UP_PERIODS = 10
@@ -508,67 +509,115 @@ class CompassSync:
         return {"heading": wrap(mean), "count": len(usable), "stamp_ms": usable[-1].stamp_ms}
 
 
-class GyroSync:
-    """Table 3.1: the mean of the gyroscope's rates since the last synchronisation, with the
-    turn they make over the synchronisation period.
+class SummedSync:
+    """A sensor that publishes a running sum (the gyro's angle, the correlator's translation),
+    synchronised as table 3.1 asks — the mean of the rates, the sum of the increments — from the
+    sum's difference between two synchronisation times.
 
-    The gyro module sums ω·T over every raw value (``angle_mrad``) and the token carries only its
-    newest sample, about one in five. The difference of that sum between two synchronisation
-    times is the mean of *all* rates times the period, every sample counted. The sum at a sync
-    time is interpolated between the samples around it, or carried there from the nearest sample
-    along the odometry track (as the compass's heading is). A sample not RUNNING (calibrating,
-    no data) ends the sum: the next turn is measured from the next synchronisation on.
+    The token carries only the newest sample of such a sensor, so a difference of the sums counts
+    every sample the sensor took, carried or not. The sum at a sync time is interpolated between
+    the samples around it, or carried there from the nearest sample by what the odometry track
+    did in between (:meth:`track_change`). A sample not in the running state ends the sum (a
+    calibration, a reset): the next amount is counted from the next synchronisation on; so does
+    a sensor silent for :data:`SUM_STALE_MS`.
     """
 
-    sensor = "gyro"
-    RUNNING = 2  # gyro_state RUNNING
+    sensor = ""
+    field = ""  # the running sum's field and its scale to the record's unit
+    scale = 1.0
+    running_state = 0
+    amount_key, rate_key = "amount", "rate"  # the record's names for the amount and amount per s
 
     def __init__(self, track: OdometryTrack) -> None:
         self.track = track
-        self.recent: list[tuple[int, float]] = []  # (stamp, summed angle rad), oldest first
-        self.reference: tuple[int, float] | None = None  # the last sync's time and angle there
-        self.skipped = 0  # samples not RUNNING
+        self.recent: list[tuple[int, float]] = []  # (stamp, sum), oldest first
+        self.reference: tuple[int, float] | None = None  # the last sync's time and sum there
+        self.skipped = 0  # samples not in the running state
 
-    def angle_at(self, sync_ms: int) -> float | None:
-        """The summed angle at ``sync_ms`` (rad); None without a recent enough sample."""
+    def track_change(self, older: tuple[float, float, float], newer: tuple[float, float, float]) -> float:
+        """What the sum would have grown by between two odometry-track poses."""
+        raise NotImplementedError
+
+    def sum_at(self, sync_ms: int) -> float | None:
+        """The sum at ``sync_ms``; None without a recent enough sample."""
         known = self.recent
-        if not known or sync_ms - known[-1][0] > GYRO_STALE_MS:
+        if not known or sync_ms - known[-1][0] > SUM_STALE_MS:
             return None
         after = next((i for i, (t, _) in enumerate(known) if t >= sync_ms), None)
         if after is not None and after > 0:
             (t0, a0), (t1, a1) = known[after - 1], known[after]
             return a1 if t1 == t0 else a0 + (sync_ms - t0) / (t1 - t0) * (a1 - a0)
-        stamp, angle = known[-1] if after is None else known[0]
+        stamp, value = known[-1] if after is None else known[0]
         at_sync, at_sample = self.track.pose_at(sync_ms), self.track.pose_at(stamp)
         if at_sync is not None and at_sample is not None:
-            angle += at_sync[2] - at_sample[2]
-        return angle
+            value += self.track_change(at_sample, at_sync)
+        return value
 
     def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any] | None:
         running = []
         for sample in samples:
-            if int(sample.values.get("state", self.RUNNING)) != self.RUNNING:
+            if int(sample.values.get("state", self.running_state)) != self.running_state:
                 self.recent.clear()
                 self.reference = None
                 self.skipped += 1
                 continue
             running.append(sample)
-            self.recent.append((sample.stamp_ms, float(sample.values["angle_mrad"]) / 1000.0))
+            self.recent.append((sample.stamp_ms, float(sample.values[self.field]) * self.scale))
         self.recent.sort()
-        angle = self.angle_at(sync_ms)
-        reference, self.reference = self.reference, None if angle is None else (sync_ms, angle)
+        value = self.sum_at(sync_ms)
+        reference, self.reference = self.reference, None if value is None else (sync_ms, value)
         before = [i for i, (t, _) in enumerate(self.recent) if t <= sync_ms]
         if before:
             del self.recent[: before[-1]]  # keep the last sample at or before the sync time
-        if angle is None or reference is None or sync_ms <= reference[0]:
+        if value is None or reference is None or sync_ms <= reference[0]:
             return None
-        turn = angle - reference[1]
+        amount = value - reference[1]
         return {
-            "rate": turn / ((sync_ms - reference[0]) / 1000.0),
-            "turn": turn,
+            self.rate_key: amount / ((sync_ms - reference[0]) / 1000.0),
+            self.amount_key: amount,
             "count": len(running),
             "stamp_ms": running[-1].stamp_ms if running else sync_ms,
         }
+
+
+class GyroSync(SummedSync):
+    """Table 3.1's mean of the gyroscope's rates: ``rate`` (rad/s) and the ``turn`` (rad) it
+    makes, from the gyro module's summed angle (``angle_mrad``: ω·T of every raw value)."""
+
+    sensor = "gyro"
+    field, scale = "angle_mrad", 0.001
+    running_state = 2  # gyro_state RUNNING
+    amount_key, rate_key = "turn", "rate"
+
+    def track_change(self, older: tuple[float, float, float], newer: tuple[float, float, float]) -> float:
+        return newer[2] - older[2]
+
+
+class CorrelatorSync(SummedSync):
+    """Table 3.1's sum of the floor correlator's translation increments: ``distance`` (mm) and
+    ``speed`` (mm/s), from the correlator module's running sum (``forward_um``)."""
+
+    sensor = "correlator"
+    field, scale = "forward_um", 0.001
+    running_state = 1  # correlator_state RUNNING
+    amount_key, rate_key = "distance", "speed"
+
+    def track_change(self, older: tuple[float, float, float], newer: tuple[float, float, float]) -> float:
+        mid = (older[2] + newer[2]) / 2.0  # the displacement along the mean heading: forward > 0
+        return (newer[0] - older[0]) * math.cos(mid) + (newer[1] - older[1]) * math.sin(mid)
+
+    def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any] | None:
+        # forward_um wraps as an i32: unwrap against the previous sample before summing
+        unwrapped = []
+        for sample in samples:
+            raw = int(sample.values.get(self.field, 0))
+            if self.recent:
+                last = round(self.recent[-1][1] / self.scale)
+                raw = last + _wrap_i32(raw - last)
+            unwrapped.append(
+                Sample(sample.sensor, sample.stamp_ms, {**sample.values, self.field: raw}, sample.seq)
+            )
+        return super().synchronise(unwrapped, sync_ms)
 
 
 class SonarSync:

@@ -1,4 +1,5 @@
-"""The gyroscope in the Localizer: table 3.1's mean of the rates, and its turn in the EKF."""
+"""The summed sensors in the Localizer: table 3.1's mean of the gyroscope's rates and sum of the
+floor correlator's increments, and the turn and distance they measure in the EKF."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import pytest
 from modules.localization.config import load_config
 from modules.localization.ekf import EkfParams, PoseEKF
 from modules.localization.localizer import LocalizationCore
-from modules.localization.sync import GyroSync, OdometryParams, OdometryTrack
+from modules.localization.sync import CorrelatorSync, GyroSync, OdometryParams, OdometryTrack, Sample
 from tests.support.locsim import drive, gyro_sample, square_moves, with_gyro
 
 CALIBRATING = 1
@@ -71,8 +72,7 @@ def test_the_filter_weighs_the_gyros_turn_against_the_odometrys_by_their_varianc
     odometry_turn = math.radians(10.0)
     odometry_var = (params.rotation_noise_rel * odometry_turn) ** 2
     gyro_turn, gyro_sigma = math.radians(9.7), math.radians(0.2)
-    accepted = ekf.predict(dl, dr, 0.1, (gyro_turn, gyro_sigma))
-    assert accepted is True
+    assert ekf.predict(dl, dr, 0.1, (gyro_turn, gyro_sigma)) == {"gyro": True}
     weight = odometry_var / (odometry_var + gyro_sigma**2)
     expected = 0.3 + odometry_turn + weight * (gyro_turn - odometry_turn)
     assert ekf.pose[2] == pytest.approx(expected, abs=1e-9)
@@ -83,7 +83,7 @@ def test_the_filter_weighs_the_gyros_turn_against_the_odometrys_by_their_varianc
 
 def test_a_turn_far_off_the_odometrys_is_gated_and_the_step_still_made() -> None:
     ekf = PoseEKF(EkfParams(estimate=()), (0.0, 0.0, 0.0))
-    assert ekf.predict(-65.0, 65.0, 0.1, (math.radians(60.0), math.radians(0.1))) is False
+    assert ekf.predict(-65.0, 65.0, 0.1, (math.radians(60.0), math.radians(0.1))) == {"gyro": False}
     assert ekf.pose[2] == pytest.approx(math.radians(10.0))
     assert ekf.gates.rejected["gyro"] == 1 and len(ekf.x) == 3
 
@@ -135,3 +135,59 @@ def test_a_lap_with_the_gyro_keeps_the_heading_the_turns_glide_loses(seed: int) 
     g = core.positions["G"]  # the gyro's own summed heading, the store's G position
     assert g["valid"] == [False, False, True]
     assert np.isfinite(g["psi"])
+
+
+def correlator_sample(stamp_ms: int, forward_mm: float, state: int = 1) -> Sample:
+    """A correlator.data sample: the running sum in whole µm, wrapped as the i32 on the wire."""
+    um = (round(forward_mm * 1000) + 2**31) % 2**32 - 2**31
+    return Sample("correlator", stamp_ms, {"forward_um": um, "increment_um": 0, "state": state})
+
+
+def test_the_correlators_distance_is_the_sum_between_two_sync_times_across_the_wrap() -> None:
+    """50 mm/s, samples every 50 ms off the grid, the running sum crossing the i32's wrap
+    (2147.48 m): every synchronisation's distance is 5 mm, its speed 50 mm/s."""
+    sync = CorrelatorSync(OdometryTrack(OdometryParams()))
+    start_mm = 2**31 / 1000.0 - 12.0  # 12 mm before the wrap
+    results = []
+    for k in range(1, 8):
+        samples = [
+            correlator_sample(t, start_mm + 0.05 * t) for t in (100 * k - 73, 100 * k - 23, 100 * k + 27)
+        ]
+        results.append(sync.synchronise(samples, 100 * k))
+    assert results[0] is None
+    for result in results[1:]:
+        assert result is not None
+        assert result["distance"] == pytest.approx(5.0, abs=1e-6)
+        assert result["speed"] == pytest.approx(50.0, abs=1e-4)
+
+
+def test_the_filter_weighs_the_correlators_distance_against_the_steps() -> None:
+    """A straight step without optional states: the distance moved along the heading is the
+    steps' and the correlator's, weighted by the inverse of their variances (worked out here)."""
+    params = EkfParams(estimate=())
+    heading = 0.7
+    ekf = PoseEKF(params, (100.0, 200.0, heading))
+    steps = 200.0
+    odometry = steps * params.odometry.mm_per_step
+    odometry_var = (params.distance_noise_rel * odometry) ** 2
+    measured, sigma = odometry * 1.005, 0.5
+    assert ekf.predict(steps, steps, 0.1, None, (measured, sigma)) == {"correlator": True}
+    weight = odometry_var / (odometry_var + sigma**2)
+    fused = odometry + weight * (measured - odometry)
+    x, y, psi = ekf.pose
+    assert math.hypot(x - 100.0, y - 200.0) == pytest.approx(fused, abs=1e-6)
+    assert math.atan2(y - 200.0, x - 100.0) == pytest.approx(heading, abs=1e-9) and psi == pytest.approx(
+        heading
+    )
+    assert len(ekf.x) == 3 and ekf.P.shape == (3, 3)
+
+
+def test_a_turning_robots_correlator_is_not_fused() -> None:
+    """Seed §3.3: turning, the correlator reads too much (on the spot, nonsense): the Localizer
+    does not fuse it above filter.correlator.max_turn_rate_deg_s."""
+    config = load_config({"sensors": {"correlator": {"use": True, "filter": True}}})
+    core = LocalizationCore(config)
+    assert core._correlator_travel({"distance": 40.0}, math.radians(1.0), 0.1) is None
+    assert core.correlator_skipped_turning == 1
+    distance, sigma = core._correlator_travel({"distance": 40.0}, 0.0, 0.1)
+    assert distance == 40.0 and sigma == pytest.approx(math.hypot(1.0, 0.03 * 40.0))
