@@ -143,8 +143,9 @@ class RobotExtension(Extension):
             "--localizer",
             metavar="YAML",
             help="copro's sync + EKF configuration, e.g. config/localization.yaml (the Darmstadt "
-            "setup: compass + walls of the wall file, data and error logs); default: exploration "
-            "mode without logs",
+            "setup: compass + walls of the wall file, data and error logs), or a bundled one by name: "
+            "early-ekf (the seed's early filter: odometry + gyroscope, untuned; with --sensors "
+            "darmstadt); default: exploration mode without logs",
         )
 
     def up_nodes(self, args: argparse.Namespace, protocol: Protocol) -> list[str]:
@@ -182,12 +183,12 @@ class RobotExtension(Extension):
 
             plan.env[MOTOR_SIP_ENV] = os.environ.get(MOTOR_SIP_ENV, str(SIP_PERIOD_MS))
         if args.localizer:
-            from modules.localization.config import load_config, sensor_set_layer
+            from modules.localization.config import config_path, load_config, sensor_set_layer
 
             # a bad file is refused (file:line, key) before anything starts, over what copro lays
             # beneath it
             load_config(args.localizer, under=sensor_set_layer(args.sensors, receivers))
-            plan.env["TOKENRING_LOCALIZER_CONFIG"] = str(Path(args.localizer).resolve())
+            plan.env["TOKENRING_LOCALIZER_CONFIG"] = str(config_path(args.localizer).resolve())
         if args.explore and args.actions:
             raise UsageError("--explore and --actions both drive the robot: give one of them")
         plan.start_hint = lcd_start_hint

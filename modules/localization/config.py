@@ -165,18 +165,32 @@ def layered(under: dict[str, Any], over: Any) -> Any:
     return out
 
 
+#: configurations that ship with tokenring, by name: ``--localizer early-ekf``
+NAMED_CONFIGS = {"early-ekf": "early-ekf.yaml"}
+
+
+def config_path(source: str | Path) -> Path:
+    """The file a ``--localizer`` names: a path, or the name of a bundled configuration
+    (:data:`NAMED_CONFIGS`) when no file of that name exists."""
+    path = Path(source)
+    if not path.exists() and str(source) in NAMED_CONFIGS:
+        return default_config_path().with_name(NAMED_CONFIGS[str(source)])
+    return path
+
+
 def load_config(
     source: str | Path | dict | None = None, under: dict[str, Any] | None = None
 ) -> dict[str, Any]:
-    """A validated configuration: ``None`` gives the defaults, else a file path or a dict;
-    ``under`` (a partial configuration, e.g. a sensor set's) lies beneath it."""
+    """A validated configuration: ``None`` gives the defaults, else a file path, the name of a
+    bundled one (:func:`config_path`) or a dict; ``under`` (a partial configuration, e.g. a
+    sensor set's) lies beneath it."""
     if source is None:
         return validate(under, "<config>", {}) if under else copy.deepcopy(DEFAULTS)
     if isinstance(source, dict):
         return validate(layered(under or {}, source), "<config>", {})
     from tokenring import message_error, read_text
 
-    path = Path(source)
+    path = config_path(source)
     text = read_text(path, "configuration file", message_error(ConfigError))
     return parse_config(text, str(path), under)
 

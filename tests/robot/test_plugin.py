@@ -45,3 +45,23 @@ def test_without_a_world_nothing_runs_faster_and_no_lops_starts() -> None:
     planned = plan("--speed", "10", "--no-world", "--sensors", "darmstadt")
     assert planned.speedup == 1.0 and planned.services == []
     assert planned.env["TOKENRING_SENSORS"] == "darmstadt"  # copro's Localizer is told all the same
+
+
+def test_a_bundled_localizer_configuration_is_named_and_a_file_of_that_name_wins(
+    tmp_path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--localizer early-ekf`` is the seed's early filter shipped in config/: copro is told
+    its path; a file called early-ekf in the working directory is the user's and wins."""
+    from modules.localization.config import load_config, sensor_set_layer
+
+    monkeypatch.chdir(tmp_path)
+    planned = plan("--sensors", "darmstadt", "--localizer", "early-ekf")
+    told = planned.env["TOKENRING_LOCALIZER_CONFIG"]
+    assert told == str(REPO / "config" / "early-ekf.yaml")
+    early = load_config(told, under=sensor_set_layer("darmstadt"))
+    fused = {name for name, sensor in early["sensors"].items() if sensor["use"] and sensor["filter"]}
+    assert fused == {"odometry", "gyro"} and early["filter"]["estimate"] == []
+    (tmp_path / "early-ekf").write_text("filter: {enabled: false}\n")
+    assert plan("--localizer", "early-ekf").env["TOKENRING_LOCALIZER_CONFIG"] == str(tmp_path / "early-ekf")
+    with pytest.raises(Exception, match="no-such-config"):
+        plan("--localizer", "no-such-config")
