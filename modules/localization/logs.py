@@ -35,9 +35,13 @@ lost), F (fatal), D (debug).
 Crash safety: every record is one ``write()`` on an unbuffered descriptor, so a killed process
 leaves every record written before the kill; a reader stops cleanly at a torn last record and
 says so. A full disk costs only the log: the writer cuts the file back to its last whole record,
-says so in one line and writes nothing more (never after a torn record). ``convert_*`` produce the seed's line-per-entry text (:func:`convert_seed_text`: exactly
-appendix B's line formats) and CSV (the seed's logfileconverter, one line per synchronisation);
-:func:`sort_log` is the seed's logfilesorter.
+says so in one line and writes nothing more (never after a torn record).
+
+``convert_*`` produce the seed's line-per-entry text (:func:`convert_seed_text`: exactly
+appendix B's line formats), the seed's logfileconverter's ``data.dat`` and ``sonar.dat``
+(:func:`convert_seed_dat`: exactly table B.8, one line per synchronisation) and CSV with our own
+columns (:func:`convert_csv`, one line per synchronisation); :func:`sort_log` is the seed's
+logfilesorter.
 """
 
 from __future__ import annotations
@@ -615,15 +619,17 @@ def _seed_int(value: Any, width: int) -> str:
     return f"{round(number):{width}d}" if math.isfinite(number) else f"{'nan':>{width}}"
 
 
-def seed_position(p: dict[str, Any] | None) -> str:
+def seed_position(p: dict[str, Any] | None, width: int = 6, angle_width: int = 7) -> str:
     """X, Y, rotation and the three valid flags (table B.7, ``x P`` and ``S S``); an unknown
-    value is written as ``0`` (figure B.3: ``      0      0      0 0 0 0``)."""
+    value is written as ``0`` (figure B.3: ``      0      0      0 0 0 0``). ``width``: X, Y and
+    an unknown rotation's field, ``angle_width``: a known rotation's (figure B.3's 6 and 7 by
+    default; table B.8's ``data.dat`` has 8 and 8)."""
     if p is None:
-        return f"{0:6d} {0:6d} {0:6d} 0 0 0"
+        return f"{0:{width}d} {0:{width}d} {0:{width}d} 0 0 0"
     vx, vy, vpsi = (bool(v) for v in p.get("valid", [True, True, True]))
-    x = _seed_int(p["x"], 6) if vx else f"{0:6d}"
-    y = _seed_int(p["y"], 6) if vy else f"{0:6d}"
-    psi = f"{float(p['psi']):7.5f}" if vpsi else f"{0:6d}"
+    x = _seed_int(p["x"], width) if vx else f"{0:{width}d}"
+    y = _seed_int(p["y"], width) if vy else f"{0:{width}d}"
+    psi = f"{float(p['psi']):{angle_width}.5f}" if vpsi else f"{0:{width}d}"
     return f"{x} {y} {psi} {int(vx)} {int(vy)} {int(vpsi)}"
 
 
@@ -640,6 +646,22 @@ def _sonar_mounts(config: Any) -> list[tuple[float, float, float]]:
     return [(m.x, m.y, m.angle) for m in SONAR_MOUNTS]
 
 
+def seed_obstacles(
+    distances_mm: list[float | None], mounts: list[tuple[float, float, float]], width: int
+) -> list[str]:
+    """Per sonar the obstacle's x and y (robot coordinates, mm) right-aligned in ``width``: the
+    mount plus the distance along the sonar's axis; ``0 0`` without contact or without a mount
+    (table B.7's ``W R``/``W C`` with 5 characters, table B.8's ``sonar.dat`` with 6)."""
+    points: list[str] = []
+    for i, d in enumerate(distances_mm):
+        if d is None or i >= len(mounts):
+            points += [f"{0:{width}d}", f"{0:{width}d}"]
+            continue
+        mx, my, angle = mounts[i]
+        points += [_seed_int(mx + d * math.cos(angle), width), _seed_int(my + d * math.sin(angle), width)]
+    return points
+
+
 def seed_sonar(
     distances_mm: list[float | None],
     previous: list[float | None] | None,
@@ -653,13 +675,7 @@ def seed_sonar(
     new = [
         int(previous is None or i >= len(previous) or previous[i] != d) for i, d in enumerate(distances_mm)
     ]
-    points: list[str] = []
-    for i, d in enumerate(distances_mm):
-        if d is None or i >= len(mounts):
-            points += [f"{0:5d}", f"{0:5d}"]
-            continue
-        mx, my, angle = mounts[i]
-        points += [_seed_int(mx + d * math.cos(angle), 5), _seed_int(my + d * math.sin(angle), 5)]
+    points = seed_obstacles(distances_mm, mounts, 5)
     ranges = [f"{0:5d}" if d is None else _seed_int(d, 5) for d in distances_mm]
     blocks = []
     for k, wall in enumerate(walls + [SEED_NO_WALL] * max(0, SEED_WALL_BLOCKS - len(walls))):
@@ -816,6 +832,77 @@ def convert_csv(log: LogFile) -> tuple[str, str]:
                 sonar_header_written = True
             sw.writerow([stamp, *["" if d is None else d for d in distances]])
             row = {}
+    return data.getvalue(), sonar.getvalue()
+
+
+#: the width of each of ``sonar.dat``'s obstacle coordinates (table B.8)
+SEED_SONAR_DAT_WIDTH = 6
+
+
+def _seed_lops_dat(p: dict[str, Any] | None) -> str:
+    """Table B.8's LOPS columns: the three distances (mm, ``0`` where none was heard), the
+    position LOPS computed (``0 0`` when it could not) and its valid flag."""
+    if p is None:
+        return " ".join([f"{0:8d}"] * 5) + " 0"
+    distances = " ".join(_num(p.get(k), 8) for k in ("d1", "d2", "d3"))
+    x, y = p.get("x"), p.get("y")
+    valid = x is not None and y is not None and math.isfinite(float(x)) and math.isfinite(float(y))
+    where = f"{_seed_int(x, 8)} {_seed_int(y, 8)}" if valid else f"{0:8d} {0:8d}"
+    return f"{distances} {where} {int(valid)}"
+
+
+def convert_seed_dat(log: LogFile) -> tuple[str, str]:
+    """The seed's logfileconverter exactly as table B.8 (seed 000, appendix B.3) defines its
+    output: ``data.dat`` and ``sonar.dat``, one line per synchronisation in each (an ``S S``
+    ends one; the records of a synchronisation come before it), fields separated by blanks.
+
+    ``data.dat``, each field right-aligned in table B.8's width (in characters: 8 4 8 8 15 8 8 8
+    8 8 1 8 8 8 1 1 1): Zeitpunkt, the ``S S`` stamp in ms since program
+    start, counted as :func:`convert_seed_text` counts it (its ``S T`` line is at 0: the log's
+    stamps as they are, ms of simulated time since the world started, no shift to the first
+    synchronisation); Takt, the ms since the synchronisation before (the ``S S``'s
+    ``period_ms``, 0 at the first); the encoder increments (``O C``'s ``dl``, ``dr``); Gyroskop,
+    ``G C``'s ``turn``, the angle over the period in rad as :func:`convert_seed_text` writes the
+    seed's ``G C``; LOPS's three distances, its position and its valid flag (``L C``); the
+    filter's position as this synchronisation left it (its ``K P``) with the three valid flags.
+    ``sonar.dat``: per sonar the obstacle's x and y (robot coordinates, mm; ``W C``'s distances
+    from the mounts of the log's configuration), as many sonars on every line (the robot's, or
+    the most a ``W C`` carried).
+
+    What the log lacks (no gyroscope or LOPS in a Hamburg run, no filter, no sonar) is written
+    ``0`` as the seed writes unknown values, its valid flags 0. Records after the last ``S S``
+    (a synchronisation the log ends inside) are not written; nor are the compass, the floor
+    correlator and the truth, which table B.8 has no columns for."""
+    if log.kind != "data":
+        raise LogError(f"{log.path}: data.dat and sonar.dat (table B.8) need a data log")
+    mounts = _sonar_mounts(log.header.get("config"))
+    sonars = max(
+        [len(mounts)]
+        + [len(p["distances_mm"]) for _, source, kind, p in log.records if (source, kind) == ("W", "C")]
+    )
+    data, sonar = io.StringIO(), io.StringIO()
+    sync: dict[str, Any] = {}
+    for stamp, source, kind, p in log.records:
+        if kind == "C" and source in ("O", "G", "L", "W"):
+            sync[source] = p
+        elif kind == "P" and source == "K":
+            sync["K"] = p
+        elif source == "S" and kind == "S":
+            odometry, gyro = sync.get("O"), sync.get("G")
+            encoders = (
+                f"{_seed_int(odometry['dl'], 8)} {_seed_int(odometry['dr'], 8)}"
+                if odometry is not None
+                else f"{0:8d} {0:8d}"
+            )
+            turn = f"{float(gyro['turn']):15.12f}" if gyro is not None else f"{0:15d}"
+            data.write(
+                f"{stamp:8d} {_seed_int(p['period_ms'], 4)} {encoders} {turn} "
+                f"{_seed_lops_dat(sync.get('L'))} {seed_position(sync.get('K'), 8, 8)}\n"
+            )
+            distances: list[float | None] = list(sync["W"]["distances_mm"]) if "W" in sync else []
+            distances += [None] * (sonars - len(distances))
+            sonar.write(" ".join(seed_obstacles(distances, mounts, SEED_SONAR_DAT_WIDTH)) + "\n")
+            sync = {}
     return data.getvalue(), sonar.getvalue()
 
 

@@ -1,4 +1,5 @@
-"""``tokenring log``: the seed's log helpers — convert (text, CSV), sort, info."""
+"""``tokenring log``: the seed's log helpers — convert (text, the seed's appendix B lines, table
+B.8's data.dat and sonar.dat, CSV, MCAP), sort, info."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ HELP = "convert, sort or summarise a localisation data or error log"
 CONVERT_EXAMPLES = """examples:
   tokenring log convert logs/drive.trlog > drive.txt                 # the seed's text, to stdout
   tokenring log convert logs/drive.trlog --to seed --out drive.log   # appendix B's line formats
+  tokenring log convert logs/drive.trlog --to dat --out drive-dat/   # table B.8's data.dat, sonar.dat
   tokenring log convert logs/drive.trlog --to csv --out drive-csv/   # data.csv and sonar.csv
   tokenring log convert logs/drive.trlog --to mcap --out drive.mcap  # for Foxglove, PlotJuggler
 """
@@ -39,26 +41,30 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help=HELP,
         description="Data and error logs are msgpack streams (crash-safe, compact). 'convert' writes the "
         "seed's line-per-entry text (--to text; --to seed: exactly the seed's appendix B line "
-        "formats) or, for a data log, data.csv and sonar.csv with one line per synchronisation "
-        "(--to csv, the seed's logfileconverter), or MCAP for Foxglove and PlotJuggler (--to mcap); "
+        "formats) or, for a data log, one line per synchronisation: exactly the seed's logfileconverter's "
+        "data.dat and sonar.dat (--to dat, table B.8) or data.csv and sonar.csv with our own columns "
+        "(--to csv), or MCAP for Foxglove and PlotJuggler (--to mcap); "
         "'sort' orders a log by time stamp "
         "into a new file (the seed's logfilesorter); 'info' counts records per source and kind.",
     )
     verbs = p.add_subparsers(dest="log_verb", metavar="VERB", required=True)
     convert = verbs.add_parser(
-        "convert", help="to the seed's text format or CSV", **with_examples(CONVERT_EXAMPLES)
+        "convert",
+        help="to the seed's text, table B.8's data.dat/sonar.dat, CSV or MCAP",
+        **with_examples(CONVERT_EXAMPLES),
     )
     convert.add_argument("log", help="a data (.trlog) or error (.trerr) log")
     convert.add_argument(
         "--to",
-        choices=("text", "seed", "csv", "mcap"),
+        choices=("text", "seed", "dat", "csv", "mcap"),
         default="text",
-        help="output format (default text; seed: the seed's exact line formats)",
+        help="output format (default text; seed: the seed's exact line formats; dat: the seed's "
+        "logfileconverter, table B.8's data.dat and sonar.dat)",
     )
     convert.add_argument(
         "--out",
         metavar="PATH",
-        help="text, seed: a file (default: standard output); csv: a directory (required); mcap: a file "
+        help="text, seed: a file (default: standard output); dat, csv: a directory (required); mcap: a file "
         "(required; Foxglove, PlotJuggler)",
     )
     convert.add_argument("--force", action="store_true", help="replace an existing output")
@@ -81,6 +87,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         )
 
 
+#: the files each directory format writes: the data (one line per synchronisation), the sonar
+DIRECTORY_OUTPUTS = {"dat": ("data.dat", "sonar.dat"), "csv": ("data.csv", "sonar.csv")}
+
+
 def check_outputs(args: argparse.Namespace) -> None:
     """Before anything is read: an output is never the input, never silently replaced."""
     from pathlib import Path
@@ -94,11 +104,14 @@ def check_outputs(args: argparse.Namespace) -> None:
         args.log_verb == "convert" and args.to in ("text", "seed", "mcap") and args.out
     ):
         check_output(args.out, (args.log,), force=args.force, error=out)
-    elif args.log_verb == "convert" and args.to == "csv":
+    elif args.log_verb == "convert" and args.to in DIRECTORY_OUTPUTS:
+        names = DIRECTORY_OUTPUTS[args.to]
         if not args.out:
-            raise UsageError("--to csv writes data.csv and sonar.csv: give the directory with --out")
+            raise UsageError(
+                f"--to {args.to} writes {names[0]} and {names[1]}: give the directory with --out"
+            )
         check_output(args.out, (args.log,), directory=True, error=out)
-        for name in ("data.csv", "sonar.csv"):
+        for name in names:
             if (Path(args.out) / name).exists():
                 check_output(Path(args.out) / name, (args.log,), force=args.force, error=out)
 
@@ -108,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
 
     from modules.localization.logs import (
         convert_csv,
+        convert_seed_dat,
         convert_seed_text,
         convert_text,
         read_log,
@@ -160,13 +174,14 @@ def run(args: argparse.Namespace) -> int:
         else:
             sys.stdout.write(text)
         return 0
-    data, sonar = convert_csv(log)
+    data, sonar = convert_seed_dat(log) if args.to == "dat" else convert_csv(log)
+    data_name, sonar_name = DIRECTORY_OUTPUTS[args.to]
     out = Path(args.out)
     made = not out.exists()
     try:
         out.mkdir(parents=True, exist_ok=True)
-        write_atomically(out / "data.csv", data, None)
-        write_atomically(out / "sonar.csv", sonar, None)
+        write_atomically(out / data_name, data, None)
+        write_atomically(out / sonar_name, sonar, None)
     except OSError as exc:  # a full disk: a folder this run made goes again, with what it holds
         import contextlib
 
@@ -174,9 +189,10 @@ def run(args: argparse.Namespace) -> int:
 
         if made:
             with contextlib.suppress(OSError):
-                for name in ("data.csv", "sonar.csv"):
+                for name in (data_name, sonar_name):
                     (out / name).unlink(missing_ok=True)
                 out.rmdir()
         raise write_failed(out, exc, option_error("--out")) from None
-    print(f"{out}/data.csv: {data.count(chr(10)) - 1} synchronisations; {out}/sonar.csv")
+    syncs = data.count("\n") - (1 if args.to == "csv" else 0)  # data.csv has a header line
+    print(f"{out}/{data_name}: {syncs} synchronisations; {out}/{sonar_name}")
     return 0
