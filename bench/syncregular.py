@@ -10,17 +10,28 @@ Triggers (``sync.trigger`` of the Localizer's configuration):
 
 - ``count``: the old default, after one odometry sample at least 100 ms of sensor time after the
   last synchronisation, stamped with that sample's time;
+- ``seedcount``: the seed's own, after every odometry sample (count 1, no minimum period);
 - ``period``: the new default, at the grid times k·100 ms of the odometry's time, as soon as a
   sample at or past the next one has arrived, stamped with the grid time.
 
-Modes: ``ours`` (every module ours, the default wire of 2.5 Mbit/s) and ``seed``
-(``--algorithms seed,copro=ours --profile arcnet``: the seed's modules at the seed's wire pace;
-copro stays ours because the seed's copro hosts no Localizer). Same-run baseline: every online
-log is replayed through the other trigger (``tokenring replay --from retrigger``), so both
-triggers are also compared on exactly the same samples; every online log is also replayed with
-its own configuration (``--check``: bit for bit). The load average is printed beside the figures.
+Modes: ``ours`` (every module ours, the default wire of 2.5 Mbit/s; the motor samples its step
+counters every loop tick), ``seed`` (``--algorithms seed,copro=ours --profile arcnet``: the seed's
+modules at the seed's wire pace; copro stays ours because the seed's copro hosts no Localizer),
+``sip`` (ours, the motor sending its counters as the Darmstadt Pioneer's SIPs, every 100 ms of
+its clock: ``TOKENRING_MOTOR_SIP_MS=100``) and ``darmstadt`` (``--sensors darmstadt``: the SIPs,
+the gyroscope and LOPS). Same-run baseline: every online log is replayed through another trigger
+(``tokenring replay --from retrigger``: the period trigger, or the count trigger for a period
+run), so the triggers are also compared on exactly the same samples; every online log is also
+replayed with its own configuration (``--check``: bit for bit). The load average is printed
+beside the figures.
 
-    python -m bench.syncregular [--runs 3] [--speed 5] [--modes ours,seed] [--json FILE]
+The periods are in sensor time (the stamps the synchronisations carry). ``--arrival`` records each
+run (``up --record``) and adds the odometry's arrival: when each new motor.data sample first
+travelled on the wire (wall clock, times the speed-up: ms of emulated time). The seed's count
+trigger synchronises on each such arrival, so for ``seedcount`` these are its periods in arrival
+time, which is what the seed's robot measured (its log's times were the onboard computer's).
+
+    python -m bench.syncregular [--runs 3] [--speed 5] [--modes ours,seed] [--arrival] [--json FILE]
 """
 
 from __future__ import annotations
@@ -45,15 +56,22 @@ from tokenring.transport import free_port
 DRIVE = "# bench.syncregular: three legs of 1.2 m\ne\ns 1200\nr 90\ns 1200\nr 90\ns 1200\n"
 TRIGGERS: dict[str, dict[str, Any]] = {
     "count": {"mode": "count", "sensor": "odometry", "count": 1, "min_period_ms": 100},
+    "seedcount": {"mode": "count", "sensor": "odometry", "count": 1, "min_period_ms": 0},
     "period": {"mode": "period", "sensor": "odometry", "period_ms": 100},
 }
 MODES: dict[str, list[str]] = {
     "ours": [],
     "seed": ["--algorithms", "seed,copro=ours", "--profile", "arcnet"],
+    "sip": [],
+    "darmstadt": ["--sensors", "darmstadt"],
 }
+#: the motor's SIP setting per mode (modules.description.robot.MOTOR_SIP_ENV; unset: none)
+SIP_ENV = "TOKENRING_MOTOR_SIP_MS"
+MODE_SIP = {"sip": "100"}
 RUN_TIMEOUT_S = 900.0
 ATTEMPTS = 2  # a ring that did not come up (a loaded machine) is started once more
 FIGURES = ("median_period_ms", "p99_period_ms", "within_98_102ms", "within_95_105ms", "within_2pct")
+ARRIVAL = ("arrival_median_ms", "arrival_p99_ms", "arrival_98_102ms", "arrival_95_105ms")
 
 
 def tokenring(*args: str) -> list[str]:
@@ -98,14 +116,48 @@ def odometry_gaps(log: Path) -> dict[str, Any]:
     }
 
 
+def arrivals(recording: Path, speed: float) -> dict[str, Any]:
+    """When each new motor.data sample (a new stamp) first travelled on the wire, from a run's
+    MCAP recording: the periods between arrivals in ms of emulated time (wall ms x speed-up)."""
+    from mcap.reader import make_reader
+
+    times: list[int] = []
+    stamps: list[int] = []
+    last = None
+    with recording.open("rb") as stream:
+        for _, _, message in make_reader(stream).iter_messages(topics=["/channel/motor.data"]):
+            stamp = json.loads(message.data).get("stamp_ms")
+            if stamp != last:
+                times.append(message.log_time)
+                stamps.append(stamp)
+                last = stamp
+    periods = sorted((b - a) / 1e6 * speed for a, b in itertools.pairwise(times))
+    if not periods:
+        return {}
+    return {
+        "arrivals": len(times),
+        "arrival_median_ms": statistics.median(periods),
+        "arrival_p99_ms": periods[min(len(periods) - 1, int(0.99 * len(periods)))],
+        "arrival_98_102ms": sum(1 for p in periods if 98 <= p <= 102) / len(periods),
+        "arrival_95_105ms": sum(1 for p in periods if 95 <= p <= 105) / len(periods),
+        # the samples' own stamps as they travelled: with SIPs, a gap over 100 ms is a SIP that
+        # never reached the wire (the motor late, or the token away from it for a period)
+        "wire_stamps_98_102ms": sum(1 for a, b in itertools.pairwise(stamps) if 98 <= b - a <= 102)
+        / len(periods),
+    }
+
+
 def replay(log: Path, out: Path, *extra: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         tokenring("replay", str(log), "--out", str(out), *extra), capture_output=True, text=True, check=False
     )
 
 
-def drive(mode: str, trigger: str, run: int, speed: str, folder: Path) -> dict[str, Any]:
-    """One action-file drive on a fresh ring; the figures of its log and of its replays."""
+def drive(
+    mode: str, trigger: str, run: int, speed: str, folder: Path, arrival: bool = False
+) -> dict[str, Any]:
+    """One action-file drive on a fresh ring; the figures of its log and of its replays (and
+    with ``arrival`` the odometry's arrival on the wire, from a recording of the run)."""
     name = f"{mode}-{trigger}-{run}"
     logs = folder / name
     logs.mkdir(parents=True)
@@ -119,13 +171,21 @@ def drive(mode: str, trigger: str, run: int, speed: str, folder: Path) -> dict[s
         "--seed", str(run), "--speed", speed, "--actions", str(actions), "--localizer", str(config),
         "--duration", str(round(600 / float(speed)) + 60), *MODES[mode],
     )  # fmt: skip
+    recording = folder / f"{name}.mcap"
+    if arrival:
+        argv += ["--record", str(recording), "--force"]
+    env = {k: v for k, v in os.environ.items() if k != SIP_ENV}
+    if mode in MODE_SIP:
+        env[SIP_ENV] = MODE_SIP[mode]
     row: dict[str, Any] = {"mode": mode, "trigger": trigger, "run": run}
     for attempt in range(1, ATTEMPTS + 1):
         for old in logs.glob("*"):
             old.unlink()
         row.update(attempt=attempt, load_before=os.getloadavg()[0])
         started = time.monotonic()
-        done = subprocess.run(argv, capture_output=True, text=True, timeout=RUN_TIMEOUT_S, check=False)
+        done = subprocess.run(
+            argv, capture_output=True, text=True, timeout=RUN_TIMEOUT_S, check=False, env=env
+        )
         row.update(seconds=round(time.monotonic() - started, 1), load_after=os.getloadavg()[0])
         data_logs = sorted(logs.glob("*.trlog"))
         if done.returncode == 0 and data_logs:
@@ -136,6 +196,8 @@ def drive(mode: str, trigger: str, run: int, speed: str, folder: Path) -> dict[s
         return row
     log = data_logs[-1]
     row["online"] = {**analyze(log), **odometry_gaps(log)}
+    if arrival and recording.exists():
+        row["online"].update(arrivals(recording, float(speed)))
     checked = replay(log, folder / f"{name}-check.trlog", "--check")
     row["replay_identical"] = checked.returncode == 0
     other = "count" if trigger == "period" else "period"
@@ -164,9 +226,13 @@ def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     table = []
     for (mode, trigger, source), figures in sorted(groups.items()):
         line: dict[str, Any] = {"mode": mode, "trigger": trigger, "source": source, "runs": len(figures)}
-        for key in (*FIGURES, "syncs", "filter_end_error_mm", "filter_rmse_mm", "odometry_gaps_over_1s"):
+        keys = (*FIGURES, *ARRIVAL, "syncs", "filter_end_error_mm", "filter_rmse_mm", "odometry_gaps_over_1s")
+        for key in keys:
             values = [f[key] for f in figures if f.get(key) is not None]
             line[key] = statistics.median(values) if values else None
+        for key in ("within_98_102ms", "arrival_98_102ms"):  # the spread over the runs
+            values = [f[key] for f in figures if f.get(key) is not None]
+            line[f"{key}_range"] = [min(values), max(values)] if values else None
         loads = [
             r[k]
             for r in rows
@@ -185,20 +251,33 @@ def format_table(table: list[dict[str, Any]]) -> str:
     def num(x: float | None, fmt: str = ".0f") -> str:
         return "–" if x is None else format(x, fmt)
 
+    def span(x: list[float] | None) -> str:
+        return "" if not x or x[0] == x[1] else f" ({100 * x[0]:.0f}-{100 * x[1]:.0f})"
+
+    arrival = any(t.get("arrival_median_ms") is not None for t in table)
     lines = [
-        "| mode | trigger | source | runs | median ms | p99 ms | 98-102 ms | 95-105 ms | ±2 % of median "
-        "| syncs | odometry gaps > 1 s | EKF end / RMSE mm | load avg |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
-        "| seed (000 §10) | odometry, count 1 | its robot | – | ≈ 100 | ≤ 105 | > 85 % | 100 % | – | – | – | – | – |",
+        "| mode | trigger | source | runs | median ms | p99 ms | 98-102 ms (runs) | 95-105 ms | ±2 % of median "
+        "| syncs | odometry gaps > 1 s | EKF end / RMSE mm | load avg |"
+        + (" odometry arrival: median ms | 98-102 ms (runs) | 95-105 ms |" if arrival else ""),
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|---|---|" if arrival else ""),
+        "| seed (000 §10) | odometry, count 1 | its robot | – | ≈ 100 | ≤ 105 | > 85 % | 100 % | – | – | – | – | – |"
+        + (" ≈ 100 | > 85 % | 100 % |" if arrival else ""),
     ]
     for t in table:
         load = "–" if not t["load"] else f"{t['load'][0]:.1f}-{t['load'][1]:.1f}"
-        lines.append(
+        line = (
             f"| {t['mode']} | {t['trigger']} | {t['source']} | {t['runs']} | {num(t['median_period_ms'], '.1f')} "
-            f"| {num(t['p99_period_ms'])} | {pct(t['within_98_102ms'])} | {pct(t['within_95_105ms'])} "
+            f"| {num(t['p99_period_ms'])} | {pct(t['within_98_102ms'])}{span(t.get('within_98_102ms_range'))} "
+            f"| {pct(t['within_95_105ms'])} "
             f"| {pct(t['within_2pct'])} | {num(t['syncs'])} | {num(t['odometry_gaps_over_1s'])} "
             f"| {num(t['filter_end_error_mm'], '.1f')} / {num(t['filter_rmse_mm'], '.1f')} | {load} |"
         )  # fmt: skip
+        if arrival:
+            line += (
+                f" {num(t.get('arrival_median_ms'), '.1f')} | {pct(t.get('arrival_98_102ms'))}"
+                f"{span(t.get('arrival_98_102ms_range'))} | {pct(t.get('arrival_95_105ms'))} |"
+            )
+        lines.append(line)
     return "\n".join(lines)
 
 
@@ -210,9 +289,14 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--runs", type=int, default=3, help="runs per mode and trigger (default %(default)s)")
     parser.add_argument("--speed", default="5", help="the world's speed-up (default %(default)s)")
-    parser.add_argument("--modes", default="ours,seed", help="ours, seed or both (default %(default)s)")
     parser.add_argument(
-        "--triggers", default="count,period", help="count, period or both (default %(default)s)"
+        "--modes", default="ours,seed", help="of ours, seed, sip, darmstadt (default %(default)s)"
+    )
+    parser.add_argument(
+        "--triggers", default="count,period", help="of count, seedcount, period (default %(default)s)"
+    )
+    parser.add_argument(
+        "--arrival", action="store_true", help="record each run and add the odometry's arrival periods"
     )
     parser.add_argument("--keep", metavar="DIR", help="keep the logs here (default: a temporary folder)")
     parser.add_argument("--json", metavar="FILE", help="write every run and the table as JSON")
@@ -232,13 +316,14 @@ def main(argv: list[str] | None = None) -> int:
         plan = [(m, t, r) for r in range(1, args.runs + 1) for m in modes for t in triggers]
         for i, (mode, trigger, run) in enumerate(plan, 1):
             print(f"  [{i}/{len(plan)}] {mode} {trigger} run {run}", file=sys.stderr, flush=True)
-            row = drive(mode, trigger, run, args.speed, folder)
+            row = drive(mode, trigger, run, args.speed, folder, args.arrival)
             online = row.get("online", {})
             print(
                 f"    {row.get('error', '')[-300:]}"
                 if "error" in row
                 else f"    median {online.get('median_period_ms')} ms, p99 {online.get('p99_period_ms')} ms, "
-                f"98-102 {online.get('within_98_102ms')}, replay identical {row.get('replay_identical')}, "
+                f"98-102 {online.get('within_98_102ms')}, arrival 98-102 {online.get('arrival_98_102ms')}, "
+                f"replay identical {row.get('replay_identical')}, "
                 f"load {row['load_before']:.1f}->{row['load_after']:.1f}, {row['seconds']} s",
                 file=sys.stderr,
                 flush=True,
