@@ -45,7 +45,7 @@ DEFAULTS: dict[str, Any] = {
         "estimate": ["glide", "compass_offset", "step_scale"],
         "initial_pose": "world",
         "compass": {"mode": "newest", "sigma_deg": 1.5, "north_deg": 90.0, "max_turn_rate_deg_s": 2.0, "settle_ms": 0},
-        "gyro": {"sigma_deg_s": 0.05, "scale_rel": 0.01},
+        "gyro": {"sigma_deg": 0.05, "sigma_deg_s": 0.05, "scale_rel": 0.01, "max_turn_rate_deg_s": 2.0, "settle_ms": 400},
         "correlator": {"sigma_mm": 1.0, "sigma_rel": 0.03, "max_turn_rate_deg_s": 2.0},
         "travel": {"enabled": False, "max_incidence_deg": 8.0, "max_range_mm": 800.0, "model_sigma": 0.005, "unknown_wall": True, "unknown_wall_bound": False, "unknown_wall_bound_sigma": 0.0, "unknown_wall_max_sigma": 1.0, "wait_for_map": False, "check_at": "end"},
         "noise": {

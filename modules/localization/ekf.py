@@ -5,6 +5,8 @@ State: ``x, y`` (mm), ``ψ`` (rad, counter-clockwise from +X), and optionally
 - ``glide`` — the glide factor μ (differential half-steps per degree turned), estimated online
   instead of the seed's calibration run;
 - ``compass_offset`` — a slowly drifting compass bias (rad);
+- ``gyro_offset`` — the heading at which the gyroscope's summed angle was zero (rad): the gyro
+  measures the heading as ``ψ − offset``; its bias drift and scale error walk the offset;
 - ``step_scale`` — the true length of a straight half-step relative to the nominal one, in the
   current move;
 - ``step_scale_mean`` — the floor's mean of it. The floor draws each move's step length afresh
@@ -13,9 +15,9 @@ State: ``x, y`` (mm), ``ψ`` (rad, counter-clockwise from +X), and optionally
 
 Prediction from synchronised step increments with the seed's odometry model
 ``(x, y, ψ) += (cos(ψ+ω/2)·s, sin(ψ+ω/2)·s, ω)``, ``s`` the straight-line mean or the exact
-chord of the arc, optionally with the gyroscope's turn and the floor correlator's distance over
-the step (:meth:`PoseEKF.predict`).
-Corrections: the compass heading (``ψ + offset``), LOPS's distances, and wall lines seen by the
+chord of the arc, optionally with the floor correlator's distance over the step
+(:meth:`PoseEKF.predict`). Corrections: the compass heading (``ψ + offset``), the gyroscope's
+summed angle (``ψ − gyro_offset``), LOPS's distances, and wall lines seen by the
 sonars — a line measured in the robot frame as ``(α_r, d_r)`` is predicted from a known wall
 ``(α_w, d_w)`` as ``(α_w − ψ, d_w − x·cos α_w − y·sin α_w)`` (sign-normalised so ``d ≥ 0``).
 
@@ -37,7 +39,7 @@ import numpy as np
 from modules.localization.sync import OdometryParams
 from modules.localization.walls import KnownWall, wrap
 
-OPTIONAL_STATES = ("glide", "compass_offset", "step_scale", "step_scale_mean")
+OPTIONAL_STATES = ("glide", "compass_offset", "gyro_offset", "step_scale", "step_scale_mean")
 
 
 @dataclass(frozen=True)
@@ -56,6 +58,9 @@ class EkfParams:
     # random walks of the optional states
     glide_walk_per_deg: float = 0.001
     compass_offset_walk_deg_per_s: float = 0.05
+    # the gyro's summed angle: its zero point's drift per second, its scale factor's error per turn
+    gyro_offset_walk_deg_per_s: float = 0.05
+    gyro_scale_rel: float = 0.01
     step_scale_walk_per_m: float = 0.0005
     step_scale_mean_walk_per_move: float = 0.001  # with step_scale_mean: the floor may change
     # initial uncertainty
@@ -63,6 +68,8 @@ class EkfParams:
     initial_sigma_deg: float = 2.0
     initial_glide_sigma: float = 0.3
     initial_compass_offset_sigma_deg: float = 3.0
+    #: unknown until the first reading: that one sets it (the measurement is linear in it)
+    initial_gyro_offset_sigma_deg: float = 180.0
     initial_step_scale_sigma: float = 0.02
     #: the floor's mean step scale to start from (1.0: the nominal step; else an odometry
     #: calibration, ``tokenring calibrate``) and its σ (None: ``initial_step_scale_sigma``)
@@ -102,7 +109,7 @@ class GateCounts:
 
 
 class PoseEKF:
-    """EKF over (x, y, ψ[, glide, compass_offset, step_scale])."""
+    """EKF over (x, y, ψ[, glide, compass_offset, gyro_offset, step_scale, step_scale_mean])."""
 
     def __init__(self, params: EkfParams, pose: tuple[float, float, float]) -> None:
         unknown = set(params.estimate) - set(OPTIONAL_STATES)
@@ -122,6 +129,8 @@ class PoseEKF:
             sigmas.append(params.initial_glide_sigma)
         if "compass_offset" in self.index:
             sigmas.append(math.radians(params.initial_compass_offset_sigma_deg))
+        if "gyro_offset" in self.index:
+            sigmas.append(math.radians(params.initial_gyro_offset_sigma_deg))
         if "step_scale" in self.index:
             self.x[self.index["step_scale"]] = params.initial_step_scale
             sigmas.append(params.initial_step_scale_sigma)
@@ -251,6 +260,11 @@ class PoseEKF:
         if "compass_offset" in self.index:
             i = self.index["compass_offset"]
             Q[i, i] += math.radians(p.compass_offset_walk_deg_per_s) ** 2 * max(dt_s, 0.0)
+        if "gyro_offset" in self.index:
+            i = self.index["gyro_offset"]
+            Q[i, i] += (math.radians(p.gyro_offset_walk_deg_per_s) * max(dt_s, 0.0)) ** 2
+            # the scale error is one error over a whole turn: counted as if every turn were 90°
+            Q[i, i] += p.gyro_scale_rel**2 * abs(omega) * (math.pi / 2.0)
         if "step_scale" in self.index:
             i = self.index["step_scale"]
             Q[i, i] += p.step_scale_walk_per_m**2 * abs(s) / 1000.0
@@ -282,28 +296,21 @@ class PoseEKF:
         return T
 
     def predict(
-        self,
-        dl: float,
-        dr: float,
-        dt_s: float = 0.0,
-        turn: tuple[float, float] | None = None,
-        travel: tuple[float, float] | None = None,
-    ) -> dict[str, bool]:
+        self, dl: float, dr: float, dt_s: float = 0.0, travel: tuple[float, float] | None = None
+    ) -> bool | None:
         """Advance by ``dl``, ``dr`` half-steps of the left and right motor over ``dt_s`` seconds.
 
-        ``turn``: the gyroscope's turn over the same period (rad) and its σ; ``travel``: the floor
-        correlator's distance along the robot's axis (mm) and its σ. Each corrects the step's
-        *change* of the pose: the pose before the step is kept as a clone in the state for the
-        corrections, then dropped (stochastic cloning), so they are weighed against the odometry
-        with every correlation the step made (the glide factor's and the step scale's among them).
-        Returns, per correction given (``gyro``, ``correlator``), whether it passed its gate."""
+        ``travel``: the floor correlator's distance along the robot's axis over the same period
+        (mm) and its σ, a correction of the step's *change* of the pose: the pose before the step
+        is kept as a clone in the state for the correction, then dropped (stochastic cloning), so
+        it is weighed against the odometry with every correlation the step made (the step
+        scale's among them). Returns whether it passed its gate (None: no travel given)."""
         before = self.x
         new, A, Q = self.motion(dl, dr, dt_s)
         kind, previous = motion_kind(dl, dr), self.last_kind
         self.last_kind = kind
         n = len(new)
-        cloned = turn is not None or travel is not None
-        if cloned:
+        if travel is not None:
             clone = np.zeros((n + 3, n))  # [the state after the step; x, y, ψ before it]
             clone[:n] = A
             clone[n, 0] = clone[n + 1, 1] = clone[n + 2, 2] = 1.0
@@ -320,14 +327,7 @@ class PoseEKF:
             i = self.index["glide"]
             self.P[i, :i] = self.P[:i, i] = 0.0
             self.P[i, i + 1 :] = self.P[i + 1 :, i] = 0.0
-        accepted: dict[str, bool] = {}
-        if turn is not None:
-            H = np.zeros((1, n + 3))
-            H[0, 2], H[0, n + 2] = 1.0, -1.0
-            model = np.array([self.x[2] - self.x[n + 2]])
-            accepted["gyro"] = self.update(
-                "gyro", np.array([turn[0]]), model, H, np.array([[turn[1] ** 2]]), angles=(0,)
-            )
+        accepted = None
         if travel is not None:
             dx, dy = self.x[0] - self.x[n], self.x[1] - self.x[n + 1]
             mid = self.x[n + 2] + wrap(self.x[2] - self.x[n + 2]) / 2.0
@@ -337,10 +337,9 @@ class PoseEKF:
             H[0, 0], H[0, 1], H[0, n], H[0, n + 1] = c, sn, -c, -sn
             H[0, 2] = H[0, n + 2] = across
             model = np.array([dx * c + dy * sn])
-            accepted["correlator"] = self.update(
+            accepted = self.update(
                 "correlator", np.array([travel[0]]), model, H, np.array([[travel[1] ** 2]])
             )
-        if cloned:
             self.x = self.x[:n]
             self.P = self.P[:n, :n]
         self.x[2] = wrap(self.x[2])
@@ -393,6 +392,24 @@ class PoseEKF:
         sigma = math.radians(self.params.compass_sigma_deg) if sigma_rad is None else sigma_rad
         hx, H = self.heading_model()
         return self.update("compass", np.array([heading]), hx, H, np.array([[sigma**2]]), angles=(0,))
+
+    def correct_gyro(self, angle: float, sigma_rad: float) -> bool:
+        """The gyroscope's summed angle (rad) as a heading measurement ``ψ − gyro_offset``: between
+        two readings it measures the turn made, whatever the odometry's glide did."""
+        i = self.index.get("gyro_offset")
+        if i is None:
+            return False
+        H = np.zeros((1, len(self.x)))
+        H[0, 2], H[0, i] = 1.0, -1.0
+        hx = np.array([float(self.x[2] - self.x[i])])
+        return self.update("gyro", np.array([angle]), hx, H, np.array([[sigma_rad**2]]), angles=(0,))
+
+    def restart_gyro(self) -> None:
+        """The gyro's sum started again (a new calibration): its offset is unknown once more."""
+        i = self.index.get("gyro_offset")
+        if i is not None:
+            self.P[i, :] = self.P[:, i] = 0.0
+            self.P[i, i] = math.radians(self.params.initial_gyro_offset_sigma_deg) ** 2
 
     def correct_range(self, receiver: tuple[float, float], distance: float, sigma_mm: float) -> bool:
         """LOPS: the distance from the robot (its transmitter at the pose's x, y) to a receiver.

@@ -213,6 +213,8 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         self.wall_corrected_at: dict[int, tuple[float, float, float]] = {}
         self.compass_skipped_turning = 0
         self.correlator_skipped_turning = 0
+        self.gyro_skipped_turning = 0
+        self.gyro_epoch = 0
         #: the walls.ahead ranges: used, or why not
         self.ahead = dict.fromkeys(
             ("used", "rejected", "repeated", "ambiguous", "not_square", "unexpected", "unconfirmed"), 0
@@ -298,20 +300,22 @@ class LocalizationCore(WallCorrections, TravelCorrections):
                     f"LOPS {key} = {distance:.0f} mm rejected by the gate (NIS {self.ekf.last_nis:.1f})",
                 )
 
-    def _gyro_turn(self, gyro: dict[str, Any] | None, dt_s: float) -> tuple[float, float] | None:
-        """The gyroscope's turn over the synchronisation period and its σ: the rate's noise and
-        drift over the period, the scale factor's error in proportion to the turn, and the summed
-        angle's millirad resolution at both ends."""
-        if gyro is None or dt_s <= 0:
-            return None
+    def _correct_gyro(self, gyro: dict[str, Any], turn_rate: float, stamp: int) -> None:
+        """The gyro's summed angle as a heading, at rest or on a straight leg only: turning, the
+        world moves the robot a little after the motor's stamps say (the token's delay), so a
+        sum taken mid-turn disagrees with the steps by the turn rate times that delay."""
+        assert self.ekf is not None
         settings = self.config["filter"]["gyro"]
-        turn = float(gyro["turn"])
-        sigma = math.sqrt(
-            (math.radians(settings["sigma_deg_s"]) * dt_s) ** 2
-            + (settings["scale_rel"] * turn) ** 2
-            + 2 * (0.001 / math.sqrt(12.0)) ** 2
-        )
-        return turn, sigma
+        if gyro["epoch"] != self.gyro_epoch:
+            self.gyro_epoch = gyro["epoch"]
+            self.ekf.restart_gyro()  # a new calibration: its sum starts again at 0
+        if turn_rate > settings["max_turn_rate_deg_s"] or self.synchronisers["odometry"].settling(
+            stamp, settings["settle_ms"]
+        ):
+            self.gyro_skipped_turning += 1
+            return
+        if not self.ekf.correct_gyro(float(gyro["sum"]), math.radians(settings["sigma_deg"])):
+            self.message("W", stamp, f"gyroscope rejected by the gate (NIS {self.ekf.last_nis:.1f})")
 
     def _correlator_travel(
         self, correlator: dict[str, Any] | None, omega: float, dt_s: float
@@ -457,19 +461,17 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         wall_fix: dict[str, Any] | None = None
         if self.ekf is not None:
             if odo is not None and use.get("odometry"):
-                turn = self._gyro_turn(gyro, dt_s) if use.get("gyro") else None
                 travel = (
                     self._correlator_travel(data.get("correlator"), omega, dt_s)
                     if use.get("correlator")
                     else None
                 )
-                for sensor, accepted in self.ekf.predict(odo["dl"], odo["dr"], dt_s, turn, travel).items():
-                    if not accepted:
-                        self.message(
-                            "W", stamp, f"{sensor} rejected by the gate (NIS {self.ekf.last_nis:.1f})"
-                        )
+                if self.ekf.predict(odo["dl"], odo["dr"], dt_s, travel) is False:
+                    self.message("W", stamp, f"correlator rejected by the gate (NIS {self.ekf.last_nis:.1f})")
             compass = data.get("compass")
             turn_rate = abs(math.degrees(omega)) / dt_s if odo is not None and dt_s > 0 else 0.0
+            if gyro is not None and use.get("gyro"):
+                self._correct_gyro(gyro, turn_rate, stamp)
             if compass is not None and use.get("compass"):
                 if turn_rate > self.config["filter"]["compass"]["max_turn_rate_deg_s"]:
                     self.compass_skipped_turning += 1  # the reading lags and the motors disturb it
@@ -593,6 +595,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             "compass_skipped_turning": self.compass_skipped_turning,
             "compass_skipped_settling": self.synchronisers["compass"].settling,
             "gyro_skipped": self.synchronisers["gyro"].skipped,
+            "gyro_skipped_turning": self.gyro_skipped_turning,
             "correlator_skipped": self.synchronisers["correlator"].skipped,
             "correlator_skipped_turning": self.correlator_skipped_turning,
             "travel": dict(self.travel),

@@ -39,12 +39,18 @@ def odometry_params(config: dict[str, Any]) -> OdometryParams:
     return OdometryParams(robot["mm_per_step"], robot["steps_per_degree"], config["filter"]["odometry_model"])
 
 
+def gyro_fused(config: dict[str, Any]) -> bool:
+    """The gyroscope is used and fed to the filter: the filter then estimates its offset."""
+    gyro = config["sensors"]["gyro"]
+    return bool(gyro["use"] and gyro["filter"])
+
+
 def ekf_params(config: dict[str, Any]) -> EkfParams:
     f = config["filter"]
     noise, initial = f["noise"], f["initial"]
     return EkfParams(
         odometry=odometry_params(config),
-        estimate=tuple(f["estimate"]),
+        estimate=tuple(f["estimate"]) + (("gyro_offset",) if gyro_fused(config) else ()),
         distance_noise_rel=noise["distance_rel"],
         rotation_noise_rel=noise["rotation_rel"],
         rotation_noise_rad_per_mm=noise["rotation_rad_per_mm"],
@@ -62,6 +68,8 @@ def ekf_params(config: dict[str, Any]) -> EkfParams:
         initial_step_scale=initial["step_scale"],
         initial_step_scale_mean_sigma=initial["step_scale_mean_sigma"],
         compass_sigma_deg=f["compass"]["sigma_deg"],
+        gyro_offset_walk_deg_per_s=f["gyro"]["sigma_deg_s"],
+        gyro_scale_rel=f["gyro"]["scale_rel"],
         gate_probability=f["gate_probability"],
         valid_sigma_mm=f["valid_sigma_mm"],
         valid_sigma_deg=f["valid_sigma_deg"],

@@ -533,6 +533,7 @@ class SummedSync:
         self.recent: list[tuple[int, float]] = []  # (stamp, sum), oldest first
         self.reference: tuple[int, float] | None = None  # the last sync's time and sum there
         self.skipped = 0  # samples not in the running state
+        self.epoch = 0  # how often the sum started again
 
     def track_change(self, older: tuple[float, float, float], newer: tuple[float, float, float]) -> float:
         """What the sum would have grown by between two odometry-track poses."""
@@ -557,6 +558,8 @@ class SummedSync:
         running = []
         for sample in samples:
             if int(sample.values.get("state", self.running_state)) != self.running_state:
+                if self.recent or self.reference is not None:
+                    self.epoch += 1
                 self.recent.clear()
                 self.reference = None
                 self.skipped += 1
@@ -575,6 +578,8 @@ class SummedSync:
         return {
             self.rate_key: amount / ((sync_ms - reference[0]) / 1000.0),
             self.amount_key: amount,
+            "sum": value,
+            "epoch": self.epoch,
             "count": len(running),
             "stamp_ms": running[-1].stamp_ms if running else sync_ms,
         }

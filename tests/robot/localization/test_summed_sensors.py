@@ -62,30 +62,38 @@ def test_a_calibration_or_a_silence_ends_the_sum() -> None:
     assert sync.synchronise([], 900) is None  # the newest sample is 600 ms old
 
 
-def test_the_filter_weighs_the_gyros_turn_against_the_odometrys_by_their_variances() -> None:
-    """Without optional states the heading's change is the odometry's turn and the gyro's,
-    weighted by the inverse of their variances (a one-dimensional fusion, worked out here)."""
-    params = EkfParams(estimate=())
+def test_the_first_gyro_reading_sets_its_offset_and_the_next_measures_the_turn() -> None:
+    """The gyro's sum as a heading ``ψ − offset``: the first reading only learns the offset; after
+    a 90° turn by the steps that truly was 86° (the floor's glide), the next reading weighs the
+    odometry's turn (σ 2 % of it) against the gyro's (its scale error, 1 % of a 90° turn, walks
+    the offset): the heading lands where the variances put it, worked out here."""
+    params = EkfParams(estimate=("gyro_offset",))
     ekf = PoseEKF(params, (0.0, 0.0, 0.3))
-    prior = ekf.P[2, 2]
-    dl, dr = -65.0, 65.0  # 10° by the nominal glide factor
-    odometry_turn = math.radians(10.0)
-    odometry_var = (params.rotation_noise_rel * odometry_turn) ** 2
-    gyro_turn, gyro_sigma = math.radians(9.7), math.radians(0.2)
-    assert ekf.predict(dl, dr, 0.1, (gyro_turn, gyro_sigma)) == {"gyro": True}
-    weight = odometry_var / (odometry_var + gyro_sigma**2)
-    expected = 0.3 + odometry_turn + weight * (gyro_turn - odometry_turn)
-    assert ekf.pose[2] == pytest.approx(expected, abs=1e-9)
-    increment_var = odometry_var * gyro_sigma**2 / (odometry_var + gyro_sigma**2)
-    assert ekf.P[2, 2] == pytest.approx(prior + increment_var, rel=1e-9)
-    assert ekf.gates.accepted["gyro"] == 1
+    sigma = math.radians(0.05)
+    assert ekf.correct_gyro(0.125, sigma)  # the gyro's sum read 0.125 rad at the start
+    i = ekf.index["gyro_offset"]
+    assert ekf.x[i] == pytest.approx(0.3 - 0.125, abs=1e-4) and ekf.pose[2] == pytest.approx(0.3, abs=1e-4)
+    ekf.predict(-585.0, 585.0, 1.0)  # 90° by the nominal glide factor
+    assert math.degrees(ekf.pose[2] - 0.3) == pytest.approx(90.0, abs=0.01)
+    assert ekf.correct_gyro(0.125 + math.radians(86.0), sigma)
+    odometry_var = (params.rotation_noise_rel * 90.0) ** 2  # deg²
+    gyro_var = (
+        params.gyro_scale_rel**2 * 90.0**2
+        + math.degrees(math.radians(params.gyro_offset_walk_deg_per_s)) ** 2
+    )
+    expected = 86.0 + 4.0 * gyro_var / (odometry_var + gyro_var)
+    assert math.degrees(ekf.pose[2] - 0.3) == pytest.approx(expected, abs=0.05)
+    assert ekf.gates.accepted["gyro"] == 2
 
 
-def test_a_turn_far_off_the_odometrys_is_gated_and_the_step_still_made() -> None:
-    ekf = PoseEKF(EkfParams(estimate=()), (0.0, 0.0, 0.0))
-    assert ekf.predict(-65.0, 65.0, 0.1, (math.radians(60.0), math.radians(0.1))) == {"gyro": False}
-    assert ekf.pose[2] == pytest.approx(math.radians(10.0))
-    assert ekf.gates.rejected["gyro"] == 1 and len(ekf.x) == 3
+def test_a_gyro_reading_far_off_is_gated_and_a_new_calibration_forgets_the_offset() -> None:
+    ekf = PoseEKF(EkfParams(estimate=("gyro_offset",)), (0.0, 0.0, 0.0))
+    sigma = math.radians(0.05)
+    assert ekf.correct_gyro(0.0, sigma)
+    assert not ekf.correct_gyro(math.radians(30.0), sigma)  # 30° at rest: not a turn
+    assert ekf.gates.rejected["gyro"] == 1
+    ekf.restart_gyro()  # the gyro calibrated again: its sum starts at 0 wherever the robot points
+    assert ekf.correct_gyro(math.radians(30.0), sigma) and ekf.pose[2] == pytest.approx(0.0, abs=1e-3)
 
 
 def heading_error_deg(position: dict, truth: dict) -> float:
@@ -171,7 +179,7 @@ def test_the_filter_weighs_the_correlators_distance_against_the_steps() -> None:
     odometry = steps * params.odometry.mm_per_step
     odometry_var = (params.distance_noise_rel * odometry) ** 2
     measured, sigma = odometry * 1.005, 0.5
-    assert ekf.predict(steps, steps, 0.1, None, (measured, sigma)) == {"correlator": True}
+    assert ekf.predict(steps, steps, 0.1, (measured, sigma)) is True
     weight = odometry_var / (odometry_var + sigma**2)
     fused = odometry + weight * (measured - odometry)
     x, y, psi = ekf.pose
