@@ -91,6 +91,8 @@ from modules.variants import algorithm
 logger = logging.getLogger("tokenring.localization")
 
 SOURCE_CODES = {"none": 0, "odometry": 1, "ekf": 2}
+#: gyro readings rejected in a row after which its offset is learned afresh
+GYRO_RELEARN_AFTER = 5
 #: data channels read for each sensor, and the field that numbers their samples
 CHANNELS = {
     "odometry": "motor.data",
@@ -215,6 +217,8 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         self.correlator_skipped_turning = 0
         self.gyro_skipped_turning = 0
         self.gyro_epoch = 0
+        self.gyro_rejected_in_row = 0
+        self.gyro_relearned = 0
         #: the walls.ahead ranges: used, or why not
         self.ahead = dict.fromkeys(
             ("used", "rejected", "repeated", "ambiguous", "not_square", "unexpected", "unconfirmed"), 0
@@ -314,8 +318,22 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         ):
             self.gyro_skipped_turning += 1
             return
-        if not self.ekf.correct_gyro(float(gyro["sum"]), math.radians(settings["sigma_deg"])):
-            self.message("W", stamp, f"gyroscope rejected by the gate (NIS {self.ekf.last_nis:.1f})")
+        if self.ekf.correct_gyro(float(gyro["sum"]), math.radians(settings["sigma_deg"])):
+            self.gyro_rejected_in_row = 0
+            return
+        self.message("W", stamp, f"gyroscope rejected by the gate (NIS {self.ekf.last_nis:.1f})")
+        self.gyro_rejected_in_row += 1
+        if self.gyro_rejected_in_row >= GYRO_RELEARN_AFTER:
+            # its sum and the filter's heading parted (a scale error beyond the model's, a bump):
+            # rejected readings never move the offset, so it is learned afresh from the next one
+            self.ekf.restart_gyro()
+            self.gyro_relearned += 1
+            self.gyro_rejected_in_row = 0
+            self.message(
+                "W",
+                stamp,
+                f"gyroscope: {GYRO_RELEARN_AFTER} readings rejected in a row, its offset learned afresh",
+            )
 
     def _correlator_travel(
         self, correlator: dict[str, Any] | None, omega: float, dt_s: float
@@ -596,6 +614,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             "compass_skipped_settling": self.synchronisers["compass"].settling,
             "gyro_skipped": self.synchronisers["gyro"].skipped,
             "gyro_skipped_turning": self.gyro_skipped_turning,
+            "gyro_relearned": self.gyro_relearned,
             "correlator_skipped": self.synchronisers["correlator"].skipped,
             "correlator_skipped_turning": self.correlator_skipped_turning,
             "travel": dict(self.travel),

@@ -199,3 +199,25 @@ def test_a_turning_robots_correlator_is_not_fused() -> None:
     assert core.correlator_skipped_turning == 1
     distance, sigma = core._correlator_travel({"distance": 40.0}, 0.0, 0.1)
     assert distance == 40.0 and sigma == pytest.approx(math.hypot(1.0, 0.03 * 40.0))
+
+
+def test_a_gyro_parted_from_the_heading_is_learned_afresh_after_five_rejections() -> None:
+    """Rejected readings never move the offset: a sum that parted from the filter's heading (here
+    a 20° bump at rest) would be locked out for good. After five rejections in a row the offset
+    is learned afresh, and the readings count again."""
+    from modules.localization.localizer import GYRO_RELEARN_AFTER
+    from tests.support.locsim import gyro_sample as sample
+
+    core = LocalizationCore(
+        load_config({"sensors": {"gyro": {"use": True}}, "filter": {"gyro": {"settle_ms": 0}}})
+    )
+    odometry = {"steps_left": 0, "steps_right": 0, "state": 0}
+    for k in range(40):
+        stamp = 1000 + 100 * k
+        core.feed(Sample("odometry", stamp, odometry))
+        core.feed(sample(stamp, 0.0 if k < 10 else math.radians(20.0)))
+        core.maybe_sync()
+    report = core.report()
+    assert report["gyro_relearned"] == 1
+    assert report["gates"]["rejected"]["gyro"] == GYRO_RELEARN_AFTER
+    assert report["gates"]["accepted"]["gyro"] > 20
