@@ -91,7 +91,7 @@ DEFAULTS: dict[str, Any] = {
         "ahead": {"enabled": False, "sensors": [1], "max_range_mm": 1400.0, "max_off_deg": 20.0, "sigma_mm": 15.0, "oblique_from_deg": 20.0, "oblique_sigma_mm": 25.0, "clear_mm": 150.0, "max_innovation_mm": 150.0, "repeat_after_mm": 100.0, "max_turn_rate_deg_s": 2.0, "confirm_mm": 30.0, "confirm_within_ms": 1000},
     },
     "robot": {"mm_per_step": 0.5419, "steps_per_degree": 6.5, "sonars": "robot"},
-    "lops": {"receivers": [], "sigma_mm": 10.0},
+    "lops": {"receivers": [], "sigma_mm": 10.0, "init": {"fixes": 5, "drive_mm": 300.0, "max_turn_deg": 2.0, "settle_ms": 500}},
     "logs": {"enabled": True, "directory": "logs", "data": "localization-{start}.trlog", "errors": "localization-{start}.trerr", "debug": False},
 }
 # fmt: on
@@ -344,11 +344,18 @@ class _Checker:
                 raise self.fail(
                     ("filter", "initial_pose"), "expected world, motor or {x_mm, y_mm, heading_deg} numbers"
                 )
-        elif pose not in ("world", "motor"):
+        elif pose not in ("world", "motor", "lops"):
             raise self.fail(
                 ("filter", "initial_pose"),
-                f"expected world, motor or {{x_mm, y_mm, heading_deg}}, got {pose!r}",
+                f"expected world, motor, lops or {{x_mm, y_mm, heading_deg}}, got {pose!r}",
             )
+        if pose == "lops" and not c["sensors"]["lops"]["use"]:
+            raise self.fail(
+                ("filter", "initial_pose"),
+                "lops: the position is initialised by LOPS, which is not used (sensors.lops.use)",
+            )
+        if c["lops"]["init"]["fixes"] < 1 or c["lops"]["init"]["drive_mm"] <= 0:
+            raise self.fail(("lops", "init"), "fixes must be at least 1 and drive_mm positive")
         if c["sensors"]["truth"]["filter"]:
             raise self.fail(
                 ("sensors", "truth", "filter"),

@@ -49,6 +49,7 @@ from typing import Any
 from modules.localization.config import load_config
 from modules.localization.ekf import PoseEKF
 from modules.localization.logs import SENSOR_SOURCE, DataLog, ErrorLog
+from modules.localization.lops_init import LopsInitialiser
 from modules.localization.params import (
     detector_params,
     ekf_params,
@@ -198,6 +199,19 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             self.known_walls = list(known_walls or [])
         self.ekf_params = ekf_params(config)
         self.ekf: PoseEKF | None = None
+        #: initial_pose lops: the filter starts once LOPS has measured before and after a drive
+        init = config["lops"]["init"]
+        self.lops_init = (
+            LopsInitialiser(
+                init["fixes"],
+                init["drive_mm"],
+                init["max_turn_deg"],
+                init["settle_ms"],
+                config["lops"]["sigma_mm"],
+            )
+            if config["filter"]["initial_pose"] == "lops"
+            else None
+        )
         self.dead_reckoning: tuple[float, float, float] | None = None
         #: the heading by summing the gyroscope's turns from the start pose's (its G position)
         self.gyro_heading: float | None = None
@@ -419,8 +433,28 @@ class LocalizationCore(WallCorrections, TravelCorrections):
 
     def _initialise(self, pose: tuple[float, float, float]) -> None:
         self.dead_reckoning = pose
-        if self.config["filter"]["enabled"]:
+        if self.config["filter"]["enabled"] and self.lops_init is None:
             self.ekf = PoseEKF(self.ekf_params, pose)
+
+    def _initialise_by_lops(self, stamp: int, moving: bool, s: float, omega: float, lops: Any) -> None:
+        """Seed 000 §8: the filter's first pose from LOPS's positions around a straight drive."""
+        assert self.lops_init is not None
+        fix = None
+        if lops is not None and lops.get("x") is not None and lops.get("y") is not None:
+            fix = (float(lops["x"]), float(lops["y"]))
+        found = self.lops_init.step(stamp, moving, s, omega, fix)
+        if found is None or not self.config["filter"]["enabled"]:
+            return
+        pose = (found.x_mm, found.y_mm, found.heading)
+        self.ekf = PoseEKF(self.ekf_params, pose)
+        self.ekf.set_pose(pose, found.sigma_mm, found.sigma_deg)
+        self.lops_init = None
+        self.message(
+            "I",
+            stamp,
+            f"position initialised by LOPS: {pose[0]:.0f} {pose[1]:.0f} mm, {math.degrees(pose[2]):.1f}° "
+            f"(± {found.sigma_mm:.0f} mm, ± {found.sigma_deg:.1f}°) after a {found.drive_mm:.0f} mm drive",
+        )
 
     def _apply_events(self, generation: int, stamp: int) -> None:
         with self._events_lock:
@@ -430,6 +464,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             if kind == "set_pose":
                 pose = (payload["x"], payload["y"], payload["psi"])
                 self.dead_reckoning = pose
+                self.lops_init = None  # a pose given: nothing to initialise
                 if self.gyro_heading is not None:
                     self.gyro_heading = pose[2]
                 if self.ekf is None and self.config["filter"]["enabled"]:
@@ -470,6 +505,8 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         if odo is not None and self.dead_reckoning is not None:
             x, y, psi = advance(self.dead_reckoning, s, omega)
             self.dead_reckoning = (x, y, wrap(psi))
+        if self.lops_init is not None and odo is not None:
+            self._initialise_by_lops(stamp, odo["dl"] != 0 or odo["dr"] != 0, s, omega, data.get("lops"))
         gyro = data.get("gyro")
         if gyro is not None and self.gyro_heading is None and self.dead_reckoning is not None:
             self.gyro_heading = self.dead_reckoning[2] - float(gyro["turn"])  # its first turn was counted

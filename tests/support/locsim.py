@@ -40,7 +40,8 @@ def drive(
     sonar_sigma_mm: float = 20.0,
     rest_ms: int = 500,
 ) -> Iterator[Sample]:
-    """Samples in time order for ``moves`` (``s`` mm / ``r`` degrees CCW), sensor-stamped.
+    """Samples in time order for ``moves`` (``s`` mm / ``r`` degrees CCW / ``w`` ms at rest),
+    sensor-stamped.
 
     ``heading`` (the fused heading, rad CCW, or None) closes the loop on turns the way main's
     action runner does: a turn aims at the heading before it plus the angle, and up to three
@@ -107,6 +108,10 @@ def drive(
 
     move_id = 0
     for kind, amount in moves:
+        if kind == "w":  # stand still for ``amount`` ms
+            for _ in range(int(amount) // odo_period_ms):
+                yield from tick(-1, 0, 0)
+            continue
         target = None
         if kind == "r" and heading is not None and heading() is not None:
             target = heading() + math.radians(amount)
