@@ -91,7 +91,7 @@ DEFAULTS: dict[str, Any] = {
         "ahead": {"enabled": False, "sensors": [1], "max_range_mm": 1400.0, "max_off_deg": 20.0, "sigma_mm": 15.0, "oblique_from_deg": 20.0, "oblique_sigma_mm": 25.0, "clear_mm": 150.0, "max_innovation_mm": 150.0, "repeat_after_mm": 100.0, "max_turn_rate_deg_s": 2.0, "confirm_mm": 30.0, "confirm_within_ms": 1000},
     },
     "robot": {"mm_per_step": 0.5419, "steps_per_degree": 6.5, "sonars": "robot"},
-    "lops": {"receivers": [], "sigma_mm": 10.0, "init": {"fixes": 5, "drive_mm": 300.0, "max_turn_deg": 2.0, "settle_ms": 500}},
+    "lops": {"receivers": [], "sigma_mm": 10.0, "delay_ms": 15.0, "delay_sigma_ms": 10.0, "floor_mm": 3.0, "init": {"fixes": 5, "drive_mm": 300.0, "max_turn_deg": 2.0, "settle_ms": 500}},
     "logs": {"enabled": True, "directory": "logs", "data": "localization-{start}.trlog", "errors": "localization-{start}.trerr", "debug": False},
 }
 # fmt: on

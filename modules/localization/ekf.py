@@ -411,10 +411,19 @@ class PoseEKF:
             self.P[i, :] = self.P[:, i] = 0.0
             self.P[i, i] = math.radians(self.params.initial_gyro_offset_sigma_deg) ** 2
 
-    def correct_range(self, receiver: tuple[float, float], distance: float, sigma_mm: float) -> bool:
+    def correct_range(
+        self,
+        receiver: tuple[float, float],
+        distance: float,
+        sigma_mm: float,
+        moved: tuple[float, float] = (0.0, 0.0),
+    ) -> bool:
         """LOPS: the distance from the robot (its transmitter at the pose's x, y) to a receiver.
-        One receiver at a time, each gated: a late echo fails the gate, the others still count."""
-        dx, dy = float(self.x[0]) - receiver[0], float(self.x[1]) - receiver[1]
+        One receiver at a time, each gated: a late echo fails the gate, the others still count.
+        ``moved``: how far the robot went between the measurement and now (mm, the filter's frame):
+        the transmitter stood that much behind the pose."""
+        dx = float(self.x[0]) - moved[0] - receiver[0]
+        dy = float(self.x[1]) - moved[1] - receiver[1]
         predicted = math.hypot(dx, dy)
         if predicted < 1.0:  # on the receiver itself: no direction to correct along
             return False

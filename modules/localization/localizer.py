@@ -305,18 +305,26 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         """LOPS's distances, each one a correction: a position also from one or two good receivers
         (seed 000: the filter can use what lopscpp could not trilaterate)."""
         assert self.ekf is not None
-        receivers = self.config["lops"]["receivers"]
-        sigma = self.config["lops"]["sigma_mm"]
+        settings = self.config["lops"]
+        receivers = settings["receivers"]
+        moved, speed = self._moved_since(int(lops.get("stamp_ms", stamp)) - settings["delay_ms"], stamp)
+        # the delay's spread, turned into distance by the speed the robot went meanwhile
+        sigma = math.hypot(settings["sigma_mm"], speed * settings["delay_sigma_ms"] / 1000.0)
         for receiver, key in zip(receivers, ("d1", "d2", "d3"), strict=True):
             distance = lops.get(key)
             if distance is not None and not self.ekf.correct_range(
-                (receiver[0], receiver[1]), distance, sigma
+                (receiver[0], receiver[1]), distance, sigma, moved
             ):
                 self.message(
                     "W",
                     stamp,
                     f"LOPS {key} = {distance:.0f} mm rejected by the gate (NIS {self.ekf.last_nis:.1f})",
                 )
+        # an error the packets share (the motion model between them, the receivers' places):
+        # taken as independent, 30 distances a second would average it away
+        floor = settings["floor_mm"]
+        for axis in (0, 1):
+            self.ekf.P[axis, axis] = max(self.ekf.P[axis, axis], floor * floor)
 
     def _correct_gyro(self, gyro: dict[str, Any], turn_rate: float, stamp: int) -> None:
         """The gyro's summed angle as a heading, at rest or on a straight leg only: turning, the
@@ -363,6 +371,18 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             return None
         distance = float(correlator["distance"])
         return distance, math.hypot(settings["sigma_mm"], settings["sigma_rel"] * distance)
+
+    def _moved_since(self, since_ms: float, stamp: int) -> tuple[tuple[float, float], float]:
+        """How far the robot went from ``since_ms`` to the sync time ``stamp`` by the odometry track,
+        turned into the filter's frame (mm), and its speed then (mm/s)."""
+        at_sync, before = self.track.pose_at(stamp), self.track.pose_at(since_ms)
+        if at_sync is None or before is None or self.ekf is None or stamp <= since_ms:
+            return (0.0, 0.0), 0.0
+        dx, dy = at_sync[0] - before[0], at_sync[1] - before[1]
+        turn = self.ekf.pose[2] - at_sync[2]  # the odometry frame into the filter's
+        c, s = math.cos(turn), math.sin(turn)
+        moved = (c * dx - s * dy, s * dx + c * dy)
+        return moved, math.hypot(dx, dy) / ((stamp - since_ms) / 1000.0)
 
     def message(self, cls: str, stamp_ms: int, text: str) -> None:
         if self.error_log is not None:

@@ -144,9 +144,9 @@ def gyro_sample(stamp_ms: int, angle_rad: float, state: int = 2) -> Sample:
     return Sample("gyro", stamp_ms, {"angle_mrad": round(angle_rad * 1000), "rate_urad_s": 0, "state": state})
 
 
-def with_gyro(samples: Iterator[Sample]) -> Iterator[Sample]:
-    """The drive's samples plus a gyro sample at every truth sample: the true summed turn,
-    whole mrad, as the gyro module publishes it."""
+def with_gyro(samples: Iterator[Sample], scale: float = 1.0) -> Iterator[Sample]:
+    """The drive's samples plus a gyro sample at every truth sample: the true summed turn times
+    ``scale`` (a gyro's scale-factor error), whole mrad, as the gyro module publishes it."""
     previous: float | None = None
     summed = 0.0
     for sample in samples:
@@ -158,4 +158,4 @@ def with_gyro(samples: Iterator[Sample]) -> Iterator[Sample]:
             previous = theta
         summed += math.remainder(theta - previous, 2 * math.pi)
         previous = theta
-        yield gyro_sample(sample.stamp_ms, summed)
+        yield gyro_sample(sample.stamp_ms, summed * scale)
