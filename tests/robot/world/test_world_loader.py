@@ -119,7 +119,9 @@ def test_bad_world_files_name_file_and_line(tmp_path, text, message):
 
 
 def test_unknown_world_name_lists_bundled_rooms():
-    with pytest.raises(WorldError, match=r"no such world file or bundled world \(bundled: empty, office"):
+    with pytest.raises(
+        WorldError, match=r"no such world file or bundled world \(bundled: darmstadt-hall, empty, office"
+    ):
         load_world("kitchen")
 
 
