@@ -67,6 +67,8 @@ class Series:
         self.sync_stamps: list[int] = []
         self.steps: list[tuple[int, int, int]] = []
         self.compass_raw: list[tuple[int, float]] = []
+        #: the world's truth as it was sampled (T R): the judge between the synchronisations
+        self.truth_raw: list[tuple[int, float, float, float]] = []
         #: the gyroscope's raw rates and its synchronised mean rates: (stamp, rad/s)
         self.gyro_raw: list[tuple[int, float]] = []
         self.gyro_sync: list[tuple[int, float]] = []
@@ -88,6 +90,8 @@ class Series:
                 if "seq" in payload:
                     self.raw_seq.setdefault(sensor, []).append(payload["seq"])
                 values = payload.get("v", {})
+                if sensor == "truth" and all(k in values for k in ("x", "y", "theta")):
+                    self.truth_raw.append((stamp, values["x"], values["y"], values["theta"]))
                 if sensor == "compass" and "heading_cdeg" in values:
                     self.compass_raw.append((stamp, values["heading_cdeg"] / 100.0))
                 elif sensor == "gyro" and "rate_urad_s" in values:
@@ -106,6 +110,14 @@ class Series:
             elif source == "S" and kind == "S":
                 self.sync_stamps.append(stamp)
 
+    def truth(self) -> np.ndarray:
+        """The truth to judge the sources by: its raw samples (stamp, x, y, ψ) where the log has
+        them — a ``T P`` at a synchronisation is the newest sample that had arrived by then,
+        up to a token round stale — else the ``T`` positions."""
+        if len(self.truth_raw) > 1:
+            return np.array(sorted(self.truth_raw), dtype=float)
+        return self.array("T")[:, :4]
+
     def array(self, source: str) -> np.ndarray:
         rows = self.positions.get(source, [])
         return np.array(rows, dtype=float) if rows else np.zeros((0, 7))
@@ -117,7 +129,7 @@ def _wrap_deg(values: np.ndarray) -> np.ndarray:
 
 def summarise(series: Series) -> dict[str, Any]:
     """End-point error and RMSE of every position source against the truth, and the timing."""
-    truth = series.array("T")
+    truth = series.truth()
     sources: dict[str, Any] = {}
     if len(truth):
         t_truth = truth[:, 0]
@@ -278,7 +290,7 @@ def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None =
     save(fig, "paths.png")
 
     # errors against the truth
-    truth = series.array("T")
+    truth = series.truth()
     if len(truth):
         fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
         tpsi = np.unwrap(truth[:, 3])
