@@ -60,7 +60,7 @@ def test_a_bundled_localizer_configuration_is_named_and_a_file_of_that_name_wins
     assert told == str(REPO / "config" / "early-ekf.yaml")
     early = load_config(told, under=sensor_set_layer("darmstadt"))
     fused = {name for name, sensor in early["sensors"].items() if sensor["use"] and sensor["filter"]}
-    assert fused == {"odometry", "gyro"} and early["filter"]["estimate"] == []
+    assert fused == {"odometry", "gyro"} and early["filter"]["estimate"] == ["glide"]
     (tmp_path / "early-ekf").write_text("filter: {enabled: false}\n")
     assert plan("--localizer", "early-ekf").env["TOKENRING_LOCALIZER_CONFIG"] == str(tmp_path / "early-ekf")
     with pytest.raises(Exception, match="no-such-config"):
