@@ -8,6 +8,11 @@ the repository is the commented default; every key may be left out (the default 
 unknown key or a bad value is an error naming the file, line and key (exit code 2 on the command
 line). A ``sync.trigger`` that sets ``count`` or ``min_period_ms`` but no ``mode`` is the count
 trigger: what it meant before the period trigger existed (so older logs replay as they ran).
+
+``sensors.<name>`` is each sensor's, as its file in :mod:`modules.localization.sensors` says
+(its defaults, its own checks, the ``up --sensors`` sets that turn it on); the filter's settings
+for the built-in sensors (``filter.compass``, ``filter.gyro``, ``filter.correlator``, ``lops``)
+stay here with the fusion they tune.
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ from typing import Any
 
 import yaml
 
-from modules.localization.sync import SENSORS as SENSOR_NAMES
+from modules.localization.sensors import names, registered
 from tokenring import NumberLoader, UsageError, YAMLStructureError, one_line
 
 #: the largest number a setting may have: every one is a distance, angle, time, count or
@@ -27,17 +32,8 @@ from tokenring import NumberLoader, UsageError, YAMLStructureError, one_line
 MAX_VALUE = 1e9
 
 # fmt: off
-DEFAULTS: dict[str, Any] = {
-    "sensors": {
-        "odometry": {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": True, "period_ms": 0},
-        "compass":  {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": True, "period_ms": 0},
-        "gyro":     {"use": False, "log_raw": True, "log_sync": True, "log_position": True, "filter": True, "period_ms": 0},
-        "correlator": {"use": False, "log_raw": True, "log_sync": True, "log_position": False, "filter": False, "period_ms": 0},
-        "sonar":    {"use": True, "log_raw": True, "log_sync": True, "log_position": False, "filter": True, "period_ms": 0},
-        "battery":  {"use": True, "log_raw": True, "log_sync": True, "log_position": False, "filter": False, "period_ms": 0},
-        "truth":    {"use": True, "log_raw": True, "log_sync": True, "log_position": True, "filter": False, "period_ms": 0},
-        "lops":     {"use": False, "log_raw": True, "log_sync": True, "log_position": True, "filter": False, "period_ms": 0},
-    },
+#: the defaults of everything but ``sensors`` (each sensor's file has its own: :func:`defaults`)
+CORE_DEFAULTS: dict[str, Any] = {
     "sync": {"enabled": True, "trigger": {"mode": "period", "sensor": "odometry", "period_ms": 100, "count": 1, "min_period_ms": 100, "rounds": 0}},
     "filter": {
         "enabled": True,
@@ -96,6 +92,25 @@ DEFAULTS: dict[str, Any] = {
 }
 # fmt: on
 
+
+def defaults() -> dict[str, Any]:
+    """Every setting's default: ``sensors.<name>`` from each registered sensor (its file's
+    ``settings``, in synchronisation order), the rest from :data:`CORE_DEFAULTS`. A new copy."""
+    sensors = {sensor.name: copy.deepcopy(dict(sensor.settings)) for sensor in registered()}
+    return {"sensors": sensors, **copy.deepcopy(CORE_DEFAULTS)}
+
+
+def __getattr__(name: str) -> Any:
+    """The tables the sensor registry makes, worked out when read (PEP 562): :data:`DEFAULTS`
+    (:func:`defaults`) and :data:`SENSOR_SET_CONFIG` (:func:`sensor_set_config` of each set)."""
+    if name == "DEFAULTS":
+        return defaults()
+    if name == "SENSOR_SET_CONFIG":
+        sets = sorted({each for sensor in registered() for each in sensor.sets})
+        return {DEFAULT_SENSOR_SET: {}, **{each: sensor_set_config(each) for each in sets}}
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 #: what config/localization.yaml sets beyond the built-in defaults (issue 21): the sonar's
 #: tangent range model with its late echo, the error a fit's points share, longer side lines, the
 #: travel gauge's settings (out to 1.4 m, known walls only, checked where its ranges were read; off),
@@ -137,19 +152,23 @@ def default_config_path() -> Path:
     return Path(__file__).resolve().parents[2] / "config" / "localization.yaml"
 
 
-#: what each of ``tokenring up --sensors``'s sets turns on in the Localizer, laid under the
-#: configuration given (whose keys win): the Darmstadt robot's gyroscope, floor correlator (logged,
-#: not fused: the seed never ran one) and LOPS
-SENSOR_SET_CONFIG: dict[str, dict[str, Any]] = {
-    "hamburg": {},
-    "darmstadt": {"sensors": {"gyro": {"use": True}, "correlator": {"use": True}, "lops": {"use": True}}},
-}
+#: the set ``tokenring up`` starts without ``--sensors``: the Hamburg robot's, none of the sets'
+DEFAULT_SENSOR_SET = "hamburg"
+
+
+def sensor_set_config(name: str) -> dict[str, Any]:
+    """What ``tokenring up --sensors NAME`` turns on in the Localizer, laid under the
+    configuration given (whose keys win): the sensors whose ``sets`` name it — for
+    ``darmstadt`` the gyroscope, the floor correlator (logged, not fused: the seed never ran one)
+    and LOPS; nothing for another set."""
+    sensors = {sensor.name: {"use": True} for sensor in registered() if name in sensor.sets}
+    return {"sensors": sensors} if sensors else {}
 
 
 def sensor_set_layer(sensors: str | None, lops_receivers: list[list[float]] | None = None) -> dict[str, Any]:
     """What ``up --sensors`` lays beneath the Localizer's configuration: the set's sensors, and
     where the LOPS that ``up`` started put its receivers (so the filter can take its distances)."""
-    under = copy.deepcopy(SENSOR_SET_CONFIG.get(sensors or "hamburg", {}))
+    under = sensor_set_config(sensors or DEFAULT_SENSOR_SET)
     if lops_receivers:
         under = layered(under, {"lops": {"receivers": [list(r) for r in lops_receivers]}})
     return under
@@ -185,7 +204,7 @@ def load_config(
     bundled one (:func:`config_path`) or a dict; ``under`` (a partial configuration, e.g. a
     sensor set's) lies beneath it."""
     if source is None:
-        return validate(under, "<config>", {}) if under else copy.deepcopy(DEFAULTS)
+        return validate(under, "<config>", {}) if under else defaults()
     if isinstance(source, dict):
         return validate(layered(under or {}, source), "<config>", {})
     from tokenring import message_error, read_text
@@ -226,7 +245,7 @@ def _collect_lines(node: Any, path: tuple[str, ...], out: dict[tuple[str, ...], 
 def validate(data: Any, source: str, lines: dict[tuple[str, ...], int]) -> dict[str, Any]:
     """Merge ``data`` over the defaults, checking every key and value."""
     checker = _Checker(source, lines)
-    config = checker.merge(DEFAULTS, data, ())
+    config = checker.merge(defaults(), data, ())
     trigger = data.get("sync", {}).get("trigger", {}) if isinstance(data, dict) else {}
     if isinstance(trigger, dict) and "mode" not in trigger and {"count", "min_period_ms"} & set(trigger):
         config["sync"]["trigger"]["mode"] = "count"  # written for the count trigger
@@ -308,7 +327,7 @@ class _Checker:
         trigger = c["sync"]["trigger"]
         if trigger["rounds"] == 0:
             choice(("sync", "trigger", "mode"), TRIGGER_MODES)
-            choice(("sync", "trigger", "sensor"), SENSOR_NAMES)
+            choice(("sync", "trigger", "sensor"), names())
             if trigger["mode"] == "period" and trigger["period_ms"] < 1:
                 raise self.fail(("sync", "trigger", "period_ms"), "must be at least 1 (ms of sensor time)")
             if trigger["mode"] == "count" and trigger["count"] < 1:
@@ -356,11 +375,9 @@ class _Checker:
             )
         if c["lops"]["init"]["fixes"] < 1 or c["lops"]["init"]["drive_mm"] <= 0:
             raise self.fail(("lops", "init"), "fixes must be at least 1 and drive_mm positive")
-        if c["sensors"]["truth"]["filter"]:
-            raise self.fail(
-                ("sensors", "truth", "filter"),
-                "the ground truth is a reference only, never fed to the filter",
-            )
+        for each in registered():  # each sensor's own (the truth: never fused)
+            if each.check_settings is not None:
+                each.check_settings(c, self.fail)
         receivers = c["lops"]["receivers"]
         if receivers and not (
             len(receivers) == 3
@@ -446,4 +463,4 @@ def _get(config: dict[str, Any], path: tuple[str, ...]) -> Any:
 
 def dump_defaults() -> str:
     """The defaults as YAML (what ``config/localization.yaml`` spells out with comments)."""
-    return yaml.safe_dump(DEFAULTS, sort_keys=False)
+    return yaml.safe_dump(defaults(), sort_keys=False)

@@ -48,7 +48,7 @@ from typing import Any
 
 from modules.localization.config import load_config
 from modules.localization.ekf import PoseEKF
-from modules.localization.logs import SENSOR_SOURCE, DataLog, ErrorLog
+from modules.localization.logs import DataLog, ErrorLog
 from modules.localization.lops_init import LopsInitialiser
 from modules.localization.params import (
     detector_params,
@@ -59,21 +59,14 @@ from modules.localization.params import (
     trigger_of,
     with_body,
 )
+from modules.localization.sensors import SyncContext, registered, sensor_named, sensor_of_letter
 from modules.localization.sync import (
     CATCH_UP_PERIODS,
-    SENSORS,
-    CompassSync,
-    CorrelatorSync,
-    GyroSync,
-    NewestSync,
-    OdometrySync,
     OdometryTrack,
     Sample,
     SampleTiming,
     ShadowBuffer,
-    SonarSync,
     SyncResult,
-    TruthSync,
     advance,
     step_motion,
 )
@@ -94,24 +87,37 @@ logger = logging.getLogger("tokenring.localization")
 SOURCE_CODES = {"none": 0, "odometry": 1, "ekf": 2}
 #: gyro readings rejected in a row after which its offset is learned afresh
 GYRO_RELEARN_AFTER = 5
-#: data channels read for each sensor, and the field that numbers their samples
-CHANNELS = {
-    "odometry": "motor.data",
-    "compass": "compass.data",
-    "gyro": "gyro.data",
-    "correlator": "correlator.data",
-    "sonar": "sonar.data",
-    "battery": "charger.data",
-}
-SEQ_FIELDS = {"compass": "sample", "sonar": "sweep"}
-VALUE_FIELDS = {
-    "odometry": ("steps_left", "steps_right", "x_mm", "y_mm", "angle_cdeg", "state"),
-    "compass": ("heading_cdeg", "state"),
-    "gyro": ("rate_urad_s", "angle_mrad", "raw", "state"),
-    "correlator": ("forward_um", "increment_um", "state"),
-    "sonar": ("distances",),
-    "battery": ("electronics_mv", "motors_mv", "remaining_min", "state"),
-}
+
+
+def __getattr__(name: str) -> Any:
+    """The sensors' tables, worked out from the registry when read (PEP 562): :data:`CHANNELS`
+    (the data channel read for each sensor), :data:`SEQ_FIELDS` (the field numbering its
+    samples), :data:`VALUE_FIELDS` (the fields taken)."""
+    if name == "CHANNELS":
+        return {s.name: s.channel for s in registered() if s.channel is not None}
+    if name == "SEQ_FIELDS":
+        return {s.name: s.seq_field for s in registered() if s.seq_field is not None}
+    if name == "VALUE_FIELDS":
+        return {s.name: s.value_fields for s in registered() if s.channel is not None}
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def _settings(config: dict[str, Any], name: str) -> dict[str, Any]:
+    """``sensors.<name>`` of ``config``; the sensor's defaults for one registered after the
+    configuration was validated."""
+    settings = config["sensors"].get(name)
+    if settings is None:
+        sensor = sensor_named(name)
+        return dict(sensor.settings) if sensor is not None else {"use": False}
+    return settings
+
+
+def _letter(name: str) -> str:
+    """The log source letter of the sensor ``name``."""
+    sensor = sensor_named(name)
+    if sensor is None:
+        raise KeyError(f"no sensor {name!r} is registered")
+    return sensor.letter
 
 
 @dataclass(frozen=True)
@@ -160,7 +166,14 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         self.config = config
         self.data_log = data_log
         self.error_log = error_log
-        self.sensors = {name: config["sensors"][name] for name in SENSORS if config["sensors"][name]["use"]}
+        #: the sensors registered as the core was built, in synchronisation order
+        self.registry = registered()
+        #: the settings (``sensors.<name>``) of every sensor used, in synchronisation order
+        self.sensors = {
+            sensor.name: settings
+            for sensor in self.registry
+            if (settings := _settings(config, sensor.name))["use"]
+        }
         self.trigger = trigger_of(config)
         on_grid = self.trigger.period_ms > 0  # records stamped at grid times, before the newest samples
         self.buffer = ShadowBuffer()
@@ -172,24 +185,16 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             if walls_mode != "off" and "sonar" in self.sensors
             else None
         )
-        odometry_sync = OdometrySync(
-            self.track, None if config["filter"]["initial_pose"] == "motor" else (0, 0), split_at_sync=on_grid
+        #: one synchroniser per registered sensor, built by its file in synchronisation order
+        context = SyncContext(
+            config, self.track, on_grid, detector=self.detector, gauge=self._travel_gauge(config)
         )
-        compass = config["filter"]["compass"]
-        self.synchronisers: dict[str, Any] = {
-            "odometry": odometry_sync,
-            "compass": CompassSync(
-                self.track, compass["mode"], compass["north_deg"], odometry_sync, compass["settle_ms"]
-            ),
-            "gyro": GyroSync(self.track),
-            "correlator": CorrelatorSync(self.track),
-            "sonar": SonarSync(self.track, self.detector, self._travel_gauge(config)),
-            "battery": NewestSync("battery"),
-            "truth": TruthSync() if on_grid else NewestSync("truth"),
-            "lops": NewestSync("lops"),  # table 3.1: the newest distances and position
-        }
+        for sensor in self.registry:
+            context.built[sensor.name] = sensor.synchroniser(context)
+        self.synchronisers: dict[str, Any] = context.built
         self.timing = {
-            name: SampleTiming(name, float(config["sensors"][name]["period_ms"]) or None) for name in SENSORS
+            sensor.name: SampleTiming(sensor.name, float(_settings(config, sensor.name)["period_ms"]) or None)
+            for sensor in self.registry
         }
         #: round obstacles of the wall file's room: a beam meets them before the wall behind
         self.known_circles: list[tuple[float, float, float]] = []
@@ -285,7 +290,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
                 payload: dict[str, Any] = {"gen": generation, "n": number, "v": sample.values}
                 if sample.seq is not None:
                     payload["seq"] = sample.seq
-                self.data_log.write(sample.stamp_ms, SENSOR_SOURCE[sample.sensor], "R", payload)
+                self.data_log.write(sample.stamp_ms, _letter(sample.sensor), "R", payload)
         return generation
 
     def event(self, kind: str, **payload: Any) -> None:
@@ -416,7 +421,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         stamp = self.trigger.stamp(half, self.last_sync_ms or 0)
         data: dict[str, dict[str, Any]] = {}
         lost: list[str] = []
-        for name in SENSORS:
+        for name in self.synchronisers:
             if name not in self.sensors:
                 continue
             samples = half.get(name, [])
@@ -442,7 +447,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         if self.data_log is not None:
             for name, record in data.items():
                 if self.sensors[name]["log_sync"]:
-                    self.data_log.write(stamp, SENSOR_SOURCE[name], "C", {"gen": generation, **record})
+                    self.data_log.write(stamp, _letter(name), "C", {"gen": generation, **record})
         counts = {name: len(half.get(name, [])) for name in self.sensors}
         self.process_synchronised(generation, stamp, data, counts)
         self.trigger.last_sync_ms = stamp
@@ -566,6 +571,10 @@ class LocalizationCore(WallCorrections, TravelCorrections):
                 ahead = self.config["walls"]["ahead"]
                 if ahead["enabled"] and turn_rate <= ahead["max_turn_rate_deg_s"]:
                     self._correct_ahead(sonar, stamp)
+            for sensor in self.registry:  # the sensors that bring their own correction
+                record = data.get(sensor.name)
+                if sensor.fuse is not None and record is not None and use.get(sensor.name):
+                    sensor.fuse(self, record, stamp)
         self._store_positions(stamp, data, wall_results, wall_fix)
         self.last_sync_ms = stamp
         self.syncs += 1
@@ -584,29 +593,10 @@ class LocalizationCore(WallCorrections, TravelCorrections):
     ) -> None:
         log = self.data_log
         store: dict[str, dict[str, Any]] = {}
-        if self.dead_reckoning is not None:
-            x, y, psi = self.dead_reckoning
-            store["O"] = {"x": x, "y": y, "psi": psi, "valid": [True, True, True]}
-        if "compass" in data:
-            store["M"] = {
-                "x": 0.0,
-                "y": 0.0,
-                "psi": data["compass"]["heading"],
-                "valid": [False, False, True],
-            }
-        if "gyro" in data and self.gyro_heading is not None:
-            store["G"] = {"x": 0.0, "y": 0.0, "psi": self.gyro_heading, "valid": [False, False, True]}
-        truth = data.get("truth")
-        if truth is not None:
-            store["T"] = {
-                "x": truth["x"],
-                "y": truth["y"],
-                "psi": truth["theta"],
-                "valid": [True, True, True],
-            }
-        lops = data.get("lops")
-        if lops is not None and lops.get("x") is not None and lops.get("y") is not None:
-            store["L"] = {"x": lops["x"], "y": lops["y"], "psi": 0.0, "valid": [True, True, False]}
+        for sensor in self.registry:  # the sensors' own: dead reckoning, compass, gyro, truth, LOPS
+            position = sensor.position(self, data.get(sensor.name)) if sensor.position is not None else None
+            if position is not None:
+                store[sensor.letter] = position
         if self.ekf is not None:
             x, y, psi = self.ekf.pose
             sx, sy, spsi = self.ekf.sigmas()
@@ -625,20 +615,11 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             }
         if wall_fix is not None:
             store["W"] = wall_fix  # one coordinate and the heading, the other invalid (seed §6.2.4)
-        letters = {
-            "O": "odometry",
-            "M": "compass",
-            "G": "gyro",
-            "T": "truth",
-            "L": "lops",
-            "K": None,
-            "W": "sonar",
-        }
         for letter, position in store.items():
             position["stamp_ms"] = stamp
             self.positions[letter] = position
-            sensor = letters[letter]
-            if log is not None and (sensor is None or self.sensors.get(sensor, {}).get("log_position")):
+            owner = sensor_of_letter(letter)  # None: the filter's, always logged
+            if log is not None and (owner is None or self.sensors.get(owner.name, {}).get("log_position")):
                 log.write(stamp, letter, "P", {k: v for k, v in position.items() if k != "stamp_ms"})
 
     # ---------------------------------------------------------------------------------------
@@ -752,6 +733,8 @@ class Localizer:
         self.truth_feed = truth  # the world's ground truth for the logs (copro's hardware), or None
         self.core: LocalizationCore | None = None
         self.buffers: dict[str, Any] = {}
+        #: per sensor read from a channel: the field numbering its samples, the fields taken
+        self.channel_fields: dict[str, tuple[str | None, tuple[str, ...]]] = {}
         self.last_seen: dict[str, tuple[Any, ...]] = {}
         self._truth_sub: Any = None
         self._lops_sub: Any = None
@@ -769,9 +752,10 @@ class Localizer:
             on_failure=self._log_failed,
         )
         self.core = LocalizationCore(self.config, data_log=data_log, error_log=error_log)
-        for sensor, channel in CHANNELS.items():
-            if sensor in self.core.sensors:
-                self.buffers[sensor] = self.os.subscribe(channel)
+        for sensor in registered():
+            if sensor.channel is not None and sensor.name in self.core.sensors:
+                self.buffers[sensor.name] = self.os.subscribe(sensor.channel)
+                self.channel_fields[sensor.name] = (sensor.seq_field, sensor.value_fields)
         if self.truth_feed is not None and "truth" in self.core.sensors:
             self._subscribe_truth()
         if "lops" in self.core.sensors and hasattr(self.truth_feed, "subscribe_lops"):
@@ -818,13 +802,16 @@ class Localizer:
             if not buffer.published:
                 continue  # nothing copied out of the token yet, or only its zeros before the owner's first store
             values = buffer.read()
-            seq_field = SEQ_FIELDS.get(sensor)
+            seq_field, value_fields = self.channel_fields[sensor]
             seq = values.get(seq_field) if seq_field else None
             key = (values["stamp_ms"], seq)
             if self.last_seen.get(sensor) == key:
                 continue
             self.last_seen[sensor] = key
-            picked = {f: values[f] for f in VALUE_FIELDS[sensor] if f in values}
+            if value_fields:
+                picked = {f: values[f] for f in value_fields if f in values}
+            else:  # all the channel has but its stamp and sample number
+                picked = {f: v for f, v in values.items() if f not in ("stamp_ms", seq_field)}
             core.feed(Sample(sensor, int(values["stamp_ms"]), picked, seq))
         return core.maybe_sync(self.os.counter)
 

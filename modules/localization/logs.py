@@ -23,6 +23,10 @@ M        magnetic compass (ours)
 T        the world's truth (ours)
 =======  ============================  =====  =====================================
 
+The sensors' letters, their payloads and their line formats come from the sensor registry
+(:mod:`modules.localization.sensors`, one file a sensor): :data:`SOURCES`, :data:`SENSOR_SOURCE`,
+:data:`SOURCE_SENSOR` and :data:`PAYLOADS` are worked out from it when read.
+
 ``T`` is the simulator's ground truth, for scoring and plots only, never fused. Logs of format
 version 1 carried it under ``L`` (LOPS's letter, while there was no LOPS): the reader takes their
 ``L`` records as ``T``. Logs of versions 1 and 2 carried the compass under ``G`` (the gyroscope's
@@ -49,7 +53,6 @@ from __future__ import annotations
 import contextlib
 import csv
 import io
-import math
 import os
 import threading
 from collections.abc import Callable
@@ -59,25 +62,29 @@ from typing import Any
 
 import msgpack
 
+from modules.localization.records import (
+    Check,
+    SeedContext,
+    fields,
+    integer,
+    mapping,
+    num,
+    number,
+    seed_int,
+    seed_obstacles,
+    seed_position,
+    sonar_mounts,
+)
+from modules.localization.records import flags as valid_flags
+from modules.localization.records import text as is_text
+from modules.localization.sensors import Sensor, registered, sensor_named, sensor_of_letter
 from tokenring import UsageError
 
 FORMAT_VERSION = 3
 #: what a log of an older format version called a source that has another letter now
 RENAMED_SOURCES: dict[int, dict[str, str]] = {1: {"L": "T", "G": "M"}, 2: {"G": "M"}}
-#: the gyroscope's sample period (seed §3.2): the seed logged a rate as the angle of one sample
-GYRO_SAMPLE_S = 0.02048
-SOURCES = {
-    "S": "system",
-    "O": "odometry",
-    "G": "gyroscope",
-    "M": "compass",
-    "W": "sonar",
-    "B": "battery",
-    "L": "LOPS",
-    "T": "truth",
-    "K": "filter",
-    "C": "correlator",
-}
+#: the sources that are not sensors (appendix B: the system, the Kalman filter)
+OTHER_SOURCES = {"S": "system", "K": "filter"}
 KINDS = {
     "R": "raw",
     "C": "synchronised",
@@ -88,17 +95,29 @@ KINDS = {
     "E": "event",
 }
 ERROR_CLASSES = {"I": "information", "W": "warning", "E": "error", "F": "fatal", "D": "debug"}
-SENSOR_SOURCE = {
-    "odometry": "O",
-    "compass": "M",
-    "gyro": "G",
-    "correlator": "C",
-    "sonar": "W",
-    "battery": "B",
-    "truth": "T",
-    "lops": "L",
-}
-SOURCE_SENSOR = {v: k for k, v in SENSOR_SOURCE.items()}
+
+
+def sources() -> dict[str, str]:
+    """Every source letter and what it is: the system, each registered sensor, the filter."""
+    return {"S": "system", **{sensor.letter: sensor.title for sensor in registered()}, "K": "filter"}
+
+
+def __getattr__(name: str) -> Any:
+    """The tables the registry makes, worked out when read (PEP 562): :data:`SOURCES` (letter:
+    title), :data:`SENSOR_SOURCE` (sensor: letter), :data:`SOURCE_SENSOR` (letter: sensor) and
+    :data:`PAYLOADS` ((source, kind): check), :data:`DATA_COLUMNS` (``data.csv``'s)."""
+    if name == "SOURCES":
+        return sources()
+    if name == "SENSOR_SOURCE":
+        return {sensor.name: sensor.letter for sensor in registered()}
+    if name == "SOURCE_SENSOR":
+        return {sensor.letter: sensor.name for sensor in registered()}
+    if name == "PAYLOADS":
+        checks = {(s.letter, kind): _sensor_check(s, kind) for s in registered() for kind in "RC"}
+        return {**checks, **OTHER_PAYLOADS}
+    if name == "DATA_COLUMNS":
+        return data_columns()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class LogError(UsageError):
@@ -264,105 +283,39 @@ class LogFile:
 MAX_LOG_BYTES = 1 << 30
 
 
-Check = Callable[[Any], bool]
-
-
-def _number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
-def _integer(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def _text(value: Any) -> bool:
-    return isinstance(value, str)
-
-
-def _mapping(value: Any) -> bool:
-    return isinstance(value, dict)
-
-
-def _integers(value: Any) -> bool:
-    return isinstance(value, list) and all(_integer(v) for v in value)
-
-
-def _numbers_or_none(value: Any) -> bool:
-    return isinstance(value, list) and all(v is None or _number(v) for v in value)
-
-
-def _flags(value: Any) -> bool:
-    return isinstance(value, list) and len(value) == 3 and all(isinstance(v, (bool, int)) for v in value)
-
-
-def _walls(value: Any) -> bool:
-    return isinstance(value, list) and all(
-        isinstance(w, dict) and _number(w.get("alpha")) and _number(w.get("d")) for w in value
-    )
-
-
-def _fields(**checks: Check) -> Check:
-    """A mapping with at least these fields, each passing its check (more fields may follow)."""
-    return lambda value: (
-        isinstance(value, dict)
-        and all(name in value and check(value[name]) for name, check in checks.items())
-    )
-
-
-def _odometry(values: Any) -> bool:
-    """Steps, and the motor's dead-reckoned pose with all three fields when it is there."""
-    steps = _fields(steps_left=_integer, steps_right=_integer)(values)
-    pose = _fields(x_mm=_integer, y_mm=_integer, angle_cdeg=_integer)
-    return steps and ("x_mm" not in values or pose(values))
-
-
-def _lops(values: Any) -> bool:
-    """LOPS's counter, its three distances and its position (mm; None where it has none)."""
-    if not _fields(counter=_integer)(values):
-        return False
-    return all(
-        values.get(k) is None
-        or (isinstance(values.get(k), int | float) and not isinstance(values.get(k), bool))
-        for k in ("d1", "d2", "d3", "x", "y")
-    )
-
-
-_RAW = {"gen": _integer, "n": _integer}
-#: what the readers (convert, analyse, replay) take from each kind of data record: a record
-#: whose payload lacks it is damage, reported like unreadable bytes, never a crash later
-PAYLOADS: dict[tuple[str, str], Check] = {
-    ("O", "R"): _fields(**_RAW, v=_odometry),
-    ("M", "R"): _fields(**_RAW, v=_fields(heading_cdeg=_number)),
-    ("G", "R"): _fields(**_RAW, v=_fields(rate_urad_s=_number, angle_mrad=_number)),
-    ("C", "R"): _fields(**_RAW, v=_fields(forward_um=_number, increment_um=_number)),
-    ("W", "R"): _fields(**_RAW, v=_fields(distances=_integers)),
-    ("T", "R"): _fields(**_RAW, v=_fields(x=_number, y=_number, theta=_number)),
-    ("L", "R"): _fields(**_RAW, v=_lops),
-    ("B", "R"): _fields(**_RAW, v=_mapping),
-    ("O", "C"): _fields(dl=_number, dr=_number, count=_integer),
-    ("M", "C"): _fields(heading=_number, count=_integer),
-    ("G", "C"): _fields(rate=_number, turn=_number, count=_integer),
-    ("C", "C"): _fields(distance=_number, speed=_number, count=_integer),
-    ("W", "C"): lambda p: (
-        _fields(distances_mm=_numbers_or_none, count=_integer)(p) and _walls(p.get("walls", []))
-    ),
-    ("T", "C"): _fields(x=_number, y=_number, theta=_number, count=_integer),
-    ("L", "C"): lambda p: _lops(p) and _fields(count=_integer)(p),
-    ("B", "C"): _mapping,
-    ("S", "S"): _fields(gen=_integer, period_ms=_number, counts=_mapping),
-    ("S", "E"): _fields(gen=_integer, event=_text),
-    ("W", "W"): _fields(gen=_integer, event=_text),
-    ("S", "T"): _fields(start=_text),
+_RAW = {"gen": integer, "n": integer}
+#: what the readers (convert, analyse, replay) take from each kind of record that is not a
+#: sensor's ``R`` or ``C`` (a sensor's say its ``raw`` and ``synchronised``): a record whose
+#: payload lacks it is damage, reported like unreadable bytes, never a crash later
+OTHER_PAYLOADS: dict[tuple[str, str], Check] = {
+    ("S", "S"): fields(gen=integer, period_ms=number, counts=mapping),
+    ("S", "E"): fields(gen=integer, event=is_text),
+    ("W", "W"): fields(gen=integer, event=is_text),
+    ("S", "T"): fields(start=is_text),
 }
+
+
+def _sensor_check(sensor: Sensor, kind: str) -> Check:
+    """A sensor's ``R`` record: its number in the buffer generation and values its ``raw``
+    check takes; its ``C`` record: what its ``synchronised`` check takes."""
+    return fields(**_RAW, v=sensor.raw) if kind == "R" else sensor.synchronised
+
+
 #: optional fields, checked when present
-OPTIONAL: dict[str, Check] = {"valid": _flags, "seq": _integer, "gen": _integer}
-_POSITION = _fields(x=_number, y=_number, psi=_number)
+OPTIONAL: dict[str, Check] = {"valid": valid_flags, "seq": integer, "gen": integer}
+_POSITION = fields(x=number, y=number, psi=number)
 
 
 def payload_ok(source: str, kind: str, payload: Any) -> bool:
     """Whether a data record's payload has what the readers take from it (:data:`PAYLOADS`;
     positions ``P`` of any source need x, y and psi)."""
-    check = _POSITION if kind == "P" else PAYLOADS.get((source, kind))
+    sensor = sensor_of_letter(source) if kind in ("R", "C") else None
+    if kind == "P":
+        check: Check | None = _POSITION
+    elif sensor is not None:
+        check = _sensor_check(sensor, kind)
+    else:
+        check = OTHER_PAYLOADS.get((source, kind))
     if check is None:
         return True  # shown as it is (``key=value``), never read field by field
     if not check(payload):
@@ -379,7 +332,8 @@ def _is_record(obj: Any, kind: str) -> bool:
     if kind == "data":
         return (
             len(obj) == 4 and isinstance(obj[1], str) and isinstance(obj[2], str)
-            and obj[1] in SOURCES and obj[2] in KINDS and payload_ok(obj[1], obj[2], obj[3])
+            and (obj[1] in OTHER_SOURCES or sensor_of_letter(obj[1]) is not None)
+            and obj[2] in KINDS and payload_ok(obj[1], obj[2], obj[3])
         )  # fmt: skip
     return len(obj) == 3 and isinstance(obj[1], str) and obj[1] in ERROR_CLASSES and isinstance(obj[2], str)
 
@@ -501,26 +455,16 @@ def read_log(path: str | Path, expect: str | None = None, salvage: bool = False)
 # converting and sorting
 
 
-def _num(value: Any, width: int = 8, digits: int = 0) -> str:
-    if value is None:
-        return f"{0:>{width}}"
-    if isinstance(value, bool):
-        return "1" if value else "0"
-    if digits:
-        return f"{float(value):>{width}.{digits}f}"
-    return f"{round(float(value)):>{width}d}" if math.isfinite(float(value)) else f"{'nan':>{width}}"
-
-
-def _lops_text(v: dict[str, Any]) -> str:
-    """LOPS's three distances (mm; 0 where nothing was heard) and its counter, appendix B's order."""
-    return " ".join(_num(v.get(k)) for k in ("d1", "d2", "d3")) + f" {v.get('counter', 0):>8}"
-
-
 def _position_text(p: dict[str, Any]) -> str:
     valid = p.get("valid", [True, True, True])
-    return f"{_num(p.get('x'))} {_num(p.get('y'))} {_num(p.get('psi'), 8, 5)} " + " ".join(
+    return f"{num(p.get('x'))} {num(p.get('y'))} {num(p.get('psi'), 8, 5)} " + " ".join(
         "1" if v else "0" for v in valid
     )
+
+
+def _values(kind: str, p: dict[str, Any]) -> dict[str, Any]:
+    """What a sensor's text hooks are handed: an ``R`` record's values, a ``C`` record's payload."""
+    return p.get("v", p) if kind == "R" else p
 
 
 def record_text(record: list[Any]) -> str:
@@ -536,47 +480,24 @@ def _record_body(source: str, kind: str, p: Any) -> str:
         return _position_text(p)
     if not isinstance(p, dict):
         return str(p)
-    v = p.get("v", p)
-    if source == "O" and kind == "R":
-        return f"{_num(v['steps_left'])} {_num(v['steps_right'])}"
-    if source == "O" and kind == "C":
-        return f"{_num(p['dl'])} {_num(p['dr'])} {p['count']}"
-    if source == "M" and kind == "R":
-        return f"{_num(v['heading_cdeg'], 6)} {v.get('state', 1)}"
-    if source == "M" and kind == "C":
-        return f"{_num(p['heading'], 15, 12)} {p['count']}"
-    if source == "G" and kind == "R":
-        return f"{float(v['rate_urad_s']) / 1e6:15.12f} {v.get('state', 2)}"
-    if source == "G" and kind == "C":
-        return f"{float(p['rate']):15.12f} {float(p['turn']):15.12f} {p['count']}"
-    if source == "C" and kind == "R":
-        return (
-            f"{_num(float(v['increment_um']) / 1000.0, 8, 3)} {_num(float(v['forward_um']) / 1000.0, 10, 3)}"
-        )
-    if source == "C" and kind == "C":
-        return f"{_num(p['distance'], 8, 3)} {p['count']}"
-    if source == "W" and kind == "R":
-        return " ".join(_num(d * 10 if d != 255 else 0, 5) for d in v["distances"])
-    if source == "W" and kind == "C":
-        parts = [_num(d, 5) for d in p["distances_mm"]]
-        for w in p.get("walls", []):
-            parts.append(f"1 {w['alpha']:.5f} {w['d']:.1f} {w.get('assoc', -1):>2}")
-        return " ".join(parts) + f" {p['count']}"
-    if source == "L" and kind in "RC":
-        return _lops_text(v if kind == "R" else p) + (f" {p['count']}" if kind == "C" else "")
-    if source == "T" and kind in "RC":
-        return f"{_num(v['x'])} {_num(v['y'])} {_num(v['theta'], 8, 5)}" + (
-            f" {p['count']}" if kind == "C" else ""
-        )
+    sensor = sensor_of_letter(source) if kind in ("R", "C") else None
+    if sensor is not None and sensor.text is not None:
+        return sensor.text(kind, _values(kind, p))
     if source == "S" and kind == "T":
         return str(p.get("start", ""))
     if source == "S" and kind == "S":
         counts = p.get("counts", {})
         return f"{p.get('gen', 0):>6} {p.get('period_ms', 0):>5} " + " ".join(
-            f"{SENSOR_SOURCE.get(k, k)}{n}" for k, n in counts.items()
+            f"{_letter(k)}{n}" for k, n in counts.items()
         )
     flat = " ".join(f"{k}={val}" for k, val in p.items() if k not in ("gen", "n"))
     return flat
+
+
+def _letter(name: str) -> str:
+    """A sensor's letter (its name when no sensor of that name is registered)."""
+    sensor = sensor_named(name)
+    return sensor.letter if sensor is not None else name
 
 
 def convert_text(log: LogFile) -> str:
@@ -595,11 +516,6 @@ def convert_text(log: LogFile) -> str:
 # ---------------------------------------------------------------------------------------------
 # the seed's exact text (seed 000, appendix B: figure B.3 for the widths, table B.7 for the fields)
 
-#: the wall blocks every sonar line carries (table B.7: "für alle 9 Wände")
-SEED_WALL_BLOCKS = 9
-#: an empty wall block: no wall (flag 0), no angle, no distance, no global wall
-SEED_NO_WALL = {"alpha": 0.0, "d": 0.0, "assoc": -1}
-
 
 def seed_start_time(start: str, path: str | Path = "") -> str:
     """The header's start (``YYYYmmdd-HHMMSS``) as the seed's 19-character ``TT.MM.JJJJ
@@ -613,99 +529,6 @@ def seed_start_time(start: str, path: str | Path = "") -> str:
     return f"{t.day:2d}.{t.month:2d}.{t.year:4d} {t.hour:2d}:{t.minute:2d}:{t.second:2d}"
 
 
-def _seed_int(value: Any, width: int) -> str:
-    """An integer field right-aligned in ``width`` (the seed's ``%6d``), rounded from mm floats."""
-    number = float(value)
-    return f"{round(number):{width}d}" if math.isfinite(number) else f"{'nan':>{width}}"
-
-
-def seed_position(p: dict[str, Any] | None, width: int = 6, angle_width: int = 7) -> str:
-    """X, Y, rotation and the three valid flags (table B.7, ``x P`` and ``S S``); an unknown
-    value is written as ``0`` (figure B.3: ``      0      0      0 0 0 0``). ``width``: X, Y and
-    an unknown rotation's field, ``angle_width``: a known rotation's (figure B.3's 6 and 7 by
-    default; table B.8's ``data.dat`` has 8 and 8)."""
-    if p is None:
-        return f"{0:{width}d} {0:{width}d} {0:{width}d} 0 0 0"
-    vx, vy, vpsi = (bool(v) for v in p.get("valid", [True, True, True]))
-    x = _seed_int(p["x"], width) if vx else f"{0:{width}d}"
-    y = _seed_int(p["y"], width) if vy else f"{0:{width}d}"
-    psi = f"{float(p['psi']):{angle_width}.5f}" if vpsi else f"{0:{width}d}"
-    return f"{x} {y} {psi} {int(vx)} {int(vy)} {int(vpsi)}"
-
-
-def _sonar_mounts(config: Any) -> list[tuple[float, float, float]]:
-    """Each sonar's (x mm, y mm, angle rad) on the robot: the log's config, else the robot's."""
-    robot = config.get("robot") if isinstance(config, dict) else None
-    sonars = robot.get("sonars") if isinstance(robot, dict) else None
-    if isinstance(sonars, list) and all(
-        isinstance(m, list) and len(m) == 3 and all(_number(v) for v in m) for m in sonars
-    ):
-        return [(float(x), float(y), math.radians(float(a))) for x, y, a in sonars]
-    from modules.description.robot import SONAR_MOUNTS
-
-    return [(m.x, m.y, m.angle) for m in SONAR_MOUNTS]
-
-
-def seed_obstacles(
-    distances_mm: list[float | None], mounts: list[tuple[float, float, float]], width: int
-) -> list[str]:
-    """Per sonar the obstacle's x and y (robot coordinates, mm) right-aligned in ``width``: the
-    mount plus the distance along the sonar's axis; ``0 0`` without contact or without a mount
-    (table B.7's ``W R``/``W C`` with 5 characters, table B.8's ``sonar.dat`` with 6)."""
-    points: list[str] = []
-    for i, d in enumerate(distances_mm):
-        if d is None or i >= len(mounts):
-            points += [f"{0:{width}d}", f"{0:{width}d}"]
-            continue
-        mx, my, angle = mounts[i]
-        points += [_seed_int(mx + d * math.cos(angle), width), _seed_int(my + d * math.sin(angle), width)]
-    return points
-
-
-def seed_sonar(
-    distances_mm: list[float | None],
-    previous: list[float | None] | None,
-    mounts: list[tuple[float, float, float]],
-    walls: list[dict[str, Any]],
-) -> str:
-    """A ``W R``/``W C`` body (table B.7): per sonar the new flag, then per sonar the obstacle's
-    x and y (robot coordinates, mm), then per sonar the distance (mm, ``0`` without contact),
-    then nine wall blocks ``flag α d association``. A value is new when it differs from the
-    previous line's (our sonar channel has no per-sensor flag; the first line is all new)."""
-    new = [
-        int(previous is None or i >= len(previous) or previous[i] != d) for i, d in enumerate(distances_mm)
-    ]
-    points = seed_obstacles(distances_mm, mounts, 5)
-    ranges = [f"{0:5d}" if d is None else _seed_int(d, 5) for d in distances_mm]
-    blocks = []
-    for k, wall in enumerate(walls + [SEED_NO_WALL] * max(0, SEED_WALL_BLOCKS - len(walls))):
-        found = int(k < len(walls))
-        assoc = wall.get("assoc", -1)
-        assoc = assoc if _integer(assoc) else -1
-        blocks.append(f"{found} {float(wall['alpha']):.5f} {float(wall['d']):.1f} {assoc:2d}")
-    return " ".join([*(str(n) for n in new), *points, *ranges, *blocks])
-
-
-def _wall_associations(records: list[list[Any]]) -> dict[int, list[int]]:
-    """For each ``W C`` record (by index) the global wall each of its walls was matched to:
-    the ``K P`` of the same synchronisation lists them in order (``[wall, accepted]``)."""
-    out: dict[int, list[int]] = {}
-    matched: list[int] | None = None
-    for i in range(len(records) - 1, -1, -1):
-        _, source, kind, p = records[i]
-        if source == "S" and kind == "S":
-            matched = None  # going back: a synchronisation ends here, the one before starts
-        elif source == "K" and kind == "P":
-            walls = p.get("walls") if isinstance(p, dict) else None
-            matched = [
-                w[0] if isinstance(w, list) and w and _integer(w[0]) else -1
-                for w in (walls if isinstance(walls, list) else [])
-            ]
-        elif source == "W" and kind == "C":
-            out[i] = matched or []
-    return out
-
-
 def convert_seed_text(log: LogFile) -> str:
     """The whole log exactly in the seed's line formats (seed 000, appendix B): the error log
     as figure B.2, the data log as figure B.3 where it shows a line (``S T``, ``x P``, ``S S``,
@@ -716,9 +539,7 @@ def convert_seed_text(log: LogFile) -> str:
         return convert_text(log)
     out = io.StringIO()
     out.write(f"S T {0:6d} {seed_start_time(log.header.get('start', ''), log.path)}\n")
-    mounts = _sonar_mounts(log.header.get("config"))
-    associations = _wall_associations(log.records)
-    previous: dict[str, list[float | None]] = {}
+    context = SeedContext(log.header.get("config"), log.records)
     filter_now: dict[str, Any] | None = None
     filter_at_sync: dict[str, Any] | None = None
     for i, (stamp, source, kind, p) in enumerate(log.records):
@@ -726,6 +547,7 @@ def convert_seed_text(log: LogFile) -> str:
             out.write(f"S T {stamp:6d} {seed_start_time(p['start'], log.path)}\n")
             continue
         head = f"{source} {kind} {stamp:7d}"
+        sensor = sensor_of_letter(source) if kind in ("R", "C") else None
         if kind == "P":
             body = seed_position(p)
             if source == "K":
@@ -733,46 +555,9 @@ def convert_seed_text(log: LogFile) -> str:
         elif source == "S" and kind == "S":
             body = seed_position(filter_at_sync)
             filter_at_sync = filter_now
-        elif source == "W" and kind in "RC":
-            if kind == "R":
-                distances: list[float | None] = [
-                    None if d == 255 else int(d) * 10 for d in p["v"]["distances"]
-                ]
-                walls: list[dict[str, Any]] = []
-            else:
-                distances = list(p["distances_mm"])
-                assoc = associations.get(i, [])
-                walls = [
-                    {**w, "assoc": assoc[k] if k < len(assoc) else w.get("assoc", -1)}
-                    for k, w in enumerate(p.get("walls", []))
-                ]
-            body = seed_sonar(distances, previous.get(kind), mounts, walls)
-            previous[kind] = distances
-            if kind == "C":
-                body += f" {p['count']}"
-        elif source == "O" and kind == "R":
-            body = f"{_seed_int(p['v']['steps_left'], 6)} {_seed_int(p['v']['steps_right'], 6)}"
-        elif source == "O" and kind == "C":
-            body = f"{_seed_int(p['dl'], 6)} {_seed_int(p['dr'], 6)} {p['count']}"
-        elif source == "G" and kind == "R":  # the seed's "Drehrate": the angle of one sample
-            body = f"{float(p['v']['rate_urad_s']) / 1e6 * GYRO_SAMPLE_S:15.12f}"
-        elif source == "G" and kind == "C":  # ... and the angle of the period (figure B.3's sums)
-            body = f"{float(p['turn']):15.12f} {p['count']}"
-        elif source == "C" and kind == "R":  # the increment (mm): table B.6 names no format
-            body = f"{float(p['v']['increment_um']) / 1000.0:8.3f}"
-        elif source == "C" and kind == "C":  # ... the sum of the increments (table 3.1)
-            body = f"{float(p['distance']):8.3f} {p['count']}"
-        elif source == "M" and kind == "R":  # ours: the compass's heading in the gyroscope's format
-            body = f"{math.radians(float(p['v']['heading_cdeg']) / 100.0):15.12f}"
-        elif source == "M" and kind == "C":
-            body = f"{float(p['heading']):15.12f} {p['count']}"
-        elif source == "L" and kind in "RC":
-            body = _lops_text(p.get("v", p)) + (f" {p['count']}" if kind == "C" else "")
-        elif source == "T" and kind in "RC":
-            v = p.get("v", p)
-            body = seed_position({"x": v["x"], "y": v["y"], "psi": v["theta"]})
-            if kind == "C":
-                body += f" {p['count']}"
+        elif sensor is not None and sensor.seed_text is not None:
+            context.index = i
+            body = sensor.seed_text(kind, _values(kind, p), context)
         else:
             # ours alone (events, battery): no seed format; one line whatever text it holds
             body = _record_body(source, kind, p).replace("\r", "\\r").replace("\n", "\\n")
@@ -780,12 +565,19 @@ def convert_seed_text(log: LogFile) -> str:
     return out.getvalue()
 
 
-DATA_COLUMNS = [
-    "stamp_ms", "period_ms", "steps_left", "steps_right", "compass_rad", "gyro_rad_s",
+#: ``data.csv``'s columns of the positions: the truth, dead reckoning and the filter
+POSITION_COLUMNS = [
     "truth_x", "truth_y", "truth_psi", "truth_valid",
     "odo_x", "odo_y", "odo_psi",
     "x", "y", "psi", "x_valid", "y_valid", "psi_valid",
 ]  # fmt: skip
+
+
+def data_columns() -> list[str]:
+    """``data.csv``'s columns: the time, each sensor's synchronised values (its ``csv_columns``,
+    in synchronisation order), then the positions (:data:`POSITION_COLUMNS`)."""
+    sensors = [column for sensor in registered() for column in sensor.csv_columns]
+    return ["stamp_ms", "period_ms", *sensors, *POSITION_COLUMNS]
 
 
 def convert_csv(log: LogFile) -> tuple[str, str]:
@@ -794,19 +586,17 @@ def convert_csv(log: LogFile) -> tuple[str, str]:
         raise LogError(f"{log.path}: CSV conversion needs a data log")
     data, sonar = io.StringIO(), io.StringIO()
     dw, sw = csv.writer(data, lineterminator="\n"), csv.writer(sonar, lineterminator="\n")
-    dw.writerow(DATA_COLUMNS)
+    columns = data_columns()
+    dw.writerow(columns)
     sonar_header_written = False
     row: dict[str, Any] = {}
     distances: list[Any] = []
     last_stamp: int | None = None
     for stamp, source, kind, p in log.records:
-        if kind == "C" and source == "O":
-            row.update(steps_left=p["dl"], steps_right=p["dr"])
-        elif kind == "C" and source == "M":
-            row["compass_rad"] = p["heading"]
-        elif kind == "C" and source == "G":
-            row["gyro_rad_s"] = p["rate"]
-        elif kind == "C" and source == "W":
+        sensor = sensor_of_letter(source) if kind == "C" else None
+        if sensor is not None and sensor.csv is not None:
+            row.update(sensor.csv(p))
+        if kind == "C" and source == "W":
             distances = p["distances_mm"]
         elif kind == "P" and source == "T":
             row.update(truth_x=p["x"], truth_y=p["y"], truth_psi=p["psi"], truth_valid=1)
@@ -826,7 +616,7 @@ def convert_csv(log: LogFile) -> tuple[str, str]:
             row["stamp_ms"] = stamp
             row["period_ms"] = stamp - last_stamp if last_stamp is not None else 0
             last_stamp = stamp
-            dw.writerow([row.get(c, "") for c in DATA_COLUMNS])
+            dw.writerow([row.get(c, "") for c in columns])
             if not sonar_header_written and distances:
                 sw.writerow(["stamp_ms", *[f"sonar{i}_mm" for i in range(len(distances))]])
                 sonar_header_written = True
@@ -837,18 +627,6 @@ def convert_csv(log: LogFile) -> tuple[str, str]:
 
 #: the width of each of ``sonar.dat``'s obstacle coordinates (table B.8)
 SEED_SONAR_DAT_WIDTH = 6
-
-
-def _seed_lops_dat(p: dict[str, Any] | None) -> str:
-    """Table B.8's LOPS columns: the three distances (mm, ``0`` where none was heard), the
-    position LOPS computed (``0 0`` when it could not) and its valid flag."""
-    if p is None:
-        return " ".join([f"{0:8d}"] * 5) + " 0"
-    distances = " ".join(_num(p.get(k), 8) for k in ("d1", "d2", "d3"))
-    x, y = p.get("x"), p.get("y")
-    valid = x is not None and y is not None and math.isfinite(float(x)) and math.isfinite(float(y))
-    where = f"{_seed_int(x, 8)} {_seed_int(y, 8)}" if valid else f"{0:8d} {0:8d}"
-    return f"{distances} {where} {int(valid)}"
 
 
 def convert_seed_dat(log: LogFile) -> tuple[str, str]:
@@ -872,33 +650,28 @@ def convert_seed_dat(log: LogFile) -> tuple[str, str]:
     What the log lacks (no gyroscope or LOPS in a Hamburg run, no filter, no sonar) is written
     ``0`` as the seed writes unknown values, its valid flags 0. Records after the last ``S S``
     (a synchronisation the log ends inside) are not written; nor are the compass, the floor
-    correlator and the truth, which table B.8 has no columns for."""
+    correlator and the truth, which table B.8 has no columns for. The sensors' columns are
+    theirs (each one's ``dat``, in synchronisation order: odometry, gyroscope, LOPS): a sensor
+    added brings its own, before the filter's."""
     if log.kind != "data":
         raise LogError(f"{log.path}: data.dat and sonar.dat (table B.8) need a data log")
-    mounts = _sonar_mounts(log.header.get("config"))
+    mounts = sonar_mounts(log.header.get("config"))
     sonars = max(
         [len(mounts)]
         + [len(p["distances_mm"]) for _, source, kind, p in log.records if (source, kind) == ("W", "C")]
     )
+    columns = [sensor for sensor in registered() if sensor.dat is not None]
     data, sonar = io.StringIO(), io.StringIO()
     sync: dict[str, Any] = {}
     for stamp, source, kind, p in log.records:
-        if kind == "C" and source in ("O", "G", "L", "W"):
+        if kind == "C" and (source == "W" or any(source == sensor.letter for sensor in columns)):
             sync[source] = p
         elif kind == "P" and source == "K":
             sync["K"] = p
         elif source == "S" and kind == "S":
-            odometry, gyro = sync.get("O"), sync.get("G")
-            encoders = (
-                f"{_seed_int(odometry['dl'], 8)} {_seed_int(odometry['dr'], 8)}"
-                if odometry is not None
-                else f"{0:8d} {0:8d}"
-            )
-            turn = f"{float(gyro['turn']):15.12f}" if gyro is not None else f"{0:15d}"
-            data.write(
-                f"{stamp:8d} {_seed_int(p['period_ms'], 4)} {encoders} {turn} "
-                f"{_seed_lops_dat(sync.get('L'))} {seed_position(sync.get('K'), 8, 8)}\n"
-            )
+            fields_ = [f"{stamp:8d}", seed_int(p["period_ms"], 4)]
+            fields_ += [sensor.dat(sync.get(sensor.letter)) for sensor in columns if sensor.dat is not None]
+            data.write(" ".join([*fields_, seed_position(sync.get("K"), 8, 8)]) + "\n")
             distances: list[float | None] = list(sync["W"]["distances_mm"]) if "W" in sync else []
             distances += [None] * (sonars - len(distances))
             sonar.write(" ".join(seed_obstacles(distances, mounts, SEED_SONAR_DAT_WIDTH)) + "\n")

@@ -5,7 +5,11 @@ writers append to the active half under a lock held only for the append, so they
 blocked by a synchronisation in progress. A :class:`Trigger` decides when to synchronise (at fixed
 grid times of one sensor's time, after N samples of one sensor, or every K token rounds); the
 buffer halves swap and one synchroniser per sensor turns the swapped half into one synchronised
-record:
+record. Which sensors there are, in which order their synchronisers run and which synchroniser
+each has is the registry's (:mod:`modules.localization.sensors`, one file per sensor); this module
+holds the machinery they share — the buffer, the trigger, the odometry track and the synchronisers
+of the built-in sensors, and :class:`SummedSync` that the gyro's and the correlator's build on
+(``sensors/gyro.py``, ``sensors/correlator.py``):
 
 ==========  ======================================================================  ==========
 sensor      synchronised as                                                         seed
@@ -17,6 +21,7 @@ correlator  sum of the translation increments since the last sync               
 sonar       newest distance of every sensor, plus every wall fitted in the period    walls
 battery     newest voltages                                                          (ours)
 truth       newest ground-truth pose (the world's: reference only, never fused)     (ours)
+lops        newest distances and position (table 3.1)                               LOPS
 ==========  ======================================================================  ==========
 
 Every sample carries the time stamp *of the sensor* (ms of simulated time), not of its arrival:
@@ -43,9 +48,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from modules.localization.walls import to_frame, wrap
-
-#: sensors the synchronisation knows, in the order their synchronisers run
-SENSORS = ("odometry", "compass", "gyro", "correlator", "sonar", "battery", "truth", "lops")
 
 NO_CONTACT_CM = 255
 #: a compass sample this much newer than the newest step-counter sample is not judged yet
@@ -391,8 +393,8 @@ class OdometrySync:
                 continue
             if not self.track.stamps:
                 self.track.append(sample.stamp_ms, self.pose)
-            dl = _wrap_i32(left - self.last[0])
-            dr = _wrap_i32(right - self.last[1])
+            dl = wrap_i32(left - self.last[0])
+            dr = wrap_i32(right - self.last[1])
             self.last = (left, right)
             dl_total += dl
             dr_total += dr
@@ -585,46 +587,6 @@ class SummedSync:
         }
 
 
-class GyroSync(SummedSync):
-    """Table 3.1's mean of the gyroscope's rates: ``rate`` (rad/s) and the ``turn`` (rad) it
-    makes, from the gyro module's summed angle (``angle_mrad``: ω·T of every raw value)."""
-
-    sensor = "gyro"
-    field, scale = "angle_mrad", 0.001
-    running_state = 2  # gyro_state RUNNING
-    amount_key, rate_key = "turn", "rate"
-
-    def track_change(self, older: tuple[float, float, float], newer: tuple[float, float, float]) -> float:
-        return newer[2] - older[2]
-
-
-class CorrelatorSync(SummedSync):
-    """Table 3.1's sum of the floor correlator's translation increments: ``distance`` (mm) and
-    ``speed`` (mm/s), from the correlator module's running sum (``forward_um``)."""
-
-    sensor = "correlator"
-    field, scale = "forward_um", 0.001
-    running_state = 1  # correlator_state RUNNING
-    amount_key, rate_key = "distance", "speed"
-
-    def track_change(self, older: tuple[float, float, float], newer: tuple[float, float, float]) -> float:
-        mid = (older[2] + newer[2]) / 2.0  # the displacement along the mean heading: forward > 0
-        return (newer[0] - older[0]) * math.cos(mid) + (newer[1] - older[1]) * math.sin(mid)
-
-    def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any] | None:
-        # forward_um wraps as an i32: unwrap against the previous sample before summing
-        unwrapped = []
-        for sample in samples:
-            raw = int(sample.values.get(self.field, 0))
-            if self.recent:
-                last = round(self.recent[-1][1] / self.scale)
-                raw = last + _wrap_i32(raw - last)
-            unwrapped.append(
-                Sample(sample.sensor, sample.stamp_ms, {**sample.values, self.field: raw}, sample.seq)
-            )
-        return super().synchronise(unwrapped, sync_ms)
-
-
 class SonarSync:
     """Newest distance of every sonar plus every wall the :class:`WallDetector` fitted."""
 
@@ -742,5 +704,6 @@ def _round_away(value: float) -> int:
     return int(math.copysign(math.floor(abs(value) + 0.5), value))
 
 
-def _wrap_i32(value: int) -> int:
+def wrap_i32(value: int) -> int:
+    """``value`` as the i32 it wraps to on the wire."""
     return (value + (1 << 31)) % (1 << 32) - (1 << 31)

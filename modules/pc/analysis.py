@@ -8,19 +8,22 @@ Plots (one PNG each, like the seed's per-module gnuplot directories):
 - ``steps.png`` — synchronised step increments of both motors (the seed's encoder module);
 - ``heading.png`` — compass heading, the filter's, dead reckoning's and the gyroscope's summed
   heading and the truth;
-- ``gyro.png`` — the gyroscope's raw rates over time and its synchronised mean rates (the seed's
-  gyroscope module, table B.9 ``Gyroskop``); only for a log with the gyroscope's ``G R`` records;
 - ``sonar.png`` — sonar distances over time (no contact is not drawn);
-- ``lops.png`` — LOPS's three distances over time, one per receiver (the seed's LOPS module,
-  table B.9 ``LOPS/Empfaenger n``; nothing heard is not drawn), and which packets gave no
-  position; only for a log with LOPS's ``L R`` records;
+- a sensor's own plot, drawn by its file in :mod:`modules.localization.sensors` (its
+  ``analysis``): ``gyro.png`` — the gyroscope's raw rates over time and its synchronised mean
+  rates (the seed's gyroscope module, table B.9 ``Gyroskop``); ``lops.png`` — LOPS's three
+  distances over time, one per receiver (the seed's LOPS module, table B.9 ``LOPS/Empfaenger
+  n``; nothing heard is not drawn), and which packets gave no position; each only for a log
+  with that sensor's raw records;
 - ``time.png`` — the **time module**: each sensor's cycle time (between its own time stamps) and
   the synchronisation's period, with missed samples marked.
 
 The summary gives, per position source, the end-point error and RMSE against the truth
 (position and heading), per sensor the sample count, missed and late samples, and the
 synchronisation's period: median, p99, extremes and the shares of cycles within 2 % of the
-median and within the seed's windows (98-102 ms and 95-105 ms).
+median and within the seed's windows (98-102 ms and 95-105 ms); and each sensor's own entry
+(``gyro``: its rates' mean and spread; ``lops``: the packets without a position, each receiver's
+share heard). Position sources are named and coloured as their sensors say.
 """
 
 from __future__ import annotations
@@ -33,27 +36,39 @@ from typing import Any
 
 import numpy as np
 
-from modules.localization.logs import SOURCE_SENSOR, LogError, LogFile, read_log
-from modules.localization.sync import SENSORS
+from modules.localization.logs import LogError, LogFile, read_log
+from modules.localization.sensors import Sensor, registered, sensor_of_letter
 
-POSITION_NAMES = {
-    "K": "filter (EKF)",
-    "O": "dead reckoning",
-    "M": "compass",
-    "G": "gyroscope",
-    "T": "truth",
-    "W": "walls",
-    "L": "LOPS",
-}
-COLOURS = {
-    "K": "tab:blue",
-    "O": "tab:red",
-    "M": "tab:green",
-    "G": "tab:olive",
-    "T": "black",
-    "W": "tab:purple",
-    "L": "tab:orange",
-}
+#: the filter's position: not a sensor's
+FILTER_NAME, FILTER_COLOUR = "filter (EKF)", "tab:blue"
+
+
+def position_names() -> dict[str, str]:
+    """What the plots and the summary call each position source: the filter, then the sensors'."""
+    named = {s.letter: s.position_name for s in registered() if s.position_name is not None}
+    return {"K": FILTER_NAME, **named}
+
+
+def colours() -> dict[str, str]:
+    """Each position source's colour in the plots: the filter's, then the sensors'."""
+    return {"K": FILTER_COLOUR, **{s.letter: s.colour for s in registered() if s.colour is not None}}
+
+
+def analysed() -> list[Sensor]:
+    """The sensors with an analyser module of their own, in synchronisation order."""
+    return [s for s in registered() if s.analysis is not None]
+
+
+def __getattr__(name: str) -> Any:
+    """The tables the sensor registry makes, worked out when read (PEP 562):
+    :data:`POSITION_NAMES`, :data:`COLOURS` and :data:`PLOTS`."""
+    if name == "POSITION_NAMES":
+        return position_names()
+    if name == "COLOURS":
+        return colours()
+    if name == "PLOTS":
+        return plots()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class Series:
@@ -69,12 +84,10 @@ class Series:
         self.compass_raw: list[tuple[int, float]] = []
         #: the world's truth as it was sampled (T R): the judge between the synchronisations
         self.truth_raw: list[tuple[int, float, float, float]] = []
-        #: the gyroscope's raw rates and its synchronised mean rates: (stamp, rad/s)
-        self.gyro_raw: list[tuple[int, float]] = []
-        self.gyro_sync: list[tuple[int, float]] = []
         self.sonar: list[tuple[int, list[int]]] = []
-        #: LOPS's packets: (stamp, d1, d2, d3, has a position), NaN where nothing was heard
-        self.lops: list[tuple[int, float, float, float, bool]] = []
+        #: per sensor with an analyser module: its R and C records (stamp, kind, payload)
+        modules = analysed()
+        records: dict[str, list[tuple[int, str, dict[str, Any]]]] = {s.name: [] for s in modules}
         self.walls_fitted = 0
         self.sigmas: dict[str, list[tuple[int, float, float, float]]] = {}  # (stamp, σx, σy, σψ)
         for stamp, source, kind, payload in log.records:
@@ -84,8 +97,12 @@ class Series:
                 self.positions.setdefault(source, []).append(row)
                 if "sigma" in payload:
                     self.sigmas.setdefault(source, []).append((stamp, *map(float, payload["sigma"])))
-            elif kind == "R" and source in SOURCE_SENSOR:
-                sensor = SOURCE_SENSOR[source]
+                continue
+            sensor_of = sensor_of_letter(source)
+            if kind in ("R", "C") and sensor_of is not None and sensor_of.name in records:
+                records[sensor_of.name].append((stamp, kind, payload))
+            if kind == "R" and sensor_of is not None:
+                sensor = sensor_of.name
                 self.raw_stamps.setdefault(sensor, []).append(stamp)
                 if "seq" in payload:
                     self.raw_seq.setdefault(sensor, []).append(payload["seq"])
@@ -94,21 +111,18 @@ class Series:
                     self.truth_raw.append((stamp, values["x"], values["y"], values["theta"]))
                 if sensor == "compass" and "heading_cdeg" in values:
                     self.compass_raw.append((stamp, values["heading_cdeg"] / 100.0))
-                elif sensor == "gyro" and "rate_urad_s" in values:
-                    self.gyro_raw.append((stamp, float(values["rate_urad_s"]) / 1e6))
                 elif sensor == "sonar" and "distances" in values:
                     self.sonar.append((stamp, list(values["distances"])))
-                elif sensor == "lops" and "counter" in values:
-                    d = [math.nan if values.get(k) is None else float(values[k]) for k in ("d1", "d2", "d3")]
-                    self.lops.append((stamp, *d, values.get("x") is not None))
             elif kind == "C" and source == "O":
                 self.steps.append((stamp, payload["dl"], payload["dr"]))
-            elif kind == "C" and source == "G":
-                self.gyro_sync.append((stamp, float(payload["rate"])))
             elif kind == "C" and source == "W":
                 self.walls_fitted += len(payload.get("walls", []))
             elif source == "S" and kind == "S":
                 self.sync_stamps.append(stamp)
+        #: what each sensor's analyser module made of its records (None: nothing to show)
+        self.sensors: dict[str, Any] = {
+            s.name: s.analysis.collect(records[s.name]) for s in modules if s.analysis is not None
+        }
 
     def truth(self) -> np.ndarray:
         """The truth to judge the sources by: its raw samples (stamp, x, y, ψ) where the log has
@@ -130,6 +144,7 @@ def _wrap_deg(values: np.ndarray) -> np.ndarray:
 def summarise(series: Series) -> dict[str, Any]:
     """End-point error and RMSE of every position source against the truth, and the timing."""
     truth = series.truth()
+    names = position_names()
     sources: dict[str, Any] = {}
     if len(truth):
         t_truth = truth[:, 0]
@@ -141,7 +156,7 @@ def summarise(series: Series) -> dict[str, Any]:
             ty = np.interp(a[:, 0], t_truth, truth[:, 2])
             tpsi = np.unwrap(truth[:, 3])
             tp = np.interp(a[:, 0], t_truth, tpsi)
-            entry: dict[str, Any] = {"name": POSITION_NAMES.get(source, source), "records": len(rows)}
+            entry: dict[str, Any] = {"name": names.get(source, source), "records": len(rows)}
             has_xy = bool(a[:, 4].any() and a[:, 5].any())
             if has_xy:
                 dist = np.hypot(a[:, 1] - tx, a[:, 2] - ty)
@@ -195,20 +210,10 @@ def summarise(series: Series) -> dict[str, Any]:
         "sync": sync,
         "walls_fitted": series.walls_fitted,
     }
-    if series.gyro_raw:  # at rest the seed's figure 10.2: one bit of noise around the zero point
-        rates = np.degrees(np.array([r for _, r in series.gyro_raw], dtype=float))
-        out["gyro"] = {
-            "samples": len(rates),
-            "mean_rate_deg_s": float(rates.mean()),
-            "sd_rate_deg_s": float(rates.std()),
-        }
-    if series.lops:  # the seed's 404 of 2024 without a position, and its receivers' share heard
-        lops = np.array(series.lops, dtype=float)
-        out["lops"] = {
-            "packets": len(lops),
-            "without_position": float(np.mean(lops[:, 4] == 0)),
-            "heard": [float(np.mean(~np.isnan(lops[:, i]))) for i in (1, 2, 3)],
-        }
+    for module in analysed():  # each sensor's own entry (the gyroscope's rates, LOPS's packets)
+        data = series.sensors.get(module.name)
+        if data is not None and module.analysis is not None and module.analysis.summary is not None:
+            out[module.name] = module.analysis.summary(data)
     if "K" in sources and "O" in sources and "end_error_mm" in sources["K"]:
         dr = sources["O"]["end_error_mm"]
         out["filter_to_dead_reckoning"] = sources["K"]["end_error_mm"] / dr if dr > 0 else None
@@ -228,17 +233,11 @@ def _known_walls(log: LogFile) -> np.ndarray:
         return np.zeros((0, 4))
 
 
-#: the files :func:`plot_all` may write (those the log has data for)
-PLOTS = (
-    "paths.png",
-    "errors.png",
-    "steps.png",
-    "heading.png",
-    "sonar.png",
-    "gyro.png",
-    "lops.png",
-    "time.png",
-)
+def plots() -> tuple[str, ...]:
+    """The files :func:`plot_all` may write (those the log has data for): the analyser's own and
+    each sensor's (after ``sonar.png``, in synchronisation order)."""
+    own = tuple(s.analysis.plot_file for s in analysed() if s.analysis is not None and s.analysis.plot)
+    return ("paths.png", "errors.png", "steps.png", "heading.png", "sonar.png", *own, "time.png")
 
 
 def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None = None) -> list[Path]:
@@ -271,6 +270,7 @@ def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None =
             progress(name)
 
     t0 = min((rows[0][0] for rows in series.positions.values() if rows), default=0)
+    names, colour = position_names(), colours()
 
     # paths
     fig, ax = plt.subplots(figsize=(7, 7))
@@ -279,9 +279,9 @@ def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None =
     for source in ("T", "O", "K"):
         a = series.array(source)
         if len(a) and a[:, 4].any():
-            ax.plot(a[:, 1], a[:, 2], color=COLOURS[source], lw=1.0 if source != "T" else 1.6,
-                    label=POSITION_NAMES[source])  # fmt: skip
-            ax.plot(a[-1, 1], a[-1, 2], "o", color=COLOURS[source], ms=4)
+            ax.plot(a[:, 1], a[:, 2], color=colour[source], lw=1.0 if source != "T" else 1.6,
+                    label=names[source])  # fmt: skip
+            ax.plot(a[-1, 1], a[-1, 2], "o", color=colour[source], ms=4)
     ax.set_aspect("equal")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
@@ -301,11 +301,9 @@ def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None =
             t = (a[:, 0] - t0) / 1000.0
             tx = np.interp(a[:, 0], truth[:, 0], truth[:, 1])
             ty = np.interp(a[:, 0], truth[:, 0], truth[:, 2])
-            ax1.plot(
-                t, np.hypot(a[:, 1] - tx, a[:, 2] - ty), color=COLOURS[source], label=POSITION_NAMES[source]
-            )
+            ax1.plot(t, np.hypot(a[:, 1] - tx, a[:, 2] - ty), color=colour[source], label=names[source])
             dh = _wrap_deg(np.degrees(a[:, 3] - np.interp(a[:, 0], truth[:, 0], tpsi)))
-            ax2.plot(t, dh, color=COLOURS[source], label=POSITION_NAMES[source])
+            ax2.plot(t, dh, color=colour[source], label=names[source])
         ax1.set_ylabel("position error [mm]")
         ax1.set_yscale("symlog", linthresh=10)
         ax1.legend(loc="upper left")
@@ -335,14 +333,14 @@ def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None =
             c[:, 1],
             ".",
             ms=1,
-            color=COLOURS["M"],
+            color=colour["M"],
             label="compass (raw, from north cw)",
         )
     for source in ("T", "O", "G", "K"):
         a = series.array(source)
         if len(a):
-            ax.plot((a[:, 0] - t0) / 1000.0, np.degrees(a[:, 3]) % 360.0, lw=0.8, color=COLOURS[source],
-                    label=f"{POSITION_NAMES[source]} (ccw from +X)")  # fmt: skip
+            ax.plot((a[:, 0] - t0) / 1000.0, np.degrees(a[:, 3]) % 360.0, lw=0.8, color=colour[source],
+                    label=f"{names[source]} (ccw from +X)")  # fmt: skip
     ax.set_xlabel("time [s]")
     ax.set_ylabel("[°]")
     ax.set_title("heading")
@@ -363,41 +361,17 @@ def plot_all(series: Series, out: Path, progress: Callable[[str], None] | None =
         ax.legend(loc="upper right", fontsize=7, ncol=4, markerscale=4)
         save(fig, "sonar.png")
 
-    # the gyroscope's rates
-    if series.gyro_raw:
-        fig, ax = plt.subplots(figsize=(9, 4))
-        raw = np.array(series.gyro_raw, dtype=float)
-        ax.plot((raw[:, 0] - t0) / 1000.0, np.degrees(raw[:, 1]), ".", ms=1.5, color=COLOURS["G"],
-                label="raw (the newest sample a token visit carried)")  # fmt: skip
-        if series.gyro_sync:
-            synced = np.array(series.gyro_sync, dtype=float)
-            ax.plot((synced[:, 0] - t0) / 1000.0, np.degrees(synced[:, 1]), lw=0.8, color="black",
-                    label="synchronised (mean of every rate since the last synchronisation)")  # fmt: skip
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("rate [°/s, ccw]")
-        ax.set_title("gyroscope: rates")
-        ax.legend(loc="best", fontsize=8)
-        save(fig, "gyro.png")
-
-    # LOPS's receivers
-    if series.lops:
-        fig, ax = plt.subplots(figsize=(9, 5))
-        lops = np.array(series.lops, dtype=float)
-        times = (lops[:, 0] - t0) / 1000.0
-        for i in range(3):
-            ax.plot(times, lops[:, i + 1], ".", ms=2, label=f"receiver {i + 1}")
-        lost = lops[:, 4] == 0
-        if lost.any():
-            ax.plot(times[lost], np.zeros(int(lost.sum())), "|", color="tab:red", ms=8,
-                    label=f"no position ({lost.mean():.0%} of {len(lops)} packets)")  # fmt: skip
-        ax.set_xlabel("time [s] (on arrival)")
-        ax.set_ylabel("distance [mm]")
-        ax.set_title("LOPS: distances to the three receivers (nothing heard not drawn)")
-        ax.legend(loc="upper right", fontsize=7, markerscale=3)
-        save(fig, "lops.png")
+    # each sensor's own (the gyroscope's rates, LOPS's receivers)
+    for module in analysed():
+        analysis, data = module.analysis, series.sensors.get(module.name)
+        if analysis is None or analysis.plot is None or data is None:
+            continue
+        fig, ax = plt.subplots(figsize=analysis.figsize)
+        analysis.plot(data, ax, t0)
+        save(fig, analysis.plot_file)
 
     # the time module
-    sensors = [s for s in SENSORS if len(series.raw_stamps.get(s, [])) > 1]
+    sensors = [s.name for s in registered() if len(series.raw_stamps.get(s.name, [])) > 1]
     rows = len(sensors) + 1
     fig, axes = plt.subplots(rows, 1, figsize=(9, 1.8 * rows + 0.6), sharex=True)
     axes = np.atleast_1d(axes)

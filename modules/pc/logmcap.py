@@ -4,7 +4,8 @@ poses, PlotJuggler plots every number, in the same format as a live recording.
 A data log (``.trlog``) becomes
 
 * ``/robot/pose/true``, ``/robot/pose/odometry``, ``/robot/pose/filtered`` (and
-  ``/robot/pose/compass``): its position records (``L``, ``O``, ``K``, ``G`` ``P``) as
+  ``/robot/pose/compass``, ``/robot/pose/gyroscope``): its position records (``T``, ``O``, ``K``,
+  ``M``, ``G`` ``P``: the filter's and each sensor's with a ``pose_topic``) as
   ``foxglove.PoseInFrame`` in the room frame, metres, exactly as the live feed's
   (:mod:`modules.pc.feed`); ``/robot/tf`` from the filter's pose, ``/robot/uncertainty`` from its
   standard deviations;
@@ -20,18 +21,35 @@ from __future__ import annotations
 from collections import Counter
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
-from modules.localization.logs import KINDS, SOURCES, LogFile
+from modules.localization.logs import KINDS, LogFile, sources
+from modules.localization.sensors import registered
 from tokenring import UsageError
 from tokenring.observe import Message, Topic
 
-POSE_TOPICS = {
-    "T": "/robot/pose/true",
-    "O": "/robot/pose/odometry",
-    "K": "/robot/pose/filtered",
-    "M": "/robot/pose/compass",
-    "G": "/robot/pose/gyroscope",
-}
+#: the filter's pose (not a sensor's)
+FILTER_TOPIC = "/robot/pose/filtered"
+#: the poses the live feed (:mod:`modules.pc.feed`) publishes, first and in its order
+LIVE_POSES = ("/robot/pose/true", "/robot/pose/odometry", FILTER_TOPIC)
+
+
+def pose_topics() -> dict[str, str]:
+    """The pose topic of each position source: the filter's and each sensor's ``pose_topic``;
+    the live feed's first (truth, dead reckoning, filter), then the others in sensor order."""
+    topics = {s.letter: s.pose_topic for s in registered() if s.pose_topic is not None}
+    topics["K"] = FILTER_TOPIC
+    first = [item for name in LIVE_POSES for item in topics.items() if item[1] == name]
+    return dict(first + [item for item in topics.items() if item[1] not in LIVE_POSES])
+
+
+def __getattr__(name: str) -> Any:
+    """:data:`POSE_TOPICS` (:func:`pose_topics`), worked out from the sensor registry when read."""
+    if name == "POSE_TOPICS":
+        return pose_topics()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 #: foxglove.LogLevel for the seed's error classes
 LOG_LEVELS = {"D": 1, "I": 2, "W": 3, "E": 4, "F": 5}
 
@@ -46,7 +64,8 @@ def start_ns(log: LogFile) -> int:
 
 
 def record_topic(source: str, kind: str) -> str:
-    return f"/log/{SOURCES.get(source, source)}/{KINDS.get(kind, kind).replace(' ', '_')}"
+    """``/log/<source>/<kind>``: the topic of a record's fields."""
+    return f"/log/{sources().get(source, source)}/{KINDS.get(kind, kind).replace(' ', '_')}"
 
 
 def log_topics(log: LogFile) -> list[Topic]:
@@ -56,14 +75,15 @@ def log_topics(log: LogFile) -> list[Topic]:
     if log.kind == "errors":
         return [Topic("/log/errors", "foxglove.Log", foxglove_schema("foxglove.Log"), "the error log")]
     pose = foxglove_schema("foxglove.PoseInFrame")
+    titles = sources()
     out = [
-        Topic(name, "foxglove.PoseInFrame", pose, f"{SOURCES[k]} positions")
-        for k, name in POSE_TOPICS.items()
+        Topic(name, "foxglove.PoseInFrame", pose, f"{titles[k]} positions")
+        for k, name in pose_topics().items()
     ]
     out.append(Topic("/robot/tf", "foxglove.FrameTransform", foxglove_schema("foxglove.FrameTransform")))
     out.append(Topic("/robot/uncertainty", "robot.Uncertainty", UNCERTAINTY_SCHEMA, "the EKF's sigmas"))
     for source, kind in sorted({(r[1], r[2]) for r in log.records}):
-        name = f"trlog.{SOURCES.get(source, source)}.{KINDS.get(kind, kind).replace(' ', '_')}"
+        name = f"trlog.{titles.get(source, source)}.{KINDS.get(kind, kind).replace(' ', '_')}"
         schema = {"title": name, "type": "object", "properties": {"stamp_ms": {"type": "integer"}}}
         out.append(Topic(record_topic(source, kind), name, schema, f"the log's {source} {kind} records"))
     return out
@@ -74,6 +94,7 @@ def log_messages(log: LogFile) -> list[Message]:
     from modules.pc.feed import frame_transform, pose_in_frame
 
     base = start_ns(log)
+    poses = pose_topics()
     out: list[Message] = []
     for record in log.records:
         t = base + max(0, int(record[0])) * 1_000_000
@@ -91,10 +112,10 @@ def log_messages(log: LogFile) -> list[Message]:
         stamp, source, kind, payload = record
         fields = dict(payload) if isinstance(payload, dict) else {"value": payload}
         out.append(Message(record_topic(source, kind), t, {"stamp_ms": stamp, **fields}))
-        if kind != "P" or source not in POSE_TOPICS:
+        if kind != "P" or source not in poses:
             continue
         x, y, psi = float(payload["x"]), float(payload["y"]), float(payload["psi"])
-        out.append(Message(POSE_TOPICS[source], t, pose_in_frame(t, x, y, psi)))
+        out.append(Message(poses[source], t, pose_in_frame(t, x, y, psi)))
         if source == "K":
             out.append(Message("/robot/tf", t, frame_transform(t, x, y, psi)))
             sigma = payload.get("sigma")

@@ -19,7 +19,8 @@ from typing import Any
 
 from modules.localization.config import load_config
 from modules.localization.localizer import LocalizationCore
-from modules.localization.logs import SOURCE_SENSOR, DataLog, ErrorLog, LogError, LogFile, read_log
+from modules.localization.logs import DataLog, ErrorLog, LogError, LogFile, read_log
+from modules.localization.sensors import sensor_of_letter
 from modules.localization.sync import Sample
 from tokenring import message_error, replacing
 
@@ -94,10 +95,10 @@ def _refuse(line: str) -> None:
 
 def _raw_sample(record: list[Any]) -> tuple[int, int, Sample] | None:
     stamp, source, kind, payload = record
-    sensor = SOURCE_SENSOR.get(source)
+    sensor = sensor_of_letter(source)
     if kind != "R" or sensor is None:
         return None
-    return payload["gen"], payload["n"], Sample(sensor, int(stamp), payload["v"], payload.get("seq"))
+    return payload["gen"], payload["n"], Sample(sensor.name, int(stamp), payload["v"], payload.get("seq"))
 
 
 def _from_raw(core: LocalizationCore, log: LogFile, progress: Callable[[int, int], None] | None) -> None:
@@ -109,8 +110,9 @@ def _from_raw(core: LocalizationCore, log: LogFile, progress: Callable[[int, int
             halves.setdefault(generation, []).append((number, sample))
     total = len(log.records)
     for i, (stamp, source, kind, payload) in enumerate(log.records):
-        if kind == "R" and source in SOURCE_SENSOR:
-            if core.data_log is not None and core.sensors.get(SOURCE_SENSOR[source], {}).get("log_raw"):
+        sensor = sensor_of_letter(source)
+        if kind == "R" and sensor is not None:
+            if core.data_log is not None and core.sensors.get(sensor.name, {}).get("log_raw"):
                 core.data_log.write(stamp, source, kind, payload)
         elif (source, kind) in EVENT_KINDS:
             _requeue(core, payload)
@@ -140,9 +142,10 @@ def _from_synchronised(
     pending: dict[str, dict[str, Any]] = {}
     total = len(log.records)
     for i, (stamp, source, kind, payload) in enumerate(log.records):
-        if kind == "C" and source in SOURCE_SENSOR:
+        sensor = sensor_of_letter(source)
+        if kind == "C" and sensor is not None:
             record = {k: v for k, v in payload.items() if k != "gen"}
-            pending[SOURCE_SENSOR[source]] = record
+            pending[sensor.name] = record
             if core.data_log is not None:
                 core.data_log.write(stamp, source, kind, payload)
         elif (source, kind) in EVENT_KINDS:

@@ -11,7 +11,9 @@ import pytest
 from modules.localization.config import load_config
 from modules.localization.ekf import EkfParams, PoseEKF
 from modules.localization.localizer import LocalizationCore
-from modules.localization.sync import CorrelatorSync, GyroSync, OdometryParams, OdometryTrack, Sample
+from modules.localization.sensors.correlator import CorrelatorSync
+from modules.localization.sensors.gyro import GyroSync
+from modules.localization.sync import OdometryParams, OdometryTrack, Sample
 from tests.support.locsim import drive, gyro_sample, square_moves, with_gyro
 
 CALIBRATING = 1
