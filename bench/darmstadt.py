@@ -323,17 +323,21 @@ def sync_rows(result: dict[str, Any]) -> list[tuple[str, str, str]]:
         "ours": "the motor's counters every loop tick",
         "seed": "the seed's modules, counters every loop tick",
         "sip": "the motor's SIPs, every 100 ms of its clock",
-        "darmstadt": "--sensors darmstadt (SIPs, gyroscope, LOPS)",
+        "darmstadt": "`up --sensors darmstadt` (the SIPs and the Darmstadt sensors)",
     }
     rows = []
-    for line in sync["lines"]:
+    order = list(what)
+    for line in sorted(
+        sync["lines"], key=lambda x: order.index(x["mode"]) if x["mode"] in order else len(order)
+    ):
         span = line.get("within_98_102ms_range") or [line["within_98_102ms"]] * 2
         arrival = line.get("arrival_98_102ms")
         arrival_span = line.get("arrival_98_102ms_range") or [arrival] * 2
+        load = f", load avg {line['load'][0]:.1f}–{line['load'][1]:.1f}" if line.get("load") else ""
         rows.append(
             (
-                f"synchronisation by odometry count 1 on the ring ({what.get(line['mode'], line['mode'])}; "
-                f"[{sync['file']}](results/{sync['file']}), {line['runs']} runs at speed-up {sync['speed']}): "
+                f"synchronisation by odometry count 1 on the ring, {what.get(line['mode'], line['mode'])} "
+                f"({line['runs']} runs at speed-up {sync['speed']}{load}; [{sync['file']}](results/{sync['file']})): "
                 "within 98–102 ms of sensor time / of arrival time",
                 f"{_pct(line['within_98_102ms'])} ({_pct(span[0])}–{_pct(span[1])}) / "
                 + (
