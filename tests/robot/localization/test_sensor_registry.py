@@ -10,6 +10,7 @@ reproduces the run — with no other file edited. And the built-in eight keep th
 from __future__ import annotations
 
 import json
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -137,6 +138,26 @@ def test_the_built_in_sensors_keep_their_order_and_letters() -> None:
         "sonar": "W", "battery": "B", "truth": "T", "lops": "L",
     }  # fmt: skip
     assert "thermometer" not in load_config()["sensors"]
+
+
+def test_a_file_in_the_sensors_folder_is_a_sensor(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The folder is the list: a module dropped beside gyro.py registers itself on import."""
+    import modules.localization.sensors as package
+
+    (tmp_path / "hygrometer.py").write_text(
+        "from modules.localization.sensors.base import Sensor, register\n"
+        "from modules.localization.sync import NewestSync\n"
+        "register(Sensor('hygrometer', 'Y', 'hygrometer', 80, lambda context: NewestSync('hygrometer')))\n"
+    )
+    monkeypatch.setattr(package, "__path__", [*package.__path__, str(tmp_path)])
+    try:
+        package._discover()
+        assert names()[-1] == "hygrometer" and sensor_of_letter("Y") is not None
+        assert load_config()["sensors"]["hygrometer"]["use"] is False
+    finally:
+        unregister("hygrometer")
+        sys.modules.pop("modules.localization.sensors.hygrometer", None)
+    assert "hygrometer" not in names()
 
 
 def test_a_taken_name_or_letter_is_refused(thermometer: Sensor) -> None:
