@@ -96,6 +96,7 @@ def test_the_hall_is_the_square_with_a_slippery_floor_for_turns() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(600)  # about 15 simulated minutes: 70 s on an idle core, twice that on a busy one
 def test_the_seed_s_drive_in_the_hall_loses_the_odometry_by_metres() -> None:
     """World seed 2: three laps by the action navigator; dead reckoning ends beyond the seed's 1.5 m."""
     drive = darmstadt.odometry_seed_drive(2)
