@@ -647,6 +647,28 @@ class NewestSync:
         return {**newest.values, "count": len(samples), "stamp_ms": newest.stamp_ms}
 
 
+class DueSync:
+    """The newest sample *measured* by the sync time: one stamped on arrival (LOPS) was measured
+    ``delay_ms`` before its stamp. A sample measured after the sync time waits for the next one:
+    the token brings the odometry that triggers a sync later than Zenoh brings such a sample
+    (at ``--speed 10`` hundreds of ms of emulated time), and a position from after the sync time
+    taken as at it put the filter ahead of the robot."""
+
+    def __init__(self, sensor: str, delay_ms: float = 0.0) -> None:
+        self.sensor = sensor
+        self.delay_ms = delay_ms
+        self.waiting: list[Sample] = []
+
+    def synchronise(self, samples: list[Sample], sync_ms: int) -> dict[str, Any] | None:
+        known = self.waiting + samples
+        due = [s for s in known if s.stamp_ms - self.delay_ms <= sync_ms]
+        self.waiting = [s for s in known if s.stamp_ms - self.delay_ms > sync_ms]
+        if not due:
+            return None
+        newest = due[-1]
+        return {**newest.values, "count": len(due), "stamp_ms": newest.stamp_ms}
+
+
 class TruthSync:
     """The ground truth at the sync time: interpolated between the samples around it (the
     period trigger stamps a synchronisation before the newest samples), else the nearest one.

@@ -2,7 +2,8 @@
 copro's WLAN receiver takes them (stamped on arrival, fed by the Localizer's ``feed_lops``, not a
 data channel): a counter, the distances to the three receivers and the position it trilaterated.
 
-Synchronised as table 3.1's newest distances and position (:class:`~modules.localization.sync.NewestSync`).
+Synchronised as table 3.1's newest distances and position, the newest measured by the sync time
+(:class:`~modules.localization.sync.DueSync`: packets arrive ahead of the odometry that triggers it).
 Logged as ``L``: ``L R`` and ``L C`` the three distances (0 where nothing was heard) and the
 counter, ``L P`` the position when it has one (x and y valid, no heading); table B.8's
 Entfernung 1-3, LOPS-X, LOPS-Y and LOPS-Valid; ``lops.png`` the distances per receiver. Its
@@ -19,7 +20,7 @@ import numpy as np
 
 from modules.localization.records import fields, integer, num, seed_int
 from modules.localization.sensors.base import Analysis, Record, Sensor, SyncContext, register, sensor_settings
-from modules.localization.sync import NewestSync
+from modules.localization.sync import DueSync
 
 DISTANCES = ("d1", "d2", "d3")
 
@@ -99,8 +100,9 @@ def _plot(packets: list[tuple[int, float, float, float, bool]], ax: Any, t0: flo
     ax.legend(loc="upper right", fontsize=7, markerscale=3)
 
 
-def _synchroniser(context: SyncContext) -> NewestSync:
-    return NewestSync("lops")  # table 3.1: the newest distances and position
+def _synchroniser(context: SyncContext) -> DueSync:
+    # table 3.1: the newest distances and position - measured by the sync time
+    return DueSync("lops", context.config["lops"]["delay_ms"])
 
 
 LOPS = register(

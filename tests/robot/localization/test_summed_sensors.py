@@ -223,3 +223,23 @@ def test_a_gyro_parted_from_the_heading_is_learned_afresh_after_five_rejections(
     assert report["gyro_relearned"] == 1
     assert report["gates"]["rejected"]["gyro"] == GYRO_RELEARN_AFTER
     assert report["gates"]["accepted"]["gyro"] > 20
+
+
+def test_a_lops_packet_measured_after_the_sync_time_waits_for_the_next_one() -> None:
+    """On a ring at speed 10 the odometry that triggers a sync comes by token, hundreds of ms of
+    emulated time after its stamp, while LOPS's packets come straight over Zenoh: the half
+    synchronised at S holds packets measured after S. Taken as at S they put the filter ahead of
+    the robot (30 mm at 50 mm/s); each waits for the first sync after it was measured."""
+    from modules.localization.sync import DueSync
+
+    sync = DueSync("lops", delay_ms=15.0)
+
+    def packet(stamp: int, counter: int) -> Sample:
+        return Sample("lops", stamp, {"counter": counter, "x": float(stamp), "y": 0.0})
+
+    first = sync.synchronise([packet(90, 1), packet(130, 2)], 100)
+    assert first is not None and (first["counter"], first["count"], first["stamp_ms"]) == (1, 1, 90)
+    second = sync.synchronise([packet(210, 3), packet(230, 4)], 200)  # 210 was measured at 195
+    assert second is not None and (second["counter"], second["count"]) == (3, 2)
+    assert sync.synchronise([], 300)["counter"] == 4
+    assert sync.synchronise([], 400) is None
