@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import struct
-import threading
 from pathlib import Path
 from typing import Any
 
@@ -19,9 +17,9 @@ import yaml
 
 from modules.description import keys as robot_keys
 from modules.world import correlator as model
+from tests.support.datawatch import DataChannelReader
 from tests.support.hallway import ROOM, programs
 from tests.support.processes import REPO
-from tests.support.ringjudge import Header
 from tests.support.ringutil import control, launcher_pids, tap, wait_ring, wait_until
 from tokenring.host.pclink import PcLink
 from tokenring.transport.session import query_one
@@ -30,42 +28,6 @@ PROTOCOL = yaml.safe_load((REPO / "protocol.yaml").read_text())
 NODES = PROTOCOL["nodes"]
 CORRELATOR = NODES["correlator"]
 STATES = PROTOCOL["enums"]["correlator_state"]
-FORMATS = {"u8": "B", "i8": "b", "u16": "H", "i16": "h", "u32": "I", "i32": "i"}
-
-
-class CorrelatorReader:
-    """correlator.data as the correlator's own frames carry it (one publisher: in the order sent)."""
-
-    def __init__(self, session: Any, ring: str) -> None:
-        self.header = Header.from_protocol()
-        fields = CORRELATOR["data"]["fields"]
-        self.names = list(fields)
-        types = [f if isinstance(f, str) else f["type"] for f in fields.values()]
-        self.format = "<" + "".join(FORMATS[t] for t in types)
-        self.address = CORRELATOR["data"]["address"]
-        self.seen: list[dict[str, int]] = []
-        self.lock = threading.Lock()
-        self.sub = session.declare_subscriber(f"tokenring/{ring}/token/*", self._on)
-
-    def _on(self, sample: Any) -> None:
-        frame = sample.payload.to_bytes()
-        if not self.header.valid(frame) or frame[0] != CORRELATOR["id"]:  # SID: the sender
-            return
-        data = dict(zip(self.names, struct.unpack_from(self.format, frame, self.address), strict=True))
-        with self.lock:
-            if not self.seen or self.seen[-1] != data:
-                self.seen.append(data)
-
-    def values(self) -> list[dict[str, int]]:
-        with self.lock:
-            return list(self.seen)
-
-    def newest(self) -> dict[str, int] | None:
-        with self.lock:
-            return self.seen[-1] if self.seen else None
-
-    def close(self) -> None:
-        self.sub.undeclare()
 
 
 def wrapped(newer: int, older: int) -> int:
@@ -87,7 +49,7 @@ def test_a_straight_drive_moves_the_correlators_sum_by_the_distance(
     )  # fmt: skip
     ids = [NODES[name]["id"] for name in ("main", "motor", "correlator")]
     with tap(endpoint) as session:
-        reader = CorrelatorReader(session, ring_name)
+        reader = DataChannelReader(session, ring_name, "correlator")
         wait_ring(session, ring_name, ids, timeout=120)
         procs.watch(launcher_pids(session, ring_name))
         link = PcLink(session, ring_name)

@@ -9,59 +9,21 @@ from __future__ import annotations
 import argparse
 import itertools
 import signal
-import struct
-import threading
 from pathlib import Path
 from typing import Any
 
 import pytest
 import yaml
 
+from tests.support.datawatch import DataChannelReader
 from tests.support.processes import REPO
-from tests.support.ringjudge import Header
 from tests.support.ringutil import control, tap, wait_until
 
 PROTOCOL = yaml.safe_load((REPO / "protocol.yaml").read_text())
 GYRO = PROTOCOL["nodes"]["gyro"]
 COPRO_ID = PROTOCOL["nodes"]["copro"]["id"]
 STATES = PROTOCOL["enums"]["gyro_state"]
-FORMATS = {"u8": "B", "i8": "b", "u16": "H", "i16": "h", "u32": "I", "i32": "i"}
 HAMBURG = ["main", "motor", "sonar", "compass", "copro", "map", "lcd", "charger"]
-
-
-def field_type(spec: Any) -> str:
-    return spec if isinstance(spec, str) else spec["type"]
-
-
-class GyroReader:
-    """gyro.data as the gyro's own frames carry it (SID 90: one publisher, so in the order sent;
-    frames of different hops may reach the tap out of order)."""
-
-    def __init__(self, session: Any, ring: str) -> None:
-        self.header = Header.from_protocol()
-        fields = GYRO["data"]["fields"]
-        self.names = list(fields)
-        self.format = "<" + "".join(FORMATS[field_type(f)] for f in fields.values())
-        self.address = GYRO["data"]["address"]
-        self.seen: list[dict[str, int]] = []
-        self.lock = threading.Lock()
-        self.sub = session.declare_subscriber(f"tokenring/{ring}/token/*", self._on)
-
-    def _on(self, sample: Any) -> None:
-        frame = sample.payload.to_bytes()
-        if not self.header.valid(frame) or frame[0] != GYRO["id"]:  # SID: the sender
-            return
-        data = dict(zip(self.names, struct.unpack_from(self.format, frame, self.address), strict=True))
-        with self.lock:
-            if not self.seen or self.seen[-1] != data:
-                self.seen.append(data)
-
-    def values(self) -> list[dict[str, int]]:
-        with self.lock:
-            return list(self.seen)
-
-    def close(self) -> None:
-        self.sub.undeclare()
 
 
 def test_the_default_ring_is_the_hamburg_eight_and_darmstadt_adds_the_gyro_and_correlator() -> None:
@@ -113,7 +75,7 @@ def test_up_with_the_darmstadt_sensors_runs_a_calibrated_gyro_and_lops(
     )  # fmt: skip
     try:
         with tap(endpoint) as session:
-            reader = GyroReader(session, ring_name)
+            reader = DataChannelReader(session, ring_name, "gyro")
             lops_packets: list[bytes] = []  # LOPS beside the ring: tables 6.1/6.2, never in the token
             lops = session.declare_subscriber(
                 f"tokenring/{ring_name}/robot/lops/packets",
