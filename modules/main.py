@@ -110,6 +110,7 @@ class Program(UserProgram):
         #: the fused heading at rest before the compass's calibration turn: where an action file
         #: run after it should start from (the turn ends a few degrees off, up to 11° seen)
         self.rest_heading: float | None = None
+        self.rest_filtered = False  # rest_heading is the fused heading (not the motor's)
         self.calibration_heading: float | None = None
         self.compass_calibrating = False  # compass.data says CALIBRATING (read with the sensors)
         # self-localisation (seed §4.3 item 5): the filtered pose corrects the motor between moves
@@ -194,7 +195,10 @@ class Program(UserProgram):
         )
 
     def _note_calibration_turn(self) -> None:
-        """Keep the heading at rest; while the compass calibrates, hold the one from before."""
+        """Keep the heading at rest; while the compass calibrates, hold the one from before. The
+        fused heading's once copro has one; before that the motor's (where the robot was put
+        down): a calibration turn started before copro's filter published (a slow start with
+        --sensors darmstadt) left none, and the next action file ran 16° off into a wall."""
         sensors = self.sensors
         if self.compass_calibrating:
             if self.calibration_heading is None:
@@ -203,10 +207,11 @@ class Program(UserProgram):
             self.navigator is None
             and self.calibration_heading is None
             and sensors.pose is not None
-            and sensors.pose_filtered
+            and (sensors.pose_filtered or not self.rest_filtered)
             and sensors.motor_state == MOTOR_STATE["IDLE"]
         ):
             self.rest_heading = sensors.pose[2]
+            self.rest_filtered = sensors.pose_filtered
 
     def _cooperate(self) -> None:
         """One turn of the seed's cooperative multitasking: pilot step, then navigator if free."""

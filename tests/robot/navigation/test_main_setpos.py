@@ -293,3 +293,49 @@ def test_main_pilot_busy_sends_nothing(monkeypatch: pytest.MonkeyPatch, choice: 
     visit(program, motor_data(1000, 2000, 9000, 5100), copro_data(1400, 1700, 9900, 5100))
     assert sent(os, "SET_GLOBAL_POSITION") == []
     assert program.corrector.sent == 0
+
+
+# -- the heading an action file squares up to after the compass's calibration turn ---------------
+
+
+def test_before_copro_filters_the_calibration_turn_keeps_the_motors_heading() -> None:
+    """The turn began before copro's filter published a pose (a slow start with --sensors
+    darmstadt): the heading kept is the motor's, where the robot was put down; once a fused
+    heading came, only a fused one replaces it."""
+    from types import SimpleNamespace
+
+    def sensors(heading: float, filtered: bool) -> Sensors:
+        return Sensors(pose=(1000.0, 1000.0, heading), pose_filtered=filtered, motor_state=IDLE)
+
+    main = SimpleNamespace(
+        navigator=None,
+        rest_heading=None,
+        rest_filtered=False,
+        calibration_heading=None,
+        compass_calibrating=False,
+    )
+    note = main_module.Program._note_calibration_turn
+    main.sensors = sensors(0.0, filtered=False)
+    note(main)
+    assert main.rest_heading == 0.0
+    main.sensors = sensors(0.02, filtered=True)
+    note(main)
+    main.sensors = sensors(0.5, filtered=False)  # a dead-reckoned pose no longer counts
+    note(main)
+    assert main.rest_heading == 0.02
+    main.compass_calibrating = True
+    main.sensors = sensors(0.9, filtered=True)  # turning
+    note(main)
+    assert main.calibration_heading == 0.02
+    without_filter = SimpleNamespace(
+        navigator=None,
+        rest_heading=None,
+        rest_filtered=False,
+        calibration_heading=None,
+        compass_calibrating=False,
+    )
+    without_filter.sensors = sensors(0.0, filtered=False)
+    note(without_filter)
+    without_filter.compass_calibrating = True
+    note(without_filter)
+    assert without_filter.calibration_heading == 0.0  # before: None, and no squaring up
