@@ -395,11 +395,11 @@ class _Checker:
                 ("sensors", "lops", "filter"),
                 "the filter takes LOPS's distances to its receivers: give lops.receivers (up --sensors darmstadt does)",
             )
-        for sensor, keys in (
-            ("gyro", ("sigma_deg_s", "scale_rel")),
+        for sensor, positive in (
+            ("gyro", ("sigma_deg", "sigma_deg_s", "scale_rel")),
             ("correlator", ("sigma_mm", "sigma_rel")),
         ):
-            for key in keys:
+            for key in positive:
                 if c["filter"][sensor][key] <= 0:
                     raise self.fail(("filter", sensor, key), "must be positive")
         if c["lops"]["sigma_mm"] <= 0:

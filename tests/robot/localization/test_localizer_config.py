@@ -82,6 +82,8 @@ def test_partial_file_overrides_only_what_it_names() -> None:
         ("walls:\n  side_sensors: [12]\n", "walls.side_sensors: sonar index 12 is not in 0..7"),
         ("walls:\n  min_points_side: 2\n", "walls.min_points_side: needs at least 3 points"),
         ("robot:\n  mm_per_step: 0\n", "robot.mm_per_step: must be positive"),
+        ("filter:\n  gyro: {sigma_deg: 0}\n", "filter.gyro.sigma_deg: must be positive"),
+        ("filter:\n  correlator: {sigma_rel: 0}\n", "filter.correlator.sigma_rel: must be positive"),
         ("robot:\n  sonars: [[1, 2]]\n", "robot.sonars: entry 0: expected [x_mm, y_mm, angle_deg]"),
         ("robot:\n  sonars: lidar\n", "robot.sonars: expected robot"),
         ("logs:\n  data: 'run-{when}.trlog'\n", "logs.data: only {start} may be substituted"),
