@@ -136,6 +136,7 @@ REPOSITORY_SETTINGS: dict[str, Any] = {
         "bias_floor_mm": 8.0,
         "ahead": {"enabled": True, "sensors": [0, 1, 2], "max_off_deg": 25.0},
     },
+    "lops": {"delay_sigma_ms": 100.0},
 }
 
 ESTIMATES = ("glide", "compass_offset", "step_scale", "step_scale_mean")

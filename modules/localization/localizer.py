@@ -325,9 +325,10 @@ class LocalizationCore(WallCorrections, TravelCorrections):
                     stamp,
                     f"LOPS {key} = {distance:.0f} mm rejected by the gate (NIS {self.ekf.last_nis:.1f})",
                 )
-        # an error the packets share (the motion model between them, the receivers' places):
-        # taken as independent, 30 distances a second would average it away
-        floor = settings["floor_mm"]
+        # an error the packets share (the motion model between them, the receivers' places, and
+        # moving, when they were measured: a WLAN stall or a late LOPS delays a run of them
+        # alike): taken as independent, 30 distances a second would average it away
+        floor = math.hypot(settings["floor_mm"], speed * settings["delay_sigma_ms"] / 1000.0)
         for axis in (0, 1):
             self.ekf.P[axis, axis] = max(self.ekf.P[axis, axis], floor * floor)
 
