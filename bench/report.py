@@ -1138,23 +1138,41 @@ def seed_list(seeds: list[int]) -> str:
     return ", ".join(map(str, seeds))
 
 
-def darmstadt_md(out_dir: Path) -> str:
-    """The Darmstadt sensors beside the seed, from the newest ``darmstadt-*.json``
-    (``python -m bench.darmstadt``); empty without one."""
-    from bench.darmstadt import section_md
-
+def newest_result(out_dir: Path, pattern: str) -> tuple[Path, dict] | None:
+    """The newest (by its ``date``) readable result file matching ``pattern``, or None."""
     found = []
-    for path in out_dir.glob("darmstadt-*.json"):
+    for path in out_dir.glob(pattern):
         try:
             result = json.loads(path.read_text())
             found.append((str(result["date"]), path, result))
         except (OSError, ValueError, KeyError, TypeError):
             continue
     if not found:
-        return ""
+        return None
     _, path, result = max(found, key=lambda item: item[0])
+    return path, result
+
+
+def darmstadt_ring_md(out_dir: Path) -> str:
+    """The Darmstadt filters on the ring, from the newest ``darmstadt_ring-*.json``
+    (``python -m bench.darmstadt_ring``); empty without one."""
+    from bench.darmstadt_ring import section_md
+
+    newest = newest_result(out_dir, "darmstadt_ring-*.json")
     try:
-        return section_md(result, path.name)
+        return section_md(newest[1], newest[0].name) if newest else ""
+    except (KeyError, TypeError):
+        return ""
+
+
+def darmstadt_md(out_dir: Path) -> str:
+    """The Darmstadt sensors beside the seed, from the newest ``darmstadt-*.json``
+    (``python -m bench.darmstadt``); empty without one."""
+    from bench.darmstadt import section_md
+
+    newest = newest_result(out_dir, "darmstadt-*.json")
+    try:
+        return section_md(newest[1], newest[0].name) if newest else ""
     except (KeyError, TypeError):
         return ""
 
@@ -1339,6 +1357,7 @@ def write_report(
     parts.append(nemesis_md(out_dir))
     parts.append(seedtable_md(out_dir))
     parts.append(darmstadt_md(out_dir))
+    parts.append(darmstadt_ring_md(out_dir))
     parts.append(robot_md(out_dir))
     md_path.write_text("\n".join(p for p in parts if p).rstrip() + "\n")
     return md_path
