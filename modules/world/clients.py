@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any
+from typing import Any, Self
 
 import msgpack
 import numpy as np
@@ -44,9 +44,9 @@ class HardwareClient:
         self.simulator: Any = None
 
     @classmethod
-    def local(cls, simulator: Any) -> HardwareClient:
-        """A client wired straight to an in-process :class:`~modules.world.sim.Simulator`
-        (fast tests): same requests, same answers, no Zenoh."""
+    def local(cls, simulator: Any) -> Self:
+        """A client wired straight to an in-process :class:`~modules.world.sim.Simulator` or a
+        device of its (fast tests): same requests, same answers, no Zenoh."""
         client = cls(None, "local")  # type: ignore[arg-type]
         client.simulator = simulator
         client._clock = simulator.clock

@@ -6,7 +6,6 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from modules.world.clients import HardwareClient
-from modules.world.correlator import CorrelatorDevice
 
 
 class CorrelatorRead(NamedTuple):
@@ -22,14 +21,6 @@ class CorrelatorHardware(HardwareClient):
     """The correlator's serial line: every translation increment since the last read, stamped."""
 
     module = "correlator"
-
-    @classmethod
-    def attached(cls, device: CorrelatorDevice) -> CorrelatorHardware:
-        """A client wired straight to an in-process :class:`CorrelatorDevice` (fast tests)."""
-        client = cls(None, "local")  # type: ignore[arg-type]
-        client.simulator = device
-        client._clock = device.clock
-        return client
 
     def read(self) -> CorrelatorRead:
         """The increments (µm) taken since the last read, their stamps (ms), how many older ones

@@ -4,21 +4,12 @@
 from __future__ import annotations
 
 from modules.world.clients import HardwareClient
-from modules.world.gyroscope import GyroDevice
 
 
 class GyroHardware(HardwareClient):
     """The gyro's serial line: every raw value since the last read, with its time stamp."""
 
     module = "gyro"
-
-    @classmethod
-    def attached(cls, device: GyroDevice) -> GyroHardware:
-        """A client wired straight to an in-process :class:`GyroDevice` (fast tests)."""
-        client = cls(None, "local")  # type: ignore[arg-type]
-        client.simulator = device
-        client._clock = device.clock
-        return client
 
     def read(self) -> tuple[list[int], list[float], int]:
         """The raw values (counts) taken since the last read, their stamps (ms), and how many

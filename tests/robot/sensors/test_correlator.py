@@ -103,7 +103,7 @@ def drive(
     increments: list[int] = []
     stamps: list[float] = []
     truth: list[model.SampleTruth] = []
-    hw = CorrelatorHardware.attached(dev)
+    hw = CorrelatorHardware.local(dev)
     for x, y, theta in poses:
         clock.advance(100.0)
         sim.set_pose(
@@ -124,7 +124,7 @@ def drive(
 def test_an_arc_reads_too_large_by_the_geometry_on_the_device() -> None:
     sim, clock, dev = device()
     clock.advance(1000.0)
-    CorrelatorHardware.attached(dev).read()
+    CorrelatorHardware.local(dev).read()
     radius, v = 500.0, 100.0  # 10 cm/s on a 0.5 m arc, counter-clockwise: 0.2 rad/s
     omega = v / radius
     poses = []
@@ -146,7 +146,7 @@ def test_an_arc_reads_too_large_by_the_geometry_on_the_device() -> None:
 def test_on_the_spot_a_turn_reads_a_bogus_translation_either_way() -> None:
     sim, clock, dev = device()
     clock.advance(1000.0)
-    CorrelatorHardware.attached(dev).read()
+    CorrelatorHardware.local(dev).read()
     omega = 0.5  # rad/s, on the spot: the pivot does not move
     increments, stamps, _ = drive(sim, clock, dev, [(0.0, 0.0, omega * k * 0.1) for k in range(1, 401)])
     dts = np.diff([1000.0, *stamps]) / 1000.0
@@ -183,7 +183,7 @@ def test_wrong_directions_come_at_the_models_share_and_more_often_when_dynamic()
 
 def test_samples_come_more_than_40_ms_apart_and_vary() -> None:
     _, clock, dev = device()
-    hw = CorrelatorHardware.attached(dev)
+    hw = CorrelatorHardware.local(dev)
     stamps: list[float] = []
     for _ in range(300):
         clock.advance(100.0)
@@ -198,7 +198,7 @@ def test_samples_come_more_than_40_ms_apart_and_vary() -> None:
 def test_a_straight_drive_sums_to_the_distance_within_the_noise() -> None:
     sim, clock, dev = device(seed=5)
     clock.advance(500.0)
-    CorrelatorHardware.attached(dev).read()
+    CorrelatorHardware.local(dev).read()
     distance = 2000.0  # 20 s at 10 cm/s, then 1 s standing: every moving sample read
     poses = [(min(distance, 10.0 * k), 0.0, 0.0) for k in range(1, 211)]
     increments, _, _ = drive(sim, clock, dev, poses)
@@ -220,7 +220,7 @@ def test_the_correlator_is_deterministic_from_the_worlds_seed_and_loses_what_is_
     assert run(5) != run(6)
     _, clock, dev = device()
     clock.advance(60_000.0)
-    read = CorrelatorHardware.attached(dev).read()
+    read = CorrelatorHardware.local(dev).read()
     assert len(read.increments_um) == model.MAX_SAMPLES and read.lost > 900
     assert 60_000.0 - model.SAMPLE_MIN_MS - model.SAMPLE_JITTER_MS < read.stamps_ms[-1] <= 60_000.0
 
@@ -228,7 +228,7 @@ def test_the_correlator_is_deterministic_from_the_worlds_seed_and_loses_what_is_
 def test_the_seeds_body_has_a_defective_correlator() -> None:
     _, clock, dev = device(body="seed")
     clock.advance(1000.0)
-    read = CorrelatorHardware.attached(dev).read()
+    read = CorrelatorHardware.local(dev).read()
     assert read == CorrelatorRead([], [], 0, True)
 
 
@@ -282,7 +282,7 @@ def run_program(
     dev: CorrelatorDevice, clock: ManualClock, steps: int, step: Any, commands: dict[int, str]
 ) -> Any:
     os = ScriptedOS(clock, steps, step, commands)
-    hw = RecordingHardware.attached(dev)
+    hw = RecordingHardware.local(dev)
     hw.reads = []  # type: ignore[attr-defined]
     prog = CorrelatorProgram(os, hw)
     prog.setup()

@@ -63,7 +63,7 @@ def test_at_rest_the_mean_raw_value_is_the_zero_point_within_the_quantisation() 
 
 def test_the_rates_of_a_known_turn_sum_to_the_turn_within_the_scale_error() -> None:
     sim, clock, dev = device()
-    hw = GyroHardware.attached(dev)
+    hw = GyroHardware.local(dev)
     clock.advance(1000.0)
     hw.read()
     raw: list[int] = []
@@ -97,7 +97,7 @@ def test_the_rates_of_a_known_turn_sum_to_the_turn_within_the_scale_error() -> N
 def test_the_gyro_is_deterministic_from_the_worlds_seed_and_loses_what_is_not_read() -> None:
     def run(seed: int) -> list[int]:
         _, clock, dev = device(seed)
-        hw = GyroHardware.attached(dev)
+        hw = GyroHardware.local(dev)
         out = []
         for _ in range(20):
             clock.advance(97.0)
@@ -108,7 +108,7 @@ def test_the_gyro_is_deterministic_from_the_worlds_seed_and_loses_what_is_not_re
     assert run(5) != run(6)
     _, clock, dev = device()
     clock.advance(10_000.0)
-    raw, stamps, lost = GyroHardware.attached(dev).read()
+    raw, stamps, lost = GyroHardware.local(dev).read()
     assert len(raw) == model.MAX_SAMPLES and lost == math.floor(10_000 / model.SAMPLE_MS) - model.MAX_SAMPLES
     assert stamps[-1] == math.floor(10_000 / model.SAMPLE_MS) * model.SAMPLE_MS
 
@@ -116,7 +116,7 @@ def test_the_gyro_is_deterministic_from_the_worlds_seed_and_loses_what_is_not_re
 def run_program(dev: GyroDevice, clock: ManualClock, reads: int, os: FakeOS | None = None) -> object:
     """The gyro's program as its loop runs it: a read every 100 simulated ms, then publish."""
     os = os or FakeOS()
-    prog = GyroProgram(os, GyroHardware.attached(dev))  # type: ignore[arg-type]
+    prog = GyroProgram(os, GyroHardware.local(dev))  # type: ignore[arg-type]
     prog.setup()
     prog.calibrate()
     for _ in range(reads):
