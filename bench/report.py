@@ -1153,28 +1153,28 @@ def newest_result(out_dir: Path, pattern: str) -> tuple[Path, dict] | None:
     return path, result
 
 
-def darmstadt_ring_md(out_dir: Path) -> str:
-    """The Darmstadt filters on the ring, from the newest ``darmstadt_ring-*.json``
-    (``python -m bench.darmstadt_ring``); empty without one."""
-    from bench.darmstadt_ring import section_md
-
-    newest = newest_result(out_dir, "darmstadt_ring-*.json")
+def newest_section(out_dir: Path, pattern: str, render: Any) -> str:
+    """``render(result, name)`` of the newest result file matching ``pattern``; empty without
+    one, or when that one lacks what the section needs."""
+    newest = newest_result(out_dir, pattern)
     try:
-        return section_md(newest[1], newest[0].name) if newest else ""
+        return render(newest[1], newest[0].name) if newest else ""
     except (KeyError, TypeError):
         return ""
+
+
+def darmstadt_ring_md(out_dir: Path) -> str:
+    """The Darmstadt filters on the ring (``python -m bench.darmstadt_ring``)."""
+    from bench.darmstadt_ring import section_md
+
+    return newest_section(out_dir, "darmstadt_ring-*.json", section_md)
 
 
 def darmstadt_md(out_dir: Path) -> str:
-    """The Darmstadt sensors beside the seed, from the newest ``darmstadt-*.json``
-    (``python -m bench.darmstadt``); empty without one."""
+    """The Darmstadt sensors beside the seed (``python -m bench.darmstadt``)."""
     from bench.darmstadt import section_md
 
-    newest = newest_result(out_dir, "darmstadt-*.json")
-    try:
-        return section_md(newest[1], newest[0].name) if newest else ""
-    except (KeyError, TypeError):
-        return ""
+    return newest_section(out_dir, "darmstadt-*.json", section_md)
 
 
 def nemesis_md(out_dir: Path) -> str:
