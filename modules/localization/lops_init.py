@@ -40,12 +40,12 @@ class LopsInitialiser:
     settle_ms: int = 500
     sigma_mm: float = 10.0  # one fix's
     #: fixes at the current rest, and the mean of the last rest's (the drive's start)
-    at_rest: list[tuple[float, float]] = field(default_factory=list)
-    start: tuple[float, float] | None = None
-    travelled_mm: float = 0.0
-    turned: float = 0.0
-    stopped_ms: int | None = None
-    moving: bool = True
+    at_rest: list[tuple[float, float]] = field(default_factory=list, init=False)
+    start: tuple[float, float] | None = field(default=None, init=False)
+    travelled_mm: float = field(default=0.0, init=False)
+    turned: float = field(default=0.0, init=False)
+    stopped_ms: int | None = field(default=None, init=False)
+    moving: bool = field(default=True, init=False)
 
     def step(
         self, stamp_ms: int, moving: bool, s_mm: float, omega: float, fix: tuple[float, float] | None

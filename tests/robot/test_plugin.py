@@ -53,6 +53,7 @@ def test_a_bundled_localizer_configuration_is_named_and_a_file_of_that_name_wins
     """``--localizer early-ekf`` is the seed's early filter shipped in config/: copro is told
     its path; a file called early-ekf in the working directory is the user's and wins."""
     from modules.localization.config import load_config, sensor_set_layer
+    from tokenring import UsageError
 
     monkeypatch.chdir(tmp_path)
     planned = plan("--sensors", "darmstadt", "--localizer", "early-ekf")
@@ -63,5 +64,5 @@ def test_a_bundled_localizer_configuration_is_named_and_a_file_of_that_name_wins
     assert fused == {"odometry", "gyro"} and early["filter"]["estimate"] == ["glide"]
     (tmp_path / "early-ekf").write_text("filter: {enabled: false}\n")
     assert plan("--localizer", "early-ekf").env["TOKENRING_LOCALIZER_CONFIG"] == str(tmp_path / "early-ekf")
-    with pytest.raises(Exception, match="no-such-config"):
+    with pytest.raises(UsageError, match="no-such-config"):
         plan("--localizer", "no-such-config")
