@@ -76,3 +76,5 @@ def test_a_users_drive_with_all_sensors_keeps_the_truth_within_three_sigma(seed:
     assert len(e) > 1000
     assert report["gates"]["accepted"]["lops"] > 1000 and report["gates"]["accepted"]["gyro"] > 100
     assert inside.mean() >= 0.99, (inside.mean(), len(e), report["gates"])
+    # honest, and also sharp: a filter that widened its σ to pass would not be within LOPS's 10 mm
+    assert np.median(np.hypot(error_x, error_y)) < 10.0 and np.median(e[:, 3]) < 10.0
