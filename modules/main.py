@@ -8,7 +8,8 @@ the token; when it finished (done or aborted) the navigator plans the next seque
 Started and stopped by commands (EXPLORE mode, STOP_EXPLORE, CALIBRATE, CLEAR_MAP — from the
 LCD keypad; CALIBRATE_COMPASS — from the compass, asked to calibrate) or over the PC link
 (``on_pc_request``: ``explore``, ``stop``, ``calibrate``, ``calibrate_compass``, ``clear_map``,
-``get_map``, ``actions`` (an action file's text), ``state``). ``main.data`` carries the navigator state, the mode,
+``get_map``, ``actions`` (an action file's text; ``append``: queued behind a file under way, the
+seed's queueing actions), ``state`` (with ``queue``, the actions not yet done)). ``main.data`` carries the navigator state, the mode,
 the pilot's last abort reason, the ALERT lock and the number of planned steps.
 
 The compass's calibration turn is pair 1's (seed 001 §4.3): :class:`CompassCalibration` tells the
@@ -378,6 +379,10 @@ class Program(UserProgram):
             name = str(payload.get("name", "<actions>"))
             actions = parse_actions(str(payload.get("text", "")), name, seed=self.seed)
             speed = int(payload.get("speed_pct", 50))
+            running = self.navigator
+            if payload.get("append") and isinstance(running, ActionNavigator):
+                running.plan_steps.append(actions)  # the seed's queueing actions (§6.7)
+                return self.state()
             start_heading, self.calibration_heading = self.calibration_heading, None
             navigator = ActionNavigator(
                 self.layout, actions, speed_pct=speed, start_heading=start_heading, seed=self.seed
@@ -427,7 +432,10 @@ class Program(UserProgram):
     def state(self) -> dict[str, Any]:
         nav = self.navigator
         pilot = self.pilot
+        from modules.navigation.actions import ActionNavigator
+
         return {
+            "queue": nav.plan_steps.queue() if isinstance(nav, ActionNavigator) else [],
             "navigator": NAV_NAMES.get(nav.state if nav else NAV["IDLE"]),
             "mode": nav.mode if nav else 0,
             "running": nav is not None,

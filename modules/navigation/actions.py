@@ -2,15 +2,15 @@
 
 One command per line, fields separated by blanks, ``#`` starts a comment::
 
-    e                      motors on (seed mode: MOTORS_ON to the motor; ours: does nothing)
+    e                      motors on: MOTORS_ON to the motor
     s <mm>                 drive straight (negative: backwards)
     r <deg>                turn on the spot, counter-clockwise positive
     v <left> <right> <ms>  track speeds in mm/s for a time (100 mm/s = 100 %)
     c <radius> <speed> <ms>  drive a circle of radius mm (positive: to the left) at speed mm/s
 
 By default every action is queued (the seed's queueing actions); ``v`` and ``c`` need the time.
-With ``seed=True`` (main's ``--algorithms main=seed``) the file is the seed's (seed 000 §6.7):
-``e`` sends MOTORS_ON ("Motoren an", non-queueing: the next action follows at once), and ``v``
+``e`` sends MOTORS_ON ("Motoren an", non-queueing: the next action follows at once). With
+``seed=True`` (main's ``--algorithms main=seed``) the file is the seed's (seed 000 §6.7): ``v``
 and ``c`` without the time are non-queueing: they run until the next driving action starts, which
 is at once (the file does not wait for them); the file's last one runs until main is stopped.
 Errors name the file and line. :class:`ActionPlan` turns the actions into steps one at a time;
@@ -214,7 +214,7 @@ class ActionPlan:
     ) -> None:
         """``start_heading`` (rad, CCW): square up to it before the first action, as after an
         ``r`` (the compass's calibration turn ends a few degrees off where it began); ``seed``:
-        ``e`` switches the motors on (:class:`MotorsOn`), as seed 000 §6.7 has it."""
+        the seed's non-queueing ``v``/``c`` without a time (seed 000 §6.7)."""
         if not 1 <= speed_pct <= 100:
             raise UsageError(f"action speed must be 1..100 %, got {speed_pct}")
         self.actions = actions
@@ -348,7 +348,7 @@ class ActionPlan:
     def _start(self, action: Action, heading: float | None, now_ms: int) -> Drive | Wheels | MotorsOn | None:
         label = f"line {action.line}: {action.text}"
         if action.kind == "e":
-            return MotorsOn(label) if self.seed else None
+            return MotorsOn(label)
         self.holding = None  # seed §6.7: a non-queueing drive ends when the next one starts
         if action.kind == "s":
             mm = action.args[0]
@@ -379,6 +379,15 @@ class ActionPlan:
         first, self.pending_wheels = pieces[0], pieces[1:]
         self.wheels_until = now_ms + first.duration_ms
         return first
+
+    def append(self, actions: list[Action]) -> None:
+        """Queue more actions behind the ones not yet started (seed 000 §6.7: queueing actions)."""
+        self.actions.extend(actions)
+
+    def queue(self) -> list[str]:
+        """The action under way (while it runs) and those still waiting, as their files wrote them."""
+        running = [self.current.text] if self.current is not None and not self.finished else []
+        return running + [a.text for a in self.actions[self.index :]]
 
     def progress(self) -> dict[str, Any]:
         return {

@@ -13,6 +13,7 @@ from modules.navigation.actions import (
     ActionNavigator,
     ActionPlan,
     Drive,
+    MotorsOn,
     Wheels,
     circle_speeds,
     load_actions,
@@ -82,6 +83,7 @@ def test_circle_speeds_follow_the_track_geometry() -> None:
 def test_plan_closes_the_loop_on_turns_with_the_fused_heading() -> None:
     plan = ActionPlan(parse_actions(SQUARE), speed_pct=60, turn_tolerance_deg=0.6, settle_ms=300)
     heading = 0.0
+    assert plan.next(heading, 0) == MotorsOn("line 2: e")
     assert plan.next(heading, 0) == Drive("forward", 3000, 60, "line 3: s 3000")
     assert plan.next(heading, 100) == Drive("left", 90, 60, "line 4: r 90")
     heading = math.radians(84.0)  # the floor slipped: 6° short
@@ -115,6 +117,7 @@ def test_plan_squares_up_to_the_heading_before_the_calibration_turn() -> None:
     assert step.direction == "left" and step.amount == 11
     heading = math.radians(30.2)
     assert plan.next(heading, 500) == WAIT
+    assert plan.next(heading, 900) == MotorsOn("line 2: e")
     assert plan.next(heading, 900) == Drive("forward", 3000, 60, "line 3: s 3000")
     # the first ``r 90`` aims at 120°, the start heading plus 90, not wherever the turn ended
     assert plan.next(heading, 1000).amount == 90
@@ -137,6 +140,7 @@ def test_plan_without_heading_is_open_loop_and_wheels_wait_for_their_time() -> N
 def test_navigator_drives_the_pilot_and_stops_on_an_abort() -> None:
     nav = ActionNavigator(default_layout(), parse_actions(SQUARE), speed_pct=40)
     sensors = Sensors(pose=(1000.0, 1000.0, 0.0), stamp_ms=0, motor_state=0)
+    assert nav.plan(None, sensors, 0) == [] and nav.commands == [("motor", "MOTORS_ON", {})]  # e
     (move,) = nav.plan(None, sensors, 0)
     assert (move.direction, move.amount, move.speed_pct) == (FORWARD, 3000, 40)
     (turn,) = nav.plan(Outcome(REASON["DONE"]), sensors, 0)

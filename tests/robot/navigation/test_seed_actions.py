@@ -75,13 +75,22 @@ def test_seed_bad_lines_give_one_clear_line_with_file_and_line(text: str, messag
 # -- the plan --------------------------------------------------------------------------------------
 
 
-def test_e_switches_the_motors_on_in_seed_mode_only() -> None:
-    seed = ActionPlan(parse_actions("e\ns 200\n"), speed_pct=50, seed=True)
-    assert seed.next(None, 0) == MotorsOn("line 1: e")
-    assert seed.next(None, 10) == Drive("forward", 200, 50, "line 2: s 200")  # e does not hold the file
-    assert seed.next(None, 20) is None and seed.finished
-    ours = ActionPlan(parse_actions("e\ns 200\n"), speed_pct=50)
-    assert ours.next(None, 0) == Drive("forward", 200, 50, "line 2: s 200")
+@pytest.mark.parametrize("seed", [True, False])
+def test_e_switches_the_motors_on(seed: bool) -> None:
+    plan = ActionPlan(parse_actions("e\ns 200\n"), speed_pct=50, seed=seed)
+    assert plan.next(None, 0) == MotorsOn("line 1: e")
+    assert plan.next(None, 10) == Drive("forward", 200, 50, "line 2: s 200")  # e does not hold the file
+    assert plan.next(None, 20) is None and plan.finished
+
+
+def test_appended_actions_queue_behind_the_waiting_ones() -> None:
+    plan = ActionPlan(parse_actions("s 200\nr 90\n", "a.act"), speed_pct=50)
+    assert plan.next(None, 0) == Drive("forward", 200, 50, "line 1: s 200")
+    plan.append(parse_actions("s 300\n", "b.act"))
+    assert plan.queue() == ["s 200", "r 90", "s 300"]
+    assert plan.next(None, 10) == Drive("left", 90, 50, "line 2: r 90")
+    assert plan.next(None, 20) == Drive("forward", 300, 50, "line 1: s 300")
+    assert plan.next(None, 30) is None and plan.queue() == []
 
 
 def test_non_queued_v_runs_until_the_next_action_starts() -> None:
@@ -161,10 +170,12 @@ def test_navigator_sends_motors_on_then_wheels_then_the_move() -> None:
     assert nav.commands == []
 
 
-def test_navigator_in_ours_mode_sends_nothing_for_e() -> None:
+def test_navigator_in_ours_mode_sends_motors_on_for_e() -> None:
     nav = ActionNavigator(default_layout(), parse_actions("e\ns 400\n"), closed_loop=False)
-    (move,) = nav.plan(None, Sensors(stamp_ms=0, motor_state=0), 0)
-    assert move.amount == 400 and nav.commands == []
+    assert nav.plan(None, Sensors(stamp_ms=0, motor_state=0), 0) == []
+    assert nav.commands == [("motor", "MOTORS_ON", {})]
+    (move,) = nav.plan(None, Sensors(stamp_ms=10, motor_state=0), 0)
+    assert move.amount == 400
 
 
 # -- the motor takes MOTORS_ON ---------------------------------------------------------------------
