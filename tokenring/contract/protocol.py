@@ -642,6 +642,8 @@ class _Compiler:
             values = self.mapping(values, f"enums.{name}")
             seen: dict[int, str] = {}
             for key, number in values.items():
+                if not isinstance(key, str):  # YAML 1.1 reads a bare OFF, ON, YES or NO as a bool
+                    raise self.fail(f"enums.{name}.{key}", f"the name {key!r} is not text: quote it")
                 number = self.integer(number, f"enums.{name}.{key}", 0, 2**32 - 1)
                 if number in seen:
                     raise self.fail(

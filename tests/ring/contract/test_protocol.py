@@ -132,6 +132,13 @@ def test_duplicate_names_are_caught_as_duplicate_keys():
         parse_protocol(text, "dup.yaml")
 
 
+def test_an_enum_name_yaml_reads_as_a_bool_is_refused():
+    text = TEXT.replace('"OFF": 4', "OFF: 4")
+    assert text != TEXT
+    with pytest.raises(ProtocolError, match=r"enums\.motor_state\.False.*not text: quote it"):
+        parse_protocol(text, "bare.yaml")
+
+
 def test_duplicate_seed_names():
     err = broken(lambda d: d["nodes"]["map"].__setitem__("seed_name", "ROBSONAR"))
     assert "nodes.map.seed_name" in str(err) and "already used by 'sonar'" in str(err)
