@@ -4,7 +4,7 @@
 key                                      what travels on it
 =======================================  ========================================================
 ``tokenring/<ring>/hw/<module>/<what>``  the simulated hardware of one module: ``hw/clock``,
-                                         ``hw/motor/steps``, ``hw/sonar/ping``,
+                                         ``hw/motor/steps``, ``hw/motor/power``, ``hw/sonar/ping``,
                                          ``hw/compass/measure``, ``hw/charger/adc``,
                                          ``hw/charger/relay`` (see :mod:`modules.world.service`)
 ``tokenring/<ring>/world/<what>``        world simulator: ``world/truth`` (msgpack ground truth:

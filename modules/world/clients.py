@@ -117,6 +117,10 @@ class MotorHardware(HardwareClient):
         start = self.request("motor/start")
         return float(start["x_mm"]), float(start["y_mm"]), float(start["theta_rad"])
 
+    def power(self, on: bool) -> dict[str, Any]:
+        """Switch the drive's power on (True) or off (False): off, no step is made."""
+        return self.request("motor/power", {"on": bool(on)})
+
     def steps(
         self, left: int, right: int, rate_hz: float, move: int, current_ma: int, energised: bool = True
     ) -> dict[str, Any]:

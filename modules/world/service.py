@@ -11,7 +11,11 @@ key                             request → result
                                 both motors made since the last batch (signed, + = that track
                                 forward); ``energised`` false switches the driver off (end of a
                                 move: no current, no running field) →
-                                ``{moved_mm, turned_rad, blocked, stalled, power, stamp_ms}``
+                                ``{moved_mm, turned_rad, blocked, stalled, power, drive,
+                                stamp_ms}``; without power (the relays, a flat battery, the
+                                drive switched off: ``drive`` false) no step is made
+``hw/motor/power``              ``{on: bool}`` → ``{drive}``: the drive's power switch (the
+                                motor's MOTORS_OFF/ON); on at power-on
 ``hw/motor/start``              ``{}`` → ``{x_mm, y_mm, theta_rad}``: where the robot was put down at
                                 power-on (the world's start pose; the motor's dead reckoning starts there)
 ``hw/sonar/ping``               ``{sensors: [i...], ping_samples, slot_ms}`` → ``{envelopes:
@@ -34,7 +38,9 @@ key                             request → result
                                 ms, int), ``t_ms`` (float), ``x_mm``, ``y_mm``, ``theta_rad`` (CCW
                                 from +X; also as ``x``, ``y``, ``theta``), ``heading_rad`` (from
                                 north, clockwise), ``moving``, ``collisions``, ``stalls``, ``steps``
-                                [left, right] received, ``glide_factor`` (this turn's true one),
+                                [left, right] taken with power, ``drive`` (its switch),
+                                ``steps_unpowered`` [left, right] that arrived without power and
+                                were not made, ``glide_factor`` (this turn's true one),
                                 ``relay``, ``electronics`` and ``motors`` ``{v, soc, a}``,
                                 ``deep_discharge``, ``world``
 ``world/state``                 queryable: the same truth, now

@@ -99,8 +99,10 @@ class Simulator:
         self.relay_reason = ""
         self.motor_pack_a = 0.0
         self.energised = False
+        self.drive_power = True  # the motor's MOTORS_OFF/ON (hw/motor/power); on at power-on
         self.last_ms = self.clock.now_ms()
         self.steps_total = [0, 0]
+        self.steps_unpowered = [0, 0]  # half-steps that arrived without power: not made
         self.lock = threading.RLock()
         # how the robot moves until the motor's next batch of steps (mm/ms, mm/ms, rad/ms) and
         # since when: a sonar sweep pings its pairs one after another while it drives on
@@ -173,10 +175,14 @@ class Simulator:
                 "blocked": False,
                 "stalled": False,
                 "power": True,
+                "drive": True,
             }
-            if not self.powered or self.motors.soc <= 0.0:
+            if not (self.powered and self.drive_power) or self.motors.soc <= 0.0:
                 self.energised = False  # pose_at: a robot without energised motors stands
-                reply["power"] = False
+                self.velocity = (0.0, 0.0, 0.0)
+                self.steps_unpowered[0] += left
+                self.steps_unpowered[1] += right
+                reply.update(power=False, drive=self.drive_power)
                 return reply
             self.steps_total[0] += left
             self.steps_total[1] += right
@@ -203,6 +209,20 @@ class Simulator:
                 stalled=result.stalled,
             )
             return reply
+
+    def motor_power(self, request: dict[str, Any]) -> dict[str, Any]:
+        """``hw/motor/power``: switch the drive's power on or off (the motor's MOTORS_ON/OFF).
+        Off, the coils carry no current and steps that arrive are not made (counted)."""
+        on = request.get("on")
+        if not isinstance(on, bool):
+            raise HardwareRequestError(f"on must be true or false, not {on!r}")
+        with self.lock:
+            self.advance()
+            self.drive_power = on
+            if not on:
+                self.energised = False
+                self.velocity = (0.0, 0.0, 0.0)
+            return {"drive": self.drive_power}
 
     def motor_start(self, _: dict[str, Any] | None = None) -> dict[str, Any]:
         """``hw/motor/start``: where the operator placed the robot at power-on (the world file's start
@@ -306,6 +326,7 @@ class Simulator:
         "clock": "clock_info",
         "motor/steps": "motor_steps",
         "motor/start": "motor_start",
+        "motor/power": "motor_power",
         "sonar/ping": "sonar_ping",
         "compass/measure": "compass_measure",
         "charger/adc": "charger_adc",
@@ -339,6 +360,8 @@ class Simulator:
                 "collisions": self.robot.collisions,
                 "stalls": self.robot.stalls,
                 "steps": list(self.steps_total),
+                "drive": self.drive_power,
+                "steps_unpowered": list(self.steps_unpowered),
                 "glide_factor": self.robot.glide,
                 "relay": self.relay_on,
                 "electronics": self.electronics.as_dict(),
