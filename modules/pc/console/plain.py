@@ -1,0 +1,99 @@
+"""The seed's other two user interfaces: ``stdout`` (StdoutUserInterface: only the messages, as
+lines on standard output, and what each key did) and ``none`` (nothing shown). Keys are read from
+the terminal one at a time (no Enter); from a pipe, each word of a line is a key's name (``up``,
+``space``, ``a``)."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import select
+import sys
+import termios
+import threading
+import tty
+from collections.abc import Iterator
+from typing import TextIO
+
+from modules.pc.console.keys import KeyRunner
+from modules.pc.console.screen import new_lines
+from modules.pc.console.state import ConsoleState
+from modules.pc.operator import Operator, Outcome
+
+#: a terminal's escape sequences for the arrow keys
+ARROWS = {b"\x1b[A": "up", b"\x1b[B": "down", b"\x1b[C": "right", b"\x1b[D": "left"}
+ARROWS.update({b"\x1bOA": "up", b"\x1bOB": "down", b"\x1bOC": "right", b"\x1bOD": "left"})
+
+
+def terminal_keys(fd: int, stop: threading.Event) -> Iterator[str]:
+    """Keys from a terminal in cbreak mode (restored afterwards); Ctrl-C still interrupts."""
+    saved = termios.tcgetattr(fd)
+    tty.setcbreak(fd)
+    try:
+        while not stop.is_set():
+            ready, _, _ = select.select([fd], [], [], 0.2)
+            if not ready:
+                continue
+            data = os.read(fd, 16)
+            if not data:
+                return
+            if data.startswith(b"\x1b"):
+                name = ARROWS.get(data[:3])
+                yield name if name else "escape"
+                continue
+            for char in data.decode("utf-8", "replace"):
+                yield "space" if char == " " else char
+    finally:
+        termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+
+
+def line_keys(stream: TextIO) -> Iterator[str]:
+    """Keys from a pipe: every word of every line is one key's name."""
+    for line in stream:
+        yield from line.split()
+
+
+def run_plain(
+    state: ConsoleState,
+    operator: Operator,
+    show: bool,
+    out: TextIO = sys.stdout,
+    keys: Iterator[str] | None = None,
+    poll_s: float = 0.5,
+) -> int:
+    """Take keys until ``x``/``q`` (or the end of the input); print messages and outcomes when
+    ``show`` (``stdout``), nothing otherwise (``none``)."""
+    stop = threading.Event()
+    shown: list[str] = []
+    lock = threading.Lock()
+
+    def say(text: str) -> None:
+        if show:
+            with lock:
+                print(text, file=out, flush=True)
+
+    def outcome(result: Outcome) -> None:
+        say(("" if result.ok else "✗ ") + result.text)
+
+    def follow() -> None:
+        while not stop.wait(poll_s):
+            for line in new_lines(shown, state.message_lines()):
+                say(line)
+
+    runner = KeyRunner(operator, outcome).start()
+    follower = threading.Thread(target=follow, name="console-messages", daemon=True)
+    follower.start()
+    if keys is None:
+        keys = terminal_keys(sys.stdin.fileno(), stop) if sys.stdin.isatty() else line_keys(sys.stdin)
+    try:
+        with contextlib.suppress(KeyboardInterrupt):
+            for key in keys:
+                if key.lower() in ("x", "q"):
+                    say("quit")
+                    break
+                runner.press(key)
+    finally:
+        stop.set()
+        runner.stop()
+        follower.join(timeout=2.0)
+    return 0
