@@ -41,6 +41,7 @@ import logging
 import math
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -166,6 +167,12 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         self.config = config
         self.data_log = data_log
         self.error_log = error_log
+        #: the MessageHandler's (seed §6.8.3, :meth:`message`): the newest messages, kept for a
+        #: screen that opens later, and who is told of each one as it comes
+        self.messages: deque[dict[str, Any]] = deque(maxlen=1000)
+        self.messages_said = 0  # every message since the start: the next one's number
+        self.message_listeners: list[Callable[[dict[str, Any]], None]] = []
+        self._messages_lock = threading.Lock()
         #: the sensors registered as the core was built, in synchronisation order
         self.registry = registered()
         #: the settings (``sensors.<name>``) of every sensor used, in synchronisation order
@@ -391,8 +398,23 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         return moved, math.hypot(dx, dy) / ((stamp - since_ms) / 1000.0)
 
     def message(self, cls: str, stamp_ms: int, text: str) -> None:
+        """The MessageHandler (seed §6.8.3): a message of class ``cls`` (I W E F D, table B.5) to
+        the error log, to the backlog (:attr:`messages`, the last 1000 as ``{n, class, stamp_ms,
+        text}``) and to every listener in :attr:`message_listeners` (on the caller's thread; the
+        entry is shared, not to be changed). Debug messages only as the error log keeps them."""
         if self.error_log is not None:
             self.error_log.message(cls, stamp_ms, text)
+        if cls == "D" and not self.config.get("logs", {}).get("debug", False):
+            return
+        with self._messages_lock:
+            entry = {"n": self.messages_said, "class": cls, "stamp_ms": int(stamp_ms), "text": text}
+            self.messages_said += 1
+            self.messages.append(entry)
+        for listener in list(self.message_listeners):
+            try:
+                listener(entry)
+            except Exception:  # a screen's trouble is never the localisation's
+                logger.exception("a message listener failed")
 
     # ---------------------------------------------------------------------------------------
     # synchronisation

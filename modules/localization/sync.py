@@ -87,6 +87,7 @@ class ShadowBuffer:
         self._halves: list[dict[str, list[Sample]]] = [{}, {}]
         self._active = 0
         self._generation = 0
+        self._latest: dict[str, Sample] = {}
 
     @property
     def generation(self) -> int:
@@ -97,7 +98,13 @@ class ShadowBuffer:
         """File ``sample`` in the active half; returns the generation it belongs to."""
         with self._lock:
             self._halves[self._active].setdefault(sample.sensor, []).append(sample)
+            self._latest[sample.sensor] = sample
             return self._generation
+
+    def latest(self) -> dict[str, Sample]:
+        """The sample written last of every sensor, whichever half it went into (a live view's)."""
+        with self._lock:
+            return dict(self._latest)
 
     def count(self, sensor: str) -> int:
         """How many samples of ``sensor`` the active half holds."""
