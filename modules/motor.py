@@ -2,14 +2,22 @@
 
 Commands (protocol.yaml, ``motor``): MOVE_FORWARD / MOVE_REVERSE (mm, speed %), TURN_LEFT /
 TURN_RIGHT (degrees, speed %), STOP, SET_GLOBAL_POSITION (x, y, angle), RECALC_GLIDE_FACTOR
-(target angle, error), SET_WHEEL_SPEEDS (left %, right %, ms), MOTORS_ON (the seed's action
-file ``e``: the drive has no off switch here, so it is counted and leaves a move alone). A
+(target angle, error), SET_WHEEL_SPEEDS (left %, right %, ms), MOTORS_OFF / MOTORS_ON. A
 finished move sends POSITION_REACHED (status DONE, or COLLISION when the bumper hit, STALLED,
 ABORTED when a new motion command or STOP replaced it) with ``move_seq`` = the sequence number of the command that
 started it, to the module that sent that command. SET_GLOBAL_POSITION and RECALC_GLIDE_FACTOR
 do not interrupt a move (the seed aborted on them, which made corrections while driving
 impossible). Bad arguments (speed 0 or above 100 %, an implausible glide correction) are
 refused with ERROR BAD_ARGUMENT to the sender: nothing moves.
+
+The drive's power (the Darmstadt operator's keys ``d``/``e``, seed 000 §6.7, table 8.2): on at
+boot, as the Hamburg drive has no switch, so nothing changes for a robot nobody switches off.
+MOTORS_OFF ends a move under way (POSITION_REACHED ABORTED, as for STOP), switches the drive
+off in the world (``hw/motor/power``) and motor.data's ``state`` reads OFF until MOTORS_ON
+powers it again (state IDLE; on already, MOTORS_ON leaves a move alone). While off, a move
+command (MOVE_*, TURN_*, SET_WHEEL_SPEEDS) is refused with ERROR MOTORS_OFF to its sender and
+one log line: nothing steps. STOP, SET_GLOBAL_POSITION and RECALC_GLIDE_FACTOR are taken as
+always (no move to stop; the pose and the glide factor need no power).
 
 Steps are issued on the simulation clock in small batches through the hardware client; the
 dead-reckoned pose is computed from the steps issued (no encoders) and starts where the robot
@@ -33,7 +41,9 @@ RECALC_GLIDE_FACTOR included, aborts it and is then carried out; POSITION_REACHE
 follows a completed move only and is sent once, lost if the commander's inbox does not take it;
 the motor never hears of a wall, a stall or lost power (no feedback: it issues every step and
 reports DONE); SET_WHEEL_SPEEDS, not a seed command, only aborts a move (both tracks always step
-together: straight moves and turns on the spot). Not the seed's: speed 0 and an undefined or
+together: straight moves and turns on the spot). The 2001 drive had no power switch either:
+MOTORS_OFF is no seed command and only aborts a move (the drive stays on, the state never reads
+OFF), MOTORS_ON aborts a move and is counted. Not the seed's: speed 0 and an undefined or
 implausible glide correction are still refused with ERROR (the seed text says nothing of them;
 a 0 % move would never end), and speeds above 100 % are accepted, as the seed had no check (the
 motor then stalls and loses its steps).
@@ -69,9 +79,11 @@ from tokenring import ChannelError, UserProgram
 log = logging.getLogger("tokenring.motor")
 
 STOPPED, FORWARD, REVERSE, TURN_LEFT, TURN_RIGHT = range(5)  # enum direction
-IDLE, MOVING, STALLED_STATE, COLLISION_STATE = range(4)  # enum motor_state
+IDLE, MOVING, STALLED_STATE, COLLISION_STATE, OFF = range(5)  # enum motor_state
 DONE, ABORTED, STALLED, COLLISION = range(4)  # enum move_status
-BAD_ARGUMENT = 2  # enum error_code
+BAD_ARGUMENT, MOTORS_OFF = 2, 5  # enum error_code
+#: what a move command is refused with while the drive is off (ERROR MOTORS_OFF, and the log)
+OFF_PROBLEM = "motors are off: MOTORS_ON first"
 TICK_SIM_S = MOTOR_TICK_MS / 1000.0  # a batch of steps every 20 simulated ms ...
 TICK_MIN_REAL_S = 0.004  # ... but not more often than every 4 real ms
 IDLE_PUBLISH_SIM_S = 0.05  # the counters' sample rate while standing
@@ -83,6 +95,8 @@ SEED_MOVE_COMMANDS = {
     TURN_LEFT: "TURN_LEFT",
     TURN_RIGHT: "TURN_RIGHT",
 }
+#: the commands that drive the tracks: refused while the drive is off
+MOVE_COMMANDS = (*SEED_MOVE_COMMANDS.values(), "SET_WHEEL_SPEEDS")
 
 
 def sip_period_ms(environ: dict[str, str] | None = None) -> int:
@@ -123,7 +137,10 @@ class Program(UserProgram):
         self.stamp_ms = self.clock.now_ms()
         self.moves = {"done": 0, "aborted": 0, "stalled": 0, "collision": 0}
         self.refused = 0
-        self.motors_on = 0  # MOTORS_ON commands taken (idempotent: the drive is always on)
+        self.powered = True  # the drive's power: on at boot (the Hamburg drive has no switch)
+        self.hw.power(True)
+        self.motors_on = 0  # MOTORS_ON commands taken
+        self.motors_off = 0  # MOTORS_OFF commands taken (seed mode: and ignored)
         self.ignored = 0  # seed mode: commands the seed dropped ("Befehl falsch", unknown ones)
         self.notices_lost = 0  # seed mode: replies the target did not take (sent once)
         self.last_move_ms = (0.0, 0.0)
@@ -211,7 +228,9 @@ class Program(UserProgram):
         name, args = cmd.name, cmd.args
         if self.seed and not self._seed_admit(cmd):
             return
-        if name in ("MOVE_FORWARD", "MOVE_REVERSE", "TURN_LEFT", "TURN_RIGHT", "SET_WHEEL_SPEEDS", "STOP"):
+        if name in MOVE_COMMANDS and not self.powered:
+            self._refuse(cmd, OFF_PROBLEM, MOTORS_OFF)
+        elif name in (*MOVE_COMMANDS, "STOP"):
             problem = self._check(name, args)
             if problem:
                 self._refuse(cmd, problem)
@@ -220,7 +239,7 @@ class Program(UserProgram):
                 self._finish(ABORTED)
             if name != "STOP":
                 self._start(cmd)
-            else:
+            elif self.powered:
                 self.state, self.direction, self.speed_pct = IDLE, STOPPED, 0
         elif name == "SET_GLOBAL_POSITION":
             self.odometry.set(
@@ -235,10 +254,36 @@ class Program(UserProgram):
             except ValueError as exc:
                 self._refuse(cmd, str(exc))
         elif name == "MOTORS_ON":
-            self.motors_on += 1
-            log.info("motor: motors on (they are: the drive has no off switch)")
+            self._motors_on()
+        elif name == "MOTORS_OFF":
+            self._motors_off()
         else:
             log.info("motor: ignoring %s from node %d", name, cmd.sender)
+
+    def _motors_on(self) -> None:
+        self.motors_on += 1
+        if self.powered:
+            log.info("motor: motors on (they are)")
+            return
+        self.hw.power(True)
+        self.powered = True
+        self.state = IDLE
+        log.info("motor: motors on")
+
+    def _motors_off(self) -> None:
+        """Unpower the drive: a move under way ends ABORTED, the state reads OFF. Seed mode: ignored
+        (the 2001 drive had no switch; :meth:`_seed_admit` aborted a move, as for any command)."""
+        self.motors_off += 1
+        if self.seed:
+            self.ignored += 1
+            log.info("motor (seed): MOTORS_OFF is not a seed command, ignored (the drive stays on)")
+            return
+        if self.move is not None:
+            self._finish(ABORTED)
+        self.hw.power(False)
+        self.powered = False
+        self.state, self.direction, self.speed_pct = OFF, STOPPED, 0
+        log.info("motor: motors off (MOTORS_ON powers the drive again)")
 
     def _seed_admit(self, cmd) -> bool:
         """Seed §4.3.3: during a move, a command of the move's own kind is dropped and any other
@@ -267,12 +312,12 @@ class Program(UserProgram):
             return "wheel speeds must be within -100..100 %"
         return ""
 
-    def _refuse(self, cmd, problem: str) -> None:
+    def _refuse(self, cmd, problem: str, error: int = BAD_ARGUMENT) -> None:
         self.refused += 1
         log.warning("motor: refused %s %s from node %d: %s", cmd.name, cmd.args, cmd.sender, problem)
         sender = self.os.protocol.by_id.get(cmd.sender)
         if sender is not None:
-            self.notices.append((sender.name, "ERROR", {"error": BAD_ARGUMENT, "about": cmd.code}))
+            self.notices.append((sender.name, "ERROR", {"error": error, "about": cmd.code}))
 
     def _start(self, cmd) -> None:
         name, args = cmd.name, cmd.args
@@ -411,7 +456,9 @@ class Program(UserProgram):
             "state": self.state,
             "moves": dict(self.moves),
             "refused": self.refused,
+            "powered": self.powered,
             "motors_on": self.motors_on,
+            "motors_off": self.motors_off,
             "steps": list(self.steps),
             "last_move_ms": list(self.last_move_ms),
             "max_speed_mm_s": MAX_SPEED_MM_S,
