@@ -7,12 +7,16 @@
     tokenring drive stop                        # ends the move under way; at rest, answers at once
     tokenring drive set-pose 1000 600 90        # x mm, y mm, angle degrees counter-clockwise from +X
     tokenring drive glide 90 -12.5              # RECALC_GLIDE_FACTOR: target degrees, error degrees
+    tokenring drive motors off                  # MOTORS_OFF: unpower the drive (Darmstadt key d)
+    tokenring drive motors on                   # MOTORS_ON: power it again (key e)
     tokenring drive pose                        # just print the poses
 
 Every command goes into motor's inbox through main, which relays it over the ring; the tool then
 follows motor.data until the move is over and prints the dead-reckoned pose next to the true one
-(from the world simulator, when one runs). Exit 0 when the move finished, 1 when it ended early
-(collision, stall, aborted) or nobody answered, 2 on bad input (nothing is sent).
+(from the world simulator, when one runs). ``motors off|on`` waits until motor.data's state says
+so. A move while motor.data says OFF is not sent: the motor would refuse it. Exit 0 when the move
+finished, 1 when it ended early (collision, stall, aborted), the motors are off or nobody
+answered, 2 on bad input (nothing is sent).
 """
 
 from __future__ import annotations
@@ -35,11 +39,16 @@ EXAMPLES = """examples:
   tokenring drive stop                        # ends the move under way; at rest, answers at once
   tokenring drive set-pose 1000 600 90        # x mm, y mm, angle degrees counter-clockwise from +X
   tokenring drive glide 90 -12.5              # RECALC_GLIDE_FACTOR: target degrees, error degrees
+  tokenring drive motors off                  # unpower the drive: moves are refused until ...
+  tokenring drive motors on                   # ... it is powered again (on at boot)
   tokenring drive pose --json                 # just the poses
 """
 
-MOVING, STALLED, COLLISION = 1, 2, 3
-STATE_NAMES = {0: "idle", 1: "moving", 2: "stalled", 3: "collision"}
+MOVING, STALLED, COLLISION, OFF = 1, 2, 3, 4
+STATE_NAMES = {0: "idle", 1: "moving", 2: "stalled", 3: "collision", 4: "off"}
+MOVES = ("MOVE_FORWARD", "MOVE_REVERSE", "TURN_LEFT", "TURN_RIGHT", "SET_WHEEL_SPEEDS")
+MOTORS_OFF_MESSAGE = "the motors are off: `tokenring drive motors on` first"
+SWITCH_PATIENCE_S = 10.0  # real seconds motor.data may take to show a switch the motor took
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -54,7 +63,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "action",
-        choices=("forward", "reverse", "turn", "wheels", "stop", "set-pose", "glide", "pose"),
+        choices=("forward", "reverse", "turn", "wheels", "stop", "set-pose", "glide", "motors", "pose"),
         help="what to do",
     )
     p.add_argument("values", nargs="*", help="the action's arguments (see the examples)")
@@ -126,6 +135,10 @@ def build_command(action: str, values: list[str], speed: float) -> tuple[str, di
         if not (-(2**31) <= x < 2**31 and -(2**31) <= y < 2**31):
             raise UsageError("x and y must fit in 32 bits of millimetres")
         return "SET_GLOBAL_POSITION", pose_to_wire(x, y, math.radians(angle))
+    if action == "motors":
+        if values not in (["on"], ["off"]):
+            raise UsageError("drive motors takes on or off: motors on|off")
+        return ("MOTORS_ON" if values == ["on"] else "MOTORS_OFF"), {}
     if action == "glide":
         target, error = _expect(values, ["TARGET_DEG", "ERROR_DEG"], action)
         if target == 0 or not (-327 <= target <= 327 and -327 <= error <= 327):
@@ -156,6 +169,8 @@ def run(args: argparse.Namespace) -> int:
         link = PcLink(session, args.ring)
         before = _first_read(link)
         status = "sent"
+        if name in MOVES and before["state"] == OFF:
+            raise TokenRingError(MOTORS_OFF_MESSAGE)  # the motor would refuse it: nothing is sent
         if name:
             reply = link.command("motor", name, **command_args)
             if not reply.get("acknowledged"):
@@ -164,12 +179,17 @@ def run(args: argparse.Namespace) -> int:
         if name == "STOP" and not args.no_wait:
             after = _until_at_rest(link, args.timeout)  # at rest already: at once
             status = "done"
+        elif name in ("MOTORS_ON", "MOTORS_OFF") and not args.no_wait:
+            after = _until_switched(link, name == "MOTORS_OFF", min(args.timeout, SWITCH_PATIENCE_S))
+            status = "done"
         elif name and not args.no_wait and name not in ("SET_GLOBAL_POSITION", "RECALC_GLIDE_FACTOR"):
             after = _follow(link, before, name, args.timeout)
             expected = expected_steps(name, command_args, before["glide_cfactor"])
             done = abs(after["steps_left"] - before["steps_left"])
             if after["state"] in (STALLED, COLLISION):
                 status = STATE_NAMES[after["state"]]
+            elif after["state"] == OFF:  # switched off under way
+                status = "aborted"
             elif expected is not None and done < expected:
                 status = "aborted"
             else:
@@ -189,6 +209,7 @@ def run(args: argparse.Namespace) -> int:
         "dead_reckoned": {"x_mm": x, "y_mm": y, "angle_deg": math.degrees(theta)},
         "steps": [after["steps_left"], after["steps_right"]],
         "glide_factor": after["glide_cfactor"] / 100.0,
+        "motors": "off" if after["state"] == OFF else "on",
         "true": None,
     }
     if truth is not None:
@@ -228,6 +249,8 @@ def _follow(link: Any, before: dict[str, Any], name: str, timeout: float) -> dic
     while time.monotonic() < deadline:
         data = link.read("motor.data")
         started = started or data["move_seq"] != before["move_seq"] or data["state"] == MOVING
+        if not started and data["state"] == OFF:  # switched off since the check: refused
+            raise TokenRingError(MOTORS_OFF_MESSAGE)
         if started and data["state"] != MOVING:
             break
         if tty and started:
@@ -255,11 +278,29 @@ def _until_at_rest(link: Any, timeout: float) -> dict[str, Any]:
         time.sleep(0.05)
 
 
+def _until_switched(link: Any, off: bool, patience: float) -> dict[str, Any]:
+    """motor.data once its state shows the drive switched ``off`` (or on: any other state)."""
+    deadline = time.monotonic() + patience
+    while True:
+        data = link.read("motor.data")
+        if (data["state"] == OFF) == off:
+            return data
+        if time.monotonic() >= deadline:
+            state = STATE_NAMES.get(data["state"], data["state"])
+            raise TokenRingError(
+                f"the motor took MOTORS_{'OFF' if off else 'ON'} but its state is still {state} "
+                f"after {patience:g} s (a motor in seed mode, --algorithms motor=seed, has no switch)"
+            )
+        time.sleep(0.05)
+
+
 def _print(result: dict[str, Any]) -> None:
     dr = result["dead_reckoned"]
     if result["command"]:
         print(f"{result['command']} {result['args']}: {result['status']}")
     print(f"dead reckoned  x {dr['x_mm']:8.0f} mm  y {dr['y_mm']:8.0f} mm  angle {dr['angle_deg']:7.2f}°")
+    if result["motors"] == "off":
+        print("motors         off (`tokenring drive motors on` powers them)")
     truth = result["true"]
     if truth is None:
         print("true pose      (no world simulator answered)")
