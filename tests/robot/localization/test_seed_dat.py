@@ -91,6 +91,9 @@ SONAR = [
     ["0", "0", "0", "370", "0", "0"],  # 250 mm to the left of (0, 120)
     ["0", "0", "0", "0", "0", "0"],  # no sonar record in this synchronisation
 ]
+#: table B.8 has sixteen sonars: the command line's sonar.dat fills each line up with 0 0
+SEED_SONARS = 16
+SONAR_FILE = [row + ["0"] * (2 * SEED_SONARS - len(row)) for row in SONAR]
 
 
 def test_data_dat_has_table_b8s_fields_in_its_widths(tmp_path: Path) -> None:
@@ -140,8 +143,9 @@ def test_the_command_line_writes_both_files(tmp_path: Path, capsys: pytest.Captu
     assert cli_main(["log", "convert", str(tmp_path / "a.trlog"), "--to", "dat", "--out", str(out)]) == 0
     assert "3 synchronisations" in capsys.readouterr().out
     assert sorted(p.name for p in out.iterdir()) == ["data.dat", "sonar.dat"]
-    assert [line.split() for line in (out / "data.dat").read_text().splitlines()] == DATA
-    assert [line.split() for line in (out / "sonar.dat").read_text().splitlines()] == SONAR
+    assert [fixed_fields(line, DATA_WIDTHS) for line in (out / "data.dat").read_text().splitlines()] == DATA
+    sonar = (out / "sonar.dat").read_text().splitlines()
+    assert [fixed_fields(line, [SONAR_WIDTH] * 2 * SEED_SONARS) for line in sonar] == SONAR_FILE
 
 
 def test_an_existing_output_is_refused_without_force(
@@ -161,7 +165,7 @@ def test_an_existing_output_is_refused_without_force(
     one_error_line(capsys, "sonar.dat", "exists", "--force")
     assert (out / "sonar.dat").read_text() == "older\n" and not (out / "data.dat").exists()
     assert cli_main([*args, "--force"]) == 0
-    assert [line.split() for line in (out / "sonar.dat").read_text().splitlines()] == SONAR
+    assert [line.split() for line in (out / "sonar.dat").read_text().splitlines()] == SONAR_FILE
 
 
 def test_a_missing_out_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
