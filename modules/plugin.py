@@ -11,7 +11,8 @@ Registered in ``pyproject.toml`` under the entry point group ``tokenring.extensi
   starts;
 * each program's hardware client (:mod:`modules.world.hardware`);
 * the LCD node's OS menu before the programs start (:mod:`modules.display.boot_menu`);
-* its topics in a live feed (:mod:`modules.pc.feed`).
+* its topics in a live feed (:mod:`modules.pc.feed`);
+* its web view's panels, buttons and keys, and ``tokenring web --action`` (:mod:`modules.pc.web`).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ if TYPE_CHECKING:
 
     import zenoh
 
-    from tokenring import Protocol, ResidentProgram, WebAction, WebPanel
+    from tokenring import Protocol, ResidentProgram, WebAction, WebKeys, WebPanel
     from tokenring.host import Launcher, ServicePlan
     from tokenring.observe import FeedSource
 
@@ -140,6 +141,12 @@ class RobotExtension(Extension):
             help="speed of the action file's moves, 1..100 %% of 10 cm/s (default %(default)s)",
         )
         mission.add_argument(
+            "--console",
+            action="store_true",
+            help="open the operator's screen (tokenring console) in this terminal once the programs "
+            "run; its x or q stops the ring (the launcher's lines go to a file meanwhile)",
+        )
+        mission.add_argument(
             "--localizer",
             metavar="YAML",
             help="copro's sync + EKF configuration, e.g. config/localization.yaml (the Darmstadt "
@@ -195,6 +202,12 @@ class RobotExtension(Extension):
         incomplete = incomplete_watch()
         plan.on_started = incomplete.start
         plan.failure = incomplete.failure
+        if args.console:
+            if getattr(args, "no_start", False):
+                raise UsageError("--console drives the running programs: drop --no-start")
+            from modules.pc.console.launch import with_console
+
+            with_console(plan, args)
         if not (args.explore or args.map_out or args.actions):
             return plan
         if getattr(args, "no_start", False):
@@ -218,16 +231,19 @@ class RobotExtension(Extension):
             actions = (Path(args.actions).name, text, args.action_speed)
         missions: list[Any] = []
 
+        started, failed = plan.on_started, plan.failure
+
         def start_mission(launcher: Launcher) -> None:
             from modules.pc.mission import Mission
 
-            incomplete.start(launcher)
+            if started is not None:
+                started(launcher)
             mission = Mission(launcher, args.explore, args.map_out, args.duration, actions=actions)
             missions.append(mission)
             mission.start()  # it follows the exploration, writes the map and stops the launcher
 
         def failure() -> str | None:
-            return (missions[0].failure() if missions else None) or incomplete.failure()
+            return (missions[0].failure() if missions else None) or (failed() if failed else None)
 
         plan.on_started = start_mission
         plan.failure = failure
@@ -295,6 +311,18 @@ class RobotExtension(Extension):
         from modules.pc.web import actions
 
         return actions()
+
+    def add_web_options(self, parser: argparse.ArgumentParser) -> None:
+        """``tokenring web --action FILE``: the action files of the keys a, b, c."""
+        from modules.pc.web.keys import add_options
+
+        add_options(parser)
+
+    def web_keys(self, args: argparse.Namespace) -> WebKeys:
+        """The seed's keys (table 8.2) on the web page, carried out as ``tokenring console`` does."""
+        from modules.pc.web.keys import web_keys
+
+        return web_keys(args)
 
 
 def check_sensors(args: argparse.Namespace, protocol: Protocol) -> None:

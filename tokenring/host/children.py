@@ -67,6 +67,13 @@ class PrefixedOutput:
         except queue.Full:
             self._dropped += 1
 
+    def divert(self, output: IO[str]) -> IO[str]:
+        """Write the lines to ``output`` from now on (a program that takes the terminal); returns
+        where they went before."""
+        self.flush()
+        previous, self.output = self.output, output
+        return previous
+
     def watch(self, stream: IO[str], name: str) -> None:
         """Copy ``stream``'s lines under ``name`` until it closes."""
         with self._selector_lock:

@@ -195,6 +195,11 @@ class Launcher(NodeCommandLines):
         """One prefixed line of output (never blocks: see :class:`PrefixedOutput`)."""
         self.output.say(text, name)
 
+    def divert_output(self, output: IO[str]) -> IO[str]:
+        """Send the prefixed lines to ``output`` from now on (an interactive program took the
+        terminal); returns where they went before, to divert them back."""
+        return self.output.divert(output)
+
     def flush_output(self, timeout: float = 1.0) -> None:
         """Wait until the queued lines are written (for a clean end of the run)."""
         self.output.flush(timeout)

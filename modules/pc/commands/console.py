@@ -58,6 +58,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="an action file for a, then b, then c (up to three; before the configuration's)",
     )
     p.add_argument("--auto", action="store_true", help="run the first action file at once ([ACTION] auto)")
+    p.add_argument("--owner-pid", type=int, metavar="PID", help=argparse.SUPPRESS)  # up --console's launcher
     add_ring_options(p, listen=False)
 
 
@@ -123,8 +124,8 @@ def _online(args: argparse.Namespace, chosen: dict[str, Any]) -> int:
     from modules.pc.console.keys import KeyRunner
     from modules.pc.console.state import ConsoleState
     from modules.pc.operator import Operator
+    from tokenring import load_protocol
     from tokenring.cli import tap_session
-    from tokenring.contract.protocol import load_protocol
     from tokenring.host import open_link
     from tokenring.observe import Feed, feed_sources
 
@@ -137,6 +138,8 @@ def _online(args: argparse.Namespace, chosen: dict[str, Any]) -> int:
         feed.add_sink(state.on_message)
         operator = Operator(link, chosen["files"])
         with feed:
+            if args.owner_pid:
+                watch_owner(args.owner_pid)
             if chosen["auto"]:
                 first = operator.press("a")
                 if not first.ok:
@@ -154,6 +157,27 @@ def _online(args: argparse.Namespace, chosen: dict[str, Any]) -> int:
             return run_plain(state, operator, show=chosen["ui"] == "stdout")
     finally:
         session.close()
+
+
+def watch_owner(pid: int) -> None:
+    """Quit (as on SIGINT) once the launcher that started this console is gone."""
+    import os
+    import signal
+    import threading
+    import time
+
+    def watch() -> None:
+        while True:
+            time.sleep(0.5)
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                os.kill(os.getpid(), signal.SIGINT)
+                return
+            except PermissionError:
+                continue
+
+    threading.Thread(target=watch, name="console-owner", daemon=True).start()
 
 
 def _offline(args: argparse.Namespace, chosen: dict[str, Any]) -> int:

@@ -79,19 +79,23 @@ class ConsoleState:
 
     # -- panels ----------------------------------------------------------------------------------
     def sensors_lines(self) -> list[str]:
-        """Every sensor's newest raw data, and how often it changed."""
+        """Every sensor's newest raw data: those the localisation is configured with, and any
+        other whose node writes its channel; how often the channel changed, and the
+        localisation's count of samples taken and missed."""
         with self._lock:
             channels, updates = dict(self.channels), dict(self.updates)
-            configured = (self.localization or {}).get("sensors") or {}
+            configured = dict((self.localization or {}).get("sensors") or {})
         lines = []
         for sensor, channel in SENSOR_CHANNELS:
-            data = channels.get(channel)
-            if data is None:
-                continue
-            lines.append(f"{sensor:<10} {_raw(sensor, data)}  ({updates.get(channel, 0)})")
-        lops = configured.get("lops") if isinstance(configured, dict) else None
-        if isinstance(lops, dict):
-            lines.append(f"{'lops':<10} {_values(lops.get('values') or lops)}")
+            data, taken = channels.get(channel), configured.pop(sensor, None)
+            if data is None or (not data.get("stamp_ms") and updates.get(channel, 0) <= 1):
+                if taken and taken.get("values"):
+                    lines.append(f"{sensor:<10} {_values(taken['values'])}{_counts(taken)}")
+                continue  # a channel nobody writes: the node is not on this ring
+            lines.append(f"{sensor:<10} {_raw(sensor, data)}  ({updates.get(channel, 0)}){_counts(taken)}")
+        for sensor, taken in configured.items():
+            if sensor != "truth" and isinstance(taken, dict):
+                lines.append(f"{sensor:<10} {_values(taken.get('values') or {})}{_counts(taken)}")
         return lines or ["(no sensor data yet: is the ring up?)"]
 
     def sync_lines(self) -> list[str]:
@@ -115,29 +119,26 @@ class ConsoleState:
         ]
 
     def position_lines(self) -> list[str]:
-        """The position store: every source's position with its X/Y/ψ validities, the filter's σ."""
+        """The position store: every source's position with its X/Y/ψ validities (table B.7's
+        P records), then the best pose and the filter's σ."""
         with self._lock:
             snapshot, truth = self.localization, self.true_pose
         lines = []
-        for name, p in ((snapshot or {}).get("positions") or {}).items():
-            valid = "".join(
-                c if p.get(f"{c.lower()}_valid", p.get("valid", {}).get(c.lower())) else "-" for c in "XYP"
+        positions = (snapshot or {}).get("positions") or {}
+        for name, p in positions.items():
+            lines.append(f"{name:<10} {_pose(p)}  {_valid(p)}")
+        best = (snapshot or {}).get("filter")
+        if isinstance(best, dict) and best.get("x_mm") is not None:
+            sigma = best.get("sigma") or {}
+            spread = (
+                f"σ {_num(sigma.get('x_mm'), 1)} / {_num(sigma.get('y_mm'), 1)} mm  {_deg(sigma.get('heading_rad'))}°"
+                if sigma
+                else "no σ (no filter)"
             )
+            lines.append(f"{'best':<10} {_pose(best)}  {_valid(best)}  {best.get('source')}, {spread}")
+        if truth is not None and "truth" not in positions:
             lines.append(
-                f"{name:<10} x {_num(p.get('x_mm'))} mm  y {_num(p.get('y_mm'))} mm  "
-                f"ψ {_deg(p.get('heading_rad'))}°  {valid}"
-            )
-        filt = (snapshot or {}).get("filter")
-        if isinstance(filt, dict) and filt.get("x_mm") is not None:
-            sigma = filt.get("sigma") or {}
-            lines.append(
-                f"{'filter':<10} x {_num(filt.get('x_mm'))} mm  y {_num(filt.get('y_mm'))} mm  "
-                f"ψ {_deg(filt.get('heading_rad'))}°  σ {_num(sigma.get('x_mm'), 1)}/"
-                f"{_num(sigma.get('y_mm'), 1)} mm {_deg(sigma.get('heading_rad'), 2)}°"
-            )
-        if truth is not None:
-            lines.append(
-                f"{'truth':<10} x {truth[0]:7.0f} mm  y {truth[1]:7.0f} mm  ψ {math.degrees(truth[2]):7.2f}°"
+                f"{'truth':<10} {_pose({'x_mm': truth[0], 'y_mm': truth[1], 'heading_rad': truth[2]})}"
             )
         return lines or ["(no positions yet)"]
 
@@ -211,10 +212,28 @@ def _enum_name(enum: str, value: Any) -> str:
     return _enum(enum).get(value, str(value)) if isinstance(value, int) else str(value)
 
 
+def _pose(p: dict[str, Any]) -> str:
+    return f"x {_num(p.get('x_mm')):>6} mm  y {_num(p.get('y_mm')):>6} mm  ψ {_deg(p.get('heading_rad')):>7}°"
+
+
+def _valid(p: dict[str, Any]) -> str:
+    """The X/Y/ψ validity bits as letters, ``-`` where not known."""
+    return "".join(c if p.get(f"{n}_valid") else "-" for c, n in (("X", "x"), ("Y", "y"), ("ψ", "heading")))
+
+
+def _counts(taken: dict[str, Any] | None) -> str:
+    if not taken:
+        return ""
+    missed = taken.get("missed")
+    return f"  [{taken.get('samples', 0)} taken{'' if missed is None else f', {missed} missed'}]"
+
+
 def _values(data: Any) -> str:
     if not isinstance(data, dict):
         return str(data)
-    return "  ".join(f"{k} {v}" for k, v in data.items() if not isinstance(v, dict | list))
+    return "  ".join(
+        f"{k} {'/'.join(map(str, v)) if isinstance(v, list) else v}" for k, v in data.items() if not isinstance(v, dict)
+    )
 
 
 def _num(value: Any, digits: int = 0) -> str:
