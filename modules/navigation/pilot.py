@@ -11,6 +11,10 @@ reverse moves, all of them for turns on the spot. An ALERT already present when 
 move (the direction the lock allows) starts does not abort that move — it is what it escapes.
 :class:`SeedPilot` (``--algorithms main=seed``) is the seed's rule instead: any sonar, any move.
 
+A move the motor refuses because its drive is off (ERROR MOTORS_OFF, handed over by main as
+:meth:`Pilot.note_error`, or motor.data's state OFF on several samples after the send), or one a
+MOTORS_OFF ended under way, ends the sequence with abort reason MOTORS_OFF: nothing is retried.
+
 The pilot does no I/O itself: it is stepped with a :class:`Sensors` snapshot and sends through
 a callable, so it is unit-tested with synthetic data and driven by main's program on the ring.
 """
@@ -44,6 +48,10 @@ REASON_NAMES = {v: k for k, v in REASON.items()}
 AREA = _E["distance_area"]
 MOTOR_STATE = _E["motor_state"]
 MOVE_STATUS = _E["move_status"]
+ERROR_CODE = _E["error_code"]
+MOTOR_CODES = {name: c.code for name, c in default_protocol().nodes["motor"].command.commands.items()}
+#: the trigger of a MOTORS_OFF outcome: what the operator has to do
+MOTORS_OFF_TRIGGER = "motors are off: MOTORS_ON first"
 CONTACT = _E["contact"]
 
 #: the seed's ALERT area: under 4 cm
@@ -130,6 +138,10 @@ class PilotSettings:
     #: 25-40 mm; when the ring stalls none of them come and the motor stops there by itself
     ahead_slack_mm: int = 100
     min_forward_mm: int = 50  # a capped move still lasts until a sweep can show its abort
+    #: motor samples (distinct stamps) showing OFF after a move was sent that make it refused
+    #: without the motor's ERROR: up to three can predate the motor taking the command (the
+    #: newest before it, the one its loop was making, a SIP sample taken before the command ran)
+    off_samples: int = 4
 
 
 Send = Callable[..., Any]  # send(target, command, **args)
@@ -164,6 +176,9 @@ class Pilot:
         self._seen_moving = False
         self._idle_at_send = True
         self._visits = 0
+        self._sent_code = 0  # the motor command code of the move under way
+        self._off_error = False  # the motor refused it with ERROR MOTORS_OFF
+        self._off_stamps: set[int] = set()  # motor samples seen OFF since it was sent
 
     # -- the navigator's side ---------------------------------------------------------------
     @property
@@ -194,6 +209,12 @@ class Pilot:
         """motor's POSITION_REACHED, handed over by main's command loop."""
         self.reached.append({"status": status, "move_seq": move_seq})
 
+    def note_error(self, error: int, about: int) -> None:
+        """An ERROR reply, handed over by main's command loop: MOTORS_OFF about the move just sent
+        ends it at the next step (the motor refused it: its drive is off)."""
+        if self.state == self.STARTING and error == ERROR_CODE["MOTORS_OFF"] and about == self._sent_code:
+            self._off_error = True
+
     # -- internals ------------------------------------------------------------------------------
     def _begin(self, sensors: Sensors) -> None:
         move = self.moves[self.index]
@@ -220,6 +241,9 @@ class Pilot:
         self._abort_counts = {}
         self._visits = 0
         self._seen_moving = False
+        self._sent_code = MOTOR_CODES[name]
+        self._off_error = False
+        self._off_stamps = set()
         self.send("motor", name, **{arg: amount, "speed_pct": int(move.speed_pct)})
         self.state = self.STARTING
 
@@ -289,6 +313,9 @@ class Pilot:
             ):
                 self._seen_moving = True
                 self._started_ms = sensors.stamp_ms  # the move's time runs from here (sensor time)
+            if self._motors_off(sensors):
+                self._finish(REASON["MOTORS_OFF"], MOTORS_OFF_TRIGGER, driven=sensors.distance_mm)
+                return self._take()
             alert = self._alerting(move.direction, sensors) - self._exempt
             if alert:
                 self._stop(REASON["ALERT"], f"alert on sonar {sorted(alert)}", lock=move.direction)
@@ -334,6 +361,19 @@ class Pilot:
             self._finish(reason, trigger, driven=sensors.distance_mm)
             return self._take()
         return None
+
+    def _motors_off(self, sensors: Sensors) -> bool:
+        """The move is over because the drive is off: refused (the motor's ERROR, or OFF on
+        ``off_samples`` samples since the send: a stale sample cannot say so that often), or
+        taken and then ended by MOTORS_OFF (OFF once it was seen running)."""
+        if self._off_error:
+            return True
+        if sensors.motor_state != MOTOR_STATE["OFF"]:
+            return False
+        if self.state == self.MOVING:
+            return True
+        self._off_stamps.add(sensors.stamp_ms)
+        return len(self._off_stamps) >= self.settings.off_samples
 
     def _take(self) -> Outcome | None:
         out, self.outcome = self.outcome, None
