@@ -58,6 +58,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="an action file for a, then b, then c (up to three; before the configuration's)",
     )
     p.add_argument("--auto", action="store_true", help="run the first action file at once ([ACTION] auto)")
+    p.add_argument("--force", action="store_true", help="-Moffline: replace existing result and error files")
     p.add_argument("--owner-pid", type=int, metavar="PID", help=argparse.SUPPRESS)  # up --console's launcher
     add_ring_options(p, listen=False)
 
@@ -76,7 +77,7 @@ def program_mode(args: argparse.Namespace) -> str:
 
 def settings(args: argparse.Namespace) -> dict[str, Any]:
     """The user interface, action files and auto-run: the command line's, else the configuration's."""
-    chosen: dict[str, Any] = {"ui": None, "files": [], "auto": False, "config": None}
+    chosen: dict[str, Any] = {"ui": None, "files": [], "auto": False, "offline": None}
     if args.config:
         chosen.update(_from_config(args.config))
     if len(args.action) > 3:
@@ -92,16 +93,23 @@ def settings(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _from_config(path: str) -> dict[str, Any]:
-    """What the console takes from a configuration file: ``ui``, action ``files``, ``auto``."""
-    from modules.localization.seedconfig import read_seed_config
+    """What the console takes from a configuration file: ``ui``, action ``files``, ``auto``, and
+    the ``offline`` settings (the seed's format: its [Main] and [Action]; tokenring's YAML: its
+    ``ui`` and ``actions`` keys)."""
+    from modules.localization.config import ConfigError, load_config
+    from modules.localization.seedconfig import looks_like_seed_config, read_seed_config
+    from tokenring import message_error, read_text
 
-    config = read_seed_config(path)
-    return {
-        "ui": config.ui,
-        "files": list(config.actions.files),
-        "auto": config.actions.auto,
-        "config": config,
-    }
+    text = read_text(Path(path), "configuration file", message_error(ConfigError))
+    if path.endswith(".cfg") or looks_like_seed_config(text):
+        seed = read_seed_config(Path(path))
+        files = [str(f) if f is not None else None for f in seed.actions.files]
+        return {"ui": seed.ui, "files": files, "auto": seed.actions.auto, "offline": seed.offline}
+    config = load_config(path)
+    actions = config.get("actions") or {}
+    base = Path(path).parent
+    files = [str(base / f) if f and not Path(f).is_absolute() else f for f in actions.get("files") or []]
+    return {"ui": config.get("ui"), "files": files, "auto": bool(actions.get("auto")), "offline": None}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -181,7 +189,24 @@ def watch_owner(pid: int) -> None:
 
 
 def _offline(args: argparse.Namespace, chosen: dict[str, Any]) -> int:
-    """The seed's offline mode (§8.3): the configuration's data log through the filter, no ring."""
-    if not args.config:
-        raise UsageError("-Moffline replays the data log that the configuration names: give -C<file>")
-    raise UsageError("-Moffline: not wired yet")
+    """The seed's offline mode (§8.3): the configuration's data log through the filter, no ring,
+    as ``tokenring replay`` (the [Offline] section's result and error files)."""
+    offline = chosen.get("offline")
+    if not args.config or offline is None:
+        raise UsageError(
+            "-Moffline replays the data log that the configuration names: give -C<file> with an [Offline] section"
+        )
+    from modules.pc.commands import replay
+
+    replay_args = argparse.Namespace(
+        log=str(offline.input),
+        out=str(offline.result),
+        config=args.config,
+        mode="sync" if offline.synchronised else "raw",
+        errors=str(offline.errors),
+        force=args.force,
+        salvage=False,
+        check=False,
+        json=False,
+    )
+    return int(replay.run(replay_args))

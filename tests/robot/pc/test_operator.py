@@ -1,0 +1,173 @@
+"""The seed's keys (table 8.2) as the operator carries them out: what reaches main's PC link, in
+which order, and what the screen is told. The link is a recorder; the ring test is
+tests/robot/pc/test_console_tmux.py."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from modules.pc.operator import KEYS, Operator, circle_text, key_name, square_text, track_speeds
+from tokenring import TransportError
+
+
+class Link:
+    """Records the PC link's calls; main's state says a navigator runs while ``running``."""
+
+    def __init__(self, running: bool = False, motor_state: int = 0) -> None:
+        self.calls: list[tuple[Any, ...]] = []
+        self.running = running
+        self.motor_state = motor_state
+        self.fail: Exception | None = None
+
+    def command(self, target: str, name: str, **args: Any) -> dict[str, Any]:
+        if self.fail:
+            raise self.fail
+        self.calls.append(("command", target, name, args))
+        return {"transmitted": True, "acknowledged": True}
+
+    def request(self, verb: str, **payload: Any) -> dict[str, Any]:
+        self.calls.append(("request", verb, payload))
+        if verb == "stop":
+            self.running = False
+        if verb == "actions":
+            self.running = True
+        return {"running": self.running, "queue": ["s 1000"] if self.running else []}
+
+    def read(self, channel: str) -> dict[str, Any]:
+        return {"state": self.motor_state}
+
+    def commands(self) -> list[tuple[str, dict[str, Any]]]:
+        return [(c[2], c[3]) for c in self.calls if c[0] == "command"]
+
+    def verbs(self) -> list[str]:
+        return [c[1] for c in self.calls if c[0] == "request"]
+
+
+def test_the_keys_are_table_8_2() -> None:
+    assert [k.name for k in KEYS] == [
+        "a", "b", "c", "d", "e", "x", "q", "space", "up", "down", "left", "right", "k", "s",
+    ]  # fmt: skip
+    assert [key_name(k) for k in ("ArrowUp", " ", "ArrowLeft", "A", "up")] == [
+        "up",
+        "space",
+        "left",
+        "a",
+        "up",
+    ]
+
+
+def test_e_and_d_switch_the_motors_and_d_clears_the_queue_first() -> None:
+    link = Link(running=True)
+    operator = Operator(link)
+    assert operator.press("e").text == "motors on"
+    assert link.commands() == [("MOTORS_ON", {})]
+    outcome = operator.press("d")
+    assert outcome.ok and "motors off" in outcome.text
+    assert link.verbs()[-1] == "stop" and link.commands()[-1] == ("MOTORS_OFF", {})
+
+
+def test_arrows_accelerate_brake_and_turn_as_a_curve() -> None:
+    link = Link()
+    operator = Operator(link)
+    operator.press("up")
+    operator.press("ArrowUp")
+    assert link.commands()[-1] == (
+        "SET_WHEEL_SPEEDS",
+        {"left_pct": 50, "right_pct": 50, "duration_ms": 60000},
+    )
+    operator.press("left")
+    name, args = link.commands()[-1]
+    assert name == "SET_WHEEL_SPEEDS" and args["right_pct"] > 50 > args["left_pct"]
+    assert args["left_pct"] + args["right_pct"] == 100  # the speed held, a turn added
+    operator.press("right")
+    operator.press("down")
+    operator.press("down")
+    assert link.commands()[-1] == ("STOP", {})  # both at 0: nothing held
+    operator.press("down")
+    assert link.commands()[-1][1]["left_pct"] == -25  # below 0 the robot backs up
+
+
+def test_track_speeds_stay_within_the_start_stop_limit() -> None:
+    for speed in (-100.0, 0.0, 100.0):
+        for turn in (-30.0, 30.0):
+            left, right = track_speeds(speed, turn)
+            assert max(abs(left), abs(right)) <= 100
+
+
+def test_space_stops_and_clears_the_queue() -> None:
+    link = Link(running=True)
+    operator = Operator(link)
+    operator.press("up")
+    outcome = operator.press("space")
+    assert outcome.ok and "cleared" in outcome.text
+    assert link.commands()[-1] == ("STOP", {}) and "stop" in link.verbs()
+    operator.press("up")
+    assert link.commands()[-1][1]["left_pct"] == 25  # the held speed started again from 0
+
+
+def test_k_s_and_action_files_queue_behind_what_runs(tmp_path: Path) -> None:
+    file = tmp_path / "a.act"
+    file.write_text("# a short leg\ns 300\nr -45\n")
+    link = Link()
+    operator = Operator(link, [file, None])
+    for key in ("a", "s", "k"):
+        assert operator.press(key).ok
+    sent = [c[2] for c in link.calls if c[:2] == ("request", "actions")]
+    assert [p["append"] for p in sent] == [True, True, True]
+    assert sent[0]["text"] == file.read_text() and sent[0]["name"] == str(file)
+    assert sent[1]["text"] == square_text() and sent[2]["text"] == circle_text()
+    assert square_text().count("r 90") == 4
+    unbound = operator.press("b")
+    assert not unbound.ok and "no action file is bound to b" in unbound.text
+
+
+def test_a_queued_drive_starts_from_rest_not_inside_a_held_speed(tmp_path: Path) -> None:
+    link = Link()
+    operator = Operator(link)
+    operator.press("up")
+    operator.press("s")
+    assert link.commands()[-1] == ("STOP", {})
+    assert operator.speed_mm_s == 0
+
+
+def test_a_bad_action_file_is_named_and_nothing_is_sent(tmp_path: Path) -> None:
+    file = tmp_path / "bad.act"
+    file.write_text("s 300\nfly 3\n")
+    link = Link()
+    outcome = Operator(link, [file]).press("a")
+    assert not outcome.ok and f"{file}:2" in outcome.text and "unknown action 'fly'" in outcome.text
+    assert "actions" not in link.verbs()
+
+
+def test_moves_with_the_motors_off_say_why() -> None:
+    from tokenring import default_protocol
+
+    off = default_protocol().enums["motor_state"].get("OFF")
+    if off is None:
+        pytest.fail("protocol.yaml's motor_state has no OFF: the motors cannot be switched off")
+    outcome = Operator(Link(motor_state=off)).press("up")
+    assert not outcome.ok and "motors are off (press e)" in outcome.text
+
+
+@pytest.mark.parametrize("key", ["z", "F1", "escape", "\x07"])
+def test_a_key_that_means_nothing_says_so(key: str) -> None:
+    link = Link()
+    outcome = Operator(link).press(key)
+    assert not outcome.ok and "means nothing" in outcome.text and "\n" not in outcome.text
+    assert link.calls == []
+
+
+def test_quit_keys_do_not_touch_the_ring() -> None:
+    link = Link()
+    assert Operator(link).press("x").quit and Operator(link).press("Q").quit
+    assert link.calls == []
+
+
+def test_an_unanswered_link_is_a_line_on_the_screen_not_a_traceback() -> None:
+    link = Link()
+    link.fail = TransportError("main did not answer on the PC link of ring 'r'")
+    outcome = Operator(link).press("e")
+    assert not outcome.ok and outcome.text == "e: main did not answer on the PC link of ring 'r'"
