@@ -10,20 +10,24 @@ line). A ``sync.trigger`` that sets ``count`` or ``min_period_ms`` but no ``mode
 trigger: what it meant before the period trigger existed (so older logs replay as they ran).
 
 ``sensors.<name>`` is each sensor's, as its file in :mod:`modules.localization.sensors` says
-(its defaults, its own checks, the ``up --sensors`` sets that turn it on); the filter's settings
-for the built-in sensors (``filter.compass``, ``filter.gyro``, ``filter.correlator``, ``lops``)
-stay here with the fusion they tune.
+(its defaults, its own checks, the ``up --sensors`` sets that turn it on; the seed's
+``synchronise`` and ``position`` switches among the settings every sensor has); the
+filter's settings for the built-in sensors (``filter.compass``, ``filter.gyro``,
+``filter.correlator``, ``lops``) stay here with the fusion they tune. ``ui`` and ``actions`` are
+the operator console's (the seed's Benutzerschnittstelle and [Action]); the Localizer ignores them.
 """
 
 from __future__ import annotations
 
 import copy
 import math
+import os
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from modules.localization.logs import DEFAULT_DEBUG_LEVEL
 from modules.localization.sensors import names, registered
 from tokenring import NumberLoader, UsageError, YAMLStructureError, one_line
 
@@ -88,9 +92,19 @@ CORE_DEFAULTS: dict[str, Any] = {
     },
     "robot": {"mm_per_step": 0.5419, "steps_per_degree": 6.5, "sonars": "robot"},
     "lops": {"receivers": [], "sigma_mm": 10.0, "delay_ms": 15.0, "delay_sigma_ms": 10.0, "floor_mm": 3.0, "init": {"fixes": 5, "drive_mm": 300.0, "max_turn_deg": 2.0, "settle_ms": 500}},
-    "logs": {"enabled": True, "directory": "logs", "data": "localization-{start}.trlog", "errors": "localization-{start}.trerr", "debug": False},
+    "logs": {"enabled": True, "directory": "logs", "data": "localization-{start}.trlog", "errors": "localization-{start}.trerr", "error_log": True, "debug_level": DEFAULT_DEBUG_LEVEL, "debug": False},
+    "ui": "stdout",
+    "actions": {"auto": False, "files": []},
 }
 # fmt: on
+
+
+#: sensors.<name>'s settings a sensor that is not synchronised cannot have on
+NEED_SYNCHRONISE = ("position", "log_sync", "filter")
+#: the operator console's screens (the seed's Benutzerschnittstelle; none: the NoUserInterface)
+UIS = ("stdout", "ncurses", "none")
+#: the action files the console's keys a, b and c drive (table 8.2)
+ACTION_FILES = 3
 
 
 def defaults() -> dict[str, Any]:
@@ -203,7 +217,7 @@ def load_config(
 ) -> dict[str, Any]:
     """A validated configuration: ``None`` gives the defaults, else a file path, the name of a
     bundled one (:func:`config_path`) or a dict; ``under`` (a partial configuration, e.g. a
-    sensor set's) lies beneath it."""
+    sensor set's) lies beneath it; relative ``actions.files`` are the file's folder's."""
     if source is None:
         return validate(under, "<config>", {}) if under else defaults()
     if isinstance(source, dict):
@@ -232,7 +246,14 @@ def parse_config(text: str, source: str, under: dict[str, Any] | None = None) ->
         data = {}  # an empty configuration is the defaults (tests/robot/localization/test_localizer_config.py)
     lines: dict[tuple[str, ...], int] = {}
     _collect_lines(node, (), lines)
-    return validate(layered(under, data) if under else data, source, lines)
+    config = validate(layered(under, data) if under else data, source, lines)
+    if not source.startswith("<"):
+        folder = Path(source).parent
+        files = config["actions"]["files"]
+        config["actions"]["files"] = [
+            f if f is None or Path(f).is_absolute() else os.path.abspath(folder / f) for f in files
+        ]
+    return config
 
 
 def _collect_lines(node: Any, path: tuple[str, ...], out: dict[tuple[str, ...], int]) -> None:
@@ -250,6 +271,8 @@ def validate(data: Any, source: str, lines: dict[tuple[str, ...], int]) -> dict[
     trigger = data.get("sync", {}).get("trigger", {}) if isinstance(data, dict) else {}
     if isinstance(trigger, dict) and "mode" not in trigger and {"count", "min_period_ms"} & set(trigger):
         config["sync"]["trigger"]["mode"] = "count"  # written for the count trigger
+    checker.debug_level(config, data)
+    checker.switches(config, data)
     checker.semantics(config)
     return config
 
@@ -318,6 +341,60 @@ class _Checker:
         if not isinstance(value, str) or not value:
             raise self.fail(path, f"expected text, got {value!r}")
         return value
+
+    def debug_level(self, c: dict[str, Any], data: Any) -> None:
+        """``logs.debug_level`` (the seed's Debuglevel, 0-4) and the older ``logs.debug``, read as
+        4 (true) or 3 (false): one given sets the other; both must agree."""
+        logs = data.get("logs") if isinstance(data, dict) else None
+        given = set(logs) & {"debug", "debug_level"} if isinstance(logs, dict) else set()
+        level = c["logs"]["debug_level"]
+        if not 0 <= level <= 4:
+            raise self.fail(
+                ("logs", "debug_level"),
+                f"must be 0-4 (0 fatal only, 1 +errors, 2 +warnings, 3 +information, 4 +debug), got {level}",
+            )
+        if given == {"debug"}:
+            c["logs"]["debug_level"] = 4 if c["logs"]["debug"] else DEFAULT_DEBUG_LEVEL
+        elif given == {"debug", "debug_level"} and c["logs"]["debug"] != (level >= 4):
+            raise self.fail(
+                ("logs", "debug"),
+                f"{c['logs']['debug']} says debug level {4 if c['logs']['debug'] else 3}, but debug_level is "
+                f"{level}: give debug_level alone (debug is its older form)",
+            )
+        c["logs"]["debug"] = c["logs"]["debug_level"] >= 4
+
+    def switches(self, c: dict[str, Any], data: Any) -> None:
+        """A sensor that is not synchronised has no synchronised data: no position, nothing to log
+        or to filter (those of its settings written on are an error, the others are off); the
+        odometry's synchronisation cannot be off (the others are carried along its track)."""
+        written = data.get("sensors") if isinstance(data, dict) else None
+        for name, settings in c["sensors"].items():
+            if settings["synchronise"]:
+                continue
+            if name == "odometry" and settings["use"]:
+                raise self.fail(
+                    ("sensors", name, "synchronise"),
+                    "the odometry's synchronised steps are the track every other sensor's samples are "
+                    "carried along, and dead reckoning's: it cannot be off alone (sync.enabled: false)",
+                )
+            own = written.get(name) if isinstance(written, dict) else None
+            for key in NEED_SYNCHRONISE:
+                if isinstance(own, dict) and own.get(key) is True:
+                    raise self.fail(
+                        ("sensors", name, key),
+                        "needs the sensor's synchronised data, and synchronise is false (with it, "
+                        f"{', '.join(NEED_SYNCHRONISE)} are false or left out)",
+                    )
+                settings[key] = False
+        for name, settings in c["sensors"].items():
+            if not settings["position"]:
+                own = written.get(name) if isinstance(written, dict) else None
+                if isinstance(own, dict) and own.get("log_position") is True:
+                    raise self.fail(
+                        ("sensors", name, "log_position"),
+                        "no position is computed (position or synchronise is false)",
+                    )
+                settings["log_position"] = False
 
     def semantics(self, c: dict[str, Any]) -> None:
         def choice(path: tuple[str, ...], allowed: tuple[str, ...]) -> None:
@@ -453,6 +530,17 @@ class _Checker:
                 name.format(start="x")
             except (KeyError, IndexError, ValueError):
                 raise self.fail(("logs", key), f"only {{start}} may be substituted in {name!r}") from None
+        choice(("ui",), UIS)
+        actions = c["actions"]
+        files = actions["files"]
+        if len(files) > ACTION_FILES or not all(f is None or (isinstance(f, str) and f) for f in files):
+            raise self.fail(
+                ("actions", "files"), f"expected up to {ACTION_FILES} file names (or null), got {files!r}"
+            )
+        if actions["auto"] and not (files and files[0]):
+            raise self.fail(
+                ("actions", "auto"), "true drives the first of actions.files at the start: name it"
+            )
 
 
 def _get(config: dict[str, Any], path: tuple[str, ...]) -> Any:

@@ -458,6 +458,8 @@ class LocalizationCore(WallCorrections, TravelCorrections):
                 self.message(
                     "W", stamp, f"{name}: {timing.late - late} late samples (stamped before the last sync)"
                 )
+            if not self.sensors[name].get("synchronise", True):
+                continue  # its raw samples only (seed [Sensors]: Synchronisieren no)
             result = self.synchronisers[name].synchronise(samples, stamp)
             if name == "odometry" and samples and "x_mm" in samples[-1].values:
                 v = samples[-1].values
@@ -546,7 +548,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         if self.dead_reckoning is None and odo is not None and "motor" in odo:
             x, y, cdeg = odo["motor"]
             self._initialise((float(x), float(y), wrap(-math.radians(cdeg / 100.0))))
-        use = {name: s["filter"] for name, s in self.sensors.items()}
+        use = {name: s["filter"] and s.get("synchronise", True) for name, s in self.sensors.items()}
         omega = 0.0
         if odo is not None:
             s, omega = step_motion(odo["dl"], odo["dr"], self.odometry)
@@ -617,7 +619,9 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         log = self.data_log
         store: dict[str, dict[str, Any]] = {}
         for sensor in self.registry:  # the sensors' own: dead reckoning, compass, gyro, truth, LOPS
-            position = sensor.position(self, data.get(sensor.name)) if sensor.position is not None else None
+            if sensor.position is None or not self._computes_position(sensor.name):
+                continue
+            position = sensor.position(self, data.get(sensor.name))
             if position is not None:
                 store[sensor.letter] = position
         if self.ekf is not None:
@@ -636,7 +640,7 @@ class LocalizationCore(WallCorrections, TravelCorrections):
                 "step_scale_mean_sigma": self.ekf.step_scale_mean_sigma,
                 "walls": walls,
             }
-        if wall_fix is not None:
+        if wall_fix is not None and self._computes_position("sonar"):
             store["W"] = wall_fix  # one coordinate and the heading, the other invalid (seed §6.2.4)
         for letter, position in store.items():
             position["stamp_ms"] = stamp
@@ -644,6 +648,11 @@ class LocalizationCore(WallCorrections, TravelCorrections):
             owner = sensor_of_letter(letter)  # None: the filter's, always logged
             if log is not None and (owner is None or self.sensors.get(owner.name, {}).get("log_position")):
                 log.write(stamp, letter, "P", {k: v for k, v in position.items() if k != "stamp_ms"})
+
+    def _computes_position(self, name: str) -> bool:
+        """Whether the sensor ``name`` puts its own position into the store (seed [Sensors]:
+        Position); one not used says yes, as before the switch (the dead reckoning's)."""
+        return bool(self.sensors.get(name, {}).get("position", True))
 
     # ---------------------------------------------------------------------------------------
     # results
@@ -713,16 +722,21 @@ def open_logs(
     on_failure: Callable[[str], None] | None = None,
 ) -> tuple[DataLog | None, ErrorLog | None]:
     """The data and error logs named by the config (``{start}`` = the start time); or (None, None).
-    ``on_failure``: a log that cannot be written (a full disk) says so there and ends, whole."""
+    No error log when ``logs.error_log`` is off (the seed's Fehlerlog no); it keeps the classes
+    ``logs.debug_level`` says. ``on_failure``: a log that cannot be written (a full disk) says so
+    there and ends, whole."""
     logs = config["logs"]
     if not logs["enabled"]:
         return None, None
     start = time.strftime("%Y%m%d-%H%M%S")
     base = Path(directory if directory is not None else logs["directory"])
     data = DataLog(base / logs["data"].format(start=start), start, config, meta, on_failure=on_failure)
-    errors = ErrorLog(
-        base / logs["errors"].format(start=start), start, debug=logs["debug"], on_failure=on_failure
-    )
+    errors = None
+    if logs.get("error_log", True):
+        level = logs.get("debug_level", 4 if logs.get("debug") else 3)
+        errors = ErrorLog(
+            base / logs["errors"].format(start=start), start, on_failure=on_failure, level=level
+        )
     return data, errors
 
 

@@ -95,6 +95,10 @@ KINDS = {
     "E": "event",
 }
 ERROR_CLASSES = {"I": "information", "W": "warning", "E": "error", "F": "fatal", "D": "debug"}
+#: the seed's Debuglevel (table B.1): the least level at which a class is written — 0 fatal
+#: only, 1 also errors, 2 warnings, 3 information (the default), 4 debug messages too
+CLASS_LEVELS = {"F": 0, "E": 1, "W": 2, "I": 3, "D": 4}
+DEFAULT_DEBUG_LEVEL = 3
 
 
 def sources() -> dict[str, str]:
@@ -237,7 +241,8 @@ class DataLog(_Stream):
 
 
 class ErrorLog(_Stream):
-    """The error log: class, time stamp, text."""
+    """The error log: class, time stamp, text; the classes above ``level`` (the seed's
+    Debuglevel, :data:`CLASS_LEVELS`) are not written. Without a level, ``debug`` says 4 or 3."""
 
     def __init__(
         self,
@@ -246,15 +251,22 @@ class ErrorLog(_Stream):
         debug: bool = False,
         on_failure: Callable[[str], None] | None = None,
         name: str | Path | None = None,
+        *,
+        level: int | None = None,
     ) -> None:
-        self.debug = debug
+        if level is None:
+            level = 4 if debug else DEFAULT_DEBUG_LEVEL
+        if not 0 <= level <= 4:
+            raise ValueError(f"debug level {level} is not within 0-4")
+        self.level = level
+        self.debug = level >= CLASS_LEVELS["D"]
         header = {"tokenring_log": "errors", "version": FORMAT_VERSION, "start": start}
         super().__init__(path, header, on_failure, name)
 
     def message(self, cls: str, stamp_ms: int, text: str) -> None:
         if cls not in ERROR_CLASSES:
             raise ValueError(f"error class {cls!r} is not one of {''.join(ERROR_CLASSES)}")
-        if cls == "D" and not self.debug:
+        if CLASS_LEVELS[cls] > self.level:
             return
         self._write([int(stamp_ms), cls, text])
 

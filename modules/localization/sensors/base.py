@@ -19,8 +19,11 @@ from modules.localization.records import Check, SeedContext, mapping
 #: the source letters that are not sensors' (appendix B: the system, the Kalman filter)
 RESERVED_LETTERS = {"S": "system", "K": "filter"}
 #: what ``sensors.<name>`` holds for every sensor, and the defaults of a sensor that says nothing
+#: (table B.1's [Sensors] row: use, synchronise, compute its position, the three logs, the filter)
 STANDARD_SETTINGS: dict[str, Any] = {
     "use": False,
+    "synchronise": True,
+    "position": True,
     "log_raw": True,
     "log_sync": True,
     "log_position": False,
