@@ -24,6 +24,9 @@ synchronisation's period: median, p99, extremes and the shares of cycles within 
 median and within the seed's windows (98-102 ms and 95-105 ms); and each sensor's own entry
 (``gyro``: its rates' mean and spread; ``lops``: the packets without a position, each receiver's
 share heard). Position sources are named and coloured as their sensors say.
+
+The seed's own output — its per-module data files (table B.9) and gnuplot control files — is
+:mod:`modules.pc.seedplots` (``tokenring analyze --seed-out``).
 """
 
 from __future__ import annotations
@@ -403,9 +406,16 @@ def analyse(
     salvage: bool = False,
 ):
     """Read a data log; write the plots into ``out`` (if given); return (summary, files)."""
-    log = read_log(path, expect="data", salvage=salvage)
+    return analyse_log(read_log(path, expect="data", salvage=salvage), out, progress)
+
+
+def analyse_log(
+    log: LogFile, out: str | Path | None = None, progress: Callable[[str], None] | None = None
+) -> tuple[dict[str, Any], list[Path]]:
+    """:func:`analyse` of a log already read (``tokenring analyze`` also writes the seed's
+    logfileanalyser files of it, :mod:`modules.pc.seedplots`)."""
     series = Series(log)
     if not series.positions and not series.raw_stamps:
-        raise LogError(f"{path}: the log holds no samples and no positions")
+        raise LogError(f"{log.path}: the log holds no samples and no positions")
     files = plot_all(series, Path(out), progress) if out is not None else []
     return summarise(series), files

@@ -25,8 +25,10 @@ WRITERS = [
     ("log-convert-seed", ["log", "convert", "{log}", "--to", "seed", "--out", "{out}"], "--out", "{out}", True),
     ("log-convert-mcap", ["log", "convert", "{log}", "--to", "mcap", "--out", "{out}"], "--out", "{out}", True),
     ("log-convert-csv", ["log", "convert", "{log}", "--to", "csv", "--out", "{dir}"], "--out", "{dir}/data.csv", True),
+    ("log-convert-dat", ["log", "convert", "{log}", "--to", "dat", "--out", "{dir}"], "--out", "{dir}/sonar.dat", True),
     ("log-sort", ["log", "sort", "{log}", "--out", "{out}"], "--out", "{out}", True),
     ("analyze", ["analyze", "{log}", "--out", "{dir}"], "--out", "{dir}/paths.png", True),
+    ("analyze-seed-out", ["analyze", "{log}", "--seed-out", "{dir}"], "--seed-out", "{dir}/logfile.cfg", True),
     ("world-generate", ["world", "generate", "--seed", "3", "--out", "{out}"], "--out", "{out}", True),
     ("world-drive", ["world", "drive", "--world", "office", "--seed", "3", "--out", "{out}"], "--out", "{out}", True),
     # verbs of a running ring: refused before anything starts or joins
