@@ -48,7 +48,10 @@ MOVING, STALLED, COLLISION, OFF = 1, 2, 3, 4
 STATE_NAMES = {0: "idle", 1: "moving", 2: "stalled", 3: "collision", 4: "off"}
 MOVES = ("MOVE_FORWARD", "MOVE_REVERSE", "TURN_LEFT", "TURN_RIGHT", "SET_WHEEL_SPEEDS")
 MOTORS_OFF_MESSAGE = "the motors are off: `tokenring drive motors on` first"
-SWITCH_PATIENCE_S = 10.0  # real seconds motor.data may take to show a switch the motor took
+#: motor.data samples (distinct stamps) not showing a switch the motor took that mean it made
+#: none: up to three can predate the motor carrying it out (the newest before it, the one its
+#: loop was making, a SIP sample taken before the command ran)
+SWITCH_SAMPLES = 4
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -180,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
             after = _until_at_rest(link, args.timeout)  # at rest already: at once
             status = "done"
         elif name in ("MOTORS_ON", "MOTORS_OFF") and not args.no_wait:
-            after = _until_switched(link, name == "MOTORS_OFF", min(args.timeout, SWITCH_PATIENCE_S))
+            after = _until_switched(link, name == "MOTORS_OFF", args.timeout)
             status = "done"
         elif name and not args.no_wait and name not in ("SET_GLOBAL_POSITION", "RECALC_GLIDE_FACTOR"):
             after = _follow(link, before, name, args.timeout)
@@ -188,10 +191,8 @@ def run(args: argparse.Namespace) -> int:
             done = abs(after["steps_left"] - before["steps_left"])
             if after["state"] in (STALLED, COLLISION):
                 status = STATE_NAMES[after["state"]]
-            elif after["state"] == OFF:  # switched off under way
-                status = "aborted"
-            elif expected is not None and done < expected:
-                status = "aborted"
+            elif after["state"] == OFF or (expected is not None and done < expected):
+                status = "aborted"  # (OFF: switched off under way)
             else:
                 status = "done"
         elif name:
@@ -278,19 +279,23 @@ def _until_at_rest(link: Any, timeout: float) -> dict[str, Any]:
         time.sleep(0.05)
 
 
-def _until_switched(link: Any, off: bool, patience: float) -> dict[str, Any]:
+def _until_switched(link: Any, off: bool, timeout: float) -> dict[str, Any]:
     """motor.data once its state shows the drive switched ``off`` (or on: any other state)."""
-    deadline = time.monotonic() + patience
+    deadline = time.monotonic() + timeout
+    unswitched: set[int] = set()  # stamps of the samples that did not show it
     while True:
         data = link.read("motor.data")
         if (data["state"] == OFF) == off:
             return data
-        if time.monotonic() >= deadline:
-            state = STATE_NAMES.get(data["state"], data["state"])
+        unswitched.add(data["stamp_ms"])
+        state = STATE_NAMES.get(data["state"], data["state"])
+        if len(unswitched) >= SWITCH_SAMPLES:
             raise TokenRingError(
-                f"the motor took MOTORS_{'OFF' if off else 'ON'} but its state is still {state} "
-                f"after {patience:g} s (a motor in seed mode, --algorithms motor=seed, has no switch)"
+                f"the motor took MOTORS_{'OFF' if off else 'ON'} but its state stays {state} "
+                "(a motor in seed mode, --algorithms motor=seed, has no switch)"
             )
+        if time.monotonic() >= deadline:
+            raise TokenRingError(f"motor.data did not change within {timeout:g} s (state {state})")
         time.sleep(0.05)
 
 

@@ -9,11 +9,12 @@ import subprocess
 
 import pytest
 
+from modules.pc.commands.drive import _until_switched
 from tests.robot.world.test_world_ring import world_state
 from tests.support.hallway import ROOM, programs
 from tests.support.processes import TOKENRING
 from tests.support.ringutil import control, launcher_pids, tap, wait_ring, wait_until
-from tokenring import default_protocol
+from tokenring import TokenRingError, default_protocol
 from tokenring.host.pclink import PcLink
 from tokenring.transport.session import free_port
 
@@ -99,3 +100,32 @@ def test_drive_motors_takes_on_or_off_before_sending(values):
     )
     assert proc.returncode == 2 and "drive motors takes on or off" in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+class ScriptedLink:
+    """main's PC link as ``_until_switched`` reads it: motor.data samples in turn, the last one kept."""
+
+    def __init__(self, samples: list[dict]) -> None:
+        self.samples = iter(samples)
+        self.last: dict = {}
+
+    def read(self, channel: str) -> dict:
+        self.last = next(self.samples, self.last)
+        return self.last
+
+
+def samples(states: list[int], stamps: list[int]) -> list[dict]:
+    return [{"state": s, "stamp_ms": t} for s, t in zip(states, stamps, strict=True)]
+
+
+def test_motors_off_waits_through_samples_from_before_the_switch():
+    link = ScriptedLink(samples([0, 0, 0, 0, OFF], [100, 100, 150, 200, 250]))
+    assert _until_switched(link, off=True, timeout=600)["state"] == OFF
+    link = ScriptedLink(samples([OFF, OFF, 0], [100, 150, 200]))
+    assert _until_switched(link, off=False, timeout=600)["state"] == 0
+
+
+def test_a_motor_without_a_switch_is_named_after_a_few_samples_not_a_timeout():
+    link = ScriptedLink(samples([0] * 6, [100, 100, 150, 200, 250, 300]))  # seed mode: stays idle
+    with pytest.raises(TokenRingError, match=r"took MOTORS_OFF but its state stays idle .*seed mode"):
+        _until_switched(link, off=True, timeout=600)
