@@ -41,7 +41,7 @@ if TYPE_CHECKING:
         TransportError,
         UsageError,
     )
-    from tokenring.extensions import Extension, UpPlan, WebAction, WebPanel
+    from tokenring.extensions import Extension, UpPlan, WebAction, WebKey, WebKeys, WebPanel
     from tokenring.node.node_os import NodeOS
     from tokenring.node.program import UserProgram
     from tokenring.node.resident import ResidentProgram
@@ -80,6 +80,8 @@ else:  # each name is imported on first use
             "UsageError": "tokenring.errors",
             "UserProgram": "tokenring.node.program",
             "WebAction": "tokenring.extensions",
+            "WebKey": "tokenring.extensions",
+            "WebKeys": "tokenring.extensions",
             "WebPanel": "tokenring.extensions",
             "write_atomically": "tokenring._util.files",
             "write_failed": "tokenring._util.files",
@@ -106,6 +108,8 @@ __all__ = [
     "UsageError",
     "UserProgram",
     "WebAction",
+    "WebKey",
+    "WebKeys",
     "WebPanel",
     "YAMLStructureError",
     "check_input",

@@ -21,8 +21,8 @@ and the ring asks every registered extension, and nothing else, for
 * **resident program** — a node's own part of its OS, run from boot while no user program runs
   (:mod:`tokenring.node.resident`; the robot's LCD menu before the programs start);
 * **feed** — its own topics in a live feed (:mod:`tokenring.observe.feed`);
-* **web** — panels (static files, one ES module each) and buttons of the web view
-  (:mod:`tokenring.web`).
+* **web** — panels (static files, one ES module each), buttons and a keyboard of the web view
+  (:mod:`tokenring.web`), and options of ``tokenring web``.
 
 ``TOKENRING_EXTENSIONS`` limits which are loaded: a comma-separated list of names, empty for
 none (the bare ring: what the ring's own tests of a non-robot system run).
@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import typing
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cache
@@ -99,6 +100,45 @@ class WebAction:
     run: Callable[[zenoh.Session, str], dict[str, Any]]
 
 
+@dataclass(frozen=True)
+class WebKey:
+    """One key of the web view's keyboard: how the page shows it and what it means, and the
+    browser's names of it (``KeyboardEvent.key``: ``"a"``, ``" "``, ``"ArrowUp"``; one entry
+    may stand for several, e.g. ``x`` and ``q``)."""
+
+    label: str
+    meaning: str
+    values: tuple[str, ...]
+
+
+class KeyHandler(typing.Protocol):
+    """What carries the web view's keys out: one per served ring, called on one worker thread,
+    one key at a time in the order they were pressed."""
+
+    def press(self, key: str) -> dict[str, Any]:
+        """Carry out ``key`` (the browser's ``KeyboardEvent.key``, any key the page had focus
+        for, known or not): ``{"text": one line for the page, "ok": False if it did nothing}``."""
+        ...
+
+    def idle(self) -> None:
+        """Called every :attr:`WebKeys.idle_s` seconds between keys (renew what a key holds)."""
+        ...
+
+
+@dataclass
+class WebKeys:
+    """The web view's keyboard: with focus on the page (not in a text field) the page posts
+    each key to ``/api/key``; ``open(session, ring)`` makes the one :class:`KeyHandler` that
+    carries them out (at the first key; a :class:`TokenRingError` there is the key's answer,
+    and the next key tries again). ``keys`` are listed on the page (and kept from scrolling it),
+    ``note`` is a line beside them (e.g. which keys are unbound)."""
+
+    keys: list[WebKey]
+    open: Callable[[zenoh.Session, str], KeyHandler]
+    note: str = ""
+    idle_s: float = 5.0
+
+
 class Extension:
     """An application on the ring; every method has a do-nothing default."""
 
@@ -160,6 +200,14 @@ class Extension:
     def web_actions(self) -> list[WebAction]:
         """The extension's buttons in the web view (e.g. start and stop a job)."""
         return []
+
+    def add_web_options(self, parser: argparse.ArgumentParser) -> None:
+        """Options of ``tokenring web`` (what its keys need, e.g. files they run)."""
+
+    def web_keys(self, args: argparse.Namespace) -> WebKeys | None:
+        """The web view's keyboard (``args``: ``tokenring web``'s, or ``watch``'s without the
+        extension's web options), or None; raise :class:`UsageError` for a bad option."""
+        return None
 
 
 def _wanted() -> set[str] | None:
@@ -238,3 +286,18 @@ def web_actions() -> list[WebAction]:
         for action in extension.web_actions():
             actions.setdefault(action.name, action)
     return list(actions.values())
+
+
+def add_web_options(parser: argparse.ArgumentParser) -> None:
+    """Every extension's options of ``tokenring web``."""
+    for extension in loaded():
+        extension.add_web_options(parser)
+
+
+def web_keys(args: argparse.Namespace) -> WebKeys | None:
+    """The first extension's web keyboard, or None (the page then takes no keys)."""
+    for extension in loaded():
+        keys = extension.web_keys(args)
+        if keys is not None:
+            return keys
+    return None

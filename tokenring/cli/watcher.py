@@ -73,6 +73,8 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
     if watch.record is not None:
         check_option_output(watch.record_option, watch.record, force=getattr(args, "force", False))
     selection = Selection.parse(watch.topics)
+    # the keyboard's options (files its keys run) are refused before the process joins the ring
+    web_keys = extensions.web_keys(args) if watch.web_port is not None else None
     protocol = load_protocol(args.protocol)
     sources = feed_sources(protocol, watch.ring)
     if watch.foxglove_port is not None:
@@ -119,6 +121,7 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
                     sources,
                     panels=extensions.web_panels(),
                     actions=extensions.web_actions(),
+                    keys=web_keys,
                     feed=feed,
                 )
             token = None

@@ -6,6 +6,7 @@
                                                                       ──► each browser's WebSocket
     browser ──► POST /api/fault  ──► tokenring.host.faults.FaultClient (as ``tokenring fault``)
             ──► POST /api/action/<name> ──► an extension's WebAction (e.g. Explore 2)
+            ──► POST /api/key ──► an extension's KeyHandler (one per ring; one thread, in order)
 
 It is a tool on the ring like ``monitor``: it subscribes to the token's key expressions and asks
 the nodes' control keys, and the token path never waits for it (a slow browser only delays its
@@ -16,6 +17,7 @@ blocking queries run on worker threads.
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import contextlib
 import json
 import logging
@@ -29,7 +31,7 @@ from tokenring._util.tables import json_default
 from tokenring.contract.faults import KINDS, NEEDS_VALUE, parse_partition, validate
 from tokenring.contract.protocol import Protocol
 from tokenring.errors import TokenRingError, UsageError
-from tokenring.extensions import WebAction, WebPanel
+from tokenring.extensions import KeyHandler, WebAction, WebKeys, WebPanel
 from tokenring.host.faults import FaultClient
 from tokenring.observe.feed import Feed, FeedSource
 from tokenring.web.hub import Hub
@@ -43,6 +45,8 @@ UPDATES_PER_S = 10.0
 PAGE_KINDS = (
     "delay", "drop", "corrupt", "duplicate", "lose", "partition", "heal", "hang", "resume", "crash", "clear",
 )  # fmt: skip
+#: the longest key name a page may send (``KeyboardEvent.key`` names are short)
+MAX_KEY_CHARS = 32
 
 
 def dumps(value: Any) -> str:
@@ -78,6 +82,7 @@ class WebView:
         *,
         panels: list[WebPanel] | None = None,
         actions: list[WebAction] | None = None,
+        keys: WebKeys | None = None,
         fault_timeout: float = 3.0,
         feed: Feed | None = None,
     ) -> None:
@@ -91,6 +96,10 @@ class WebView:
         self.feed.add_sink(self.hub.on_message)
         self.panels = list(panels or [])
         self.actions = {action.name: action for action in actions or []}
+        #: the keyboard: one handler, opened at the first key, fed by one thread in arrival order
+        self.keys = keys
+        self._key_handler: KeyHandler | None = None
+        self._key_thread: concurrent.futures.ThreadPoolExecutor | None = None
         self.fault_timeout = fault_timeout
         self.nodes = {spec.id: spec.name for spec in protocol.nodes.values()}
         self._sockets: set[web.WebSocketResponse] = set()
@@ -104,6 +113,7 @@ class WebView:
         app.router.add_get("/api/state", self.state)
         app.router.add_post("/api/fault", self.fault)
         app.router.add_post("/api/action/{name}", self.action)
+        app.router.add_post("/api/key", self.key)
         app.router.add_get("/ws", self.websocket)
         app.router.add_static("/static/", STATIC)
         for panel in self.panels:
@@ -126,6 +136,8 @@ class WebView:
                     for p in self.panels
                 ],
                 "actions": [{"name": a.name, "label": a.label} for a in self.actions.values()],
+                "keys": self._keys_config(),
+                "enums": self.protocol.enums,
                 "updates_per_s": UPDATES_PER_S,
             }
         )
@@ -221,6 +233,62 @@ class WebView:
             return _error(f"{action.label}: {exc}", 502)
         return web.Response(text=dumps({"ok": True, "result": result}), content_type="application/json")
 
+    # -- the keyboard ---------------------------------------------------------------------------
+    def _keys_config(self) -> dict[str, Any] | None:
+        if self.keys is None:
+            return None
+        listed = [{"label": k.label, "meaning": k.meaning, "values": list(k.values)} for k in self.keys.keys]
+        return {"keys": listed, "note": self.keys.note}
+
+    async def key(self, request: web.Request) -> web.Response:
+        """Carry out one key the page had focus for (``{"key": KeyboardEvent.key}``), after every
+        key posted before it; the answer is the handler's: one line of text, ok or not."""
+        if self.keys is None:
+            return _error("this web view takes no keys (no extension gives it a keyboard)", 404)
+        try:
+            body = await request.json()
+        except ValueError:
+            return _error("the body is not JSON")
+        key = body.get("key") if isinstance(body, dict) else None
+        if not isinstance(key, str) or not 0 < len(key) <= MAX_KEY_CHARS:
+            return _error(f'a key is {{"key": NAME}}, NAME a KeyboardEvent.key of 1..{MAX_KEY_CHARS} chars')
+        outcome = await asyncio.get_running_loop().run_in_executor(self._keys_worker(), self._press, key)
+        return web.Response(text=dumps({"key": key, **outcome}), content_type="application/json")
+
+    def _keys_worker(self) -> concurrent.futures.ThreadPoolExecutor:
+        """The one thread that carries keys out: what is submitted first is done first."""
+        if self._key_thread is None:
+            self._key_thread = concurrent.futures.ThreadPoolExecutor(
+                1, thread_name_prefix="tokenring-web-keys"
+            )
+        return self._key_thread
+
+    def _press(self, key: str) -> dict[str, Any]:
+        """On the keys' thread: the handler's answer, ``{"text", "ok"}``."""
+        assert self.keys is not None
+        try:
+            if self._key_handler is None:
+                self._key_handler = self.keys.open(self.session, self.ring)
+            answer = self._key_handler.press(key)
+        except TokenRingError as exc:  # the handler could not be opened, or refused: say so, go on
+            return {"text": str(exc), "ok": False}
+        return {"text": str(answer.get("text", "")), "ok": bool(answer.get("ok", True))}
+
+    def _idle(self) -> None:
+        """On the keys' thread, between keys: the handler renews what its keys hold."""
+        if self._key_handler is not None:
+            try:
+                self._key_handler.idle()
+            except TokenRingError as exc:
+                log.warning("keys: %s", exc)
+
+    async def _keep_alive(self, every_s: float) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            await asyncio.sleep(every_s)
+            if self._key_handler is not None:
+                await loop.run_in_executor(self._keys_worker(), self._idle)
+
     # -- running ------------------------------------------------------------------------------
     async def serve(
         self,
@@ -243,16 +311,21 @@ class WebView:
             raise UsageError(f"{port_option} {port}: cannot listen on {host}:{port} ({why})") from None
         if self._owns_feed:
             self.feed.start()
+        renew = asyncio.create_task(self._keep_alive(self.keys.idle_s)) if self.keys is not None else None
         try:
             bound = runner.addresses[0]
             where = f"[{bound[0]}]" if ":" in str(bound[0]) else str(bound[0])
             ready(f"http://{where}:{bound[1]}/")
             await stop.wait()
         finally:
+            if renew is not None:
+                renew.cancel()
             for ws in list(self._sockets):
                 with contextlib.suppress(Exception):
                     await ws.close()
             await runner.cleanup()
+            if self._key_thread is not None:  # a key under way ends first (a PC-link call: seconds)
+                await asyncio.get_running_loop().run_in_executor(None, self._key_thread.shutdown)
             if self._owns_feed:
                 await asyncio.get_running_loop().run_in_executor(None, self.feed.stop)
 

@@ -2,8 +2,9 @@
 
 The nodes in ring order and who holds the token, the successor chain, the round trip as a
 sparkline, each node's counters and faults (with buttons to inject and clear them, through the
-same control keys as ``tokenring fault``), and the panels the application adds (the robot's room,
-its map and LCD, Explore 1/2). It joins the ring like any tool and never slows the token.
+same control keys as ``tokenring fault``), and the panels, buttons and keys the application adds
+(the robot's room, its map and LCD, its localisation, Explore 1/2, the seed's keys while the page
+has the focus). It joins the ring like any tool and never slows the token.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ EXAMPLES = """examples:
   tokenring web --port 0 --json               # any free port; prints {"ring": ..., "url": ...}
   tokenring web --duration 600                # serve for ten minutes, then exit 0
   tokenring up --explore 2 --web              # the ring and its web view in one command
+  tokenring web --action actions/square-3-laps.act   # the robot's key a runs this action file
 """
 
 DEFAULT_PORT = 8080
@@ -45,6 +47,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--host", default="127.0.0.1", help="address to serve on (default %(default)s: this machine only)"
     )
     p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds (default: Ctrl-C)")
+    from tokenring import extensions  # the extensions' own options (what the page's keys run)
+
+    extensions.add_web_options(p)
     add_json_option(p)
     add_ring_options(p, listen=False)
 

@@ -1,6 +1,6 @@
 // The ring's page: builds itself from /api/config, follows /ws (coalesced topics, <= 10/s),
-// and injects faults / runs actions through the server's POST endpoints. Plain ES modules,
-// no build step, nothing from the network but this server.
+// and injects faults / runs actions / sends keys through the server's POST endpoints. Plain ES
+// modules, no build step, nothing from the network but this server.
 
 const $ = (id) => document.getElementById(id);
 const listeners = new Map();   // topic -> [callback]
@@ -267,6 +267,84 @@ function buildActions() {
   }
 }
 
+// -- the keyboard: keys the page has focus for go to the application's key handler, in order --
+const IGNORED_KEYS = new Set([
+  "Shift", "Control", "Alt", "AltGraph", "Meta", "OS", "Hyper", "Super", "CapsLock", "NumLock",
+  "ScrollLock", "Fn", "FnLock", "Tab", "ContextMenu", "Dead", "Unidentified", "Process", "Compose",
+]);
+const keyLabels = new Map();   // KeyboardEvent.key -> how the page shows it
+let keyChain = Promise.resolve();
+let keyCount = 0;
+
+function typing(target) {
+  return target instanceof Element
+    && (target.isContentEditable || ["INPUT", "TEXTAREA", "SELECT"].includes(target.tagName));
+}
+
+/** Whether this keydown/keyup is the keyboard's (not a shortcut, not typing, not the browser's). */
+function forKeys(event) {
+  if (event.ctrlKey || event.altKey || event.metaKey || typing(event.target)) return false;
+  if (IGNORED_KEYS.has(event.key) || /^F\d+$/.test(event.key)) return false;
+  // Enter on a button or link presses that, not the application's key
+  return !(event.key === "Enter" && event.target instanceof Element && event.target.closest("button, a"));
+}
+
+function buildKeys() {
+  if (!config.keys) return;
+  $("keys").hidden = false;
+  const help = $("key-help");
+  for (const key of config.keys.keys) {
+    for (const value of key.values) keyLabels.set(value, key.label);
+    const item = document.createElement("span");
+    const kbd = document.createElement("kbd");
+    kbd.textContent = key.label;
+    item.append(kbd, ` ${key.meaning}`);
+    help.append(item, " ");
+  }
+  $("key-note").textContent = config.keys.note || "";
+  document.addEventListener("keydown", (event) => {
+    if (!forKeys(event)) return;
+    if (keyLabels.has(event.key)) event.preventDefault();  // the arrows and space scroll no page
+    if (!event.repeat) sendKey(event.key);  // a held key counts once
+  });
+  document.addEventListener("keyup", (event) => {  // space on a focused button presses no button
+    if (forKeys(event) && keyLabels.has(event.key)) event.preventDefault();
+  });
+  const focus = () => {
+    const has = document.hasFocus();
+    $("key-focus").dataset.focus = String(has);
+    $("key-focus").textContent = has ? "(the page has the keyboard)" : "(click the page to give it the keyboard)";
+  };
+  window.addEventListener("focus", focus);
+  window.addEventListener("blur", focus);
+  focus();
+}
+
+function sendKey(key) {
+  const shown = key.length === 1 && key !== " " ? key : keyLabels.get(key) ?? (key === " " ? "space" : key);
+  const status = $("key-status");
+  status.dataset.ok = "";
+  status.textContent = `${shown} …`;
+  // one after another: the server carries keys out in the order they arrive
+  keyChain = keyChain.then(async () => {
+    const answer = await post("/api/key", { key }).catch((e) => ({ ok: false, error: String(e) }));
+    showKey(shown, answer.text ?? answer.error ?? "no answer", Boolean(answer.ok));
+  });
+}
+
+function showKey(shown, text, ok) {
+  keyCount += 1;
+  const status = $("key-status");
+  status.textContent = `${shown}: ${text}`;
+  status.dataset.ok = String(ok);
+  status.dataset.count = String(keyCount);
+  const item = document.createElement("li");
+  item.textContent = `${new Date().toLocaleTimeString()} ${shown}: ${text}`;
+  item.dataset.ok = String(ok);
+  $("key-log").prepend(item);
+  while ($("key-log").children.length > 30) $("key-log").lastChild.remove();
+}
+
 function showEvent(event) {
   const item = document.createElement("li");
   item.textContent = `${new Date().toLocaleTimeString()} ${event.kind} node ${event.node} (by ${event.by}, epoch ${event.epoch})`;
@@ -296,7 +374,7 @@ async function start() {
   config = await (await fetch("/api/config")).json();
   $("ring-name").textContent = config.ring;
   document.title = `tokenring ${config.ring}`;
-  buildTable(); buildForm(); buildActions();
+  buildTable(); buildForm(); buildActions(); buildKeys();
   view.on("/web/token", showToken);
   view.on("/ring/roundtrip", showRoundtrip);
   view.on("/ring/nodes", showNodes);
