@@ -1,7 +1,10 @@
-"""The robot's part of the web view (:mod:`tokenring.web`): its panel (the room with the walls,
-the map growing, the sonar beams, the true and estimated pose, the LCD) and its buttons
-(Explore 1, Explore 2, stop), handed to the ring through ``RobotExtension.web_panels`` and
-``web_actions``. The panel reads the robot's feed topics (:mod:`modules.pc.feed`)."""
+"""The robot's part of the web view (:mod:`tokenring.web`): its panels (the room with the walls,
+the map growing, the sonar beams, the true and estimated pose, the LCD; and the localisation as
+the seed's operator's screen showed it: the sensors' raw data, the synchronisation, the position
+store, main's action queue, the messages), its buttons (Explore 1, Explore 2, stop) and its keys
+(seed table 8.2, :mod:`modules.pc.web.keys`), handed to the ring through ``RobotExtension``'s
+``web_panels``, ``web_actions`` and ``web_keys``. The panels read the robot's feed topics
+(:mod:`modules.pc.feed`)."""
 
 from __future__ import annotations
 
@@ -15,8 +18,12 @@ STATIC = Path(__file__).resolve().parent / "static"
 
 
 def panels() -> list[WebPanel]:
-    """The room panel: ``static/panel.js`` (a plain ES module, no build step)."""
-    return [WebPanel("robot", STATIC, "panel.js", "The robot")]
+    """The room and the localisation: ``static/panel.js`` and ``static/localisation.js`` (plain
+    ES modules, no build step)."""
+    return [
+        WebPanel("robot", STATIC, "panel.js", "The robot"),
+        WebPanel("localisation", STATIC, "localisation.js", "Localisation"),
+    ]
 
 
 def _explore(action: str) -> Callable[[Any, str], dict[str, Any]]:
