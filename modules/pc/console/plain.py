@@ -11,6 +11,7 @@ import select
 import sys
 import termios
 import threading
+import time
 import tty
 from collections.abc import Iterator
 from typing import TextIO
@@ -22,6 +23,8 @@ from modules.pc.operator import Operator, Outcome
 
 #: a terminal's escape sequences for the arrow keys
 ARROWS = {b"\x1b[A": "up", b"\x1b[B": "down", b"\x1b[C": "right", b"\x1b[D": "left"}
+#: from a pipe, how long the localisation's messages are waited for at the end
+PIPE_PATIENCE_S = 5.0
 ARROWS.update({b"\x1bOA": "up", b"\x1bOB": "down", b"\x1bOC": "right", b"\x1bOD": "left"})
 
 
@@ -80,20 +83,34 @@ def run_plain(
             for line in new_lines(shown, state.message_lines()):
                 say(line)
 
+    def drain(patience_s: float) -> None:
+        """The messages not shown yet; from a pipe, the localisation's (earlier ones included)
+        are waited for a moment: a script's keys may all be taken before they arrive."""
+        deadline = time.monotonic() + patience_s
+        while time.monotonic() < deadline and not (state.localization is not None and state.message_lines()):
+            time.sleep(0.1)
+        for line in new_lines(shown, state.message_lines()):
+            say(line)
+
     runner = KeyRunner(operator, outcome).start()
+    piped = keys is None and not sys.stdin.isatty()
     follower = threading.Thread(target=follow, name="console-messages", daemon=True)
     follower.start()
     if keys is None:
         keys = terminal_keys(sys.stdin.fileno(), stop) if sys.stdin.isatty() else line_keys(sys.stdin)
+    quit_key = False
     try:
         with contextlib.suppress(KeyboardInterrupt):
             for key in keys:
                 if key.lower() in ("x", "q"):
-                    say("quit")
+                    quit_key = True
                     break
                 runner.press(key)
     finally:
+        runner.stop(timeout=120.0)  # the keys before x are carried out first
         stop.set()
-        runner.stop()
         follower.join(timeout=2.0)
+        drain(PIPE_PATIENCE_S if piped else 0.0)
+        if quit_key:
+            say("quit")
     return 0
