@@ -12,6 +12,11 @@ exists (hosted here, stepped every token visit), else dead reckoning from ``moto
 are published in the ``pose_*`` fields (source 2 = EKF, 1 = dead reckoning), and the filter's
 standard deviations in ``sigma_*`` (0 without a filter) so tools can draw its uncertainty.
 
+Beside the token, the localisation's live state as the seed's screen showed it (seed 000 §6.6:
+:func:`modules.localization.liveview.snapshot`, at most five times a second) and its messages
+(§6.8.3: each as it is said, and the backlog on request, for a screen opened later) go out on the
+keys ``robot/localization/*`` (:class:`LivePublisher`); without a localizer, nothing.
+
 Seed mode (``--algorithms copro=seed``, seed §4.3.4): the seed's edge follower on the newest
 dead-reckoned pose from ``motor.data`` alone; no localizer runs, so no vector becomes a map wall
 for it, and nothing of ours (collinear merge, corner closing) touches the vectors.
@@ -19,14 +24,18 @@ for it, and nothing of ours (collinear merge, corner closing) touches the vector
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
 import os as _os
 import queue
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
+
+import msgpack
 
 from modules.mapping.vectorgen import OUR_METHOD, SEED_METHOD, PoseHistory, Vector, Vectorizer, default_layout
 from modules.mapping.vectormap import vector_to_wire
@@ -40,6 +49,7 @@ SEED, OURS = SEED_METHOD, OUR_METHOD
 POSE_NONE, POSE_DEAD_RECKONING, POSE_EKF = 0, 1, 2
 FLUSHED = object()  # in the vector queue: every vector before it has been delivered
 MIN_DRIVEN_MM = 10  # the seed: vectors only after more than 1 cm driven
+LIVE_PERIOD_S = 0.2  # the localisation's live state at most five times a second
 
 
 #: the localizer's settings while exploring an unknown room: start where the motor was put down,
@@ -133,6 +143,114 @@ def incomplete_flag(hardware: Any, module: str, what: str) -> Callable[[str], No
     return flag
 
 
+class LivePublisher:
+    """The localisation's live state and messages beside the ring, never in the token (keys
+    :func:`modules.description.keys.localization`): :meth:`step`, on the program's thread after
+    each step of the localizer, watches the synchronisation's period and, at most every
+    ``period_s``, takes a snapshot; a thread of its own puts it and each message as the core says
+    it (a put that stalls holds up only that thread, never a token visit); a queryable answers
+    the backlog (seed §6.8.3: messages said before a screen opened are shown once it does).
+    ``run`` tells this copro's messages from a restarted one's (their ``n`` starts again)."""
+
+    def __init__(self, session: Any, ring: str, core: Any, period_s: float = LIVE_PERIOD_S) -> None:
+        from modules.description import keys as robot_keys
+        from modules.localization.liveview import SyncPeriods
+
+        self.core = core
+        self.period_s = period_s
+        self.run = f"{_os.getpid()}-{time.time_ns()}"
+        self.periods = SyncPeriods()
+        self.stats = {"states": 0, "messages": 0, "dropped": 0}
+        self._state: dict[str, Any] | None = None
+        self._messages: queue.Queue[dict[str, Any]] = queue.Queue(maxsize=1000)
+        self._wake = threading.Event()
+        self._stopping = threading.Event()
+        self._due = 0.0
+        self._declared: list[Any] = []
+        self._state_pub = session.declare_publisher(robot_keys.localization(ring, "state"))
+        self._declared.append(self._state_pub)
+        self._message_pub = session.declare_publisher(robot_keys.localization(ring, "message"))
+        self._declared.append(self._message_pub)
+        self._declared.append(
+            session.declare_queryable(robot_keys.localization(ring, "messages"), self._answer)
+        )
+        core.message_listeners.append(self._on_message)
+        self._thread = threading.Thread(target=self._run, name="copro-live", daemon=True)
+        self._thread.start()
+
+    def step(self) -> None:
+        """After a step of the localizer, on its thread (the snapshot reads the core's state)."""
+        from modules.localization.liveview import snapshot
+
+        self.periods.observe(self.core)
+        now = time.monotonic()
+        if now < self._due:
+            return
+        self._due = now + self.period_s
+        self._state = snapshot(self.core, self.periods)
+        self._wake.set()
+
+    def _on_message(self, entry: dict[str, Any]) -> None:
+        try:
+            self._messages.put_nowait({"run": self.run, **entry})
+        except queue.Full:  # nobody takes them (a stalled put): the backlog still has them
+            self.stats["dropped"] += 1
+        self._wake.set()
+
+    def _answer(self, query: Any) -> None:
+        try:
+            backlog = list(self.core.messages)  # copied in one go: no Python code runs meanwhile
+            reply = {"ok": True, "result": {"run": self.run, "messages": backlog}}
+            query.reply(query.key_expr, msgpack.packb(reply))
+        except Exception as exc:  # a closing session; the asker times out
+            log.warning("the localisation's messages could not be answered: %s", exc)
+
+    def _run(self) -> None:
+        while not self._stopping.is_set():
+            self._wake.wait(1.0)
+            self._wake.clear()
+            try:
+                while True:
+                    try:
+                        entry = self._messages.get_nowait()
+                    except queue.Empty:
+                        break
+                    self._message_pub.put(msgpack.packb(entry))
+                    self.stats["messages"] += 1
+                state, self._state = self._state, None
+                if state is not None:
+                    self._state_pub.put(msgpack.packb(state))
+                    self.stats["states"] += 1
+            except Exception as exc:  # a closing session
+                if not self._stopping.is_set():
+                    log.warning("the localisation's live state could not be published: %s", exc)
+
+    def close(self) -> None:
+        with contextlib.suppress(ValueError):
+            self.core.message_listeners.remove(self._on_message)
+        self._stopping.set()
+        self._wake.set()
+        self._thread.join(timeout=2.0)
+        for item in reversed(self._declared):
+            with contextlib.suppress(Exception):
+                item.undeclare()
+        self._declared.clear()
+
+
+def open_live(hardware: Any, localizer: Any) -> LivePublisher | None:
+    """The localizer's :class:`LivePublisher` on the hardware's Zenoh session; None without a
+    localizer (seed mode, ``$TOKENRING_LOCALIZER=off``) or a session."""
+    core = getattr(localizer, "core", None)
+    session, ring = getattr(hardware, "session", None), getattr(hardware, "ring", None)
+    if core is None or session is None or ring is None:
+        return None
+    try:
+        return LivePublisher(session, ring, core)
+    except Exception as exc:  # the localisation runs on unseen
+        log.warning("the localisation's live state will not be published: %s", exc)
+        return None
+
+
 def localizer_pose(
     localizer: Any,
 ) -> tuple[tuple[float, float, float], int, int, int | None, tuple[float, float, float] | None] | None:
@@ -211,6 +329,7 @@ class Program(UserProgram):
         self.pose_sigmas: tuple[float, float, float] | None = None
         self._make_generators()
         self.localizer = None if self.seed_mode else open_localizer(os, self.hw)
+        self.live = open_live(self.hw, self.localizer)
         self.sender = threading.Thread(target=self._send_vectors, name="copro-vectors", daemon=True)
         self.sender.start()
 
@@ -229,6 +348,8 @@ class Program(UserProgram):
             self.os.wait_visit(0.2)
             self._handle_commands()
             pose = self._update_pose()
+            if self.live is not None and self.localizer is not None:
+                self.live.step()
             sonar = self.sonar.read()
             if self.sonar.visits and sonar["sweep"] != self.last_sweep:
                 if self.last_sweep is not None and (sonar["sweep"] - self.last_sweep) & 0xFFFF > 1:
@@ -371,6 +492,9 @@ class Program(UserProgram):
 
     def teardown(self) -> None:
         self.outgoing.put(None)
+        live = getattr(self, "live", None)
+        if live is not None:
+            live.close()
 
     def report(self) -> dict[str, Any]:
         return {
@@ -384,4 +508,6 @@ class Program(UserProgram):
             **self.stats,
             # the filter's corrections, accepted and rejected per kind (compass, walls, LOPS, ...)
             "gates": (self.localizer.report().get("gates") if self.localizer is not None else None),
+            # the live state and messages put beside the ring (None: nothing published)
+            "live": dict(live.stats) if (live := getattr(self, "live", None)) is not None else None,
         }

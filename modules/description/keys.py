@@ -17,6 +17,13 @@ key                                      what travels on it
                                          one packet of seed 000 tables 6.1/6.2, raw bytes, as
                                          the robot receives them over WLAN), ``robot/lops/alive``
                                          (liveliness: LOPS is up)
+``tokenring/<ring>/robot/localization``  copro's localisation, beside the token (never in it):
+                                         ``robot/localization/state`` (msgpack, at most five a
+                                         second: :func:`modules.localization.liveview.snapshot`),
+                                         ``robot/localization/message`` (each message as it is
+                                         said: ``run``, ``n``, ``class``, ``stamp_ms``, ``text``),
+                                         ``robot/localization/messages`` (queryable: the backlog,
+                                         ``{run, messages}``); nothing without a localizer
 ``tokenring/<ring>/robot/incomplete/*``  liveliness ``<module>/<what>`` while a module runs
                                          without what it was to keep (``copro/logs``: a log that
                                          a full disk cut short); ``up`` then exits 1
@@ -43,6 +50,12 @@ def lcd(ring: str, what: str) -> str:
 def lops(ring: str, what: str) -> str:
     """``tokenring/<ring>/robot/lops/<what>``: LOPS's packets and its liveliness (``packets``, ``alive``)."""
     return f"{keys.PREFIX}/{ring}/robot/lops/{what}"
+
+
+def localization(ring: str, what: str) -> str:
+    """``tokenring/<ring>/robot/localization/<what>``: copro's localisation live (``state``,
+    ``message``) and its messages so far (``messages``, a queryable)."""
+    return f"{keys.PREFIX}/{ring}/robot/localization/{what}"
 
 
 def incomplete(ring: str, module: str = "*", what: str = "*") -> str:

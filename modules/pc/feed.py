@@ -24,6 +24,12 @@ topic                       schema                  from
 ``/robot/lcd``              robot.Lcd               the LCD's text lines (the lcd program's report)
 ``/robot/lcd/image``        foxglove.RawImage       the LCD's screen (``lcd/screen``), mono8
 ``/robot/navigator``        robot.Navigator         ``main.data`` with enum names
+``/robot/localization``     robot.Localization      copro's localisation live: sensors, sync,
+                                                    positions, filter, logs (``robot/
+                                                    localization/state``, five a second)
+``/robot/messages``         robot.Messages          its messages, the newest 200, earlier ones
+                                                    asked for once (``robot/localization/
+                                                    message`` and ``messages``)
 ==========================  ======================  ============================================
 
 Frames: ``room`` is the world's frame (the walls', x/y as in the world file, metres); ``robot``
@@ -42,6 +48,7 @@ from __future__ import annotations
 
 import base64
 import math
+import threading
 from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
@@ -59,6 +66,7 @@ POSE_SOURCE_EKF = 2  # copro.data pose_source: 0 none, 1 dead reckoning, 2 EKF
 VECTOR_CODE_NAME = "VECTOR"
 CIRCLE_SEGMENTS = 32
 LCD_WIDTH, LCD_HEIGHT = 128, 64  # the screen (modules/world/lcdpanel.py): 64 rows of 16 bytes
+MESSAGES_SHOWN = 200  # /robot/messages: the localisation's newest messages
 
 # --------------------------------------------------------------------------------------------
 # Foxglove's JSON Schemas, from the protobuf descriptors foxglove-sdk ships
@@ -278,6 +286,116 @@ LCD_SCHEMA: dict[str, Any] = {
     "required": ["lines"],
 }
 
+_INT_OR_NULL: dict[str, Any] = {"type": ["integer", "null"]}
+_NUMBER_OR_NULL: dict[str, Any] = {"type": ["number", "null"]}
+_TEXT_OR_NULL: dict[str, Any] = {"type": ["string", "null"]}
+_PLACED: dict[str, Any] = {
+    "x_mm": {**_NUMBER_OR_NULL, "description": "room frame, mm"},
+    "y_mm": {**_NUMBER_OR_NULL, "description": "room frame, mm"},
+    "heading_rad": {**_NUMBER_OR_NULL, "description": "counter-clockwise from +X"},
+    "x_valid": {"type": "boolean", "description": "table B.7's X-Valid"},
+    "y_valid": {"type": "boolean", "description": "table B.7's Y-Valid"},
+    "heading_valid": {"type": "boolean", "description": "table B.7's Drehung-Valid"},
+}
+_SYNC: dict[str, Any] = {
+    "mode": {"type": "string", "enum": ["period", "count", "rounds"]},
+    "sensor": _TEXT_OR_NULL,
+    "count": _INT_OR_NULL,
+    "period_ms": _INT_OR_NULL,
+    "rounds": _INT_OR_NULL,
+    "syncs": {"type": "integer", "minimum": 0},
+    "last_sync_ms": _INT_OR_NULL,
+    "last_period_ms": {**_NUMBER_OR_NULL, "description": "sensor time between the last two"},
+    "mean_period_ms": _NUMBER_OR_NULL,
+    "skipped": {"type": "integer", "minimum": 0, "description": "grid times jumped over"},
+}
+LOCALIZATION_SCHEMA: dict[str, Any] = {
+    "title": "robot.Localization",
+    "type": "object",
+    "description": "copro's localisation as the seed's screen showed it (modules/localization/liveview.py)",
+    "properties": {
+        "stamp_ms": {**_INT_OR_NULL, "description": "the last synchronisation, sensor time"},
+        "sensors": {
+            "type": "object",
+            "description": "every configured sensor by name: its newest raw sample and counts",
+            "additionalProperties": {
+                "type": "object",
+                "properties": {
+                    "values": {"type": ["object", "null"], "description": "the sample's fields by name"},
+                    "stamp_ms": _INT_OR_NULL,
+                    "seq": {**_INT_OR_NULL, "description": "the sensor's own sample number"},
+                    "samples": {"type": "integer", "minimum": 0, "description": "taken into syncs"},
+                    "missed": {**_INT_OR_NULL, "description": "null: no way to tell"},
+                    "late": {"type": "integer", "minimum": 0},
+                },
+                "required": ["values", "stamp_ms", "seq", "samples", "missed", "late"],
+            },
+        },
+        "sync": {"type": "object", "properties": _SYNC, "required": list(_SYNC)},
+        "positions": {
+            "type": "object",
+            "description": "the position store by source name (odometry, compass, gyro, lops, truth, filter, walls)",
+            "additionalProperties": {
+                "type": "object",
+                "properties": {
+                    **_PLACED,
+                    "letter": {"type": "string", "description": "its log source (table B.6)"},
+                    "stamp_ms": _INT_OR_NULL,
+                },
+                "required": [*_PLACED, "letter", "stamp_ms"],
+            },
+        },
+        "filter": {
+            "type": "object",
+            "description": "the best pose: the EKF's, else dead reckoning",
+            "properties": {
+                "source": {"type": "string", "enum": ["ekf", "odometry", "none"]},
+                **_PLACED,
+                "stamp_ms": {"type": "integer"},
+                "sigma": {
+                    "type": ["object", "null"],
+                    "properties": {
+                        "x_mm": {"type": "number"},
+                        "y_mm": {"type": "number"},
+                        "heading_rad": {"type": "number"},
+                    },
+                    "required": ["x_mm", "y_mm", "heading_rad"],
+                    "description": "the filter's standard deviations; null without a filter",
+                },
+            },
+            "required": ["source", *_PLACED, "stamp_ms", "sigma"],
+        },
+        "logs": {
+            "type": "object",
+            "properties": {"data": _TEXT_OR_NULL, "errors": _TEXT_OR_NULL, "failure": _TEXT_OR_NULL},
+            "required": ["data", "errors", "failure"],
+        },
+        "message_count": {"type": "integer", "minimum": 0, "description": "messages said so far"},
+    },
+    "required": ["stamp_ms", "sensors", "sync", "positions", "filter", "logs", "message_count"],
+}
+MESSAGES_SCHEMA: dict[str, Any] = {
+    "title": "robot.Messages",
+    "type": "object",
+    "properties": {
+        "messages": {
+            "type": "array",
+            "description": f"the localisation's newest {MESSAGES_SHOWN} messages, oldest first",
+            "items": {
+                "type": "object",
+                "properties": {
+                    "n": {"type": "integer", "minimum": 0, "description": "its number since copro started"},
+                    "class": {"type": "string", "description": "table B.5: I W E F D"},
+                    "stamp_ms": {"type": "integer", "description": "sensor time"},
+                    "text": {"type": "string"},
+                },
+                "required": ["n", "class", "stamp_ms", "text"],
+            },
+        },
+    },
+    "required": ["messages"],
+}
+
 
 def navigator_schema(protocol: Protocol) -> dict[str, Any]:
     """``main.data`` with its enums as names (names from protocol.yaml)."""
@@ -320,6 +438,8 @@ def robot_topics(protocol: Protocol) -> list[Topic]:
         Topic("/robot/lcd", "robot.Lcd", LCD_SCHEMA, "the LCD's text lines"),
         Topic("/robot/lcd/image", image, foxglove_schema(image), "the LCD's screen (128x64)"),
         Topic("/robot/navigator", "robot.Navigator", navigator_schema(protocol), "main's navigator"),
+        Topic("/robot/localization", "robot.Localization", LOCALIZATION_SCHEMA, "copro's localisation"),
+        Topic("/robot/messages", "robot.Messages", MESSAGES_SCHEMA, "the localisation's messages"),
     ]
 
 
@@ -436,7 +556,8 @@ class RobotSource(FeedSource):
     mounts: tuple[SonarMount, ...] = field(default_factory=body_mounts)
 
     def topics(self) -> list[Topic]:
-        return [t for t in robot_topics(self.protocol) if t.name not in WorldSource.NAMES + LcdSource.NAMES]
+        others = WorldSource.NAMES + LcdSource.NAMES + LocalizationSource.NAMES
+        return [t for t in robot_topics(self.protocol) if t.name not in others]
 
     def keys(self, ring: str) -> list[str]:
         return [keys.token(ring, "*"), robot_keys.world(ring, "truth")]
@@ -716,6 +837,109 @@ def lcd_image(screen: bytes, time_ns: int) -> dict[str, Any]:
     }
 
 
+@dataclass
+class LocalizationSource(FeedSource):
+    """copro's localisation (:mod:`modules.localization.liveview`): its live state as
+    ``/robot/localization``, and its messages as ``/robot/messages``, the newest
+    :data:`MESSAGES_SHOWN` sent whole again as each one comes.
+
+    A feed opened late asks once for the messages said before (the ``robot/localization/messages``
+    backlog); they join the list on the feed's own thread with the next sample of either key, so
+    no list sent lacks a message an earlier one had, and each message is in it once (by its
+    copro's ``run`` and number ``n``). Should the localisation say nothing for a whole poll
+    interval, the next poll sends them itself."""
+
+    protocol: Protocol
+    poll_interval_s: float = 1.0
+    NAMES = ("/robot/localization", "/robot/messages")
+    _known: dict[tuple[int, int], dict[str, Any]] = field(default_factory=dict)  # (run, n) -> entry
+    _runs: dict[str, int] = field(default_factory=dict)  # copro's run -> the order it was first seen in
+    _backlog: list[dict[str, Any]] | None = None  # asked for, not in the list yet
+    _backlog_polls: int = 0
+    _asked: bool = False
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def topics(self) -> list[Topic]:
+        return [t for t in robot_topics(self.protocol) if t.name in self.NAMES]
+
+    def keys(self, ring: str) -> list[str]:
+        return [robot_keys.localization(ring, "state"), robot_keys.localization(ring, "message")]
+
+    def translate(self, key: str, payload: bytes, time_ns: int) -> list[Message]:
+        try:
+            data = decode_msgpack(payload)
+        except Exception:
+            return []
+        if not isinstance(data, dict):
+            return []
+        out: list[Message] = []
+        with self._lock:
+            changed = self._take_backlog()
+            if key.rsplit("/", 1)[-1] == "state":
+                out.append(Message("/robot/localization", time_ns, data))
+            else:
+                changed = self._add(data) or changed
+            if changed:
+                out.append(self._messages(time_ns))
+        return out
+
+    def poll(self, session: Any, ring: str, time_ns: int) -> list[Message]:
+        with self._lock:
+            if self._backlog is not None:
+                self._backlog_polls += 1
+                if self._backlog_polls < 2 or not self._take_backlog():
+                    return []
+                return [self._messages(time_ns)]  # the localisation fell silent: shown from here
+            if self._asked:
+                return []
+        from tokenring.transport import query
+
+        for _, reply in query(session, robot_keys.localization(ring, "messages"), timeout=1.0):
+            result = reply.get("result") if reply.get("ok") else None
+            if isinstance(result, dict) and isinstance(result.get("messages"), list):
+                run = str(result.get("run", ""))
+                with self._lock:
+                    self._backlog = [{**m, "run": run} for m in result["messages"] if isinstance(m, dict)]
+                    self._backlog_polls = 0
+                    self._asked = True
+                break
+        return []
+
+    # -- with the lock held ----------------------------------------------------------------------
+
+    def _take_backlog(self) -> bool:
+        backlog, self._backlog = self._backlog, None
+        if not backlog:
+            return False
+        added = [self._add(entry, trim=False) for entry in backlog]
+        self._trim()
+        return any(added)
+
+    def _add(self, entry: dict[str, Any], trim: bool = True) -> bool:
+        """One message into the list; False if it is not one, or there already."""
+        n, stamp, cls, text = entry.get("n"), entry.get("stamp_ms"), entry.get("class"), entry.get("text")
+        if not (
+            isinstance(n, int) and isinstance(stamp, int) and isinstance(cls, str) and isinstance(text, str)
+        ):
+            return False
+        run = self._runs.setdefault(str(entry.get("run", "")), len(self._runs))
+        if (run, n) in self._known:
+            return False
+        self._known[(run, n)] = {"n": n, "class": cls, "stamp_ms": stamp, "text": text}
+        if trim:
+            self._trim()
+        return True
+
+    def _trim(self) -> None:
+        if len(self._known) > MESSAGES_SHOWN:
+            for old in sorted(self._known)[:-MESSAGES_SHOWN]:
+                del self._known[old]
+
+    def _messages(self, time_ns: int) -> Message:
+        shown = [dict(self._known[k]) for k in sorted(self._known)]
+        return Message("/robot/messages", time_ns, {"messages": shown})
+
+
 def robot_feed_sources(protocol: Protocol, ring: str) -> list[FeedSource]:
     """The robot's sources for :meth:`modules.plugin.RobotExtension.feed_sources`."""
-    return [RobotSource(protocol), WorldSource(protocol), LcdSource(protocol)]
+    return [RobotSource(protocol), WorldSource(protocol), LcdSource(protocol), LocalizationSource(protocol)]

@@ -21,7 +21,14 @@ import msgpack
 import pytest
 import yaml
 
-from modules.pc.feed import LcdSource, RobotSource, WorldSource, robot_feed_sources, walls_messages
+from modules.pc.feed import (
+    LcdSource,
+    LocalizationSource,
+    RobotSource,
+    WorldSource,
+    robot_feed_sources,
+    walls_messages,
+)
 from tests.support.ringjudge import crc16_arc  # the judge's own CRC, not tokenring's
 from tests.support.ringutil import tap, wait_until
 from tokenring.contract.protocol import default_protocol_path, load_protocol
@@ -336,7 +343,8 @@ def test_topics_carry_foxgloves_schemas_under_foxgloves_names() -> None:
     # the ring's extension hands the robot's sources to every feed, after the ring's own
     names = [type(s).__name__ for s in feed_sources(protocol, "t")]
     assert names[0] == "RingSource" and {"RobotSource", "WorldSource", "LcdSource"} <= set(names)
-    assert {RobotSource, WorldSource, LcdSource} == {type(s) for s in robot_feed_sources(protocol, "t")}
+    robot = {RobotSource, WorldSource, LcdSource, LocalizationSource}
+    assert robot == {type(s) for s in robot_feed_sources(protocol, "t")}
 
 
 # --------------------------------------------------------------------------------------------
