@@ -15,6 +15,10 @@ trigger: what it meant before the period trigger existed (so older logs replay a
 filter's settings for the built-in sensors (``filter.compass``, ``filter.gyro``,
 ``filter.correlator``, ``lops``) stay here with the fusion they tune. ``ui`` and ``actions`` are
 the operator console's (the seed's Benutzerschnittstelle and [Action]); the Localizer ignores them.
+
+The seed's own file (table B.1: a ``.cfg``, or text that starts with a ``[Section]``) is read by
+:mod:`modules.localization.seedconfig` and laid over :data:`REPOSITORY_SETTINGS`; its errors name
+its lines too.
 """
 
 from __future__ import annotations
@@ -27,13 +31,10 @@ from typing import Any
 
 import yaml
 
-from modules.localization.logs import DEFAULT_DEBUG_LEVEL
+from modules.localization.errors import MAX_VALUE, ConfigError
+from modules.localization.logs import DEFAULT_DEBUG_LEVEL, DEFAULT_LOG_DIRECTORY
 from modules.localization.sensors import names, registered
-from tokenring import NumberLoader, UsageError, YAMLStructureError, one_line
-
-#: the largest number a setting may have: every one is a distance, angle, time, count or
-#: sigma of a room-sized robot (the defaults are at most 1400), and 1e300 is a typo
-MAX_VALUE = 1e9
+from tokenring import NumberLoader, YAMLStructureError, one_line
 
 # fmt: off
 #: the defaults of everything but ``sensors`` (each sensor's file has its own: :func:`defaults`)
@@ -92,7 +93,7 @@ CORE_DEFAULTS: dict[str, Any] = {
     },
     "robot": {"mm_per_step": 0.5419, "steps_per_degree": 6.5, "sonars": "robot"},
     "lops": {"receivers": [], "sigma_mm": 10.0, "delay_ms": 15.0, "delay_sigma_ms": 10.0, "floor_mm": 3.0, "init": {"fixes": 5, "drive_mm": 300.0, "max_turn_deg": 2.0, "settle_ms": 500}},
-    "logs": {"enabled": True, "directory": "logs", "data": "localization-{start}.trlog", "errors": "localization-{start}.trerr", "error_log": True, "debug_level": DEFAULT_DEBUG_LEVEL, "debug": False},
+    "logs": {"enabled": True, "directory": DEFAULT_LOG_DIRECTORY, "data": "localization-{start}.trlog", "errors": "localization-{start}.trerr", "error_log": True, "debug_level": DEFAULT_DEBUG_LEVEL, "debug": False},
     "ui": "stdout",
     "actions": {"auto": False, "files": []},
 }
@@ -158,10 +159,6 @@ ESTIMATES = ("glide", "compass_offset", "step_scale", "step_scale_mean")
 TRIGGER_MODES = ("period", "count")
 
 
-class ConfigError(UsageError):
-    """A bad localisation configuration; the message names file, line and key."""
-
-
 def default_config_path() -> Path:
     """``config/localization.yaml`` of the repository (the commented defaults)."""
     return Path(__file__).resolve().parents[2] / "config" / "localization.yaml"
@@ -200,7 +197,7 @@ def layered(under: dict[str, Any], over: Any) -> Any:
 
 
 #: configurations that ship with tokenring, by name: ``--localizer early-ekf``
-NAMED_CONFIGS = {"early-ekf": "early-ekf.yaml"}
+NAMED_CONFIGS = {"early-ekf": "early-ekf.yaml", "syncaria": "syncaria.cfg"}
 
 
 def config_path(source: str | Path) -> Path:
@@ -217,7 +214,8 @@ def load_config(
 ) -> dict[str, Any]:
     """A validated configuration: ``None`` gives the defaults, else a file path, the name of a
     bundled one (:func:`config_path`) or a dict; ``under`` (a partial configuration, e.g. a
-    sensor set's) lies beneath it; relative ``actions.files`` are the file's folder's."""
+    sensor set's) lies beneath it. A path ending ``.cfg`` is the seed's file (table B.1), as is
+    text that starts with a ``[Section]``; relative ``actions.files`` are the file's folder's."""
     if source is None:
         return validate(under, "<config>", {}) if under else defaults()
     if isinstance(source, dict):
@@ -226,11 +224,29 @@ def load_config(
 
     path = config_path(source)
     text = read_text(path, "configuration file", message_error(ConfigError))
+    if path.suffix.lower() == ".cfg":
+        return parse_seed_config(text, str(path), under)
     return parse_config(text, str(path), under)
 
 
+def parse_seed_config(text: str, source: str, under: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The seed's configuration text (table B.1) as a validated configuration: what it says laid
+    over :data:`REPOSITORY_SETTINGS`, ``under`` beneath both; errors carry ``source:line``."""
+    from modules.localization.seedconfig import read_seed_config
+
+    seed = read_seed_config(text, source)
+    seed.check_beneath(under)
+    data = layered(REPOSITORY_SETTINGS, seed.localization_layer())
+    return validate(layered(under, data) if under else data, source, seed.layer_lines())
+
+
 def parse_config(text: str, source: str, under: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Parse and validate YAML text; errors carry ``source:line``."""
+    """Parse and validate YAML text (or the seed's, when it starts with a ``[Section]``); errors
+    carry ``source:line``."""
+    from modules.localization.seedconfig import looks_like_seed_config
+
+    if looks_like_seed_config(text):
+        return parse_seed_config(text, source, under)
     try:
         node = yaml.compose(text, Loader=NumberLoader)
         data = yaml.load(text, Loader=NumberLoader)

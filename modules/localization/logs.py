@@ -99,6 +99,8 @@ ERROR_CLASSES = {"I": "information", "W": "warning", "E": "error", "F": "fatal",
 #: only, 1 also errors, 2 warnings, 3 information (the default), 4 debug messages too
 CLASS_LEVELS = {"F": 0, "E": 1, "W": 2, "I": 3, "D": 4}
 DEFAULT_DEBUG_LEVEL = 3
+#: where the logs go, relative to the hosting node's working directory (``logs.directory``)
+DEFAULT_LOG_DIRECTORY = "logs"
 
 
 def sources() -> dict[str, str]:
