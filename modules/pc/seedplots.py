@@ -24,9 +24,10 @@ time/<sensor>               time 8 (ms), the ms since its sample before 5    ``R
 ==========================  ===============================================  ===============
 
 ``DIR/logfile.cfg`` (the seed's default name) is the configuration in table B.2's format that
-makes this output: its six plot switches, its gnuplot terminals and its styles, which positions
-it plots and which sensors the time module shows. A module the log has no data for gets no
-directory, and one line says so.
+makes this output: ``--seed-config FILE`` reads such a file (the seed's own, figure 10.1, or one
+written here and edited) and honours its six plot switches, its gnuplot terminals and its
+styles, which positions it plots and which sensors the time module shows. A module the log has
+no data for gets no directory, and one line says so.
 """
 
 from __future__ import annotations
@@ -241,7 +242,7 @@ def config_text(config: SeedConfig) -> str:
     t = config.terminals
     lines = [
         "# the seed's logfileanalyser configuration (seed 000, table B.2), written by",
-        "# tokenring analyze --seed-out. Values by position.",
+        "# tokenring analyze --seed-out; read back with --seed-config. Values by position.",
         "[MAIN]",
         "# Logdatei: the data log analysed; Output: the output directory",
         _value(config.log),
@@ -483,3 +484,190 @@ def write_seed_out(
     if progress is not None:
         progress(CONFIG_NAME)
     return report
+
+
+# =============================================================================================
+# reading a table B.2 file
+
+Value = tuple[str, int]  # a value and its line
+
+
+def _sections(text: str, source: str) -> dict[str, tuple[int, list[Value]]]:
+    """The file's sections by upper-case name: the heading's line and the values in order,
+    each with its line (the appendix-B reader's, :func:`modules.localization.seedconfig.read_sections`)."""
+    from modules.localization.seedconfig import read_sections
+
+    out: dict[str, tuple[int, list[Value]]] = {}
+    for section in read_sections(text, source):
+        name = section.name.upper()
+        if name in out:
+            raise SeedConfigError(
+                f"{source}:{section.line}: [{section.name}] again (first at line {out[name][0]})"
+            )
+        out[name] = (section.line, [(v.text, v.line) for v in section.values])
+    return out
+
+
+#: table B.2's sections, by the module each configures (figure 10.1's spellings as aliases)
+SECTIONS = {
+    "MAIN": "main",
+    "POSITION": "position",
+    "LOPS": "lops",
+    "ODOMETRY": "odometrie",
+    "ODOMETRIE": "odometrie",
+    "GYROSCOP": "gyroskop",
+    "GYROSKOP": "gyroskop",
+    "GYROSCOPE": "gyroskop",
+    "SONAR": "sonar",
+    "TIME": "time",
+}
+
+
+class _Section:
+    """A section's values read one after another, each problem naming the file and line."""
+
+    def __init__(self, source: str, name: str, line: int, values: list[Value]) -> None:
+        self.source, self.name, self.line, self.values, self.next = source, name, line, values, 0
+
+    def fail(self, problem: str, line: int | None = None) -> SeedConfigError:
+        return SeedConfigError(f"{self.source}:{line or self.line}: [{self.name}] {problem}")
+
+    def left(self) -> int:
+        return len(self.values) - self.next
+
+    def take(self, what: str) -> Value:
+        if self.next >= len(self.values):
+            last = self.values[-1][1] if self.values else self.line
+            raise self.fail(f"ends before its {what} (table B.2)", last)
+        value = self.values[self.next]
+        self.next += 1
+        return value
+
+    def yes(self, what: str) -> bool:
+        text, line = self.take(what)
+        if text.lower() not in ("yes", "no", "ja", "nein"):
+            raise self.fail(f"{what}: {text!r} is not yes or no", line)
+        return text.lower() in ("yes", "ja")
+
+    def terminal(self) -> str:
+        text, line = self.take("Format (the gnuplot terminal)")
+        words = text.split()
+        if (
+            not words
+            or not re.fullmatch(r"[a-z][a-z0-9]*", words[0])
+            or not all(_WORD.fullmatch(w) for w in words)
+            or text.count("'") % 2
+        ):
+            raise self.fail(
+                f"Format: {text!r} is not a gnuplot terminal with its options (a name, then words of "
+                "letters, digits and , . : + = ' -)",
+                line,
+            )
+        return " ".join(words)
+
+    def style(self, what: str) -> str:
+        text, line = self.take(what)
+        words = text.split()
+        if (
+            not words
+            or words[0] not in STYLES
+            or not all(_WORD.fullmatch(w) for w in words)
+            or text.count("'") % 2
+        ):
+            raise self.fail(f"{what}: {text!r} is not a gnuplot style ({', '.join(STYLES)})", line)
+        return " ".join(words)
+
+    def done(self) -> None:
+        if self.left():
+            text, line = self.values[self.next]
+            raise self.fail(f"has a value too many: {text!r} (table B.2)", line)
+
+
+def parse_config(text: str, source: str) -> SeedConfig:
+    """A table B.2 file (the seed's logfileanalyser configuration) as a :class:`SeedConfig`;
+    every problem is a :class:`SeedConfigError` naming the file and line."""
+    sections = _sections(text, source)
+    for name, (line, _) in sections.items():
+        if name not in SECTIONS:
+            raise SeedConfigError(
+                f"{source}:{line}: no section [{name}] in table B.2 (its sections: MAIN, POSITION, "
+                "LOPS, ODOMETRY, GYROSCOP, SONAR, TIME)"
+            )
+    by_module: dict[str, _Section] = {}
+    for name, (line, values) in sections.items():
+        module = SECTIONS[name]
+        if module in by_module:
+            raise SeedConfigError(f"{source}:{line}: [{name}] again (as [{by_module[module].name}])")
+        by_module[module] = _Section(source, name, line, values)
+    if "main" not in by_module:
+        raise SeedConfigError(f"{source}: no [MAIN] section (table B.2: log file, output, six plot switches)")
+    main = by_module["main"]
+    log, output = main.take("Logdatei")[0], main.take("Output")[0]
+    switches = ("Pfadplot", "LOPS-Plot", "Gyroskopplot", "Odometrieplot", "Sonarplot", "Timeplot")
+    plots = {module: main.yes(switch) for module, switch in zip(MODULES, switches, strict=True)}
+    main.done()
+    config = SeedConfig(
+        log=log,
+        output=output,
+        plots=plots,
+        terminals={m: DEFAULT_POSITION_TERMINAL if m == "position" else DEFAULT_TERMINAL for m in MODULES},
+        positions=[],
+    )
+    for module in MODULES:
+        section = by_module.get(module)
+        if section is None:
+            if plots[module] and module != "lops":  # table B.2 has no [LOPS]; figure 10.1 has
+                switch = switches[MODULES.index(module)]
+                raise SeedConfigError(f"{source}: no section for the {switch}, which [MAIN] turns on")
+            continue
+        config.terminals[module] = section.terminal()
+        if module == "position":
+            seen: dict[str, int] = {}
+            while section.left():
+                name, line = section.take("Position")
+                if position_letter(name) is None:
+                    raise section.fail(
+                        f"Position: no position {name!r} (the names: {', '.join(position_names())})", line
+                    )
+                if name in seen:
+                    raise section.fail(f"Position {name!r} again (first at line {seen[name]})", line)
+                seen[name] = line
+                config.positions.append((name, section.style(f"the style of position {name!r}")))
+        elif module == "lops":
+            config.lops = tuple(section.style(f"the style of receiver {i + 1}") for i in range(RECEIVERS))
+        elif module == "odometrie":
+            config.odometry = (
+                section.style("the left wheel's style"),
+                section.style("the right wheel's style"),
+            )
+        elif module == "gyroskop":
+            config.gyro = section.style("Stil")
+        elif module == "sonar":
+            styles = [section.style("the first sonar's style")]
+            while section.left() and len(styles) < SEED_SONARS:
+                styles.append(section.style(f"sonar {len(styles)}'s style"))
+            config.sonar = tuple(styles)
+            config.sonar_at = f"{source}:{section.line}"
+        else:  # time
+            config.sync = section.yes("Synchronisation")
+            config.sync_style = section.style("the synchronisation's style")
+            seen = {}
+            while section.left():
+                name, line = section.take("Sensor")
+                if sensor_named(name) is None:
+                    names = ", ".join(s.name for s in registered())
+                    raise section.fail(f"Sensor: no sensor {name!r} (the sensors: {names})", line)
+                if name in seen:
+                    raise section.fail(f"Sensor {name!r} again (first at line {seen[name]})", line)
+                seen[name] = line
+                config.timed.append((name, section.style(f"the style of sensor {name!r}")))
+        section.done()
+    return config
+
+
+def read_config(path: str | Path) -> SeedConfig:
+    """``path`` read as a table B.2 file (:func:`parse_config`); one line naming it if it cannot be."""
+    from tokenring import message_error, read_text
+
+    text = read_text(path, "analyser configuration", message_error(SeedConfigError))
+    return parse_config(text, str(path))

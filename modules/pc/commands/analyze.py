@@ -14,6 +14,9 @@ EXAMPLES = """examples:
   tokenring analyze logs/drive.trlog --salvage --json  # a damaged log, read around the damage
   tokenring analyze logs/drive.trlog --seed-out seed/  # the seed's files and seed/logfile.cfg;
                                                        # then: cd seed/position && gnuplot command
+  tokenring analyze logs/drive.trlog --seed-out seed/ --seed-config my.cfg --force
+                                                       # my.cfg: a table B.2 file, e.g. a copy of
+                                                       # seed/logfile.cfg edited (terminals, styles)
 """
 
 
@@ -44,6 +47,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "DIR/logfile.cfg, the configuration in table B.2's format",
     )
     p.add_argument(
+        "--seed-config",
+        metavar="FILE",
+        help="a table B.2 file (the seed's logfile.cfg) for --seed-out: its plot switches, gnuplot "
+        "terminals, styles, positions and timed sensors (its log and output names: the command line's)",
+    )
+    p.add_argument(
         "--force", action="store_true", help="replace plots already in --out DIR, or --seed-out DIR's files"
     )
     p.add_argument(
@@ -59,9 +68,11 @@ def run(args: argparse.Namespace) -> int:
 
     from modules.localization.logs import read_log
     from modules.pc.analysis import PLOTS, analyse_log
-    from tokenring import check_output, option_error
+    from tokenring import UsageError, check_output, option_error
     from tokenring.cli import print_json
 
+    if args.seed_config and not args.seed_out:
+        raise UsageError("--seed-config configures the seed's output: give its directory with --seed-out DIR")
     if args.out:  # before the log is read and plotted
         check_output(args.out, (args.log,), directory=True, error=option_error("--out"))
         for name in PLOTS:
@@ -69,8 +80,12 @@ def run(args: argparse.Namespace) -> int:
                 check_output(
                     Path(args.out) / name, (args.log,), force=args.force, error=option_error("--out")
                 )
+    seed_config = None
     if args.seed_out:
+        from modules.pc.seedplots import read_config
+
         check_seed_out(args)
+        seed_config = read_config(args.seed_config) if args.seed_config else None
 
     def progress(name: str) -> None:
         if not args.json:
@@ -82,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     if args.seed_out:
         from modules.pc.seedplots import write_seed_out
 
-        seed = write_seed_out(log.records, args.seed_out, None, args.log, progress)
+        seed = write_seed_out(log.records, args.seed_out, seed_config, args.log, progress)
         if not args.json:
             for note in seed["notes"]:
                 print(f"  {note}", file=sys.stderr)
@@ -133,7 +148,7 @@ def check_seed_out(args: argparse.Namespace) -> None:
     from tokenring import check_output, option_error
 
     error = option_error("--seed-out")
-    inputs = [Path(args.log)]
+    inputs = [Path(p) for p in (args.log, args.seed_config) if p]
     check_output(args.seed_out, tuple(inputs), directory=True, error=error)
     for path in existing_outputs(Path(args.seed_out)):
         for source in inputs:

@@ -38,6 +38,42 @@ WIDTHS = {
 MODULES = {"position", "odometrie", "gyroskop", "lops", "sonar", "time"}
 PNG = b"\x89PNG\r\n\x1a\n"
 GNUPLOT = shutil.which("gnuplot")
+#: the seed's own configuration file, figure 10.1, as printed
+FIGURE_10_1 = """[Main]
+data.log
+default
+yes yes yes yes yes yes
+
+[Position]
+"fig color big metric"
+kalman lines
+lops lines
+odometrie lines
+
+[Lops]
+"fig color big metric"
+dots dots dots
+
+[Odometry]
+"fig color big metric"
+lines lines
+
+[Gyroskop]
+"fig color big metric"
+dots
+
+[Sonar]
+"fig color big metric"
+dots dots dots dots dots dots dots dots
+dots dots dots dots dots dots dots dots
+
+[Time]
+"fig color big metric"
+yes
+dots
+gyro dots
+lops dots
+"""
 
 
 def needs_gnuplot() -> str:
@@ -271,6 +307,11 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(
     out = tmp_path / "seed"
     assert cli_main(["analyze", str(tmp_path / "missing.trlog"), "--seed-out", str(out)]) == 2
     assert "missing.trlog" in one_line(capsys) and not out.exists()
+    assert cli_main(["analyze", str(darmstadt_log), "--seed-config", str(tmp_path / "x.cfg")]) == 2
+    assert "--seed-out" in one_line(capsys)
+    args = ["analyze", str(darmstadt_log), "--seed-out", str(out), "--seed-config", str(tmp_path / "x.cfg")]
+    assert cli_main(args) == 2
+    assert "x.cfg" in one_line(capsys) and not out.exists()
     # an input inside a module's directory is never replaced, not even with --force
     (out / "time").mkdir(parents=True)
     inside = out / "time" / "drive.trlog"
@@ -354,6 +395,110 @@ def test_log_convert_to_dat_writes_table_b8_exactly(darmstadt_log: Path, tmp_pat
     assert sonar == expected_sonar
     assert any(row[10] == "0" for row in data) and any(row[10] == "1" for row in data)  # LOPS lost, found
     assert any(float(row[4]) != 0 for row in data)  # the gyroscope turned
+
+
+# ---------------------------------------------------------------------------------------------
+# --seed-config: a table B.2 file honoured
+
+
+def analyse_with(log: Path, out: Path, config: Path, *more: str) -> int:
+    return cli_main(["analyze", str(log), "--seed-out", str(out), "--seed-config", str(config), *more])
+
+
+def test_the_seeds_own_file_figure_10_1_is_honoured(darmstadt_log: Path, tmp_path: Path) -> None:
+    """Its positions (kalman, lops, odometrie: not our truth), its time module (the
+    synchronisation, gyro, lops), its styles and its terminal: xfig's ``fig``. gnuplot 5 knows
+    ``fig color big`` but no more gnuplot 3.7's ``metric``: drawn here without it."""
+    needs_gnuplot()
+    config = tmp_path / "logfile.cfg"
+    config.write_text(FIGURE_10_1)
+    out = tmp_path / "seed"
+    assert analyse_with(darmstadt_log, out, config) == 0
+    assert {p.name for p in (out / "position").iterdir()} == {"kalman", "lops", "odometrie", "command"}
+    assert {p.name for p in (out / "time").iterdir()} == {"synchronisation", "gyro", "lops", "command"}
+    for module in MODULES:
+        command = (out / module / "command").read_text()
+        assert "set terminal fig color big metric\n" in command and f"set output '{module}.fig'" in command
+        assert " with lines" in command if module in ("position", "odometrie") else " with dots" in command
+        (out / module / "command").write_text(command.replace(" metric", ""))
+        result = gnuplot(out / module)
+        assert result.returncode == 0, (module, result.stderr)
+        assert (out / module / f"{module}.fig").read_text().startswith("#FIG 3.2\n")
+    # the same data files as without a configuration: the positions and sensors it names
+    plain = tmp_path / "plain"
+    assert cli_main(["analyze", str(darmstadt_log), "--seed-out", str(plain)]) == 0
+    for file in (
+        "position/kalman",
+        "lops/empfaenger3",
+        "time/gyro",
+        "gyroskop/gyroskop",
+        "sonar/empfaenger2",
+    ):
+        assert (out / file).read_text() == (plain / file).read_text(), file
+
+
+def test_the_plot_switches_turn_modules_off_and_the_written_file_reads_back(
+    darmstadt_log: Path, seed_out: Path, tmp_path: Path
+) -> None:
+    config = tmp_path / "my.cfg"
+    text = (seed_out / "logfile.cfg").read_text()
+    config.write_text(text.replace("yes yes yes yes yes yes", "yes no no yes no no"))
+    out = tmp_path / "seed"
+    assert analyse_with(darmstadt_log, out, config) == 0
+    assert {p.name for p in out.iterdir()} == {"position", "odometrie", "logfile.cfg"}
+    assert "\nyes no no yes no no\n" in (out / "logfile.cfg").read_text()
+    # the file written read back: the same output as the one it was written with
+    again = tmp_path / "again"
+    assert analyse_with(darmstadt_log, again, seed_out / "logfile.cfg") == 0
+    assert snapshot(again) == {
+        name: data for name, data in snapshot(seed_out).items() if not name.endswith(".png")
+    }
+
+
+#: a bad table B.2 file: (what is changed in the written one, the words of the one line)
+BAD_CONFIGS = [
+    ("kalman lines", "kalman dots;", ["logfile.cfg:13", "[POSITION]", "'dots;'", "gnuplot style"]),
+    ('"pngcairo size 800,800"', '"pngcairo `touch x`"', [":12", "[POSITION]", "terminal"]),
+    ("kalman lines", "wand lines", [":13", "no position 'wand'", "kalman"]),
+    ("\nlines lines\n", "\nlines lines lines\n", ["[ODOMETRY]", "a value too many", "'lines'"]),
+    ("yes yes yes yes yes yes", "yes yes yes yes vielleicht yes", [":8", "[MAIN]", "Sonarplot", "yes or no"]),
+    ("[SONAR]", "[SONAREN]", ["[SONAREN]", "table B.2"]),
+    ("odometry", "odometrie_", ["[TIME]", "no sensor 'odometrie_'"]),
+    ('"pngcairo size 900,600"\ndots dots', '"pngcairo size 900,600\ndots dots', ['"', "not closed"]),
+]
+
+
+@pytest.mark.parametrize(("old", "new", "words"), BAD_CONFIGS, ids=[b[1][:20] for b in BAD_CONFIGS])
+def test_a_malformed_configuration_is_one_line_exit_2_and_nothing_written(
+    old: str, new: str, words: list[str], darmstadt_log: Path, seed_out: Path, tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:  # fmt: skip
+    text = (seed_out / "logfile.cfg").read_text().replace('"points pt 7 ps 0.3"', "dots")
+    assert old in text
+    config = tmp_path / "logfile.cfg"
+    config.write_text(text.replace(old, new, 1))
+    out = tmp_path / "seed"
+    out.mkdir()
+    (out / "time").mkdir()
+    (out / "time" / "synchronisation").write_text("older\n")
+    before = snapshot(tmp_path)
+    assert analyse_with(darmstadt_log, out, config, "--force") == 2
+    line = one_line(capsys)
+    assert str(config) in line
+    for word in words:
+        assert word in line, (word, line)
+    assert snapshot(tmp_path) == before
+
+
+def test_fewer_sonar_styles_than_the_logs_sonars_is_refused(
+    darmstadt_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    config = tmp_path / "logfile.cfg"
+    config.write_text(FIGURE_10_1.replace("dots dots dots dots dots dots dots dots\ndots", "dots dots\n#"))
+    assert analyse_with(darmstadt_log, tmp_path / "seed", config) == 2
+    line = one_line(capsys)
+    assert f"{config}:" in line and "[SONAR] has 2 styles" in line and "8 sonars" in line
+    assert not (tmp_path / "seed").exists()
 
 
 def test_json_lists_the_modules_written_and_why_others_are_not(
