@@ -414,3 +414,15 @@ def test_files_of_the_seeds_words_are_a_clean_error_or_a_configuration(words: li
     text = " ".join(words)
     one_line_or_nothing(lambda: parse_config(text, "fuzz.cfg"))
     one_line_or_nothing(lambda: parse_config(MINIMAL + text, "fuzz.cfg"))
+
+
+def test_the_docs_table_names_every_value_of_table_b1() -> None:
+    from modules.localization.seedconfig import TABLE_B1
+    from tests.support.processes import REPO
+
+    doc = (REPO / "docs" / "seed-config.md").read_text()
+    for section, options in TABLE_B1:
+        assert f"| [{section}]" in doc, section
+        for option in options:
+            name = option.rstrip("*?").removesuffix(" n")
+            assert name in doc, (section, name)
