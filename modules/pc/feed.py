@@ -30,6 +30,8 @@ topic                       schema                  from
 ``/robot/messages``         robot.Messages          its messages, the newest 200, earlier ones
                                                     asked for once (``robot/localization/
                                                     message`` and ``messages``)
+``/robot/main``             robot.Main              main's action queue and navigator (its
+                                                    ``state`` over the PC link, twice a second)
 ==========================  ======================  ============================================
 
 Frames: ``room`` is the world's frame (the walls', x/y as in the world file, metres); ``robot``
@@ -397,6 +399,25 @@ MESSAGES_SCHEMA: dict[str, Any] = {
 }
 
 
+MAIN_SCHEMA: dict[str, Any] = {
+    "title": "robot.Main",
+    "type": "object",
+    "description": "main's state over its PC link (modules/main.py state()), sent when it changes",
+    "properties": {
+        "queue": {
+            "type": "array",
+            "items": {"type": "string"},
+            "description": "the actions still queued as action-file lines, the one under way first",
+        },
+        "navigator": {"type": ["string", "null"], "description": "enum navigator's name"},
+        "running": {"type": ["boolean", "null"], "description": "a navigator runs"},
+        "abort_reason": {"type": ["string", "null"], "description": "enum abort_reason's name"},
+        "steps": {"type": ["integer", "null"]},
+        "error": {"type": "string", "description": "only when main stopped answering: why"},
+    },
+}
+
+
 def navigator_schema(protocol: Protocol) -> dict[str, Any]:
     """``main.data`` with its enums as names (names from protocol.yaml)."""
 
@@ -440,6 +461,7 @@ def robot_topics(protocol: Protocol) -> list[Topic]:
         Topic("/robot/navigator", "robot.Navigator", navigator_schema(protocol), "main's navigator"),
         Topic("/robot/localization", "robot.Localization", LOCALIZATION_SCHEMA, "copro's localisation"),
         Topic("/robot/messages", "robot.Messages", MESSAGES_SCHEMA, "the localisation's messages"),
+        Topic("/robot/main", "robot.Main", MAIN_SCHEMA, "main's action queue and navigator"),
     ]
 
 
@@ -556,7 +578,7 @@ class RobotSource(FeedSource):
     mounts: tuple[SonarMount, ...] = field(default_factory=body_mounts)
 
     def topics(self) -> list[Topic]:
-        others = WorldSource.NAMES + LcdSource.NAMES + LocalizationSource.NAMES
+        others = WorldSource.NAMES + LcdSource.NAMES + LocalizationSource.NAMES + MainSource.NAMES
         return [t for t in robot_topics(self.protocol) if t.name not in others]
 
     def keys(self, ring: str) -> list[str]:
@@ -940,6 +962,52 @@ class LocalizationSource(FeedSource):
         return Message("/robot/messages", time_ns, {"messages": shown})
 
 
+@dataclass
+class MainSource(FeedSource):
+    """main's action queue and navigator (its ``state`` over the PC link, as ``tokenring
+    console`` asks it) as ``/robot/main``, sent when it changes; once main stops answering, one
+    message with ``error``, and it is asked again only every few seconds."""
+
+    protocol: Protocol
+    poll_interval_s: float = 0.5
+    NAMES = ("/robot/main",)
+    KEPT = ("queue", "navigator", "running", "abort_reason", "steps")
+    RETRY_S = 5.0
+    _link: Any = None
+    _last: Any = None
+    _quiet_until: float = 0.0
+
+    def topics(self) -> list[Topic]:
+        return [t for t in robot_topics(self.protocol) if t.name in self.NAMES]
+
+    def poll(self, session: Any, ring: str, time_ns: int) -> list[Message]:
+        import time
+
+        from tokenring import TokenRingError
+        from tokenring.host import PcLink
+
+        if time.monotonic() < self._quiet_until:
+            return []
+        if self._link is None:
+            self._link = PcLink(session, ring, timeout=1.0, connect_timeout=1.0)
+        try:
+            state = self._link.request("state")
+            out = {k: state.get(k) for k in self.KEPT} if isinstance(state, dict) else None
+        except TokenRingError as exc:
+            self._quiet_until = time.monotonic() + self.RETRY_S
+            out = {"error": str(exc)} if self._last is not None else None  # said once it was heard
+        if out is None or out == self._last:
+            return []
+        self._last = out
+        return [Message("/robot/main", time_ns, out)]
+
+
 def robot_feed_sources(protocol: Protocol, ring: str) -> list[FeedSource]:
     """The robot's sources for :meth:`modules.plugin.RobotExtension.feed_sources`."""
-    return [RobotSource(protocol), WorldSource(protocol), LcdSource(protocol), LocalizationSource(protocol)]
+    return [
+        RobotSource(protocol),
+        WorldSource(protocol),
+        LcdSource(protocol),
+        LocalizationSource(protocol),
+        MainSource(protocol),
+    ]

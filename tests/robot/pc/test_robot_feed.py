@@ -24,6 +24,7 @@ import yaml
 from modules.pc.feed import (
     LcdSource,
     LocalizationSource,
+    MainSource,
     RobotSource,
     WorldSource,
     robot_feed_sources,
@@ -343,7 +344,7 @@ def test_topics_carry_foxgloves_schemas_under_foxgloves_names() -> None:
     # the ring's extension hands the robot's sources to every feed, after the ring's own
     names = [type(s).__name__ for s in feed_sources(protocol, "t")]
     assert names[0] == "RingSource" and {"RobotSource", "WorldSource", "LcdSource"} <= set(names)
-    robot = {RobotSource, WorldSource, LcdSource, LocalizationSource}
+    robot = {RobotSource, WorldSource, LcdSource, LocalizationSource, MainSource}
     assert robot == {type(s) for s in robot_feed_sources(protocol, "t")}
 
 
