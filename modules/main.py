@@ -162,6 +162,8 @@ class Program(UserProgram):
             self._send("map", "CLEAR_MAP")
         elif name == "ERROR":
             log.warning("error reported to main: %s", args)
+            if self.pilot is not None:
+                self.pilot.note_error(args["error"], args["about"])
 
     def _read_sensors(self) -> Sensors:
         sonar, motor, copro, compass = (
@@ -226,6 +228,10 @@ class Program(UserProgram):
             self.last_outcome_logged = (
                 f"{outcome.reason_name}{'/' + outcome.trigger if outcome.trigger else ''}"
             )
+            if outcome.reason == REASON["MOTORS_OFF"]:  # nothing moves until MOTORS_ON: no replanning
+                self.stop_explore(f"failed: {outcome.trigger}")
+                self.abort_reason = outcome.reason
+                return
         if pilot.busy or not self.sensors.ready:  # no plan before sonar and motor have spoken
             return
         if self._correct_motor():  # a correction under way: no move until motor and filter show it
