@@ -1,0 +1,167 @@
+"""The seed's keys (table 8.2) and the Localisation panel in the web view, in a real browser (the
+OS's headless Chromium, driven by selenium) on a live ring with the world: with the focus on the
+page, ``e``, ↑ ↑ and ← drive the simulated robot, the panel's odometry line follows, ``s`` queues
+a square and space stops the robot and clears the queue; ``x`` has nothing to quit, ``z`` means
+nothing.
+
+The judges of the motion are the world's ground truth (``world/truth`` on Zenoh, read here by
+hand) and main's own state over its PC link, never the page; the page is read as a user reads
+it (its text).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import msgpack
+import pytest
+
+from tests.ring.web.test_web_browser import chromium, read_url
+from tests.support.processes import wait_gone
+from tests.support.ringutil import launcher_pids, tap, wait_ring, wait_until
+from tokenring.host.pclink import PcLink
+
+# a 6 m square hall: the robot starts in the middle, well away from every wall
+ROOM = """
+name: web-hall
+start: {x: 3000, y: 3000, angle_deg: 0}
+walls:
+  - polygon: [[0, 0], [6000, 0], [6000, 6000], [0, 6000]]
+"""
+
+
+class Truth:
+    """The world's ground truth pose (mm, mm, rad CCW) as it is published."""
+
+    def __init__(self, session, ring: str) -> None:
+        self.pose: tuple[float, float, float] | None = None
+        self.count = 0
+        self._sub = session.declare_subscriber(f"tokenring/{ring}/world/truth", self._on)
+
+    def _on(self, sample) -> None:
+        data = msgpack.unpackb(sample.payload.to_bytes(), raw=False, strict_map_key=False)
+        self.pose = (float(data["x_mm"]), float(data["y_mm"]), float(data["theta_rad"]))
+        self.count += 1
+
+    def wait(
+        self, condition: Callable[[tuple[float, float, float]], bool], what: str, timeout: float = 120.0
+    ):
+        return wait_until(lambda: self.pose if self.pose and condition(self.pose) else None, timeout, what)
+
+    def settled(self, updates: int = 20, timeout: float = 120.0) -> tuple[float, float, float]:
+        """The pose once ``updates`` truth updates in a row left it where it was."""
+        deadline = time.monotonic() + timeout
+        same, last = 0, None
+        while same < updates:
+            assert time.monotonic() < deadline, f"the robot never stood still (true pose {self.pose})"
+            seen = self.count
+            while self.count == seen:
+                time.sleep(0.02)
+            same = same + 1 if last is not None and close(self.pose, last) else 0
+            last = self.pose
+        assert last is not None
+        return last
+
+
+def close(a, b, mm: float = 0.5, rad: float = 0.002) -> bool:
+    return a is not None and b is not None and math.dist(a[:2], b[:2]) < mm and abs(a[2] - b[2]) < rad
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_the_pages_keys_drive_the_robot_and_the_localisation_panel_follows(
+    procs, ring_name, endpoint, tmp_path: Path
+):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+
+    room = tmp_path / "hall.yaml"
+    room.write_text(ROOM)
+    launcher = procs.tokenring(
+        "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor,copro",
+        "--world", str(room), "--bitrate", "max", "--duration", "900",
+    )  # fmt: skip
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10, 20, 50], timeout=180)
+        procs.watch(launcher_pids(session, ring_name))
+        truth = Truth(session, ring_name)
+        link = PcLink(session, ring_name, timeout=10)
+        web = procs.tokenring("web", "--ring", ring_name, "-e", endpoint, "--port", "0", "--json")
+        url = read_url(web, 60)
+        driver = chromium()
+        driver_pid = driver.service.process.pid
+        try:
+            driver.get(url)
+            wait_until(
+                lambda: driver.find_element(By.TAG_NAME, "body").get_attribute("data-ready"), 60, "the page"
+            )
+            status = driver.find_element(By.ID, "key-status")
+            note = driver.find_element(By.ID, "key-note").text
+            assert "a, b, c are unbound" in note, note
+
+            def text(selector: str) -> str:
+                """An element's text now (the panel redraws its lines: no element is kept)."""
+                script = "const e = document.querySelector(arguments[0]); return e ? e.innerText : '';"
+                return str(driver.execute_script(script, selector))
+
+            def line(name: str) -> str:
+                return text(f'#panel-localisation [data-line="{name}"]')
+
+            def queue() -> str:
+                return text("#loc-queue")
+
+            odometry = wait_until(lambda: line("odometry"), 120, "the panel's odometry line")
+            assert odometry.startswith("odometry") and "steps" in odometry, odometry
+            start = truth.wait(lambda p: True, "reported a pose")
+
+            answered = 0
+
+            def press(*keys: str, expect: str) -> str:
+                """Press ``keys`` with the focus on the page; the last one's answer on the page."""
+                nonlocal answered
+                ActionChains(driver).send_keys(*keys).perform()
+                answered += len(keys)
+                wait_until(
+                    lambda: int(status.get_attribute("data-count") or 0) >= answered,
+                    60,
+                    f"the page's answer to {keys!r} (it says {status.text!r})",
+                )
+                assert expect in status.text, (keys, status.text)
+                return status.text
+
+            driver.find_element(By.TAG_NAME, "h1").click()  # the focus on the page, in no field
+            press("e", expect="motors on")
+            press(Keys.ARROW_UP, Keys.ARROW_UP, expect="↑: speed +50 mm/s")
+            moved = truth.wait(lambda p: p[0] > start[0] + 30, "drove forward on ↑ ↑")
+            press(Keys.ARROW_LEFT, expect="turn +10 °/s")
+            truth.wait(lambda p: p[2] > moved[2] + math.radians(3), "turned left on ←")
+            wait_until(lambda: line("odometry") != odometry, 60, "the odometry line to follow the drive")
+
+            press("s", expect="queued s: square")
+            wait_until(lambda: link.request("state").get("queue"), 60, "the square in main's queue")
+            wait_until(
+                lambda: "▶ s 1000" in queue(), 60, f"the page's queue to show the square ({queue()!r})"
+            )
+            driver.save_screenshot(str(tmp_path / "web-keys.png"))  # the page driving, for a failure's story
+            press(" ", expect="stopped; the queue is cleared")
+            assert link.request("state").get("queue") == [], "main's queue after space"
+            wait_until(lambda: "(queue empty)" in queue(), 60, f"the page's queue to empty ({queue()!r})")
+            stopped = truth.settled()
+            assert close(truth.settled(), stopped), "the robot went on after space"
+
+            press("x", expect="nothing to quit in a browser")
+            press("z", expect="key z means nothing")
+            errors = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
+            assert not errors, errors
+            assert launcher.poll() is None  # the ring runs on
+        finally:
+            driver.quit()
+            assert not wait_gone([driver_pid], 15.0), "chromedriver outlived the test"
+        web.terminate()
+        assert web.wait(30) == 0
+    launcher.terminate()
+    assert launcher.wait(60) == 0
