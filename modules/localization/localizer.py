@@ -49,7 +49,7 @@ from typing import Any
 
 from modules.localization.config import load_config
 from modules.localization.ekf import PoseEKF
-from modules.localization.logs import DataLog, ErrorLog
+from modules.localization.logs import CLASS_LEVELS, DEFAULT_DEBUG_LEVEL, DataLog, ErrorLog
 from modules.localization.lops_init import LopsInitialiser
 from modules.localization.params import (
     detector_params,
@@ -401,10 +401,11 @@ class LocalizationCore(WallCorrections, TravelCorrections):
         """The MessageHandler (seed §6.8.3): a message of class ``cls`` (I W E F D, table B.5) to
         the error log, to the backlog (:attr:`messages`, the last 1000 as ``{n, class, stamp_ms,
         text}``) and to every listener in :attr:`message_listeners` (on the caller's thread; the
-        entry is shared, not to be changed). Debug messages only as the error log keeps them."""
+        entry is shared, not to be changed). Only the classes the debug level shows, as the error
+        log keeps them (the seed's Debuglevel 0-4)."""
         if self.error_log is not None:
             self.error_log.message(cls, stamp_ms, text)
-        if cls == "D" and not self.config.get("logs", {}).get("debug", False):
+        if CLASS_LEVELS.get(cls, 0) > self.config.get("logs", {}).get("debug_level", DEFAULT_DEBUG_LEVEL):
             return
         with self._messages_lock:
             entry = {"n": self.messages_said, "class": cls, "stamp_ms": int(stamp_ms), "text": text}

@@ -641,6 +641,9 @@ def convert_csv(log: LogFile) -> tuple[str, str]:
 
 #: the width of each of ``sonar.dat``'s obstacle coordinates (table B.8)
 SEED_SONAR_DAT_WIDTH = 6
+#: table B.8's sonar.dat: an obstacle's x and y "für alle 16 Empfänger" (the seed's two rings of
+#: eight); a robot with fewer fills the rest as the seed writes a sonar that saw nothing
+SEED_DAT_SONARS = 16
 
 
 def convert_seed_dat(log: LogFile) -> tuple[str, str]:
@@ -658,8 +661,8 @@ def convert_seed_dat(log: LogFile) -> tuple[str, str]:
     seed's ``G C``; LOPS's three distances, its position and its valid flag (``L C``); the
     filter's position as this synchronisation left it (its ``K P``) with the three valid flags.
     ``sonar.dat``: per sonar the obstacle's x and y (robot coordinates, mm; ``W C``'s distances
-    from the mounts of the log's configuration), as many sonars on every line (the robot's, or
-    the most a ``W C`` carried).
+    from the mounts of the log's configuration), the table's sixteen sonars on every line (more if
+    the robot has more, or a ``W C`` carried more).
 
     What the log lacks (no gyroscope or LOPS in a Hamburg run, no filter, no sonar) is written
     ``0`` as the seed writes unknown values, its valid flags 0. Records after the last ``S S``
@@ -671,7 +674,7 @@ def convert_seed_dat(log: LogFile) -> tuple[str, str]:
         raise LogError(f"{log.path}: data.dat and sonar.dat (table B.8) need a data log")
     mounts = sonar_mounts(log.header.get("config"))
     sonars = max(
-        [len(mounts)]
+        [SEED_DAT_SONARS, len(mounts)]
         + [len(p["distances_mm"]) for _, source, kind, p in log.records if (source, kind) == ("W", "C")]
     )
     columns = [sensor for sensor in registered() if sensor.dat is not None]

@@ -68,8 +68,8 @@ def replay(
         data_log = DataLog(data_path, start, settings, meta, on_failure=_refuse, name=output)
         error_log = None
         if error_path is not None:
-            debug = settings["logs"]["debug"]
-            error_log = ErrorLog(error_path, start, debug=debug, on_failure=_refuse, name=errors)
+            level = settings["logs"]["debug_level"]
+            error_log = ErrorLog(error_path, start, level=level, on_failure=_refuse, name=errors)
         core = LocalizationCore(settings, data_log=data_log, error_log=error_log)
         try:
             if mode == "sync":

@@ -5,10 +5,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from modules.localization.logs import LogFile
 
 HELP = "convert, sort or summarise a localisation data or error log"
 
@@ -93,25 +89,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 #: the files each directory format writes: the data (one line per synchronisation), the sonar
 DIRECTORY_OUTPUTS = {"dat": ("data.dat", "sonar.dat"), "csv": ("data.csv", "sonar.csv")}
-#: table B.8's sonar.dat: an obstacle's x and y "für alle 16 Empfänger" (the seed's robot's two
-#: rings of eight), each 6 characters wide
-SEED_DAT_SONARS, SEED_DAT_WIDTH = 16, 6
-
-
-def seed_dat(log: LogFile) -> tuple[str, str]:
-    """Table B.8's data.dat and sonar.dat: :func:`~modules.localization.logs.convert_seed_dat`'s,
-    each sonar.dat line filled up to the table's sixteen sonars with ``0 0`` (no contact, as the
-    seed writes a sonar that saw nothing): a robot with eight writes the same columns as the
-    seed's, and a reader of the seed's files reads ours."""
-    from modules.localization.logs import convert_seed_dat
-
-    data, sonar = convert_seed_dat(log)
-    empty = f" {0:{SEED_DAT_WIDTH}d} {0:{SEED_DAT_WIDTH}d}"
-    lines = []
-    for line in sonar.splitlines():
-        pairs = len(line.split()) // 2
-        lines.append(line + empty * max(0, SEED_DAT_SONARS - pairs))
-    return data, "".join(f"{line}\n" for line in lines)
 
 
 def check_outputs(args: argparse.Namespace) -> None:
@@ -144,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
 
     from modules.localization.logs import (
         convert_csv,
+        convert_seed_dat,
         convert_seed_text,
         convert_text,
         read_log,
@@ -196,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             sys.stdout.write(text)
         return 0
-    data, sonar = seed_dat(log) if args.to == "dat" else convert_csv(log)
+    data, sonar = convert_seed_dat(log) if args.to == "dat" else convert_csv(log)
     data_name, sonar_name = DIRECTORY_OUTPUTS[args.to]
     out = Path(args.out)
     made = not out.exists()

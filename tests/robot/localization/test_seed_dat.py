@@ -101,7 +101,7 @@ def test_data_dat_has_table_b8s_fields_in_its_widths(tmp_path: Path) -> None:
     data, sonar = convert_seed_dat(read_log(tmp_path / "a.trlog"))
     assert data.endswith("\n") and sonar.endswith("\n")
     assert [fixed_fields(line, DATA_WIDTHS) for line in data.splitlines()] == DATA
-    assert [fixed_fields(line, [SONAR_WIDTH] * 6) for line in sonar.splitlines()] == SONAR
+    assert [fixed_fields(line, [SONAR_WIDTH] * 2 * SEED_SONARS) for line in sonar.splitlines()] == SONAR_FILE
 
 
 def test_the_gyroscope_column_is_the_seed_texts_g_c_value(tmp_path: Path) -> None:
@@ -132,8 +132,8 @@ def test_a_hamburg_run_without_gyroscope_and_lops_writes_zeros_there(tmp_path: P
         for k in range(2)
     ]
     # 400 mm ahead of (150, 0), 300 mm to the left of (0, 120), nothing behind
-    assert [fixed_fields(line, [SONAR_WIDTH] * 6) for line in sonar.splitlines()] == [
-        ["550", "0", "0", "420", "0", "0"]
+    assert [fixed_fields(line, [SONAR_WIDTH] * 2 * SEED_SONARS) for line in sonar.splitlines()] == [
+        ["550", "0", "0", "420"] + ["0"] * (2 * SEED_SONARS - 4)
     ] * 2
 
 
