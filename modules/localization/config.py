@@ -94,7 +94,7 @@ CORE_DEFAULTS: dict[str, Any] = {
     "robot": {"mm_per_step": 0.5419, "steps_per_degree": 6.5, "sonars": "robot"},
     "lops": {"receivers": [], "sigma_mm": 10.0, "delay_ms": 15.0, "delay_sigma_ms": 10.0, "floor_mm": 3.0, "init": {"fixes": 5, "drive_mm": 300.0, "max_turn_deg": 2.0, "settle_ms": 500}},
     "logs": {"enabled": True, "directory": DEFAULT_LOG_DIRECTORY, "data": "localization-{start}.trlog", "errors": "localization-{start}.trerr", "error_log": True, "debug_level": DEFAULT_DEBUG_LEVEL, "debug": False},
-    "ui": "stdout",
+    "ui": "ncurses",
     "actions": {"auto": False, "files": []},
 }
 # fmt: on

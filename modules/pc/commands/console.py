@@ -105,10 +105,9 @@ def _from_config(path: str) -> dict[str, Any]:
         seed = read_seed_config(Path(path))
         files = [str(f) if f is not None else None for f in seed.actions.files]
         return {"ui": seed.ui, "files": files, "auto": seed.actions.auto, "offline": seed.offline}
-    config = load_config(path)
+    config = load_config(path)  # action files come back resolved from the file's folder
     actions = config.get("actions") or {}
-    base = Path(path).parent
-    files = [str(base / f) if f and not Path(f).is_absolute() else f for f in actions.get("files") or []]
+    files = [str(f) if f else None for f in actions.get("files") or []]
     return {"ui": config.get("ui"), "files": files, "auto": bool(actions.get("auto")), "offline": None}
 
 

@@ -39,6 +39,10 @@ def console_command(args: argparse.Namespace, owner_pid: int) -> list[str]:
         command += ["--zenoh-config", args.zenoh_config]
     if getattr(args, "protocol", None):
         command += ["--protocol", args.protocol]
+    if getattr(args, "localizer", None):  # the seed's one file: its [Main] screen and [Action] keys too
+        from modules.localization.config import config_path
+
+        command += ["--config", str(config_path(args.localizer).resolve())]
     return command
 
 
