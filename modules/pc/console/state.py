@@ -232,7 +232,9 @@ def _values(data: Any) -> str:
     if not isinstance(data, dict):
         return str(data)
     return "  ".join(
-        f"{k} {'/'.join(map(str, v)) if isinstance(v, list) else v}" for k, v in data.items() if not isinstance(v, dict)
+        f"{k} {'/'.join(map(str, v)) if isinstance(v, list) else v}"
+        for k, v in data.items()
+        if not isinstance(v, dict)
     )
 
 
