@@ -14,22 +14,14 @@ import shlex
 import shutil
 import subprocess
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
-import msgpack
 import pytest
 
 from tests.support.processes import REPO, TOKENRING, pid_alive, wait_gone
 from tests.support.ringutil import launcher_pids, tap, wait_ring
-
-# a 6 m square hall: the robot starts in the middle, well away from every wall
-ROOM = """
-name: console-hall
-start: {x: 3000, y: 3000, angle_deg: 0}
-walls:
-  - polygon: [[0, 0], [6000, 0], [6000, 6000], [0, 6000]]
-"""
+from tests.support.worldtruth import OPEN_HALL, Truth, close
 
 
 class Terminal:
@@ -73,45 +65,6 @@ class Terminal:
         subprocess.run(["tmux", "kill-session", "-t", self.name], capture_output=True)
 
 
-class Truth:
-    """The world's ground truth pose (mm, mm, rad CCW), newest first."""
-
-    def __init__(self, session, ring: str) -> None:
-        self.pose: tuple[float, float, float] | None = None
-        self.count = 0
-        self._sub = session.declare_subscriber(f"tokenring/{ring}/world/truth", self._on)
-
-    def _on(self, sample) -> None:
-        data = msgpack.unpackb(sample.payload.to_bytes(), raw=False, strict_map_key=False)
-        self.pose = (float(data["x_mm"]), float(data["y_mm"]), float(data["theta_rad"]))
-        self.count += 1
-
-    def wait(self, condition: Callable[[tuple[float, float, float]], bool], what: str, timeout: float = 90.0):
-        deadline = time.monotonic() + timeout
-        while True:
-            if self.pose is not None and condition(self.pose):
-                return self.pose
-            if time.monotonic() > deadline:
-                raise AssertionError(f"the robot never {what} (true pose {self.pose})")
-            time.sleep(0.1)
-
-    def settled(self, rounds: int = 20) -> tuple[float, float, float]:
-        """The pose once ``rounds`` truth updates in a row left it where it was."""
-        same, last = 0, None
-        while same < rounds:
-            seen = self.count
-            while self.count == seen:
-                time.sleep(0.02)
-            same = same + 1 if last is not None and _close(self.pose, last) else 0
-            last = self.pose
-        assert last is not None
-        return last
-
-
-def _close(a, b, mm: float = 0.5, rad: float = 0.002) -> bool:
-    return a is not None and b is not None and math.dist(a[:2], b[:2]) < mm and abs(a[2] - b[2]) < rad
-
-
 @pytest.fixture
 def terminal_name(ring_name: str) -> Iterator[list[Terminal]]:
     if shutil.which("tmux") is None:
@@ -131,7 +84,7 @@ def test_console_keys_drive_the_robot_and_x_leaves_the_ring_running(
     procs, ring_name, endpoint, tmp_path: Path, terminal_name: list[Terminal]
 ) -> None:
     room = tmp_path / "hall.yaml"
-    room.write_text(ROOM)
+    room.write_text(OPEN_HALL)
     action = tmp_path / "leg.act"
     action.write_text("# bound to a\ns 300\n")
     launcher = procs.tokenring(
@@ -188,7 +141,7 @@ def test_console_keys_drive_the_robot_and_x_leaves_the_ring_running(
         term.wait_for(r"motors off")
         term.keys("Up")
         term.wait_for(r"refused, the motors are off")
-        assert _close(truth.settled(), leg_end), "the robot moved with its motors off"
+        assert close(truth.settled(), leg_end), "the robot moved with its motors off"
 
         term.keys("z")
         term.wait_for(r"key z means nothing")
@@ -236,7 +189,7 @@ def test_up_console_takes_the_terminal_and_x_stops_the_ring(
     ring_name, endpoint, tmp_path: Path, terminal_name: list[Terminal]
 ) -> None:
     room = tmp_path / "hall.yaml"
-    room.write_text(ROOM)
+    room.write_text(OPEN_HALL)
     exit_file = tmp_path / "up.exit"
     up = [
         *TOKENRING, "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor,sonar",

@@ -12,62 +12,15 @@ it (its text).
 from __future__ import annotations
 
 import math
-import time
-from collections.abc import Callable
 from pathlib import Path
 
-import msgpack
 import pytest
 
 from tests.ring.web.test_web_browser import chromium, read_url
 from tests.support.processes import wait_gone
 from tests.support.ringutil import launcher_pids, tap, wait_ring, wait_until
+from tests.support.worldtruth import OPEN_HALL, Truth, close
 from tokenring.host.pclink import PcLink
-
-# a 6 m square hall: the robot starts in the middle, well away from every wall
-ROOM = """
-name: web-hall
-start: {x: 3000, y: 3000, angle_deg: 0}
-walls:
-  - polygon: [[0, 0], [6000, 0], [6000, 6000], [0, 6000]]
-"""
-
-
-class Truth:
-    """The world's ground truth pose (mm, mm, rad CCW) as it is published."""
-
-    def __init__(self, session, ring: str) -> None:
-        self.pose: tuple[float, float, float] | None = None
-        self.count = 0
-        self._sub = session.declare_subscriber(f"tokenring/{ring}/world/truth", self._on)
-
-    def _on(self, sample) -> None:
-        data = msgpack.unpackb(sample.payload.to_bytes(), raw=False, strict_map_key=False)
-        self.pose = (float(data["x_mm"]), float(data["y_mm"]), float(data["theta_rad"]))
-        self.count += 1
-
-    def wait(
-        self, condition: Callable[[tuple[float, float, float]], bool], what: str, timeout: float = 120.0
-    ):
-        return wait_until(lambda: self.pose if self.pose and condition(self.pose) else None, timeout, what)
-
-    def settled(self, updates: int = 20, timeout: float = 120.0) -> tuple[float, float, float]:
-        """The pose once ``updates`` truth updates in a row left it where it was."""
-        deadline = time.monotonic() + timeout
-        same, last = 0, None
-        while same < updates:
-            assert time.monotonic() < deadline, f"the robot never stood still (true pose {self.pose})"
-            seen = self.count
-            while self.count == seen:
-                time.sleep(0.02)
-            same = same + 1 if last is not None and close(self.pose, last) else 0
-            last = self.pose
-        assert last is not None
-        return last
-
-
-def close(a, b, mm: float = 0.5, rad: float = 0.002) -> bool:
-    return a is not None and b is not None and math.dist(a[:2], b[:2]) < mm and abs(a[2] - b[2]) < rad
 
 
 @pytest.mark.slow
@@ -80,7 +33,7 @@ def test_the_pages_keys_drive_the_robot_and_the_localisation_panel_follows(
     from selenium.webdriver.common.keys import Keys
 
     room = tmp_path / "hall.yaml"
-    room.write_text(ROOM)
+    room.write_text(OPEN_HALL)
     launcher = procs.tokenring(
         "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor,copro",
         "--world", str(room), "--bitrate", "max", "--duration", "900",
