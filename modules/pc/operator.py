@@ -235,7 +235,7 @@ class Operator:
             self.held_since = None
         state = self.link.request("actions", text=text, name=name, append=True, speed_pct=ACTION_SPEED_PCT)
         waiting = len(state.get("queue") or ()) if isinstance(state, dict) else len(actions)
-        return Outcome(key, f"queued {name} ({len(actions)} actions; {waiting} waiting)")
+        return Outcome(key, f"queued {Path(name).name} ({len(actions)} actions; {waiting} waiting)")
 
     # -- the link --------------------------------------------------------------------------------
     def _clear_queue(self) -> None:

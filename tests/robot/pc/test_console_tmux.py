@@ -25,17 +25,19 @@ from tests.support.worldtruth import OPEN_HALL, Truth, close
 
 
 class Terminal:
-    """One tmux session running one command; keys in, screen text out."""
+    """One tmux server of the test's own (its socket named after the session: the user's tmux and
+    its window sizes are never involved) running one command; keys in, screen text out."""
 
     def __init__(self, name: str, command: str, width: int = 200, height: int = 50) -> None:
         self.name = name
+        self.tmux = ["tmux", "-L", name, "-f", "/dev/null"]
         subprocess.run(
-            ["tmux", "new-session", "-d", "-s", name, "-x", str(width), "-y", str(height), command],
+            [*self.tmux, "new-session", "-d", "-s", name, "-x", str(width), "-y", str(height), command],
             check=True,
             cwd=REPO,
         )
         out = subprocess.run(
-            ["tmux", "display-message", "-p", "-t", name, "#{pane_pid}"],
+            [*self.tmux, "display-message", "-p", "-t", name, "#{pane_pid}"],
             capture_output=True,
             text=True,
             check=True,
@@ -43,10 +45,12 @@ class Terminal:
         self.shell_pid = int(out.stdout.strip())
 
     def keys(self, *keys: str) -> None:
-        subprocess.run(["tmux", "send-keys", "-t", self.name, *keys], check=True)
+        subprocess.run([*self.tmux, "send-keys", "-t", self.name, *keys], check=True)
 
     def screen(self) -> str:
-        out = subprocess.run(["tmux", "capture-pane", "-p", "-t", self.name], capture_output=True, text=True)
+        out = subprocess.run(
+            [*self.tmux, "capture-pane", "-p", "-t", self.name], capture_output=True, text=True
+        )
         return out.stdout
 
     def wait_for(self, pattern: str, timeout: float = 60.0, differs: tuple | None = None) -> re.Match[str]:
@@ -62,7 +66,7 @@ class Terminal:
             time.sleep(0.2)
 
     def close(self) -> None:
-        subprocess.run(["tmux", "kill-session", "-t", self.name], capture_output=True)
+        subprocess.run([*self.tmux, "kill-server"], capture_output=True)
 
 
 @pytest.fixture
