@@ -1,0 +1,442 @@
+"""The simulated runtime: the same threaded code, one thread at a time, on a virtual clock.
+
+Every task is a real thread, but only the one holding the *baton* runs; the others wait on a
+private semaphore. A task gives the baton up only inside this runtime's primitives (sleep, an
+event's, lock's, condition's or queue's wait): the scheduler then hands it to a ready task, chosen
+with the seeded random generator, or — when every task waits — moves the virtual clock on to the
+earliest timer and wakes what it frees (trio's autojump clock, Go's ``testing/synctest``). The same
+seed gives the same interleaving and the same clock readings, run after run; another seed explores
+another interleaving. Code between two primitives runs as one step, as it would between two
+preemptions that happen not to come.
+
+Rules for code that runs here: every wait goes through the runtime (a ``time.sleep`` or a plain
+``threading.Event`` would stall the whole simulation on the real clock), and no task holds a plain
+lock across a runtime wait. A wait that can never end — every task waiting, no timer left — is a
+:class:`Deadlock`, raised in the task that called :meth:`SimRuntime.run`.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import queue as _queue
+import random
+import threading
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+from tokenring.errors import TokenRingError
+
+#: the simulated wall clock starts here (``time()``): 2001-06-01, the Hamburg robot's year
+EPOCH_S = 991_353_600.0
+
+
+class Deadlock(TokenRingError):
+    """Every simulated task waits and no timer will wake any of them."""
+
+
+class _Shutdown(BaseException):
+    """Raised inside a parked task when the simulation is closed: its thread unwinds and ends."""
+
+
+class _Task:
+    """One simulated thread: its gate (the baton is handed over by releasing it) and its wait."""
+
+    def __init__(self, index: int, name: str) -> None:
+        self.index = index
+        self.name = name
+        self.gate = threading.Semaphore(0)
+        self.waiting_on: _WaitList | None = None
+        self.wait_id = 0  # which wait a timer belongs to (a stale timer wakes nobody)
+        self.timed_out = False
+        self.done = False
+        self.finished: SimEvent | None = None
+        self.error: BaseException | None = None
+        self.ident: int | None = None
+
+
+class _WaitList:
+    """The tasks waiting on one object, first come first woken."""
+
+    def __init__(self) -> None:
+        self.tasks: deque[_Task] = deque()
+
+
+class SimRuntime:
+    """A deterministic scheduler and virtual clock (see the module docstring).
+
+    ``seed`` chooses among ready tasks; ``jitter`` False always takes the one ready longest (a
+    single canonical interleaving)."""
+
+    name = "sim"
+    simulated = True
+
+    def __init__(self, seed: int = 0, *, jitter: bool = True) -> None:
+        self.seed = seed
+        self.jitter = jitter
+        self.rng = random.Random(seed)
+        self.now = 0.0
+        self.switches = 0
+        self._ready: list[_Task] = []
+        self._timers: list[tuple[float, int, _Task, int]] = []
+        self._order = itertools.count()
+        self._tasks: dict[int, _Task] = {}  # by thread ident
+        self._all: list[_Task] = []
+        self._main: _Task | None = None
+        self._current: _Task | None = None
+        self._deadlocked = False
+        self._closing = False
+        self.failures: list[tuple[str, BaseException]] = []
+
+    # -- the clock -------------------------------------------------------------------------------
+    def monotonic(self) -> float:
+        return self.now
+
+    def time(self) -> float:
+        return EPOCH_S + self.now
+
+    def sleep(self, seconds: float) -> None:
+        task = self._me()
+        if seconds <= 0:
+            self._ready.append(task)  # a yield: the others ready now go first, in the seed's order
+            self._park(task)
+            return
+        self._wait(task, None, seconds)
+
+    # -- primitives --------------------------------------------------------------------------------
+    def event(self) -> SimEvent:
+        return SimEvent(self)
+
+    def lock(self) -> SimLock:
+        return SimLock(self)
+
+    def condition(self, lock: Any = None) -> SimCondition:
+        return SimCondition(self, lock)
+
+    def queue(self, maxsize: int = 0) -> SimQueue:
+        return SimQueue(self, maxsize)
+
+    def spawn(self, target: Callable[[], Any], name: str, daemon: bool = True) -> SimThread:
+        """A new task, ready to run when the scheduler picks it (the caller goes on first)."""
+        task = _Task(len(self._all), name)
+        task.finished = SimEvent(self)
+        self._all.append(task)
+        handle = SimThread(self, task)
+
+        def body() -> None:
+            task.ident = threading.get_ident()
+            self._tasks[task.ident] = task
+            task.gate.acquire()
+            try:
+                if self._closing:
+                    return
+                target()
+            except _Shutdown:
+                return
+            except BaseException as exc:  # a task's failure is the run's, reported by run()
+                task.error = exc
+                self.failures.append((task.name, exc))
+            task.done = True
+            assert task.finished is not None
+            task.finished.set()
+            self._exit(task)
+
+        thread = threading.Thread(target=body, name=f"sim-{name}", daemon=True)
+        thread.start()
+        self._ready.append(task)
+        return handle
+
+    # -- running -------------------------------------------------------------------------------------
+    def run(self, main: Callable[[], Any]) -> Any:
+        """Run ``main`` as the first task on this thread; the others run while it waits. Returns
+        what ``main`` returns; a task's exception is raised here once ``main`` is done."""
+        if self._main is not None:
+            raise RuntimeError("a simulated runtime runs once")
+        task = _Task(len(self._all), "main")
+        task.ident = threading.get_ident()
+        self._all.append(task)
+        self._tasks[task.ident] = task
+        self._main = self._current = task
+        try:
+            result = main()
+        finally:
+            task.done = True
+        if self.failures:
+            name, exc = self.failures[0]
+            raise RuntimeError(f"simulated task {name!r} failed: {exc!r}") from exc
+        return result
+
+    def close(self) -> None:
+        """End every parked task (their threads unwind); the runtime takes no more work."""
+        self._closing = True
+        for task in self._all:
+            if task is not self._main and not task.done:
+                task.gate.release()
+
+    def until(self, seconds: float) -> None:
+        """Let the simulation run ``seconds`` of virtual time from now (the caller sleeps)."""
+        self.sleep(seconds)
+
+    # -- the scheduler -------------------------------------------------------------------------------
+    def _me(self) -> _Task:
+        task = self._tasks.get(threading.get_ident())
+        if task is None or task is not self._current:
+            raise RuntimeError(
+                f"{threading.current_thread().name} is not the running simulated task "
+                "(a thread started without the runtime, or a wait outside it)"
+            )
+        return task
+
+    def _wait(self, task: _Task, waits: _WaitList | None, timeout: float | None) -> bool:
+        """Park ``task`` on ``waits`` (None: a plain sleep) until woken or ``timeout`` passes;
+        True if woken, False on the timeout."""
+        task.wait_id += 1
+        task.timed_out = False
+        task.waiting_on = waits
+        if waits is not None:
+            waits.tasks.append(task)
+        if timeout is not None:
+            heapq.heappush(
+                self._timers, (self.now + max(0.0, timeout), next(self._order), task, task.wait_id)
+            )
+        self._park(task)
+        return not task.timed_out
+
+    def _wake(self, waits: _WaitList, count: int | None = None) -> None:
+        """Make up to ``count`` (None: all) waiters of ``waits`` ready, first come first."""
+        n = 0
+        while waits.tasks and (count is None or n < count):
+            task = waits.tasks.popleft()
+            task.waiting_on = None
+            task.wait_id += 1  # its timer is stale now
+            self._ready.append(task)
+            n += 1
+
+    def _pick(self) -> _Task | None:
+        """The next task to run: a ready one (by the seed), else the earliest timer's."""
+        if self._ready:
+            index = self.rng.randrange(len(self._ready)) if self.jitter and len(self._ready) > 1 else 0
+            return self._ready.pop(index)
+        while self._timers:
+            deadline, _, task, wait_id = heapq.heappop(self._timers)
+            if task.wait_id != wait_id or task.done:
+                continue  # woken before its timeout
+            self.now = max(self.now, deadline)
+            if task.waiting_on is not None:
+                task.waiting_on.tasks.remove(task)
+                task.waiting_on = None
+            task.timed_out = True
+            task.wait_id += 1
+            return task
+        return None
+
+    def _park(self, task: _Task) -> None:
+        """Hand the baton on and wait for it back."""
+        self._hand_on(task)
+        task.gate.acquire()
+        if self._closing and task is not self._main:
+            raise _Shutdown
+        if self._deadlocked and task is self._main:
+            self._deadlocked = False
+            raise Deadlock(
+                f"every simulated task waits and no timer is left at t={self.now:.6f} s: "
+                + ", ".join(t.name for t in self._all if not t.done and t.waiting_on is not None)
+            )
+
+    def _hand_on(self, task: _Task) -> None:
+        nxt = self._pick()
+        if nxt is None:  # nothing will ever run again: the task that called run() hears of it
+            self._deadlocked = True
+            nxt = self._main
+            assert nxt is not None
+            if nxt.waiting_on is not None:
+                nxt.waiting_on.tasks.remove(nxt)
+                nxt.waiting_on = None
+            nxt.wait_id += 1
+        self.switches += 1
+        self._current = nxt
+        nxt.gate.release()
+
+    def _exit(self, task: _Task) -> None:
+        """A finished task hands the baton on for good."""
+        self._hand_on(task)
+
+
+class SimThread:
+    """A simulated task's handle, as much of :class:`threading.Thread` as the ring uses."""
+
+    def __init__(self, sim: SimRuntime, task: _Task) -> None:
+        self._sim = sim
+        self._task = task
+        self.name = task.name
+        self.daemon = True
+
+    def is_alive(self) -> bool:
+        return not self._task.done
+
+    def join(self, timeout: float | None = None) -> None:
+        assert self._task.finished is not None
+        self._task.finished.wait(timeout)
+
+
+class SimEvent:
+    """:class:`threading.Event` on the virtual clock."""
+
+    def __init__(self, sim: SimRuntime) -> None:
+        self._sim = sim
+        self._flag = False
+        self._waits = _WaitList()
+
+    def is_set(self) -> bool:
+        return self._flag
+
+    def set(self) -> None:
+        self._flag = True
+        self._sim._wake(self._waits)
+
+    def clear(self) -> None:
+        self._flag = False
+
+    def wait(self, timeout: float | None = None) -> bool:
+        if self._flag:
+            return True
+        sim = self._sim
+        sim._wait(sim._me(), self._waits, timeout)
+        return self._flag
+
+
+class SimLock:
+    """:class:`threading.Lock`: contended only when its holder waits inside it."""
+
+    def __init__(self, sim: SimRuntime) -> None:
+        self._sim = sim
+        self._held = False
+        self._waits = _WaitList()
+
+    def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
+        sim = self._sim
+        if not self._held:
+            self._held = True
+            return True
+        if not blocking:
+            return False
+        deadline = None if timeout < 0 else sim.now + timeout
+        while self._held:
+            left = None if deadline is None else deadline - sim.now
+            if left is not None and left <= 0:
+                return False
+            sim._wait(sim._me(), self._waits, left)
+        self._held = True
+        return True
+
+    def release(self) -> None:
+        if not self._held:
+            raise RuntimeError("release unlocked lock")
+        self._held = False
+        self._sim._wake(self._waits, 1)
+
+    def locked(self) -> bool:
+        return self._held
+
+    def __enter__(self) -> bool:
+        return self.acquire()
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+class SimCondition:
+    """:class:`threading.Condition` over a :class:`SimLock` (its own unless given one)."""
+
+    def __init__(self, sim: SimRuntime, lock: Any = None) -> None:
+        self._sim = sim
+        self._lock = lock if lock is not None else SimLock(sim)
+        self._waits = _WaitList()
+
+    def __enter__(self) -> bool:
+        return bool(self._lock.acquire())
+
+    def __exit__(self, *exc: object) -> None:
+        self._lock.release()
+
+    def acquire(self, *args: Any) -> bool:
+        return bool(self._lock.acquire(*args))
+
+    def release(self) -> None:
+        self._lock.release()
+
+    def wait(self, timeout: float | None = None) -> bool:
+        sim = self._sim
+        self._lock.release()
+        try:
+            return sim._wait(sim._me(), self._waits, timeout)
+        finally:
+            self._lock.acquire()
+
+    def wait_for(self, predicate: Callable[[], Any], timeout: float | None = None) -> Any:
+        sim = self._sim
+        deadline = None if timeout is None else sim.now + timeout
+        result = predicate()
+        while not result:
+            left = None if deadline is None else deadline - sim.now
+            if left is not None and left <= 0:
+                break
+            self.wait(left)
+            result = predicate()
+        return result
+
+    def notify(self, n: int = 1) -> None:
+        self._sim._wake(self._waits, n)
+
+    def notify_all(self) -> None:
+        self._sim._wake(self._waits)
+
+
+class SimQueue:
+    """:class:`queue.Queue` on the virtual clock (raises the standard ``queue.Empty``/``Full``)."""
+
+    def __init__(self, sim: SimRuntime, maxsize: int = 0) -> None:
+        self._sim = sim
+        self.maxsize = maxsize
+        self._items: deque[Any] = deque()
+        self._getters = _WaitList()
+        self._putters = _WaitList()
+
+    def qsize(self) -> int:
+        return len(self._items)
+
+    def empty(self) -> bool:
+        return not self._items
+
+    def full(self) -> bool:
+        return 0 < self.maxsize <= len(self._items)
+
+    def put(self, item: Any, block: bool = True, timeout: float | None = None) -> None:
+        sim = self._sim
+        deadline = None if timeout is None else sim.now + timeout
+        while self.full():
+            left = None if deadline is None else deadline - sim.now
+            if not block or (left is not None and left <= 0):
+                raise _queue.Full
+            sim._wait(sim._me(), self._putters, left)
+        self._items.append(item)
+        sim._wake(self._getters, 1)
+
+    def put_nowait(self, item: Any) -> None:
+        self.put(item, block=False)
+
+    def get(self, block: bool = True, timeout: float | None = None) -> Any:
+        sim = self._sim
+        deadline = None if timeout is None else sim.now + timeout
+        while not self._items:
+            left = None if deadline is None else deadline - sim.now
+            if not block or (left is not None and left <= 0):
+                raise _queue.Empty
+            sim._wait(sim._me(), self._getters, left)
+        item = self._items.popleft()
+        sim._wake(self._putters, 1)
+        return item
+
+    def get_nowait(self) -> Any:
+        return self.get(block=False)
