@@ -4,6 +4,7 @@ task waits; the same seed gives the same interleaving, another seed another one.
 from __future__ import annotations
 
 import queue
+import threading
 import time
 
 import pytest
@@ -214,3 +215,96 @@ def test_a_million_simulated_seconds_of_timers_take_no_real_time() -> None:
     sim.run(main)
     assert sorted(ticks) == ["1009.0", "1013.0", "997.0"]
     assert time.monotonic() - started < 10.0
+
+
+def test_an_rlock_is_reentrant_for_its_owner_and_a_condition_over_it_releases_it_whole() -> None:
+    sim = SimRuntime(seed=3)
+    trace = []
+
+    def main() -> None:
+        lock = sim.rlock()
+        cond = sim.condition(lock)
+
+        def other() -> None:
+            with lock:  # free while main waits on the condition, held twice as it was
+                trace.append(("other in", sim.monotonic()))
+                cond.notify()
+
+        with lock, lock:
+            sim.spawn(other, "other")
+            sim.sleep(1.0)  # other waits for the lock meanwhile
+            assert cond.wait(5.0)
+            trace.append(("main back", sim.monotonic()))
+        with pytest.raises(RuntimeError):
+            lock.release()
+
+    sim.run(main)
+    assert trace == [("other in", 1.0), ("main back", 1.0)]
+
+
+def test_a_timer_fires_at_its_virtual_time_unless_cancelled() -> None:
+    sim = SimRuntime()
+    fired = []
+
+    def main() -> None:
+        kept = sim.timer(2.0, lambda what: fired.append((what, sim.monotonic())), ("kept",))
+        dropped = sim.timer(1.0, lambda: fired.append(("dropped", sim.monotonic())))
+        kept.start()
+        dropped.start()
+        sim.sleep(0.5)
+        dropped.cancel()
+        sim.sleep(3.0)
+        assert not kept.is_alive()
+
+    sim.run(main)
+    assert fired == [("kept", 2.0)]
+
+
+def test_a_simple_queue_current_thread_and_rng_have_the_real_runtimes_shape() -> None:
+    real = RealRuntime()
+    assert real.monotonic is time.monotonic and real.current_thread() is threading.current_thread()
+    assert type(real.simple_queue()) is queue.SimpleQueue
+    sim = SimRuntime(seed=9)
+    seen = []
+
+    def main() -> None:
+        box = sim.simple_queue()
+        handle = sim.spawn(lambda: seen.append(sim.current_thread().name) or box.put("x"), "worker")
+        seen.append(box.get(timeout=1.0))
+        handle.join()
+        seen.append(sim.current_thread().name)
+        seen.append(sim.rng().random())
+
+    sim.run(main)
+    again = SimRuntime(seed=9)
+    assert seen[:3] == ["worker", "x", "main"]
+    assert seen[3] == again.rng().random() != SimRuntime(seed=10).rng().random()
+
+
+def test_closing_ends_every_parked_task_and_leaves_no_thread() -> None:
+    sim = SimRuntime(seed=1)
+    unwound = []
+
+    def parked(name: str) -> None:
+        lock = sim.lock()
+        try:
+            with lock:
+                sim.event().wait()
+        finally:
+            unwound.append(name)
+            sim.sleep(1.0)  # a wait while unwinding ends the task at once
+            unwound.append("never")
+
+    def main() -> None:
+        for name in "abc":
+            sim.spawn(lambda name=name: parked(name), name)
+        sim.sleep(0.001)  # every ready task runs before a timer: a, b and c park
+        sim.spawn(lambda: None, "never started")  # still ready when main returns
+
+    before = set(threading.enumerate())
+    with sim:
+        sim.run(main)
+        assert len(set(threading.enumerate()) - before) == 4  # main's own thread is not one
+    assert sorted(unwound) == ["a", "b", "c"]
+    assert not set(threading.enumerate()) - before
+    assert sim.close() == []
