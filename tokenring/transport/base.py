@@ -9,10 +9,10 @@ of backend errors; a backend implements only the ``_underscore`` methods. Backen
 
 from __future__ import annotations
 
-import threading
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable
 
+from tokenring import runtime
 from tokenring.errors import FrameError, TokenRingError, TransportClosed, TransportError
 
 FrameHandler = Callable[[bytes], None]
@@ -32,7 +32,9 @@ class Transport(ABC):
         self.frame_size = frame_size
         self._closed = False
         self._opened = False
-        self._lock = threading.Lock()
+        #: the runtime in force when the transport was made: its locks and threads are this one's
+        self._rt = runtime.current()
+        self._lock = self._rt.lock()
         #: the IDs this node passes the token among (set by the node before :meth:`open`); a
         #: backend whose nodes see only part of the network tells joiners this
         self.active_view: Callable[[], Iterable[int]] | None = None

@@ -2,16 +2,22 @@
 
 Each node gets its own delivery thread fed by a queue, so handlers run asynchronously as they
 do over Zenoh. A :class:`MemoryHub` is the shared medium; it can also emulate a crashed node
-(:meth:`MemoryHub.crash`) or a hung one (:meth:`MemoryHub.freeze`).
+(:meth:`MemoryHub.crash`) or a hung one (:meth:`MemoryHub.freeze`). Threads, queues and locks
+come from the runtime in force when the hub and a transport are made (:mod:`tokenring.runtime`):
+in a simulation each delivery thread is a simulated task, and frames still reach a node's
+handler in that node's own task.
 """
 
 from __future__ import annotations
 
-import queue
-import threading
 from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
+from tokenring import runtime
 from tokenring.transport.base import FrameHandler, MembershipHandler, MessageHandler, Transport
+
+if TYPE_CHECKING:
+    import hashlib
 
 _STOP = object()
 
@@ -20,14 +26,24 @@ class MemoryHub:
     """The shared medium of a set of :class:`MemoryTransport` nodes."""
 
     def __init__(self) -> None:
-        self._lock = threading.Lock()
+        self._rt = runtime.current()
+        self._lock = self._rt.lock()
         self._nodes: dict[int, MemoryTransport] = {}
         self._live: set[int] = set()
         self.frames_delivered = 0
         self.wire: list[tuple[int, int, bytes]] = []  # (sender, receiver, frame) when tapping
         self.tapping = False
+        #: a running SHA-256 of every frame the hub delivers, with its sender and receiver (a
+        #: simulation's run is repeatable when two runs end with the same digest); None: off
+        self.digest: hashlib._Hash | None = None
         self._groups: list[set[int]] | None = None
         self._drop_frames = 0
+
+    def hash_frames(self) -> None:
+        """Start hashing the delivered frames into :attr:`digest` (from the next one on)."""
+        import hashlib  # here: OpenSSL is megabytes a process that never hashes need not load
+
+        self.digest = hashlib.sha256()
 
     def attach(self, transport: MemoryTransport) -> set[int]:
         with self._lock:
@@ -73,6 +89,9 @@ class MemoryHub:
         if node is not None:
             if item[0] == "frame":
                 self.frames_delivered += 1
+                if self.digest is not None:
+                    self.digest.update(bytes((sender, did)))
+                    self.digest.update(item[1])
             node._deliver(item)
 
     def broadcast(self, sender: int, item: tuple) -> None:
@@ -122,9 +141,9 @@ class MemoryTransport(Transport):
     def __init__(self, hub: MemoryHub, ring: str, node_id: int, frame_size: int = 514) -> None:
         super().__init__(ring, node_id, frame_size)
         self.hub = hub
-        self._queue: queue.SimpleQueue = queue.SimpleQueue()
-        self._thread: threading.Thread | None = None
-        self._thawed = threading.Event()
+        self._queue = self._rt.simple_queue()
+        self._thread: Any = None
+        self._thawed = self._rt.event()
         self._thawed.set()
         self._dead = False
         self._handlers: tuple[FrameHandler, MessageHandler, MembershipHandler] | None = None
@@ -155,10 +174,7 @@ class MemoryTransport(Transport):
     ) -> set[int]:
         self._handlers = (on_frame, on_message, on_membership)
         members = self.hub.attach(self)
-        self._thread = threading.Thread(
-            target=self._run, name=f"memory-transport-{self.node_id}", daemon=True
-        )
-        self._thread.start()
+        self._thread = self._rt.spawn(self._run, f"memory-transport-{self.node_id}")
         members.discard(self.node_id)
         return members
 
@@ -187,5 +203,5 @@ class MemoryTransport(Transport):
         self.hub.detach(self.node_id)
         self._thawed.set()
         self._queue.put(_STOP)
-        if self._thread is not None and self._thread is not threading.current_thread():
+        if self._thread is not None and self._thread is not self._rt.current_thread():
             self._thread.join(timeout=2.0)
