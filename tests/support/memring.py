@@ -3,22 +3,24 @@
 from __future__ import annotations
 
 import sys
-import time
 from collections.abc import Callable, Iterable
 
+from tokenring import runtime
 from tokenring.contract.protocol import Protocol, default_protocol
 from tokenring.node.node_os import NodeOS
 from tokenring.transport.memory import MemoryHub, MemoryTransport
 
 
 def wait_for(condition: Callable[[], object], timeout: float = 5.0, what: str = "condition") -> object:
-    """Poll ``condition`` until it is truthy; fail with ``what`` after ``timeout`` seconds."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
+    """Poll ``condition`` until it is truthy; fail with ``what`` after ``timeout`` seconds (of
+    the runtime in force: virtual ones in a simulation)."""
+    rt = runtime.current()
+    deadline = rt.monotonic() + timeout
+    while rt.monotonic() < deadline:
         value = condition()
         if value:
             return value
-        time.sleep(0.002)
+        rt.sleep(0.002)
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
@@ -28,7 +30,8 @@ sys.setswitchinterval(0.0005)
 
 
 class MemoryRing:
-    """A set of NodeOS instances sharing one MemoryHub."""
+    """A set of NodeOS instances sharing one MemoryHub; made inside a simulation (under
+    ``runtime.using(sim)``, in ``sim.run``) it runs on the simulation's virtual clock."""
 
     def __init__(
         self, ids: Iterable[int] | None = None, protocol: Protocol | None = None, **node_options

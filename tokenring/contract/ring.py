@@ -284,8 +284,9 @@ class Timing:
 class Membership:
     """Live IDs (from liveliness) minus excluded ones; the successor is the next higher active ID."""
 
-    def __init__(self, own_id: int) -> None:
+    def __init__(self, own_id: int, clock: Callable[[], float] = time.monotonic) -> None:
         self.own_id = own_id
+        self._clock = clock  # when an exclusion may be retried: the node's clock (a simulation's)
         self.live: set[int] = {own_id}
         self.excluded: dict[int, float] = {}  # node -> time its exclusion may be retried
         self._lock = threading.Lock()
@@ -319,7 +320,7 @@ class Membership:
         with self._lock:
             if node_id == self.own_id:
                 return False
-            self.excluded[node_id] = time.monotonic() + retry_after
+            self.excluded[node_id] = self._clock() + retry_after
             return self._recompute()
 
     def include(self, node_id: int) -> bool:

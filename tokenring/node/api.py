@@ -27,8 +27,6 @@ declares; the token path reads the registrations through ``_active``.
 
 from __future__ import annotations
 
-import threading
-import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -68,8 +66,8 @@ class ProgramAPI(TokenPathHost):
     _cmd_seqs: dict[str, int]
     _regs: dict[str, DataRegistration]
     _inbox: Inbox | None
-    _regs_lock: threading.Lock
-    _visit_cond: threading.Condition
+    _regs_lock: Any  # the runtime's lock and condition (tokenring.runtime)
+    _visit_cond: Any
 
     @property
     def stopping(self) -> bool:
@@ -286,11 +284,11 @@ class ProgramAPI(TokenPathHost):
             assert inbox is not None
         if inbox.locked and not inbox.received:
             self.unlock_data(inbox.channel.name)
-        deadline = None if timeout is None else time.monotonic() + timeout
+        deadline = None if timeout is None else self._now() + timeout
         while not inbox.received:
             if self.stopping:
                 return None
-            remaining = 0.1 if deadline is None else min(0.1, deadline - time.monotonic())
+            remaining = 0.1 if deadline is None else min(0.1, deadline - self._now())
             if remaining <= 0:
                 return None
             inbox.event.wait(remaining)
@@ -311,20 +309,20 @@ class ProgramAPI(TokenPathHost):
         self, target: str, command: str | int, args: dict[str, Any], timeout: float, retry: bool = True
     ) -> Delivery:
         """:meth:`deliver` with its account (the PC link reports it); ``retry`` False: one round."""
-        deadline = time.monotonic() + timeout
+        deadline = self._now() + timeout
         self.wait_channel_free(target, timeout)
         outbox: Outbox | None = self.send_command(target, command, **args)
         attempts, transmitted = 0, False
         while outbox is not None and not self.stopping:
             attempts += 1
             while not outbox.done.wait(0.05):
-                if self.stopping or time.monotonic() > deadline:
+                if self.stopping or self._now() > deadline:
                     outbox.cancel()
                     return Delivery(transmitted, False, attempts)
             transmitted = transmitted or outbox.transmitted
-            if outbox.acknowledged or not retry or time.monotonic() > deadline:
+            if outbox.acknowledged or not retry or self._now() > deadline:
                 return Delivery(transmitted, outbox.acknowledged, attempts)
-            time.sleep(min(0.002, max(0.0, deadline - time.monotonic())))
+            self._sleep(min(0.002, max(0.0, deadline - self._now())))
             outbox = self._queue_command(target, command, args, again=outbox)
         return Delivery(transmitted, False, attempts)
 

@@ -22,13 +22,12 @@ from __future__ import annotations
 
 import logging
 import os
-import threading
-import time
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from tokenring import runtime
 from tokenring.contract.protocol import Channel, Command, CommandChannel, Protocol
 from tokenring.errors import ChannelError
 
@@ -54,7 +53,7 @@ class ChannelBuffer:
         self.channel = channel
         self.raw = bytearray(channel.size)
         self.fields = np.ndarray((), dtype=channel.dtype, buffer=self.raw)
-        self.mutex = threading.Lock()
+        self.mutex = runtime.current().lock()
         self.visits = 0  # how many visits copied into/out of this buffer
 
     @property
@@ -322,7 +321,7 @@ class Inbox:
         self._off = offsets
         self.locked = True
         self.received = False
-        self.event = threading.Event()
+        self.event = runtime.current().event()
         self.memory = memory if memory is not None else CommandMemory()
         self.live = live
         self.refused = 0
@@ -438,9 +437,10 @@ class Outbox:
         self.state = Outbox.WAITING
         self.transmitted = False
         self.acknowledged = False
-        self.done = threading.Event()
+        rt = runtime.current()
+        self.done = rt.event()
         self.rounds_waited = 0
-        self.queued_at = time.monotonic()
+        self.queued_at = rt.monotonic()
         self.stats = stats
 
     def visit(self, work: bytearray) -> bool:

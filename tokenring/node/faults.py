@@ -6,13 +6,11 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import random
 import signal
-import threading
-import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from tokenring import runtime
 from tokenring.contract.faults import validate
 from tokenring.transport.control import AfterReply
 
@@ -33,16 +31,17 @@ class FaultInjector:
     """The faults active on one node, and the hooks that apply them on its token path."""
 
     def __init__(self, os_: NodeOS, exit_process: Callable[[int], None] = os._exit) -> None:
+        self._rt = rt = runtime.current()
         self.os = os_
         self.active: dict[str, dict[str, Any]] = {}
-        self.rng = random.Random()
+        self.rng = rt.rng()
         self._exit = exit_process
-        self._thawed = threading.Event()
+        self._thawed = rt.event()
         self._thawed.set()
-        self._lock = threading.Lock()
-        self._pending_stop: threading.Timer | None = None  # a hard hang's SIGSTOP, not sent yet
+        self._lock = rt.lock()
+        self._pending_stop: Any = None  # a hard hang's SIGSTOP (a timer), not sent yet
         self.counts = {"dropped": 0, "corrupted": 0, "duplicated": 0, "lost": 0, "blocked": 0, "delayed": 0}
-        self.changed_at = float("-inf")  # time.monotonic() of the last change of the faults
+        self.changed_at = float("-inf")  # the runtime's monotonic clock at the last change of the faults
         #: called with the listing after every change (the node process tells the ring, whose
         #: nodes tell a regeneration with a cause from a spurious one: tokenring.node.regeneration)
         self.on_change: Callable[[dict[str, Any]], None] | None = None
@@ -53,24 +52,25 @@ class FaultInjector:
         effect :data:`AFTER_REPLY_S` after the answer left, so the requester hears it)."""
         spec = validate(request)
         kind = spec["kind"]
-        later: threading.Timer | None = None  # started after the ring was told
+        later: Any = None  # a timer, started after the ring was told
+        rt = self._rt
         with self._lock:
             if kind == "crash":
                 from tokenring.contract.faults import CRASH_EXIT_CODE  # the launcher's, not a node's, module
 
-                later = threading.Timer(AFTER_REPLY_S, self._exit, args=(CRASH_EXIT_CODE,))
+                later = rt.timer(AFTER_REPLY_S, self._exit, (CRASH_EXIT_CODE,))
             elif kind == "hang":
                 if spec["soft"]:
                     self._thawed.clear()
                     self.os.paused = True
                 else:
-                    later = threading.Timer(AFTER_REPLY_S, os.kill, args=(os.getpid(), signal.SIGSTOP))
+                    later = rt.timer(AFTER_REPLY_S, os.kill, (os.getpid(), signal.SIGSTOP))
                     self._pending_stop = later
-                self.active["hang"] = {"since": time.time(), **spec}
+                self.active["hang"] = {"since": rt.time(), **spec}
             elif kind == "resume":
                 self._resume()
             elif kind in ("delay", "drop", "corrupt", "duplicate", "lose", "partition"):
-                self.active[kind] = {"since": time.time(), **spec}
+                self.active[kind] = {"since": rt.time(), **spec}
             elif kind == "heal":
                 self.active.pop("partition", None)
             elif kind == "clear":
@@ -78,7 +78,7 @@ class FaultInjector:
                 self.active.clear()
             elif kind == "leave":
                 self.os.depart_in_background()
-                self.active["leave"] = {"since": time.time(), **spec}
+                self.active["leave"] = {"since": rt.time(), **spec}
             elif kind == "join":
                 self.active.pop("leave", None)
                 self.os.join()
@@ -93,7 +93,7 @@ class FaultInjector:
 
     def _changed(self, listing: dict[str, Any]) -> None:
         """The faults changed: note when, and tell whoever listens (never raises)."""
-        self.changed_at = time.monotonic()
+        self.changed_at = self._rt.monotonic()
         if self.on_change is not None:
             try:
                 self.on_change(listing)
@@ -146,7 +146,7 @@ class FaultInjector:
             jitter = delay["jitter_ms"]
             pause = delay["ms"] + (self.rng.uniform(-jitter, jitter) if jitter else 0.0)
             self.counts["delayed"] += 1
-            time.sleep(max(0.0, pause) / 1000.0)
+            self._rt.sleep(max(0.0, pause) / 1000.0)
         drop = active.get("drop")
         if drop and self.rng.random() < drop["p"]:
             self.counts["dropped"] += 1
@@ -167,9 +167,8 @@ class FaultInjector:
                 active.pop("lose", None)
                 self._install()
                 # the token path must not wait for the notice: it goes from a thread of its own
-                threading.Thread(
-                    target=self._changed, args=(self.listing(),), name="fault-notice", daemon=True
-                ).start()
+                listing = self.listing()
+                self._rt.spawn(lambda: self._changed(listing), "fault-notice")
             self.counts["lost"] += 1
             # the token is gone, not late: an acknowledged pass must not come back as the
             # watchdog's retry (it did on a loaded machine, so no node ever regenerated)

@@ -13,18 +13,19 @@ the node's token thread while a visit may wait: emulated wire time, a pacer, a f
 Everything slower — timeouts, retries, regeneration, statistics — happens on a watchdog thread
 off that path. User programs run in their own thread and talk to the handler only through
 :class:`~tokenring.node.channels.ChannelBuffer` objects and a few flags.
+
+Every clock read, wait, lock and thread comes from the runtime in force when the node is made
+(:mod:`tokenring.runtime`): the operating system's, or a simulation's virtual clock and tasks,
+in which the token path is the Python one (:meth:`NodeOS.__new__`).
 """
 
 from __future__ import annotations
 
 import logging
-import queue
-import random
-import threading
-import time
 from collections.abc import Callable
 from typing import Any
 
+from tokenring import runtime
 from tokenring.contract import ring as R
 from tokenring.contract.protocol import Protocol
 from tokenring.contract.ring import EPOCH_MASK
@@ -33,12 +34,10 @@ from tokenring.node.api import ProgramAPI
 from tokenring.node.channels import CommandMemory, DataRegistration, Inbox, Outbox, _Offsets
 from tokenring.node.program_host import ProgramHost
 from tokenring.node.recovery import RingRecovery
-from tokenring.node.tokenpath import HOT_COUNTERS, TokenPathBase, new_counters
+from tokenring.node.tokenpath import HOT_COUNTERS, NATIVE, PyTokenPath, TokenPathBase, new_counters
 from tokenring.transport.base import Transport
 
 log = logging.getLogger("tokenring.node")
-
-perf_counter = time.perf_counter
 
 
 def _hot_counter(name: str) -> Any:
@@ -137,6 +136,14 @@ class NodeStats:
 class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
     """One node of the ring: the token handler, ring membership and the user-program API."""
 
+    def __new__(cls, *args: Any, **kwargs: Any) -> NodeOS:
+        """A node; in a simulation one whose token path is the Python one, whatever was built:
+        the C path reads the OS's clock and sleeps on it, which a virtual clock cannot see."""
+        if cls is NodeOS and NATIVE and runtime.current().simulated:
+            cls = _PythonPathNodeOS
+        node: NodeOS = super().__new__(cls)
+        return node
+
     def __init__(
         self,
         protocol: Protocol,
@@ -153,6 +160,10 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
             raise TokenRingError(f"node ID {node_id} is outside 1..255")
         if ack_mode not in ("adaptive", "always", "never"):
             raise TokenRingError(f"ack mode must be adaptive, always or never, not {ack_mode!r}")
+        #: the runtime this node waits on; its clock bound once, for the paths that read it often
+        self._rt = rt = runtime.current()
+        self._now = rt.monotonic
+        self._sleep = rt.sleep
         self.protocol = protocol
         self.node_id = node_id
         self.transport = transport
@@ -162,7 +173,7 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         self.stats = NodeStats()
         self._counters = self.stats.counters
         self.timing = R.Timing(bitrate, ack_mode)
-        self.membership = R.Membership(node_id)
+        self.membership = R.Membership(node_id, clock=rt.monotonic)
         if master_id is None and "main" in protocol.nodes:
             master_id = protocol.nodes["main"].id
         self.preferred_master = master_id  # starts the token at boot (the seed: main)
@@ -190,7 +201,8 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         self._work = bytearray(self._frame_size)
         # what the CRC covers, as a view made once: a new view per pass costs microseconds cold
         self._work_body = memoryview(self._work)[: self._token_size]
-        self._token_lock = threading.RLock()
+        self._token_lock = rt.rlock()
+        self._defer_lock = rt.lock()  # the Python path's count of frames handed to the token thread
         self._epoch = 0
         self._origin = 0
         self._accepted_crc = -1
@@ -242,15 +254,15 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         self._outboxes: dict[str, Outbox] = {}
         self._active: tuple[Any, ...] = ()
         self._pending_outboxes: list[Outbox] = []
-        self._regs_lock = threading.Lock()
+        self._regs_lock = rt.lock()
         # exactly-once commands: a random incarnation per process, a sequence per target inbox
         # (protocol.yaml, command_channel), and the receiver's memory of what it took, kept by
         # the node so that a restarted program never takes a command twice
-        self.incarnation = random.SystemRandom().randrange(1, 1 << 32)
+        self.incarnation = rt.rng().randrange(1, 1 << 32)
         self._cmd_seqs: dict[str, int] = {}
         self.command_memory = CommandMemory()
         self._visit_waiters = 0
-        self._visit_cond = threading.Condition()
+        self._visit_cond = rt.condition(rt.rlock())
 
         # asks whoever supervises the ring to stop it cleanly (the charger's deep-discharge cut);
         # the node process sets it, in-process rings may leave it None
@@ -272,20 +284,20 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         self._joined = False
         self._leaving = False
         self._departed = False  # left with the `leave` fault; `join` brings it back
-        self._departure_lock = threading.Lock()
+        self._departure_lock = rt.lock()
         self._rejoin_wanted = False  # `join` came while `depart` was still handing over
         self.paused = False  # set by the soft `hang` fault: the watchdog stands still too
-        self._stopping = threading.Event()
+        self._stopping = rt.event()
         self._closing = False  # _stopping as a plain flag for the token path (Event.is_set is Python)
-        self._halt = threading.Event()  # the current program is being stopped
+        self._halt = rt.event()  # the current program is being stopped
         self.ring_stopping = False  # the whole ring is shutting down: no handover needed
         # the watchdog sleeps on a raw lock (a C-level binary semaphore): waking it from the
         # token path costs ~0.1 us where threading.Event.set costs tens of microseconds cold
-        self._wake_lock = threading.Lock()
+        self._wake_lock = rt.lock()
         self._wake_lock.acquire()
-        self._watchdog: threading.Thread | None = None
+        self._watchdog: Any = None
         self._program: Any = None
-        self._program_thread: threading.Thread | None = None
+        self._program_thread: Any = None
         self._program_set_up = False
         self._program_started = 0.0
         self.program_error: str | None = None
@@ -295,12 +307,10 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
 
     def start(self) -> None:
         """Join the ring: learn who is live, announce this node, start the watchdog."""
-        self._frames: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
-        self._token_thread = threading.Thread(
-            target=self._token_loop, args=(self._frames,), name=f"token-{self.node_id}", daemon=True
-        )
-        self._token_thread.start()
-        self._defer = self._frames.put
+        rt = self._rt
+        frames = self._frames = rt.simple_queue()
+        self._token_thread = rt.spawn(lambda: self._token_loop(frames), f"token-{self.node_id}")
+        self._defer = frames.put
         self.transport.active_view = lambda: self.membership.active
         members = self.transport.open(self._on_frame, self._on_message, self._on_membership)
         for member in members:
@@ -309,14 +319,13 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
             if self._near(member):
                 self.transport.prepare(member)
         self.transport.prepare(self.membership.successor)
-        now = perf_counter()
+        now = self._now()
         self._started_at = now
         self._last_seen = now
         self._live_changed_at = now
         self.transport.announce()
         self._joined = True
-        self._watchdog = threading.Thread(target=self._watch, name=f"watchdog-{self.node_id}", daemon=True)
-        self._watchdog.start()
+        self._watchdog = rt.spawn(self._watch, f"watchdog-{self.node_id}")
         log.info(
             "node %s (id %d) joined; live: %s",
             self.name,
@@ -324,7 +333,7 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
             sorted(self.membership.live),
         )
 
-    def _token_loop(self, frames: queue.SimpleQueue[bytes | None]) -> None:
+    def _token_loop(self, frames: Any) -> None:
         """The token thread: visits the frames the receiving thread handed over, in order."""
         while (frame := frames.get()) is not None:
             try:
@@ -350,7 +359,7 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
             if not self._joined or self._leaving or self._departed:
                 return
             self._leaving = True
-        threading.Thread(target=self.depart, args=(grace, True), name="fault-leave", daemon=True).start()
+        self._rt.spawn(lambda: self.depart(grace, True), "fault-leave")
 
     def depart(self, grace: float | None = None, _marked: bool = False) -> None:
         """Leave the ring but keep the process and its program (the ``leave`` fault)."""
@@ -373,7 +382,7 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
                     self._rejoin_wanted = True
                 return
             self._departed = False
-        self._last_seen = perf_counter()
+        self._last_seen = self._now()
         self._last_visit = 0.0
         self._last_counter = -1  # rounds went on while we were away, maybe past 128
         self._accepted_crc = -1
@@ -386,7 +395,7 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         """Announce the departure (the others route around this node but still accept its
         frames), forward whatever token still arrives until it stops coming, then withdraw."""
         self._leaving = True
-        announced = perf_counter()
+        announced = self._now()
         try:
             self.transport.broadcast(
                 R.RING_EVENT.pack(R.EVENT_LEAVING, self.node_id, self.node_id, self._epoch, self._origin)
@@ -394,12 +403,11 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         except TokenRingError as exc:
             log.warning("leaving: %s", exc)
         quiet = max(0.05, 3 * self.timing.rounds.percentile(99, 0.0), 3 * self.timing.hop)
-        deadline = time.monotonic() + (grace if grace is not None else 2.0)
-        while time.monotonic() < deadline and not self.ring_stopping:  # it may come late
-            now = perf_counter()
+        deadline = self._now() + (grace if grace is not None else 2.0)
+        while (now := self._now()) < deadline and not self.ring_stopping:  # it may come late
             if now - announced >= quiet and now - self._last_seen >= quiet:
                 break
-            time.sleep(min(quiet, 0.02))
+            self._sleep(min(quiet, 0.02))
         try:
             self.transport.withdraw()
         except TokenRingError as exc:
@@ -411,7 +419,7 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         self._closing = True
         self._wake()
         self.stop_program()
-        if self._watchdog is not None and self._watchdog is not threading.current_thread():
+        if self._watchdog is not None and self._watchdog is not self._rt.current_thread():
             self._watchdog.join(timeout=1.0)
         if self._defer is not None:
             self._frames.put(None)
@@ -460,3 +468,10 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
 
     def _bump_epoch(self, now: float) -> None:
         self._adopt_epoch((self._epoch + 1) & EPOCH_MASK, self.node_id, now)
+
+
+if NATIVE:
+
+    class _PythonPathNodeOS(PyTokenPath, NodeOS):
+        """A node whose token path is the Python one over the C type's state: what
+        :meth:`NodeOS.__new__` makes in a simulation (the same steps, on the virtual clock)."""

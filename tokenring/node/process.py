@@ -14,7 +14,6 @@ import logging
 import os
 import signal
 import sys
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -98,7 +97,7 @@ class NodeProcess:
             ack_mode=ack_mode,
             expected_nodes=expected_nodes,
         )
-        install_profile(self.os, profile, bitrate, time.perf_counter())
+        install_profile(self.os, profile, bitrate, self.os._now())
         #: set to end :meth:`wait` (the process's signal handlers set the same one)
         self.stop_event = stop_event if stop_event is not None else StopEvent()
         self.control: dict[str, ControlHandler] = {
@@ -270,11 +269,12 @@ class NodeProcess:
     def shutdown(self) -> None:
         """Leave the ring; a leave slower than :data:`SLOW_LEAVE_S` says which step took the time."""
         steps: list[tuple[str, float]] = []
-        started = last = time.perf_counter()
+        clock = self.os._now
+        started = last = clock()
 
         def step(name: str) -> None:
             nonlocal last
-            now = time.perf_counter()
+            now = clock()
             steps.append((name, now - last))
             last = now
 

@@ -9,11 +9,11 @@ The node OS calls ``setup()`` then ``run()`` in the program's own thread; ``run`
 from __future__ import annotations
 
 import sys
-import threading
 import types
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from tokenring import runtime
 from tokenring.errors import ProgramError
 
 if TYPE_CHECKING:
@@ -29,7 +29,7 @@ class UserProgram:
     def __init__(self, os: NodeOS, hardware: Any = None) -> None:
         self.os = os
         self.hw = hardware
-        self.stop_requested = threading.Event()
+        self.stop_requested = runtime.current().event()
 
     @property
     def running(self) -> bool:

@@ -11,8 +11,6 @@ import logging
 import os
 import socket
 import sys
-import threading
-import time
 import traceback
 from collections.abc import Callable
 from typing import Any
@@ -44,15 +42,15 @@ class ProgramHost(TokenPathHost):
     #: before it was asked to stop: the node process tells its launcher (the run's exit code)
     on_program_failed: Callable[[str, str, str], None] | None = None
     program_error: str | None
-    _halt: threading.Event
+    _halt: Any  # the runtime's event, lock, condition and thread (tokenring.runtime)
     _program: Any
-    _program_thread: threading.Thread | None
+    _program_thread: Any
     _program_set_up: bool  # the current program's setup() has returned
-    _program_started: float  # time.monotonic() when the current program was started
+    _program_started: float  # the node's clock (_now) when the current program was started
     _regs: dict[str, DataRegistration]
     _inbox: Inbox | None
-    _regs_lock: threading.Lock
-    _visit_cond: threading.Condition
+    _regs_lock: Any
+    _visit_cond: Any
 
     def _rebuild_active(self, exclude: list[Any] | None = None) -> None:
         raise NotImplementedError
@@ -69,8 +67,8 @@ class ProgramHost(TokenPathHost):
         program = program_class(self, *args)
         self._program = program
         self._program_set_up = False
-        self._program_started = time.monotonic()
-        warning = threading.Timer(SETUP_WARNING_S, self._warn_setting_up, (program,))
+        self._program_started = self._now()
+        warning = self._rt.timer(SETUP_WARNING_S, self._warn_setting_up, (program,))
         warning.daemon = True
 
         def runner() -> None:
@@ -101,8 +99,7 @@ class ProgramHost(TokenPathHost):
                 except Exception as exc:
                     log.error("user program teardown failed: %s", exc)
 
-        self._program_thread = threading.Thread(target=runner, name=f"program-{self.name}", daemon=True)
-        self._program_thread.start()
+        self._program_thread = self._rt.spawn(runner, f"program-{self.name}")
         warning.start()
 
     def _warn_setting_up(self, program: Any) -> None:
@@ -112,7 +109,7 @@ class ProgramHost(TokenPathHost):
                 "user program %s: setup() has not returned after %.0f s, so its run() has not "
                 "started (it shows as SETTING_UP in 'tokenring status' and 'tokenring load')",
                 type(program).__name__,
-                time.monotonic() - self._program_started,
+                self._now() - self._program_started,
             )
 
     def stop_program(self, timeout: float = 1.0) -> bool:
@@ -124,7 +121,7 @@ class ProgramHost(TokenPathHost):
         self._halt.set()
         with self._visit_cond:
             self._visit_cond.notify_all()
-        if thread is not None and thread is not threading.current_thread():
+        if thread is not None and thread is not self._rt.current_thread():
             thread.join(timeout)
         stopped = thread is None or not thread.is_alive()
         if not stopped:
@@ -217,7 +214,7 @@ class ProgramHost(TokenPathHost):
             "send_us": {"median": pct(send, 50) * 1e3, "p99": pct(send, 99) * 1e3},
             "program": type(self._program).__name__ if self._program is not None else None,
             "program_state": self.program_status(),
-            "setup_s": round(time.monotonic() - self._program_started, 1) if self.setting_up else None,
+            "setup_s": round(self._now() - self._program_started, 1) if self.setting_up else None,
             "program_error": self.program_error,
             "bitrate": timing.bitrate,
             "ack_mode": timing.ack_mode,

@@ -10,7 +10,6 @@ which initialises the state it declares.
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -19,7 +18,6 @@ from tokenring.errors import TokenRingError
 from tokenring.node.tokenpath import TokenPathHost
 
 log = logging.getLogger("tokenring.node")
-perf_counter = time.perf_counter
 
 #: a watchdog that overslept this long (and 4 reconfiguration times) was frozen, e.g. SIGSTOP;
 #: shorter gaps happen on any loaded machine and must not make the node ask to rejoin
@@ -62,7 +60,7 @@ def regeneration_deadline(
     deferred: bool,
     streak: int,
 ) -> float:
-    """When a node that has not seen the token regenerates it (a ``perf_counter`` time): the
+    """When a node that has not seen the token regenerates it (a time on the node's clock): the
     watchdog's one decision, as a function of what it knows (no threads, no clock, no Zenoh).
 
     ``booting``: no visit and nothing sent yet; ``starts_ring``: the node that seeds the first
@@ -159,7 +157,7 @@ class RingRecovery(TokenPathHost):
             if len(payload) != R.ACK_MESSAGE.size:
                 return
             _, sender, crc, epoch, origin = R.ACK_MESSAGE.unpack(payload)
-            now = perf_counter()
+            now = self._now()
             if sender in self._excluded:
                 self._include(sender, tell=True)  # it answers: it is alive after all
             if kind == b"S" and R.epoch_order(epoch, origin, self._epoch, self._origin) > 0:
@@ -194,7 +192,7 @@ class RingRecovery(TokenPathHost):
             and by != self.node_id
             and R.epoch_order(epoch, origin, self._epoch, self._origin) > 0
         ):
-            self._adopt_epoch(epoch, origin, perf_counter())
+            self._adopt_epoch(epoch, origin, self._now())
         if kind == R.EVENT_EXCLUDED and by != self.node_id:
             if node_id == self.node_id:
                 log.warning("excluded from the ring by node %d; asking to rejoin", by)
@@ -206,7 +204,7 @@ class RingRecovery(TokenPathHost):
         elif kind == R.EVENT_RING_STOPPING:
             self.ring_stopping = True
         elif kind == R.EVENT_REGENERATED and by != self.node_id:
-            self._last_seen = max(self._last_seen, perf_counter())  # a fresh token is on its way
+            self._last_seen = max(self._last_seen, self._now())  # a fresh token is on its way
         elif kind == R.EVENT_LEAVING and node_id != self.node_id:
             # route around it at once, but keep accepting its frames until it withdraws
             self._leaving_nodes.add(node_id)
@@ -239,7 +237,7 @@ class RingRecovery(TokenPathHost):
             return  # it still answers while it hands over, but it is on its way out
         self._exclusion_backoff.pop(node_id, None)
         skipped_at = self._skipped_at.pop(node_id, None)
-        if skipped_at is not None and perf_counter() - skipped_at < FALSE_EXCLUSION_S:
+        if skipped_at is not None and self._now() - skipped_at < FALSE_EXCLUSION_S:
             self._ack_grace[node_id] = min(ACK_GRACE_MAX, 2 * self._ack_grace.get(node_id, 1.0))
             self.stats.successors_only_slow += 1
         if self.membership.include(node_id):
@@ -256,7 +254,7 @@ class RingRecovery(TokenPathHost):
         if node_id == self.node_id:
             return
         changed = self.membership.set_live(node_id, alive)
-        self._live_changed_at = perf_counter()
+        self._live_changed_at = self._now()
         if alive:
             self._leaving_nodes.discard(node_id)
             if self._near(node_id):
@@ -296,7 +294,7 @@ class RingRecovery(TokenPathHost):
                 return
             log.info("node %d vanished holding our last pass; passing again", node_id)
             self.stats.reconfigurations += 1
-            self._repass(perf_counter())
+            self._repass(self._now())
 
     def _repass(self, now: float) -> None:
         """Send our last copy of the token (still in the working buffer) on, in a new epoch."""
@@ -312,12 +310,12 @@ class RingRecovery(TokenPathHost):
 
     def _watch(self) -> None:
         refresh_at = 0.0
-        planned = perf_counter()  # when this loop meant to run next
+        planned = self._now()  # when this loop meant to run next
         while not self._stopping.is_set():
             if self.paused or self._departed:
                 self._wake_lock.acquire(timeout=0.05)
                 continue
-            now = perf_counter()
+            now = self._now()
             self.stats.watchdog_wakes += 1
             if now - planned > max(FROZEN_AFTER_S, 4 * self.timing.current.recon):
                 # this process was frozen (SIGSTOP, a long pause): whatever we hold is old; ask
@@ -331,7 +329,7 @@ class RingRecovery(TokenPathHost):
                 # live, not active: exclusions must not shrink the timeouts that caused them
                 self._ack_interval = self.timing.refresh(len(self.membership.live)).ack_interval
                 refresh_at = now + (0.1 if now - self._started_at < 3.0 else 0.5)
-                for node_id in self.membership.probes_due(time.monotonic(), self._exclusion_backoff):
+                for node_id in self.membership.probes_due(now, self._exclusion_backoff):
                     # a ping, not the token: a node that is still hung costs the ring nothing
                     self._send_message(
                         node_id, R.ACK_MESSAGE.pack(b"P", self.node_id, 0, self._epoch, self._origin)
@@ -359,14 +357,14 @@ class RingRecovery(TokenPathHost):
                     deadlines.append(due)
             # sleep until the earliest deadline: whatever moves one earlier (a membership
             # change, the token back after regenerations, a pass wanting an ack) wakes us
-            wait = max(0.0, min(min(deadlines) - perf_counter(), WATCH_MAX_SLEEP_RECONS * timeouts.recon))
-            planned = perf_counter() + wait
+            wait = max(0.0, min(min(deadlines) - self._now(), WATCH_MAX_SLEEP_RECONS * timeouts.recon))
+            planned = self._now() + wait
             self._wake_lock.acquire(timeout=wait)
 
     def _regeneration_deadline(self, timeouts: R.Timeouts) -> float:
         return regeneration_deadline(
             timeouts,
-            now=perf_counter(),
+            now=self._now(),
             booting=self._last_visit == 0.0 and not self._has_sent,
             starts_ring=self.preferred_master == self.node_id,
             master_live=self.preferred_master in self._live,
@@ -412,7 +410,7 @@ class RingRecovery(TokenPathHost):
         """No token seen for the reconfiguration timeout: this node restarts the ring."""
         with self._token_lock:
             recon = self.timing.current.recon
-            if self._last_visit and perf_counter() - self._last_seen < recon:
+            if self._last_visit and self._now() - self._last_seen < recon:
                 return
             first = self._last_visit == 0.0 and not self._has_sent
             self.stats.tokens_regenerated += 1

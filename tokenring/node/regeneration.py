@@ -27,10 +27,10 @@ from __future__ import annotations
 
 import collections
 import logging
-import threading
-import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
+
+from tokenring import runtime
 
 if TYPE_CHECKING:
     from tokenring.node.faults import FaultInjector
@@ -66,11 +66,12 @@ class RegenerationLedger:
         self,
         os_: NodeOS,
         faults: FaultInjector | None = None,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float] | None = None,
     ) -> None:
+        self._rt = runtime.current()  # the node's: its clock, its wall clock, its locks
         self.os = os_
         self.faults = faults
-        self.clock = clock
+        self.clock = clock = clock or self._rt.monotonic
         self.started = clock()
         self.seeds = 0
         self.counts = dict.fromkeys(CAUSES, 0)
@@ -81,7 +82,7 @@ class RegenerationLedger:
         self._spurious: collections.deque[dict[str, Any]] = collections.deque(maxlen=1024)
         #: spans (wall-clock start, end) in which the network stalled, as the router told them
         self.stalls: collections.deque[tuple[float, float]] = collections.deque(maxlen=16)
-        self._lock = threading.Lock()
+        self._lock = self._rt.lock()
 
     def install(self) -> None:
         """Wrap the node's ``_regenerate`` (its watchdog's call) so every regeneration is counted here."""
@@ -167,10 +168,10 @@ class RegenerationLedger:
             for node_id, (at, active) in self.remote.items():
                 if now - at < quiet or (active and node_id in live):
                     return "fault"
-        changed = getattr(self.os, "_live_changed_at", 0.0)  # perf_counter time
-        if changed and time.perf_counter() - changed < quiet:
+        changed = getattr(self.os, "_live_changed_at", 0.0)  # the node's clock
+        if changed and self._rt.monotonic() - changed < quiet:
             return "membership"
-        wall = time.time()
+        wall = self._rt.time()
         with self._lock:
             if any(start <= wall <= end + quiet for start, end in self.stalls):
                 return "network"
@@ -185,7 +186,7 @@ class RegenerationLedger:
                 self.seeds += 1
             else:
                 self.counts[cause] += 1
-            entry = {"t": round(time.time(), 3), "cause": cause, **(state or {})}
+            entry = {"t": round(self._rt.time(), 3), "cause": cause, **(state or {})}
             self.recent.append(entry)
             if cause == "spurious":
                 self._spurious.append(entry)

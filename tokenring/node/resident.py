@@ -11,9 +11,10 @@ of its own with the node's hardware client, and it steps aside while a user prog
 from __future__ import annotations
 
 import logging
-import threading
 import traceback
 from typing import TYPE_CHECKING, Any
+
+from tokenring import runtime
 
 if TYPE_CHECKING:
     from tokenring.node.node_os import NodeOS
@@ -32,7 +33,7 @@ class ResidentProgram:
         self.os = os
         self.system = system
         self.hw = hardware
-        self.stop_requested = threading.Event()
+        self.stop_requested = runtime.current().event()
 
     @property
     def running(self) -> bool:
@@ -82,9 +83,11 @@ class ResidentHost:
     def __init__(
         self, resident_class: type[ResidentProgram], os: NodeOS, system: SystemLayer, hardware: Any
     ) -> None:
+        self._rt = runtime.current()
         self.resident = resident_class(os, system, hardware)
         self.error: str | None = None
-        self._thread = threading.Thread(target=self._run, name=f"resident-{os.name}", daemon=True)
+        self._name = f"resident-{os.name}"
+        self._thread: Any = None  # the runtime's thread, once started
 
     def _run(self) -> None:
         resident = self.resident
@@ -102,12 +105,13 @@ class ResidentHost:
                 log.error("resident teardown failed: %s", exc)
 
     def start(self) -> None:
-        self._thread.start()
+        self._thread = self._rt.spawn(self._run, self._name)
 
     def stop(self, timeout: float = 1.0) -> None:
         self.resident.stop_requested.set()
-        if self._thread.is_alive() and self._thread is not threading.current_thread():
-            self._thread.join(timeout)
+        thread = self._thread
+        if thread is not None and thread.is_alive() and thread is not self._rt.current_thread():
+            thread.join(timeout)
 
     def control(self, _request: dict[str, Any]) -> dict[str, Any]:
         """The control verb ``resident``: its class, its error and its report."""
@@ -119,7 +123,7 @@ class ResidentHost:
                 report = {"report_error": f"{type(exc).__name__}: {exc}"}
         return {
             "resident": type(self.resident).__name__,
-            "alive": self._thread.is_alive(),
+            "alive": self._thread is not None and self._thread.is_alive(),
             "error": self.error,
             "report": report,
         }

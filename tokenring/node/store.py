@@ -11,6 +11,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from tokenring import runtime
 from tokenring.node.program import program_sha256
 
 log = logging.getLogger("tokenring.system")
@@ -19,7 +20,7 @@ STORE_ENV = "TOKENRING_STORE"
 
 
 def now_ms() -> int:
-    return int(time.time() * 1000)
+    return int(runtime.current().time() * 1000)
 
 
 def file_stamp(path: Path) -> int:
@@ -106,7 +107,7 @@ class ProgramStore:
             "sha256": digest.hex(),
             "stamp_ms": stamp_ms,
             "size": len(source),
-            "installed_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
+            "installed_at": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(runtime.current().time())),
         }
         meta_tmp = self.directory / (self.META + ".tmp")
         meta_tmp.write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")

@@ -9,6 +9,10 @@ epoch, an excluded sender, a leaving node, hooks, commands, a failed send) calls
 Python methods of the node from either. ``TOKENRING_NATIVE=0`` picks the Python path;
 ``tests/ring/node/test_tokenpath.py`` runs one scenario through both and compares every byte sent.
 
+The Python path reads the clock and sleeps through the node's runtime (``_now``, ``_sleep``,
+bound once by the node), so a simulation runs it on its virtual clock; the C path reads the OS's
+clock itself, which is why a simulated node runs the Python path.
+
 ``_on_frame`` is the receiving thread's entry: it visits at once, or hands the frame to the
 node's token thread while the visit may wait (see its docstring). The visit (``_visit_frame``;
 see :mod:`tokenring.node` for what each step means):
@@ -27,8 +31,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import threading
-import time
 from typing import Any
 
 from tokenring._native import compiled as _native
@@ -37,7 +39,6 @@ from tokenring.contract.frame import crc16_arc
 from tokenring.contract.ring import ACK_REQUESTED, EPOCH_MASK
 
 log = logging.getLogger("tokenring.node")
-perf_counter = time.perf_counter
 
 
 class TokenPathHost:
@@ -66,6 +67,10 @@ class TokenPathHost:
     pacer: Any  # emulated hardware timing (tokenring.node.pacing), or None
     _token_lock: Any  # the node's lock around the token's state
     _wake_lock: Any  # released to wake the watchdog
+    _defer_lock: Any  # the Python path's: guards _deferred_pending
+    _rt: Any  # the runtime (tokenring.runtime) the node was made in
+    _now: Any  # its monotonic clock (time.monotonic itself in the real runtime): the Python path's
+    _sleep: Any  # its sleep: the Python path's emulated wire time
     _live: Any  # set of live node IDs (membership's)
     _excluded: Any  # set of excluded node IDs
     _senders: dict[int, Any]  # successor ID -> transport sender
@@ -107,7 +112,7 @@ class TokenPathHost:
     _regeneration_streak: int
     _visit_waiters: int  # programs waiting in wait_visit()
     _deferred_pending: int = 0  # frames queued for the token thread
-    _last_seen: float  # perf_counter times
+    _last_seen: float  # times on the node's clock (_now)
     _last_visit: float
     _last_sent_time: float
     _confirmed_at: float
@@ -198,7 +203,7 @@ class PyTokenPath(TokenPathHost):
 
     def _visit_frame(self, frame: bytes) -> None:
         """The token handler: one call per frame."""
-        t_in = perf_counter()
+        t_in = self._now()
         stats = self.stats
         stats.frames_received += 1
         if self.rx_fault is not None and self.rx_fault(frame):
@@ -342,11 +347,12 @@ class PyTokenPath(TokenPathHost):
         if did == self.node_id:
             hop = max(hop, 0.001)
         if hop:
-            delay = t_in + hop - perf_counter()
+            now = self._now
+            delay = t_in + hop - now()
             if delay > 0:
-                slept_from = perf_counter()
-                time.sleep(delay)  # emulated wire time; a lone node also waits 1 ms per pass
-                self._paced += perf_counter() - slept_from  # with the sleep's overshoot
+                slept_from = now()
+                self._sleep(delay)  # emulated wire time; a lone node also waits 1 ms per pass
+                self._paced += now() - slept_from  # with the sleep's overshoot
         if did != self._last_sent_did or not self._ack_pending:
             self._retries = 0
         elif self._retries:
@@ -357,7 +363,7 @@ class PyTokenPath(TokenPathHost):
         self._last_sent_crc = crc
         self._has_sent = True
         self._ack_pending = want_ack or (self._ack_pending and self._retries > 0)
-        self._last_sent_time = perf_counter()  # also ends the handler's time (see _on_frame)
+        self._last_sent_time = self._now()  # also ends the handler's time (see _on_frame)
         self._transmit(did)
         if arm_now:
             self._wake()
@@ -376,9 +382,9 @@ class PyTokenPath(TokenPathHost):
             if stats.frames_sent & 15:
                 sender(self._work)
             else:  # every 16th send is timed
-                t0 = perf_counter()
+                t0 = self._now()
                 sender(self._work)
-                self._send_add(perf_counter() - t0)
+                self._send_add(self._now() - t0)
             stats.frames_sent += 1
         except Exception as exc:
             self._send_failed(did, exc)
@@ -387,8 +393,6 @@ class PyTokenPath(TokenPathHost):
         """Wake the watchdog (idempotent)."""
         with contextlib.suppress(RuntimeError):  # already awake
             self._wake_lock.release()
-
-    _defer_lock = threading.Lock()  # the fallback's counter; one lock for all nodes is enough
 
 
 #: the counters every visit adds to (NodeStats keeps them in a Counters object: C integers

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import hashlib
 import time
-from types import SimpleNamespace
 
 import pytest
 
@@ -261,12 +260,10 @@ def test_each_skip_of_the_target_gets_its_own_wait(ring, monkeypatch):
     # a long download whose target is skipped twice, the second time long after the first: the
     # first skip's wait must not carry over (the clock jumps 10 s between them, as a long
     # download would take)
-    import tokenring.node.system.issuer as sysissuer
-
     offset = [0.0]
-    monkeypatch.setattr(sysissuer, "time", SimpleNamespace(monotonic=lambda: time.monotonic() + offset[0]))
     r, layers = ring
     main, motor = layers[10], layers[20]
+    monkeypatch.setattr(main, "_clock", lambda: time.monotonic() + offset[0])  # the issuer's clock
     source = program(9) + b"# padding\n" * 3000  # 1000 chunks: still going after skip 1
     tx = main.submit(main.download_steps(20, source, 9, start=True, compress=False), "skipped twice")
     wait_for(lambda: tx.index > 2, 2, "the download under way")

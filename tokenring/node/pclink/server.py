@@ -25,14 +25,13 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import threading
-import time
 from collections.abc import Callable
 from dataclasses import asdict
 from typing import TYPE_CHECKING, Any
 
 import zenoh
 
+from tokenring import runtime
 from tokenring.contract import keys
 from tokenring.errors import ChannelError, TransportError, UsageError
 from tokenring.transport.control import answer_query
@@ -54,7 +53,8 @@ class PcLinkServer:
         self.os = os
         self.session = session
         self.ring = ring
-        self._serial = threading.Lock()
+        self._rt = runtime.current()
+        self._serial = self._rt.lock()
         self.handlers: dict[str, Handler] = {
             "command": self._command,
             "read": self._read,
@@ -102,8 +102,8 @@ class PcLinkServer:
         except ChannelError as exc:
             raise UsageError(str(exc)) from None
         if buffer.visits == 0:
-            deadline = time.monotonic() + float(request.get("timeout", 2.0))
-            while buffer.visits == 0 and time.monotonic() < deadline:
+            deadline = self._rt.monotonic() + float(request.get("timeout", 2.0))
+            while buffer.visits == 0 and self._rt.monotonic() < deadline:
                 self.os.wait_visit(0.1)
             if buffer.visits == 0:
                 raise TransportError(f"no token visit reached main within the timeout to copy {name}")

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import itertools
 import logging
-import time
 from typing import TYPE_CHECKING, Any
 
 from tokenring.errors import UsageError
@@ -50,10 +49,11 @@ class PcSystemVerbs:
     def scan(self, request: dict[str, Any]) -> dict[str, Any]:
         """ARCNET_SCAN, then ARCNET_GET_CONFIG of every node found."""
         layer = self.layer
-        t0 = time.monotonic()
+        clock = layer._rt.monotonic
+        t0 = clock()
         ids = layer.scan(float(request.get("timeout", 5.0)))
         configs = layer.configs(ids) if ids else {}
-        return {"nodes": [configs[i] for i in ids if i in configs], "seconds": time.monotonic() - t0}
+        return {"nodes": [configs[i] for i in ids if i in configs], "seconds": clock() - t0}
 
     def download(self, request: dict[str, Any]) -> dict[str, Any]:
         """``{target, source, stamp_ms, compress, start}`` → ``{job, chunks, bytes}``."""

@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import random
-import time
 import zlib
 from typing import Any
 
@@ -97,7 +95,7 @@ class SystemIssuer(SystemParts):
                     return False
                 tx = self._queue.popleft()
             self._current = tx
-            tx.started = time.monotonic()
+            tx.started = self._clock()
         self._saved = bytes(work[self.w0 : self.w1])
         self._write(work, tx)
         return True
@@ -139,7 +137,7 @@ class SystemIssuer(SystemParts):
                     self._finish(tx, f"node {step.target} left the ring")
                     return self._next_or_restore(work)
                 if step.target not in membership.active:
-                    now = time.monotonic()
+                    now = self._clock()
                     if not tx.excluded_since:
                         tx.excluded_since = now
                     elif now - tx.excluded_since > EXCLUDED_WAIT_S:
@@ -160,7 +158,7 @@ class SystemIssuer(SystemParts):
             tx.excluded_since = 0.0  # the target answered: a later skip starts its own wait
             status = work[self.w0]
             if status == Status.PENDING and step.poll:
-                now = time.monotonic()
+                now = self._clock()
                 if not tx.poll_deadline:
                     tx.poll_deadline = now + POLL_TIMEOUT_S
                 elif now > tx.poll_deadline:
@@ -189,7 +187,7 @@ class SystemIssuer(SystemParts):
         if error is not None:
             tx.error = error
             tx.failed_step = tx.index
-        tx.finished = time.monotonic()
+        tx.finished = self._clock()
         if self._current is tx:
             self._current = None
         tx.done.set()
@@ -270,10 +268,10 @@ class SystemIssuer(SystemParts):
         return steps
 
     def start_step(self, target: int) -> Step:
-        return Step(target, self.START_PROGRAM, self.layouts.NONCE.pack(random.getrandbits(32)), poll=True)
+        return Step(target, self.START_PROGRAM, self.layouts.NONCE.pack(self._rng.getrandbits(32)), poll=True)
 
     def stop_step(self, target: int) -> Step:
-        return Step(target, self.STOP_PROGRAM, self.layouts.NONCE.pack(random.getrandbits(32)), poll=True)
+        return Step(target, self.STOP_PROGRAM, self.layouts.NONCE.pack(self._rng.getrandbits(32)), poll=True)
 
     def restamp_step(self, target: int, digest: bytes, stamp_ms: int) -> Step:
         return Step(target, self.SEND_CONFIG, self.layouts.STAMP.pack(stamp_ms, digest[:8]), poll=True)

@@ -56,8 +56,6 @@ from __future__ import annotations
 
 import itertools
 import logging
-import queue
-import threading
 from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -65,6 +63,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from tokenring.node.node_os import NodeOS
 
+from tokenring import runtime
 from tokenring.node.store import Installed, ProgramStore
 from tokenring.node.system.issuer import SystemIssuer
 from tokenring.node.system.receiver import SystemReceiver
@@ -92,6 +91,9 @@ class SystemLayer(SystemIssuer, SystemReceiver):
         capacity: int = DEFAULT_CAPACITY,
         starter: Callable[[type], None] | None = None,
     ) -> None:
+        self._rt = rt = runtime.current()  # its locks, queue, worker and clock (the node's)
+        self._clock = rt.monotonic  # the issuer's transaction times
+        self._rng = rt.rng()  # the start and stop commands' nonces
         self.os = os_
         self.me = os_.node_id
         self.store = store or ProgramStore(None, os_.name)
@@ -146,7 +148,7 @@ class SystemLayer(SystemIssuer, SystemReceiver):
         self._queue: deque[Transaction] = deque()
         self._current: Transaction | None = None
         self.os.system_busy = False  # a transaction is queued or in flight: the node skips us when idle
-        self._lock = threading.Lock()  # _queue and system_busy change together
+        self._lock = rt.lock()  # _queue and system_busy change together
         self._saved: bytes | None = None
         self._rest = False  # leave the next free round to others
 
@@ -162,10 +164,8 @@ class SystemLayer(SystemIssuer, SystemReceiver):
         self._error_count = itertools.count(1)
         self.corrupt_chunk: int | None = None  # test hook: damage this chunk index once stored
         self._reported_program: Any = None
-        self._work: queue.SimpleQueue[tuple[Callable[..., None], tuple[Any, ...]] | None] = (
-            queue.SimpleQueue()
-        )
-        self._worker: threading.Thread | None = None
+        self._work = rt.simple_queue()
+        self._worker = None
         self._closing = False
 
     # =========================================================================================
@@ -175,12 +175,11 @@ class SystemLayer(SystemIssuer, SystemReceiver):
         """Hook into the node OS and start the worker thread."""
         self.os.system_handler = self.handle
         self.os.on_program_error = lambda: self._work.put((self._watch_program, ()))
-        self._worker = threading.Thread(target=self._work_loop, name=f"system-{self.me}", daemon=True)
-        self._worker.start()
+        self._worker = self._rt.spawn(self._work_loop, f"system-{self.me}")
         return self
 
     def close(self) -> None:
         self._closing = True
         self._work.put(None)
-        if self._worker is not None and self._worker is not threading.current_thread():
+        if self._worker is not None and self._worker is not self._rt.current_thread():
             self._worker.join(1.0)

@@ -5,7 +5,6 @@ the program state it reports. Mixed into :class:`~tokenring.node.system.layer.Sy
 from __future__ import annotations
 
 import logging
-import time
 import zlib
 from collections.abc import Callable
 from typing import Any
@@ -282,9 +281,10 @@ class SystemReceiver(SystemParts):
         self._running_digest = installed.digest
         self.stats.starts += 1
         program = self.os.program
-        deadline = time.monotonic() + START_GRACE_S
-        while time.monotonic() < deadline and self.os.program_error is None:
-            time.sleep(0.02)
+        rt = self._rt
+        deadline = rt.monotonic() + START_GRACE_S
+        while rt.monotonic() < deadline and self.os.program_error is None:
+            rt.sleep(0.02)
         if self.os.program_error is not None and self.os.program is program:
             self._report_program_error(program)
             line = self.os.program_error + self._roll_back()

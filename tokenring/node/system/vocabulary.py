@@ -5,15 +5,14 @@ from __future__ import annotations
 
 import enum
 import logging
-import queue
+import random
 import struct
-import threading
-import time
 from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from tokenring import runtime
 from tokenring.contract.protocol import Field, Protocol, default_protocol, fields_struct
 from tokenring.errors import ProgramError, ProtocolError
 
@@ -159,7 +158,7 @@ class Transaction:
     status: Status | None = None
     error: str | None = None
     failed_step: int | None = None
-    done: threading.Event = field(default_factory=threading.Event)
+    done: Any = field(default_factory=lambda: runtime.current().event())  # the runtime's event
     cancelled: bool = False
     started: float = 0.0
     finished: float = 0.0
@@ -172,7 +171,7 @@ class Transaction:
         return self.done.is_set() and self.error is None
 
     def progress(self) -> dict[str, Any]:
-        end = self.finished or time.monotonic()
+        end = self.finished or runtime.current().monotonic()
         return {
             "what": self.what,
             "step": self.index,
@@ -299,7 +298,10 @@ class SystemParts:
     # the issuer's
     _queue: deque[Transaction]
     _current: Transaction | None
-    _lock: threading.Lock
+    _rt: Any  # the runtime (tokenring.runtime): locks, queue, worker, clock
+    _clock: Callable[[], float]
+    _rng: random.Random
+    _lock: Any
     _saved: bytes | None
     _rest: bool
     # the receiver's
@@ -314,8 +316,8 @@ class SystemParts:
     _error_count: Iterator[int]
     corrupt_chunk: int | None
     _reported_program: Any
-    _work: queue.SimpleQueue[tuple[Callable[..., None], tuple[Any, ...]] | None]
-    _worker: threading.Thread | None
+    _work: Any  # the runtime's simple queue of (action, args), None to stop
+    _worker: Any
     _closing: bool
 
     def submit(self, steps: list[Step], what: str = "") -> Transaction:
