@@ -410,7 +410,7 @@ class RingRecovery(TokenPathHost):
         """No token seen for the reconfiguration timeout: this node restarts the ring."""
         with self._token_lock:
             recon = self.timing.current.recon
-            if self._last_visit and self._now() - self._last_seen < recon:
+            if self._last_visit and self._now() < self._last_seen + recon:  # as the deadline sums it
                 return
             first = self._last_visit == 0.0 and not self._has_sent
             self.stats.tokens_regenerated += 1
