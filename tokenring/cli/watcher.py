@@ -1,6 +1,7 @@
-"""One watcher of a running ring: the web view, an MCAP recording and the Foxglove bridge on one
-feed (:mod:`tokenring.observe.feed`), as ``tokenring watch`` runs it and ``web``, ``record`` and
-``foxglove`` run one part of it. Apart from the verbs, which import it only when they run."""
+"""One watcher of a running ring: the web view, an MCAP recording, the Foxglove bridge and the
+Prometheus metrics on one feed (:mod:`tokenring.observe.feed`), as ``tokenring watch`` runs it
+and ``web``, ``record`` and ``foxglove`` run one part of it. Apart from the verbs, which import
+it only when they run."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from tokenring.observe.foxglove import FoxgloveBridge
+    from tokenring.observe.metrics import RingMetrics
     from tokenring.observe.recording import McapRecorder, Stopper
 
 
@@ -31,14 +33,18 @@ class Watch:
     ready_token: str | None = None
     topics: str | None = None
     compression: str = "zstd"
+    metrics_port: int | None = None  # None: no Prometheus metrics
+    metrics_host: str = "127.0.0.1"
     #: what runs while it serves (the recorder's progress line), every half second
     on_tick: Callable[[Watch, float], None] | None = None
     #: called once everything serves and records
     on_ready: Callable[[Watch], None] | None = None
     web_url: str | None = None
     foxglove_url: str | None = None
+    metrics_url: str | None = None
     recorder: McapRecorder | None = None
     bridge: FoxgloveBridge | None = None
+    metrics: RingMetrics | None = None
     dropped: int = 0
     elapsed: float = 0.0
     failure_told: bool = False  # the recording's failure was said
@@ -47,6 +53,7 @@ class Watch:
     record_option: str = "--record"
     web_port_option: str = "--web-port"
     foxglove_port_option: str = "--foxglove-port"
+    metrics_option: str = "--metrics"
 
 
 def serve(args: argparse.Namespace, watch: Watch) -> int:
@@ -66,10 +73,17 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
     from tokenring.observe.feed import Feed, feed_sources
     from tokenring.observe.recording import McapRecorder, Selection, Stopper
 
-    if watch.web_port is None and watch.record is None and watch.foxglove_port is None:
-        raise UsageError("give at least one of --web, --record FILE.mcap, --foxglove")
+    if (
+        watch.web_port is None
+        and watch.record is None
+        and watch.foxglove_port is None
+        and watch.metrics_port is None
+    ):
+        raise UsageError("give at least one of --web, --record FILE.mcap, --foxglove, --metrics PORT")
     if not watch.host.strip():
         raise UsageError("--host: give an address to serve on, e.g. 127.0.0.1")
+    if watch.metrics_port is not None and not watch.metrics_host.strip():
+        raise UsageError("--metrics-host: give an address to serve on, e.g. 127.0.0.1")
     if watch.record is not None:
         check_option_output(watch.record_option, watch.record, force=getattr(args, "force", False))
     selection = Selection.parse(watch.topics)
@@ -95,8 +109,21 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
     stopper.install()
     started = time.monotonic()
     try:
+        if watch.metrics_port is not None:
+            from tokenring.observe.metrics import RingMetrics
+
+            # served before the process joins the ring: a port in use is refused first
+            watch.metrics = RingMetrics(watch.ring)
+            watch.metrics_url = watch.metrics.serve(
+                watch.metrics_host, watch.metrics_port, option=watch.metrics_option
+            )
+        # the metrics' own source (the nodes' download counters) feeds nothing but the metrics
+        read = sources if watch.metrics is None else [*sources, watch.metrics.source()]
         with tap_session(args) as session:
-            feed = Feed(session, watch.ring, sources)
+            feed = Feed(session, watch.ring, read)
+            if watch.metrics is not None:
+                feed.add_sink(watch.metrics.on_message)
+                watch.metrics.dropped = lambda: feed.dropped
             if watch.record is not None:
                 watch.recorder = McapRecorder(
                     watch.record,
@@ -143,7 +170,12 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
                 elapsed = time.monotonic() - started
                 if watch.recorder is not None:
                     watch.recorder.tick()
-                    if recording_failed(args, watch) and view is None and watch.bridge is None:
+                    if (
+                        recording_failed(args, watch)
+                        and view is None
+                        and watch.bridge is None
+                        and watch.metrics is None
+                    ):
                         return True  # it only recorded: nothing left to do
                 if watch.on_tick is not None:
                     watch.on_tick(watch, elapsed)
@@ -169,6 +201,8 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
                 if token is not None:
                     token.undeclare()
     finally:
+        if watch.metrics is not None:
+            watch.metrics.close()
         if watch.bridge is not None:
             watch.bridge.close()
     watch.elapsed = time.monotonic() - started

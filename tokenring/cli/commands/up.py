@@ -17,6 +17,7 @@ EXAMPLES = """examples:
   tokenring up --router --links -l tcp/127.0.0.1:7447
                                    the nodes clients of this launcher, the token on direct links
   tokenring up --ring lab2         a second ring beside a running one (a ring runs once per network)
+  tokenring up --metrics 9464      Prometheus scrapes the ring at http://127.0.0.1:9464/metrics
 
 exit codes:
   0  the run was whole; 130 after Ctrl-C
@@ -46,6 +47,7 @@ HELP = "launch the whole ring (every node its own process)"
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring import extensions  # the extensions' own options (the robot's world, missions)
     from tokenring.cli.args import add_ring_options, with_examples
+    from tokenring.cli.commands.watch import add_metrics_options
 
     p = sub.add_parser(
         "up",
@@ -146,6 +148,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="record the whole run to a new MCAP file (as 'tokenring record'; one watcher process serves"
         " --web, --record and --foxglove together)",
     )
+    add_metrics_options(p)
     p.add_argument(
         "--force",
         action="store_true",
@@ -243,7 +246,7 @@ def run(args: argparse.Namespace) -> int:
                 "the emulated wire must be within 10k..100G bit/s (give another --bitrate or --speed)"
             ) from None
     services = [service for plan in plans_up for service in plan.services]
-    if args.web or args.record or args.foxglove:
+    if args.web or args.record or args.foxglove or args.metrics is not None:
         services.append(watch_service(args))
     launcher = Launcher(
         plans,
@@ -334,21 +337,24 @@ def say_waiting(launcher: Launcher, plans_up: list[UpPlan]) -> None:
             launcher.say(hint)
 
 
-def check_port(option: str, port: int) -> None:
-    """Refuse ``option``'s port on 127.0.0.1 if it cannot be had, before anything starts."""
+def check_port(option: str, port: int, host: str = "127.0.0.1") -> None:
+    """Refuse ``option``'s port on ``host`` if it cannot be had, before anything starts."""
     import socket
 
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the servers will
-        try:
-            probe.bind(("127.0.0.1", port))
-        except OSError as exc:
-            raise UsageError(f"{option} {port}: cannot listen on 127.0.0.1:{port} ({exc.strerror})") from None
+    try:
+        family, _, _, _, address = socket.getaddrinfo(
+            host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+        )[0]
+        with socket.socket(family, socket.SOCK_STREAM) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the servers will
+            probe.bind(address)
+    except OSError as exc:
+        raise UsageError(f"{option} {port}: cannot listen on {host}:{port} ({exc.strerror or exc})") from None
 
 
 def watch_service(args: argparse.Namespace) -> ServicePlan:
-    """``--web``, ``--record`` and ``--foxglove`` as one launcher service, ``tokenring watch``:
-    one process, one Zenoh session and one feed for all three (three tools would each decode
+    """``--web``, ``--record``, ``--foxglove`` and ``--metrics`` as one launcher service,
+    ``tokenring watch``: one process, one Zenoh session and one feed for all of them (three tools would each decode
     every frame again, on the cores the nodes need). Ports and the file are checked here, before
     anything starts; the launcher waits until it serves and records, so the file holds the boot,
     and stops it (SIGTERM: the recording is finalised) after the nodes."""
@@ -365,6 +371,9 @@ def watch_service(args: argparse.Namespace) -> ServicePlan:
     if args.foxglove:
         check_port("--foxglove-port", args.foxglove_port)
         argv += ["--foxglove", "--foxglove-port", str(args.foxglove_port)]
+    if args.metrics is not None:
+        check_port("--metrics", args.metrics, args.metrics_host)
+        argv += ["--metrics", str(args.metrics), "--metrics-host", args.metrics_host]
     if args.record:
         check_option_output("--record", args.record, force=args.force)
         argv += ["--record", args.record] + (["--force"] if args.force else [])

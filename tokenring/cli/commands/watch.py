@@ -1,9 +1,11 @@
-"""``tokenring watch``: the web view, an MCAP recording and the Foxglove bridge in one process.
+"""``tokenring watch``: the web view, an MCAP recording, the Foxglove bridge and Prometheus
+metrics in one process.
 
-All three read the same feed (:mod:`tokenring.observe.feed`): one Zenoh session, one subscription per
+All of them read the same feed (:mod:`tokenring.observe.feed`): one Zenoh session, one subscription per
 key, every frame decoded once and every message encoded to JSON once, whichever of them use it.
 Three separate tools (``web``, ``record``, ``foxglove``) would each do that work again, on the
-cores the ring's nodes need; ``tokenring up --web --record F --foxglove`` starts this instead.
+cores the ring's nodes need; ``tokenring up --web --record F --foxglove --metrics P`` starts this
+instead.
 ``web``, ``record`` and ``foxglove`` are this verb with one of the three.
 """
 
@@ -17,12 +19,13 @@ from tokenring.cli.args import int_within, seconds
 if TYPE_CHECKING:
     from tokenring.cli.watcher import Watch
 
-HELP = "web view, MCAP recording and Foxglove bridge of a running ring, in one process"
+HELP = "web view, MCAP recording, Foxglove bridge and Prometheus metrics of a running ring, in one process"
 
 EXAMPLES = """examples:
   tokenring watch --web --record run.mcap --foxglove   # all three, one process
   tokenring watch --web --web-port 9000 --duration 60
   tokenring watch --record run.mcap --topics '/robot/*' --force
+  tokenring watch --metrics 9464                       # Prometheus scrapes http://127.0.0.1:9464/metrics
   tokenring up --explore 2 --web --record run.mcap     # the ring starts one watcher for both
 """
 
@@ -58,12 +61,31 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--host", default="127.0.0.1", help="address to serve on (default %(default)s: this machine only)"
     )
+    add_metrics_options(p, lowest_port=0)
     p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds (default: Ctrl-C)")
     # `up --web/--record/--foxglove`: a liveliness token tokenring/<ring>/watch/<TAG> once all
     # serve and record (the launcher waits for it, so the recording holds the boot)
     p.add_argument("--ready-token", metavar="TAG", help=argparse.SUPPRESS)
     add_json_option(p)
     add_ring_options(p, listen=False)
+
+
+def add_metrics_options(p: argparse.ArgumentParser, lowest_port: int = 1) -> None:
+    """``--metrics PORT`` and ``--metrics-host``, shared by ``watch`` and ``up``."""
+    group = p.add_argument_group("Prometheus metrics")
+    group.add_argument(
+        "--metrics",
+        type=int_within(lowest_port, 65535),
+        metavar="PORT",
+        help="serve the ring's metrics for Prometheus at http://HOST:PORT/metrics (docs/metrics.md)"
+        + ("; 0: any free port" if lowest_port == 0 else ""),
+    )
+    group.add_argument(
+        "--metrics-host",
+        default="127.0.0.1",
+        metavar="HOST",
+        help="address the metrics are served on (default %(default)s: this machine only)",
+    )
 
 
 def add_record_options(p: argparse.ArgumentParser) -> None:
@@ -96,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
                     "web": watch.web_url,
                     "foxglove": watch.foxglove_url,
                     "record": watch.record,
+                    "metrics": watch.metrics_url,
                 }
             )
             return
@@ -105,6 +128,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"Foxglove bridge of ring {watch.ring!r}: {watch.foxglove_url}")
         if watch.record:
             print(f"recording ring {watch.ring!r} to {watch.record}")
+        if watch.metrics_url:
+            print(f"metrics of ring {watch.ring!r}: {watch.metrics_url}")
         print("(Ctrl-C stops)")
 
     watch = Watch(
@@ -117,6 +142,8 @@ def run(args: argparse.Namespace) -> int:
         ready_token=args.ready_token,
         topics=args.topics,
         compression=args.compression,
+        metrics_port=args.metrics,
+        metrics_host=args.metrics_host,
         on_ready=announce,
     )
     code = serve(args, watch)
