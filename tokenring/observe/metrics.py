@@ -357,23 +357,23 @@ class RingMetrics:
                 gauge("tokenring_node_uptime_seconds", "seconds since the node started").add_metric(
                     labels(node_id), stats["uptime_s"]
                 )
-            for key, metric, scale, doc in (
-                ("round_ms", "tokenring_node_round_trip_seconds", 1e-3, "the node's recent round trips"),
-                (
-                    "handler_us",
-                    "tokenring_node_handler_seconds",
-                    1e-6,
-                    "the node's handler time, arrival to put",
-                ),
-                ("send_us", "tokenring_node_put_seconds", 1e-6, "the node's put of the token"),
+            # the node's own quantiles of its last 512 (status's columns): gauges, not a summary,
+            # for there is no cumulative count and sum to go with them; they hold on direct links,
+            # where the watcher sees no frame to time
+            for key, what, scale, doc in (
+                ("round_ms", "round_trip", 1e-3, "round trip"),
+                ("handler_us", "handler", 1e-6, "handler time, arrival to put"),
+                ("send_us", "put", 1e-6, "put of the token"),
             ):
                 timing = stats.get(key)
                 if not isinstance(timing, dict) or not timing.get("n", 1):
                     continue
-                quantiles = gauge(metric, f"{doc} (its last 512), median and p99", ("quantile",))
-                for quantile, field_name in (("0.5", "median"), ("0.99", "p99")):
+                for field_name, quantile in (("median", "median"), ("p99", "p99")):
                     if isinstance(timing.get(field_name), int | float):
-                        quantiles.add_metric(labels(node_id, quantile), timing[field_name] * scale)
+                        gauge(
+                            f"tokenring_node_{what}_{quantile}_seconds",
+                            f"{quantile} of the node's {doc} over its last 512",
+                        ).add_metric(labels(node_id), timing[field_name] * scale)
             for key, metric, doc in (
                 ("active", "tokenring_node_members", "active members of the ring as the node sees it"),
                 ("excluded", "tokenring_node_excluded", "nodes the node sees excluded"),

@@ -83,7 +83,7 @@ def test_a_poll_a_round_trip_and_an_event_become_prometheus_families():
     assert value(found, "tokenring_inbox_full_total", **motor) == 3
     assert value(found, "tokenring_regenerations_by_cause", cause="spurious", **motor) == 2
     assert types["tokenring_regenerations_by_cause"] == "gauge"  # reclassified later: it may go down
-    assert value(found, "tokenring_node_round_trip_seconds", quantile="0.99", **motor) == pytest.approx(0.009)
+    assert value(found, "tokenring_node_round_trip_p99_seconds", **motor) == pytest.approx(0.009)
     assert value(found, "tokenring_node_members", **motor) == 2
     assert value(found, "tokenring_faults_active", kind="delay", **motor) == 1
     assert value(found, "tokenring_faults_active", kind="drop", **motor) == 0
