@@ -1,0 +1,109 @@
+"""``tokenring sim``: the ring in virtual time, one process, deterministic for a seed.
+
+The nodes are the very ones ``tokenring up`` starts (the node OS with its Python token path, its
+recovery and membership) on an in-memory wire, run one task at a time by a simulated runtime whose
+clock jumps whenever every task waits: a minute of the ring takes a couple of real seconds, and the
+same command and seed print the same hash of the whole frame stream (``frames_sha256``), on any
+host. The wire's time per hop (``--bitrate``, ``--profile``) is what moves the clock.
+
+Not yet in virtual time (issue 55, under way): the user programs and the world simulator, faults
+and chaos scenarios, seed campaigns.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from tokenring.cli.args import seconds
+
+HELP = "run the ring in virtual time: deterministic, faster than real time"
+
+EXAMPLES = """examples:
+  tokenring sim --duration 60                           # the default nodes, a minute of ARCNET
+  tokenring sim --nodes 10,20,30 --seed 7 --json run.json
+  tokenring sim --profile arcnet --duration 10          # the seed robot's per-visit timing
+  tokenring sim --bitrate 10M --duration 600 --json -   # the summary on standard output
+"""
+
+DEFAULT_BITRATE = "2.5M"
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from tokenring.cli.args import int_within, with_examples
+
+    p = sub.add_parser("sim", help=HELP, description=__doc__, **with_examples(EXAMPLES))
+    p.add_argument(
+        "--nodes",
+        help="comma-separated nodes (names or IDs); default protocol.yaml's nodes but the optional ones",
+    )
+    p.add_argument(
+        "--duration", type=seconds, default=60.0, metavar="S", help="simulated seconds (default %(default)s)"
+    )
+    p.add_argument("--seed", type=int_within(0, 2**32 - 1), default=1, help="the schedule's seed (default 1)")
+    p.add_argument(
+        "--bitrate",
+        default=DEFAULT_BITRATE,
+        help=f"the emulated wire, e.g. 2.5M or 10M; not max: the wire's time moves the clock (default {DEFAULT_BITRATE})",
+    )
+    p.add_argument(
+        "--profile", choices=("arcnet",), help="the seed robot's per-visit timing on top of the wire"
+    )
+    p.add_argument("--no-world", action="store_true", help="the ring alone (the only mode so far)")
+    p.add_argument(
+        "--json", metavar="FILE", help="write the run's summary as JSON to FILE (- for standard output)"
+    )
+    p.add_argument("--force", action="store_true", help="replace an existing --json FILE")
+    p.add_argument("--protocol", metavar="FILE", help="protocol.yaml to use (also $TOKENRING_PROTOCOL)")
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+
+    from tokenring import (
+        ChannelError,
+        UsageError,
+        check_output,
+        load_protocol,
+        option_error,
+        parse_bitrate,
+        write_atomically,
+    )
+    from tokenring.sim import run_ring
+
+    if args.json and args.json != "-":
+        check_output(args.json, (), force=args.force, error=option_error("--json"))
+    protocol = load_protocol(args.protocol)
+    if args.nodes:
+        try:
+            ids = sorted({protocol.node(part.strip()).id for part in args.nodes.split(",") if part.strip()})
+        except ChannelError as exc:
+            raise UsageError(f"--nodes {args.nodes}: {exc}") from None
+    else:
+        ids = [n.id for n in protocol.default_nodes]
+    if len(ids) < 2:
+        raise UsageError(f"--nodes {args.nodes}: a ring needs two nodes at least")
+    summary = run_ring(
+        protocol,
+        ids,
+        seed=args.seed,
+        duration_s=args.duration,
+        bitrate=parse_bitrate(args.bitrate),
+        profile=args.profile,
+    )
+    data = summary.as_dict()
+    if args.json == "-":
+        print(json.dumps(data, indent=2))
+    else:
+        if args.json:
+            write_atomically(args.json, json.dumps(data, indent=2) + "\n")
+        median = summary.round_median_ms
+        print(
+            f"{summary.simulated_s:.3f} simulated s in {summary.real_s:.2f} real s ({summary.speedup:.0f}x), "
+            f"seed {summary.seed}, nodes {','.join(map(str, summary.nodes))}: {summary.frames} frames, "
+            f"round median {'?' if median is None else f'{median:.3f} ms'}, "
+            f"{summary.regenerations} regeneration(s)"
+        )
+        print(f"frames_sha256 {summary.frames_sha256}")
+    sys.stdout.flush()
+    return 0
