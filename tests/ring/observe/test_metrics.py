@@ -6,6 +6,7 @@ ring over HTTP and waits on values that move, never on a clock."""
 from __future__ import annotations
 
 import json
+import re
 import signal
 import socket
 import subprocess
@@ -17,10 +18,10 @@ from prometheus_client import generate_latest
 from prometheus_client.openmetrics.parser import text_string_to_metric_families as openmetrics_families
 from prometheus_client.parser import text_string_to_metric_families
 
-from tests.support.processes import run_tokenring
+from tests.support.processes import REPO, run_tokenring
 from tests.support.ringutil import control, launcher_pids, tap, wait_ring, wait_until
 from tokenring.observe.feed import Message
-from tokenring.observe.metrics import ROUND_TRIP_BUCKETS, STALE_S, RingMetrics
+from tokenring.observe.metrics import NODE_COUNTERS, ROUND_TRIP_BUCKETS, STALE_S, SYSTEM_COUNTERS, RingMetrics
 from tokenring.transport.session import free_port
 
 #: what a node's ``stats`` answer holds of what the metrics read (tokenring/node/program_host.py)
@@ -116,6 +117,30 @@ def test_a_poll_a_round_trip_and_an_event_become_prometheus_families():
     assert value(found, "tokenring_faults_active", kind="delay", **motor) is None
     assert value(found, "tokenring_nodes_answering", ring="lab") == 0
     assert value(found, "tokenring_round_trip_seconds_count", ring="lab") == 2  # the watcher's own
+
+
+def test_the_dashboard_and_the_docs_name_only_metrics_that_are_served():
+    """docs/grafana-tokenring.json's queries and docs/metrics.md's names are all served (a
+    metric renamed here would leave a panel empty without a word)."""
+    metrics = RingMetrics("lab")
+    node = {**STATS, "stats": {**dict.fromkeys(NODE_COUNTERS, 1), "rejected_crc": 0}}
+    metrics.on_message(Message("/ring/nodes", 0, {"nodes": {"20": node}, "faults": {"20": {}}}))
+    metrics.on_message(Message("/ring/roundtrip", 0, {"ms": 4.2, "node": 10}))
+    metrics.on_message(Message("/ring/event", 0, {"kind": "regenerated", "node": 10, "by": 20}))
+    metrics.on_system({20: {"stats": dict.fromkeys(SYSTEM_COUNTERS, 1), "state": "RUNNING"}})
+    found, types = samples(text_string_to_metric_families(generate_latest(metrics.registry).decode()))
+    served = {name for name, _ in found} | set(types)
+
+    dashboard = json.loads((REPO / "docs" / "grafana-tokenring.json").read_text(encoding="utf-8"))
+    queries = [target["expr"] for panel in dashboard["panels"] for target in panel["targets"]]
+    queries += [v["definition"] for v in dashboard["templating"]["list"] if "definition" in v]
+    asked = {name for query in queries for name in re.findall(r"tokenring_\w+", query)}
+    assert len(asked) >= 10 and asked <= served, sorted(asked - served)
+
+    doc = (REPO / "docs" / "metrics.md").read_text(encoding="utf-8")
+    # whole names (not the shorthands `…_total` and `tokenring_node_put_{median,p99}_seconds`)
+    named = {n for n in re.findall(r"`(tokenring_[a-z_]+)", doc) if not n.endswith("_")}
+    assert len(named) >= 30 and named <= served, sorted(named - served)
 
 
 def one_line_refusal(out: subprocess.CompletedProcess, *needles: str) -> None:
