@@ -340,11 +340,12 @@ class RingRecovery(TokenPathHost):
             deadlines = [refresh_at if self.membership.excluded else refresh_at + REFRESH_SLACK_S]
             with self._token_lock:
                 if self._ack_pending:
-                    due = self._last_sent_time + timeouts.ack * self._ack_grace.get(self._last_sent_did, 1.0)
-                    if now >= due:
+                    if now >= self._ack_due(timeouts):
                         self._pass_timed_out(now)
-                    else:
-                        deadlines.append(due)
+                    if (
+                        self._ack_pending
+                    ):  # still waiting, or waiting again: for the retry or the next successor
+                        deadlines.append(self._ack_due(timeouts))
             if now - planned > timeouts.slot:
                 # woke far too late (a loaded machine stalled us): every deadline may have
                 # passed at once, so restart the rank stagger from now; higher ranks go first
@@ -360,6 +361,10 @@ class RingRecovery(TokenPathHost):
             wait = max(0.0, min(min(deadlines) - self._now(), WATCH_MAX_SLEEP_RECONS * timeouts.recon))
             planned = self._now() + wait
             self._wake_lock.acquire(timeout=wait)
+
+    def _ack_due(self, timeouts: R.Timeouts) -> float:
+        """When the pass in flight counts as unacknowledged (the successor's grace included)."""
+        return self._last_sent_time + timeouts.ack * self._ack_grace.get(self._last_sent_did, 1.0)
 
     def _regeneration_deadline(self, timeouts: R.Timeouts) -> float:
         return regeneration_deadline(

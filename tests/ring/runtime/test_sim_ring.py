@@ -173,7 +173,10 @@ def test_a_lost_node_is_routed_around_in_virtual_time_the_same_for_the_same_seed
         # reconfiguration timeout (840 ms at 2.5 Mbit/s; its watchdog wakes at that very
         # instant in virtual time, and must not find the token "not lost yet" there), and the
         # hung node is skipped once its ack does not come
-        assert 0.84 < first.facts["recovered_s"] < 2.5
-        assert first.facts["regenerated"] >= 2
+        # (seed 5 found that the watchdog slept past the retries' acknowledgement deadlines,
+        # so the hung node cost a second regeneration: 1.724 s; each retry is due one ack
+        # timeout after it went out)
+        assert 0.84 < first.facts["recovered_s"] < 1.0
+        assert first.facts["regenerated"] == 2
         assert {i for i, n in first.facts["regenerated_by"].items() if n} == {max(IDS[:5])}
         assert first.facts["rejoined_s"] > first.facts["recovered_s"]
