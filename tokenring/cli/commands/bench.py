@@ -15,6 +15,7 @@ ROUNDS, WARMUP = 2000, 300
 MAX_WARMUP = 10**9  # a warm-up that never ends on any machine is a test's hang guard
 MAX_REPEAT = 1000
 KINDS = {"peer": "peers", "router": "routers", "links": "direct links"}
+SIM_SIZES = (2, 8, 32, 128, 255)  # tokenring.perf.simmodel.SIZES, without importing it to parse
 
 EXAMPLES = """examples:
   tokenring bench                                   8 nodes, one bare/ring pair
@@ -24,6 +25,8 @@ EXAMPLES = """examples:
   tokenring bench --nodes 255 --topology links      each node linked to its successor directly
   tokenring bench --transport udp --nodes 8         the token over plain UDP sockets
   tokenring bench --bitrate 2.5M --profile arcnet   the seed robot's hardware timing
+  tokenring bench --sim                             the round trip and recovery times of 2..255
+                                                    nodes in virtual time, beside the model's
   tokenring bench --interleave 100 --nodes 64       both rings up at once, taking turns in
                                                     0.6 s windows: the own share per hop with
                                                     its 95 % interval on a host that steals CPUs
@@ -72,7 +75,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     # their ranges are checked in run(), which says them (--nodes must be 2..255); these types
     # only say the range when the value is no whole number at all
-    p.add_argument("--nodes", type=whole("2..255"), default=8, help="ring size 2..255 (default %(default)s)")
+    p.add_argument(
+        "--nodes",
+        type=whole("2..255"),
+        help=f"ring size 2..255 (default 8; --sim: {', '.join(map(str, SIM_SIZES))})",
+    )
     # rounds, warmup and repeat default to None so that --interleave can refuse them when given
     p.add_argument(
         "--rounds", type=whole("10..16000"), help=f"rounds measured per run, 10..16000 (default {ROUNDS})"
@@ -82,7 +89,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=int_within(0, MAX_WARMUP),
         help=f"rounds discarded first, 0..{MAX_WARMUP} (default {WARMUP})",
     )
-    p.add_argument("--bitrate", default="max", help="emulated bitrate of the ring (default %(default)s)")
+    p.add_argument(
+        "--bitrate", help="emulated bitrate of the ring (default max; --sim: 2.5M, the wire moves its clock)"
+    )
     p.add_argument("--ack", default="adaptive", choices=("adaptive", "always", "never"))
     p.add_argument(
         "--repeat",
@@ -125,6 +134,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "set against the bare windows either side (the ring not measured is frozen)",
     )
     p.add_argument(
+        "--sim",
+        action="store_true",
+        help="the ring in virtual time: its round trip and recovery times from the timing model "
+        "alone, host-independent, beside the model's ARCNET figures (tokenring.perf.simmodel)",
+    )
+    p.add_argument(
         "--window",
         type=real("0.05..1 s"),
         metavar="S",
@@ -143,6 +158,10 @@ def run(args: argparse.Namespace) -> int:
     from tokenring.perf.roundtrip import generated_ids, progress, run_bare, run_budget, run_ring, summarize
 
     check_json_target(args.json, args.force)  # before minutes of measuring
+    if args.sim:
+        return run_sim(args)
+    args.nodes = 8 if args.nodes is None else args.nodes
+    args.bitrate = "max" if args.bitrate is None else args.bitrate
     ids = generated_ids(args.nodes)
     if args.interleave is not None:
         return run_interleaved(args)
@@ -417,3 +436,117 @@ def print_interleaved(record: dict[str, Any]) -> None:
         first = record["ring_warning_lines"][0] if record["ring_warning_lines"] else ""
         host += f"; the nodes warned {warned} times (a freeze's doing; first: {first.strip()[:120]})"
     print(host)
+
+
+def run_sim(args: argparse.Namespace) -> int:
+    """``--sim``: the round trip and the recovery times in virtual time (:mod:`tokenring.perf.simmodel`)."""
+    import logging
+
+    from tokenring._util.tables import format_table
+    from tokenring.cli.output import write_json
+    from tokenring.contract.protocol import load_protocol
+    from tokenring.contract.ring import format_bitrate, parse_bitrate
+    from tokenring.errors import UsageError
+    from tokenring.perf.roundtrip import generated_ids, progress
+    from tokenring.perf.simmodel import SIZES, run_sizes
+
+    refused = {
+        "--interleave": args.interleave is not None,
+        "--window": args.window is not None,
+        "--rounds": args.rounds is not None,
+        "--warmup": args.warmup is not None,
+        "--repeat": args.repeat is not None,
+        "--timeout": args.timeout is not None,
+        "--tap": args.tap,
+        "--transport": args.transport != "zenoh",
+        "--topology": args.topology != "auto",
+        "--ack": args.ack != "adaptive",
+    }
+    given = [option for option, present in refused.items() if present]
+    if given:
+        raise UsageError(
+            f"{given[0]} belongs to the real ring; --sim runs the model in virtual time "
+            "(--nodes, --bitrate, --profile, --json, --quiet)"
+        )
+    bitrate = parse_bitrate("2.5M" if args.bitrate is None else args.bitrate)
+    if bitrate is None:
+        raise UsageError(
+            "--sim needs a bitrate (not max): the wire's hop time is what moves the virtual clock"
+        )
+    if args.profile:
+        from tokenring.node.pacing import get_profile
+
+        get_profile(args.profile)
+    sizes = SIZES if args.nodes is None else (args.nodes,)
+    for n in sizes:
+        generated_ids(n)  # says the range
+    protocol = load_protocol(None)
+    # the faults are the point: the nodes' warnings about them would only bury the progress lines
+    quiet_logger = logging.getLogger("tokenring")
+    level = quiet_logger.level
+    quiet_logger.setLevel(logging.ERROR)
+    try:
+        report = run_sizes(
+            protocol,
+            sizes,
+            generated_ids,
+            bitrate=bitrate,
+            profile=args.profile,
+            say=lambda text: progress(text, args.quiet),
+        )
+    finally:
+        quiet_logger.setLevel(level)
+    if args.json == "-":  # the report alone on standard output, as `tokenring sim --json -`
+        write_json("-", report)
+        return 0
+    arc = report["arcnet"]
+    print(
+        f"the ring in virtual time (the timing model alone, host-independent), bitrate {format_bitrate(bitrate)}"
+        f"{', profile ' + args.profile if args.profile else ''}, seed {report['seed']}"
+    )
+    print(
+        f"model (tokenring/contract/ring.py): hop {arc['hop_ms']:.4f} ms = a {arc['packet_bytes']}-byte packet "
+        f"{arc['packet_ms']:.4f} ms + token pass {arc['token_pass_us']:.1f} us; response timeout "
+        f"{arc['response_timeout_us']:.1f} us (ack timeout floor 5 ms); lost-token timer "
+        f"{arc['lost_token_timer_ms']:.0f} ms (at least 10 rounds)"
+    )
+
+    def pair(measured: float | None, expected: list[float]) -> str:
+        if measured is None:
+            return "-"
+        return f"{measured:.1f} [{expected[0]:.0f}..{expected[1]:.0f}]"
+
+    rows = []
+    for run in report["runs"]:
+        m = run["model"]
+        rows.append(
+            [
+                str(run["nodes"]),
+                f"{run['round_median_ms']:.3f} ({m['round_ms']:.3f})",
+                f"{run['round_p99_ms']:.3f}",
+                f"{m['recon_ms']:.0f}",
+                pair(run["lost_token_ms"], m["lost_token_ms"]),
+                pair(run["crash_ms"], m["crash_ms"]),
+                pair(run["freeze_ms"], m["freeze_ms"]),
+                f"{run['simulated_s']:.1f}/{run['real_s']:.1f}",
+            ]
+        )
+    print(
+        format_table(
+            rows,
+            [
+                "nodes",
+                "round median ms (model)",
+                "p99 ms",
+                "lost-token timer ms",
+                "lost token ms [model]",
+                "crash ms [model]",
+                "freeze ms [model]",
+                "sim/real s",
+            ],
+        )
+    )
+    print("recovery: from the fault to every surviving node visited again, the lost node out of the ring")
+    if args.json:
+        write_json(args.json, report)
+    return 0
