@@ -17,6 +17,7 @@ from typing import Any
 
 from tokenring.contract.protocol import Protocol
 from tokenring.errors import UsageError
+from tokenring.node.faults import FaultInjector
 from tokenring.node.node_os import NodeOS
 from tokenring.node.pacing import install as install_profile
 from tokenring.runtime import SimRuntime, using
@@ -39,6 +40,11 @@ class SimSummary:
     regenerations: int
     round_median_ms: float | None
     switches: int
+    #: the ``--fault`` requests as applied, each with its recovery (``recovered_s``: from the
+    #: fault to the ring circulating again; the regenerations in between): tokenring.sim.faults
+    faults: list[dict[str, Any]] = field(default_factory=list)
+    #: what the nodes' fault injectors did (dropped, corrupted, ...), by node
+    fault_counts: dict[str, dict[str, int]] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -66,6 +72,9 @@ class SimRing:
             install_profile(node, profile, bitrate, node._now())
             node.start()
             self.nodes[node_id] = node
+        #: each node's own fault injector, as its process has one (``tokenring fault``'s path);
+        #: made after every node started, its draws come from the simulation's seed
+        self.faults = {node_id: FaultInjector(node) for node_id, node in self.nodes.items()}
 
     def close(self) -> None:
         for node in self.nodes.values():
@@ -129,6 +138,8 @@ def run_ring(
             regenerations=sum(n.stats.tokens_regenerated for n in ring.nodes.values()),
             round_median_ms=None if median is None else round(median * 1000.0, 6),
             switches=sim.switches,
+            faults=extra.pop("faults", []),
+            fault_counts=extra.pop("fault_counts", {}),
             extra=extra,
         )
         ring.close()

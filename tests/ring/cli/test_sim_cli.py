@@ -53,3 +53,23 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path) -> None:
         lines = result.stderr.strip().splitlines()
         assert result.returncode == 2 and len(lines) == 1 and needle in lines[0], (args, result.stderr)
     assert taken.read_text() == "{}"
+
+
+def test_faults_in_virtual_time_give_the_same_frames_for_the_same_command(tmp_path: Path) -> None:
+    # the ring forms in about 1.7 simulated s (the nodes' boot, then main's lost-token timer)
+    args = ("--nodes", "10,20,30,40", "--duration", "8", "--seed", "3")
+    faults = ("--fault", "drop:30:0.5@2", "--fault", "clear@3", "--fault", "crash:20@4")
+    faults += ("--fault", "hang:40@5", "--fault", "resume:40@6")
+    first, again = summary(tmp_path, "a.json", *args, *faults), summary(tmp_path, "b.json", *args, *faults)
+    assert first["frames_sha256"] == again["frames_sha256"] and first["faults"] == again["faults"]
+    assert [f["fault"] for f in first["faults"]] == [
+        "drop:30:0.5@2",
+        "clear@3",
+        "crash:20@4",
+        "hang:40@5",
+        "resume:40@6",
+    ]
+    assert all(f["recovered_s"] is not None for f in first["faults"])
+    assert first["fault_counts"]["30"]["dropped"] > 0
+    bad = run_tokenring("sim", "--fault", "crash:30@9", "--duration", "5", timeout=60)
+    assert bad.returncode == 2 and "after the run's end" in bad.stderr.strip().splitlines()[0]

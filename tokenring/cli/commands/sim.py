@@ -6,8 +6,13 @@ clock jumps whenever every task waits: a minute of the ring takes a couple of re
 same command and seed print the same hash of the whole frame stream (``frames_sha256``), on any
 host. The wire's time per hop (``--bitrate``, ``--profile``) is what moves the clock.
 
-Not yet in virtual time (issue 55, under way): the user programs and the world simulator, faults
-and chaos scenarios, seed campaigns.
+``--fault KIND[:NODE[:VALUE]]@T`` applies a kind of ``tokenring fault`` at virtual time T: the
+node's own fault injector where the fault acts inside the node (its draws from the seed), the
+in-memory wire where the real one acts on the process (crash, hang, resume). The summary lists
+each fault with the time until the ring circulated again and the regenerations it cost.
+
+Not yet in virtual time (issue 55, under way): the user programs and the world simulator, chaos
+scenarios, seed campaigns.
 """
 
 from __future__ import annotations
@@ -24,6 +29,9 @@ EXAMPLES = """examples:
   tokenring sim --nodes 10,20,30 --seed 7 --json run.json
   tokenring sim --profile arcnet --duration 10          # the seed robot's per-visit timing
   tokenring sim --bitrate 10M --duration 600 --json -   # the summary on standard output
+  tokenring sim --nodes 10,20,30 --fault crash:20@2 --duration 5   # node 20 dies at 2 s
+  tokenring sim --fault hang:sonar@2 --fault resume:sonar@4 --fault drop:main:0.1@6
+  tokenring sim --fault 'partition:all:10,20|30,40@2' --fault heal@4 --json -
 """
 
 DEFAULT_BITRATE = "2.5M"
@@ -49,6 +57,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--profile", choices=("arcnet",), help="the seed robot's per-visit timing on top of the wire"
     )
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="KIND[:NODE[:VALUE]]@T",
+        help="apply a fault of 'tokenring fault' at T simulated seconds (repeatable); NODE: a name, "
+        "an ID or all (the default); VALUE: delay MS, drop/corrupt/duplicate P, lose COUNT, partition A,B|C,D",
+    )
     p.add_argument("--no-world", action="store_true", help="the ring alone (the only mode so far)")
     p.add_argument(
         "--json", metavar="FILE", help="write the run's summary as JSON to FILE (- for standard output)"
@@ -70,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
         write_atomically,
     )
     from tokenring.sim import run_ring
+    from tokenring.sim.faults import fault_scenario, parse_fault
 
     if args.json and args.json != "-":
         check_output(args.json, (), force=args.force, error=option_error("--json"))
@@ -83,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
         ids = [n.id for n in protocol.default_nodes]
     if len(ids) < 2:
         raise UsageError(f"--nodes {args.nodes}: a ring needs two nodes at least")
+    faults = [parse_fault(text, protocol, ids) for text in args.fault]
     summary = run_ring(
         protocol,
         ids,
@@ -90,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         bitrate=parse_bitrate(args.bitrate),
         profile=args.profile,
+        scenario=fault_scenario(faults, args.duration) if faults else None,
     )
     data = summary.as_dict()
     if args.json == "-":
@@ -104,6 +123,18 @@ def run(args: argparse.Namespace) -> int:
             f"round median {'?' if median is None else f'{median:.3f} ms'}, "
             f"{summary.regenerations} regeneration(s)"
         )
+        for fault in summary.faults:
+            took = fault["recovered_s"]
+            print(
+                f"  {fault['fault']}: "
+                + (
+                    "not circulating again by the end"
+                    if took is None
+                    else f"circulating again after {took * 1000:.3f} ms"
+                )
+                + ("" if took is None else f", {fault['regenerations']} regeneration(s)")
+                + (f" (no answer from {','.join(map(str, fault['skipped']))})" if fault["skipped"] else "")
+            )
         print(f"frames_sha256 {summary.frames_sha256}")
     sys.stdout.flush()
     return 0
