@@ -42,6 +42,8 @@ OPTIONS = [
     ("up --boot-wave {v}", "--boot-wave", "1..255"),
     ("up --web-port {v}", "--web-port", "1..65535"),
     ("up --foxglove-port {v}", "--foxglove-port", "1..65535"),
+    ("up --metrics {v}", "--metrics", "1..65535"),
+    ("watch --metrics {v}", "--metrics", "0..65535"),
     ("up --seed {v}", "--seed", "0..4294967295"),
     ("up --action-speed {v}", "--action-speed", "1..100"),
     ("node --id {v}", "--id", "1..255"),
