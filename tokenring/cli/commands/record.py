@@ -5,16 +5,30 @@ faults, and every extension's topics (the robot's poses, sonar, map) with their 
 or SIGTERM ends the recording and finalises the file; ``FILE`` appears only when it is whole.
 A full disk ends it too, in one line, exit 1: what was written whole before stays ``FILE`` (a
 recording without an index, as ``play`` and any MCAP reader read it), no ``FILE.part`` is left.
+
+``--pcap FILE.pcapng`` also (or, without ``FILE.mcap``, only) writes every frame as an ARCNET
+packet to a pcapng file that Wireshark and tshark open (:mod:`tokenring.observe.pcapng`;
+``tokenring dissector`` decodes the token inside). It reads the frames on a Zenoh session of its
+own: the MCAP recording's feed and its file are the same with it or without it.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import sys
+import time
+from typing import TYPE_CHECKING, Any
 
 from tokenring.cli.args import add_ring_options, seconds, with_examples
 
-HELP = "record a running ring to an MCAP file (Foxglove, PlotJuggler, tokenring play)"
+if TYPE_CHECKING:
+    from collections.abc import Iterator
+
+    from tokenring.observe.pcapng import PcapngWriter
+
+HELP = "record a running ring to an MCAP file (Foxglove, PlotJuggler, play), its frames to pcapng (Wireshark)"
 
 EXAMPLES = """examples:
   tokenring record run.mcap                          # until Ctrl-C
@@ -22,6 +36,8 @@ EXAMPLES = """examples:
   tokenring record poses.mcap --topics '/robot/*'    # the robot's topics only (no raw frames)
   tokenring record run.mcap --ring lab -e tcp/10.0.0.5:7447 --json
   tokenring play run.mcap --listen tcp/127.0.0.1:7447  # and back
+  tokenring record run.mcap --pcap run.pcapng        # and every frame for Wireshark
+  tokenring record --pcap frames.pcapng --duration 60  # the frames for Wireshark only
 """
 
 
@@ -34,7 +50,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description=__doc__,
         **with_examples(EXAMPLES),
     )
-    p.add_argument("file", metavar="FILE.mcap", help="the recording to write")
+    p.add_argument(
+        "file", metavar="FILE.mcap", nargs="?", help="the recording to write (optional with --pcap)"
+    )
+    p.add_argument(
+        "--pcap",
+        metavar="FILE.pcapng",
+        help="also write every frame as an ARCNET packet to a pcapng file (Wireshark, tshark; "
+        "'tokenring dissector' decodes the token inside)",
+    )
     p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds (default: Ctrl-C)")
     add_record_options(p)
     p.add_argument("--quiet", action="store_true", help="no progress line")
@@ -43,16 +67,32 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tokenring.cli.output import print_json
+    from tokenring.cli.output import check_option_output, print_json
     from tokenring.cli.watcher import Watch, record_progress, recording_summary, serve
     from tokenring.contract import keys
+    from tokenring.errors import UsageError
 
     ring = keys.check_ring_name(args.ring)
     progress = sys.stderr.isatty() and not args.quiet
+    if args.file is None and args.pcap is None:
+        raise UsageError("give the recording to write: FILE.mcap, --pcap FILE.pcapng, or both")
+    if args.pcap is not None:
+        if args.pcap.lower().endswith(".pcap"):
+            raise UsageError(f"--pcap {args.pcap}: the capture is written as pcapng: name it .pcapng")
+        if args.file is not None:
+            check_option_output("FILE", args.file, force=args.force)
+            if os.path.abspath(args.file) == os.path.abspath(args.pcap):
+                raise UsageError(f"--pcap {args.pcap}: is FILE too; give the capture another name")
+        check_option_output("--pcap", args.pcap, force=args.force)
+    if args.file is None:
+        return record_pcap_only(args, ring, progress)
 
     def announce(watch: Watch) -> None:
         if not args.quiet:
-            print(f"recording ring {ring!r} to {args.file} (Ctrl-C ends it)", file=sys.stderr, flush=True)
+            also = f" and its frames to {args.pcap}" if args.pcap else ""
+            print(
+                f"recording ring {ring!r} to {args.file}{also} (Ctrl-C ends it)", file=sys.stderr, flush=True
+            )
 
     watch = Watch(
         ring=ring,
@@ -64,8 +104,11 @@ def run(args: argparse.Namespace) -> int:
         on_ready=announce,
         on_tick=record_progress if progress else None,
     )
-    code = serve(args, watch)
+    with pcap_capture(args, ring) as pcap:
+        code = serve(args, watch)
     summary = recording_summary(watch)
+    if pcap is not None:
+        summary["pcap"] = pcap.summary()
     if progress:
         sys.stderr.write("\n")
     if args.json:
@@ -76,6 +119,123 @@ def run(args: argparse.Namespace) -> int:
             f"{summary['messages']} messages on {len(summary['counts'])} channels, {summary['bytes'] / 1e6:.1f} MB"
             + (f"; {watch.dropped} samples dropped (the recorder fell behind)" if watch.dropped else "")
         )
+    if pcap is not None and not args.json and not args.quiet and not pcap.writer.failure:
+        print(pcap.line())
     if not summary["messages"] and not summary["failure"] and not args.quiet:
         print(f"nothing was recorded: is ring {ring!r} running, and is --connect right?", file=sys.stderr)
-    return code
+    return 1 if code == 0 and pcap is not None and pcap.writer.failure else code
+
+
+class PcapCapture:
+    """``--pcap``: every frame into a pcapng file, from a feed of the token's keys alone."""
+
+    def __init__(self, writer: PcapngWriter, feed: Any, verb: str) -> None:
+        self.writer = writer
+        self.feed = feed
+        self.verb = verb
+        self.failure_told = False
+        self.seconds = 0.0
+
+    def on_raw(self, raw: Any) -> None:
+        """The feed's raw sink: the frame into the file; a failure said once, as it happens."""
+        self.writer.on_raw(raw)
+        self.tell_failure()
+
+    def tell_failure(self) -> bool:
+        if self.writer.failure is None:
+            return False
+        if not self.failure_told:
+            self.failure_told = True
+            print(f"tokenring {self.verb}: error: {self.writer.failure}", file=sys.stderr, flush=True)
+        return True
+
+    def summary(self) -> dict[str, Any]:
+        path = self.writer.path
+        return {
+            "file": str(path),
+            "frames": self.writer.frames_kept,
+            "bytes": path.stat().st_size if path.exists() else 0,
+            "failure": self.writer.failure,
+            "dropped": self.feed.dropped,
+        }
+
+    def line(self) -> str:
+        s = self.summary()
+        dropped = f"; {s['dropped']} frames dropped (the capture fell behind)" if s["dropped"] else ""
+        return f"{s['file']}: {s['frames']} frames, {s['bytes'] / 1e6:.1f} MB (pcapng){dropped}"
+
+
+@contextlib.contextmanager
+def pcap_capture(args: argparse.Namespace, ring: str) -> Iterator[PcapCapture | None]:
+    """``--pcap``'s capture while the block runs (None without ``--pcap``): on a Zenoh session of
+    its own, opened first (a refused endpoint leaves no file). It is finished as ``FILE`` when the
+    block ends; a block that fails before a frame came leaves no file."""
+    if args.pcap is None:
+        yield None
+        return
+    from tokenring.cli.args import tap_session
+    from tokenring.cli.watcher import protocol_text
+    from tokenring.contract.protocol import load_protocol
+    from tokenring.observe.feed import Feed
+    from tokenring.observe.pcapng import PcapngWriter, TokenFrames
+
+    protocol = load_protocol(args.protocol)
+    text = protocol_text(args.protocol)
+    with tap_session(args) as session:
+        writer = PcapngWriter(args.pcap, ring=ring, protocol=protocol, protocol_text=text)
+        feed = Feed(session, ring, [TokenFrames()])
+        capture = PcapCapture(writer, feed, getattr(args, "command", None) or "record")
+        feed.add_raw_sink(capture.on_raw)
+        started = time.monotonic()
+        finished = False
+        try:
+            feed.start()
+            yield capture
+            finished = True
+        finally:
+            feed.stop()
+            capture.seconds = time.monotonic() - started
+            if finished or writer.frames:
+                writer.close()
+                capture.tell_failure()
+            else:
+                writer.discard()
+
+
+def record_pcap_only(args: argparse.Namespace, ring: str, progress: bool) -> int:
+    """``record --pcap FILE.pcapng`` without ``FILE.mcap``: the frames only, until Ctrl-C,
+    SIGTERM or ``--duration``; 130 after Ctrl-C, 1 if the capture failed (a full disk)."""
+    import signal
+
+    from tokenring.cli.output import print_json
+    from tokenring.observe.recording import Stopper
+
+    stopper = Stopper()
+    stopper.install()
+    with pcap_capture(args, ring) as pcap:
+        assert pcap is not None
+        if not args.quiet:
+            print(f"capturing ring {ring!r} to {args.pcap} (Ctrl-C ends it)", file=sys.stderr, flush=True)
+        started = time.monotonic()
+        while not stopper.event.wait(0.5):
+            pcap.writer.tick()
+            if pcap.tell_failure():
+                break
+            elapsed = time.monotonic() - started
+            if progress:
+                sys.stderr.write(f"\r{elapsed:6.1f} s  {pcap.writer.frames} frames ")
+                sys.stderr.flush()
+            if args.duration is not None and elapsed >= args.duration:
+                break
+    if progress:
+        sys.stderr.write("\n")
+    summary = pcap.summary()
+    if args.json:
+        print_json({"ring": ring, "seconds": round(pcap.seconds, 3), "pcap": summary})
+    elif not args.quiet and not summary["failure"]:
+        print(pcap.line())
+    if not summary["frames"] and not summary["failure"] and not args.quiet:
+        print(f"no frame came: is ring {ring!r} running, and is --connect right?", file=sys.stderr)
+    if stopper.signal == signal.SIGINT:
+        return 130
+    return 1 if summary["failure"] else 0
