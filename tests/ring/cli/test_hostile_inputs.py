@@ -24,6 +24,8 @@ READERS = [
     ("map", ["score", "{f}", "--world", "office"]),
     ("map-from", ["map", "--from", "{f}", "--out", "{out}"]),
     ("sniff-protocol", ["sniff", "--protocol", "{f}", "-n", "1"]),
+    ("sniff-read", ["sniff", "--read", "{f}"]),
+    ("dissector-protocol", ["dissector", "--protocol", "{f}"]),
 ]
 
 

@@ -37,6 +37,9 @@ WRITERS = [
     ("load-upload", ["load", "-u", "{out}.dxf"], "--upload", "{out}.dxf", False),
     ("record", ["record", "{out}", "--duration", "1"], "FILE", "{out}", False),
     ("sniff-write", ["sniff", "--write", "{out}", "-n", "1"], "--write", "{out}", False),
+    ("sniff-write-pcapng", ["sniff", "--write", "{out}.pcapng", "-n", "1"], "--write", "{out}.pcapng", False),
+    ("record-pcap", ["record", "--pcap", "{out}.pcapng", "--duration", "1"], "--pcap", "{out}.pcapng", False),
+    ("record-mcap-pcap", ["record", "{dir}/new.mcap", "--pcap", "{out}.pcapng", "--duration", "1"], "--pcap", "{out}.pcapng", False),
     ("watch-record", ["watch", "--record", "{out}", "--duration", "1"], "--record", "{out}", False),
 ]  # fmt: skip
 FORCED = [w for w in WRITERS if w[4]]

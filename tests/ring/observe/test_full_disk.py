@@ -82,6 +82,31 @@ def test_sniff_write_onto_a_full_disk_stops_with_one_line(procs, ring_name, endp
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("verb", ["sniff", "record"])
+def test_a_pcapng_capture_onto_a_full_disk_stops_with_one_line(verb, procs, ring_name, endpoint, tmp_path):
+    """``sniff --write FILE.pcapng`` and ``record --pcap``: the capture keeps every block that
+    fitted, as ``FILE`` (tshark and ``sniff --read`` read it), and says so in one line, exit 1."""
+    from tokenring.observe.pcapng import open_pcapng
+
+    with two_nodes(procs, ring_name, endpoint), small_disk(tmp_path / "disk", DISK) as disk:
+        target = disk / "frames.pcapng"
+        option = "--write" if verb == "sniff" else "--pcap"
+        result = subprocess.run(  # the decoded frames on stdout are not what is judged
+            [*TOKENRING, verb, option, str(target), "--ring", ring_name, "-e", endpoint, "--duration", "120",
+             *(["--quiet"] if verb == "record" else [])],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, timeout=180,
+        )  # fmt: skip
+        assert result.returncode == 1, (result.returncode, result.stderr)
+        one_error_line(
+            result.stderr, str(target), "cannot write the capture: No space left on device", "frames"
+        )
+        assert listing(disk) == ["frames.pcapng"]
+        capture = open_pcapng(target)
+        assert capture.frames > 50 and len(list(capture)) == capture.frames
+        assert target.stat().st_size > DISK - 8 * 4096  # what fitted was kept, nearly the whole disk
+
+
+@pytest.mark.slow
 def test_up_names_a_recording_the_disk_ended_and_exits_1(procs, ring_name, endpoint, tmp_path):
     with small_disk(tmp_path / "disk", DISK) as disk:
         target = disk / "run.mcap"
