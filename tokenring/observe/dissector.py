@@ -228,7 +228,7 @@ def lua_dissector(protocol: Protocol, *, source: str, protocol_text: str | None 
 --           ~/.local/lib/wireshark/plugins/; Windows: %APPDATA%\\Wireshark\\plugins\\;
 --           `tshark -G folders` names it), and every capture opens decoded.
 -- Filters:  tokenring.sid == 10, tokenring.syscmd_code_name == "ARCNET_SCAN",
---           tokenring.motor.command.command == "STOP", !tokenring.ok"""
+--           tokenring.motor.command.command == "STOP", tokenring.ok == 0"""
     return head + "\n\n" + _Generator(protocol).generate() + "\n" + _ENGINE
 
 

@@ -24,10 +24,10 @@ dissector ``tokenring dissector`` generates registers itself there
 
 Every Zenoh key frames came on gets an interface of its own, named by the key
 (``tokenring/<ring>/token/<DID>``, described as the frames to that node): the receiver's ID as the
-key said it, even for a frame whose DID byte a corrupted bit changed, and Wireshark's capture file
-properties count the frames each node received. Time stamps are the wall clock (ns since the epoch)
-the tap saw each frame at, kept to the nanosecond (the interfaces' ``if_tsresol`` is 9). The
-section header names the tool, the ring and protocol.yaml's SHA-256.
+key said it, even for a frame whose DID byte a corrupted bit changed, and a display filter on
+``frame.interface_name`` picks the frames one node received. Time stamps are the wall clock (ns
+since the epoch) the tap saw each frame at, kept to the nanosecond (the interfaces'
+``if_tsresol`` is 9). The section header names the tool, the ring and protocol.yaml's SHA-256.
 
 The file is written with dpkt's pcapng blocks (dpkt reads the wire tap's pcap already; a frame's
 block as dpkt's own fast path packs it, 6 us a frame) as ``FILE.part``, renamed to ``FILE`` when
