@@ -29,7 +29,7 @@ from typing import Any
 
 from tokenring.errors import TokenRingError
 
-#: the simulated wall clock starts here (``time()``): 2001-06-01, the Hamburg robot's year
+#: the simulated wall clock's start (``time()``): fixed, so stamps and logs repeat run after run
 EPOCH_S = 991_353_600.0
 
 
@@ -48,7 +48,7 @@ class _Task:
         self.index = index
         self.name = name
         # a raw lock, held while the task may not run, released once to hand it the baton: a C
-        # call where a Semaphore's is Python under a Condition (23 µs a switch instead of 28)
+        # call where a Semaphore's is Python under a Condition (the hand-over is the simulation's cost)
         self.gate = threading.Lock()
         self.gate.acquire()
         self.waiting_on: _WaitList | None = None
