@@ -54,7 +54,7 @@ from tokenring.contract import keys
 from tokenring.contract.protocol import Protocol
 from tokenring.errors import UsageError
 from tokenring.observe.feed import FeedSource, RawSample
-from tokenring.observe.recording import _WholeRecords, part_path, tokenring_version
+from tokenring.observe.recording import _WholeRecords, drop_part, part_path, publish_part, tokenring_version
 
 #: libpcap's link type ``LINKTYPE_ARCNET_LINUX`` / ``DLT_ARCNET_LINUX``
 LINKTYPE_ARCNET_LINUX = 129
@@ -303,13 +303,11 @@ class PcapngWriter:
             if self._closed:  # the last write failed
                 return self.path
             try:
-                os.fsync(self._file.fileno())  # a file system may report a full disk only here
+                publish_part(self._file, self.part, self.path)
             except OSError as exc:
                 self._fail(exc)
                 return self.path
             self._closed = True
-            self._file.close()
-            os.replace(self.part, self.path)
         return self.path
 
     def discard(self) -> None:
@@ -318,9 +316,7 @@ class PcapngWriter:
             if self._closed:
                 return
             self._closed = True
-            self._file.close()
-            with contextlib.suppress(FileNotFoundError):
-                self.part.unlink()
+            drop_part(self._file, self.part)
 
 
 # --------------------------------------------------------------------------------------------

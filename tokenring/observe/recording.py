@@ -74,6 +74,21 @@ def part_path(path: str | Path) -> Path:
     return target.with_name(target.name + ".part")
 
 
+def publish_part(file: Any, part: Path, path: Path) -> None:
+    """A complete ``part`` becomes ``path``: synced first (a file system may report a full disk
+    only there; its OSError is the caller's), closed, renamed into place."""
+    os.fsync(file.fileno())
+    file.close()
+    os.replace(part, path)
+
+
+def drop_part(file: Any, part: Path) -> None:
+    """An abandoned ``part`` is closed and removed; the file it was to replace stays as it was."""
+    file.close()
+    with contextlib.suppress(FileNotFoundError):
+        part.unlink()
+
+
 # --------------------------------------------------------------------------------------------
 # selecting topics and keys
 
@@ -374,13 +389,11 @@ class McapRecorder:
                 return self.path
             try:
                 self._writer.finish()
-                os.fsync(self._file.fileno())  # a file system may report a full disk only here
+                publish_part(self._file, self.part, self.path)
             except OSError as exc:
                 self._fail(exc)
                 return self.path
             self._closed = True
-            self._file.close()
-            os.replace(self.part, self.path)
         return self.path
 
     def discard(self) -> None:
@@ -389,9 +402,7 @@ class McapRecorder:
             if self._closed:
                 return
             self._closed = True
-            self._file.close()
-            with contextlib.suppress(FileNotFoundError):
-                self.part.unlink()
+            drop_part(self._file, self.part)
 
     def __enter__(self) -> McapRecorder:
         return self
