@@ -44,6 +44,8 @@ MAX_TURN_DEG_S = 30.0
 #: one SET_WHEEL_SPEEDS of the held speed lasts this long; renewed before it runs out
 HOLD_MS = 60_000
 RENEW_AFTER_S = 45.0
+#: how long d and e wait for the motor's state to show them (a loaded ring takes a few rounds)
+CONFIRM_S = 5.0
 #: what ``k`` and ``s`` queue (action-file lines, table B.4)
 CIRCLE_RADIUS_MM, CIRCLE_SPEED_MM_S = 500, 50
 SQUARE_SIDE_MM = 1000
@@ -173,9 +175,13 @@ class Operator:
             self.speed_mm_s = self.turn_deg_s = 0.0
             self.held_since = None
             self._motor("MOTORS_OFF")
+            if not self._motor_state_is_off(True):
+                return Outcome(key, "motors off sent; the motor has not confirmed it yet", ok=False)
             return Outcome(key, "motors off: moves are refused until e")
         if key == "e":
             self._motor("MOTORS_ON")
+            if not self._motor_state_is_off(False):
+                return Outcome(key, "motors on sent; the motor has not confirmed it yet", ok=False)
             return Outcome(key, "motors on")
         if key in ("up", "down", "left", "right"):
             return self._steer(key)
@@ -249,6 +255,17 @@ class Operator:
 
         off = default_protocol().enums["motor_state"].get("OFF")
         return off is not None and self.link.read("motor.data").get("state") == off
+
+    def _motor_state_is_off(self, off: bool) -> bool:
+        """Wait until main's copy of motor.data shows the motors off (or on): the command was
+        acknowledged into the motor's inbox, its state follows a visit or two later, and what
+        the screen says next (a move refused or not) must not race it."""
+        deadline = time.monotonic() + CONFIRM_S
+        while self._motors_off() != off:
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.05)
+        return True
 
     def _motor(self, name: str, **args: Any) -> None:
         reply = self.link.command("motor", name, **args)

@@ -196,7 +196,12 @@ def test_a_foxglove_client_sees_poses_the_map_and_round_trips_of_an_exploring_ri
             assert min(ys_all) - 0.75 <= point["y"] <= max(ys_all) + 0.75, point
 
         trips = client.on("/ring/roundtrip")
-        assert all(t["ms"] > 0 and t["node"] == 10 for t in trips), trips[:5]
+        assert all(t["ms"] > 0 for t in trips), trips[:5]
+        # measured where the ring wraps: its lowest member, main once it has joined (while the
+        # ring forms, before main's boot, another node can be the lowest for a few rounds)
+        ring_ids = {n["id"] for n in launcher_status(session, ring_name)["nodes"]}
+        assert {t["node"] for t in trips} <= ring_ids, trips
+        assert trips[-1]["node"] == 10, trips[-5:]
         # the odometry arrived too (advertised and subscribed: a second robot topic of the same schema)
         assert client.on("/robot/pose/odometry")
 

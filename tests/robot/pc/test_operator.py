@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 
 from modules.pc.operator import KEYS, Operator, circle_text, key_name, square_text, track_speeds
-from tokenring import TransportError
+from tokenring import TransportError, default_protocol
 
 
 class Link:
@@ -26,6 +26,8 @@ class Link:
         if self.fail:
             raise self.fail
         self.calls.append(("command", target, name, args))
+        if name in ("MOTORS_OFF", "MOTORS_ON"):  # the motor's state follows, as on the ring
+            self.motor_state = default_protocol().enums["motor_state"]["OFF"] if name == "MOTORS_OFF" else 0
         return {"transmitted": True, "acknowledged": True}
 
     def request(self, verb: str, **payload: Any) -> dict[str, Any]:
@@ -171,3 +173,14 @@ def test_an_unanswered_link_is_a_line_on_the_screen_not_a_traceback() -> None:
     link.fail = TransportError("main did not answer on the PC link of ring 'r'")
     outcome = Operator(link).press("e")
     assert not outcome.ok and outcome.text == "e: main did not answer on the PC link of ring 'r'"
+
+
+def test_d_says_so_when_the_motor_never_shows_its_motors_off(monkeypatch: pytest.MonkeyPatch) -> None:
+    class DeafMotor(Link):
+        def command(self, target: str, name: str, **args: Any) -> dict[str, Any]:
+            self.calls.append(("command", target, name, args))
+            return {"transmitted": True, "acknowledged": True}  # taken, its state never follows
+
+    monkeypatch.setattr("modules.pc.operator.CONFIRM_S", 0.2)
+    outcome = Operator(DeafMotor()).press("d")
+    assert not outcome.ok and "not confirmed" in outcome.text
