@@ -1,7 +1,8 @@
-"""The simulated runtime: the same threaded code, one thread at a time, on a virtual clock.
+"""The simulated runtime: the same threaded code, one task at a time, on a virtual clock.
 
-Every task is a real thread, but only the one holding the *baton* runs; the others wait on a
-private semaphore. A task gives the baton up only inside this runtime's primitives (sleep, an
+Every task is a greenlet (a stack of its own in the calling thread, switched to directly), or with
+``tasks="threads"`` a real thread parked on a private lock; either way only the task holding the
+*baton* runs. A task gives the baton up only inside this runtime's primitives (sleep, an
 event's, lock's, condition's or queue's wait): the scheduler then hands it to a ready task, chosen
 with the seeded random generator, or — when every task waits — moves the virtual clock on to the
 earliest timer and wakes what it frees (trio's autojump clock, Go's ``testing/synctest``). The same
@@ -13,13 +14,19 @@ Rules for code that runs here: every wait goes through the runtime (a ``time.sle
 ``threading.Event`` would stall the whole simulation on the real clock), and no task holds a plain
 lock across a runtime wait. A wait that can never end — every task waiting, no timer left — is a
 :class:`Deadlock`, raised in the task that called :meth:`SimRuntime.run`. :meth:`SimRuntime.close`
-ends the tasks still parked, one at a time, so that no thread outlives the simulation.
+ends the tasks still parked, one at a time, so that no task (and no thread) outlives the
+simulation. Both kinds of task make the same choices: a seed gives the same run with either.
+
+Greenlets are the default (a hand-over is a stack switch in one thread, where two OS threads
+passing a lock cost two context switches and the interpreter lock's hand-off); the threads are
+kept for where greenlet is missing, and ``TOKENRING_SIM_TASKS=threads`` asks for them.
 """
 
 from __future__ import annotations
 
 import heapq
 import itertools
+import os
 import queue as _queue
 import random
 import threading
@@ -28,6 +35,27 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from tokenring.errors import TokenRingError
+
+try:
+    from greenlet import GreenletExit, getcurrent, greenlet
+except ImportError:  # pragma: no cover - a platform without its wheel: the tasks are threads
+    greenlet = None
+
+#: the kinds of task a :class:`SimRuntime` can run its tasks as
+TASK_KINDS = ("greenlet", "threads")
+
+if greenlet is not None:
+    from greenlet import error as _greenlet_error
+
+    _Collected: type[BaseException] = GreenletExit
+else:  # pragma: no cover
+
+    class _greenlet_error(Exception):  # type: ignore[no-redef]
+        """Never raised: there are no greenlets."""
+
+    class _Collected(BaseException):  # type: ignore[no-redef]
+        """Never raised: there are no greenlets."""
+
 
 #: the simulated wall clock's start (``time()``): fixed, so stamps and logs repeat run after run
 EPOCH_S = 991_353_600.0
@@ -42,15 +70,15 @@ class _Shutdown(BaseException):
 
 
 class _Task:
-    """One simulated thread: its gate (the baton is handed over by releasing it) and its wait."""
+    """One simulated thread: what carries it (a greenlet, or a thread and its gate) and its wait."""
 
     def __init__(self, index: int, name: str) -> None:
         self.index = index
         self.name = name
-        # a raw lock, held while the task may not run, released once to hand it the baton: a C
-        # call where a Semaphore's is Python under a Condition (the hand-over is the simulation's cost)
-        self.gate = threading.Lock()
-        self.gate.acquire()
+        # threads: a raw lock, held while the task may not run, released once to hand it the
+        # baton (a C call where a Semaphore's is Python under a Condition)
+        self.gate: Any = None
+        self.glet: Any = None  # greenlets: the task's own
         self.waiting_on: _WaitList | None = None
         self.wait_id = 0  # which wait a timer belongs to (a stale timer wakes nobody)
         self.timed_out = False
@@ -78,9 +106,20 @@ class SimRuntime:
     name = "sim"
     simulated = True
 
-    def __init__(self, seed: int = 0, *, jitter: bool = True) -> None:
+    def __init__(self, seed: int = 0, *, jitter: bool = True, tasks: str | None = None) -> None:
+        if tasks is None:
+            tasks = os.environ.get("TOKENRING_SIM_TASKS") or (
+                "greenlet" if greenlet is not None else "threads"
+            )
+        if tasks not in TASK_KINDS:
+            raise ValueError(f"tasks must be one of {', '.join(TASK_KINDS)}, not {tasks!r}")
+        if tasks == "greenlet" and greenlet is None:
+            raise RuntimeError("tasks='greenlet' needs the greenlet package")
         self.seed = seed
         self.jitter = jitter
+        #: what carries each task: "greenlet" (one thread, stacks switched) or "threads"
+        self.tasks = tasks
+        self._greenlets = tasks == "greenlet"
         self.schedule_rng = random.Random(seed)  # which ready task runs next
         self.now = 0.0
         self.switches = 0
@@ -160,30 +199,44 @@ class SimRuntime:
         task.finished = SimEvent(self)
         self._all.append(task)
         handle = task.handle = SimThread(self, task)
-
-        def body() -> None:
-            task.ident = threading.get_ident()
-            self._tasks[task.ident] = task
+        if self._greenlets:
+            # its parent is where its body returns to: the task the baton goes to then (_exit)
+            main = self._main
+            task.glet = greenlet(lambda *_: self._body(task, target), main.glet if main is not None else None)
+        else:
+            task.gate = threading.Lock()
             task.gate.acquire()
-            try:
-                if self._closing:
-                    return
-                target()
-            except _Shutdown:
-                return
-            except BaseException as exc:  # a task's failure is the run's, reported by run()
-                task.error = exc
-                self.failures.append((task.name, exc))
-            finally:
-                task.done = True
-            assert task.finished is not None
-            task.finished.set()
-            self._exit(task)
 
-        thread = task.thread = threading.Thread(target=body, name=f"sim-{name}", daemon=True)
-        thread.start()
+            def carry() -> None:
+                task.ident = threading.get_ident()
+                self._tasks[task.ident] = task
+                task.gate.acquire()
+                self._body(task, target)
+
+            thread = task.thread = threading.Thread(target=carry, name=f"sim-{name}", daemon=True)
+            thread.start()
         self._ready.append(task)
         return handle
+
+    def _body(self, task: _Task, target: Callable[[], Any]) -> None:
+        """A task's life: ``target``, its failure recorded, then the baton handed on for good."""
+        try:
+            if self._closing:
+                return
+            target()
+        except _Shutdown:
+            return
+        except _Collected:  # its greenlet was collected parked (a runtime never closed)
+            self._closing = True
+            return
+        except BaseException as exc:  # a task's failure is the run's, reported by run()
+            task.error = exc
+            self.failures.append((task.name, exc))
+        finally:
+            task.done = True
+        assert task.finished is not None
+        task.finished.set()
+        self._exit(task)
 
     # -- running -------------------------------------------------------------------------------------
     def run(self, main: Callable[[], Any]) -> Any:
@@ -195,6 +248,14 @@ class SimRuntime:
         task.ident = threading.get_ident()
         task.finished = SimEvent(self)
         task.handle = SimThread(self, task)
+        if self._greenlets:
+            task.glet = getcurrent()
+            for other in self._all:  # spawned before run(): their bodies return here too
+                if not other.glet:
+                    other.glet.parent = task.glet
+        else:
+            task.gate = threading.Lock()
+            task.gate.acquire()
         self._all.append(task)
         self._tasks[task.ident] = task
         self._main = self._current = task
@@ -209,13 +270,32 @@ class SimRuntime:
 
     def close(self, timeout: float = 5.0) -> list[str]:
         """End every parked task, one at a time: each unwinds from the wait it is parked in
-        (its ``finally`` blocks run, a further wait ends it at once) and its thread ends. The
-        runtime takes no more work. Returns the names of tasks whose thread did not end within
-        ``timeout`` real seconds (blocked outside the runtime); safe to call twice."""
+        (its ``finally`` blocks run, a further wait ends it at once) and its greenlet or thread
+        ends. The runtime takes no more work. Returns the names of tasks that did not end (a
+        thread blocked outside the runtime for ``timeout`` real seconds; a greenlet of another
+        thread than the caller's); safe to call twice."""
         self._closing = True
         stuck = []
         for task in self._all:
-            if task is self._main or task.done or task.thread is None:
+            if task is self._main or task.done:
+                continue
+            if self._greenlets:
+                glet = task.glet
+                if glet is None or glet.dead:
+                    continue
+                if not glet:  # never started: nothing to unwind
+                    task.done = True
+                    continue
+                self._current = task
+                try:
+                    glet.parent = getcurrent()  # back here once it has unwound
+                    glet.switch()
+                except (ValueError, _greenlet_error):  # another thread's greenlet
+                    pass
+                if not glet.dead:
+                    stuck.append(task.name)
+                continue
+            if task.thread is None:
                 continue
             self._current = task
             task.gate.release()
@@ -231,28 +311,49 @@ class SimRuntime:
 
     # -- the scheduler -------------------------------------------------------------------------------
     def _me(self) -> _Task:
-        task = self._tasks.get(threading.get_ident())
-        if task is None or (task is not self._current and not self._closing):
-            raise RuntimeError(
-                f"{threading.current_thread().name} is not the running simulated task "
-                "(a thread started without the runtime, or a wait outside it)"
-            )
-        return task
+        if self._greenlets:
+            task = self._current
+            if task is not None and task.glet is getcurrent():
+                return task
+            mine = getcurrent()
+            task = next((t for t in self._all if t.glet is mine), None)
+            if task is not None and self._closing:
+                return task
+        else:
+            task = self._tasks.get(threading.get_ident())
+            if task is not None and (task is self._current or self._closing):
+                return task
+        raise RuntimeError(
+            f"{threading.current_thread().name} is not the running simulated task "
+            "(a thread started without the runtime, or a wait outside it)"
+        )
 
     def _wait(self, task: _Task, waits: _WaitList | None, timeout: float | None) -> bool:
         """Park ``task`` on ``waits`` (None: a plain sleep) until woken or ``timeout`` passes;
         True if woken, False on the timeout."""
         if self._closing and task is not self._main:
             raise _Shutdown
+        if timeout is not None:
+            deadline = self.now + timeout if timeout > 0.0 else self.now
+            if not self._ready:
+                # nothing is ready: the earliest live timer runs next, and if that is this wait's
+                # own, handing the baton round would come straight back - the clock moves on here
+                timers = self._timers
+                while timers:
+                    _, _, other, wait_id = timers[0]
+                    if other.wait_id == wait_id and not other.done:
+                        break
+                    heapq.heappop(timers)  # stale: _pick would drop it first as well
+                if not timers or timers[0][0] > deadline:
+                    self.now = deadline
+                    return False
         task.wait_id += 1
         task.timed_out = False
         task.waiting_on = waits
         if waits is not None:
             waits.tasks.append(task)
         if timeout is not None:
-            heapq.heappush(
-                self._timers, (self.now + max(0.0, timeout), next(self._order), task, task.wait_id)
-            )
+            heapq.heappush(self._timers, (deadline, next(self._order), task, task.wait_id))
         self._park(task)
         return not task.timed_out
 
@@ -290,8 +391,17 @@ class SimRuntime:
         """Hand the baton on and wait for it back."""
         if self._closing and task is not self._main:
             raise _Shutdown  # unwinding: nothing runs any more
-        self._hand_on(task)
-        task.gate.acquire()
+        nxt = self._next()
+        if nxt is not task:
+            if self._greenlets:
+                try:
+                    nxt.glet.switch()
+                except _Collected:
+                    self._closing = True  # collected while parked: no wait may switch again
+                    raise
+            else:
+                nxt.gate.release()
+                task.gate.acquire()
         if self._closing and task is not self._main:
             raise _Shutdown
         if self._deadlocked and task is self._main:
@@ -301,9 +411,11 @@ class SimRuntime:
                 + ", ".join(t.name for t in self._all if not t.done and t.waiting_on is not None)
             )
 
-    def _hand_on(self, task: _Task) -> None:
+    def _next(self) -> _Task:
+        """Who gets the baton now (the task that called run() if nothing will ever run again:
+        it hears of the deadlock); it counts as a switch even when it is the caller again."""
         nxt = self._pick()
-        if nxt is None:  # nothing will ever run again: the task that called run() hears of it
+        if nxt is None:
             self._deadlocked = True
             nxt = self._main
             assert nxt is not None
@@ -313,12 +425,17 @@ class SimRuntime:
             nxt.wait_id += 1
         self.switches += 1
         self._current = nxt
-        nxt.gate.release()
+        return nxt
 
     def _exit(self, task: _Task) -> None:
         """A finished task hands the baton on for good."""
-        if not self._closing:
-            self._hand_on(task)
+        if self._closing:
+            return
+        nxt = self._next()
+        if self._greenlets:
+            task.glet.parent = nxt.glet  # its body returns into the next task
+        else:
+            nxt.gate.release()
 
 
 class SimThread:
@@ -351,7 +468,8 @@ class SimEvent:
 
     def set(self) -> None:
         self._flag = True
-        self._sim._wake(self._waits)
+        if self._waits.tasks:
+            self._sim._wake(self._waits)
 
     def clear(self) -> None:
         self._flag = False
@@ -392,16 +510,20 @@ class SimLock:
         if not self._held:
             raise RuntimeError("release unlocked lock")
         self._held = False
-        self._sim._wake(self._waits, 1)
+        if self._waits.tasks:
+            self._sim._wake(self._waits, 1)
 
     def locked(self) -> bool:
         return self._held
 
-    def __enter__(self) -> bool:
-        return self.acquire()
+    __enter__ = acquire
 
     def __exit__(self, *exc: object) -> None:
-        self.release()
+        if not self._held:
+            raise RuntimeError("release unlocked lock")
+        self._held = False
+        if self._waits.tasks:
+            self._sim._wake(self._waits, 1)
 
 
 class SimRLock:
@@ -416,10 +538,14 @@ class SimRLock:
     def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
         sim = self._sim
         me = sim._me()
-        if self._owner is me:
+        owner = self._owner
+        if owner is None:
+            self._owner, self._count = me, 1
+            return True
+        if owner is me:
             self._count += 1
             return True
-        if self._owner is not None:
+        if owner is not None:
             if not blocking:
                 return False
             deadline = None if timeout < 0 else sim.now + timeout
@@ -437,10 +563,10 @@ class SimRLock:
         self._count -= 1
         if not self._count:
             self._owner = None
-            self._sim._wake(self._waits, 1)
+            if self._waits.tasks:
+                self._sim._wake(self._waits, 1)
 
-    def __enter__(self) -> bool:
-        return self.acquire()
+    __enter__ = acquire
 
     def __exit__(self, *exc: object) -> None:
         self.release()
@@ -530,6 +656,11 @@ class SimQueue:
         return 0 < self.maxsize <= len(self._items)
 
     def put(self, item: Any, block: bool = True, timeout: float | None = None) -> None:
+        if not 0 < self.maxsize <= len(self._items):
+            self._items.append(item)
+            if self._getters.tasks:
+                self._sim._wake(self._getters, 1)
+            return
         sim = self._sim
         deadline = None if timeout is None else sim.now + timeout
         while self.full():
@@ -544,6 +675,11 @@ class SimQueue:
         self.put(item, block=False)
 
     def get(self, block: bool = True, timeout: float | None = None) -> Any:
+        if self._items:
+            item = self._items.popleft()
+            if self._putters.tasks:
+                self._sim._wake(self._putters, 1)
+            return item
         sim = self._sim
         deadline = None if timeout is None else sim.now + timeout
         while not self._items:

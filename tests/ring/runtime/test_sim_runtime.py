@@ -10,7 +10,7 @@ import time
 import pytest
 
 from tokenring.runtime import RealRuntime, current, using
-from tokenring.runtime.sim import Deadlock, SimRuntime
+from tokenring.runtime.sim import TASK_KINDS, Deadlock, SimRuntime
 
 
 def ping_pong(sim: SimRuntime, rounds: int = 50) -> list[tuple[float, str]]:
@@ -281,8 +281,9 @@ def test_a_simple_queue_current_thread_and_rng_have_the_real_runtimes_shape() ->
     assert seen[3] == again.rng().random() != SimRuntime(seed=10).rng().random()
 
 
-def test_closing_ends_every_parked_task_and_leaves_no_thread() -> None:
-    sim = SimRuntime(seed=1)
+@pytest.mark.parametrize("tasks", TASK_KINDS)
+def test_closing_ends_every_parked_task_and_leaves_no_thread(tasks: str) -> None:
+    sim = SimRuntime(seed=1, tasks=tasks)
     unwound = []
 
     def parked(name: str) -> None:
@@ -304,7 +305,34 @@ def test_closing_ends_every_parked_task_and_leaves_no_thread() -> None:
     before = set(threading.enumerate())
     with sim:
         sim.run(main)
-        assert len(set(threading.enumerate()) - before) == 4  # main's own thread is not one
+        # a thread per task still parked (main's own is not one); greenlets are no threads
+        assert len(set(threading.enumerate()) - before) == (4 if tasks == "threads" else 0)
     assert sorted(unwound) == ["a", "b", "c"]
     assert not set(threading.enumerate()) - before
     assert sim.close() == []
+
+
+def test_greenlets_and_threads_make_the_same_choices() -> None:
+    traces = {kind: ping_pong(SimRuntime(seed=11, tasks=kind)) for kind in TASK_KINDS}
+    assert traces["greenlet"] == traces["threads"]
+    for kind in TASK_KINDS:
+        sim = SimRuntime(tasks=kind)
+        with pytest.raises(Deadlock):
+            sim.run(lambda sim=sim: sim.event().wait())
+        assert sim.close() == []
+
+
+def test_a_wait_only_its_own_timer_can_end_moves_the_clock_without_a_switch() -> None:
+    sim = SimRuntime(seed=1)
+
+    def main() -> None:
+        sim.sleep(1.0)  # nothing else runs before: the clock moves on, the baton stays
+        assert sim.event().wait(0.5) is False
+        assert sim.monotonic() == 1.5
+        assert sim.switches == 0
+        sim.spawn(lambda: sim.sleep(0.1), "other")
+        sim.sleep(1.0)  # the other task is ready: it runs first
+        assert sim.monotonic() == 2.5
+
+    sim.run(main)
+    assert sim.switches > 0
