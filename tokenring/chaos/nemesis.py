@@ -125,15 +125,18 @@ def generate(
 
 
 def scenario_document(
-    ops: Sequence[Operation], *, settle: float = 3.0, comment: str = ""
+    ops: Sequence[Operation], *, settle: float = 3.0, comment: str = "", sim: dict[str, Any] | None = None
 ) -> str:  # fmt: skip
-    """The operations as a scenario file for ``tokenring chaos`` (every node, respawn, probe)."""
+    """The operations as a scenario file for ``tokenring chaos`` (every node, respawn, probe);
+    ``sim``: how ``tokenring sim`` ran it (seed, bitrate), for its ``--replay``."""
     faults = sorted((step for op in ops for step in op.steps), key=lambda s: float(s["at"]))
-    doc = {
+    doc: dict[str, Any] = {
         "ring": {"nodes": "all", "bitrate": "max", "ack": "adaptive", "respawn": True, "workload": "probe"},
         "settle": settle,
         "faults": faults,
     }
+    if sim:
+        doc["sim"] = sim
     header = "".join(f"# {line}\n" for line in comment.splitlines())
     return header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=110)
 

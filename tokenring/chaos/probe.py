@@ -8,7 +8,7 @@ sender's run tag (random per program incarnation) and its number, so (sender, ru
 across crashes and respawns.
 
 With ``$TOKENRING_PROBE_LEDGER`` set to a directory, every incarnation appends a JSON-lines
-ledger there, ``ledger-<node>-<pid>.jsonl``, flushed line by line so that it survives a crash:
+ledger there, ``ledger-<node>-<pid>-<run>.jsonl``, flushed line by line so that it survives a crash:
 
 - ``{"ev": "start", "node", "run", "pid", "t"}``
 - ``{"ev": "send", "to", "run", "n", "t"}``, then ``{"ev": "outcome", "to", "n", "result", "t"}``
@@ -20,14 +20,17 @@ ledger there, ``ledger-<node>-<pid>.jsonl``, flushed line by line so that it sur
 The judge compares the ledgers after the ring stopped: lost = acknowledged but taken by no
 incarnation of the target; duplicated = taken twice. Without the variable the program keeps
 the same facts in memory for ``report()`` (the last 4000 of each).
+
+Its clock, threads and random draws are the runtime's (:mod:`tokenring.runtime`), so that the
+same program runs in a simulation (``tokenring sim --chaos``), where a node's crash is
+:meth:`Program.crash`: the ledger ends there, as a killed process's does.
 """
 
 import json
 import os
 import random
-import threading
-import time
 
+from tokenring import runtime
 from tokenring.node.program import UserProgram
 
 HALF = 1 << 15  # a VECTOR argument is an i16: a 30-bit value travels as two 15-bit halves
@@ -45,7 +48,8 @@ class Program(UserProgram):
     def setup(self):
         self.os.set_own_input_id()
         self.others = [n for n in self.os.protocol.nodes if n != self.os.name]
-        self.run_tag = random.randrange(1, 1 << 30)
+        self._rt = runtime.current()
+        self.run_tag = self._rt.rng().randrange(1, 1 << 30)
         self.random = random.Random(self.run_tag)
         self.target = None
         self.burst = 0
@@ -54,18 +58,19 @@ class Program(UserProgram):
         self.taken = {}
         self.duplicates = 0
         self.quiesced = False
-        self._lock = threading.Lock()
+        self._lock = self._rt.lock()
         self._file = None
         self._dir = os.environ.get("TOKENRING_PROBE_LEDGER")
         if self._dir:
-            path = os.path.join(self._dir, f"ledger-{self.os.node_id}-{os.getpid()}.jsonl")
+            name = f"ledger-{self.os.node_id}-{os.getpid()}-{self.run_tag}.jsonl"
+            path = os.path.join(self._dir, name)
             self._file = open(path, "a", buffering=1)  # noqa: SIM115 - open for the program's life
         self._log(ev="start", node=self.os.node_id, run=self.run_tag, pid=os.getpid())
 
     def _log(self, **entry):
         if self._file is None:
             return
-        entry["t"] = time.time()
+        entry["t"] = self._rt.time()
         line = json.dumps(entry, separators=(",", ":")) + "\n"
         with self._lock:
             if not self._file.closed:
@@ -75,7 +80,7 @@ class Program(UserProgram):
         return self._dir is not None and os.path.exists(os.path.join(self._dir, "quiesce"))
 
     def run(self):
-        threading.Thread(target=self._receive, name="probe-receive", daemon=True).start()
+        self._rt.spawn(self._receive, "probe-receive")
         while self.running:
             if not self.others or self.quiesced:
                 self.sleep(0.05)
@@ -122,6 +127,12 @@ class Program(UserProgram):
             if n in seen:
                 self.duplicates += 1
             seen.add(n)
+
+    def crash(self):
+        """The process is killed (a simulated crash): nothing more reaches the ledger."""
+        with self._lock:
+            if self._file is not None:
+                self._file.close()
 
     def teardown(self):
         self._log(ev="stop")

@@ -87,6 +87,9 @@ class Scenario:
     workload: str = "probe"
     settle: float = 2.0
     faults: list[FaultStep] = field(default_factory=list)
+    #: how ``tokenring sim`` ran it (``seed``, ``bitrate``, ``profile``): a replay file's; real
+    #: processes have no seed to follow and ignore it
+    sim: dict[str, Any] = field(default_factory=dict)
 
     @property
     def duration(self) -> float:
@@ -105,9 +108,9 @@ def load_scenario(path: str | Path, protocol: Protocol | None = None) -> Scenari
 
     if not isinstance(data, dict):
         raise UsageError(f"{source}: a scenario is a mapping with 'faults' (and optionally 'ring', 'settle')")
-    unknown = set(data) - {"ring", "settle", "faults"}
+    unknown = set(data) - {"ring", "settle", "faults", "sim"}
     if unknown:
-        raise fail(sorted(unknown)[0], "unknown key (allowed: ring, settle, faults)")
+        raise fail(sorted(unknown)[0], "unknown key (allowed: ring, settle, faults, sim)")
     ring = data.get("ring") or {}
     if not isinstance(ring, dict):
         raise fail("ring", "expected a mapping")
@@ -152,6 +155,7 @@ def load_scenario(path: str | Path, protocol: Protocol | None = None) -> Scenari
     if not isinstance(settle, int | float) or isinstance(settle, bool) or not 0.2 <= settle <= 600:
         raise fail("settle", f"{settle!r} must be a number of seconds 0.2..600")
     scenario.settle = float(settle)
+    scenario.sim = _sim_section(data.get("sim"), fail)
     faults = data.get("faults")
     if not isinstance(faults, list) or not faults:
         raise fail("faults", "expected a non-empty list of faults")
@@ -207,6 +211,47 @@ def load_scenario(path: str | Path, protocol: Protocol | None = None) -> Scenari
             raise fail(f"{entry}.node", f"unknown node {node!r}")
         scenario.faults.append(FaultStep(float(at), node, kind, request, lines.get(entry, 0)))
     return scenario
+
+
+SIM_KEYS = {"seed", "bitrate", "profile", "frames_sha256"}
+
+
+def _sim_section(raw: Any, fail: Any) -> dict[str, Any]:
+    """The optional ``sim:`` mapping (seed, bitrate, profile) checked, or {} without one."""
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict):
+        raise fail("sim", "expected a mapping with seed (and optionally bitrate, profile)")
+    unknown = set(raw) - SIM_KEYS
+    if unknown:
+        key = sorted(unknown)[0]
+        raise fail(f"sim.{key}", f"unknown key (allowed: {', '.join(sorted(SIM_KEYS))})")
+    seed = raw.get("seed", 1)
+    if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed < 2**32:
+        raise fail("sim.seed", f"{seed!r} is not a whole number 0..{2**32 - 1}")
+    out: dict[str, Any] = {"seed": seed}
+    if "bitrate" in raw:
+        from tokenring.contract.ring import parse_bitrate
+
+        try:
+            rate = parse_bitrate(str(raw["bitrate"]))
+        except UsageError as exc:
+            raise fail("sim.bitrate", str(exc)) from None
+        if rate is None:
+            raise fail("sim.bitrate", "max has no wire time: give a bitrate, e.g. 2.5M")
+        out["bitrate"] = str(raw["bitrate"])
+    profile = raw.get("profile")
+    if profile not in (None, "arcnet"):
+        raise fail("sim.profile", f"{profile!r} is not arcnet (or absent)")
+    out["profile"] = profile
+    digest = raw.get("frames_sha256")
+    if digest is not None:
+        if not (
+            isinstance(digest, str) and len(digest) == 64 and all(c in "0123456789abcdef" for c in digest)
+        ):
+            raise fail("sim.frames_sha256", "expected the 64 hex digits of a SHA-256")
+        out["frames_sha256"] = digest
+    return out
 
 
 class WireCapture(CapturedFrames):
@@ -431,14 +476,14 @@ def run_scenario(
             if launcher is not None:
                 launcher.stop()
         if ledger is not None:
-            _judge_ledger(report, ledger_judge(ledger))
+            add_ledger_verdict(report, ledger_judge(ledger))
         return report
     finally:
         if scratch is not None:
             scratch.cleanup()
 
 
-def _judge_ledger(report: dict[str, Any], verdict: Any) -> None:
+def add_ledger_verdict(report: dict[str, Any], verdict: Any) -> None:
     """Fill the report's command figures from the ledgers' verdict."""
     for step in report["faults"]:
         step["commands_lost"] = verdict.lost_between(step["wall_from"], step["wall_to"])
@@ -598,6 +643,43 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
     elif scenario.workload == "probe":
         end_probes = collect_probes(session, ring, sorted(membership.present))
     capture.close()
+    lost, duplicated = command_losses(end_probes, protocol) if end_probes else (0, 0)
+    return build_report(
+        ring=ring,
+        source=scenario.source,
+        frames=frames,
+        steps=steps,
+        t0=t0,
+        finished=finished,
+        finished_wall=finished_wall,
+        end_stats=end_stats,
+        end_passes=len(seq),
+        one_token=one_token,
+        commands_lost=lost,
+        commands_duplicated=duplicated,
+        judged_by="ledger" if ledger is not None else ("reports" if end_probes else "none"),
+    )
+
+
+def build_report(
+    *,
+    ring: str,
+    source: str,
+    frames: list[tuple[float, bytes]],
+    steps: list[dict[str, Any]],
+    t0: float,
+    finished: float,
+    finished_wall: float,
+    end_stats: dict[int, dict[str, int]],
+    end_passes: int,
+    one_token: bool,
+    commands_lost: int,
+    commands_duplicated: int,
+    judged_by: str,
+) -> dict[str, Any]:
+    """The report of a run (real processes or virtual time): each fault's recovery from the
+    frames and its counters' deltas, the end state and the invariants. ``steps`` are the faults
+    as applied (``injected``/``effective`` on the frames' clock, ``wall`` on the ledgers')."""
     report_steps = []
     recovered_at: dict[int, tuple[float | None, int]] = {}
     for first, last, at in episodes(frames, steps, finished):
@@ -630,26 +712,25 @@ def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[
                 "skipped": step["skipped"],
             }
         )
-    lost, duplicated = command_losses(end_probes, protocol) if end_probes else (0, 0)
     invariants = {
         "exactly_one_token_at_end": one_token,
         "every_fault_recovered": all(s["recovered_ms"] is not None for s in report_steps),
-        "no_command_executed_twice": duplicated == 0,
-        "no_acknowledged_command_lost": lost == 0,
+        "no_command_executed_twice": commands_duplicated == 0,
+        "no_acknowledged_command_lost": commands_lost == 0,
         "no_injection_failed": not any(s["errors"] for s in report_steps),
     }
     return {
         "ring": ring,
-        "scenario": scenario.source,
+        "scenario": source,
         "frames_captured": len(frames),
         "faults": report_steps,
         "end": {
-            "passes_judged": len(seq),
+            "passes_judged": end_passes,
             "converged_after_last_fault_s": round(finished - steps[-1]["injected"], 3) if one_token else None,
-            "commands_lost": lost,
-            "commands_duplicated": duplicated,
+            "commands_lost": commands_lost,
+            "commands_duplicated": commands_duplicated,
         },
-        "commands_judged_by": "ledger" if ledger is not None else ("reports" if end_probes else "none"),
+        "commands_judged_by": judged_by,
         "invariants": invariants,
         "ok": all(invariants.values()),
     }

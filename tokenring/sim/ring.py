@@ -15,6 +15,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from tokenring import runtime
 from tokenring.contract.protocol import Protocol
 from tokenring.errors import UsageError
 from tokenring.node.faults import FaultInjector
@@ -63,18 +64,56 @@ class SimSummary:
 class SimRing:
     """The nodes of one simulated ring on their hub (built inside the simulation)."""
 
-    def __init__(self, protocol: Protocol, ids: Sequence[int], bitrate: float, profile: str | None) -> None:
+    def __init__(
+        self,
+        protocol: Protocol,
+        ids: Sequence[int],
+        bitrate: float,
+        profile: str | None,
+        ack_mode: str = "adaptive",
+    ) -> None:
+        self.protocol = protocol
+        self.bitrate = bitrate
+        self.profile = profile
+        self.ack_mode = ack_mode
         self.hub = MemoryHub()
         self.hub.hash_frames()
         self.nodes: dict[int, NodeOS] = {}
         for node_id in ids:
-            node = NodeOS(protocol, node_id, MemoryTransport(self.hub, "sim", node_id), bitrate=bitrate)
-            install_profile(node, profile, bitrate, node._now())
-            node.start()
-            self.nodes[node_id] = node
+            self.nodes[node_id] = self._boot(node_id)
         #: each node's own fault injector, as its process has one (``tokenring fault``'s path);
         #: made after every node started, its draws come from the simulation's seed
         self.faults = {node_id: FaultInjector(node) for node_id, node in self.nodes.items()}
+
+    def _boot(self, node_id: int) -> NodeOS:
+        node = NodeOS(
+            self.protocol,
+            node_id,
+            MemoryTransport(self.hub, "sim", node_id),
+            bitrate=self.bitrate,
+            ack_mode=self.ack_mode,
+        )
+        install_profile(node, self.profile, self.bitrate, node._now())
+        node.start()
+        return node
+
+    def kill(self, node_id: int) -> None:
+        """The node's process dies at once (a crash): it vanishes from the wire and stops, no
+        goodbye. Its program is stopped too; what a program may still write as it stops is its
+        own to suppress (a killed process writes nothing)."""
+        node = self.nodes[node_id]
+        node.paused = True  # a dead process's watchdog regenerates nothing
+        self.hub.crash(node_id)
+        # its threads end in a task of their own: the killer's time does not pass meanwhile
+        runtime.current().spawn(node.close, f"kill-{node_id}")
+
+    def respawn(self, node_id: int) -> NodeOS:
+        """A new process for a killed node (the launcher's respawn): a fresh node OS and fault
+        injector under the same ID."""
+        node = self._boot(node_id)
+        self.nodes[node_id] = node
+        self.faults[node_id] = FaultInjector(node)
+        return node
 
     def close(self) -> None:
         for node in self.nodes.values():
@@ -107,6 +146,7 @@ def run_ring(
     bitrate: float | None,
     profile: str | None = None,
     scenario: Scenario | None = None,
+    ack_mode: str = "adaptive",
 ) -> SimSummary:
     """Run the ring ``ids`` for ``duration_s`` of virtual time (or ``scenario``, which gets the
     runtime and the ring and returns facts for the summary)."""
@@ -119,7 +159,7 @@ def run_ring(
     sim = SimRuntime(seed)
 
     def main() -> SimSummary:
-        ring = SimRing(protocol, ids, bitrate, profile)
+        ring = SimRing(protocol, ids, bitrate, profile, ack_mode)
         extra = scenario(sim, ring) if scenario is not None else {}
         if scenario is None:
             sim.sleep(duration_s)

@@ -38,6 +38,9 @@ class MemoryHub:
         self.digest: hashlib._Hash | None = None
         self._groups: list[set[int]] | None = None
         self._drop_frames = 0
+        #: told (sender, receiver, frame) of every frame put on the wire, delivered or not, as a
+        #: subscriber to the ring's token keys sees it (a simulation's capture)
+        self.on_frame: Callable[[int, int, bytes], None] | None = None
 
     def hash_frames(self) -> None:
         """Start hashing the delivered frames into :attr:`digest` (from the next one on)."""
@@ -50,8 +53,12 @@ class MemoryHub:
             self._nodes[transport.node_id] = transport
             return set(self._live)
 
-    def detach(self, node_id: int) -> None:
+    def detach(self, node_id: int, transport: MemoryTransport | None = None) -> None:
+        """The node leaves the hub (``transport``: only if it is still the one under that ID, not
+        a new process's that took its place)."""
         with self._lock:
+            if transport is not None and self._nodes.get(node_id) is not transport:
+                return
             self._nodes.pop(node_id, None)
             was_live = node_id in self._live
             self._live.discard(node_id)
@@ -76,6 +83,8 @@ class MemoryHub:
         return not any(a in group and b in group for group in self._groups)
 
     def send(self, sender: int, did: int, item: tuple) -> None:
+        if self.on_frame is not None and item[0] == "frame":
+            self.on_frame(sender, did, item[1])
         with self._lock:
             node = self._nodes.get(did)
             if self._separated(sender, did):
@@ -200,7 +209,7 @@ class MemoryTransport(Transport):
         self.hub.set_live(self.node_id, False)
 
     def _close(self) -> None:
-        self.hub.detach(self.node_id)
+        self.hub.detach(self.node_id, self)
         self._thawed.set()
         self._queue.put(_STOP)
         if self._thread is not None and self._thread is not self._rt.current_thread():

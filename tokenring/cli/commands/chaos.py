@@ -9,8 +9,6 @@ from typing import TYPE_CHECKING, Any
 from tokenring.cli.args import int_within, seconds
 
 if TYPE_CHECKING:
-    from pathlib import Path
-
     from tokenring.chaos.nemesis import Operation
 
 HELP = "run a timed fault scenario (or a seeded random one) against a ring and judge it"
@@ -90,16 +88,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
 
 
-def unique_path(directory: Path, stem: str, suffix: str) -> Path:
-    """``directory/stem.suffix``, or with -2, -3 ... if that exists: nothing is overwritten."""
-    path = directory / f"{stem}{suffix}"
-    number = 2
-    while path.exists():
-        path = directory / f"{stem}-{number}{suffix}"
-        number += 1
-    return path
-
-
 def _check(args: argparse.Namespace) -> list[str]:
     from pathlib import Path
 
@@ -167,6 +155,7 @@ def _run_random(args: argparse.Namespace, kinds: list[str], progress: Any) -> in
     import tempfile
     from pathlib import Path
 
+    from tokenring.chaos.campaign import unique_path
     from tokenring.chaos.nemesis import generate, scenario_document, shrink
     from tokenring.chaos.runner import load_scenario, run_scenario
     from tokenring.contract.protocol import default_protocol

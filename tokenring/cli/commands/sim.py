@@ -11,8 +11,10 @@ node's own fault injector where the fault acts inside the node (its draws from t
 in-memory wire where the real one acts on the process (crash, hang, resume). The summary lists
 each fault with the time until the ring circulated again and the regenerations it cost.
 
-Not yet in virtual time (issue 55, under way): the user programs and the world simulator, chaos
-scenarios, seed campaigns.
+``--chaos SCENARIO`` runs a ``tokenring chaos`` scenario file in virtual time, judged by the same
+invariants and ledgers; ``--random A..B`` runs a campaign of seeded schedules (on ``--jobs``
+processes), writes each failing seed as a replay file with a shrunk one beside it, and
+``--replay FILE`` runs such a file exactly again.
 """
 
 from __future__ import annotations
@@ -32,6 +34,9 @@ EXAMPLES = """examples:
   tokenring sim --nodes 10,20,30 --fault crash:20@2 --duration 5   # node 20 dies at 2 s
   tokenring sim --fault hang:sonar@2 --fault resume:sonar@4 --fault drop:main:0.1@6
   tokenring sim --fault 'partition:all:10,20|30,40@2' --fault heal@4 --json -
+  tokenring sim --chaos scenarios/compound.yaml          # a chaos scenario, judged in virtual time
+  tokenring sim --random 1..1000 --jobs 2                # a campaign of 1000 seeded schedules
+  tokenring sim --replay sim-seed17-min.yaml             # a failing seed's schedule, exactly again
 """
 
 DEFAULT_BITRATE = "2.5M"
@@ -71,10 +76,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--force", action="store_true", help="replace an existing --json FILE")
     p.add_argument("--protocol", metavar="FILE", help="protocol.yaml to use (also $TOKENRING_PROTOCOL)")
+    from tokenring.cli.commands import simchaos  # chaos scenarios and seed campaigns: their own module
+
+    simchaos.add_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
     import json
+
+    from tokenring.cli.commands import simchaos
+
+    if simchaos.wanted(args):
+        return simchaos.run(args)
 
     from tokenring import (
         ChannelError,
