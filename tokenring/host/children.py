@@ -13,7 +13,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from typing import IO, Any
 
 from tokenring.contract.faults import CRASH_EXIT_CODE
@@ -74,10 +74,11 @@ class PrefixedOutput:
         previous, self.output = self.output, output
         return previous
 
-    def watch(self, stream: IO[str], name: str) -> None:
-        """Copy ``stream``'s lines under ``name`` until it closes."""
+    def watch(self, stream: IO[str], name: str, relay: Callable[[str], None] | None = None) -> None:
+        """Copy ``stream``'s lines under ``name`` until it closes; or hand each to ``relay``
+        (a line that carries a prefix of its own: another host's share)."""
         with self._selector_lock:
-            self._selector.register(stream, selectors.EVENT_READ, name)
+            self._selector.register(stream, selectors.EVENT_READ, (name, relay))
 
     def start_reading(self, stopped: threading.Event) -> None:
         """Start copying the watched streams; the reader ends once ``stopped`` is set and every
@@ -126,10 +127,13 @@ class PrefixedOutput:
                 time.sleep(0.05)
                 continue
             for key, _ in self._selector.select(timeout=0.1):
-                stream, name = key.fileobj, key.data
+                stream, (name, relay) = key.fileobj, key.data
                 line = stream.readline()  # type: ignore[union-attr]
                 if line:
-                    self.say(line.rstrip("\n"), name)
+                    if relay is not None:
+                        relay(line.rstrip("\n"))
+                    else:
+                        self.say(line.rstrip("\n"), name)
                     continue
                 with self._selector_lock, contextlib.suppress(KeyError, ValueError):
                     self._selector.unregister(stream)

@@ -44,13 +44,16 @@ class FaultClient:
                 keys.control(self.ring, "launcher", "signal"),
                 {"id": node_id, "signal": "CONT"},
                 max(0.1, min(self.timeout, deadline - time.monotonic())),
+                enough=lambda answers: any(a.get("ok") for _, a in answers),
+                everyone=True,
             )
             answer = query(
                 self.session, keys.control(self.ring, node_id, "fault"), {"kind": "resume"}, timeout=1.0
             )
             if answer and answer[0][1].get("ok"):
                 return answer[0][1]["result"]
-            if launcher and not launcher[0][1].get("ok"):
+            # a ring across hosts has a launcher per host: only the node's own sends SIGCONT
+            if launcher and not any(answer.get("ok") for _, answer in launcher):
                 refused = f" (the launcher: {launcher[0][1].get('error', 'refused')})"
                 break
             time.sleep(0.05)  # no answer from either yet: a busy host, ask again until the deadline

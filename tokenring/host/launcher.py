@@ -23,7 +23,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import zenoh
 
@@ -49,6 +49,9 @@ from tokenring.host.stall import StallWatch
 from tokenring.transport.control import answer_query
 from tokenring.transport.zenoh import RingViewServer, peer_to_peer
 from tokenring.transport.zenoh_config import node_environment
+
+if TYPE_CHECKING:
+    from tokenring.host.remote import HostShares, Share
 
 #: a ring bigger than this boots in waves of at most this many nodes at a time (8 per core)
 BOOT_CONCURRENCY = 8 * max(1, os.cpu_count() or 1)
@@ -144,6 +147,15 @@ class Launcher(NodeCommandLines):
         self.link_ports: dict[int, int] = {}
         self.services = list(services)
         self.service_supervisor = ServiceSupervisor(self)
+        #: the other hosts' shares of a ring across hosts (``up --hosts``), supervised like nodes
+        self.hosts: HostShares | None = None
+        #: before each node's name in the output: its host's, on a ring across hosts
+        self.label_prefix = ""
+        #: the whole ring's size when this launcher runs a share of it (the nodes' ``--expect``)
+        self.expected_nodes: int | None = None
+        #: tell the ring it is stopping as a whole when this launcher stops (not a host's share:
+        #: the rest of the ring goes on, and its nodes must still hand the token over)
+        self.announce_stop = True
         #: why this run is not whole, one line each (a service died, a program failed): exit 1
         self.failures: list[str] = []
         # what each child started ends with it: its process group is ended once it exits
@@ -227,14 +239,17 @@ class Launcher(NodeCommandLines):
             self.say(opened.note)
 
     # -- children -------------------------------------------------------------------------------
-    def popen_child(self, argv: list[str], name: str) -> subprocess.Popen:
-        """Start a child (a node or a service) in a process group of its own, its output prefixed
-        with ``name``, ended with the launcher however that ends."""
+    def popen_child(
+        self, argv: list[str], name: str, *, stdin: int = subprocess.DEVNULL, watch: bool = True
+    ) -> subprocess.Popen:
+        """Start a child (a node, a service, another host's share) in a process group of its own,
+        its output prefixed with ``name`` (unless not ``watch``: the caller watches it), ended
+        with the launcher however that ends."""
         env = node_environment()
         env.update(self.extra_env)
         process = subprocess.Popen(
             argv,
-            stdin=subprocess.DEVNULL,
+            stdin=stdin,
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             text=True,
@@ -250,7 +265,8 @@ class Launcher(NodeCommandLines):
             self._keeper_reported = True
             self.say(self._groups.keeper.failed)
         assert process.stdout is not None
-        self.output.watch(process.stdout, name)
+        if watch:
+            self.output.watch(process.stdout, name)
         return process
 
     @property
@@ -258,7 +274,7 @@ class Launcher(NodeCommandLines):
         """The running process of each service, by name."""
         return self.service_supervisor.children
 
-    def watch_exit(self, pid: int, record: Child | ServiceChild) -> None:
+    def watch_exit(self, pid: int, record: Child | ServiceChild | Share) -> None:
         """Wake the supervisor when child ``pid`` exits."""
         self._exits.add(pid, record)
 
@@ -272,7 +288,7 @@ class Launcher(NodeCommandLines):
         command = self.command_for(plan)
         if previous is not None and not plan.program:
             command.append("--autostart")  # a respawned bare node runs the program in its store
-        child = Child(plan, self.popen_child(command, plan.name), time.monotonic())
+        child = Child(plan, self.popen_child(command, self.label_prefix + plan.name), time.monotonic())
         if previous is not None:
             child.restarts = previous.restarts + 1
         self.children[plan.node_id] = child
@@ -318,6 +334,8 @@ class Launcher(NodeCommandLines):
         self.output.start_reading(self._stop)
         for service in self.services:
             self.service_supervisor.start(service)
+        if self.hosts is not None:
+            self.hosts.start()  # the other hosts' shares boot while this host's nodes do
         if self.transport != "zenoh":
             from tokenring.transport.registry import MembershipRegistry
 
@@ -381,6 +399,8 @@ class Launcher(NodeCommandLines):
             while not self._stop.is_set():
                 timeout = EXIT_CHECK_S if self._exits.works else CHILD_POLL_S
                 due = [*self._respawn_due.values(), *self.service_supervisor.due()]
+                if self.hosts is not None:
+                    due += self.hosts.due()
                 if due:
                     timeout = max(0.0, min(timeout, min(due) - time.monotonic()))
                 exited = self._exits.wait(timeout)
@@ -413,6 +433,8 @@ class Launcher(NodeCommandLines):
             if self.respawn and not self._stop.is_set():
                 self._respawn_due.setdefault(plan.node_id, time.monotonic() + RESPAWN_DELAY_S)
         self.service_supervisor.check(stopping=self._stop.is_set())
+        if self.hosts is not None:
+            self.hosts.check(stopping=self._stop.is_set())
         now = time.monotonic()
         for node_id, due in list(self._respawn_due.items()):
             if now >= due and not self._stop.is_set():
@@ -437,7 +459,7 @@ class Launcher(NodeCommandLines):
         self.failures.append(line)
         self.say(line)
 
-    def end_group(self, child: Child | ServiceChild) -> None:
+    def end_group(self, child: Child | ServiceChild | Share) -> None:
         """End what is left of a child's process group, once: its leader has exited (a PID,
         and so a group ID, may be reused once nothing holds it)."""
         if not child.group_ended:
@@ -482,10 +504,12 @@ class Launcher(NodeCommandLines):
         with self._children_lock:
             self.check_children()  # report what died before the stop
         running = [c for c in self.child_list() if c.process.poll() is None]
-        if running and self.session is not None:
+        if (running or self.hosts is not None) and self.session is not None and self.announce_stop:
             with contextlib.suppress(zenoh.ZError):  # nobody needs a handover: all are leaving
                 self.session.put(keys.ring_event(self.ring), RING_EVENT.pack(EVENT_RING_STOPPING, 0, 0, 0, 0))
             time.sleep(0.02)
+        if self.hosts is not None:
+            self.hosts.begin_stop()  # the other hosts stop their nodes while this one does
         for child in running:
             with contextlib.suppress(ProcessLookupError):
                 child.process.send_signal(signal.SIGTERM)
@@ -514,6 +538,8 @@ class Launcher(NodeCommandLines):
         for child in running:
             if child.process.poll() is not None:
                 self.end_group(child)
+        if self.hosts is not None:
+            self.hosts.stop()
         self.service_supervisor.stop()
         # the supervisor, which may have started nodes and services again, outlives them
         self._children_gone.set()
@@ -593,6 +619,7 @@ class LauncherVerbs:
                 }
                 for name, p in launcher.service_children.items()
             ],
+            "hosts": launcher.hosts.status() if launcher.hosts is not None else [],
             "failures": list(launcher.failures),
         }
 

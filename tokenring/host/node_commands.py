@@ -29,6 +29,7 @@ class NodeCommandLines:
     log_level: str
     extra_node_args: list[str]
     extra_env: dict[str, str]
+    expected_nodes: int | None
     residents: bool
     router: bool
     links: bool
@@ -64,7 +65,7 @@ class NodeCommandLines:
     def command_for(self, plan: NodePlan) -> list[str]:
         cmd = [sys.executable, "-m", "tokenring", "--log-level", self.log_level, "node"]
         cmd += ["--id", str(plan.node_id), "--ring", self.ring, "--bitrate", self.bitrate]
-        cmd += ["--ack", self.ack_mode, "--expect", str(len(self.plans))]
+        cmd += ["--ack", self.ack_mode, "--expect", str(self.expected_nodes or len(self.plans))]
         if plan.name and not plan.name.startswith("node"):
             cmd += ["--name", plan.name]
         if self.protocol_path:

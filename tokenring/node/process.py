@@ -203,6 +203,7 @@ class NodeProcess:
             for reply in self.session.get(
                 keys.control(self.ring, "launcher", "shutdown"),
                 payload=msgpack.packb({"reason": reason, "by": self.os.name}),
+                target=zenoh.QueryTarget.ALL,  # a ring across hosts: every host's launcher
                 timeout=2.0,
             ):
                 if reply.ok is not None:

@@ -50,15 +50,17 @@ def query(
     request: Any = None,
     timeout: float = 2.0,
     enough: Callable[[list[tuple[str, Any]]], bool] | None = None,
+    everyone: bool = False,
 ) -> list[tuple[str, Any]]:
     """Query a control key; returns (key, decoded reply) for every answer.
 
     A key with a wildcard asks every matching node (and waits for all, up to ``timeout``, or
     until ``enough`` says the answers so far suffice: a hung node answers nothing); a plain key
-    asks the best matching one only, so a hung node elsewhere cannot delay it."""
+    asks the best matching one only, so a hung node elsewhere cannot delay it, unless
+    ``everyone`` (every launcher of a ring across hosts answers ``ctl/launcher/*``)."""
     payload = msgpack.packb(request) if request is not None else None
     out: list[tuple[str, Any]] = []
-    wildcard = "*" in key
+    wildcard = "*" in key or everyone
     try:
         options: dict[str, Any] = {
             "timeout": timeout,

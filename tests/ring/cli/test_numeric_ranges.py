@@ -40,6 +40,7 @@ OPTIONS = [
     ("chaos --random 1 --shrink-runs {v}", "--shrink-runs", "0..1000"),
     ("up --duration {v}", "--duration", WEEK),
     ("up --boot-wave {v}", "--boot-wave", "1..255"),
+    ("up --share {v}", "--share", "1..255"),
     ("up --web-port {v}", "--web-port", "1..65535"),
     ("up --foxglove-port {v}", "--foxglove-port", "1..65535"),
     ("up --metrics {v}", "--metrics", "1..65535"),

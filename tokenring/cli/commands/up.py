@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import time
 from typing import TYPE_CHECKING
 
 from tokenring.cli.args import int_within, seconds
@@ -18,6 +20,14 @@ EXAMPLES = """examples:
                                    the nodes clients of this launcher, the token on direct links
   tokenring up --ring lab2         a second ring beside a running one (a ring runs once per network)
   tokenring up --metrics 9464      Prometheus scrapes the ring at http://127.0.0.1:9464/metrics
+  tokenring up --hosts ring.yaml --web
+                                   one ring across the hosts of an inventory, started over ssh, a
+                                   Zenoh router per host (docs/hosts.md); Ctrl-C stops every host
+
+an inventory (--hosts FILE; the launcher's host is 'ssh: local', its router the hub):
+  hosts:
+    pc:     {address: 10.0.0.1, ssh: local, nodes: [main, motor]}
+    board1: {address: 10.0.0.2, ssh: {user: robot}, nodes: 3, tokenring: /opt/ring/bin/tokenring}
 
 exit codes:
   0  the run was whole; 130 after Ctrl-C
@@ -26,7 +36,8 @@ exit codes:
      world simulator, the recorder) that died or did not stop cleanly, a download that failed
   2  bad input, refused before anything started: an option, a file, a ring name that another
      launcher holds on this Zenoh network (named; --connect joins it on purpose, with --nodes
-     that are not live there)
+     that are not live there), an inventory's mistake or a host it names that cannot be reached
+     or whose share refused to start (FILE:LINE)
 
 supervision: every node and service is its own process group; what a program starts ends with
 its node. --respawn starts a dead node again, and a dead service where that is safe (the web
@@ -38,6 +49,7 @@ if TYPE_CHECKING:
 
     from tokenring.contract.protocol import Protocol
     from tokenring.extensions import UpPlan
+    from tokenring.host.hosts import Inventory
     from tokenring.host.launcher import Launcher
     from tokenring.host.services import ServicePlan
 
@@ -60,6 +72,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--nodes",
         help="comma-separated nodes to start (names or IDs); default protocol.yaml's nodes but the optional ones",
     )
+    p.add_argument(
+        "--hosts",
+        metavar="FILE",
+        help="a ring across hosts: the inventory (YAML) says each host's address, how ssh reaches it "
+        "and its nodes; each other host runs its share over ssh as its own Zenoh router, connected "
+        "to this launcher's (docs/hosts.md)",
+    )
+    # a host's share of a ring across hosts, started over ssh by `up --hosts` (remote.py): it
+    # stops when its standard input closes; TOTAL is the whole ring's size
+    p.add_argument("--share", type=int_within(1, 255), metavar="TOTAL", help=argparse.SUPPRESS)
     p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds")
     p.add_argument(
         "--bitrate",
@@ -204,20 +226,30 @@ def run(args: argparse.Namespace) -> int:
         from tokenring.node.store import check_store_root
 
         check_store_root(Path(args.store))  # before any node starts (a node would fail mid-download)
-    selection = node_selection(args, protocol)
+    inventory = load_hosts(args, protocol) if args.hosts else None
+    if inventory is not None:
+        selection: list[str] | None = inventory.local.nodes
+        everyone = plans_from_protocol(protocol, [n for h in inventory.hosts for n in h.nodes], None)
+    else:
+        selection = node_selection(args, protocol)
     programs = None if args.no_programs else (args.programs or extensions.programs_dir())
     if programs is not None and not Path(programs).is_dir():
         raise UsageError(f"--programs {programs}: no such directory")
     main_id = protocol.nodes["main"].id if "main" in protocol.nodes else None
     download = programs is not None and not args.no_download
-    plans = plans_from_protocol(protocol, selection, None if download else programs)
-    if download and main_id not in {p.node_id for p in plans}:
+    if args.share and not args.no_download:
+        programs = None  # a host's share boots bare: the launcher of the whole ring downloads
+    plans = (
+        [] if selection == [] else plans_from_protocol(protocol, selection, None if download else programs)
+    )
+    ring_ids = {p.node_id for p in (everyone if inventory is not None else plans)}
+    if download and main_id not in ring_ids:
         download = False  # no main, no PC link: the programs start from their files
-        plans = plans_from_protocol(protocol, selection, programs)
+        plans = [] if selection == [] else plans_from_protocol(protocol, selection, programs)
     if programs is not None:  # a <node>.py that cannot be one (a link loop) is named, not skipped
         from tokenring.host.loader import check_program_dir
 
-        check_program_dir(Path(programs), [p.name for p in plans])
+        check_program_dir(Path(programs), [p.name for p in (everyone if inventory is not None else plans)])
     if args.no_start and not download:
         why = "main, the PC link, is not among --nodes"
         if programs is None or args.no_download:
@@ -225,8 +257,9 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--no-start holds the programs downloaded over the ring, and there is no download ({why})"
         )
-    # every extension checks its options before anything starts
-    plans_up = [extension.plan_up(args, protocol) for extension in extensions.loaded()]
+    # every extension checks its options before anything starts (a host's share runs none: its
+    # services run beside the launcher of the whole ring, which passes the nodes' environment)
+    plans_up = [] if args.share else [extension.plan_up(args, protocol) for extension in extensions.loaded()]
     speedup = 1.0
     node_env: dict[str, str] = {}
     for plan in plans_up:
@@ -248,6 +281,9 @@ def run(args: argparse.Namespace) -> int:
     services = [service for plan in plans_up for service in plan.services]
     if args.web or args.record or args.foxglove or args.metrics is not None:
         services.append(watch_service(args))
+    if inventory is not None:
+        args.router = True
+        args.listen = hub_endpoints(inventory)
     launcher = Launcher(
         plans,
         ring=args.ring,
@@ -267,14 +303,20 @@ def run(args: argparse.Namespace) -> int:
         boot_concurrency=BOOT_CONCURRENCY if args.boot_wave is None else args.boot_wave,
         env=node_env,
     )
+    if inventory is not None:
+        across_hosts(launcher, args, inventory, wire, node_env, download)
+    if args.share:
+        share_of_a_ring(launcher, args.share)
     install_signal_handlers(launcher)
     # the status says so from its first answer: nodes that are live before the download starts
     # are not yet running their programs
     launcher.booting = download and programs is not None
     launcher.start()
+    if launcher.hosts is not None:
+        wait_for_hosts(launcher, ring_ids)
     boot_ok = True
     if download and programs is not None:
-        boot_ok = boot_load(launcher, Path(programs), {p.node_id for p in plans}, start=not args.no_start)
+        boot_ok = boot_load(launcher, Path(programs), ring_ids, start=not args.no_start)
     if args.no_start:
         say_waiting(launcher, plans_up)
     for plan in plans_up:
@@ -293,6 +335,117 @@ def run(args: argparse.Namespace) -> int:
     launcher.say("stopped (interrupted)" if code == 130 else f"stopped (exit code {code})")
     launcher.flush_output()
     return code
+
+
+def load_hosts(args: argparse.Namespace, protocol: Protocol) -> Inventory:
+    """``--hosts FILE``: the inventory, checked; it places the nodes and the routers itself."""
+    from tokenring.host.hosts import load_inventory
+
+    if args.share:
+        raise UsageError("--hosts starts the shares itself; --share is theirs")
+    for option, given in (
+        ("--nodes", args.nodes is not None),
+        ("--router", args.router),
+        ("--listen", bool(args.listen)),
+        ("--connect", bool(args.connect)),
+        ("--links", args.links),
+    ):
+        if given:
+            raise UsageError(
+                f"--hosts places the nodes and the routers from {args.hosts}; leave out {option}"
+            )
+    return load_inventory(args.hosts, protocol)
+
+
+def hub_endpoints(inventory: Inventory) -> list[str]:
+    """Where the launcher's router, the hub, listens: its host's address, where the other hosts'
+    routers connect, and loopback on the same port, where this host's tools find the ring."""
+    local = inventory.local
+    endpoints = [local.endpoint(inventory.scheme)]
+    if local.address not in ("127.0.0.1", "localhost", "0.0.0.0", "::", "::1"):
+        endpoints.append(f"{inventory.scheme}/127.0.0.1:{local.zenoh_port}")
+    return endpoints
+
+
+def across_hosts(
+    launcher: Launcher,
+    args: argparse.Namespace,
+    inventory: Inventory,
+    wire: str,
+    node_env: dict[str, str],
+    download: bool,
+) -> None:
+    """Make ``launcher`` the hub of a ring across the inventory's hosts: each other host's share
+    is started over ssh (each checked reachable first) and supervised like its nodes."""
+    import os
+
+    from tokenring.host.remote import HostShares, ShareSettings, check_reachable
+
+    env = dict(node_env)
+    for name in ("TOKENRING_EXTENSIONS", "TOKENRING_PROTOCOL"):
+        if name in os.environ and name not in env:
+            env[name] = os.environ[name]
+    settings = ShareSettings(
+        ring=launcher.ring,
+        bitrate=wire,
+        ack=args.ack,
+        log_level=args.log_level,
+        total=inventory.node_count,
+        hub=launcher.listen[0],
+        scheme=inventory.scheme,
+        respawn=args.respawn,
+        profile=args.profile,
+        protocol=args.protocol,
+        zenoh_config=args.zenoh_config,
+        no_programs=args.no_programs,
+        no_download=not download,  # (no main in the ring: the programs start from their files)
+        programs=args.programs,
+        env=env,
+    )
+    launcher.hosts = HostShares(launcher, inventory, settings)
+    launcher.label_prefix = f"{inventory.local.name}/"
+    launcher.expected_nodes = inventory.node_count
+    labels = [*launcher.hosts.labels(), *(f"{inventory.local.name}/{p.name}" for p in launcher.plans)]
+    launcher.output.width = max([launcher.output.width, *map(len, labels)])
+    check_reachable(inventory)
+
+
+def wait_for_hosts(launcher: Launcher, ids: set[int], timeout: float = 120.0) -> None:
+    """Wait until every host's nodes are live; a host whose share ended first stops the run
+    (exit 2, the inventory's line named)."""
+    assert launcher.hosts is not None
+    started = time.monotonic()
+    try:
+        whole = launcher.hosts.wait_up(ids, timeout)
+    except UsageError:
+        launcher.stop()
+        raise
+    if whole:
+        launcher.say(f"every host's nodes are live ({len(ids)} nodes, {time.monotonic() - started:.1f} s)")
+    elif not launcher.stopping:
+        launcher.say(f"not every node is live after {timeout:.0f} s: going on with those that are")
+
+
+def share_of_a_ring(launcher: Launcher, total: int) -> None:
+    """``--share TOTAL``: this launcher runs one host's share of a ring of TOTAL nodes for ``up
+    --hosts`` (over ssh). It stops when its standard input closes (the launcher stops the ring, or
+    the ssh session dropped), and does not announce the ring's stop (the other hosts go on)."""
+    import os
+    import sys
+    import threading
+
+    launcher.expected_nodes = total
+    launcher.announce_stop = False
+
+    def lifeline() -> None:
+        with contextlib.suppress(OSError, ValueError):
+            while os.read(sys.stdin.fileno(), 4096):
+                pass
+        if not launcher.stopping:
+            launcher.say("the launcher's connection closed: stopping this host's share")
+        launcher.request_stop()
+
+    threading.Thread(target=lifeline, name="share-lifeline", daemon=True).start()
 
 
 def boot_load(

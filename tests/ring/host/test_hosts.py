@@ -1,0 +1,269 @@
+"""``tokenring up --hosts FILE``: one ring across hosts from one command, over ssh.
+
+The slow test runs three hosts made of network namespaces on a bridge, each with an sshd of its
+own (tests/support/sshhosts.py): one ``up --hosts`` on host a forms the ring, the programs are
+downloaded over it, ``status`` on host a sees every node, a fault reaches a node on host b, host
+c's cable is cut silently (its ssh session dies, and with it its share) while a and b re-form,
+and c's nodes rejoin once the cable is back; Ctrl-C then leaves no process in any namespace.
+The quick tests refuse bad input: one line naming the inventory's file and line, exit code 2.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import pytest
+
+from tests.support.processes import REPO, pid_alive, run_tokenring
+from tests.support.ringutil import wait_until, write_probe_programs
+from tests.support.sshhosts import SshHost, SshHosts, needs_ssh_hosts
+
+TOKENRING = str(Path(sys.executable).with_name("tokenring"))
+
+
+def inventory(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("text", "where", "what"),
+    [
+        ("hosts:\n  a: {address: 127.0.0.1, ssh: local, nodes: [main]\n", ":3:", "YAML syntax error"),
+        (
+            "hosts:\n  a: {address: 127.0.0.1, ssh: local, nodes: [main]}\n"
+            "  b: {address: 10.9.9.9, nodes: [motor, wheel]}\n",
+            ":3:",
+            "unknown node 'wheel'",
+        ),
+        (
+            "hosts:\n  a: {address: 127.0.0.1, ssh: local, nodes: [main]}\n"
+            "  b: {address: 10.9.9.9, nodes: [motor, main]}\n",
+            ":3:",
+            "node main is on host a already",
+        ),
+        (
+            "hosts:\n  a: {address: 127.0.0.1, ssh: local, nodes: [main]}\n  b:\n    adress: 10.9.9.9\n",
+            ":4:",
+            "hosts.b.adress: unknown key",
+        ),
+        ("hosts:\n  a: {address: 10.9.9.8, nodes: [main]}\n", ":2:", "exactly one host must be 'ssh: local'"),
+        (
+            # nothing listens on port 1: ssh is refused at once
+            "hosts:\n  a: {address: 127.0.0.1, ssh: local, nodes: [main]}\n"
+            "  b:\n    address: 127.0.0.1\n    port: 7450\n    ssh: {port: 1}\n    nodes: [motor]\n",
+            ":4:",  # within host b
+            "host b (127.0.0.1): unreachable over ssh",
+        ),
+    ],
+    ids=["syntax", "unknown-module", "twice", "unknown-key", "no-local", "unreachable"],
+)
+def test_a_bad_inventory_is_one_line_naming_file_and_line(tmp_path, text, where, what):
+    path = inventory(tmp_path / "ring.yaml", text)
+    done = run_tokenring("up", "--hosts", str(path), "--ring", f"h{uuid.uuid4().hex[:8]}", "--no-world")
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in done.stderr, done.stderr
+    assert f"{path}{where}" in lines[0] and what in lines[0], lines[0]
+    assert done.stdout == ""  # nothing started
+
+
+def test_an_existing_output_path_is_refused_before_any_host_is_asked(tmp_path):
+    path = inventory(
+        tmp_path / "ring.yaml",
+        "hosts:\n  a: {address: 127.0.0.1, ssh: local, nodes: [main]}\n"
+        "  b: {address: 127.0.0.1, port: 7450, ssh: {port: 1}, nodes: [motor]}\n",
+    )
+    (tmp_path / "run.mcap").write_text("")
+    done = run_tokenring("up", "--hosts", str(path), "--record", str(tmp_path / "run.mcap"), "--no-world")
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        f"tokenring up: error: --record {tmp_path / 'run.mcap'}: exists; give --force to replace it, or another path"
+    ]
+
+
+def test_hosts_places_the_nodes_itself(tmp_path):
+    path = inventory(tmp_path / "ring.yaml", "hosts:\n  a: {address: 127.0.0.1, ssh: local, nodes: 2}\n")
+    done = run_tokenring("up", "--hosts", str(path), "--nodes", "main")
+    assert done.returncode == 2
+    assert "leave out --nodes" in done.stderr and len(done.stderr.strip().splitlines()) == 1
+
+
+# -- three hosts ---------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def ssh_hosts(tmp_path):
+    """Three namespaces on a bridge with an sshd each; all of it gone afterwards, failed or not."""
+    hosts = SshHosts(tmp_path / "hosts")
+    yield hosts
+    hosts.close()
+
+
+def status(hosts: SshHosts, host: SshHost, ring: str) -> dict[int, dict]:
+    """``tokenring status --json`` on ``host`` (the tools' default endpoint: loopback there)."""
+    done = subprocess.run(
+        hosts.run(host, TOKENRING, "status", "--ring", ring, "--json", "--timeout", "1.5"),
+        capture_output=True,
+        text=True,
+        timeout=60,  # a hang guard: a loaded machine starts an interpreter slowly
+        cwd=REPO,
+    )
+    if done.returncode != 0 or not done.stdout.strip():
+        return {}
+    return {n["id"]: n for n in json.loads(done.stdout)["nodes"]}
+
+
+def one_ring(nodes: dict[int, dict], members: list[int]) -> bool:
+    """Exactly ``members`` answer, chained in ID order, all on one epoch (one token)."""
+    if set(nodes) != set(members):
+        return False
+    ring = sorted(members)
+    chained = all(nodes[a]["successor"] == ring[(i + 1) % len(ring)] for i, a in enumerate(ring))
+    return chained and len({tuple(nodes[i]["epoch"]) for i in members}) == 1
+
+
+def log_says(log: Path, text: str) -> bool:
+    return text in log.read_text()
+
+
+@needs_ssh_hosts
+@pytest.mark.slow
+@pytest.mark.timeout(600)  # its hang guards: a loaded machine's ssh and status are slow
+def test_one_command_runs_a_ring_across_three_hosts_over_ssh(procs, ssh_hosts, tmp_path):
+    hosts = ssh_hosts
+    a, b, c = hosts.hosts
+    ring = f"h{uuid.uuid4().hex[:8]}"
+    programs = write_probe_programs(tmp_path / "programs")
+    # the test's own ssh settings; the client finds a dead connection within ~4 s
+    ssh = {
+        "identity": str(hosts.identity),
+        "options": [*hosts.ssh_options, "-o", "ServerAliveInterval=1", "-o", "ServerAliveCountMax=3"],
+    }
+    spec = {
+        "hosts": {
+            "a": {"address": a.address, "ssh": "local", "nodes": ["main", "motor", "sonar"]},
+            "b": {
+                "address": b.address,
+                "ssh": ssh,
+                "nodes": ["compass", "copro", "map"],
+                "tokenring": TOKENRING,
+                "store": str(tmp_path / "store-b"),
+            },
+            "c": {
+                "address": c.address,
+                "ssh": ssh,
+                "nodes": 2,  # the two nodes left: lcd and charger
+                "tokenring": TOKENRING,
+                "store": str(tmp_path / "store-c"),
+            },
+        }
+    }
+    path = inventory(tmp_path / "ring.yaml", json.dumps(spec, indent=2))  # JSON is YAML
+    log = tmp_path / "launcher.log"
+    everyone, without_c = [10, 20, 30, 40, 50, 60, 70, 80], [10, 20, 30, 40, 50, 60]
+    seen: dict[int, dict] = {}
+
+    def ring_of(members: list[int]) -> dict[int, dict] | None:
+        nodes = status(hosts, a, ring)
+        seen.clear()
+        seen.update(
+            {i: {k: n[k] for k in ("successor", "epoch", "pid", "program")} for i, n in nodes.items()}
+        )
+        return nodes if one_ring(nodes, members) else None
+
+    started = time.monotonic()
+    with log.open("w") as out:  # a file: an unread pipe would fill and stall the launcher's writer
+        launcher = procs.start(
+            hosts.run(
+                a,
+                TOKENRING,
+                "up",
+                "--hosts",
+                str(path),
+                "--ring",
+                ring,
+                "--bitrate",
+                "10M",
+                "--programs",
+                str(programs),
+                "--store",
+                str(tmp_path / "store-a"),
+            ),
+            stdout=out,
+            env={"TOKENRING_EXTENSIONS": ""},  # the bare ring: the probe programs need no world
+        )
+    try:
+        # one ring over the three hosts, seen from host a, every program downloaded over it
+        nodes = wait_until(lambda: ring_of(everyone), 120, "one ring across the three hosts")
+        formed = time.monotonic() - started
+        wait_until(lambda: log_says(log, "changed: 8 of 8 program(s)"), 120, "the programs downloaded")
+
+        def programs_run() -> bool:
+            nodes = status(hosts, a, ring)
+            return len(nodes) == 8 and all(n.get("program") == "Program" for n in nodes.values())
+
+        wait_until(programs_run, 60, "every node running its downloaded program")
+        for name in ("b/compass", "c/lcd", "b/up", "c/up", "a/main"):
+            assert f"{name} | " in log.read_text(), name  # lines prefixed with host and module
+        pids = {n["id"]: n["pid"] for n in nodes.values()}
+
+        # a fault on a remote node: copro (host b) hangs, really stopped, and the ring routes
+        # around it; resumed through host b's launcher (SIGCONT), it is back in the ring
+        done = subprocess.run(
+            hosts.run(a, TOKENRING, "fault", "--ring", ring, "copro", "hang"),
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert done.returncode == 0, done.stderr
+        wait_until(lambda: ring_of([i for i in everyone if i != 50]), 60, "the ring around hung copro")
+        assert seen[40]["successor"] == 60
+        done = subprocess.run(
+            hosts.run(a, TOKENRING, "fault", "--ring", ring, "copro", "resume"),
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert done.returncode == 0, done.stderr
+        wait_until(lambda: ring_of(everyone), 60, "copro back in the ring")
+
+        # host c's cable cut silently: a and b re-form without lcd and charger; c's ssh session
+        # dies (sshd's ClientAlive), and with it c's share: nothing of the ring is left on c
+        cut = time.monotonic()
+        hosts.cut(c)
+        wait_until(lambda: ring_of(without_c), 120, "hosts a and b re-formed without host c")
+        reformed = time.monotonic() - cut
+        wait_until(lambda: not hosts.leftovers().get(c.name), 60, "host c's share ended with its session")
+        wait_until(lambda: log_says(log, "host c (") and log_says(log, "lost"), 60, "host c reported lost")
+        hosts.mend()
+        mended = time.monotonic()
+        after = wait_until(lambda: ring_of(everyone), 120, "host c's nodes back in the ring")
+        rejoined = time.monotonic() - mended
+        assert log_says(log, "connecting to host c")
+        # the nodes on a and b are the ones that were there all along; c's are new processes
+        assert all(after[i]["pid"] == pids[i] for i in without_c)
+        assert all(after[i]["pid"] != pids[i] for i in (70, 80))
+        print(f"formed {formed:.1f} s, re-formed after the cut {reformed:.1f} s, rejoined {rejoined:.1f} s")
+    except AssertionError as failure:
+        tail = "\n".join(log.read_text().splitlines()[-60:])
+        raise AssertionError(f"{failure}\nlast status: {seen}\n--- launcher\n{tail}") from None
+    finally:
+        # Ctrl-C stops everything everywhere
+        launcher.send_signal(signal.SIGINT)
+        try:
+            code = launcher.wait(60)
+        except subprocess.TimeoutExpired:
+            launcher.kill()
+            code = None
+    assert code == 130, log.read_text()[-3000:]
+    assert not pid_alive(launcher.pid)
+    # no process in any namespace but the sshd listeners (a session's sshd ends just after its command)
+    wait_until(lambda: not hosts.leftovers(), 30, "no process left in any namespace")
+    assert log_says(log, "b/up | stopped (exit code 0)") and log_says(log, "c/up | stopped (exit code 0)")
