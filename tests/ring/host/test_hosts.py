@@ -106,10 +106,10 @@ def ssh_hosts(tmp_path):
     hosts.close()
 
 
-def status(hosts: SshHosts, host: SshHost, ring: str) -> dict[int, dict]:
-    """``tokenring status --json`` on ``host`` (the tools' default endpoint: loopback there)."""
+def status(hosts: SshHosts, host: SshHost, ring: str, *options: str) -> dict[int, dict]:
+    """``tokenring status --json`` on ``host`` (by default at the tools' endpoint: loopback there)."""
     done = subprocess.run(
-        hosts.run(host, TOKENRING, "status", "--ring", ring, "--json", "--timeout", "1.5"),
+        hosts.run(host, TOKENRING, "status", "--ring", ring, "--json", "--timeout", "1.5", *options),
         capture_output=True,
         text=True,
         timeout=60,  # a hang guard: a loaded machine starts an interpreter slowly
@@ -267,3 +267,81 @@ def test_one_command_runs_a_ring_across_three_hosts_over_ssh(procs, ssh_hosts, t
     # no process in any namespace but the sshd listeners (a session's sshd ends just after its command)
     wait_until(lambda: not hosts.leftovers(), 30, "no process left in any namespace")
     assert log_says(log, "b/up | stopped (exit code 0)") and log_says(log, "c/up | stopped (exit code 0)")
+
+
+@needs_ssh_hosts
+@pytest.mark.slow
+@pytest.mark.timeout(400)
+def test_a_secured_ring_across_hosts_obeys_only_its_operator(procs, ssh_hosts, tmp_path):
+    """``tokenring secure``'s deployment across hosts: every router and node on TLS with the node
+    certificate (which names the three hosts' addresses); the operator hangs and resumes a node
+    on another host, an observer sees the whole ring but its fault never arrives."""
+    hosts = ssh_hosts
+    a, b, c = hosts.hosts
+    ring = f"s{uuid.uuid4().hex[:8]}"
+    keys = tmp_path / "keys"
+    made = run_tokenring("secure", "init", str(keys), *(f"--host={h.address}" for h in hosts.hosts))
+    assert made.returncode == 0, made.stderr
+    operator, observer = keys / "operator.json5", keys / "observer.json5"
+    ssh = {"identity": str(hosts.identity), "options": hosts.ssh_options}
+    remote = {"ssh": ssh, "tokenring": TOKENRING}
+    spec = {
+        "scheme": "tls",
+        "hosts": {
+            "a": {"address": a.address, "ssh": "local", "nodes": ["main", "motor", "sonar"]},
+            "b": {"address": b.address, "nodes": ["compass", "copro", "map"], **remote},
+            "c": {"address": c.address, "nodes": ["lcd", "charger"], **remote},
+        },
+    }
+    path = inventory(tmp_path / "ring.yaml", json.dumps(spec, indent=2))
+    log = tmp_path / "launcher.log"
+    hub = ["-e", f"tls/{a.address}:7447"]
+    with log.open("w") as out:
+        launcher = procs.start(
+            hosts.run(
+                a, TOKENRING, "up", "--hosts", str(path), "--ring", ring, "--bitrate", "10M", "--no-programs",
+                "--zenoh-config", str(keys / "node.json5"),
+            ),
+            stdout=out,
+            env={"TOKENRING_EXTENSIONS": ""},
+        )  # fmt: skip
+    everyone = [10, 20, 30, 40, 50, 60, 70, 80]
+
+    def ring_of(members: list[int], config: Path) -> dict[int, dict] | None:
+        nodes = status(hosts, a, ring, *hub, "--zenoh-config", str(config))
+        return nodes if one_ring(nodes, members) else None
+
+    def fault(config: Path, *args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(
+            hosts.run(a, TOKENRING, "fault", "--ring", ring, *hub, "--zenoh-config", str(config), *args),
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+
+    try:
+        wait_until(lambda: ring_of(everyone, observer), 120, "the observer to see one ring over three hosts")
+        assert "tls/" in log.read_text() and "tcp/" not in log.read_text()
+        done = fault(operator, "copro", "hang")
+        assert done.returncode == 0, done.stderr
+        wait_until(lambda: ring_of([i for i in everyone if i != 50], observer), 60, "the ring around copro")
+        done = fault(operator, "copro", "resume")  # SIGCONT by host b's launcher
+        assert done.returncode == 0, done.stderr
+        wait_until(lambda: ring_of(everyone, observer), 60, "copro back")
+        refused = fault(observer, "lcd", "hang", "--timeout", "3")
+        assert refused.returncode != 0 and "certificate lack the right" in refused.stderr, refused.stderr
+        assert ring_of(everyone, operator) or wait_until(
+            lambda: ring_of(everyone, operator), 30, "lcd untouched"
+        )
+    except AssertionError as failure:
+        tail = "\n".join(log.read_text().splitlines()[-60:])
+        raise AssertionError(f"{failure}\n--- launcher\n{tail}") from None
+    finally:
+        launcher.send_signal(signal.SIGINT)
+        try:
+            code = launcher.wait(60)
+        except subprocess.TimeoutExpired:
+            launcher.kill()
+            code = None
+    assert code == 130, log.read_text()[-3000:]
+    wait_until(lambda: not hosts.leftovers(), 30, "no process left in any namespace")

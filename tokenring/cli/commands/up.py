@@ -359,11 +359,12 @@ def load_hosts(args: argparse.Namespace, protocol: Protocol) -> Inventory:
 
 def hub_endpoints(inventory: Inventory) -> list[str]:
     """Where the launcher's router, the hub, listens: its host's address, where the other hosts'
-    routers connect, and loopback on the same port, where this host's tools find the ring."""
+    routers connect, and on plain TCP loopback on the same port, where this host's tools find the
+    ring without ``-e`` (a secured ring's certificate names the hosts' addresses, not loopback)."""
     local = inventory.local
     endpoints = [local.endpoint(inventory.scheme)]
-    if local.address not in ("127.0.0.1", "localhost", "0.0.0.0", "::", "::1"):
-        endpoints.append(f"{inventory.scheme}/127.0.0.1:{local.zenoh_port}")
+    if inventory.scheme == "tcp" and local.address not in ("127.0.0.1", "localhost", "0.0.0.0", "::", "::1"):
+        endpoints.append(f"tcp/127.0.0.1:{local.zenoh_port}")
     return endpoints
 
 
