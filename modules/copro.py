@@ -30,7 +30,6 @@ import logging
 import math
 import os as _os
 import queue
-import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -42,6 +41,7 @@ from modules.mapping.vectormap import vector_to_wire
 from modules.units import pose_from_wire, pose_to_wire
 from modules.variants import algorithm
 from tokenring import UserProgram
+from tokenring.runtime import current as current_runtime
 
 log = logging.getLogger("tokenring.copro")
 
@@ -162,9 +162,10 @@ class LivePublisher:
         self.periods = SyncPeriods()
         self.stats = {"states": 0, "messages": 0, "dropped": 0}
         self._state: dict[str, Any] | None = None
-        self._messages: queue.Queue[dict[str, Any]] = queue.Queue(maxsize=1000)
-        self._wake = threading.Event()
-        self._stopping = threading.Event()
+        self.rt = current_runtime()  # the clock, queue, events and thread
+        self._messages: queue.Queue[dict[str, Any]] = self.rt.queue(maxsize=1000)
+        self._wake = self.rt.event()
+        self._stopping = self.rt.event()
         self._due = 0.0
         self._declared: list[Any] = []
         self._state_pub = session.declare_publisher(robot_keys.localization(ring, "state"))
@@ -175,15 +176,14 @@ class LivePublisher:
             session.declare_queryable(robot_keys.localization(ring, "messages"), self._answer)
         )
         core.message_listeners.append(self._on_message)
-        self._thread = threading.Thread(target=self._run, name="copro-live", daemon=True)
-        self._thread.start()
+        self._thread = self.rt.spawn(self._run, "copro-live")
 
     def step(self) -> None:
         """After a step of the localizer, on its thread (the snapshot reads the core's state)."""
         from modules.localization.liveview import snapshot
 
         self.periods.observe(self.core)
-        now = time.monotonic()
+        now = self.rt.monotonic()
         if now < self._due:
             return
         self._due = now + self.period_s
@@ -316,7 +316,8 @@ class Program(UserProgram):
         self.method = int(_os.environ.get("TOKENRING_COPRO_METHOD", SEED if self.seed_mode else OURS))
         self.scanning = False
         self.history = PoseHistory()
-        self.outgoing: queue.Queue[Vector | object | None] = queue.Queue()
+        self.rt = current_runtime()  # the queue and thread: the process's, or a simulation's
+        self.outgoing: queue.Queue[Vector | object | None] = self.rt.queue()
         self.stats = {
             "vectors_sent": 0,
             "vectors_refused": 0,
@@ -330,8 +331,7 @@ class Program(UserProgram):
         self._make_generators()
         self.localizer = None if self.seed_mode else open_localizer(os, self.hw)
         self.live = open_live(self.hw, self.localizer)
-        self.sender = threading.Thread(target=self._send_vectors, name="copro-vectors", daemon=True)
-        self.sender.start()
+        self.sender = self.rt.spawn(self._send_vectors, "copro-vectors")
 
     def _make_generators(self) -> None:
         self.vectorizer = Vectorizer(self.layout, self.method, self._emit)

@@ -13,14 +13,13 @@ from __future__ import annotations
 
 import logging
 import queue
-import threading
-import time
 from typing import Any
 
 from modules.display.menus import MENU_NAMES, Menus, Screen
 from modules.mapping.map_request import MapCollector
 from modules.units import pose_from_wire
 from tokenring import UserProgram
+from tokenring.runtime import current as current_runtime
 
 log = logging.getLogger("tokenring.lcd")
 REFRESH_S = 0.1
@@ -40,14 +39,14 @@ class Program(UserProgram):
         }
         self.collector = MapCollector()
         self.vectors: list[tuple[int, int, int, int]] = []
-        self.outgoing: queue.Queue[tuple[str, str, dict[str, Any]] | None] = queue.Queue()
+        self.rt = current_runtime()  # the clock, queue and thread: the process's, or a simulation's
+        self.outgoing: queue.Queue[tuple[str, str, dict[str, Any]] | None] = self.rt.queue()
         self.menus = Menus(self)
         self.screen = Screen()
         self.key_seq = 0
         self.last_key = 0
-        self.started = time.monotonic()
-        self.sender = threading.Thread(target=self._send_loop, name="lcd-send", daemon=True)
-        self.sender.start()
+        self.started = self.rt.monotonic()
+        self.sender = self.rt.spawn(self._send_loop, "lcd-send")
         self.redraw()
 
     # -- LcdContext -------------------------------------------------------------------------------
@@ -107,7 +106,7 @@ class Program(UserProgram):
             while key is not None:
                 self.press(key)
                 key = self.hw.key()
-            now = time.monotonic()
+            now = self.rt.monotonic()
             if now >= next_draw:
                 self.redraw()
                 next_draw = now + REFRESH_S
@@ -136,7 +135,7 @@ class Program(UserProgram):
             key_seq=self.key_seq,
             menu=self.menus.menu,
             selection=self.menus.selection & 0xFF,
-            stamp_ms=int((time.monotonic() - self.started) * 1000) & 0xFFFFFFFF,
+            stamp_ms=int((self.rt.monotonic() - self.started) * 1000) & 0xFFFFFFFF,
         )
 
     def _send_loop(self) -> None:

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import logging
 import queue
-import time
 from typing import Any
 
 from modules.localization.pose_correction import CorrectionSettings, PoseCorrector
@@ -57,6 +56,7 @@ from modules.navigation.pilot import (
 from modules.units import pose_from_wire
 from modules.variants import algorithm
 from tokenring import UsageError, UserProgram, default_protocol
+from tokenring.runtime import current as current_runtime
 
 log = logging.getLogger("tokenring.main")
 NAV_NAMES = {v: k for k, v in NAV.items()}
@@ -102,11 +102,12 @@ class Program(UserProgram):
         self.last_outcome: Outcome | None = None
         self.last_outcome_logged = "start"
         self.abort_reason = REASON["NONE"]
-        self.requests: queue.Queue[tuple[str, dict[str, Any], queue.Queue[Any]]] = queue.Queue()
+        self.rt = current_runtime()  # the clock and queues: the process's, or a simulation's
+        self.requests: queue.Queue[tuple[str, dict[str, Any], queue.Queue[Any]]] = self.rt.queue()
         self.collector = MapCollector()
         self.history: list[dict[str, Any]] = []
         self.finished: dict[str, Any] | None = None
-        self.started = time.monotonic()
+        self.started = self.rt.monotonic()
         self.sensors = Sensors()
         #: the fused heading at rest before the compass's calibration turn: where an action file
         #: run after it should start from (the turn ends a few degrees off, up to 11° seen)
@@ -190,7 +191,7 @@ class Program(UserProgram):
             distance_mm=motor["distance_mm"],
             stamp_ms=motor["stamp_ms"]
             if self.motor.visits
-            else int((time.monotonic() - self.started) * 1000),
+            else int((self.rt.monotonic() - self.started) * 1000),
             pose=pose,
             heading_cdeg=heading,
             pose_filtered=copro["pose_source"] == 2,
@@ -327,8 +328,8 @@ class Program(UserProgram):
     def _drain_pilot(self, timeout: float = 5.0) -> None:
         """Step the pilot until its abort finished (the motor stands still)."""
         assert self.pilot is not None
-        deadline = time.monotonic() + timeout
-        while self.pilot.busy and time.monotonic() < deadline and not self.os.stopping:
+        deadline = self.rt.monotonic() + timeout
+        while self.pilot.busy and self.rt.monotonic() < deadline and not self.os.stopping:
             self.os.wait_visit(0.2)
             self._take_commands()
             self.pilot.step(self._read_sensors())
@@ -341,7 +342,7 @@ class Program(UserProgram):
         verbs = ("explore", "stop", "calibrate", "calibrate_compass", "clear_map", "get_map", "actions")
         if verb not in verbs:
             raise UsageError(f"main takes {', '.join(verbs)}, state — not {verb!r}")
-        answer: queue.Queue[Any] = queue.Queue()
+        answer: queue.Queue[Any] = self.rt.queue()
         self.requests.put((verb, payload, answer))
         timeout = float(payload.get("timeout", 60.0))
         try:
@@ -405,15 +406,15 @@ class Program(UserProgram):
         self._flush_copro(timeout)
         self.collector.begin()
         self._send("map", "GET_MAP")
-        deadline = time.monotonic() + timeout
+        deadline = self.rt.monotonic() + timeout
         last = -1
         while not self.collector.done.is_set():
             self.os.wait_visit(0.2)
             self._take_commands()
             received, _ = self.collector.progress()
             if received != last:
-                last, deadline = received, time.monotonic() + timeout
-            if time.monotonic() > deadline or self.os.stopping:
+                last, deadline = received, self.rt.monotonic() + timeout
+            if self.rt.monotonic() > deadline or self.os.stopping:
                 raise UsageError(f"the map module did not answer GET_MAP within {timeout:.0f} s")
         vectors = self.collector.wait(0) or []
         return [list(v) for v in vectors]
@@ -426,9 +427,9 @@ class Program(UserProgram):
         if not self.os.deliver("copro", "FLUSH", timeout=3.0):
             log.warning("copro did not take FLUSH: asking the map without it")
             return
-        deadline = time.monotonic() + timeout
+        deadline = self.rt.monotonic() + timeout
         while self.copro.read()["flushes_done"] == before:
-            if time.monotonic() > deadline or self.os.stopping:
+            if self.rt.monotonic() > deadline or self.os.stopping:
                 log.warning("copro did not report its flush within %.0f s", timeout)
                 return
             self.os.wait_visit(0.2)
@@ -460,7 +461,7 @@ class Program(UserProgram):
             abort_reason=self.abort_reason,
             alert_lock=pilot.alert_lock if pilot else STOPPED,
             steps_done=(nav.steps if nav else 0) & 0xFFFF,
-            stamp_ms=int((time.monotonic() - self.started) * 1000) & 0xFFFFFFFF,
+            stamp_ms=int((self.rt.monotonic() - self.started) * 1000) & 0xFFFFFFFF,
         )
 
     def report(self) -> dict[str, Any]:

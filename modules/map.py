@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import logging
 import queue
-import threading
 from typing import Any
 
 from modules.mapping.vectormap import CAPACITY, MapFull, VectorStore
 from tokenring import UserProgram
+from tokenring.runtime import current as current_runtime
 
 log = logging.getLogger("tokenring.map")
 
@@ -30,13 +30,13 @@ class Program(UserProgram):
         self.store = VectorStore(CAPACITY)
         self.data = self.os.publish()
         self.os.set_own_input_id()
-        self.replies: queue.Queue[tuple[str, list[tuple[str, dict[str, int]]]] | None] = queue.Queue()
+        self.rt = current_runtime()  # the queue and thread: the process's, or a simulation's
+        self.replies: queue.Queue[tuple[str, list[tuple[str, dict[str, int]]]] | None] = self.rt.queue()
         self.stats = {"vectors_received": 0, "refused_full": 0, "maps_sent": 0, "streams_failed": 0}
         self.error_codes = self.os.protocol.enums["error_code"]
         self.vector_code = self.os.protocol.common_commands["VECTOR"].code
         self._publish()
-        self.sender = threading.Thread(target=self._send_replies, name="map-replies", daemon=True)
-        self.sender.start()
+        self.sender = self.rt.spawn(self._send_replies, "map-replies")
 
     def _publish(self) -> None:
         self.data.write(vector_count=self.store.count, capacity_left=self.store.left)

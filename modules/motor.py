@@ -54,7 +54,6 @@ from __future__ import annotations
 import logging
 import math
 import os
-import time
 from collections import deque
 
 from modules.description.robot import (
@@ -75,6 +74,7 @@ from modules.sensors.odometry import (
 from modules.units import cdeg_to_rad, pose_to_wire
 from modules.variants import algorithm
 from tokenring import ChannelError, UserProgram
+from tokenring.runtime import current as current_runtime
 
 log = logging.getLogger("tokenring.motor")
 
@@ -420,7 +420,7 @@ class Program(UserProgram):
         did not take (its inbox was locked) is sent again, for up to ``NOTICE_PATIENCE_S``: the
         seed sent POSITION_REACHED once and lost it whenever the commander was not listening (seed
         mode does the same: no patience)."""
-        now = time.monotonic()
+        now = current_runtime().monotonic()
         patience = 0.0 if self.seed else NOTICE_PATIENCE_S
         for target in list(self.in_flight):
             outbox, entry, deadline = self.in_flight[target]

@@ -6,9 +6,9 @@ A module with its own command loop (main, lcd) feeds every received command to
 
 from __future__ import annotations
 
-import threading
-import time
 from typing import TYPE_CHECKING, Any
+
+from tokenring.runtime import current as current_runtime
 
 if TYPE_CHECKING:
     from tokenring import NodeOS
@@ -18,10 +18,11 @@ class MapCollector:
     """Assembles one GET_MAP answer (vectors in cm, in the map's order)."""
 
     def __init__(self) -> None:
-        self.lock = threading.Lock()
+        self.rt = current_runtime()  # the clock, lock and event: the process's, or a simulation's
+        self.lock = self.rt.lock()
         self.expected: int | None = None
         self.vectors: list[tuple[int, int, int, int]] = []
-        self.done = threading.Event()
+        self.done = self.rt.event()
         self.active = False
 
     def begin(self) -> None:
@@ -55,14 +56,14 @@ class MapCollector:
 
     def wait(self, timeout: float) -> list[tuple[int, int, int, int]] | None:
         """The whole map, or None if it did not arrive in time (waiting restarts while vectors flow)."""
-        deadline = time.monotonic() + timeout
+        deadline = self.rt.monotonic() + timeout
         last = -1
         while not self.done.wait(0.05):
             received, _ = self.progress()
             if received != last:  # still streaming: a long map is not a timeout
                 last = received
-                deadline = time.monotonic() + timeout
-            if time.monotonic() > deadline:
+                deadline = self.rt.monotonic() + timeout
+            if self.rt.monotonic() > deadline:
                 with self.lock:
                     self.active = False
                 return None
@@ -76,12 +77,13 @@ def request_map(os: NodeOS, timeout: float = 5.0) -> list[tuple[int, int, int, i
     collector.begin()
     if not os.deliver("map", "GET_MAP", timeout=timeout):
         return None
-    deadline = time.monotonic() + timeout
+    clock = collector.rt.monotonic
+    deadline = clock() + timeout
     while not collector.done.is_set():
         command = os.receive_command(timeout=0.1)
         if command is not None:
             collector.feed(command.name, command.args)
-            deadline = time.monotonic() + timeout
-        elif time.monotonic() > deadline or os.stopping:
+            deadline = clock() + timeout
+        elif clock() > deadline or os.stopping:
             return None
     return collector.wait(0)

@@ -8,8 +8,6 @@ hardware never needs a world.
 
 from __future__ import annotations
 
-import threading
-import time
 from typing import Any, Self
 
 import msgpack
@@ -20,6 +18,7 @@ from modules.description import keys as robot_keys
 from modules.world.clock import SimClock
 from modules.world.service import hw_key
 from tokenring import TokenRingError
+from tokenring.runtime import current as current_runtime
 
 DEFAULT_TIMEOUT_S = 2.0
 WORLD_WAIT_S = 10.0  # how long the first request waits for a world that is still starting
@@ -39,7 +38,8 @@ class HardwareClient:
         self.ring = ring
         self.timeout = timeout
         self._clock: SimClock | None = None
-        self._clock_lock = threading.Lock()
+        self._rt = current_runtime()
+        self._clock_lock = self._rt.lock()
         self.requests = 0
         self.simulator: Any = None
 
@@ -88,19 +88,20 @@ class HardwareClient:
 
     def _sync_clock(self) -> SimClock:
         """Ask the world three times; keep the answer with the shortest round trip."""
-        deadline = time.monotonic() + WORLD_WAIT_S
+        clock = self._rt.monotonic
+        deadline = clock() + WORLD_WAIT_S
         best: tuple[float, SimClock] | None = None
         answered = 0
         while answered < 3:
-            sent = time.monotonic()
+            sent = clock()
             try:
                 info = self.request("clock", timeout=1.0)
             except HardwareError:
-                if time.monotonic() > deadline:
+                if clock() > deadline:
                     raise
-                time.sleep(0.1)
+                self._rt.sleep(0.1)
                 continue
-            received = time.monotonic()
+            received = clock()
             answered += 1
             if best is None or received - sent < best[0]:
                 best = (received - sent, SimClock.synced(info["sim_ms"], info["speed"], sent, received))

@@ -55,8 +55,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import threading
-import time
 from typing import Any
 
 import msgpack
@@ -65,6 +63,7 @@ import zenoh
 from modules.description import keys as robot_keys
 from modules.world.sim import HardwareRequestError, Simulator
 from tokenring import keys
+from tokenring.runtime import current as current_runtime
 
 log = logging.getLogger("modules.world")
 TRUTH_PERIOD_SIM_S = 0.1
@@ -91,10 +90,11 @@ class WorldService:
         self.devices = attach_devices(sim)
         self.session = session
         self.ring = ring
-        self.stop = threading.Event()
+        self.rt = current_runtime()
+        self.stop = self.rt.event()
         self._declared: list[Any] = []
         self._publisher: Any = None
-        self._thread: threading.Thread | None = None
+        self._thread: Any = None
         self.requests = 0
 
     def start(self) -> None:
@@ -111,8 +111,7 @@ class WorldService:
             )
         )
         self._publisher = self.session.declare_publisher(robot_keys.world(self.ring, "truth"))
-        self._thread = threading.Thread(target=self._publish_truth, name="world-truth", daemon=True)
-        self._thread.start()
+        self._thread = self.rt.spawn(self._publish_truth, "world-truth")
         self._declared.append(self.session.liveliness().declare_token(ready_key(self.ring)))
 
     def close(self) -> None:
@@ -138,12 +137,7 @@ class WorldService:
         if what in ("state", "truth"):
             return self.sim.truth()
         if what == "info":
-            return {
-                **self.sim.world.to_dict(),
-                "seed": self.sim.seed,
-                "speed": self.sim.clock.speed,
-                "body": self.sim.body,
-            }
+            return self.sim.info()
         if what == "control/pose":
             return self.sim.set_pose(request)
         if what == "control/batteries":
@@ -169,7 +163,8 @@ class WorldService:
 
     def _publish_truth(self) -> None:
         period = max(TRUTH_MIN_REAL_S, self.sim.clock.to_real(TRUTH_PERIOD_SIM_S))
-        next_at = time.monotonic()
+        clock = self.rt.monotonic
+        next_at = clock()
         while not self.stop.is_set():
             try:
                 self._publisher.put(msgpack.packb(self.sim.truth(), default=_plain))
@@ -178,7 +173,7 @@ class WorldService:
                     return
                 raise
             next_at += period
-            self.stop.wait(max(0.0, next_at - time.monotonic()))
+            self.stop.wait(max(0.0, next_at - clock()))
 
 
 def _plain(value: Any) -> Any:

@@ -8,7 +8,6 @@ given its seed and the sequence of requests: each subsystem draws from its own r
 from __future__ import annotations
 
 import math
-import threading
 from typing import Any, ClassVar
 
 import numpy as np
@@ -30,6 +29,7 @@ from modules.world.battery import (
 from modules.world.clock import SimClock
 from modules.world.magnetics import CompassBridges
 from modules.world.physics import TrackedRobot
+from tokenring.runtime import current as current_runtime
 
 ADC_COUNTS = 1023  # the charger's 10-bit ADC
 ELECTRONICS_FULL_SCALE_V = 15.0  # voltage dividers in front of the ADC
@@ -103,7 +103,7 @@ class Simulator:
         self.last_ms = self.clock.now_ms()
         self.steps_total = [0, 0]
         self.steps_unpowered = [0, 0]  # half-steps that arrived without power: not made
-        self.lock = threading.RLock()
+        self.lock = current_runtime().rlock()
         # how the robot moves until the motor's next batch of steps (mm/ms, mm/ms, rad/ms) and
         # since when: a sonar sweep pings its pairs one after another while it drives on
         self.velocity = (0.0, 0.0, 0.0)
@@ -341,6 +341,10 @@ class Simulator:
         return getattr(self, name)(request)
 
     # -- ground truth and the hand of god (tests, tools) ----------------------------------------
+    def info(self) -> dict[str, Any]:
+        """The room (:meth:`World.to_dict`) with the seed, speed and body (``world/info``)."""
+        return {**self.world.to_dict(), "seed": self.seed, "speed": self.clock.speed, "body": self.body}
+
     def truth(self) -> dict[str, Any]:
         """Ground truth: for logs and scoring only, never for the modules."""
         with self.lock:
