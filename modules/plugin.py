@@ -9,6 +9,8 @@ Registered in ``pyproject.toml`` under the entry point group ``tokenring.extensi
 * ``tokenring up``'s world (``--world``, ``--speed``, ``--seed``, ``--no-world``) and its jobs
   (``--explore``, ``--map-out``, ``--actions``, ``--localizer``), all checked before anything
   starts;
+* ``tokenring sim``'s robot: the world, the programs and ``up``'s mission in virtual time
+  (``--world``, ``--explore``, ``--actions``, ``--map-out``: :mod:`modules.virtual`);
 * each program's hardware client (:mod:`modules.world.hardware`);
 * the LCD node's OS menu before the programs start (:mod:`modules.display.boot_menu`);
 * its topics in a live feed (:mod:`modules.pc.feed`);
@@ -31,7 +33,7 @@ if TYPE_CHECKING:
 
     import zenoh
 
-    from tokenring import Protocol, ResidentProgram, WebAction, WebKeys, WebPanel
+    from tokenring import Protocol, ResidentProgram, SimPlan, WebAction, WebKeys, WebPanel
     from tokenring.host import Launcher, ServicePlan
     from tokenring.observe import FeedSource
 
@@ -160,8 +162,6 @@ class RobotExtension(Extension):
         return list(sensor_nodes(args))
 
     def plan_up(self, args: argparse.Namespace, protocol: Protocol) -> UpPlan:
-        from pathlib import Path
-
         from modules.variants import ENV, all_seed, format_algorithms, parse_algorithms
         from modules.world.__main__ import parse_speed
 
@@ -221,14 +221,9 @@ class RobotExtension(Extension):
             check_out(args.map_out, "--map-out", force=getattr(args, "force", False))
         actions = None
         if args.actions:
-            from modules.navigation.actions import load_actions
-            from tokenring import read_text
+            from modules.pc.mission import action_job
 
-            # a bad file is refused (file:line) before anything starts; the seed's main takes
-            # v/c without a time (non-queued)
-            load_actions(args.actions, seed=choice["main"] == "seed")
-            text = read_text(args.actions, "action file")  # as load_actions read it (no byte-order mark)
-            actions = (Path(args.actions).name, text, args.action_speed)
+            actions = action_job(args.actions, args.action_speed, seed=choice["main"] == "seed")
         missions: list[Any] = []
 
         started, failed = plan.on_started, plan.failure
@@ -249,6 +244,18 @@ class RobotExtension(Extension):
         plan.failure = failure
         plan.grace_s = 30.0  # the mission stops the ring itself; this only caps a stuck map fetch
         return plan
+
+    def add_sim_options(self, parser: argparse.ArgumentParser) -> None:
+        """``tokenring sim``'s robot: its world, programs and mission in virtual time
+        (:mod:`modules.virtual`)."""
+        from modules.virtual import add_sim_options
+
+        add_sim_options(parser)
+
+    def plan_sim(self, args: argparse.Namespace, protocol: Protocol) -> SimPlan | None:
+        from modules.virtual import plan_sim
+
+        return plan_sim(args, protocol, programs_dir())
 
     def add_load_options(self, parser: argparse.ArgumentParser) -> None:
         parser.add_argument(

@@ -41,7 +41,7 @@ if TYPE_CHECKING:
         TransportError,
         UsageError,
     )
-    from tokenring.extensions import Extension, UpPlan, WebAction, WebKey, WebKeys, WebPanel
+    from tokenring.extensions import Extension, SimPlan, UpPlan, WebAction, WebKey, WebKeys, WebPanel
     from tokenring.node.node_os import NodeOS
     from tokenring.node.program import UserProgram
     from tokenring.node.resident import ResidentProgram
@@ -73,6 +73,7 @@ else:  # each name is imported on first use
             "read_text": "tokenring._util.files",
             "replacing": "tokenring._util.files",
             "ResidentProgram": "tokenring.node.resident",
+            "SimPlan": "tokenring.extensions",
             "TokenRingError": "tokenring.errors",
             "TransportClosed": "tokenring.errors",
             "TransportError": "tokenring.errors",
@@ -101,6 +102,7 @@ __all__ = [
     "Protocol",
     "ProtocolError",
     "ResidentProgram",
+    "SimPlan",
     "TokenRingError",
     "TransportClosed",
     "TransportError",

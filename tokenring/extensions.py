@@ -15,6 +15,9 @@ and the ring asks every registered extension, and nothing else, for
   start, and an :class:`UpPlan`:
   services started beside the nodes (a world simulator), how much faster emulated time runs,
   environment for the nodes, work to do once the ring runs (a mission);
+* **sim** — options of ``tokenring sim`` and a :class:`SimPlan`: the optional nodes, speed-up,
+  timing profile and environment, and a scenario run inside the simulation (its world, its
+  programs on the simulated nodes, its mission);
 * **load** — options of ``tokenring load`` and a step after it (the robot's map upload, the
   seed's ``LOAD.EXE -u``);
 * **hardware** — the client a node's program gets as ``self.hw``;
@@ -76,6 +79,28 @@ class UpPlan:
     #: ``up --no-start``: a line saying how a user starts the programs on this application
     #: (beside ``tokenring load --start``), given the launcher
     start_hint: Callable[[Launcher], str | None] | None = None
+
+
+@dataclass
+class SimPlan:
+    """What an extension adds to one ``tokenring sim`` (the ring in virtual time)."""
+
+    #: optional nodes of protocol.yaml run beside the default ring (unless ``--nodes`` is given)
+    nodes: list[str] = field(default_factory=list)
+    #: emulated time runs this many times faster than the ring's clock; the wire follows it
+    speedup: float = 1.0
+    #: a hardware timing profile the options imply, used unless the user gave ``--profile``
+    profile: str | None = None
+    #: environment the programs read, set in this process for the run and restored after it
+    env: dict[str, str] = field(default_factory=dict)
+    #: runs inside the simulation once the nodes are built, given the runtime and the
+    #: :class:`~tokenring.sim.SimRing`; runs its course (``--duration``) and returns facts for
+    #: the summary (JSON-able)
+    scenario: Callable[[Any, Any], dict[str, Any]] | None = None
+    #: lines printed under the summary, given its facts
+    report: Callable[[dict[str, Any]], list[str]] | None = None
+    #: a message if the application's job failed (exit code 1), given the facts
+    failure: Callable[[dict[str, Any]], str | None] | None = None
 
 
 @dataclass
@@ -166,6 +191,14 @@ class Extension:
     def plan_up(self, args: argparse.Namespace, protocol: Protocol) -> UpPlan:
         """Check this extension's ``up`` options (raise :class:`UsageError`) and plan its part."""
         return UpPlan()
+
+    def add_sim_options(self, parser: argparse.ArgumentParser) -> None:
+        """Options of ``tokenring sim`` (in argument groups of their own)."""
+
+    def plan_sim(self, args: argparse.Namespace, protocol: Protocol) -> SimPlan | None:
+        """Check this extension's ``sim`` options (raise :class:`UsageError`) and plan its part of
+        the run, or None when they ask for none (the ring alone)."""
+        return None
 
     def add_load_options(self, parser: argparse.ArgumentParser) -> None:
         """Options of ``tokenring load``."""

@@ -69,6 +69,12 @@ def end_pose(session: Any, ring: str, estimate: list[float] | None) -> dict[str,
     """How far main's pose ``estimate`` (x mm, y mm, theta rad: the filter's, else dead
     reckoning) is from the simulator's ground truth now; None without either."""
     truth = true_pose(session, ring) if estimate is not None else None
+    return pose_error(estimate, truth)
+
+
+def pose_error(estimate: list[float] | None, truth: dict[str, Any] | None) -> dict[str, Any] | None:
+    """How far ``estimate`` (x mm, y mm, theta rad) is from ``truth`` (the world's truth record:
+    ``x_mm``, ``y_mm``, ``theta_rad``); None without either."""
     if estimate is None or truth is None:
         return None
     x, y, theta = (float(v) for v in estimate[:3])
@@ -172,15 +178,28 @@ def write_map(
     score = score_map(vectors, truth) if truth is not None else None
     with replacing(path, option_error(option)) as temp:
         if suffix == ".json":
-            doc = {"units": "mm", "world": world, "vectors": np.round(vectors, 1).tolist(), "score": score}
-            if end is not None:
-                doc["end_pose"] = end
-            temp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+            temp.write_text(map_document(vectors, world, score, end), encoding="utf-8")
         elif suffix == ".dxf":
             write_dxf(vectors, temp, truth)
         else:
             write_png(vectors, temp, truth, title or (world or "map"), score, paths)
     return score
+
+
+def map_document(
+    vectors: np.ndarray, world: str | None, score: dict[str, Any] | None, end: dict[str, Any] | None = None
+) -> str:
+    """A map as a .json map file holds it (:func:`write_map`): vectors in mm to 0.1 mm, the world,
+    the score and the end pose; the same map gives the same text, byte for byte."""
+    doc: dict[str, Any] = {
+        "units": "mm",
+        "world": world,
+        "vectors": np.round(vectors, 1).tolist(),
+        "score": score,
+    }
+    if end is not None:
+        doc["end_pose"] = end
+    return json.dumps(doc, indent=1) + "\n"
 
 
 def write_dxf(vectors: np.ndarray, path: str | Path, truth: np.ndarray | None) -> None:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
 from tokenring.cli.args import seconds
 
@@ -79,6 +80,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring.cli.commands import simchaos  # chaos scenarios and seed campaigns: their own module
 
     simchaos.add_arguments(p)
+    # an application's part of the run (the robot's world, programs and mission): its options
+    from tokenring import extensions
+
+    for extension in extensions.loaded():
+        extension.add_sim_options(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -114,6 +120,9 @@ def run(args: argparse.Namespace) -> int:
     if len(ids) < 2:
         raise UsageError(f"--nodes {args.nodes}: a ring needs two nodes at least")
     faults = [parse_fault(text, protocol, ids) for text in args.fault]
+    plan = application_plan(args, protocol)
+    if plan is not None:
+        return run_application(args, protocol, ids, faults, plan)
     summary = run_ring(
         protocol,
         ids,
@@ -150,4 +159,90 @@ def run(args: argparse.Namespace) -> int:
             )
         print(f"frames_sha256 {summary.frames_sha256}")
     sys.stdout.flush()
+    return 0
+
+
+# -- an application in virtual time (tokenring.extensions.SimPlan: the robot's world and programs) --
+def application_plan(args: argparse.Namespace, protocol: Any) -> Any:
+    """The first extension's :class:`~tokenring.extensions.SimPlan` for these options, or None."""
+    from tokenring import extensions
+
+    for extension in extensions.loaded():
+        plan = extension.plan_sim(args, protocol)
+        if plan is not None:
+            return plan
+    return None
+
+
+def run_application(
+    args: argparse.Namespace, protocol: Any, ids: list[int], faults: list[Any], plan: Any
+) -> int:
+    """Run the ring with an application's scenario (its world, programs and job) in virtual time:
+    its nodes added, the wire ``plan.speedup`` times faster, its environment set for the run; the
+    ``--fault`` schedule runs beside it. Exit 1 if the application's job failed."""
+    import json
+    import os
+
+    from tokenring import UsageError, parse_bitrate, write_atomically
+    from tokenring.sim import run_ring
+    from tokenring.sim.faults import fault_scenario
+
+    if not args.nodes and plan.nodes:
+        ids = sorted({*ids, *(protocol.node(name).id for name in plan.nodes)})
+    bitrate = parse_bitrate(args.bitrate)
+    if bitrate is None:
+        raise UsageError("--bitrate max has no wire time: give a bitrate, e.g. 2.5M")
+    profile = args.profile or (plan.profile if args.bitrate == DEFAULT_BITRATE else None)
+    wire = bitrate * plan.speedup
+    schedule = fault_scenario(faults, args.duration) if faults else None
+    application = plan.scenario
+
+    def scenario(sim: Any, ring: Any) -> dict[str, Any]:
+        fault_facts: dict[str, Any] = {}
+        if schedule is not None:  # the faults on their own task, the application on this one
+            sim.spawn(lambda: fault_facts.update(schedule(sim, ring)), "faults")
+        facts = application(sim, ring) if application is not None else {}
+        return {**fault_facts, **facts}
+
+    before = {key: os.environ.get(key) for key in plan.env}
+    os.environ.update(plan.env)
+    try:
+        summary = run_ring(
+            protocol,
+            ids,
+            seed=args.seed,
+            duration_s=args.duration,
+            bitrate=wire,
+            profile=profile,
+            scenario=scenario,
+        )
+    finally:
+        for key, value in before.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+    data = summary.as_dict()
+    for key in [k for k in summary.extra if k.endswith("_sha256")]:  # beside frames_sha256
+        data[key] = data["extra"].pop(key)
+    if args.json == "-":
+        print(json.dumps(data, indent=2))
+    else:
+        if args.json:
+            write_atomically(args.json, json.dumps(data, indent=2) + "\n")
+        median = summary.round_median_ms
+        print(
+            f"{summary.simulated_s:.3f} simulated s in {summary.real_s:.2f} real s ({summary.speedup:.1f}x), "
+            f"seed {summary.seed}, nodes {','.join(map(str, summary.nodes))}: {summary.frames} frames, "
+            f"round median {'?' if median is None else f'{median:.3f} ms'}, "
+            f"{summary.regenerations} regeneration(s)"
+        )
+        for line in plan.report(summary.extra | data) if plan.report is not None else []:
+            print(line)
+        print(f"frames_sha256 {summary.frames_sha256}")
+    sys.stdout.flush()
+    failure = plan.failure(summary.extra) if plan.failure is not None else None
+    if failure:
+        print(f"failed: {failure}", file=sys.stderr)
+        return 1
     return 0

@@ -79,6 +79,15 @@ class PcLinkServer:
     def _on_query(self, query: zenoh.Query) -> None:
         answer_query(query, self.handlers, "the PC link", lock=self._serial)
 
+    def serve(self, verb: str, request: dict[str, Any]) -> Any:
+        """Answer one request in this process, one at a time like the serial line (the PC side of
+        a simulation, which has no Zenoh); raises what the verb raises."""
+        handler = self.handlers.get(verb)
+        if handler is None:
+            raise UsageError(f"the PC link has no verb {verb!r} (has: {', '.join(sorted(self.handlers))})")
+        with self._serial:
+            return handler(request)
+
     # -- verbs ----------------------------------------------------------------------------------
     def _command(self, request: dict[str, Any]) -> dict[str, Any]:
         target = str(request.get("target", ""))
