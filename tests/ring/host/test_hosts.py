@@ -129,6 +129,25 @@ def one_ring(nodes: dict[int, dict], members: list[int]) -> bool:
     return chained and len({tuple(nodes[i]["epoch"]) for i in members}) == 1
 
 
+#: asks the web view's API on a host for the nodes it shows
+WEB_NODES = """
+import json, sys, urllib.request
+with urllib.request.urlopen(f"http://127.0.0.1:{sys.argv[1]}/api/state", timeout=5) as answer:
+    print(json.dumps(sorted(json.loads(answer.read())["topics"].get("/ring/nodes", {}).get("nodes", {}))))
+"""
+
+
+def web_nodes(hosts: SshHosts, host: SshHost, port: int) -> list[int]:
+    """The node IDs the web view on ``host`` shows (none while it does not answer)."""
+    done = subprocess.run(
+        hosts.run(host, sys.executable, "-c", WEB_NODES, str(port)),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    return sorted(int(i) for i in json.loads(done.stdout)) if done.returncode == 0 else []
+
+
 def log_says(log: Path, text: str) -> bool:
     return text in log.read_text()
 
@@ -141,10 +160,10 @@ def test_one_command_runs_a_ring_across_three_hosts_over_ssh(procs, ssh_hosts, t
     a, b, c = hosts.hosts
     ring = f"h{uuid.uuid4().hex[:8]}"
     programs = write_probe_programs(tmp_path / "programs")
-    # the test's own ssh settings; the client finds a dead connection within ~4 s
+    # the test's own ssh settings; the client finds a dead connection within ~6 s
     ssh = {
         "identity": str(hosts.identity),
-        "options": [*hosts.ssh_options, "-o", "ServerAliveInterval=1", "-o", "ServerAliveCountMax=3"],
+        "options": [*hosts.ssh_options, "-o", "ServerAliveInterval=2", "-o", "ServerAliveCountMax=3"],
     }
     spec = {
         "hosts": {
@@ -195,6 +214,7 @@ def test_one_command_runs_a_ring_across_three_hosts_over_ssh(procs, ssh_hosts, t
                 str(programs),
                 "--store",
                 str(tmp_path / "store-a"),
+                "--web",  # host a's own port space: the default port is free there
             ),
             stdout=out,
             env={"TOKENRING_EXTENSIONS": ""},  # the bare ring: the probe programs need no world
@@ -203,6 +223,8 @@ def test_one_command_runs_a_ring_across_three_hosts_over_ssh(procs, ssh_hosts, t
         # one ring over the three hosts, seen from host a, every program downloaded over it
         nodes = wait_until(lambda: ring_of(everyone), 120, "one ring across the three hosts")
         formed = time.monotonic() - started
+        # the web view on the launcher's host shows every node, whichever host runs it
+        wait_until(lambda: web_nodes(hosts, a, 8080) == everyone, 60, "the web view showing all nodes")
         wait_until(lambda: log_says(log, "changed: 8 of 8 program(s)"), 120, "the programs downloaded")
 
         def programs_run() -> bool:
@@ -345,3 +367,44 @@ def test_a_secured_ring_across_hosts_obeys_only_its_operator(procs, ssh_hosts, t
             code = None
     assert code == 130, log.read_text()[-3000:]
     wait_until(lambda: not hosts.leftovers(), 30, "no process left in any namespace")
+
+
+@needs_ssh_hosts
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_a_host_whose_share_refuses_to_start_stops_the_run_naming_its_line(procs, request, tmp_path):
+    """Host b answers ssh, but its share refuses (its store is a file): one line naming the
+    inventory's line and b's reason, exit code 2, and nothing left running on either host."""
+    hosts = SshHosts(tmp_path / "hosts", count=2)
+    request.addfinalizer(hosts.close)
+    a, b = hosts.hosts
+    (tmp_path / "not-a-dir").write_text("")
+    spec = {
+        "hosts": {
+            "a": {"address": a.address, "ssh": "local", "nodes": ["main", "motor"]},
+            "b": {
+                "address": b.address,
+                "ssh": {"identity": str(hosts.identity), "options": hosts.ssh_options},
+                "nodes": ["sonar"],
+                "tokenring": TOKENRING,
+                "store": str(tmp_path / "not-a-dir"),
+            },
+        }
+    }
+    path = inventory(tmp_path / "ring.yaml", json.dumps(spec, indent=2))
+    launcher = procs.start(
+        hosts.run(
+            a, TOKENRING, "up", "--hosts", str(path), "--ring", f"r{uuid.uuid4().hex[:8]}", "--no-programs"
+        ),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env={"TOKENRING_EXTENSIONS": ""},
+    )
+    out, err = launcher.communicate(timeout=120)
+    assert launcher.returncode == 2, out[-2000:] + err
+    line = path.read_text().splitlines().index('    "b": {') + 1
+    assert err.strip().splitlines() == [
+        f"tokenring up: error: {path}:{line}: host b ({b.address}): share exited with code 2 "
+        f"(tokenring up: error: --store {tmp_path / 'not-a-dir'}: not a directory)"
+    ], err
+    wait_until(lambda: not hosts.leftovers(), 30, "no process left in either namespace")
