@@ -9,15 +9,20 @@ give the same hash, run after run, on any host.
 from __future__ import annotations
 
 import logging
+import shutil
+import tempfile
 import threading
 import time
+import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 from tokenring import runtime
 from tokenring.contract.protocol import Protocol
 from tokenring.errors import UsageError
+from tokenring.node.channels import CommandMemory
 from tokenring.node.faults import FaultInjector
 from tokenring.node.node_os import NodeOS
 from tokenring.node.pacing import install as install_profile
@@ -78,6 +83,10 @@ class SimRing:
         self.ack_mode = ack_mode
         self.hub = MemoryHub()
         self.hub.hash_frames()
+        #: the nodes' stores (battery-backed RAM), which outlive a crash: a node process keeps
+        #: what its inbox took there (tokenring.node.process), so a respawned node does too
+        self.store = Path(tempfile.mkdtemp(prefix="tokenring-sim-store-"))
+        self._remove_store = weakref.finalize(self, shutil.rmtree, self.store, True)
         self.nodes: dict[int, NodeOS] = {}
         for node_id in ids:
             self.nodes[node_id] = self._boot(node_id)
@@ -93,6 +102,7 @@ class SimRing:
             bitrate=self.bitrate,
             ack_mode=self.ack_mode,
         )
+        node.command_memory = CommandMemory(self.store / node.name / "inbox-memory")
         install_profile(node, self.profile, self.bitrate, node._now())
         node.start()
         return node
@@ -104,6 +114,7 @@ class SimRing:
         node = self.nodes[node_id]
         node.paused = True  # a dead process's watchdog regenerates nothing
         self.hub.crash(node_id)
+        node.command_memory.close()  # its store keeps what it wrote; the process writes no more
         # its threads end in a task of their own: the killer's time does not pass meanwhile
         runtime.current().spawn(node.close, f"kill-{node_id}")
 
@@ -118,6 +129,8 @@ class SimRing:
     def close(self) -> None:
         for node in self.nodes.values():
             node.close()
+            node.command_memory.close()
+        self._remove_store()
 
 
 class _VirtualTime(logging.Filter):
