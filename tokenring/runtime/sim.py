@@ -24,6 +24,7 @@ kept for where greenlet is missing, and ``TOKENRING_SIM_TASKS=threads`` asks for
 
 from __future__ import annotations
 
+import contextlib
 import heapq
 import itertools
 import os
@@ -40,6 +41,12 @@ try:
     from greenlet import GreenletExit, getcurrent, greenlet
 except ImportError:  # pragma: no cover - a platform without its wheel: the tasks are threads
     greenlet = None
+    _NO_GREENLET = object()
+
+    def getcurrent() -> Any:
+        """No greenlet is ever current (a task's ``glet`` is None): _me() checks the thread."""
+        return _NO_GREENLET
+
 
 #: the kinds of task a :class:`SimRuntime` can run its tasks as
 TASK_KINDS = ("greenlet", "threads")
@@ -129,6 +136,7 @@ class SimRuntime:
         self._tasks: dict[int, _Task] = {}  # by thread ident
         self._all: list[_Task] = []
         self._main: _Task | None = None
+        self._starter: Any = None  # greenlets: where every task's greenlet starts (_start_tasks)
         self._current: _Task | None = None
         self._deadlocked = False
         self._closing = False
@@ -151,11 +159,24 @@ class SimRuntime:
         return EPOCH_S + self.now
 
     def sleep(self, seconds: float) -> None:
-        task = self._me()
+        task = self._current
+        if task is None or task.glet is not getcurrent():  # _me()'s check, inlined for greenlets
+            task = self._me()
         if seconds <= 0:
             self._ready.append(task)  # a yield: the others ready now go first, in the seed's order
             self._park(task)
             return
+        if not self._ready and not self._closing:  # _wait()'s fast path, inlined for the wire time
+            deadline = self.now + seconds
+            timers = self._timers
+            while timers:
+                _, _, other, wait_id = timers[0]
+                if other.wait_id == wait_id and not other.done:
+                    break
+                heapq.heappop(timers)
+            if not timers or timers[0][0] > deadline:
+                self.now = deadline
+                return
         self._wait(task, None, seconds)
 
     # -- primitives --------------------------------------------------------------------------------
@@ -218,17 +239,18 @@ class SimRuntime:
         self._ready.append(task)
         return handle
 
-    def _body(self, task: _Task, target: Callable[[], Any]) -> None:
-        """A task's life: ``target``, its failure recorded, then the baton handed on for good."""
+    def _body(self, task: _Task, target: Callable[[], Any]) -> _Task | None:
+        """A task's life: ``target``, its failure recorded, then the baton handed on for good
+        (greenlets: the task to start next, if it is one never run, for _start_tasks)."""
         try:
             if self._closing:
-                return
+                return None
             target()
         except _Shutdown:
-            return
+            return None
         except _Collected:  # its greenlet was collected parked (a runtime never closed)
             self._closing = True
-            return
+            return None
         except BaseException as exc:  # a task's failure is the run's, reported by run()
             task.error = exc
             self.failures.append((task.name, exc))
@@ -236,7 +258,7 @@ class SimRuntime:
             task.done = True
         assert task.finished is not None
         task.finished.set()
-        self._exit(task)
+        return self._exit(task)
 
     # -- running -------------------------------------------------------------------------------------
     def run(self, main: Callable[[], Any]) -> Any:
@@ -253,6 +275,8 @@ class SimRuntime:
             for other in self._all:  # spawned before run(): their bodies return here too
                 if not other.glet:
                     other.glet.parent = task.glet
+            self._starter = greenlet(self._start_tasks)
+            self._starter.switch()  # it starts here, as shallow as run() itself, and comes back
         else:
             task.gate = threading.Lock()
             task.gate.acquire()
@@ -267,6 +291,15 @@ class SimRuntime:
             name, exc = self.failures[0]
             raise RuntimeError(f"simulated task {name!r} failed: {exc!r}") from exc
         return result
+
+    def _start_tasks(self) -> None:
+        """Greenlets: start every task's greenlet from here, at one shallow depth. A greenlet
+        starts on top of whichever stack switches into it first, and inherits that stack's
+        Python recursion depth: tasks started by tasks started by tasks (a ring of 255 nodes)
+        would otherwise run out of recursion depth. Whoever switches here passes the task."""
+        task = getcurrent().parent.switch()  # back to run(); resumed with the first to start
+        while True:
+            task = task.glet.switch()  # returns when something hands the next one over
 
     def close(self, timeout: float = 5.0) -> list[str]:
         """End every parked task, one at a time: each unwinds from the wait it is parked in
@@ -303,6 +336,11 @@ class SimRuntime:
             if task.thread.is_alive():
                 stuck.append(task.name)
         self._current = None
+        starter, self._starter = self._starter, None
+        if starter is not None and starter:
+            with contextlib.suppress(ValueError, _greenlet_error):
+                starter.parent = getcurrent()
+                starter.throw()  # GreenletExit: it ends
         return stuck
 
     def until(self, seconds: float) -> None:
@@ -311,11 +349,12 @@ class SimRuntime:
 
     # -- the scheduler -------------------------------------------------------------------------------
     def _me(self) -> _Task:
+        """The running task, checked: the caller must be it (or one unwinding in close())."""
+        task = self._current
         if self._greenlets:
-            task = self._current
-            if task is not None and task.glet is getcurrent():
-                return task
             mine = getcurrent()
+            if task is not None and task.glet is mine:
+                return task
             task = next((t for t in self._all if t.glet is mine), None)
             if task is not None and self._closing:
                 return task
@@ -359,13 +398,13 @@ class SimRuntime:
 
     def _wake(self, waits: _WaitList, count: int | None = None) -> None:
         """Make up to ``count`` (None: all) waiters of ``waits`` ready, first come first."""
-        n = 0
-        while waits.tasks and (count is None or n < count):
-            task = waits.tasks.popleft()
+        tasks = waits.tasks
+        ready = self._ready
+        for _ in range(len(tasks) if count is None else min(count, len(tasks))):
+            task = tasks.popleft()
             task.waiting_on = None
             task.wait_id += 1  # its timer is stale now
-            self._ready.append(task)
-            n += 1
+            ready.append(task)
 
     def _pick(self) -> _Task | None:
         """The next task to run: a ready one (by the seed), else the earliest timer's."""
@@ -391,11 +430,20 @@ class SimRuntime:
         """Hand the baton on and wait for it back."""
         if self._closing and task is not self._main:
             raise _Shutdown  # unwinding: nothing runs any more
-        nxt = self._next()
+        ready = self._ready
+        if ready:  # _next() inlined for the common case
+            nxt = ready.pop(self.schedule_rng.randrange(len(ready)) if self.jitter and len(ready) > 1 else 0)
+            self.switches += 1
+            self._current = nxt
+        else:
+            nxt = self._next()
         if nxt is not task:
             if self._greenlets:
                 try:
-                    nxt.glet.switch()
+                    if nxt.glet:  # running: switch to where it parked
+                        nxt.glet.switch()
+                    else:  # never run: started from _start_tasks
+                        self._starter.switch(nxt)
                 except _Collected:
                     self._closing = True  # collected while parked: no wait may switch again
                     raise
@@ -427,15 +475,20 @@ class SimRuntime:
         self._current = nxt
         return nxt
 
-    def _exit(self, task: _Task) -> None:
-        """A finished task hands the baton on for good."""
+    def _exit(self, task: _Task) -> _Task | None:
+        """A finished task hands the baton on for good (greenlets: its body returns into the
+        next task, or into _start_tasks with the next task when that one never ran yet)."""
         if self._closing:
-            return
+            return None
         nxt = self._next()
-        if self._greenlets:
-            task.glet.parent = nxt.glet  # its body returns into the next task
-        else:
+        if not self._greenlets:
             nxt.gate.release()
+            return None
+        if nxt.glet:
+            task.glet.parent = nxt.glet
+            return None
+        task.glet.parent = self._starter
+        return nxt
 
 
 class SimThread:
@@ -537,7 +590,9 @@ class SimRLock:
 
     def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
         sim = self._sim
-        me = sim._me()
+        me = sim._current
+        if me is None or me.glet is not getcurrent():  # _me()'s check, inlined for greenlets
+            me = sim._me()
         owner = self._owner
         if owner is None:
             self._owner, self._count = me, 1
@@ -569,7 +624,14 @@ class SimRLock:
     __enter__ = acquire
 
     def __exit__(self, *exc: object) -> None:
-        self.release()
+        # release() (the owner is whoever runs: the with block's own task)
+        if self._owner is None:
+            raise RuntimeError("cannot release un-acquired lock")
+        self._count -= 1
+        if not self._count:
+            self._owner = None
+            if self._waits.tasks:
+                self._sim._wake(self._waits, 1)
 
     def _release_save(self) -> int:
         """Release however deep it is held (a condition's wait); the depth, to restore."""
@@ -658,8 +720,12 @@ class SimQueue:
     def put(self, item: Any, block: bool = True, timeout: float | None = None) -> None:
         if not 0 < self.maxsize <= len(self._items):
             self._items.append(item)
-            if self._getters.tasks:
-                self._sim._wake(self._getters, 1)
+            getters = self._getters.tasks
+            if getters:  # _wake(self._getters, 1), inlined: a consumer is handed every item
+                task = getters.popleft()
+                task.waiting_on = None
+                task.wait_id += 1
+                self._sim._ready.append(task)
             return
         sim = self._sim
         deadline = None if timeout is None else sim.now + timeout
@@ -669,7 +735,8 @@ class SimQueue:
                 raise _queue.Full
             sim._wait(sim._me(), self._putters, left)
         self._items.append(item)
-        sim._wake(self._getters, 1)
+        if self._getters.tasks:
+            sim._wake(self._getters, 1)
 
     def put_nowait(self, item: Any) -> None:
         self.put(item, block=False)
@@ -681,14 +748,22 @@ class SimQueue:
                 self._sim._wake(self._putters, 1)
             return item
         sim = self._sim
-        deadline = None if timeout is None else sim.now + timeout
-        while not self._items:
-            left = None if deadline is None else deadline - sim.now
-            if not block or (left is not None and left <= 0):
-                raise _queue.Empty
-            sim._wait(sim._me(), self._getters, left)
+        if block and timeout is None:  # a consumer's loop: wait until an item comes
+            me = sim._current
+            if me is None or me.glet is not getcurrent():
+                me = sim._me()
+            while not self._items:
+                sim._wait(me, self._getters, None)
+        else:
+            deadline = None if timeout is None else sim.now + timeout
+            while not self._items:
+                left = None if deadline is None else deadline - sim.now
+                if not block or (left is not None and left <= 0):
+                    raise _queue.Empty
+                sim._wait(sim._me(), self._getters, left)
         item = self._items.popleft()
-        sim._wake(self._putters, 1)
+        if self._putters.tasks:
+            sim._wake(self._putters, 1)
         return item
 
     def get_nowait(self) -> Any:

@@ -336,3 +336,20 @@ def test_a_wait_only_its_own_timer_can_end_moves_the_clock_without_a_switch() ->
 
     sim.run(main)
     assert sim.switches > 0
+
+
+def test_tasks_started_by_tasks_do_not_run_out_of_recursion_depth() -> None:
+    # a greenlet starts on top of the stack that first switches to it: started from deep inside
+    # another task's wait, each generation used to start deeper (255 nodes' tasks overflowed)
+    sim = SimRuntime(seed=1)
+    ran = []
+
+    def link(k: int) -> None:
+        ran.append(k)
+        if k < 1000:
+            task = sim.spawn(lambda: link(k + 1), f"t{k}")
+            sim.sleep(0.001)
+            task.join()
+
+    sim.run(lambda: link(0))
+    assert ran == list(range(1001)) and sim.close() == []
