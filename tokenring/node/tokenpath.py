@@ -205,7 +205,8 @@ class PyTokenPath(TokenPathHost):
         """The token handler: one call per frame."""
         t_in = self._now()
         stats = self.stats
-        stats.frames_received += 1
+        counters = self._counters  # the hot counters themselves (stats reads them through properties)
+        counters.frames_received += 1
         if self.rx_fault is not None and self.rx_fault(frame):
             return
         if self._departed:
@@ -305,11 +306,11 @@ class PyTokenPath(TokenPathHost):
                 self._regeneration_streak = 0
                 self._wake()
             if (counter - self._last_counter) & 0xFF > 1 and self._last_counter >= 0:
-                stats.rounds_missed += ((counter - self._last_counter) & 0xFF) - 1
+                counters.rounds_missed += ((counter - self._last_counter) & 0xFF) - 1
             self._last_counter = counter
-            stats.visits += 1
+            counters.visits += 1
             if wraps:
-                stats.rounds += 1
+                counters.rounds += 1
         if flags & ACK_REQUESTED:  # after the pass: the token must not wait for our ack
             self._send_ack(sid, crc)
         self._handler_add(held)
@@ -378,14 +379,14 @@ class PyTokenPath(TokenPathHost):
             sender = self._senders.get(did)
             if sender is None:
                 sender = self._senders[did] = self.transport.sender(did)
-            stats = self.stats
-            if stats.frames_sent & 15:
+            counters = self._counters
+            if counters.frames_sent & 15:
                 sender(self._work)
             else:  # every 16th send is timed
                 t0 = self._now()
                 sender(self._work)
                 self._send_add(self._now() - t0)
-            stats.frames_sent += 1
+            counters.frames_sent += 1
         except Exception as exc:
             self._send_failed(did, exc)
 
