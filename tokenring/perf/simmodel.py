@@ -131,7 +131,9 @@ def measure(
         "frames": summary.frames,
         "frames_sha256": summary.frames_sha256,
         "simulated_s": round(summary.simulated_s, 6),
-        "real_s": summary.real_s,
+        # the scheduler's hand-overs of the baton: the same for a seed, like the figures above
+        "switches": summary.switches,
+        "real_s": summary.real_s,  # the only host-dependent figure
     }
 
 
@@ -233,6 +235,14 @@ def _visit_time(node: NodeOS, sim: SimRuntime) -> float:
     return float(stamp) if stamp else sim.monotonic()
 
 
+def _speed(run: dict[str, Any]) -> str:
+    """How fast the simulation ran (simulated seconds per real second, the ring's set-up
+    included) and the scheduler's hand-overs per frame."""
+    real, frames = run["real_s"], run["frames"]
+    speed = f"{run['simulated_s'] / real:.0f}x real time" if real > 0 else "no real time"
+    return f"{speed}, {run['switches'] / frames:.2f} switches a frame" if frames else speed
+
+
 def run_sizes(
     protocol: Protocol,
     sizes: Sequence[int],
@@ -250,7 +260,7 @@ def run_sizes(
         run = measure(protocol, ids_for(n), bitrate=bitrate, profile=profile, seed=seed)
         say(
             f"        round median {run['round_median_ms']:.3f} ms; {run['simulated_s']:.1f} simulated s "
-            f"in {run['real_s']:.1f} real s"
+            f"in {run['real_s']:.1f} real s ({_speed(run)})"
         )
         runs.append(run)
     return {
