@@ -165,6 +165,7 @@ class Share:
     group_ended: bool = False
     last: deque[str] = field(default_factory=lambda: deque(maxlen=5))
     said: str = ""  # the last line ssh or the share's shell said itself (not a module's)
+    connected: bool = False  # its launcher spoke: ssh reached the host and tokenring runs there
 
     def relay(self, say: Callable[[str, str], None]) -> Callable[[str], None]:
         """Its output lines under ``host/module`` (the share's launcher prefixed them with the
@@ -174,6 +175,7 @@ class Share:
             self.last.append(text)
             match = _PREFIXED.match(text)
             if match:
+                self.connected = True
                 say(match.group(2), f"{self.host.name}/{match.group(1)}")
             else:
                 self.said = text
@@ -236,13 +238,18 @@ class HostShares:
             why = self._why(share, code)
             again = code == SSH_FAILED or launcher.respawn
             if again:
+                if share.connected:  # lost now (not another attempt that failed): back to 1 s
+                    self._backoff.pop(host.name, None)
                 delay = self._backoff.get(host.name, RECONNECT_S)
                 self._backoff[host.name] = min(RECONNECT_MAX_S, delay * 2)
                 self._due[host.name] = time.monotonic() + delay
-                launcher.failure(
-                    f"host {host.name} ({host.address}) {why}: its nodes are out of the ring; "
-                    f"connecting again in {delay:.0f} s"
-                )
+                line = f"host {host.name} ({host.address}) {why}: "
+                if share.connected:  # counted once per loss, however many attempts it takes
+                    launcher.failure(
+                        line + f"its nodes are out of the ring; connecting again in {delay:.0f} s"
+                    )
+                else:
+                    launcher.say(line + f"connecting again in {delay:.0f} s")
             else:
                 launcher.failure(f"host {host.name} ({host.address}) {why}: the ring goes on without it")
         now = time.monotonic()

@@ -11,6 +11,7 @@ The quick tests refuse bad input: one line naming the inventory's file and line,
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -272,7 +273,12 @@ def test_one_command_runs_a_ring_across_three_hosts_over_ssh(procs, ssh_hosts, t
         # the nodes on a and b are the ones that were there all along; c's are new processes
         assert all(after[i]["pid"] == pids[i] for i in without_c)
         assert all(after[i]["pid"] != pids[i] for i in (70, 80))
-        print(f"formed {formed:.1f} s, re-formed after the cut {reformed:.1f} s, rejoined {rejoined:.1f} s")
+        live = re.search(r"every host's nodes are live \(8 nodes, ([0-9.]+) s\)", log.read_text())
+        assert live, "the launcher said when every host's nodes were live"
+        print(
+            f"nodes live {live.group(1)} s, one ring seen {formed:.1f} s, re-formed after the cut "
+            f"{reformed:.1f} s, rejoined {rejoined:.1f} s after the mend"
+        )
     except AssertionError as failure:
         tail = "\n".join(log.read_text().splitlines()[-60:])
         raise AssertionError(f"{failure}\nlast status: {seen}\n--- launcher\n{tail}") from None
