@@ -414,3 +414,43 @@ def test_a_host_whose_share_refuses_to_start_stops_the_run_naming_its_line(procs
         f"(tokenring up: error: --store {tmp_path / 'not-a-dir'}: not a directory)"
     ], err
     wait_until(lambda: not hosts.leftovers(), 30, "no process left in either namespace")
+
+
+@needs_ssh_hosts
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_a_killed_launcher_leaves_nothing_on_any_host(procs, request, tmp_path):
+    """SIGKILL gives the launcher no time to stop anything: its ssh clients die with it (their
+    parent-death signal), each host's sshd closes the session, and the share there stops its
+    nodes when its input closes. Nothing is left on any host, by PID."""
+    hosts = SshHosts(tmp_path / "hosts", count=2)
+    request.addfinalizer(hosts.close)
+    a, b = hosts.hosts
+    ring = f"k{uuid.uuid4().hex[:8]}"
+    spec = {
+        "hosts": {
+            "a": {"address": a.address, "ssh": "local", "nodes": ["main", "motor"]},
+            "b": {
+                "address": b.address,
+                "ssh": {"identity": str(hosts.identity), "options": hosts.ssh_options},
+                "nodes": ["sonar", "compass"],
+                "tokenring": TOKENRING,
+                "store": str(tmp_path / "store-b"),
+            },
+        }
+    }
+    path = inventory(tmp_path / "ring.yaml", json.dumps(spec, indent=2))
+    log = tmp_path / "launcher.log"
+    with log.open("w") as out:
+        launcher = procs.start(
+            hosts.run(a, TOKENRING, "up", "--hosts", str(path), "--ring", ring, "--no-programs"),
+            stdout=out,
+            env={"TOKENRING_EXTENSIONS": ""},
+        )
+    wait_until(lambda: one_ring(status(hosts, a, ring), [10, 20, 30, 40]), 120, "the ring over two hosts")
+    assert hosts.leftovers().get(b.name), "host b runs its share"
+    killed = time.monotonic()
+    launcher.kill()
+    launcher.wait(30)
+    wait_until(lambda: not hosts.leftovers(), 60, "nothing left on either host")
+    print(f"host b empty {time.monotonic() - killed:.1f} s after the launcher's SIGKILL")
