@@ -741,6 +741,7 @@ def format_report(report: dict[str, Any]) -> str:
     from tokenring._util.tables import format_table
 
     rows = []
+    modelled = any("model_ms" in s for s in report["faults"])  # virtual time: tokenring.chaos.virtual
     for s in report["faults"]:
         rows.append(
             [
@@ -754,10 +755,10 @@ def format_report(report: dict[str, Any]) -> str:
                 s["crc_rejects"],
                 s["commands_lost"],
             ]
+            + ([_model_cell(s)] if modelled else [])
         )
-    table = format_table(
-        rows, ["at s", "node", "fault", "recover ms", "episode", "regen", "dup elim", "crc rej", "cmd lost"]
-    )
+    headers = ["at s", "node", "fault", "recover ms", "episode", "regen", "dup elim", "crc rej", "cmd lost"]
+    table = format_table(rows, headers + (["model ms"] if modelled else []))
     commands = report.get("commands")
     summary = ""
     if commands:
@@ -777,3 +778,11 @@ def format_report(report: dict[str, Any]) -> str:
         f"  {'ok  ' if ok else 'FAIL'} {name.replace('_', ' ')}" for name, ok in report["invariants"].items()
     )
     return f"{table}\n{summary}\ninvariants:\n{verdict}\n"
+
+
+def _model_cell(step: dict[str, Any]) -> str:
+    """The timing model's window for a fault it covers, and whether the recovery lay in it."""
+    if "model_ms" not in step:
+        return ""
+    low, high = step["model_ms"]
+    return f"{low:.0f}..{high:.0f} {'ok' if step['within_model'] else 'OUT'}"

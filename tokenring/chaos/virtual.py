@@ -275,6 +275,7 @@ class _Body:
                     errors.append(f"{node_id}: no answer (hung)")
                     continue
                 self._apply(step.kind, step.request, node_id, hung, frozen, owed)
+            in_ring = len(membership.present) if not membership.groups else 0
             membership.apply(step, targets, scenario.respawn)
             self.say(f"{sim.now - t0:6.2f} s  {step.kind:9s} on {step.node}" + (
                 f"  ({'; '.join(errors + skipped)})" if errors or skipped else ""
@@ -292,6 +293,8 @@ class _Body:
                     "before": before,
                     "errors": errors,
                     "skipped": skipped,
+                    "in_ring": in_ring,  # the nodes circulating as it landed (0: a partition)
+                    "request": step.request,
                 }
             )
         self._advance(max(t0 + scenario.duration, steps[-1]["injected"] + scenario.settle))
@@ -310,7 +313,7 @@ class _Body:
         if self.ledger is not None:
             self._quiesce(membership.present - hung)
         ring.hub.on_frame = None
-        return build_report(
+        report = build_report(
             ring=f"sim seed {sim.seed}",
             source=scenario.source,
             frames=frames,
@@ -325,6 +328,8 @@ class _Body:
             commands_duplicated=0,
             judged_by="ledger" if self.ledger is not None else "none",
         )
+        against_model(report, steps, scenario.respawn, ring.bitrate)
+        return report
 
     def _apply(
         self,
@@ -384,3 +389,43 @@ class _Body:
         if waiting:
             self.say(f"probes on {sorted(waiting)} did not quiesce in {QUIESCE_S:.0f} simulated s")
         self._advance(self.sim.now + LAND_S)
+
+
+#: faults the timing model covers when they land alone (tokenring.sim.model): a lost token, a
+#: frozen node, a crash that nothing restarts
+MODELLED = {"lose": "lost_token_ms", "hang": "freeze_ms", "crash": "crash_ms"}
+
+
+def against_model(report: dict[str, Any], steps: list[dict[str, Any]], respawn: bool, bitrate: float) -> None:
+    """Put the timing model's window beside each fault it covers that landed alone (its own
+    episode, the whole ring circulating, one token lost): ``model_ms`` and ``within_model``.
+
+    The chaos judge's recovery ends once a whole round went through the ring, the model's once
+    every node was visited again: up to one round later, which the window's top gets added."""
+    from tokenring.sim.model import model
+
+    judged = within = 0
+    for index, (fault, step) in enumerate(zip(report["faults"], steps, strict=True)):
+        key = MODELLED.get(fault["kind"])
+        alone = fault["episode"] == index and (
+            index + 1 == len(steps) or report["faults"][index + 1]["episode"] != index
+        )
+        if (
+            key is None
+            or not alone
+            or not step["in_ring"]
+            or step["node"] == "all"
+            or (fault["kind"] == "crash" and respawn)
+            or (fault["kind"] == "lose" and step["request"].get("count", 1) != 1)
+            or (fault["kind"] == "hang" and step["request"].get("soft"))
+            or fault["recovered_ms"] is None
+        ):
+            continue
+        figures = model(step["in_ring"], bitrate)
+        low, high = figures[key]
+        window = [round(low, 3), round(high + figures["round_ms"], 3)]
+        fault["model_ms"] = window
+        fault["within_model"] = window[0] <= fault["recovered_ms"] <= window[1]
+        judged += 1
+        within += fault["within_model"]
+    report["timing_model"] = {"judged": judged, "within": within}

@@ -147,3 +147,31 @@ def test_bad_input_gets_one_line_and_exit_code_2(args: list[str], says: str):
     assert done.returncode == 2, (done.stdout, done.stderr)
     assert says in done.stderr and "Traceback" not in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+
+
+def test_faults_that_land_alone_recover_within_the_timing_model(tmp_path: Path):
+    """A lost token, a frozen node and a crash with nothing to restart it, each alone: the ring
+    in virtual time recovers within what the ring's constants allow (tokenring bench --sim's
+    model), whatever the seed."""
+    scenario = tmp_path / "alone.yaml"
+    scenario.write_text(
+        """
+ring: {nodes: all, respawn: false, workload: probe}
+settle: 2.0
+faults:
+  - {at: 1.0, node: motor, kind: lose}
+  - {at: 3.0, node: sonar, kind: hang}
+  - {at: 5.0, node: sonar, kind: resume}
+  - {at: 7.0, node: copro, kind: crash}
+  - {at: 9.0, node: main, kind: lose}
+"""
+    )
+    for seed in ("1", "8"):
+        done, report = run_scenario(tmp_path, f"alone{seed}", "--chaos", str(scenario), "--seed", seed)
+        assert done.returncode == 0, done.stdout
+        modelled = [f for f in report["faults"] if "model_ms" in f]
+        assert [f["kind"] for f in modelled] == ["lose", "hang", "crash", "lose"]
+        assert report["timing_model"] == {"judged": 4, "within": 4}, modelled
+        lose = modelled[0]
+        # the lost-token timer of eight nodes at 2.5 Mbit/s: ARCNET's 840 ms, give or take a round
+        assert 800 <= lose["recovered_ms"] <= 900 and lose["model_ms"][0] <= 840 <= lose["model_ms"][1]
