@@ -79,3 +79,16 @@ def test_refused_before_anything_runs(options: tuple[str, ...], said: str) -> No
     result = run_tokenring("sim", *options)
     assert result.returncode == 2, (result.stdout, result.stderr)
     assert said in result.stderr and "Traceback" not in result.stderr, result.stderr
+
+
+@pytest.mark.slow
+def test_faults_run_beside_the_robot_to_the_end_of_the_run(tmp_path: Path) -> None:
+    """``--fault`` beside a mission that ends early: the schedule still runs its --duration out
+    and its faults and the injectors' counts are in the summary."""
+    options = ("--world", "empty", "--explore", "2", "--duration", "20", "--fault", "drop:motor:0.1@5")
+    summary = simulate(tmp_path, "faults", *options)
+    assert summary["simulated_s"] == 20.0
+    [fault] = summary["faults"]
+    assert fault["fault"] == "drop:motor:0.1@5" and fault["recovered_s"] is not None
+    assert summary["fault_counts"]["20"]["dropped"] > 0
+    assert summary["extra"]["robot"]["failure"] is None

@@ -199,9 +199,12 @@ def run_application(
 
     def scenario(sim: Any, ring: Any) -> dict[str, Any]:
         fault_facts: dict[str, Any] = {}
+        faulting = None
         if schedule is not None:  # the faults on their own task, the application on this one
-            sim.spawn(lambda: fault_facts.update(schedule(sim, ring)), "faults")
+            faulting = sim.spawn(lambda: fault_facts.update(schedule(sim, ring)), "faults")
         facts = application(sim, ring) if application is not None else {}
+        if faulting is not None:  # the schedule runs its --duration out, whenever the job ended
+            faulting.join()
         return {**fault_facts, **facts}
 
     before = {key: os.environ.get(key) for key in plan.env}
