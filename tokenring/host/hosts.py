@@ -12,6 +12,7 @@ reached and which of protocol.yaml's nodes it runs. Every mistake names the file
       board1:
         address: 10.0.0.2
         ssh: {user: robot, port: 22, identity: ~/.ssh/ring_ed25519, options: [-o, Compression=no]}
+                               # (ssh: {host: ALIAS}: an ssh_config Host to reach it by, if not its address)
         nodes: 3               # the next three of protocol.yaml's nodes no other host names
         tokenring: /opt/ring/.venv/bin/tokenring
         store: /var/lib/tokenring
@@ -32,7 +33,7 @@ DEFAULT_PORT = 7447
 SCHEMES = ("tcp", "tls")
 TOP_KEYS = ("hosts", "port", "scheme")
 HOST_KEYS = ("address", "ssh", "nodes", "tokenring", "store", "zenoh_config", "port")
-SSH_KEYS = ("user", "port", "identity", "options")
+SSH_KEYS = ("host", "user", "port", "identity", "options")
 
 
 @dataclass
@@ -44,6 +45,7 @@ class Host:
     line: int  # where the inventory names it
     local: bool = False  # the launcher's own host: no SSH, its router is the hub
     nodes: list[str] = field(default_factory=list)
+    ssh_host: str | None = None  # what ssh is given (an ssh_config alias), else the address
     user: str | None = None
     ssh_port: int | None = None
     identity: str | None = None
@@ -135,6 +137,10 @@ def load_inventory(path: str | Path, protocol: Any) -> Inventory:
             for key in ssh:
                 if key not in SSH_KEYS:
                     raise fail(f"{entry}.ssh.{key}", f"unknown key (allowed: {', '.join(SSH_KEYS)})")
+            if ssh.get("host") is not None:
+                host.ssh_host = _text(
+                    ssh["host"], fail, f"{entry}.ssh.host", "a host name or ssh_config alias"
+                )
             if ssh.get("user") is not None:
                 host.user = _text(ssh["user"], fail, f"{entry}.ssh.user", "a user name")
             if ssh.get("port") is not None:
@@ -151,7 +157,7 @@ def load_inventory(path: str | Path, protocol: Any) -> Inventory:
                 )
             host.ssh_options = list(options)
         else:
-            raise fail(f"{entry}.ssh", "expected 'local' or a mapping of user, port, identity, options")
+            raise fail(f"{entry}.ssh", "expected 'local' or a mapping of host, user, port, identity, options")
         if "tokenring" in raw:
             command = _text(raw["tokenring"], fail, f"{entry}.tokenring", "the tokenring command there")
             try:

@@ -90,7 +90,7 @@ def ssh_command(host: Host, remote: Sequence[str], env: Mapping[str, str] | None
     command = list(remote)
     if env:
         command = ["env", *(f"{k}={v}" for k, v in sorted(env.items())), *command]
-    return [*argv, *SSH_DEFAULTS, host.address, "--", "exec " + shlex.join(command)]
+    return [*argv, *SSH_DEFAULTS, host.ssh_host or host.address, "--", "exec " + shlex.join(command)]
 
 
 def share_command(host: Host, settings: ShareSettings) -> list[str]:

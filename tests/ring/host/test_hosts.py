@@ -422,7 +422,8 @@ def test_a_host_whose_share_refuses_to_start_stops_the_run_naming_its_line(procs
 def test_a_killed_launcher_leaves_nothing_on_any_host(procs, request, tmp_path):
     """SIGKILL gives the launcher no time to stop anything: its ssh clients die with it (their
     parent-death signal), each host's sshd closes the session, and the share there stops its
-    nodes when its input closes. Nothing is left on any host, by PID."""
+    nodes when its input closes. Nothing is left on any host, by PID. (Host b is reached by an
+    ssh_config Host alias: the user's ssh configuration applies.)"""
     hosts = SshHosts(tmp_path / "hosts", count=2)
     request.addfinalizer(hosts.close)
     a, b = hosts.hosts
@@ -439,6 +440,14 @@ def test_a_killed_launcher_leaves_nothing_on_any_host(procs, request, tmp_path):
             },
         }
     }
+    # host b reached through an ssh_config of the test's own: its Host alias, key and known_hosts
+    config = tmp_path / "ssh_config"
+    config.write_text(
+        f"Host ring-b\n  HostName {b.address}\n  IdentityFile {hosts.identity}\n  IdentitiesOnly yes\n"
+        f"  IdentityAgent none\n  UserKnownHostsFile {hosts.known_hosts}\n  StrictHostKeyChecking accept-new\n"
+        "  LogLevel ERROR\n"
+    )
+    spec["hosts"]["b"]["ssh"] = {"host": "ring-b", "options": ["-F", str(config)]}
     path = inventory(tmp_path / "ring.yaml", json.dumps(spec, indent=2))
     log = tmp_path / "launcher.log"
     with log.open("w") as out:
