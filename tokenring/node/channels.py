@@ -20,6 +20,7 @@ The objects here run inside the token handler: each ``visit`` is a handful of by
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 from collections import deque
@@ -96,7 +97,26 @@ class ChannelBuffer:
         self.write(**{name: value})
 
 
+@functools.cache
+def _int_bounds(dtype: Any) -> tuple[int, int]:
+    """The smallest and largest value of an integer dtype (numpy's iinfo, once per dtype)."""
+    import numpy as np
+
+    info = np.iinfo(dtype)
+    return int(info.min), int(info.max)
+
+
 def _check_value(where: str, field: Any, value: Any) -> None:
+    if type(value) is int and not field.dtype.shape and not field.is_text:
+        # a plain int for a scalar field, the common argument: what the numpy path below
+        # concludes, without building arrays (a program's every command passes here)
+        if field.dtype.kind in "iu":
+            low, high = _int_bounds(field.dtype)
+            if not low <= value <= high:
+                raise ChannelError(
+                    f"{where}.{field.name}: {value} does not fit {field.type_name} ({low}..{high})"
+                )
+        return
     import numpy as np
 
     dtype = field.dtype.base if field.dtype.shape else field.dtype
