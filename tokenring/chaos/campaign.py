@@ -23,6 +23,7 @@ from typing import Any
 
 SETTLE_S = 3.0  # after the last operation, as tokenring chaos --random
 COMMAND_KEYS = ("sent", "acked", "unacked", "untransmitted", "taken", "lost", "duplicated", "phantom")
+DOWNLOAD_KEYS = ("attempted", "completed", "failed")
 
 
 @dataclass(frozen=True)
@@ -36,6 +37,7 @@ class CampaignSpec:
     out: str
     shrink_runs: int
     nodes: tuple[str, ...]
+    downloads: bool = False  # main downloads programs all along (ring.downloads)
 
 
 @dataclass
@@ -52,6 +54,7 @@ class CampaignResult:
     operations: int = 0
     regenerations: int = 0
     commands: dict[str, int] = field(default_factory=lambda: dict.fromkeys(COMMAND_KEYS, 0))
+    downloads: dict[str, int] = field(default_factory=lambda: dict.fromkeys(DOWNLOAD_KEYS, 0))
     interrupted: bool = False
 
     @property
@@ -68,6 +71,8 @@ class CampaignResult:
         self.regenerations += outcome["regenerations"]
         for key in COMMAND_KEYS:
             self.commands[key] += int(outcome["commands"].get(key, 0))
+        for key in DOWNLOAD_KEYS:
+            self.downloads[key] += int(outcome.get("downloads", {}).get(key, 0))
         if not outcome["ok"]:
             self.failed.append(
                 {k: outcome[k] for k in ("seed", "broken", "file", "shrunk", "frames_sha256") if k in outcome}
@@ -87,6 +92,7 @@ class CampaignResult:
             "faults": self.faults,
             "regenerations": self.regenerations,
             "commands": self.commands,
+            "downloads": self.downloads,
             "interrupted": self.interrupted,
         }
 
@@ -119,7 +125,7 @@ def run_seed(seed: int, spec: CampaignSpec) -> dict[str, Any]:
     def attempt(candidate: Sequence[Any]) -> Any:
         with tempfile.TemporaryDirectory(prefix="tokenring-sim-") as scratch:
             file = Path(scratch) / "scenario.yaml"
-            file.write_text(scenario_document(candidate, settle=SETTLE_S, sim=sim))
+            file.write_text(scenario_document(candidate, settle=SETTLE_S, sim=sim, downloads=spec.downloads))
             return run_virtual(
                 load_scenario(file, protocol), protocol, seed=seed, bitrate=bitrate, profile=spec.profile
             )
@@ -134,6 +140,7 @@ def run_seed(seed: int, spec: CampaignSpec) -> dict[str, Any]:
         "faults": len(report["faults"]),
         "regenerations": sum(int(s["tokens_regenerated"]) for s in report["faults"]),
         "commands": {k: report.get("commands", {}).get(k, 0) for k in COMMAND_KEYS},
+        "downloads": {k: report.get("downloads", {}).get(k, 0) for k in DOWNLOAD_KEYS},
         "simulated_s": run.summary.simulated_s,
         "real_s": run.summary.real_s,
         "frames_sha256": run.summary.frames_sha256,
@@ -148,7 +155,11 @@ def run_seed(seed: int, spec: CampaignSpec) -> dict[str, Any]:
     path = unique_path(out, f"sim-seed{seed}", ".yaml")
     path.write_text(
         scenario_document(
-            ops, settle=SETTLE_S, comment=comment, sim={**sim, "frames_sha256": run.summary.frames_sha256}
+            ops,
+            settle=SETTLE_S,
+            comment=comment,
+            sim={**sim, "frames_sha256": run.summary.frames_sha256},
+            downloads=spec.downloads,
         )
     )
     outcome["file"] = str(path)
@@ -163,6 +174,7 @@ def run_seed(seed: int, spec: CampaignSpec) -> dict[str, Any]:
                 comment=f"shrunk from {path.name} ({len(ops)} operations) in {runs} runs: {len(smallest)} "
                 "still fail\nrun it again exactly with: tokenring sim --replay THIS_FILE",
                 sim={**sim, "frames_sha256": last.summary.frames_sha256},
+                downloads=spec.downloads,
             )
         )
         outcome["shrunk"] = {"file": str(shrunk), "operations": len(smallest), "runs": runs}

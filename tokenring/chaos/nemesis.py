@@ -125,16 +125,24 @@ def generate(
 
 
 def scenario_document(
-    ops: Sequence[Operation], *, settle: float = 3.0, comment: str = "", sim: dict[str, Any] | None = None
-) -> str:  # fmt: skip
+    ops: Sequence[Operation],
+    *,
+    settle: float = 3.0,
+    comment: str = "",
+    sim: dict[str, Any] | None = None,
+    downloads: bool = False,
+) -> str:
     """The operations as a scenario file for ``tokenring chaos`` (every node, respawn, probe);
-    ``sim``: how ``tokenring sim`` ran it (seed, bitrate), for its ``--replay``."""
+    ``sim``: how ``tokenring sim`` ran it (seed, bitrate), for its ``--replay``; ``downloads``:
+    programs moved all along (virtual time only)."""
     faults = sorted((step for op in ops for step in op.steps), key=lambda s: float(s["at"]))
     doc: dict[str, Any] = {
         "ring": {"nodes": "all", "bitrate": "max", "ack": "adaptive", "respawn": True, "workload": "probe"},
         "settle": settle,
         "faults": faults,
     }
+    if downloads:
+        doc["ring"]["downloads"] = True
     if sim:
         doc["sim"] = sim
     header = "".join(f"# {line}\n" for line in comment.splitlines())

@@ -47,7 +47,7 @@ from tokenring.observe.capture import CapturedFrames, first_full_round, passes, 
 from tokenring.transport.session import free_port, query
 from tokenring.transport.zenoh_config import make_config, open_session
 
-RING_KEYS = {"nodes", "bitrate", "ack", "respawn", "workload"}
+RING_KEYS = {"nodes", "bitrate", "ack", "respawn", "workload", "downloads"}
 #: the latest a fault may be scheduled, seconds from the start (a day, as chaos --duration)
 MAX_AT_S = 86_400.0
 FAULT_KEYS = {"at", "node", "kind", "value", "jitter", "count", "soft"}
@@ -85,6 +85,8 @@ class Scenario:
     ack: str = "adaptive"
     respawn: bool = False
     workload: str = "probe"
+    #: main downloads programs into the other nodes all along (virtual time only, so far)
+    downloads: bool = False
     settle: float = 2.0
     faults: list[FaultStep] = field(default_factory=list)
     #: how ``tokenring sim`` ran it (``seed``, ``bitrate``, ``profile``): a replay file's; real
@@ -148,6 +150,10 @@ def load_scenario(path: str | Path, protocol: Protocol | None = None) -> Scenari
     if not isinstance(respawn, bool):
         raise fail("ring.respawn", f"{respawn!r} is not true or false")
     scenario.respawn = respawn
+    downloads = ring.get("downloads", False)
+    if not isinstance(downloads, bool):
+        raise fail("ring.downloads", f"{downloads!r} is not true or false")
+    scenario.downloads = downloads
     scenario.workload = str(ring.get("workload", "probe"))
     if scenario.workload not in ("probe", "modules", "none"):
         raise fail("ring.workload", f"{scenario.workload!r} is not probe, modules or none")
@@ -426,6 +432,11 @@ def run_scenario(
     its commands are judged from the ledgers once every node has stopped. A running ring
     (``ring``) is judged from its probes' reports, if it runs the probe."""
     protocol = protocol or default_protocol()
+    if scenario.downloads:
+        raise UsageError(
+            f"{scenario.source}: ring.downloads runs in virtual time only so far: "
+            f"tokenring sim --chaos {scenario.source}"
+        )
     say = progress or (lambda text: None)
     launcher = None
     scratch = None

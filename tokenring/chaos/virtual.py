@@ -52,6 +52,11 @@ CALM_S = 1.0  # a calm second to start from, as on real processes
 QUIESCE_S = 10.0  # for the probes to stop sending and learn the fate of their last commands
 LAND_S = 0.3  # then for the receivers to write down the last commands they took
 SETTLE_STEP_S = 0.25  # how often the end state is looked at while the ring converges
+#: ``ring.downloads``: a download that has not ended by then is stuck (seconds; a whole program
+#: moves in a round per chunk, well under a second on eight nodes)
+DOWNLOAD_TIMEOUT_S = 30.0
+DOWNLOAD_PAUSE_S = 0.2  # between two downloads
+DOWNLOAD_BYTES = (200, 6000)  # a downloaded program's size, drawn per download
 
 
 @dataclass(frozen=True)
@@ -181,6 +186,7 @@ class _Body:
         for node in ring.nodes.values():
             self._start_program(node)
         self._form()
+        self.downloads = _Downloads(self) if self.scenario.downloads else None
         return {"report": self._run()}
 
     # -- the processes ------------------------------------------------------------------------
@@ -310,8 +316,12 @@ class _Body:
         known.update(self._stats(membership.present - self.away - hung))
         end_stats = dict(known)
         frames = list(self.frames)
+        if self.downloads is not None:
+            self.downloads.stop()
         if self.ledger is not None:
             self._quiesce(membership.present - hung)
+        if self.downloads is not None:
+            self.downloads.last_round(sorted(membership.present - hung - self.away))
         ring.hub.on_frame = None
         report = build_report(
             ring=f"sim seed {sim.seed}",
@@ -329,6 +339,8 @@ class _Body:
             judged_by="ledger" if self.ledger is not None else "none",
         )
         against_model(report, steps, scenario.respawn, ring.bitrate)
+        if self.downloads is not None:
+            self.downloads.judge(report)
         return report
 
     def _apply(
@@ -429,3 +441,106 @@ def against_model(report: dict[str, Any], steps: list[dict[str, Any]], respawn: 
         judged += 1
         within += fault["within_model"]
     report["timing_model"] = {"judged": judged, "within": within}
+
+
+class _Downloads:
+    """``ring.downloads``: the lowest node (main) downloads programs into the others all along,
+    one after another, through the faults, as ``tokenring load`` and ``up`` move programs.
+
+    Judged: a download that says it completed installed exactly the bytes sent; none is stuck
+    (every one ends, done or failed, within :data:`DOWNLOAD_TIMEOUT_S`); once the faults are over
+    one download into every node in the ring succeeds. One that fails under a fault is allowed:
+    the issuer reports it, as the loader does."""
+
+    def __init__(self, body: _Body) -> None:
+        self.body = body
+        self.issuer = min(body.scenario.nodes)
+        self.rng = body.sim.rng()
+        self.attempted = self.completed = 0
+        self.failed: list[str] = []
+        self.corrupted: list[str] = []
+        self.stuck: list[str] = []
+        self.abandoned = 0  # the issuer itself crashed meanwhile
+        self.final: dict[int, str | None] = {}
+        self._stopping = False
+        self._task = body.sim.spawn(self._loop, "downloads")
+
+    def _loop(self) -> None:
+        body = self.body
+        while not self._stopping:
+            if self.issuer in body.away or self.issuer in body.dead:
+                body.sim.sleep(0.1)
+                continue
+            target = self.rng.choice(sorted(i for i in body.ring.nodes if i != self.issuer))
+            self.once(target)
+            body.sim.sleep(DOWNLOAD_PAUSE_S)
+
+    def stop(self) -> None:
+        """No new download; the one under way ends first."""
+        self._stopping = True
+        self._task.join()
+
+    def once(self, target: int) -> str | None:
+        """One download into ``target``: None if it completed and installed what was sent, else
+        why not."""
+        from tokenring.node.program import program_sha256
+
+        body = self.body
+        system = body.ring.systems[self.issuer]
+        source = self._source()
+        self.attempted += 1
+        stamp_ms = int(body.sim.time() * 1000)
+        tx = system.submit(system.download_steps(target, source, stamp_ms), f"download into {target}")
+        deadline = body.sim.now + DOWNLOAD_TIMEOUT_S
+        while not tx.done.wait(0.5):
+            issuer_gone = self.issuer in body.away or self.issuer in body.dead
+            if issuer_gone or body.ring.systems.get(self.issuer) is not system:
+                self.abandoned += 1  # its issuer died with it: nobody is left to finish it
+                return "the issuer crashed"
+            if body.sim.now > deadline:
+                tx.cancelled = True
+                self.stuck.append(f"{target} at {body.sim.now:.3f} s ({tx.what}, step {tx.index})")
+                return "stuck"
+        if tx.error is not None:
+            self.failed.append(f"{target}: {tx.error}")
+            return str(tx.error)
+        self.completed += 1
+        installed = body.ring.systems[target].installed
+        digest = program_sha256(source)
+        if installed is None or installed.digest != digest:
+            got = "nothing" if installed is None else installed.digest.hex()[:12]
+            self.corrupted.append(f"{target}: sent {digest.hex()[:12]}, installed {got}")
+            return "installed other bytes"
+        return None
+
+    def last_round(self, targets: list[int]) -> None:
+        """Once the faults are over: one download into every node in the ring."""
+        for target in targets:
+            if target != self.issuer:
+                self.final[target] = self.once(target)
+
+    def _source(self) -> bytes:
+        size = self.rng.randint(*DOWNLOAD_BYTES)
+        padding = "".join(f"# {self.rng.getrandbits(240):060x}\n" for _ in range(max(1, size // 63)))
+        return (
+            '"""A program moved by tokenring sim\'s ring.downloads."""\n\n'
+            "from tokenring.node.program import UserProgram\n\n\n"
+            "class Program(UserProgram):\n    pass\n\n" + padding
+        ).encode()
+
+    def judge(self, report: dict[str, Any]) -> None:
+        report["downloads"] = {
+            "attempted": self.attempted,
+            "completed": self.completed,
+            "failed": len(self.failed),
+            "abandoned_at_issuer_crash": self.abandoned,
+            "examples": {"failed": self.failed[:5], "corrupted": self.corrupted[:5], "stuck": self.stuck[:5]},
+            "after_the_faults": {str(k): v or "ok" for k, v in self.final.items()},
+        }
+        invariants = report["invariants"]
+        invariants["no_download_installed_other_bytes"] = not self.corrupted
+        invariants["no_download_stuck"] = not self.stuck
+        invariants["downloads_succeed_after_the_faults"] = bool(self.final) and all(
+            v is None for v in self.final.values()
+        )
+        report["ok"] = all(invariants.values())

@@ -26,6 +26,8 @@ from tokenring.node.channels import CommandMemory
 from tokenring.node.faults import FaultInjector
 from tokenring.node.node_os import NodeOS
 from tokenring.node.pacing import install as install_profile
+from tokenring.node.store import ProgramStore
+from tokenring.node.system.layer import SystemLayer
 from tokenring.runtime import SimRuntime, using
 from tokenring.transport.memory import MemoryHub, MemoryTransport
 
@@ -88,6 +90,9 @@ class SimRing:
         self.store = Path(tempfile.mkdtemp(prefix="tokenring-sim-store-"))
         self._remove_store = weakref.finalize(self, shutil.rmtree, self.store, True)
         self.nodes: dict[int, NodeOS] = {}
+        #: each node's system commands (scan, download, start, stop), as its process has them,
+        #: its program in its store
+        self.systems: dict[int, SystemLayer] = {}
         for node_id in ids:
             self.nodes[node_id] = self._boot(node_id)
         #: each node's own fault injector, as its process has one (``tokenring fault``'s path);
@@ -104,6 +109,9 @@ class SimRing:
         )
         node.command_memory = CommandMemory(self.store / node.name / "inbox-memory")
         install_profile(node, self.profile, self.bitrate, node._now())
+        self.systems[node_id] = SystemLayer(
+            node, store=ProgramStore(self.store / node.name, node.name)
+        ).install()
         node.start()
         return node
 
@@ -115,8 +123,14 @@ class SimRing:
         node.paused = True  # a dead process's watchdog regenerates nothing
         self.hub.crash(node_id)
         node.command_memory.close()  # its store keeps what it wrote; the process writes no more
+        system = self.systems[node_id]
+
+        def end() -> None:
+            system.close()
+            node.close()
+
         # its threads end in a task of their own: the killer's time does not pass meanwhile
-        runtime.current().spawn(node.close, f"kill-{node_id}")
+        runtime.current().spawn(end, f"kill-{node_id}")
 
     def respawn(self, node_id: int) -> NodeOS:
         """A new process for a killed node (the launcher's respawn): a fresh node OS and fault
@@ -127,7 +141,8 @@ class SimRing:
         return node
 
     def close(self) -> None:
-        for node in self.nodes.values():
+        for node_id, node in self.nodes.items():
+            self.systems[node_id].close()
             node.close()
             node.command_memory.close()
         self._remove_store()

@@ -30,11 +30,12 @@ def test_seed_22_a_respawned_receiver_does_not_take_again_what_its_predecessor_t
     scenario.write_text(SEED_22)
     report_file = tmp_path / "report.json"
     done = subprocess.run(
-        [*TOKENRING, "sim", "--replay", str(scenario), "--json", str(report_file), "--quiet"],
+        # its schedule and seed, not its recorded frames: any change to the node's code moves
+        # those (tokenring sim --replay says so), while the invariant must hold whatever the frames
+        [*TOKENRING, "sim", "--chaos", str(scenario), "--seed", "22", "--json", str(report_file), "--quiet"],
         capture_output=True, text=True, timeout=600, cwd=REPO,
     )  # fmt: skip
     report = json.loads(report_file.read_text())
     assert report["invariants"]["no_command_executed_twice"], done.stdout
     assert report["ok"] and done.returncode == 0, done.stdout
     assert report["commands"]["duplicated"] == 0 and report["commands"]["acked"] > 100
-    assert report["replay"]["same_frames"]

@@ -74,6 +74,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help=f"--random: at most N runs to shrink a failing schedule (default {DEFAULT_SHRINK_RUNS}; 0: none)",
     )
     group.add_argument(
+        "--downloads",
+        action="store_true",
+        help="--random: main downloads programs into the other nodes all along (ring.downloads)",
+    )
+    group.add_argument(
         "--stop-at-failure", action="store_true", help="--random: end the campaign at the first failing seed"
     )
     group.add_argument("--ledger", metavar="DIR", help="--chaos/--replay: keep the probes' ledgers in DIR")
@@ -221,6 +226,7 @@ def _campaign(args: argparse.Namespace, given: set[str], progress: Any) -> int:
         out=str(out),
         shrink_runs=args.shrink_runs,
         nodes=tuple(n.name for n in protocol.default_nodes),
+        downloads=args.downloads,
     )
     progress(
         f"seeds {seeds.start}..{seeds.stop - 1} ({len(seeds)}), {args.duration:g} simulated s each, {args.jobs} job(s)"
@@ -253,6 +259,11 @@ def _campaign(args: argparse.Namespace, given: set[str], progress: Any) -> int:
             f"{result.simulated_s:.0f} simulated s in {result.wall_s:.1f} s on {result.jobs} job(s) "
             f"({result.per_hour:.0f} schedules/hour); {result.faults} faults, {result.regenerations} regenerations; "
             f"commands sent {c['sent']}, acknowledged {c['acked']}, lost {c['lost']}, duplicated {c['duplicated']}"
+            + (
+                f"; downloads {result.downloads['completed']} of {result.downloads['attempted']} completed"
+                if args.downloads
+                else ""
+            )
         )
         for failure in result.failed:
             print(f"  seed {failure['seed']}: {', '.join(failure['broken'])}  {failure.get('file', '')}")
