@@ -2,8 +2,8 @@
 
 The slow test runs three hosts made of network namespaces on a bridge, each with an sshd of its
 own (tests/support/sshhosts.py): one ``up --hosts`` on host a forms the ring, the programs are
-downloaded over it, ``status`` on host a sees every node, a fault reaches a node on host b, host
-c's cable is cut silently (its ssh session dies, and with it its share) while a and b re-form,
+downloaded over it, ``status`` and the web view on host a see every node, faults reach nodes on
+host b (a hang resumed by b's launcher, a crash respawned by it), host c's cable is cut silently (its ssh session dies, and with it its share) while a and b re-form,
 and c's nodes rejoin once the cable is back; Ctrl-C then leaves no process in any namespace.
 The quick tests refuse bad input: one line naming the inventory's file and line, exit code 2.
 """
@@ -216,13 +216,14 @@ def test_one_command_runs_a_ring_across_three_hosts_over_ssh(procs, ssh_hosts, t
                 "--store",
                 str(tmp_path / "store-a"),
                 "--web",  # host a's own port space: the default port is free there
+                "--respawn",
             ),
             stdout=out,
             env={"TOKENRING_EXTENSIONS": ""},  # the bare ring: the probe programs need no world
         )
     try:
         # one ring over the three hosts, seen from host a, every program downloaded over it
-        nodes = wait_until(lambda: ring_of(everyone), 120, "one ring across the three hosts")
+        wait_until(lambda: ring_of(everyone), 120, "one ring across the three hosts")
         formed = time.monotonic() - started
         # the web view on the launcher's host shows every node, whichever host runs it
         wait_until(lambda: web_nodes(hosts, a, 8080) == everyone, 60, "the web view showing all nodes")
@@ -235,7 +236,6 @@ def test_one_command_runs_a_ring_across_three_hosts_over_ssh(procs, ssh_hosts, t
         wait_until(programs_run, 60, "every node running its downloaded program")
         for name in ("b/compass", "c/lcd", "b/up", "c/up", "a/main"):
             assert f"{name} | " in log.read_text(), name  # lines prefixed with host and module
-        pids = {n["id"]: n["pid"] for n in nodes.values()}
 
         # a fault on a remote node: copro (host b) hangs, really stopped, and the ring routes
         # around it; resumed through host b's launcher (SIGCONT), it is back in the ring
@@ -256,6 +256,27 @@ def test_one_command_runs_a_ring_across_three_hosts_over_ssh(procs, ssh_hosts, t
         )
         assert done.returncode == 0, done.stderr
         wait_until(lambda: ring_of(everyone), 60, "copro back in the ring")
+
+        # a remote node that dies is reported and started again by its host's share (--respawn),
+        # with its program from that host's store; the lines come back prefixed with the host
+        before = seen[60]["pid"]
+        done = subprocess.run(
+            hosts.run(a, TOKENRING, "fault", "--ring", ring, "map", "crash"),
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert done.returncode == 0, done.stderr
+        wait_until(lambda: log_says(log, "b/up | respawning map"), 60, "host b to respawn map")
+        assert log_says(log, "b/up | node map (id 60) crashed on purpose")
+        wait_until(
+            lambda: (
+                (ring := ring_of(everyone)) and ring[60]["pid"] != before and ring[60]["program"] == "Program"
+            ),
+            60,
+            "the respawned map in the ring, running its program",
+        )
+        pids = {i: n["pid"] for i, n in seen.items()}
 
         # host c's cable cut silently: a and b re-form without lcd and charger; c's ssh session
         # dies (sshd's ClientAlive), and with it c's share: nothing of the ring is left on c
