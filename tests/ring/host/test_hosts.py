@@ -96,6 +96,41 @@ def test_hosts_places_the_nodes_itself(tmp_path):
     assert "leave out --nodes" in done.stderr and len(done.stderr.strip().splitlines()) == 1
 
 
+def test_the_inventory_places_counted_nodes_and_ssh_gets_its_options_first(tmp_path):
+    """``nodes: N`` takes the next N of protocol.yaml's nodes no host names; the inventory's ssh
+    options come before the defaults (ssh keeps an option's first value), and the share's command
+    line is quoted for the remote shell with the nodes' environment before it (``tokenring:`` is
+    a command, split as a shell would)."""
+    from tokenring.contract.protocol import default_protocol
+    from tokenring.host.hosts import load_inventory
+    from tokenring.host.remote import ShareSettings, share_command, ssh_command
+
+    path = inventory(
+        tmp_path / "ring.yaml",
+        "port: 7500\nhosts:\n  pc: {address: 10.0.0.1, ssh: local, nodes: 2}\n"
+        "  b1:\n    address: 10.0.0.2\n    nodes: [charger]\n    tokenring: /opt/ring/bin/python -m tokenring\n"
+        "    store: /var/lib/my ring\n"
+        "    ssh: {host: b1-alias, user: robot, port: 2222, options: [-o, ServerAliveInterval=1]}\n",
+    )
+    found = load_inventory(path, default_protocol())
+    assert [h.nodes for h in found.hosts] == [["main", "motor"], ["charger"]]
+    b1 = found.remote[0]
+    settings = ShareSettings(
+        ring="lab", bitrate="10M", ack="adaptive", log_level="info", total=3, hub="tcp/10.0.0.1:7500",
+        env={"TOKENRING_EXTENSIONS": ""},
+    )  # fmt: skip
+    argv = ssh_command(b1, share_command(b1, settings), settings.env)
+    assert argv[:8] == ["ssh", "-T", "-o", "ServerAliveInterval=1", "-p", "2222", "-l", "robot"]
+    assert argv.index("ServerAliveInterval=1") < argv.index("ServerAliveInterval=5")
+    assert argv[-3:-1] == ["b1-alias", "--"]
+    remote = argv[-1]
+    assert remote.startswith(
+        "exec env TOKENRING_EXTENSIONS= /opt/ring/bin/python -m tokenring --log-level info up --share 3 "
+    )
+    assert "--nodes charger" in remote and "--listen tcp/10.0.0.2:7500 --connect tcp/10.0.0.1:7500" in remote
+    assert remote.endswith(" --store '/var/lib/my ring'")
+
+
 # -- three hosts ---------------------------------------------------------------------------------
 
 
