@@ -1,5 +1,6 @@
-"""The PC side that acts on a running ring: the launcher and its children, program download,
-the PC link to main, fault requests, the deployment's certificates."""
+"""The PC side that acts on a running ring: the launcher and its children, the other hosts of a
+ring across hosts (the inventory, their shares over ssh), program download, the PC link to
+main, fault requests, the deployment's certificates."""
 
 from __future__ import annotations
 
