@@ -77,7 +77,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--force", action="store_true", help="replace an existing --json FILE")
     p.add_argument("--protocol", metavar="FILE", help="protocol.yaml to use (also $TOKENRING_PROTOCOL)")
-    from tokenring.cli.commands import simchaos  # chaos scenarios and seed campaigns: their own module
+    from tokenring.cli import simchaos  # chaos scenarios and seed campaigns: their own module
 
     simchaos.add_arguments(p)
     # an application's part of the run (the robot's world, programs and mission): its options
@@ -90,7 +90,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from tokenring.cli.commands import simchaos
+    from tokenring.cli import simchaos
 
     if simchaos.wanted(args):
         return simchaos.run(args)
