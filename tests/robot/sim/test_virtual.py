@@ -31,6 +31,7 @@ def simulate(tmp_path: Path, name: str, *options: str) -> dict[str, Any]:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(900)  # three runs of 120 virtual s, each up to 600 s on a loaded machine
 def test_the_same_exploration_gives_the_same_frames_and_map(tmp_path: Path) -> None:
     mapped = tmp_path / "empty.json"
     first = simulate(tmp_path, "first", *EXPLORE, "--map-out", str(mapped))
@@ -51,6 +52,7 @@ def test_the_same_exploration_gives_the_same_frames_and_map(tmp_path: Path) -> N
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(600)  # 120 virtual s, 30 s on an idle core
 def test_an_action_file_ends_where_the_world_puts_the_robot(tmp_path: Path) -> None:
     """800 mm east, a quarter turn left, 500 mm north: from the empty room's start (1000, 1500)
     the world's truth has the robot at (1800, 2000) facing north."""
@@ -82,6 +84,7 @@ def test_refused_before_anything_runs(options: tuple[str, ...], said: str) -> No
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(600)
 def test_faults_run_beside_the_robot_to_the_end_of_the_run(tmp_path: Path) -> None:
     """``--fault`` beside a mission that ends early: the schedule still runs its --duration out
     and its faults and the injectors' counts are in the summary."""
