@@ -103,7 +103,12 @@ def test_no_verbs_help_imports_zenoh_numpy_or_yaml(tmp_path, verb):
     assert result.returncode == 0, result.stderr
     assert result.stdout.startswith(f"usage: tokenring {verb} ")
     assert among(modules, NEVER) == []
-    if verb not in ("up", "load", "web", "sim"):  # their options come partly from the extensions (the robot's)
+    if verb not in (
+        "up",
+        "load",
+        "web",
+        "sim",
+    ):  # their options come partly from the extensions (the robot's)
         assert among(modules, (*METADATA, "tokenring.extensions", "modules")) == [], verb
 
 
