@@ -544,12 +544,12 @@ class SimLock:
         self._waits = _WaitList()
 
     def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
-        sim = self._sim
         if not self._held:
             self._held = True
             return True
         if not blocking:
             return False
+        sim = self._sim
         deadline = None if timeout < 0 else sim.now + timeout
         while self._held:
             left = None if deadline is None else deadline - sim.now
