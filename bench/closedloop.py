@@ -40,6 +40,22 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def contact_summary(results: list[dict[str, Any]]) -> str:
+    """Bumper contacts (each a failure), the footprint's closest approach, ALERTs and homecomings."""
+    if not results:
+        return "no runs"
+    hit = [r for r in results if r.get("collisions")]
+    closest = [r["closest_mm"] for r in results if r.get("closest_mm") is not None]
+    near = (
+        f"closest approach median {np.median(closest):.0f} mm, worst {min(closest):.0f} mm" if closest else ""
+    )
+    return (
+        f"{len(results)} runs: {sum(r.get('collisions', 0) for r in results)} collisions in {len(hit)} runs; "
+        f"{near}; {sum(r.get('alerts', 0) for r in results)} ALERTs; "
+        f"{sum(bool(r.get('home')) for r in results)} ended at home"
+    )
+
+
 def summary(rows: list[dict[str, Any]]) -> str:
     """Median and worst decile (10th percentile) of coverage and precision over the runs' maps."""
     if not rows:
@@ -84,17 +100,102 @@ def plot_distribution(rows: list[dict[str, Any]], path: str, title: str) -> None
     Image.open(path).convert("RGB").quantize(64).save(path, optimize=True)  # kilobytes, not 100s
 
 
-def write_json(path: str, results: list[dict[str, Any]], argv: list[str] | None) -> None:
-    """The runs so far, without their move logs, with the command that made them."""
+def write_json(
+    path: str,
+    results: list[dict[str, Any]],
+    argv: list[str] | None,
+    variants: bool = True,
+    timing: dict[str, Any] | None = None,
+) -> None:
+    """The runs so far, without their move logs (and without the variants' rows unless
+    ``variants``: kilobytes), with the command that made them and ``timing`` (seconds, load)."""
     import datetime as dt
+
+    def kept(r: dict[str, Any]) -> dict[str, Any]:
+        run = {k: v for k, v in r.items() if k != "log"}
+        if not variants and "rows" in run:
+            run["rows"] = run["rows"][:1]
+        return run
 
     document = {
         "benchmark": "closedloop",
         "date": dt.datetime.now().isoformat(timespec="seconds"),
         "command": "python -m bench.closedloop " + " ".join(argv if argv is not None else sys.argv[1:]),
-        "runs": [{k: v for k, v in r.items() if k != "log"} for r in results],
+        **({"timing": timing} if timing else {}),
+        "runs": [kept(r) for r in results],
     }
     Path(path).write_text(json.dumps(document, indent=1) + "\n")
+
+
+def figures(document: dict[str, Any]) -> dict[str, Any] | None:
+    """A result file's runs summed up: collisions, closest approach, ALERTs, coverage and
+    precision (median, worst decile), corners, runs ended at home; None for a file from before
+    collisions were counted."""
+    runs = document.get("runs") or []
+    if not runs or any("collisions" not in r for r in runs):
+        return None
+    rows = [r["rows"][0] if r.get("rows") else r for r in runs]
+    coverage = np.array([r["coverage"] for r in rows])
+    precision = np.array([r["precision"] for r in rows])
+    closest = [r["closest_mm"] for r in runs if r.get("closest_mm") is not None]
+    return {
+        "runs": len(runs),
+        "collisions": sum(r["collisions"] for r in runs),
+        "runs_hit": sum(1 for r in runs if r["collisions"]),
+        "closest_median_mm": float(np.median(closest)) if closest else None,
+        "closest_worst_mm": float(min(closest)) if closest else None,
+        "alerts": sum(r.get("alerts", 0) for r in runs),
+        "coverage_median": float(np.median(coverage)),
+        "coverage_decile": float(np.percentile(coverage, 10)),
+        "precision_median": float(np.median(precision)),
+        "precision_decile": float(np.percentile(precision, 10)),
+        "corners": (sum(r["corners_closed"] for r in rows), sum(r["corners_total"] for r in rows)),
+        "home": sum(1 for r in runs if r.get("home")),
+    }
+
+
+def section_md(documents: list[tuple[str, dict[str, Any]]]) -> str:
+    """bench/RESULTS.md's collisions section: one row per closed-loop result file that counts them."""
+    lines = []
+    for name, document in documents:
+        got = figures(document)
+        if got is None:
+            continue
+        timing = document.get("timing") or {}
+        load = timing.get("load_start")
+        closest = (
+            f"{got['closest_median_mm']:.0f} / {got['closest_worst_mm']:.0f}"
+            if got["closest_worst_mm"] is not None
+            else "-"
+        )
+        lines.append(
+            f"| [{name}](results/{name}) | {document['command'].split('closedloop ', 1)[-1]} | {got['runs']} | "
+            f"{got['collisions']} in {got['runs_hit']} | {closest} | {got['alerts']} | "
+            f"{got['coverage_median']:.1%} / {got['coverage_decile']:.1%} | "
+            f"{got['precision_median']:.1%} / {got['precision_decile']:.1%} | "
+            f"{got['corners'][0]}/{got['corners'][1]} | {got['home']}/{got['runs']} | "
+            + (f"{timing['seconds'] / 60:.0f} min, load {load[0]:.1f}" if load else "-")
+            + " |"
+        )
+    if not lines:
+        return ""
+    return "\n".join(
+        [
+            "## Collisions and clearance (closed loop, issue 57)",
+            "",
+            "Explore 2 in process (`python -m bench.closedloop`), every run's bumper contacts (each a "
+            "failure), the footprint's closest approach to any surface (median over runs / worst, mm), "
+            "the pilot's ALERT aborts, the maps' coverage and precision (median / worst decile) and "
+            "the runs that ended at home. Tuning rooms are 101-130, evaluation rooms 1-30 "
+            "(`bench/rooms.py`).",
+            "",
+            "| file | command | runs | collisions (in runs) | closest mm | ALERTs | coverage | "
+            "precision | corners | home | wall time |",
+            "|---|---|---|---|---|---|---|---|---|---|---|",
+            *lines,
+            "",
+        ]
+    )
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -173,14 +274,24 @@ def main(argv: list[str] | None = None) -> int:
         overrides=overrides,
         visit_ms=args.visit_ms,
     )
+    import os
+    import time
+
     results: list[dict[str, Any]] = []
+    began, load_start = time.monotonic(), os.getloadavg()
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         futures = [pool.submit(explore, w, s, **options) for w, s in jobs]
         for future in futures:
             result = future.result()
             results.append(result)
             if args.json:  # after each run: a long set interrupted keeps what it measured
-                write_json(args.json, results, argv)
+                timing = {
+                    "seconds": round(time.monotonic() - began, 1),
+                    "jobs": args.jobs,
+                    "load_start": [round(x, 2) for x in load_start],
+                    "load_now": [round(x, 2) for x in os.getloadavg()],
+                }
+                write_json(args.json, results, argv, args.variants, timing)
             r = result["rows"][0]
             if args.moves:
                 print("\n".join(result["log"]))
@@ -189,6 +300,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"{result['sim_seconds']:.0f} s simulated; moves {result['moves']}; {r['vectors']} vectors, "
                 f"coverage {r['coverage']:.1%}, precision {r['precision']:.1%}, "
                 f"orientation {r['orientation_error_deg'] or 0:.1f}°, corners {r['corners_closed']}/{r['corners_total']}; "
+                f"collisions {result['collisions']}, closest {result['closest_mm']} mm, "
+                f"ALERTs {result['alerts']}, home {'yes' if result['home'] else 'no'}; "
                 + ", ".join(
                     f"{k} {v:.4f}" if "scale" in k else f"{k} {v:.1f}"
                     for k, v in result["pose_errors"].items()
@@ -200,6 +313,7 @@ def main(argv: list[str] | None = None) -> int:
         print()
         print(format_rows(rows))
         print(summary([result["rows"][0] for result in results]))
+        print(contact_summary(results))
     if args.plot and results:
         rooms = args.generated or args.world
         plot_distribution(

@@ -1163,6 +1163,20 @@ def newest_section(out_dir: Path, pattern: str, render: Any) -> str:
         return ""
 
 
+def collisions_md(out_dir: Path) -> str:
+    """Explore 2's collisions and clearance in process (``closedloop-*.json`` that count them), by date."""
+    from bench.closedloop import section_md
+
+    found = []
+    for path in out_dir.glob("closedloop-*.json"):
+        try:
+            document = json.loads(path.read_text())
+            found.append((str(document["date"]), path.name, document))
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    return section_md([(name, document) for _, name, document in sorted(found, key=lambda f: f[0])])
+
+
 def darmstadt_ring_md(out_dir: Path) -> str:
     """The Darmstadt filters on the ring (``python -m bench.darmstadt_ring``)."""
     from bench.darmstadt_ring import section_md
@@ -1489,6 +1503,7 @@ def write_report(
     parts.append(seedtable_md(out_dir))
     parts.append(darmstadt_md(out_dir))
     parts.append(darmstadt_ring_md(out_dir))
+    parts.append(collisions_md(out_dir))
     parts.append(robot_md(out_dir))
     md_path.write_text("\n".join(p for p in parts if p).rstrip() + "\n")
     return md_path

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import math
 import sys
 from typing import TYPE_CHECKING, Any
 
@@ -251,6 +252,7 @@ class RobotRun:
                 "truth": [round(truth["x_mm"], 3), round(truth["y_mm"], 3), round(truth["theta_rad"], 6)],
                 "moved_mm": round(moved, 3),
                 "collisions": truth["collisions"],
+                "closest_mm": round(truth["closest_mm"], 1) if math.isfinite(truth["closest_mm"]) else None,
                 "steps": truth["steps"],
                 "map_vectors": 0 if mission.vectors is None else len(mission.vectors),
                 "map_score": mission.score,
@@ -268,7 +270,7 @@ def report(facts: dict[str, Any]) -> list[str]:
     lines = [
         f"robot in {robot.get('world')} at speed {robot.get('speed'):g}: {robot.get('world_s', 0):.1f} world s, "
         f"moved {robot.get('moved_mm', 0):.0f} mm to ({robot['truth'][0]:.0f}, {robot['truth'][1]:.0f}) mm, "
-        f"{robot.get('collisions')} collision(s); map {robot.get('map_vectors')} vectors"
+        f"{robot.get('collisions')} collision(s), closest {robot.get('closest_mm')} mm; map {robot.get('map_vectors')} vectors"
         + (
             f", coverage {score['coverage']:.0%}, precision {score['precision']:.0%}, "
             f"corners {score['corners_closed']}/{score['corners_total']}"

@@ -262,6 +262,12 @@ class Run:
     moves: dict[str, int]
     pose_errors: dict[str, float] = field(default_factory=dict)
     log: list[str] = field(default_factory=list)
+    #: bumper contacts (a failure, never a way to find walls) and the footprint's closest approach
+    #: to any surface (mm; None in a room without one)
+    collisions: int = 0
+    closest_mm: float | None = None
+    alerts: int = 0  # move sequences the pilot ended by ALERT
+    home: bool = False  # the navigator says it is back at its start
 
 
 class ClosedLoop:
@@ -332,6 +338,7 @@ class ClosedLoop:
         self.calibration_turns = 8 if calibrate else 0
         self.visit_ms = visit_ms
         self.log: list[str] = []
+        self.alerts = 0
 
     # -- the ring's commands ------------------------------------------------------------------
     def _send(self, target: str, command: str, **args: Any) -> None:
@@ -426,7 +433,7 @@ class ClosedLoop:
         return self.history.carry(pose, self.pose_stamp, stamp_ms)
 
     def _main(self) -> str | None:
-        from modules.navigation.pilot import Sensors
+        from modules.navigation.pilot import REASON, Sensors
 
         sonar = self.sonar.published
         motor = self.motor.data()
@@ -450,6 +457,8 @@ class ClosedLoop:
         outcome = self.pilot.step(sensors)
         if outcome is not None:
             self.last_outcome = outcome
+            if outcome.reason == REASON["ALERT"] and outcome.trigger != "locked":
+                self.alerts += 1
         if self.pilot.busy or not sensors.ready:
             return None
         nav = self.navigator
@@ -552,6 +561,10 @@ class ClosedLoop:
             moves=dict(self.motor.moves),
             pose_errors=pose_errors,
             log=self.log,
+            collisions=self.robot.collisions,
+            closest_mm=self.robot.closest_mm if math.isfinite(self.robot.closest_mm) else None,
+            alerts=self.alerts,
+            home=bool(getattr(self.navigator, "home_reached", False)),
         )
 
 
@@ -615,6 +628,10 @@ def explore(
         "finished": run.finished,
         "sim_seconds": run.sim_seconds,
         "moves": run.moves,
+        "collisions": run.collisions,
+        "closest_mm": None if run.closest_mm is None else round(run.closest_mm, 1),
+        "alerts": run.alerts,
+        "home": run.home,
         "pose_errors": run.pose_errors,
         "log": run.log,
         "rows": rows,

@@ -94,6 +94,8 @@ class TrackedRobot:
         self.glide = world.floor.glide_factor
         self.collisions = 0
         self.stalls = 0
+        #: the closest the footprint (the collision circle) came to any surface, mm: 0 is contact
+        self.closest_mm = max(0.0, world.clearance(self.pose.x, self.pose.y) - world.robot_radius)
 
     def new_move(self, move_id: int) -> None:
         """Draw this move's true step length and true glide factor (SPEC §5)."""
@@ -134,8 +136,10 @@ class TrackedRobot:
                     done += frac
                     self.pose = Pose(x, y, theta)
                     self.collisions += 1
+                    self.closest_mm = 0.0
                     return MoveResult(done * d_piece, done * r_piece, blocked=True)
                 clearance = new_clearance
+                self.closest_mm = min(self.closest_mm, max(0.0, clearance - radius))
             x, y, theta = nx, ny, theta + r_piece
             done += 1
         self.pose = Pose(x, y, theta)

@@ -362,6 +362,7 @@ class Simulator:
                 "heading_rad": self.world.heading(pose.theta),
                 "moving": self.energised,
                 "collisions": self.robot.collisions,
+                "closest_mm": self.robot.closest_mm,
                 "stalls": self.robot.stalls,
                 "steps": list(self.steps_total),
                 "drive": self.drive_power,
