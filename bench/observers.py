@@ -10,9 +10,13 @@ times, so drift of the machine falls on both. The observers start before an ``al
 messages, the recording grows) and stop, by PID, after it.
 
     python -m bench.observers --repeat 3 --rounds 1000 [--json F] [--speed 1] [--separate]
+    python -m bench.observers --observers metrics,pcap     # what a Prometheus scrape and a capture cost
 
-The observers run as ``tokenring up --web --record --foxglove`` runs them: one ``tokenring
-watch`` process; ``--separate`` runs ``web``, ``record`` and ``foxglove`` as three.
+The observers run as ``tokenring up --web --record --foxglove --metrics P`` runs them: one
+``tokenring watch`` process; ``--separate`` runs ``web``, ``record``, ``foxglove`` and ``watch
+--metrics`` as four. ``metrics`` is scraped over HTTP every second (proved live: a scrape
+returned the ring's counters); ``pcap`` is ``tokenring record --pcap FILE.pcapng``, a process of
+its own in both modes (proved live: the capture grows).
 """
 
 from __future__ import annotations
@@ -41,7 +45,8 @@ REPO = Path(__file__).resolve().parent.parent
 MASTER = 10  # main: the round master times its rounds
 START_TIMEOUT_S = 120.0
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
-OBSERVERS = ("web", "record", "foxglove")
+OBSERVERS = ("web", "record", "foxglove", "metrics", "pcap")
+SCRAPE_S = 1.0  # the metrics scraper's interval: Prometheus's default is 15 s, this is harsher
 WINDOW_TIMEOUT_S = 300.0
 
 
@@ -156,6 +161,33 @@ class BridgeClient:
         self._thread.join(5.0)
 
 
+class Scraper:
+    """Prometheus's part: GET the metrics page every :data:`SCRAPE_S` on a thread of its own."""
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+        self.good = 0
+        self.error: str | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        import urllib.request
+
+        while not self._stop.wait(SCRAPE_S):
+            try:
+                with urllib.request.urlopen(self.url, timeout=5) as reply:
+                    if b"tokenring_" in reply.read():
+                        self.good += 1
+            except OSError as exc:
+                self.error = f"{type(exc).__name__}: {exc}"
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(10.0)
+
+
 class Browser:
     """Headless Chromium (the OS package) with the web view open."""
 
@@ -190,7 +222,7 @@ def observers(
     """The web view with a browser on it, a recording, the bridge with a client (those in
     ``which``; one ``tokenring watch``, or a process each if ``separate``): all live, their
     process trees' CPU seconds measured by ``cpu()``."""
-    web_port, bridge_port = free_port(), free_port()
+    web_port, bridge_port, metrics_port = free_port(), free_port(), free_port()
     ring_opts = ["--ring", ring, "-e", endpoint]
     recording = folder / "observers.mcap"
     if separate:  # a process of each, as three tools started by hand
@@ -198,8 +230,9 @@ def observers(
             "web": tokenring("web", "--port", str(web_port), *ring_opts),
             "record": tokenring("record", str(recording), "--force", "--quiet", *ring_opts),
             "foxglove": tokenring("foxglove", "--port", str(bridge_port), *ring_opts),
+            "metrics": tokenring("watch", "--metrics", str(metrics_port), *ring_opts),
         }
-        children = {name: spawn(commands[name], folder / f"{name}.log") for name in which}
+        children = {name: spawn(commands[name], folder / f"{name}.log") for name in which if name != "pcap"}
     else:  # one watcher, as `up --web --record --foxglove` starts it
         argv = ["watch", *ring_opts]
         if "web" in which:
@@ -208,10 +241,21 @@ def observers(
             argv += ["--record", str(recording), "--force"]
         if "foxglove" in which:
             argv += ["--foxglove", "--foxglove-port", str(bridge_port)]
-        children = {"watch": spawn(tokenring(*argv), folder / "watch.log")}
+        if "metrics" in which:
+            argv += ["--metrics", str(metrics_port)]
+        watched = set(which) - {"pcap"}  # the capture is a process of its own
+        children = {"watch": spawn(tokenring(*argv), folder / "watch.log")} if watched else {}
+    capture = folder / "observers.pcapng"
+    if "pcap" in which:
+        children["pcap"] = spawn(
+            tokenring("record", "--pcap", str(capture), "--force", "--quiet", *ring_opts), folder / "pcap.log"
+        )
     browser: Browser | None = None
     client: BridgeClient | None = None
+    scraper: Scraper | None = None
     try:
+        if "metrics" in which:
+            scraper = Scraper(f"http://127.0.0.1:{metrics_port}/metrics")
         if "web" in which:
             browser = Browser(f"http://127.0.0.1:{web_port}/")
         if "foxglove" in which:
@@ -220,6 +264,15 @@ def observers(
         while client is not None and client.messages < 100:
             if client.error or time.monotonic() > deadline:
                 raise RuntimeError(f"the bridge's client got {client.messages} messages ({client.error})")
+            time.sleep(0.2)
+        while scraper is not None and scraper.good < 1:
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"no metrics scraped ({scraper.error})")
+            time.sleep(0.2)
+        growing = capture.with_name(capture.name + ".part")  # the capture is FILE.part until it ends
+        while "pcap" in which and (not growing.exists() or growing.stat().st_size < 10_000):
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"the capture did not grow: {(folder / 'pcap.log').read_text()[-500:]}")
             time.sleep(0.2)
         dead = [name for name, c in children.items() if c.poll() is not None]
         if dead:
@@ -231,8 +284,14 @@ def observers(
         def cpu() -> float:
             return sum(tree_cpu_s(pid) for pid in roots)
 
-        yield {"bridge_messages": lambda: client.messages if client else 0, "cpu": cpu}
+        yield {
+            "bridge_messages": lambda: client.messages if client else 0,
+            "scrapes": lambda: scraper.good if scraper else 0,
+            "cpu": cpu,
+        }
     finally:
+        if scraper is not None:
+            scraper.close()
         if client is not None:
             client.close()
         if browser is not None:
@@ -283,6 +342,7 @@ def run(
                                 values = measure_window(session, ring, rounds)
                                 extra = {
                                     "bridge_messages": live["bridge_messages"](),
+                                    "scrapes": live["scrapes"](),
                                     "observer_cpu_pct": 100
                                     * (live["cpu"]() - cpu0)
                                     / (time.monotonic() - t0),
@@ -333,7 +393,13 @@ def format_summary(report: dict[str, Any]) -> str:
         "per condition, windows alternating",
         f"{'condition':<44} {'median ms':>10} {'p99 ms':>10}",
     ]
-    names = {"web": "web view + browser", "record": "MCAP recording", "foxglove": "bridge + client"}
+    names = {
+        "web": "web view + browser",
+        "record": "MCAP recording",
+        "foxglove": "bridge + client",
+        "metrics": "metrics + scrapes",
+        "pcap": "pcapng capture",
+    }
     watched = ", ".join(names[w] for w in report["observers"])
     if len(report["observers"]) > 1:
         watched += f" ({report.get('processes', 'separate')})"
