@@ -237,7 +237,7 @@ class RobotRun:
             self.host.stopping = True
             mission.thread.join(5.0)
         truth = self.simulator.truth()
-        moved = ((truth["x_mm"] - start["x_mm"]) ** 2 + (truth["y_mm"] - start["y_mm"]) ** 2) ** 0.5
+        from_start = ((truth["x_mm"] - start["x_mm"]) ** 2 + (truth["y_mm"] - start["y_mm"]) ** 2) ** 0.5
         text = mission.map_text
         failure = mission.error or program_errors(self.ring) or None
         return {
@@ -250,7 +250,7 @@ class RobotRun:
                 "program_errors": program_errors(self.ring),
                 "start": [round(start["x_mm"], 3), round(start["y_mm"], 3), round(start["theta_rad"], 6)],
                 "truth": [round(truth["x_mm"], 3), round(truth["y_mm"], 3), round(truth["theta_rad"], 6)],
-                "moved_mm": round(moved, 3),
+                "from_start_mm": round(from_start, 3),
                 "collisions": truth["collisions"],
                 "closest_mm": round(truth["closest_mm"], 1) if math.isfinite(truth["closest_mm"]) else None,
                 "steps": truth["steps"],
@@ -269,7 +269,7 @@ def report(facts: dict[str, Any]) -> list[str]:
     score = robot.get("map_score") or {}
     lines = [
         f"robot in {robot.get('world')} at speed {robot.get('speed'):g}: {robot.get('world_s', 0):.1f} world s, "
-        f"moved {robot.get('moved_mm', 0):.0f} mm to ({robot['truth'][0]:.0f}, {robot['truth'][1]:.0f}) mm, "
+        f"ended at ({robot['truth'][0]:.0f}, {robot['truth'][1]:.0f}) mm, {robot.get('from_start_mm', 0):.0f} mm from its start, "
         f"{robot.get('collisions')} collision(s), closest {robot.get('closest_mm')} mm; map {robot.get('map_vectors')} vectors"
         + (
             f", coverage {score['coverage']:.0%}, precision {score['precision']:.0%}, "

@@ -71,7 +71,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="apply a fault of 'tokenring fault' at T simulated seconds (repeatable); NODE: a name, "
         "an ID or all (the default); VALUE: delay MS, drop/corrupt/duplicate P, lose COUNT, partition A,B|C,D",
     )
-    p.add_argument("--no-world", action="store_true", help="the ring alone (the only mode so far)")
+    p.add_argument(
+        "--no-world",
+        action="store_true",
+        help="the ring alone: no world, no programs (the default without the robot's options)",
+    )
     p.add_argument(
         "--json", metavar="FILE", help="write the run's summary as JSON to FILE (- for standard output)"
     )
