@@ -377,6 +377,8 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         Asked while the departure is still handing over, it comes back once that is done
         (ignored, the node would have stayed out for good: the seeded nemesis found it)."""
         with self._departure_lock:
+            if self._closing:  # closed (killed, stopped) while away: nothing to come back to
+                return
             if not self._departed:
                 if self._leaving:
                     self._rejoin_wanted = True
@@ -387,7 +389,11 @@ class NodeOS(TokenPathBase, RingRecovery, ProgramAPI, ProgramHost):
         self._last_counter = -1  # rounds went on while we were away, maybe past 128
         self._accepted_crc = -1
         self._accepted_frame = b""
-        self.transport.announce()
+        try:
+            self.transport.announce()
+        except TokenRingError as exc:  # closed between the check and here
+            log.info("node %s stays out: %s", self.name, exc)
+            return
         self._announce_rejoin()
         log.info("node %s (id %d) rejoined", self.name, self.node_id)
 

@@ -120,3 +120,24 @@ def test_a_bad_fault_is_refused_before_the_run(text, needle):
 def test_a_fault_after_the_end_is_refused():
     with pytest.raises(UsageError, match="after the run's end"):
         fault_scenario([parse_fault("crash:20@9", default_protocol(), IDS)], 5.0)
+
+
+def test_a_node_killed_while_leaving_with_a_rejoin_pending_stays_dead():
+    """The mutation campaign's finding: a node asked to join while its departure still hands
+    over comes back once that is done — but if its process is killed meanwhile, the departure's
+    thread must not announce on the closed transport (it failed the whole run)."""
+    protocol = default_protocol()
+
+    def scenario(runtime: Any, ring: Any) -> dict[str, Any]:
+        runtime.sleep(1.0)
+        node = ring.nodes[30]
+        node.depart_in_background(grace=0.5)
+        runtime.sleep(0.01)
+        node.join()  # during the handover: wanted back once it is done
+        runtime.sleep(0.01)
+        ring.kill(30)
+        runtime.sleep(2.0)
+        return {"live": sorted(ring.hub._live)}
+
+    summary = run_ring(protocol, IDS, seed=1, duration_s=3.0, bitrate=ARCNET, scenario=scenario)
+    assert summary.extra["live"] == [10, 20, 40]
