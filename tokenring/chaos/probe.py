@@ -3,9 +3,9 @@
 Each node sends numbered commands (``VECTOR``, accepted by every inbox) in bursts: a run of
 1 to 300 commands to one other node, then a run to another, chosen at random — so sequence
 numbers wrap and interleave between targets as the robot's own traffic does — and takes every
-command from its own inbox. A command carries its
-sender's run tag (random per program incarnation) and its number, so (sender, run, n) names it
-across crashes and respawns.
+command from its own inbox, now and then busy for a while after a take (its inbox locked, as a
+robot's program is). A command carries its sender's run tag (random per program incarnation)
+and its number, so (sender, run, n) names it across crashes and respawns.
 
 With ``$TOKENRING_PROBE_LEDGER`` set to a directory, every incarnation appends a JSON-lines
 ledger there, ``ledger-<node>-<pid>-<run>.jsonl``, flushed line by line so that it survives a crash:
@@ -34,6 +34,11 @@ from tokenring import runtime
 from tokenring.node.program import UserProgram
 
 HALF = 1 << 15  # a VECTOR argument is an i16: a 30-bit value travels as two 15-bit halves
+#: after a take, the receiver is busy this often, for a time drawn from BUSY_S: its inbox stays
+#: locked meanwhile, so commands arrive at a locked inbox (refused, offered again) as they do on
+#: a robot whose programs take time; in virtual time a program's work takes none without it
+BUSY_P = 1 / 16
+BUSY_S = (0.005, 0.05)
 
 
 def split(value):
@@ -51,6 +56,7 @@ class Program(UserProgram):
         self._rt = runtime.current()
         self.run_tag = self._rt.rng().randrange(1, 1 << 30)
         self.random = random.Random(self.run_tag)
+        self.pace = random.Random(self.run_tag ^ 0x5EED)  # the receiver's own draws
         self.target = None
         self.burst = 0
         self.number = 0
@@ -127,6 +133,8 @@ class Program(UserProgram):
             if n in seen:
                 self.duplicates += 1
             seen.add(n)
+            if self.pace.random() < BUSY_P:
+                self.sleep(self.pace.uniform(*BUSY_S))
 
     def crash(self):
         """The process is killed (a simulated crash): nothing more reaches the ledger."""
