@@ -308,6 +308,12 @@ def main(argv: list[str] | None = None) -> int:
                 ),
                 flush=True,
             )
+            for contact in result["contacts"]:
+                print(
+                    f"  contact at ({contact['x_mm']:.0f}, {contact['y_mm']:.0f}) mm heading "
+                    f"{contact['heading_deg']:.0f}°: {contact['bearing_deg']:+.0f}° off the "
+                    f"{'tail' if contact['reverse'] else 'nose'} direction"
+                )
     rows = [r for result in results for r in (result["rows"] if args.variants else result["rows"][:1])]
     if len(rows) > 1:
         print()

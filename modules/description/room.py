@@ -167,6 +167,26 @@ class World:
             best = min(best, math.hypot(x - c.x, y - c.y) - c.r)
         return best
 
+    def nearest_point(self, x: float, y: float) -> tuple[float, float] | None:
+        """The point of a wall or obstacle surface nearest to (x, y), mm (None in an empty world)."""
+        best: tuple[float, float, float] | None = None
+        if self.walls:
+            seg = self.segments()
+            a, ab = seg[:, 0:2], seg[:, 2:4] - seg[:, 0:2]
+            denom = np.einsum("ij,ij->i", ab, ab)
+            t = np.clip(
+                np.einsum("ij,ij->i", np.array([x, y]) - a, ab) / np.where(denom > 0, denom, 1.0), 0, 1
+            )
+            closest = a + t[:, None] * ab
+            d = np.hypot(closest[:, 0] - x, closest[:, 1] - y)
+            k = int(np.argmin(d))
+            best = (float(d[k]), float(closest[k, 0]), float(closest[k, 1]))
+        for c in self.circles:
+            d = math.hypot(x - c.x, y - c.y)
+            if d > 0 and (best is None or d - c.r < best[0]):
+                best = (d - c.r, c.x + (x - c.x) * c.r / d, c.y + (y - c.y) * c.r / d)
+        return None if best is None else (best[1], best[2])
+
     def heading(self, theta: float) -> float:
         """Compass heading of a robot pointing at ``theta``: radians from north, clockwise, [0, 2 pi)."""
         return (self.north - theta) % (2 * math.pi)

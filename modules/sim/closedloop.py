@@ -267,6 +267,7 @@ class Run:
     collisions: int = 0
     closest_mm: float | None = None
     alerts: int = 0  # move sequences the pilot ended by ALERT
+    contacts: list[dict[str, float]] = field(default_factory=list)  # each collision's geometry
     home: bool = False  # the navigator says it is back at its start
 
 
@@ -564,6 +565,7 @@ class ClosedLoop:
             collisions=self.robot.collisions,
             closest_mm=self.robot.closest_mm if math.isfinite(self.robot.closest_mm) else None,
             alerts=self.alerts,
+            contacts=list(self.robot.contacts),
             home=bool(getattr(self.navigator, "home_reached", False)),
         )
 
@@ -631,6 +633,7 @@ def explore(
         "collisions": run.collisions,
         "closest_mm": None if run.closest_mm is None else round(run.closest_mm, 1),
         "alerts": run.alerts,
+        "contacts": run.contacts,
         "home": run.home,
         "pose_errors": run.pose_errors,
         "log": run.log,

@@ -96,6 +96,9 @@ class TrackedRobot:
         self.stalls = 0
         #: the closest the footprint (the collision circle) came to any surface, mm: 0 is contact
         self.closest_mm = max(0.0, world.clearance(self.pose.x, self.pose.y) - world.robot_radius)
+        #: every contact: where, the heading, and where on the body it touched (bearing from the
+        #: heading, degrees, + to the left) — what a sonar layout has to cover
+        self.contacts: list[dict[str, float]] = []
 
     def new_move(self, move_id: int) -> None:
         """Draw this move's true step length and true glide factor (SPEC §5)."""
@@ -137,6 +140,7 @@ class TrackedRobot:
                     self.pose = Pose(x, y, theta)
                     self.collisions += 1
                     self.closest_mm = 0.0
+                    self._record_contact(x, y, theta, d_piece)
                     return MoveResult(done * d_piece, done * r_piece, blocked=True)
                 clearance = new_clearance
                 self.closest_mm = min(self.closest_mm, max(0.0, clearance - radius))
@@ -144,6 +148,23 @@ class TrackedRobot:
             done += 1
         self.pose = Pose(x, y, theta)
         return MoveResult(distance, rotation)
+
+    def _record_contact(self, x: float, y: float, theta: float, step: float) -> None:
+        touched = self.world.nearest_point(x, y)
+        if touched is None:
+            return
+        bearing = math.degrees(
+            math.remainder(math.atan2(touched[1] - y, touched[0] - x) - theta, 2 * math.pi)
+        )
+        self.contacts.append(
+            {
+                "x_mm": round(x, 1),
+                "y_mm": round(y, 1),
+                "heading_deg": round(math.degrees(theta) % 360.0, 1),
+                "bearing_deg": round(bearing, 1),
+                "reverse": step < 0,
+            }
+        )
 
     def _touch(
         self, x: float, y: float, heading: float, step: float, radius: float, clearance: float
