@@ -24,6 +24,30 @@ def wait_for(condition: Callable[[], object], timeout: float = 5.0, what: str = 
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
+def in_virtual_time(seed: int = 1) -> Callable[[Callable[[], None]], Callable[[], None]]:
+    """Run a test's body on a simulated runtime (:class:`tokenring.runtime.SimRuntime`): every
+    ring it builds runs on the virtual clock, deterministic for ``seed``, and no task may be left
+    when it returns. The body takes no fixtures (it runs as the simulation's first task)."""
+    import functools
+
+    def decorate(test: Callable[[], None]) -> Callable[[], None]:
+        @functools.wraps(test)
+        def run() -> None:
+            from tokenring.runtime import SimRuntime, using
+
+            sim = SimRuntime(seed)
+            with using(sim):
+                try:
+                    sim.run(test)
+                finally:
+                    left = sim.close()
+            assert left == [], f"tasks left running: {left}"
+
+        return run
+
+    return decorate
+
+
 # node processes hand the GIL over every 0.5 ms (tokenring.node.process); eight in-process nodes
 # need the same, or one node waits 5 ms per switch behind the others
 sys.setswitchinterval(0.0005)
