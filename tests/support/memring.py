@@ -24,21 +24,22 @@ def wait_for(condition: Callable[[], object], timeout: float = 5.0, what: str = 
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
-def in_virtual_time(seed: int = 1) -> Callable[[Callable[[], None]], Callable[[], None]]:
+def in_virtual_time(seed: int = 1) -> Callable[[Callable[..., None]], Callable[..., None]]:
     """Run a test's body on a simulated runtime (:class:`tokenring.runtime.SimRuntime`): every
     ring it builds runs on the virtual clock, deterministic for ``seed``, and no task may be left
-    when it returns. The body takes no fixtures (it runs as the simulation's first task)."""
+    when it returns. Fixtures it takes are made outside the simulation: a ring must be built in
+    the body."""
     import functools
 
-    def decorate(test: Callable[[], None]) -> Callable[[], None]:
-        @functools.wraps(test)
-        def run() -> None:
+    def decorate(test: Callable[..., None]) -> Callable[..., None]:
+        @functools.wraps(test)  # pytest still sees the test's own fixtures (tmp_path, ...)
+        def run(*args: object, **kwargs: object) -> None:
             from tokenring.runtime import SimRuntime, using
 
             sim = SimRuntime(seed)
             with using(sim):
                 try:
-                    sim.run(test)
+                    sim.run(lambda: test(*args, **kwargs))
                 finally:
                     left = sim.close()
             assert left == [], f"tasks left running: {left}"
