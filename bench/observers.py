@@ -12,11 +12,10 @@ messages, the recording grows) and stop, by PID, after it.
     python -m bench.observers --repeat 3 --rounds 1000 [--json F] [--speed 1] [--separate]
     python -m bench.observers --observers metrics,pcap     # what a Prometheus scrape and a capture cost
 
-The observers run as ``tokenring up --web --record --foxglove --metrics P`` runs them: one
-``tokenring watch`` process; ``--separate`` runs ``web``, ``record``, ``foxglove`` and ``watch
---metrics`` as four. ``metrics`` is scraped over HTTP every second (proved live: a scrape
-returned the ring's counters); ``pcap`` is ``tokenring record --pcap FILE.pcapng``, a process of
-its own in both modes (proved live: the capture grows).
+The observers run as ``tokenring up --web --record --foxglove --metrics P --pcap F`` runs them:
+one ``tokenring watch`` process; ``--separate`` runs ``web``, ``record``, ``foxglove``, ``watch
+--metrics`` and ``record --pcap`` as five. ``metrics`` is scraped over HTTP every second (proved
+live: a scrape returned the ring's counters); ``pcap`` is proved live by its file growing.
 """
 
 from __future__ import annotations
@@ -225,14 +224,16 @@ def observers(
     web_port, bridge_port, metrics_port = free_port(), free_port(), free_port()
     ring_opts = ["--ring", ring, "-e", endpoint]
     recording = folder / "observers.mcap"
+    capture = folder / "observers.pcapng"
     if separate:  # a process of each, as three tools started by hand
         commands = {
             "web": tokenring("web", "--port", str(web_port), *ring_opts),
             "record": tokenring("record", str(recording), "--force", "--quiet", *ring_opts),
             "foxglove": tokenring("foxglove", "--port", str(bridge_port), *ring_opts),
             "metrics": tokenring("watch", "--metrics", str(metrics_port), *ring_opts),
+            "pcap": tokenring("record", "--pcap", str(capture), "--force", "--quiet", *ring_opts),
         }
-        children = {name: spawn(commands[name], folder / f"{name}.log") for name in which if name != "pcap"}
+        children = {name: spawn(commands[name], folder / f"{name}.log") for name in which}
     else:  # one watcher, as `up --web --record --foxglove` starts it
         argv = ["watch", *ring_opts]
         if "web" in which:
@@ -243,13 +244,9 @@ def observers(
             argv += ["--foxglove", "--foxglove-port", str(bridge_port)]
         if "metrics" in which:
             argv += ["--metrics", str(metrics_port)]
-        watched = set(which) - {"pcap"}  # the capture is a process of its own
-        children = {"watch": spawn(tokenring(*argv), folder / "watch.log")} if watched else {}
-    capture = folder / "observers.pcapng"
-    if "pcap" in which:
-        children["pcap"] = spawn(
-            tokenring("record", "--pcap", str(capture), "--force", "--quiet", *ring_opts), folder / "pcap.log"
-        )
+        if "pcap" in which:
+            argv += ["--pcap", str(capture), "--force"]
+        children = {"watch": spawn(tokenring(*argv), folder / "watch.log")}
     browser: Browser | None = None
     client: BridgeClient | None = None
     scraper: Scraper | None = None
@@ -272,7 +269,8 @@ def observers(
         growing = capture.with_name(capture.name + ".part")  # the capture is FILE.part until it ends
         while "pcap" in which and (not growing.exists() or growing.stat().st_size < 10_000):
             if time.monotonic() > deadline:
-                raise RuntimeError(f"the capture did not grow: {(folder / 'pcap.log').read_text()[-500:]}")
+                logs = " | ".join(p.read_text()[-300:] for p in folder.glob("*.log"))
+                raise RuntimeError(f"the capture did not grow: {logs}")
             time.sleep(0.2)
         dead = [name for name, c in children.items() if c.poll() is not None]
         if dead:

@@ -1,7 +1,7 @@
-"""One watcher of a running ring: the web view, an MCAP recording, the Foxglove bridge and the
-Prometheus metrics on one feed (:mod:`tokenring.observe.feed`), as ``tokenring watch`` runs it
-and ``web``, ``record`` and ``foxglove`` run one part of it. Apart from the verbs, which import
-it only when they run."""
+"""One watcher of a running ring: the web view, an MCAP recording, the Foxglove bridge, the
+Prometheus metrics and a pcapng capture on one feed (:mod:`tokenring.observe.feed`), as
+``tokenring watch`` runs it and ``web``, ``record`` and ``foxglove`` run one part of it. Apart
+from the verbs, which import it only when they run."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from tokenring.cli.pcapcapture import PcapCapture
     from tokenring.observe.foxglove import FoxgloveBridge
     from tokenring.observe.metrics import RingMetrics
     from tokenring.observe.recording import McapRecorder, Stopper
@@ -35,6 +36,7 @@ class Watch:
     compression: str = "zstd"
     metrics_port: int | None = None  # None: no Prometheus metrics
     metrics_host: str = "127.0.0.1"
+    pcap: str | None = None  # every frame to this pcapng file (Wireshark); None: none
     #: what runs while it serves (the recorder's progress line), every half second
     on_tick: Callable[[Watch, float], None] | None = None
     #: called once everything serves and records
@@ -45,6 +47,7 @@ class Watch:
     recorder: McapRecorder | None = None
     bridge: FoxgloveBridge | None = None
     metrics: RingMetrics | None = None
+    capture: PcapCapture | None = None
     dropped: int = 0
     elapsed: float = 0.0
     failure_told: bool = False  # the recording's failure was said
@@ -54,6 +57,7 @@ class Watch:
     web_port_option: str = "--web-port"
     foxglove_port_option: str = "--foxglove-port"
     metrics_option: str = "--metrics"
+    pcap_option: str = "--pcap"
 
 
 def serve(args: argparse.Namespace, watch: Watch) -> int:
@@ -78,14 +82,27 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
         and watch.record is None
         and watch.foxglove_port is None
         and watch.metrics_port is None
+        and watch.pcap is None
     ):
-        raise UsageError("give at least one of --web, --record FILE.mcap, --foxglove, --metrics PORT")
+        raise UsageError(
+            "give at least one of --web, --record FILE.mcap, --foxglove, --metrics PORT, --pcap FILE.pcapng"
+        )
     if not watch.host.strip():
         raise UsageError("--host: give an address to serve on, e.g. 127.0.0.1")
     if watch.metrics_port is not None and not watch.metrics_host.strip():
         raise UsageError("--metrics-host: give an address to serve on, e.g. 127.0.0.1")
     if watch.record is not None:
         check_option_output(watch.record_option, watch.record, force=getattr(args, "force", False))
+    if watch.pcap is not None:
+        from tokenring.cli.pcapcapture import check_pcap_output
+
+        check_pcap_output(
+            watch.pcap_option,
+            watch.pcap,
+            getattr(args, "force", False),
+            other=watch.record,
+            other_option=watch.record_option,
+        )
     selection = Selection.parse(watch.topics)
     # the keyboard's options (files its keys run) are refused before the process joins the ring
     web_keys = extensions.web_keys(args) if watch.web_port is not None else None
@@ -135,6 +152,15 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
                 )
                 feed.add_sink(watch.recorder.on_message)
                 feed.add_raw_sink(watch.recorder.on_raw)
+            if watch.pcap is not None:
+                from tokenring.cli.pcapcapture import PcapCapture
+                from tokenring.observe.pcapng import PcapngWriter
+
+                writer = PcapngWriter(
+                    watch.pcap, ring=watch.ring, protocol=protocol, protocol_text=protocol_text(args.protocol)
+                )
+                capture = watch.capture = PcapCapture(writer, feed, getattr(args, "command", None) or "watch")
+                feed.add_raw_sink(lambda raw: capture.on_raw(raw) if is_frame_key(raw.key) else None)
             if watch.bridge is not None:
                 feed.add_sink(watch.bridge)
             view = None
@@ -168,15 +194,16 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
             def tick() -> bool:
                 """Every half second: flush the recording, report; True once it is time to stop."""
                 elapsed = time.monotonic() - started
+                writing = []  # whether each file still writes
                 if watch.recorder is not None:
                     watch.recorder.tick()
-                    if (
-                        recording_failed(args, watch)
-                        and view is None
-                        and watch.bridge is None
-                        and watch.metrics is None
-                    ):
-                        return True  # it only recorded: nothing left to do
+                    writing.append(not recording_failed(args, watch))
+                if watch.capture is not None:
+                    watch.capture.writer.tick()
+                    writing.append(not watch.capture.tell_failure())
+                serving = view is not None or watch.bridge is not None or watch.metrics is not None
+                if writing and not any(writing) and not serving:
+                    return True  # it only wrote files, and none can be written: nothing left to do
                 if watch.on_tick is not None:
                     watch.on_tick(watch, elapsed)
                 return stopper.event.is_set() or (watch.duration is not None and elapsed >= watch.duration)
@@ -196,6 +223,11 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
                 elif watch.recorder is not None:
                     watch.recorder.close()  # the file first: a launcher stopping us waits only a moment
                     recording_failed(args, watch)
+                if watch.capture is not None and not served:
+                    watch.capture.writer.discard()
+                elif watch.capture is not None:
+                    watch.capture.writer.close()
+                    watch.capture.tell_failure()
                 feed.stop()
                 watch.dropped = feed.dropped
                 if token is not None:
@@ -208,7 +240,16 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
     watch.elapsed = time.monotonic() - started
     if stopper.signal == signal.SIGINT:
         return 130
-    return 1 if watch.recorder is not None and watch.recorder.failure else 0
+    failed = (watch.recorder is not None and watch.recorder.failure) or (
+        watch.capture is not None and watch.capture.writer.failure
+    )
+    return 1 if failed else 0
+
+
+def is_frame_key(key: str) -> bool:
+    """A token frame's key (``tokenring/<ring>/token/<id>``), not an event's or a channel's."""
+    parts = key.rsplit("/", 2)
+    return len(parts) == 3 and parts[1] == "token"
 
 
 def recording_failed(args: argparse.Namespace, watch: Watch) -> bool:

@@ -435,6 +435,28 @@ def test_record_pcap_writes_the_frames_wireshark_opens(live: Live, tmp_path: Pat
     )
 
 
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_the_watcher_captures_beside_its_metrics_on_its_own_feed(live: Live, tmp_path: Path) -> None:
+    """``watch --metrics --pcap`` (what ``up --metrics P --pcap F`` starts): one process, one
+    subscription to the frames, and the capture is what tshark and sniff read."""
+    options = ["--ring", live.ring, "-e", live.endpoint, "--protocol", str(live.protocol)]
+    env = dict(os.environ, TOKENRING_EXTENSIONS="")
+    capture = tmp_path / "watched.pcapng"
+    result = run_tokenring(
+        "watch", "--metrics", "0", "--pcap", str(capture), "--duration", "2", *options, env=env, timeout=120
+    )
+    assert result.returncode == 0, result.stderr
+    assert "metrics of ring" in result.stdout and f"{capture}: " in result.stdout, result.stdout
+    read = run_tokenring("sniff", "--read", str(capture), "--json", "--protocol", str(live.protocol))
+    assert read.returncode == 0, read.stderr
+    records = [json.loads(line) for line in read.stdout.splitlines()]
+    assert len(records) > 50, len(records)
+    assert {r["header"]["sid"] for r in records} == set(NODES.values())  # frames only, every node's
+    problems = compare(records, dissected(tmp_path / "home", capture, live.lua))
+    assert not problems, "\n".join(problems[:30])
+
+
 # --------------------------------------------------------------------------------------------
 # every field of the robot's protocol.yaml, and damaged frames (no ring)
 
@@ -613,6 +635,14 @@ def test_a_capture_that_is_not_one_or_is_cut_short_is_one_line_and_exit_2(tmp_pa
         run_tokenring("record", "--pcap", str(tmp_path / "x.pcap"), "--duration", "1"), "--pcap", ".pcapng"
     )
     one_line(run_tokenring("record", "--duration", "1"), "FILE.mcap", "--pcap")
+    one_line(
+        run_tokenring("watch", "--pcap", str(tmp_path / "x.pcap"), "--duration", "1"), "--pcap", ".pcapng"
+    )
+    # up refuses an existing capture before anything starts, and keeps it
+    one_line(run_tokenring("up", "--no-world", "--pcap", str(good), "--duration", "1"), "--pcap", "exists")
+    one_line(
+        run_tokenring("up", "--no-world", "--record", str(good), "--pcap", str(good), "--force"), "--pcap"
+    )
     before = good.read_bytes()
     one_line(
         run_tokenring("record", str(good), "--pcap", str(good), "--duration", "1", "--force"),

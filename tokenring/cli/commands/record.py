@@ -15,18 +15,10 @@ own: the MCAP recording's feed and its file are the same with it or without it.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import os
 import sys
 import time
-from typing import TYPE_CHECKING, Any
 
 from tokenring.cli.args import add_ring_options, seconds, with_examples
-
-if TYPE_CHECKING:
-    from collections.abc import Iterator
-
-    from tokenring.observe.pcapng import PcapngWriter
 
 HELP = "record a running ring to an MCAP file (Foxglove, PlotJuggler, play), its frames to pcapng (Wireshark)"
 
@@ -68,6 +60,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from tokenring.cli.output import check_option_output, print_json
+    from tokenring.cli.pcapcapture import check_pcap_output, pcap_capture
     from tokenring.cli.watcher import Watch, record_progress, recording_summary, serve
     from tokenring.contract import keys
     from tokenring.errors import UsageError
@@ -77,13 +70,9 @@ def run(args: argparse.Namespace) -> int:
     if args.file is None and args.pcap is None:
         raise UsageError("give the recording to write: FILE.mcap, --pcap FILE.pcapng, or both")
     if args.pcap is not None:
-        if args.pcap.lower().endswith(".pcap"):
-            raise UsageError(f"--pcap {args.pcap}: the capture is written as pcapng: name it .pcapng")
         if args.file is not None:
             check_option_output("FILE", args.file, force=args.force)
-            if os.path.abspath(args.file) == os.path.abspath(args.pcap):
-                raise UsageError(f"--pcap {args.pcap}: is FILE too; give the capture another name")
-        check_option_output("--pcap", args.pcap, force=args.force)
+        check_pcap_output("--pcap", args.pcap, args.force, other=args.file, other_option="FILE")
     if args.file is None:
         return record_pcap_only(args, ring, progress)
 
@@ -126,88 +115,13 @@ def run(args: argparse.Namespace) -> int:
     return 1 if code == 0 and pcap is not None and pcap.writer.failure else code
 
 
-class PcapCapture:
-    """``--pcap``: every frame into a pcapng file, from a feed of the token's keys alone."""
-
-    def __init__(self, writer: PcapngWriter, feed: Any, verb: str) -> None:
-        self.writer = writer
-        self.feed = feed
-        self.verb = verb
-        self.failure_told = False
-        self.seconds = 0.0
-
-    def on_raw(self, raw: Any) -> None:
-        """The feed's raw sink: the frame into the file; a failure said once, as it happens."""
-        self.writer.on_raw(raw)
-        self.tell_failure()
-
-    def tell_failure(self) -> bool:
-        if self.writer.failure is None:
-            return False
-        if not self.failure_told:
-            self.failure_told = True
-            print(f"tokenring {self.verb}: error: {self.writer.failure}", file=sys.stderr, flush=True)
-        return True
-
-    def summary(self) -> dict[str, Any]:
-        path = self.writer.path
-        return {
-            "file": str(path),
-            "frames": self.writer.frames_kept,
-            "bytes": path.stat().st_size if path.exists() else 0,
-            "failure": self.writer.failure,
-            "dropped": self.feed.dropped,
-        }
-
-    def line(self) -> str:
-        s = self.summary()
-        dropped = f"; {s['dropped']} frames dropped (the capture fell behind)" if s["dropped"] else ""
-        return f"{s['file']}: {s['frames']} frames, {s['bytes'] / 1e6:.1f} MB (pcapng){dropped}"
-
-
-@contextlib.contextmanager
-def pcap_capture(args: argparse.Namespace, ring: str) -> Iterator[PcapCapture | None]:
-    """``--pcap``'s capture while the block runs (None without ``--pcap``): on a Zenoh session of
-    its own, opened first (a refused endpoint leaves no file). It is finished as ``FILE`` when the
-    block ends; a block that fails before a frame came leaves no file."""
-    if args.pcap is None:
-        yield None
-        return
-    from tokenring.cli.args import tap_session
-    from tokenring.cli.watcher import protocol_text
-    from tokenring.contract.protocol import load_protocol
-    from tokenring.observe.feed import Feed
-    from tokenring.observe.pcapng import PcapngWriter, TokenFrames
-
-    protocol = load_protocol(args.protocol)
-    text = protocol_text(args.protocol)
-    with tap_session(args) as session:
-        writer = PcapngWriter(args.pcap, ring=ring, protocol=protocol, protocol_text=text)
-        feed = Feed(session, ring, [TokenFrames()])
-        capture = PcapCapture(writer, feed, getattr(args, "command", None) or "record")
-        feed.add_raw_sink(capture.on_raw)
-        started = time.monotonic()
-        finished = False
-        try:
-            feed.start()
-            yield capture
-            finished = True
-        finally:
-            feed.stop()
-            capture.seconds = time.monotonic() - started
-            if finished or writer.frames:
-                writer.close()
-                capture.tell_failure()
-            else:
-                writer.discard()
-
-
 def record_pcap_only(args: argparse.Namespace, ring: str, progress: bool) -> int:
     """``record --pcap FILE.pcapng`` without ``FILE.mcap``: the frames only, until Ctrl-C,
     SIGTERM or ``--duration``; 130 after Ctrl-C, 1 if the capture failed (a full disk)."""
     import signal
 
     from tokenring.cli.output import print_json
+    from tokenring.cli.pcapcapture import pcap_capture
     from tokenring.observe.recording import Stopper
 
     stopper = Stopper()

@@ -59,7 +59,7 @@ HELP = "launch the whole ring (every node its own process)"
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from tokenring import extensions  # the extensions' own options (the robot's world, missions)
     from tokenring.cli.args import add_ring_options, with_examples
-    from tokenring.cli.commands.watch import add_metrics_options
+    from tokenring.cli.commands.watch import add_metrics_options, add_pcap_option
 
     p = sub.add_parser(
         "up",
@@ -170,11 +170,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="record the whole run to a new MCAP file (as 'tokenring record'; one watcher process serves"
         " --web, --record and --foxglove together)",
     )
+    add_pcap_option(rec)
     add_metrics_options(p)
     p.add_argument(
         "--force",
         action="store_true",
-        help="replace existing output files (--record, and an application's, e.g. the robot's --map-out)",
+        help="replace existing output files (--record, --pcap, and an application's, e.g. the robot's --map-out)",
     )
     for extension in extensions.loaded():
         extension.add_up_options(p)
@@ -279,7 +280,7 @@ def run(args: argparse.Namespace) -> int:
                 "the emulated wire must be within 10k..100G bit/s (give another --bitrate or --speed)"
             ) from None
     services = [service for plan in plans_up for service in plan.services]
-    if args.web or args.record or args.foxglove or args.metrics is not None:
+    if args.web or args.record or args.foxglove or args.metrics is not None or args.pcap:
         services.append(watch_service(args))
     if inventory is not None:
         args.router = True
@@ -530,12 +531,20 @@ def watch_service(args: argparse.Namespace) -> ServicePlan:
         argv += ["--metrics", str(args.metrics), "--metrics-host", args.metrics_host]
     if args.record:
         check_option_output("--record", args.record, force=args.force)
-        argv += ["--record", args.record] + (["--force"] if args.force else [])
+        argv += ["--record", args.record]
+    if args.pcap:
+        from tokenring.cli.pcapcapture import check_pcap_output
+
+        check_pcap_output("--pcap", args.pcap, args.force, other=args.record)
+        argv += ["--pcap", args.pcap]
+    if args.force and (args.record or args.pcap):
+        argv += ["--force"]
     tag = f"up{os.getpid()}"
     argv += ["--ready-token", tag]
     if args.zenoh_config:
         argv += ["--zenoh-config", args.zenoh_config]
     if args.protocol:
         argv += ["--protocol", args.protocol]
-    # a recording is not started again after a death: a new recorder would need a new file
-    return ServicePlan("watch", argv, ready_key=keys.watch_ready(args.ring, tag), restart=not args.record)
+    # a recording or capture is not started again after a death: it would need a new file
+    written = args.record or args.pcap
+    return ServicePlan("watch", argv, ready_key=keys.watch_ready(args.ring, tag), restart=not written)

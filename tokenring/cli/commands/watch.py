@@ -1,5 +1,5 @@
-"""``tokenring watch``: the web view, an MCAP recording, the Foxglove bridge and Prometheus
-metrics in one process.
+"""``tokenring watch``: the web view, an MCAP recording, the Foxglove bridge, Prometheus
+metrics and a pcapng capture in one process.
 
 All of them read the same feed (:mod:`tokenring.observe.feed`): one Zenoh session, one subscription per
 key, every frame decoded once and every message encoded to JSON once, whichever of them use it.
@@ -26,6 +26,7 @@ EXAMPLES = """examples:
   tokenring watch --web --web-port 9000 --duration 60
   tokenring watch --record run.mcap --topics '/robot/*' --force
   tokenring watch --metrics 9464                       # Prometheus scrapes http://127.0.0.1:9464/metrics
+  tokenring watch --metrics 9464 --pcap run.pcapng     # and every frame for Wireshark, one process
   tokenring up --explore 2 --web --record run.mcap     # the ring starts one watcher for both
 """
 
@@ -50,6 +51,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="the web view's TCP port (default %(default)s; 0: any free port)",
     )
     p.add_argument("--record", metavar="FILE.mcap", help="record to a new MCAP file (as 'tokenring record')")
+    add_pcap_option(p)
     add_record_options(p)
     p.add_argument("--foxglove", action="store_true", help="serve Foxglove (as 'tokenring foxglove')")
     p.add_argument(
@@ -68,6 +70,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ready-token", metavar="TAG", help=argparse.SUPPRESS)
     add_json_option(p)
     add_ring_options(p, listen=False)
+
+
+def add_pcap_option(p: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--pcap FILE.pcapng``, shared by ``watch`` and ``up``: the watcher's own feed, no second
+    subscription to the frames (``record --pcap`` opens one of its own)."""
+    p.add_argument(
+        "--pcap",
+        metavar="FILE.pcapng",
+        help="write every frame as an ARCNET packet to a new pcapng file (Wireshark, tshark; "
+        "'tokenring dissector' decodes the token inside)",
+    )
 
 
 def add_metrics_options(p: argparse.ArgumentParser, lowest_port: int = 1) -> None:
@@ -119,6 +132,7 @@ def run(args: argparse.Namespace) -> int:
                     "foxglove": watch.foxglove_url,
                     "record": watch.record,
                     "metrics": watch.metrics_url,
+                    "pcap": watch.pcap,
                 }
             )
             return
@@ -130,6 +144,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"recording ring {watch.ring!r} to {watch.record}")
         if watch.metrics_url:
             print(f"metrics of ring {watch.ring!r}: {watch.metrics_url}")
+        if watch.pcap:
+            print(f"capturing ring {watch.ring!r}'s frames to {watch.pcap}")
         print("(Ctrl-C stops)")
 
     watch = Watch(
@@ -144,6 +160,7 @@ def run(args: argparse.Namespace) -> int:
         compression=args.compression,
         metrics_port=args.metrics,
         metrics_host=args.metrics_host,
+        pcap=args.pcap,
         on_ready=announce,
     )
     code = serve(args, watch)
@@ -168,5 +185,7 @@ def report(watch: Watch) -> None:
             f"Foxglove: {sum(bridge.counts.values())} messages sent on {len(bridge.counts)} topics, "
             f"{bridge.subscriptions} subscriptions"
         )
+    if watch.capture is not None and not watch.capture.writer.failure:
+        print(watch.capture.line())
     if watch.dropped:
         print(f"{watch.dropped} samples dropped (the watcher fell behind)")
