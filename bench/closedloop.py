@@ -144,13 +144,14 @@ def figures(document: dict[str, Any]) -> dict[str, Any] | None:
         "runs_hit": sum(1 for r in runs if r["collisions"]),
         "closest_median_mm": float(np.median(closest)) if closest else None,
         "closest_worst_mm": float(min(closest)) if closest else None,
-        "alerts": sum(r.get("alerts", 0) for r in runs),
+        # older files counted collisions only: what they did not count is None, not 0
+        "alerts": sum(r["alerts"] for r in runs) if all("alerts" in r for r in runs) else None,
         "coverage_median": float(np.median(coverage)),
         "coverage_decile": float(np.percentile(coverage, 10)),
         "precision_median": float(np.median(precision)),
         "precision_decile": float(np.percentile(precision, 10)),
         "corners": (sum(r["corners_closed"] for r in rows), sum(r["corners_total"] for r in rows)),
-        "home": sum(1 for r in runs if r.get("home")),
+        "home": sum(1 for r in runs if r["home"]) if all("home" in r for r in runs) else None,
     }
 
 
@@ -163,6 +164,7 @@ def section_md(documents: list[tuple[str, dict[str, Any]]]) -> str:
             continue
         timing = document.get("timing") or {}
         load = timing.get("load_start")
+        home = "-" if got["home"] is None else f"{got['home']}/{got['runs']}"
         closest = (
             f"{got['closest_median_mm']:.0f} / {got['closest_worst_mm']:.0f}"
             if got["closest_worst_mm"] is not None
@@ -170,10 +172,11 @@ def section_md(documents: list[tuple[str, dict[str, Any]]]) -> str:
         )
         lines.append(
             f"| [{name}](results/{name}) | {document['command'].split('closedloop ', 1)[-1]} | {got['runs']} | "
-            f"{got['collisions']} in {got['runs_hit']} | {closest} | {got['alerts']} | "
+            f"{got['collisions']} in {got['runs_hit']} | {closest} | "
+            f"{'-' if got['alerts'] is None else got['alerts']} | "
             f"{got['coverage_median']:.1%} / {got['coverage_decile']:.1%} | "
             f"{got['precision_median']:.1%} / {got['precision_decile']:.1%} | "
-            f"{got['corners'][0]}/{got['corners'][1]} | {got['home']}/{got['runs']} | "
+            f"{got['corners'][0]}/{got['corners'][1]} | {home} | "
             + (f"{timing['seconds'] / 60:.0f} min, load {load[0]:.1f}" if load else "-")
             + " |"
         )
