@@ -101,6 +101,7 @@ def test_all_three_share_one_session_on_a_live_ring_and_stop_on_sigterm(procs, r
             "foxglove": f"ws://127.0.0.1:{fox_port}",
             "record": str(recording),
             "metrics": None,
+            "pcap": None,
         }
 
         def frames() -> int:
