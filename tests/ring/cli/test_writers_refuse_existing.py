@@ -41,6 +41,8 @@ WRITERS = [
     ("record-pcap", ["record", "--pcap", "{out}.pcapng", "--duration", "1"], "--pcap", "{out}.pcapng", False),
     ("record-mcap-pcap", ["record", "{dir}/new.mcap", "--pcap", "{out}.pcapng", "--duration", "1"], "--pcap", "{out}.pcapng", False),
     ("watch-record", ["watch", "--record", "{out}", "--duration", "1"], "--record", "{out}", False),
+    ("watch-pcap", ["watch", "--pcap", "{out}.pcapng", "--duration", "1"], "--pcap", "{out}.pcapng", False),
+    ("up-pcap", ["up", "--pcap", "{out}.pcapng", "--duration", "5"], "--pcap", "{out}.pcapng", False),
 ]  # fmt: skip
 FORCED = [w for w in WRITERS if w[4]]
 
