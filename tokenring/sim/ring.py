@@ -45,6 +45,7 @@ class SimSummary:
     frames: int
     frames_sha256: str
     visits: dict[int, int]
+    #: tokens the nodes made: the ring's first one too (no token seen yet, as at any start)
     regenerations: int
     round_median_ms: float | None
     switches: int
@@ -54,6 +55,8 @@ class SimSummary:
     #: what the nodes' fault injectors did (dropped, corrupted, ...), by node
     fault_counts: dict[str, dict[str, int]] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
+    #: of those, the ones that replaced a token the ring had had (lost, or thought lost)
+    reconfigurations: int = 0
 
     @property
     def speedup(self) -> float:
@@ -204,6 +207,7 @@ def run_ring(
             frames_sha256=ring.hub.digest.hexdigest() if ring.hub.digest is not None else "",
             visits={i: n.stats.visits for i, n in ring.nodes.items()},
             regenerations=sum(n.stats.tokens_regenerated for n in ring.nodes.values()),
+            reconfigurations=sum(n.stats.reconfigurations for n in ring.nodes.values()),
             round_median_ms=None if median is None else round(median * 1000.0, 6),
             switches=sim.switches,
             faults=extra.pop("faults", []),

@@ -21,9 +21,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tokenring.cli.args import seconds
+
+if TYPE_CHECKING:
+    from tokenring.sim.ring import SimSummary
 
 HELP = "run the ring in virtual time: deterministic, faster than real time"
 
@@ -147,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
             f"{summary.simulated_s:.3f} simulated s in {summary.real_s:.2f} real s ({summary.speedup:.0f}x), "
             f"seed {summary.seed}, nodes {','.join(map(str, summary.nodes))}: {summary.frames} frames, "
             f"round median {'?' if median is None else f'{median:.3f} ms'}, "
-            f"{summary.regenerations} regeneration(s)"
+            f"{regenerated(summary)}"
         )
         for fault in summary.faults:
             took = fault["recovered_s"]
@@ -242,7 +245,7 @@ def run_application(
             f"{summary.simulated_s:.3f} simulated s in {summary.real_s:.2f} real s ({summary.speedup:.1f}x), "
             f"seed {summary.seed}, nodes {','.join(map(str, summary.nodes))}: {summary.frames} frames, "
             f"round median {'?' if median is None else f'{median:.3f} ms'}, "
-            f"{summary.regenerations} regeneration(s)"
+            f"{regenerated(summary)}"
         )
         for line in plan.report(summary.extra | data) if plan.report is not None else []:
             print(line)
@@ -253,3 +256,12 @@ def run_application(
         print(f"failed: {failure}", file=sys.stderr)
         return 1
     return 0
+
+
+def regenerated(summary: SimSummary) -> str:
+    """The tokens the nodes made, the ring's first told apart from the ones that replaced one."""
+    first = summary.regenerations - summary.reconfigurations
+    made = f"{summary.reconfigurations} regeneration(s)"
+    return made + (
+        " after the first token" if first == 1 else f" and {first} first token(s)" if first else ""
+    )
