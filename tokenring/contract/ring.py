@@ -129,12 +129,21 @@ def epoch_order(a_epoch: int, a_origin: int, b_epoch: int, b_origin: int) -> int
 
     Epochs are 7-bit serial numbers (RFC 1982 style, window 64); equal epochs started by
     different nodes are ordered by the starting node's ID, so two partitions that both
-    regenerated a token agree on which one survives.
+    regenerated a token agree on which one survives. Exactly half the circle apart, where
+    serial arithmetic makes each older than the other, the starting node's ID decides too: of
+    two different epochs exactly one is newer. Origin 0 is no epoch at all (IDs are 1..255): a
+    node that has seen no token yet, older than any epoch a token carried — else a respawned
+    node's zero, 64 or more behind the ring's, looks newer to it, and the ring drops to it.
     """
+    if not a_origin or not b_origin:
+        return (a_origin != 0) - (b_origin != 0)
     diff = (a_epoch - b_epoch) & EPOCH_MASK
-    if diff == 0:
-        return (a_origin > b_origin) - (a_origin < b_origin)
-    return 1 if diff < 64 else -1
+    if diff == 0 or diff == (EPOCH_MASK + 1) // 2:
+        by_origin = (a_origin > b_origin) - (a_origin < b_origin)
+        if by_origin or diff == 0:
+            return by_origin
+        return 1 if a_epoch > b_epoch else -1
+    return 1 if diff < (EPOCH_MASK + 1) // 2 else -1
 
 
 class RollingStats:

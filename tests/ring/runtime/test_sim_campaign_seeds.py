@@ -39,3 +39,22 @@ def test_seed_22_a_respawned_receiver_does_not_take_again_what_its_predecessor_t
     assert report["invariants"]["no_command_executed_twice"], done.stdout
     assert report["ok"] and done.returncode == 0, done.stdout
     assert report["commands"]["duplicated"] == 0 and report["commands"]["acked"] > 100
+
+
+#: the hour-long campaign of 2026-12-07 (bench/results/simcampaign-2026-12-07.json), seed 2219:
+#: after some sixty regenerations a node that had seen no token (epoch 0, origin 0) made the
+#: ring's nodes take its zero for a newer epoch, and epochs exactly half the 7-bit circle apart
+#: were each older than the other: the ring stalled for 4 s and the last fault never recovered
+#: (tokenring.contract.ring.epoch_order, tests/ring/contract/test_epochs.py)
+SEED_2219 = REPO / "bench" / "results" / "simcampaign-2026-12-07-failures" / "sim-seed2219-min.yaml"
+
+
+def test_seed_2219_a_ring_sixty_epochs_on_takes_its_respawned_nodes_back(tmp_path: Path):
+    report_file = tmp_path / "report.json"
+    done = subprocess.run(
+        [*TOKENRING, "sim", "--chaos", str(SEED_2219), "--seed", "2219", "--json", str(report_file), "--quiet"],
+        capture_output=True, text=True, timeout=600, cwd=REPO,
+    )  # fmt: skip
+    report = json.loads(report_file.read_text())
+    assert report["invariants"]["every_fault_recovered"], done.stdout
+    assert report["ok"] and done.returncode == 0, done.stdout
