@@ -1338,8 +1338,15 @@ def _simcampaign_section(result: dict[str, Any], name: str) -> str:
         result["failures"],
         f"{load['median']} / {load['max']}",
     ]
+    files: dict[str, str] = {}  # seed -> its replay file, the shrunk one where there is one
+    for file in result.get("failure_files", []):
+        seed = file.split("sim-seed")[-1].split("-")[0].split(".")[0]
+        if seed not in files or file.endswith("-min.yaml"):
+            files[seed] = file
     failed = "".join(
-        f"\n* seed {x['seed']}: {', '.join(x.get('broken', []))}" for x in result.get("failed", [])
+        f"\n* seed {x['seed']}: {', '.join(x.get('broken', []))}"
+        + (f" ([replay file](results/{files[str(x['seed'])]}))" if str(x["seed"]) in files else "")
+        for x in result.get("failed", [])
     )
     return (
         "## Seed campaign in virtual time (`python -m bench.simcampaign`)\n\n"
@@ -1348,8 +1355,8 @@ def _simcampaign_section(result: dict[str, Any], name: str) -> str:
         f"by the chaos invariants and the probes' ledgers, for {result['minutes']:g} wall minutes on "
         f"{result['jobs']} processes ({result['cpus']} cores; the issue's aim: 10 000 schedules an hour). "
         "Lost: acknowledged and taken by no incarnation; duplicated: taken twice. "
-        f"From [{name}](results/{name}), {result['date']}; load: the 1-minute load average over the run, "
-        "median / max.\n\n"
+        f"From [{name}](results/{name}), {result['date']}, the build at commit {result['commit'][:10]}; "
+        "load: the 1-minute load average over the run, median / max.\n\n"
         + md_table(
             [row],
             [
