@@ -175,3 +175,12 @@ def with_examples(examples: str) -> dict[str, Any]:
     """``add_parser`` keywords for a help that ends with ``examples`` as written (an
     ``examples:`` line, then one indented ``tokenring ...`` command a line)."""
     return {"epilog": examples, "formatter_class": ExamplesHelpFormatter}
+
+
+def protocol_text(path: str | None) -> str:
+    """protocol.yaml's text as the ring reads it (the file is checked by load_protocol first)."""
+    from pathlib import Path
+
+    from tokenring.contract.protocol import default_protocol_path
+
+    return Path(path or default_protocol_path()).read_text(encoding="utf-8")

@@ -81,8 +81,7 @@ def pcap_capture(args: argparse.Namespace, ring: str) -> Iterator[PcapCapture | 
     if args.pcap is None:
         yield None
         return
-    from tokenring.cli.args import tap_session
-    from tokenring.cli.watcher import protocol_text
+    from tokenring.cli.args import protocol_text, tap_session
     from tokenring.contract.protocol import load_protocol
     from tokenring.observe.feed import Feed
     from tokenring.observe.pcapng import PcapngWriter, TokenFrames

@@ -69,7 +69,7 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
     cannot be written is named in one line as it fails; the web view and the Foxglove bridge
     go on without it, and a watcher that only recorded stops."""
     from tokenring import extensions
-    from tokenring.cli.args import tap_session
+    from tokenring.cli.args import protocol_text, tap_session
     from tokenring.cli.output import check_option_output
     from tokenring.contract import keys
     from tokenring.contract.protocol import load_protocol
@@ -281,15 +281,6 @@ async def _serve_web(view: Any, watch: Watch, ready: Callable[[], None], tick: C
         await view.serve(watch.host, watch.web_port, served, stop, port_option=watch.web_port_option)
     finally:
         ticking.cancel()
-
-
-def protocol_text(path: str | None) -> str:
-    """protocol.yaml's text as the ring reads it (the file is checked by load_protocol first)."""
-    from pathlib import Path
-
-    from tokenring.contract.protocol import default_protocol_path
-
-    return Path(path or default_protocol_path()).read_text(encoding="utf-8")
 
 
 def recording_summary(watch: Watch) -> dict[str, Any]:
