@@ -133,7 +133,8 @@ def epoch_order(a_epoch: int, a_origin: int, b_epoch: int, b_origin: int) -> int
     serial arithmetic makes each older than the other, the starting node's ID decides too: of
     two different epochs exactly one is newer. Origin 0 is no epoch at all (IDs are 1..255): a
     node that has seen no token yet, older than any epoch a token carried — else a respawned
-    node's zero, 64 or more behind the ring's, looks newer to it, and the ring drops to it.
+    node's zero, 64 or more behind the ring's epoch, looks newer to the ring's nodes, and they
+    drop to it.
     """
     if not a_origin or not b_origin:
         return (a_origin != 0) - (b_origin != 0)
