@@ -199,7 +199,8 @@ def test_a_foxglove_client_sees_poses_the_map_and_round_trips_of_an_exploring_ri
         assert all(t["ms"] > 0 for t in trips), trips[:5]
         # measured where the ring wraps: its lowest member, main once it has joined (while the
         # ring forms, before main's boot, another node can be the lowest for a few rounds)
-        ring_ids = {n["id"] for n in launcher_status(session, ring_name)["nodes"]}
+        latest = wait_until(lambda: launcher_status(session, ring_name), 60, "the launcher's status")
+        ring_ids = {n["id"] for n in latest["nodes"]}
         assert {t["node"] for t in trips} <= ring_ids, trips
         assert trips[-1]["node"] == 10, trips[-5:]
         # the odometry arrived too (advertised and subscribed: a second robot topic of the same schema)
