@@ -173,11 +173,13 @@ class Program(UserProgram):
             self.copro.read(),
             self.compass.read(),
         )
-        pose = None
+        pose, pose_ms = None, None
         if copro["pose_source"]:
             pose = pose_from_wire(copro["pose_x_mm"], copro["pose_y_mm"], copro["pose_angle_cdeg"])
+            pose_ms = copro["pose_stamp_ms"]
         elif self.motor.published:
             pose = pose_from_wire(motor["x_mm"], motor["y_mm"], motor["angle_cdeg"])
+            pose_ms = motor["stamp_ms"]
         self.compass_calibrating = bool(self.compass.visits) and compass["state"] == COMPASS_CALIBRATING
         heading = compass["heading_cdeg"] if self.compass.visits and not self.compass_calibrating else None
         return Sensors(
@@ -192,7 +194,9 @@ class Program(UserProgram):
             stamp_ms=motor["stamp_ms"]
             if self.motor.visits
             else int((self.rt.monotonic() - self.started) * 1000),
+            sweep_ms=sonar["stamp_ms"] if self.sonar.visits else None,
             pose=pose,
+            pose_ms=pose_ms,
             heading_cdeg=heading,
             pose_filtered=copro["pose_source"] == 2,
             ready=bool(self.sonar.visits and sonar["sweep"] and self.motor.visits and motor["stamp_ms"]),

@@ -36,6 +36,7 @@ from modules.navigation.frontier_visits import FrontierVisits
 from modules.navigation.homing import ReturnHome, route_home
 from modules.navigation.islands import IslandVisits, interior_goal, linked_groups
 from modules.navigation.pilot import (
+    BLOCKING_TRIGGERS,
     FORWARD,
     REASON,
     REVERSE,
@@ -279,7 +280,7 @@ class ExploreLeftWall(TurnJudging, IslandVisits, FrontierVisits, ReturnHome, Nav
                 return judged
             label = "turned"
         if self.phase in ("home", "home_turn"):  # no lap ends on the way home, whatever it passes
-            blocked = last is not None and last.trigger in ("ahead_within", "front_within")
+            blocked = last is not None and last.trigger in BLOCKING_TRIGGERS
             return self._homeward(label, blocked, sensors)
         self._count_rotation(sensors)
         budget = s.frontier_follow_mm if self.frontier_follow else s.island_budget_mm
@@ -308,7 +309,7 @@ class ExploreLeftWall(TurnJudging, IslandVisits, FrontierVisits, ReturnHome, Nav
             self.note = "lap closed"
             self.outer_path = self.path
             return self._next_island(sensors)
-        blocked = last is not None and last.trigger in ("ahead_within", "front_within")
+        blocked = last is not None and last.trigger in BLOCKING_TRIGGERS
         handler = {
             "probe": self._plan_probe,
             "goto": self._plan_goto,

@@ -11,6 +11,14 @@ reverse moves, all of them for turns on the spot. An ALERT already present when 
 move (the direction the lock allows) starts does not abort that move — it is what it escapes.
 :class:`SeedPilot` (``--algorithms main=seed``) is the seed's rule instead: any sonar, any move.
 
+Straight moves keep clear of what the sonars have shown (:class:`~modules.navigation.clearance.
+EchoMemory`, issue 57): a move is commanded no farther than the free way ahead of the body, and
+one whose way closes while it runs (an echo it did not have at its start) is stopped while the
+reaction — a sweep, main's visit, the STOP's way to the motor, all measured — still fits. Either
+ends the sequence with abort reason CLOSE and trigger ``clearance``: something is in the way, as
+for a front sonar's abort, though no sonar need read it now (a partition's end met edge-on
+returns no echo). Escapes from ALERT are exempt: the ALERT rule guards them.
+
 A move the motor refuses because its drive is off (ERROR MOTORS_OFF, handed over by main as
 :meth:`Pilot.note_error`, or motor.data's state OFF on several samples after the send), or one a
 MOTORS_OFF ended under way, ends the sequence with abort reason MOTORS_OFF: nothing is retried.
@@ -22,11 +30,14 @@ a callable, so it is unit-tested with synthetic data and driven by main's progra
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from modules.mapping.vectorgen import NO_CONTACT_CM, SonarLayout
+from modules.description.robot import SONAR_COUNT, SONAR_SLOT_MS
+from modules.mapping.vectorgen import NO_CONTACT_CM, PoseHistory, SonarLayout
+from modules.navigation.clearance import EchoMemory
 from tokenring import default_protocol
 
 _E = default_protocol().enums
@@ -56,6 +67,9 @@ CONTACT = _E["contact"]
 
 #: the seed's ALERT area: under 4 cm
 ALERT_CM = 4
+
+#: the triggers that say something is in the way ahead: a front sonar's abort, or the clearance
+BLOCKING_TRIGGERS = frozenset({"ahead_within", "front_within", "clearance"})
 
 
 @dataclass(frozen=True)
@@ -99,7 +113,9 @@ class Sensors:
     move_seq: int = 0
     distance_mm: int = 0
     stamp_ms: int = 0
+    sweep_ms: int | None = None  # when the sweep's first pair was pinged (sonar's stamp)
     pose: tuple[float, float, float] | None = None
+    pose_ms: int | None = None  # the time ``pose`` is of (the filter's lags the motor's)
     heading_cdeg: int | None = None  # compass, navigation convention (north, clockwise)
     pose_filtered: bool = False  # ``pose`` is the EKF's (its heading fuses the compass)
     ready: bool = True  # sonar and motor have published: nothing is planned on empty channels
@@ -142,6 +158,11 @@ class PilotSettings:
     #: without the motor's ERROR: up to three can predate the motor taking the command (the
     #: newest before it, the one its loop was making, a SIP sample taken before the command ran)
     off_samples: int = 4
+    #: kept free beyond the clearance margin for the pose's drift between sweeps: a capped move
+    #: ends this much short of where the body would come within the margin
+    clearance_reserve_mm: int = 20
+    min_clear_mm: int = 30  # a straight move with less free way than this is not sent at all
+    reaction_window: int = 16  # the sweeps and visits over which the reaction time is measured
 
 
 Send = Callable[..., Any]  # send(target, command, **args)
@@ -152,10 +173,26 @@ class Pilot:
 
     IDLE, STARTING, MOVING, STOPPING = "idle", "starting", "moving", "stopping"
 
-    def __init__(self, layout: SonarLayout, send: Send, settings: PilotSettings | None = None) -> None:
+    def __init__(
+        self,
+        layout: SonarLayout,
+        send: Send,
+        settings: PilotSettings | None = None,
+        clearance: EchoMemory | None = None,
+    ) -> None:
         self.layout = layout
         self.send = send
         self.settings = settings or PilotSettings()
+        self.clearance = clearance if clearance is not None else self._make_clearance(layout)
+        self._poses_seen = PoseHistory(64)  # where the robot was when (for placing sweeps)
+        self._fed_sweep: int | None = None
+        self._fed_ms: int | None = None
+        self._step_ms: int | None = None
+        self._sweep_gaps: deque[int] = deque(maxlen=self.settings.reaction_window)
+        self._visit_gaps: deque[int] = deque(maxlen=self.settings.reaction_window)
+        self._commanded = 0  # the distance commanded for the move under way (mm or degrees)
+        self._capped = False  # ... less than the move asked for: the clearance cut it short
+        self._escaping = False  # the move under way is the escape the ALERT lock allows
         self.state = self.IDLE
         self.alert_lock = STOPPED
         self.moves: list[Move] = []
@@ -180,6 +217,10 @@ class Pilot:
         self._off_error = False  # the motor refused it with ERROR MOTORS_OFF
         self._off_stamps: set[int] = set()  # motor samples seen OFF since it was sent
 
+    @staticmethod
+    def _make_clearance(layout: SonarLayout) -> EchoMemory | None:
+        return EchoMemory(mounts=layout.mounts)
+
     # -- the navigator's side ---------------------------------------------------------------
     @property
     def busy(self) -> bool:
@@ -187,6 +228,7 @@ class Pilot:
 
     def start(self, moves: list[Move], sensors: Sensors) -> bool:
         """Take a sequence; False (and an ALERT outcome) if the ALERT lock refuses its first move."""
+        self._observe(sensors)
         self.moves, self.index, self.outcome = list(moves), 0, None
         if not self.moves:
             self.outcome = Outcome(REASON["DONE"])
@@ -219,17 +261,25 @@ class Pilot:
     def _begin(self, sensors: Sensors) -> None:
         move = self.moves[self.index]
         escape = self.alert_lock != STOPPED and move.direction == self.alert_lock
+        self._escaping = escape
         self._exempt = self._escape_exempt(move.direction, sensors) if escape else set()
         if escape:
             self.alert_lock = STOPPED  # the navigator commanded the opposite direction
         if self._alert_at_start(move.direction, sensors):
             self._finish(REASON["ALERT"], "alert at start", lock=move.direction)
             return
+        amount = self._capped_amount(move, sensors)
+        clear = math.inf if escape else self._clear_mm(move.direction, sensors)
+        if clear < self.settings.min_clear_mm:
+            self._finish(REASON["CLOSE"], "clearance", driven=0)
+            return
+        self._capped = clear < amount
+        amount = int(min(amount, clear))
+        self._commanded = amount
         if move.scan and not self._scanning:
             self.send("copro", "START_SCAN")
             self._scanning = True
         name, arg = MOTOR_COMMAND[move.direction]
-        amount = self._capped_amount(move, sensors)
         self.reached.clear()
         self._seq_before = sensors.move_seq
         self._idle_at_send = sensors.motor_state != MOTOR_STATE["MOVING"]
@@ -292,6 +342,7 @@ class Pilot:
 
     def step(self, sensors: Sensors) -> Outcome | None:
         """Advance; returns the outcome once the sequence ended (DONE or aborted), else None."""
+        self._observe(sensors)
         if self.state == self.IDLE:
             out, self.outcome = self.outcome, None
             return out
@@ -320,6 +371,9 @@ class Pilot:
             if alert:
                 self._stop(REASON["ALERT"], f"alert on sonar {sorted(alert)}", lock=move.direction)
                 return None
+            if self._closing(move, sensors):
+                self._stop(REASON["CLOSE"], "clearance")
+                return None
             new_sweep = sensors.sweep != self._abort_sweep
             self._abort_sweep = sensors.sweep
             for k, condition in enumerate(move.abort):
@@ -341,6 +395,10 @@ class Pilot:
                     reason = "STALL" if status == MOVE_STATUS["STALLED"] else "COLLISION"
                     self._finish(REASON[reason], "motor", driven=sensors.distance_mm)
                     return self._take()
+                if self._capped and self._clear_mm(move.direction, sensors) < self.settings.min_clear_mm:
+                    # ended where the clearance cut it short, and the way is still closed there
+                    self._finish(REASON["CLOSE"], "clearance", driven=sensors.distance_mm)
+                    return self._take()
                 self._next(sensors)
                 return self._take() if self.state == self.IDLE else None
             if sensors.stamp_ms - self._started_ms > self._expected_ms(move):
@@ -361,6 +419,60 @@ class Pilot:
             self._finish(reason, trigger, driven=sensors.distance_mm)
             return self._take()
         return None
+
+    def _observe(self, sensors: Sensors) -> None:
+        """Every new sweep into the echo memory; the gaps between sweeps and between visits (world
+        ms) for the reaction time."""
+        stamp = sensors.stamp_ms
+        if self._step_ms is not None and stamp > self._step_ms:
+            self._visit_gaps.append(stamp - self._step_ms)
+        self._step_ms = stamp
+        if sensors.pose is not None and sensors.pose_ms is not None:
+            self._poses_seen.add(sensors.pose_ms, sensors.pose)
+        if sensors.sweep == self._fed_sweep or not sensors.ready:
+            return
+        if self._fed_ms is not None and stamp > self._fed_ms:
+            self._sweep_gaps.append(stamp - self._fed_ms)
+        self._fed_sweep, self._fed_ms = sensors.sweep, stamp
+        if self.clearance is None or sensors.pose is None:
+            return
+        pose = sensors.pose
+        if sensors.sweep_ms is not None:  # where the robot was at the sweep's middle
+            pose = self._poses_seen.at(sensors.sweep_ms + int(SONAR_COUNT * SONAR_SLOT_MS / 2)) or pose
+        self.clearance.add(pose, sensors.distances, stamp)
+
+    def reaction_ms(self) -> float:
+        """From an echo's sweep to the motor standing: the longest recent gap between the sweeps
+        main saw (the sweep itself and main's wait for it) and between its visits (the STOP's
+        way to the motor), as measured on this ring."""
+        sweep = max(self._sweep_gaps, default=240)
+        visit = max(self._visit_gaps, default=40)
+        return float(sweep + visit)
+
+    def stopping_mm(self, move: Move, sensors: Sensors) -> float:
+        """How far a straight move at its speed goes while a STOP is on its way, counted from
+        the time of the pose it is judged by (the filter's lags), plus the reserve."""
+        speed = self.settings.mm_per_s_at_full * max(move.speed_pct, 1) / 100.0
+        lag = max(0, sensors.stamp_ms - sensors.pose_ms) if sensors.pose_ms is not None else 0
+        return speed * (self.reaction_ms() + lag) / 1000.0 + self.settings.clearance_reserve_mm
+
+    def _clear_mm(self, direction: int, sensors: Sensors) -> float:
+        """The free way for a straight move from here, less the reserve (inf: not straight, no
+        pose, no clearance kept)."""
+        if self.clearance is None or sensors.pose is None or direction not in (FORWARD, REVERSE):
+            return math.inf
+        free = self.clearance.free_mm(sensors.pose, reverse=direction == REVERSE)
+        return free - self.settings.clearance_reserve_mm
+
+    def _closing(self, move: Move, sensors: Sensors) -> bool:
+        """A running straight move must stop now: the free way left is shorter than what it still
+        has to go and no longer than its stopping distance (the next sweep would come too late)."""
+        if move.direction not in (FORWARD, REVERSE) or self._escaping or not self._seen_moving:
+            return False
+        free = self._clear_mm(move.direction, sensors)
+        left = self._commanded - max(0, sensors.distance_mm)
+        reserve = self.settings.clearance_reserve_mm  # (a capped move's own end is no news)
+        return free < left - reserve and free <= self.stopping_mm(move, sensors) - reserve
 
     def _motors_off(self, sensors: Sensors) -> bool:
         """The move is over because the drive is off: refused (the motor's ERROR, or OFF on
@@ -476,6 +588,10 @@ class SeedPilot(Pilot):
 
     def _alert_at_start(self, direction: int, sensors: Sensors) -> set[int]:
         return set()  # sent, then stopped at the first check of the running move
+
+    @staticmethod
+    def _make_clearance(layout: SonarLayout) -> EchoMemory | None:
+        return None  # the seed's robot had only the ALERT rule
 
 
 def side_slope(

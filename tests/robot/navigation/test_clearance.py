@@ -43,12 +43,12 @@ def test_nothing_seen_leaves_the_way_open():
 def test_a_wall_ahead_leaves_its_distance_less_the_radius_and_the_margin():
     echoes = memory()
     nose = SONAR_MOUNTS[FRONT].x  # 188 mm ahead of the centre
-    echoes.add((0.0, 0.0, 0.0), readings(**{f"s{FRONT}": round((1000 - nose) / 10)}), 0)
-    # the echo on the beam's axis is at x = 1000: the circle reaches it within the margin at
-    # 1000 - 190 - 60; the arc's other points lie nearer but off the axis, which frees more
-    assert echoes.free_mm((0.0, 0.0, 0.0)) == pytest.approx(1000 - R - MARGIN, abs=3)
+    echoes.add((0.0, 0.0, 0.0), readings(**{f"s{FRONT}": round((900 - nose) / 10)}), 0)
+    # the echo on the beam's axis is at x = 900: the circle reaches it within the margin at
+    # 900 - 190 - 60; the arc's other points lie nearer but off the axis, which frees more
+    assert echoes.free_mm((0.0, 0.0, 0.0)) == pytest.approx(900 - R - MARGIN, abs=3)
     # and from 300 mm nearer, 300 less; looking away, nothing in the way
-    assert echoes.free_mm((300.0, 0.0, 0.0)) == pytest.approx(1000 - R - MARGIN - 300, abs=3)
+    assert echoes.free_mm((300.0, 0.0, 0.0)) == pytest.approx(900 - R - MARGIN - 300, abs=3)
     assert echoes.free_mm((0.0, 0.0, math.pi)) == math.inf
     assert echoes.free_mm((0.0, 0.0, 0.0), reverse=True) == math.inf
 
@@ -81,7 +81,9 @@ def test_backing_off_looks_behind_the_robot():
     echoes = memory()
     tail = -SONAR_MOUNTS[REAR].x
     echoes.add((0.0, 0.0, 0.0), readings(**{f"s{REAR}": round((500 - tail) / 10)}), 0)
-    assert echoes.free_mm((0.0, 0.0, 0.0), reverse=True) == pytest.approx(500 - R - MARGIN, abs=3)
+    assert echoes.free_mm((0.0, 0.0, 0.0), reverse=True) == pytest.approx(
+        500 - R - MARGIN, abs=6
+    )  # 1-cm readings, the arc
     assert echoes.free_mm((0.0, 0.0, 0.0)) == math.inf
 
 
@@ -101,3 +103,33 @@ def test_echoes_far_away_or_long_ago_are_forgotten():
     echoes.add((0.0, 0.0, 0.0), readings(), 13_000)  # 11 s later
     assert len(echoes.points) == 0
     assert echoes.free_mm((0.0, 0.0, 0.0)) == math.inf
+
+
+def test_an_echo_farther_along_a_beam_clears_what_lay_short_of_it_and_no_echo_clears_nothing():
+    """An arc is where the surface may be: a later beam whose echo came from beyond a point went
+    through it. No echo says nothing: a surface at a grazing angle answers none."""
+    nose = SONAR_MOUNTS[FRONT].x
+    sweep = [math.radians(d) for d in range(-25, 30, 5)]  # the nose swept across the old arc
+    cleared, kept = memory(), memory()
+    for echoes in (cleared, kept):
+        echoes.add((0.0, 0.0, 0.0), readings(**{f"s{FRONT}": 50}), 0)  # something 50 cm ahead
+    before = cleared.free_mm((0.0, 0.0, 0.0))
+    assert before < 500 + nose - R  # the arc's near points: at most the echo's distance
+    for heading in sweep:  # then echoes from 100 cm on every bearing across it: it has gone
+        cleared.add((0.0, 0.0, heading), readings(**{f"s{FRONT}": 75}), 1)
+        kept.add((0.0, 0.0, heading), readings(), 1)
+    # the way now ends short of the far echoes (750 mm past the nose), not of the old ones
+    assert cleared.free_mm((0.0, 0.0, 0.0)) > 750 + nose - R - MARGIN - 60
+    assert kept.free_mm((0.0, 0.0, 0.0)) == pytest.approx(before)
+
+
+def test_a_wall_beside_the_lane_is_passed_and_one_in_it_is_not():
+    """The circle passes an echo beside it at the side margin; one inside its width it stops at."""
+    beside, inside = memory(), memory()
+    # a wall 230 mm right of the centre line (60 mm off the right side pairs at y = -170)
+    for x in range(0, 600, 40):
+        beside.add((float(x), 0.0, 0.0), readings(**{f"s{RIGHT_FRONT}": 6, f"s{RIGHT_REAR}": 6}), x)
+    assert beside.free_mm((0.0, 0.0, 0.0)) == math.inf
+    for x in range(0, 600, 40):  # 30 mm off them: 200 mm from the centre line, inside the lane
+        inside.add((float(x), 0.0, 0.0), readings(**{f"s{RIGHT_FRONT}": 3, f"s{RIGHT_REAR}": 3}), x)
+    assert inside.free_mm((-400.0, 0.0, 0.0)) < 400 - MARGIN
