@@ -20,7 +20,6 @@ at a grazing angle, a partition's end, answer none).
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -47,8 +46,9 @@ class ClearanceSettings:
     #: readings beyond this are too coarse to place: at 1 m the beam is half a metre wide, and
     #: a pillar's face seen there put points across the free way beside it
     range_mm: float = 800.0
-    keep_mm: float = 2000.0  # echoes farther than this from the robot are forgotten
-    keep_ms: float = 120_000.0  # ... and those older than this (the pose drifts)
+    keep_ms: float = 120_000.0  # echoes older than this are forgotten (the pose drifts)
+    merge_mm: float = 20.0  # points are kept one per cell this size, the newest
+    merge_every: int = 8  # sweeps between merges
     clear_half_deg: float = 7.5  # an echo clears older points this near its beam's axis
     clear_short_mm: float = 60.0  # ... lying at least this much short of it
     max_points: int = 20_000
@@ -64,8 +64,9 @@ class EchoMemory:
         self.mounts = mounts
         half = math.radians(self.s.half_beam_deg)
         self._arc = np.linspace(-half, half, self.s.arc_points) if self.s.arc_points > 1 else np.zeros(1)
-        self._sweeps: deque[tuple[float, np.ndarray]] = deque()  # (stamp_ms, (N, 2) points)
         self._points = np.zeros((0, 2))
+        self._stamps = np.zeros(0)
+        self._adds = 0
 
     def add(self, pose: Pose, distances_cm: Sequence[int], stamp_ms: float) -> None:
         """One sweep's readings at ``pose``: each echo as an arc of points across its beam."""
@@ -79,42 +80,43 @@ class EchoMemory:
             reach = cm * 10.0
             parts.append(np.column_stack((sx + reach * np.cos(angles), sy + reach * np.sin(angles))))
             beams.append((sx, sy, direction, reach))
-        self._clear_along(beams)
-        self._clear_body(pose)
+        keep = self._stamps >= stamp_ms - self.s.keep_ms
+        keep &= self._not_passed(beams) & self._not_under(pose)
+        points, stamps = self._points[keep], self._stamps[keep]
         if parts:
-            self._sweeps.append((stamp_ms, np.vstack(parts)))
-        self._forget(pose, stamp_ms)
+            new = np.vstack(parts)
+            points = np.vstack((points, new))
+            stamps = np.concatenate((stamps, np.full(len(new), float(stamp_ms))))
+        self._points, self._stamps = points[-self.s.max_points :], stamps[-self.s.max_points :]
+        self._adds += 1
+        if self._adds % self.s.merge_every == 0:
+            self._merge()
 
-    def _clear_body(self, pose: Pose) -> None:
-        """Drop the remembered points under the body: it stands there, so they were misplaced."""
+    def _not_under(self, pose: Pose) -> np.ndarray:
+        """False for the points under the body: it stands there, so they were misplaced."""
         reach = ROBOT_RADIUS_MM - self.s.overlap_mm
-        for k, (stamp, points) in enumerate(self._sweeps):
-            under = np.hypot(points[:, 0] - pose[0], points[:, 1] - pose[1]) < reach
-            if under.any():
-                self._sweeps[k] = (stamp, points[~under])
+        return np.hypot(self._points[:, 0] - pose[0], self._points[:, 1] - pose[1]) >= reach
 
-    def _clear_along(self, beams: list[tuple[float, float, float, float]]) -> None:
-        """Drop the remembered points each beam's echo went past: near its axis, short of it."""
-        if not beams or not self._sweeps:
-            return
+    def _not_passed(self, beams: list[tuple[float, float, float, float]]) -> np.ndarray:
+        """False for the points a beam's echo went past: near its axis, short of it."""
+        keep = np.ones(len(self._points), dtype=bool)
         half = math.radians(self.s.clear_half_deg)
-        for k, (stamp, points) in enumerate(self._sweeps):
-            keep = np.ones(len(points), dtype=bool)
-            for sx, sy, direction, reach in beams:
-                dx, dy = points[:, 0] - sx, points[:, 1] - sy
-                distance = np.hypot(dx, dy)
-                off = np.abs(np.remainder(np.arctan2(dy, dx) - direction + math.pi, 2 * math.pi) - math.pi)
-                keep &= ~((off <= half) & (distance < reach - self.s.clear_short_mm))
-            if not keep.all():
-                self._sweeps[k] = (stamp, points[keep])
+        for sx, sy, direction, reach in beams:
+            dx, dy = self._points[:, 0] - sx, self._points[:, 1] - sy
+            distance = np.hypot(dx, dy)
+            off = np.abs(np.remainder(np.arctan2(dy, dx) - direction + math.pi, 2 * math.pi) - math.pi)
+            keep &= ~((off <= half) & (distance < reach - self.s.clear_short_mm))
+        return keep
 
-    def _forget(self, pose: Pose, stamp_ms: float) -> None:
-        """Drop the sweeps older than ``keep_ms``; of the rest, keep the points near ``pose``."""
-        while self._sweeps and stamp_ms - self._sweeps[0][0] > self.s.keep_ms:
-            self._sweeps.popleft()
-        points = np.vstack([p for _, p in self._sweeps]) if self._sweeps else np.zeros((0, 2))
-        near = np.hypot(points[:, 0] - pose[0], points[:, 1] - pose[1]) <= self.s.keep_mm
-        self._points = points[near][-self.s.max_points :]
+    def _merge(self) -> None:
+        """One point per ``merge_mm`` cell, the newest: a wall passed for minutes stays a line."""
+        if len(self._points) == 0:
+            return
+        cells = np.floor(self._points / self.s.merge_mm).astype(np.int64)
+        newest_first = np.arange(len(cells))[::-1]
+        _, first = np.unique(cells[newest_first], axis=0, return_index=True)
+        chosen = np.sort(newest_first[first])
+        self._points, self._stamps = self._points[chosen], self._stamps[chosen]
 
     @property
     def points(self) -> np.ndarray:

@@ -442,12 +442,11 @@ class Pilot:
         self.clearance.add(pose, sensors.distances, stamp)
 
     def reaction_ms(self) -> float:
-        """From an echo's sweep to the motor standing: the longest recent gap between the sweeps
-        main saw (the sweep itself and main's wait for it) and between its visits (the STOP's
-        way to the motor), as measured on this ring."""
-        sweep = max(self._sweep_gaps, default=240)
-        visit = max(self._visit_gaps, default=40)
-        return float(sweep + visit)
+        """From an echo's sweep to the motor standing: the recent gaps between the sweeps main saw
+        (the sweep itself and main's wait for it) and between its visits (the STOP's way to the
+        motor), each at its 90th percentile, as measured on this ring (a pause while no
+        navigator ran is no ring latency, and a single one does not count)."""
+        return _p90(self._sweep_gaps, 240) + _p90(self._visit_gaps, 40)
 
     def stopping_mm(self, move: Move, sensors: Sensors) -> float:
         """How far a straight move at its speed goes while a STOP is on its way, counted from
@@ -571,6 +570,13 @@ class Pilot:
         if kind == "corner_right":
             return sensors.right_contact == CONTACT["CORNER"]
         raise ValueError(f"unknown abort condition {kind!r}")
+
+
+def _p90(values: deque[int], default: float) -> float:
+    if not values:
+        return default
+    ordered = sorted(values)
+    return float(ordered[int(0.9 * (len(ordered) - 1))])
 
 
 class SeedPilot(Pilot):

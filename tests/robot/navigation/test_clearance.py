@@ -93,16 +93,26 @@ def test_a_point_inside_the_margin_ahead_leaves_no_way_at_all():
     assert echoes.free_mm((0.0, 0.0, 0.0)) == 0.0
 
 
-def test_echoes_far_away_or_long_ago_are_forgotten():
-    echoes = EchoMemory(ClearanceSettings(keep_mm=2000.0, keep_ms=10_000.0))
+def test_echoes_long_ago_are_forgotten_and_far_ones_kept_for_coming_back():
+    echoes = EchoMemory(ClearanceSettings(keep_ms=10_000.0))
     echoes.add((0.0, 0.0, 0.0), readings(**{f"s{FRONT}": 50}), 0)  # a wall at about 690 mm
     assert len(echoes.points) > 0
     echoes.add((5000.0, 0.0, 0.0), readings(), 1000)  # the robot is 5 m away now
-    assert len(echoes.points) == 0
-    echoes.add((0.0, 0.0, 0.0), readings(**{f"s{FRONT}": 50}), 2000)
-    echoes.add((0.0, 0.0, 0.0), readings(), 13_000)  # 11 s later
+    assert echoes.free_mm((0.0, 0.0, 0.0)) < 690 - R  # back where it saw it: still known
+    echoes.add((0.0, 0.0, math.pi), readings(), 11_000)  # 11 s after it was seen
     assert len(echoes.points) == 0
     assert echoes.free_mm((0.0, 0.0, 0.0)) == math.inf
+
+
+def test_a_wall_passed_for_minutes_is_kept_as_a_line_not_a_heap():
+    """The same wall seen on every sweep for two minutes: one point per cell, whatever the time."""
+    echoes = EchoMemory(ClearanceSettings(merge_mm=20.0))
+    for k in range(1000):  # 1000 sweeps, 3 mm apart: 3 m of wall, 30 cm off the left pairs
+        x = 3.0 * k
+        echoes.add((x, 0.0, 0.0), readings(**{f"s{LEFT_FRONT}": 30, f"s{LEFT_REAR}": 30}), 120 * k)
+    # the arcs of both pairs span about 3 m by 80 mm: at most a few cells across the wall
+    assert len(echoes.points) <= (3000 / 20 + 10) * (80 / 20 + 2)
+    assert echoes.free_mm((3000.0, 0.0, 0.0)) == math.inf  # and still beside the way, not in it
 
 
 def test_an_echo_farther_along_a_beam_clears_what_lay_short_of_it_and_no_echo_clears_nothing():

@@ -156,6 +156,12 @@ def test_the_stopping_distance_follows_the_measured_reaction():
     assert slow.pilot.stopping_mm(move, slow.sensors) > quick.pilot.stopping_mm(move, quick.sensors) + 40
     half = Move(FORWARD, 600, speed_pct=50)
     assert slow.pilot.stopping_mm(half, slow.sensors) < slow.pilot.stopping_mm(move, slow.sensors)
+    # a pause while no navigator stepped the pilot (30 s) is no ring latency
+    paused = Bench()
+    paused.tick(8)
+    paused.sensors.stamp_ms += 30_000
+    paused.tick(8)
+    assert paused.pilot.stopping_mm(move, paused.sensors) == quick.pilot.stopping_mm(move, quick.sensors)
 
 
 def test_reverse_moves_look_behind_turns_are_never_capped_and_escapes_are_exempt():
