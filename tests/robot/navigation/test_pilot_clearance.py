@@ -22,6 +22,7 @@ from modules.navigation.pilot import (
     SeedPilot,
     Sensors,
 )
+from tests.robot.navigation.test_navigator import Bench as PilotBench
 
 LAYOUT = default_layout()
 FAR = 255
@@ -43,31 +44,16 @@ def reading(**by_name: int) -> list[int]:
     return out
 
 
-class Bench:
+class Bench(PilotBench):
     """A pilot at a pose with a scripted motor; every tick is a new sweep 120 ms on."""
 
     def __init__(self, pilot_class: type[Pilot] = Pilot, pose: tuple[float, float, float] = (0.0, 0.0, 0.0)):
-        self.sent: list[tuple[str, str, dict]] = []
+        super().__init__()
         self.pilot = pilot_class(LAYOUT, self.send)
-        self.sensors = Sensors(distances=[FAR] * 8, pose=pose, pose_ms=0, sweep_ms=0)
-
-    def send(self, target: str, name: str, **args) -> None:
-        self.sent.append((target, name, args))
+        self.sensors = Sensors(distances=[FAR] * 8, pose=pose)
 
     def motor_commands(self) -> list[tuple[str, dict]]:
         return [(n, a) for t, n, a in self.sent if t == "motor"]
-
-    def tick(self, sweeps: int = 1, **changes):
-        for name, value in changes.items():
-            setattr(self.sensors, name, value)
-        out = None
-        for _ in range(sweeps):
-            self.sensors.sweep += 1
-            self.sensors.stamp_ms += 120
-            self.sensors.sweep_ms = self.sensors.stamp_ms - 120
-            self.sensors.pose_ms = self.sensors.stamp_ms
-            out = self.pilot.step(self.sensors) or out
-        return out
 
     def drive_to(self, x_mm: float, driven_mm: int, **changes):
         """The motor has taken the move and carried the robot to ``x_mm`` (heading 0)."""

@@ -407,7 +407,7 @@ def judge(link: PcLink, timeline: TokenTimeline, truth: TruthTrace, algorithms: 
     # the pose once the motor's last batch of steps has reached the world (its motors off): the
     # truth between batches stands or runs on at the last batch's speed, so a sample taken as the
     # action file ended could lie behind where the aborted drive's last steps put the robot
-    x2 = wait_until(lambda: (t := truth.now()) is not None and not t["moving"] and t, 60, "the robot at rest")
+    x2 = at_rest(truth)
     t2 = time.monotonic()
     run_file(link, drive_text(OPPOSITE[allowed], 100), 300.0)
     frames = timeline.since(t2)
