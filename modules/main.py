@@ -259,7 +259,7 @@ class Program(UserProgram):
                 ended,
                 ", ".join(f"{m.label or m.direction} {m.amount}" for m in moves),
             )
-        pilot.start(moves, self.sensors)
+        pilot.start(moves, self.sensors, keep_clear=nav.keeps_clear)
 
     def _observe_poses(self) -> None:
         """Feed motor.data and copro.data to the self-localisation (once both have spoken)."""

@@ -412,11 +412,16 @@ def _navigator_base() -> type:
 class ActionNavigator(_navigator_base()):  # type: ignore[misc]
     """The action plan as one of main's navigators: the pilot drives, the copro pose closes turns.
 
+    Its straight moves keep clear of what the sonars showed (the pilot's clearance): a drive
+    toward a wall stops outside the ALERT area, CLOSE/clearance.
+
     A transient abort (a spurious ALERT echo, CLOSE, a timeout) does not end the file: the pilot's
     ALERT lock is honoured with the small escape move it allows, then the interrupted drive is
     finished (turns by the closed loop); after :attr:`MAX_RETRIES` such aborts, or on a
     collision or stall, the file is given up.
     """
+
+    keeps_clear = True
 
     mode = 0
     MAX_RETRIES = 5

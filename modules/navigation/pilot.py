@@ -193,6 +193,7 @@ class Pilot:
         self._commanded = 0  # the distance commanded for the move under way (mm or degrees)
         self._capped = False  # ... less than the move asked for: the clearance cut it short
         self._escaping = False  # the move under way is the escape the ALERT lock allows
+        self._keep_clear = True  # the sequence under way keeps clear of remembered echoes
         self.state = self.IDLE
         self.alert_lock = STOPPED
         self.moves: list[Move] = []
@@ -226,9 +227,11 @@ class Pilot:
     def busy(self) -> bool:
         return self.state != self.IDLE
 
-    def start(self, moves: list[Move], sensors: Sensors) -> bool:
-        """Take a sequence; False (and an ALERT outcome) if the ALERT lock refuses its first move."""
+    def start(self, moves: list[Move], sensors: Sensors, keep_clear: bool = True) -> bool:
+        """Take a sequence; False (and an ALERT outcome) if the ALERT lock refuses its first move.
+        ``keep_clear``: its straight moves keep clear of remembered echoes (else ALERT alone)."""
         self._observe(sensors)
+        self._keep_clear = keep_clear
         self.moves, self.index, self.outcome = list(moves), 0, None
         if not self.moves:
             self.outcome = Outcome(REASON["DONE"])
@@ -458,7 +461,12 @@ class Pilot:
     def _clear_mm(self, direction: int, sensors: Sensors) -> float:
         """The free way for a straight move from here, less the reserve (inf: not straight, no
         pose, no clearance kept)."""
-        if self.clearance is None or sensors.pose is None or direction not in (FORWARD, REVERSE):
+        if (
+            self.clearance is None
+            or not self._keep_clear
+            or sensors.pose is None
+            or direction not in (FORWARD, REVERSE)
+        ):
             return math.inf
         free = self.clearance.free_mm(sensors.pose, reverse=direction == REVERSE)
         return free - self.settings.clearance_reserve_mm

@@ -478,7 +478,7 @@ class ClosedLoop:
             self.log.append(
                 f"{self.now / 1000:7.1f} s {why}: " + ", ".join(f"{m.label} {m.amount}" for m in moves)
             )
-        self.pilot.start(moves, sensors)
+        self.pilot.start(moves, sensors, keep_clear=nav.keeps_clear)
         return None
 
     # -- the clock -----------------------------------------------------------------------------
