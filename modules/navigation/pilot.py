@@ -230,8 +230,8 @@ class Pilot:
     def start(self, moves: list[Move], sensors: Sensors, keep_clear: bool = True) -> bool:
         """Take a sequence; False (and an ALERT outcome) if the ALERT lock refuses its first move.
         ``keep_clear``: its straight moves keep clear of remembered echoes (else ALERT alone)."""
-        self._observe(sensors)
         self._keep_clear = keep_clear
+        self._observe(sensors)
         self.moves, self.index, self.outcome = list(moves), 0, None
         if not self.moves:
             self.outcome = Outcome(REASON["DONE"])
@@ -437,8 +437,8 @@ class Pilot:
         if self._fed_ms is not None and stamp > self._fed_ms:
             self._sweep_gaps.append(stamp - self._fed_ms)
         self._fed_sweep, self._fed_ms = sensors.sweep, stamp
-        if self.clearance is None or sensors.pose is None:
-            return
+        if self.clearance is None or not self._keep_clear or sensors.pose is None:
+            return  # (nothing to keep clear of: no numpy work on main's visit)
         pose = sensors.pose
         if sensors.sweep_ms is not None:  # where the robot was at the sweep's middle
             pose = self._poses_seen.at(sensors.sweep_ms + int(SONAR_COUNT * SONAR_SLOT_MS / 2)) or pose

@@ -338,15 +338,20 @@ def at_rest(truth: TruthTrace) -> dict[str, Any]:
     )
 
 
-def judge_clearance(link: PcLink, timeline: TokenTimeline, truth: TruthTrace, algorithms: str) -> None:
-    """Ours: the drive stops short of the ALERT area and says why; the wall is not driven at again."""
-    # 1. s 600 toward the wall 30 cm away: it drives most of the way and stops with the body
-    #    outside the ALERT area — no front sonar ever reads under 4 cm, nothing is touched
+def drive_at_the_wall(link: PcLink, timeline: TokenTimeline) -> tuple[list[Snapshot], list[Snapshot]]:
+    """``s 600`` toward the wall 30 cm away: main's frames since, and those from the drive on."""
     t1 = time.monotonic()
     run_file(link, "s 600\n", 300.0)
     frames = timeline.since(t1)
     drive = first(frames, lambda s: s.direction == FORWARD, "the forward drive")
-    after = frames[frames.index(drive) :]
+    return frames, frames[frames.index(drive) :]
+
+
+def judge_clearance(link: PcLink, timeline: TokenTimeline, truth: TruthTrace, algorithms: str) -> None:
+    """Ours: the drive stops short of the ALERT area and says why; the wall is not driven at again."""
+    # 1. s 600 toward the wall 30 cm away: it drives most of the way and stops with the body
+    #    outside the ALERT area — no front sonar ever reads under 4 cm, nothing is touched
+    frames, after = drive_at_the_wall(link, timeline)
     closest = min(min(s.distances[i] for i in FRONT_PAIRS) for s in after)
     assert closest >= SEED_ALERT_BELOW_CM, [s.distances for s in after[-5:]]
     assert not [
@@ -380,11 +385,7 @@ def judge(link: PcLink, timeline: TokenTimeline, truth: TruthTrace, algorithms: 
     """The three steps of the rule, as seen from main's frames and the world's truth."""
     # 1. s 600 toward the wall 30 cm away: ALERT aborts the drive near the wall, the lock allows
     #    only REVERSE (the action file then escapes and retries a few times, and gives up)
-    t1 = time.monotonic()
-    run_file(link, "s 600\n", 300.0)
-    frames = timeline.since(t1)
-    drive = first(frames, lambda s: s.direction == FORWARD, "the forward drive")
-    after = frames[frames.index(drive) :]
+    frames, after = drive_at_the_wall(link, timeline)
     locked = first(after, lambda s: s.alert_lock == REVERSE, "the lock to REVERSE")
     during = after[: after.index(locked) + 1]
     under = [s for s in during if min(s.distances[i] for i in FRONT_PAIRS) < SEED_ALERT_BELOW_CM]
