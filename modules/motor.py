@@ -5,10 +5,12 @@ TURN_RIGHT (degrees, speed %), STOP, SET_GLOBAL_POSITION (x, y, angle), RECALC_G
 (target angle, error), SET_WHEEL_SPEEDS (left %, right %, ms), MOTORS_OFF / MOTORS_ON. A
 finished move sends POSITION_REACHED (status DONE, or COLLISION when the bumper hit, STALLED,
 ABORTED when a new motion command or STOP replaced it) with ``move_seq`` = the sequence number of the command that
-started it, to the module that sent that command. SET_GLOBAL_POSITION and RECALC_GLIDE_FACTOR
-do not interrupt a move (the seed aborted on them, which made corrections while driving
-impossible). Bad arguments (speed 0 or above 100 %, an implausible glide correction) are
-refused with ERROR BAD_ARGUMENT to the sender: nothing moves.
+started it, to the module that sent that command. A SET_WHEEL_SPEEDS of the wheel speeds already
+driven renews that move instead (the operator's held speed, renewed every second): it then ends
+``duration_ms`` after the renewal, and the tracks step on without a pause or a reply.
+SET_GLOBAL_POSITION and RECALC_GLIDE_FACTOR do not interrupt a move (the seed aborted on them,
+which made corrections while driving impossible). Bad arguments (speed 0 or above 100 %, an
+implausible glide correction) are refused with ERROR BAD_ARGUMENT to the sender: nothing moves.
 
 The drive's power (the Darmstadt operator's keys ``d``/``e``, seed 000 §6.7, table 8.2): on at
 boot, as the Hamburg drive has no switch, so nothing changes for a robot nobody switches off.
@@ -124,6 +126,8 @@ class Program(UserProgram):
         x, y, theta = self.hw.start_pose()
         self.odometry = DeadReckoning(x, y, theta)
         self.move: Move | None = None
+        self.wheels: tuple[int, int] | None = None  # the wheel move under way's speeds (left, right %)
+        self.renewals = 0  # SET_WHEEL_SPEEDS that renewed the wheel move under way
         self.move_seq = 0
         self.state = IDLE
         self.direction = STOPPED
@@ -235,6 +239,9 @@ class Program(UserProgram):
             if problem:
                 self._refuse(cmd, problem)
                 return
+            if self.move is not None and self._renewal(name, args):
+                self._extend(args["duration_ms"])
+                return
             if self.move is not None:
                 self._finish(ABORTED)
             if name != "STOP":
@@ -312,6 +319,20 @@ class Program(UserProgram):
             return "wheel speeds must be within -100..100 %"
         return ""
 
+    def _renewal(self, name: str, args: dict) -> bool:
+        """SET_WHEEL_SPEEDS of the speeds the wheel move under way drives."""
+        return name == "SET_WHEEL_SPEEDS" and self.wheels == (int(args["left_pct"]), int(args["right_pct"]))
+
+    def _extend(self, duration_ms: int) -> None:
+        """The wheel move under way now ends ``duration_ms`` from now, as if it had been
+        commanded that long in the first place: the steps due go on at the same rates."""
+        move = self.move
+        assert move is not None
+        elapsed = max(0.0, (self.clock.now_ms() - move.start_ms) / 1000.0)
+        seconds = elapsed + duration_ms / 1000.0
+        move.total = (math.floor(move.rate_hz[0] * seconds), math.floor(move.rate_hz[1] * seconds))
+        self.renewals += 1
+
     def _refuse(self, cmd, problem: str, error: int = BAD_ARGUMENT) -> None:
         self.refused += 1
         log.warning("motor: refused %s %s from node %d: %s", cmd.name, cmd.args, cmd.sender, problem)
@@ -333,7 +354,9 @@ class Program(UserProgram):
             else:
                 direction = TURN_LEFT if right > left else TURN_RIGHT if left > right else STOPPED
             speed = max(abs(left), abs(right))
+            self.wheels = (left, right)
         else:
+            self.wheels = None
             speed = int(args["speed_pct"])
             if name in ("MOVE_FORWARD", "MOVE_REVERSE"):
                 n = steps_for_distance(args["distance_mm"])
@@ -459,6 +482,7 @@ class Program(UserProgram):
             "powered": self.powered,
             "motors_on": self.motors_on,
             "motors_off": self.motors_off,
+            "renewals": self.renewals,
             "steps": list(self.steps),
             "last_move_ms": list(self.last_move_ms),
             "max_speed_mm_s": MAX_SPEED_MM_S,
