@@ -190,11 +190,12 @@ class RobotExtension(Extension):
 
             plan.env[MOTOR_SIP_ENV] = os.environ.get(MOTOR_SIP_ENV, str(SIP_PERIOD_MS))
         if args.localizer:
-            from modules.localization.config import config_path, load_config, sensor_set_layer
+            from modules.localization.config import config_path, load_config, seed_notes, sensor_set_layer
 
             # a bad file is refused (file:line, key) before anything starts, over what copro lays
-            # beneath it
-            load_config(args.localizer, under=sensor_set_layer(args.sensors, receivers))
+            # beneath it; a seed file's values that do not apply here are said once, on stderr
+            with seed_notes():
+                load_config(args.localizer, under=sensor_set_layer(args.sensors, receivers))
             plan.env["TOKENRING_LOCALIZER_CONFIG"] = str(config_path(args.localizer).resolve())
         if args.explore and args.actions:
             raise UsageError("--explore and --actions both drive the robot: give one of them")

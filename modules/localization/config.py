@@ -18,16 +18,23 @@ the operator console's (the seed's Benutzerschnittstelle and [Action]); the Loca
 
 The seed's own file (table B.1: a ``.cfg``, or text that starts with a ``[Section]``) is read by
 :mod:`modules.localization.seedconfig` and laid over :data:`REPOSITORY_SETTINGS`; its errors name
-its lines too.
+its lines too. Its values that are accepted but do not apply here are told, once each as
+``file:line: [Section] option: why`` on standard error, while a command holds :func:`seed_notes`
+open (``up --localizer``, ``console -C``, ``replay --config``); elsewhere (copro, the tests'
+calls) nobody is told.
 """
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import math
 import os
+import sys
+from collections.abc import Callable, Iterator
+from contextvars import ContextVar
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
@@ -35,6 +42,9 @@ from modules.localization.errors import MAX_VALUE, ConfigError
 from modules.localization.logs import DEFAULT_DEBUG_LEVEL, DEFAULT_LOG_DIRECTORY
 from modules.localization.sensors import names, registered
 from tokenring import NumberLoader, YAMLStructureError, one_line
+
+if TYPE_CHECKING:
+    from modules.localization.seedconfig import SeedConfig
 
 # fmt: off
 #: the defaults of everything but ``sensors`` (each sensor's file has its own: :func:`defaults`)
@@ -237,7 +247,60 @@ def parse_seed_config(text: str, source: str, under: dict[str, Any] | None = Non
     seed = read_seed_config(text, source)
     seed.check_beneath(under)
     data = layered(REPOSITORY_SETTINGS, seed.localization_layer())
-    return validate(layered(under, data) if under else data, source, seed.layer_lines())
+    config = validate(layered(under, data) if under else data, source, seed.layer_lines())
+    tell_notes(seed)
+    return config
+
+
+def read_seed_file(path: str | Path) -> SeedConfig:
+    """The seed's file at ``path`` (table B.1) as it is written (what the operator's console
+    reads of it: screen, action files, offline mode), its notes told as :func:`parse_seed_config`
+    tells them."""
+    from modules.localization.seedconfig import read_seed_config
+
+    seed = read_seed_config(Path(path))
+    tell_notes(seed)
+    return seed
+
+
+def _to_stderr(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+#: who is told the notes of the seed files read (:func:`seed_notes`); None: none is open
+_TOLD: ContextVar[Callable[[str], None] | None] = ContextVar("seed_notes", default=None)
+
+
+@contextlib.contextmanager
+def seed_notes(quiet: bool = False, say: Callable[[str], None] = _to_stderr) -> Iterator[None]:
+    """While open, every seed file read (:func:`load_config`, :func:`read_seed_file`) tells
+    ``say`` (standard error) each of its notes once, as ``file:line: [Section] option: why`` (the
+    values accepted that do not apply here, :meth:`~modules.localization.seedconfig.SeedConfig.notes`);
+    ``quiet`` tells nobody (``--json``). Opened inside an open one, the outer one's ``say`` and
+    memory stay (``console -Moffline`` replays through ``replay``'s)."""
+    if not quiet and _TOLD.get() is not None:
+        yield
+        return
+    told: set[str] = set()
+
+    def once(line: str) -> None:
+        if not quiet and line not in told:
+            told.add(line)
+            say(line)
+
+    token = _TOLD.set(once)
+    try:
+        yield
+    finally:
+        _TOLD.reset(token)
+
+
+def tell_notes(seed: SeedConfig) -> None:
+    """Tell the open :func:`seed_notes` the notes of ``seed`` (nobody, when none is open)."""
+    say = _TOLD.get()
+    if say is not None:
+        for line in seed.note_lines():
+            say(line)
 
 
 def parse_config(text: str, source: str, under: dict[str, Any] | None = None) -> dict[str, Any]:

@@ -11,9 +11,11 @@ naming ``file:line``, the value and what was expected (the YAML's
 :func:`read_seed_config` reads syncaria's file (table B.1) into a :class:`SeedConfig`:
 :meth:`SeedConfig.localization_layer` is what the Localizer takes of it, in
 ``config/localization.yaml``'s shape; :meth:`SeedConfig.notes` lists the values that do not apply
-here and why; a value the emulator cannot do as the seed did is refused. ``load_config`` takes
-such a file (a ``.cfg``, or text that starts with a section) as it takes YAML. docs/seed-config.md
-maps every option.
+here and why (:meth:`SeedConfig.note_lines`: one line each, ``file:line: [Section] option: why``,
+what the commands that take such a file print: :func:`modules.localization.config.seed_notes`); a
+value the emulator cannot do as the seed did is refused. ``load_config`` takes such a file (a
+``.cfg``, or text that starts with a section) as it takes YAML. docs/seed-config.md maps every
+option.
 """
 
 from __future__ import annotations
@@ -712,6 +714,12 @@ class SeedConfig:
             for key, option in _lopscpp_options(self.lops):
                 out.append(Note(at[key], f"[Lops] {option}", same))
         return out
+
+    def note_lines(self) -> list[str]:
+        """:meth:`notes` as the operator is told them, in file order: ``file:line: [Section]
+        option: why`` each."""
+        notes = sorted(self.notes(), key=lambda note: note.line)
+        return [f"{self.source}:{note.line}: {note.option}: {note.why}" for note in notes]
 
     def check_beneath(self, under: Mapping[str, Any] | None) -> None:
         """Refuse LOPS receivers other than those of the LOPS ``tokenring up`` started (``under``,

@@ -96,13 +96,13 @@ def _from_config(path: str) -> dict[str, Any]:
     """What the console takes from a configuration file: ``ui``, action ``files``, ``auto``, and
     the ``offline`` settings (the seed's format: its [Main] and [Action]; tokenring's YAML: its
     ``ui`` and ``actions`` keys)."""
-    from modules.localization.config import ConfigError, load_config
-    from modules.localization.seedconfig import looks_like_seed_config, read_seed_config
+    from modules.localization.config import ConfigError, load_config, read_seed_file
+    from modules.localization.seedconfig import looks_like_seed_config
     from tokenring import message_error, read_text
 
     text = read_text(Path(path), "configuration file", message_error(ConfigError))
     if path.endswith(".cfg") or looks_like_seed_config(text):
-        seed = read_seed_config(Path(path))
+        seed = read_seed_file(path)
         files = [str(f) if f is not None else None for f in seed.actions.files]
         return {"ui": seed.ui, "files": files, "auto": seed.actions.auto, "offline": seed.offline}
     config = load_config(path)  # action files come back resolved from the file's folder
@@ -112,6 +112,15 @@ def _from_config(path: str) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from modules.localization.config import seed_notes
+
+    # the seed file's values that do not apply here, once each on stderr (under up --console,
+    # up has said them)
+    with seed_notes(quiet=bool(args.owner_pid)):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     mode = program_mode(args)
     chosen = settings(args)
     if mode == "offline":

@@ -30,7 +30,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("log", help="data log to replay (.trlog)")
     p.add_argument("--out", required=True, metavar="FILE", help="the new data log to write")
     p.add_argument(
-        "--config", metavar="YAML", help="settings (default: the configuration recorded in the log)"
+        "--config",
+        metavar="FILE",
+        help="settings, YAML or the seed's .cfg (default: the configuration recorded in the log)",
     )
     p.add_argument(
         "--from",
@@ -52,6 +54,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from modules.localization.config import seed_notes
     from modules.pc.replay import replay
     from tokenring.cli import print_json
 
@@ -61,15 +64,16 @@ def run(args: argparse.Namespace) -> int:
         if sys.stderr.isatty():
             print(f"\rreplaying {done}/{total} records", end="", file=sys.stderr, flush=True)
 
-    result = replay(
-        args.log,
-        args.out,
-        args.config,
-        mode=args.mode,
-        errors=args.errors,
-        progress=progress,
-        salvage=args.salvage,
-    )
+    with seed_notes(quiet=args.json):  # a seed file's values that do not apply here, on stderr
+        result = replay(
+            args.log,
+            args.out,
+            args.config,
+            mode=args.mode,
+            errors=args.errors,
+            progress=progress,
+            salvage=args.salvage,
+        )
     if sys.stderr.isatty():
         print(file=sys.stderr)
     if args.json:
