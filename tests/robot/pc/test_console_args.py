@@ -1,14 +1,17 @@
 """``tokenring console``'s command line: the seed's spelling (table 8.1), its configuration's
-user interface and action files, and bad input as one line with exit code 2."""
+user interface and action files (bound to a, b, c), and bad input as one line with exit code 2.
+The modes run to the end: test_console_modes.py."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from modules.pc.commands import console
+from modules.pc.operator import Operator
 from tests.support.processes import REPO, run_tokenring
 from tokenring import UsageError
 
@@ -52,6 +55,39 @@ def test_the_seeds_configuration_gives_the_screen_and_the_action_files() -> None
     first = chosen["files"][0]
     assert first is not None and Path(first).name == "square-3-laps.act" and Path(first).is_file()
     assert chosen["offline"] is not None
+
+
+class Link:
+    """main's PC link as the operator uses it, recording the action files it is sent."""
+
+    def __init__(self) -> None:
+        self.sent: list[dict[str, Any]] = []
+
+    def request(self, verb: str, **payload: Any) -> dict[str, Any]:
+        if verb == "actions":
+            self.sent.append(payload)
+        return {"running": bool(self.sent), "queue": []}
+
+
+@pytest.mark.parametrize("auto", ["yes", "no"])
+def test_the_seeds_action_section_binds_its_three_files_to_a_b_and_c(tmp_path: Path, auto: str) -> None:
+    texts = {"one.act": "s 100\n", "two.act": "r 90\n", "three.act": "s -50\n"}
+    for name, text in texts.items():
+        (tmp_path / name).write_text(text)
+    cfg = tmp_path / "keys.cfg"
+    cfg.write_text(
+        "[Main]\nsim none odo 1 yes no data.trlog 2 no\n[Sensors]\nodo yes yes yes yes yes yes\n"
+        f"[Odometry]\nyes\n[Action]\n{auto}\n" + "\n".join(texts) + "\n"
+    )
+    chosen = console.settings(parse("-C", str(cfg)))
+    assert chosen["auto"] is (auto == "yes") and chosen["ui"] == "none"
+    link = Link()
+    operator = Operator(link, chosen["files"])
+    for key in "cab":
+        assert operator.press(key).ok
+    assert [(Path(p["name"]).name, p["text"]) for p in link.sent] == [
+        ("three.act", "s -50\n"), ("one.act", "s 100\n"), ("two.act", "r 90\n")
+    ]  # fmt: skip
 
 
 def test_the_command_line_wins_over_the_configuration(tmp_path: Path) -> None:
