@@ -416,13 +416,54 @@ def test_files_of_the_seeds_words_are_a_clean_error_or_a_configuration(words: li
     one_line_or_nothing(lambda: parse_config(MINIMAL + text, "fuzz.cfg"))
 
 
-def test_the_docs_table_names_every_value_of_table_b1() -> None:
-    from modules.localization.seedconfig import TABLE_B1
+#: table B.2 of seed 000 (the logfileanalyser's file), its sections and values in order; "*": the
+#: value repeats (per position, wheel, sonar, sensor)
+TABLE_B2: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("MAIN", ("Logdatei", "Output", "Pfadplot", "LOPS-Plot", "Gyroskopplot", "Odometrieplot", "Sonarplot",
+              "Timeplot")),
+    ("POSITION", ("Format", "Position*", "Stil*")),
+    ("ODOMETRY", ("Format", "Stil*")),
+    ("GYROSCOP", ("Format", "Stil")),
+    ("SONAR", ("Format", "Stil*")),
+    ("TIME", ("Format", "Synchronisation", "Stil", "Sensor*", "Stil*")),
+)  # fmt: skip
+
+
+def doc_table(heading: str) -> dict[str, list[tuple[str, str]]]:
+    """docs/seed-config.md's table under ``heading``: each section's rows as (value, status)."""
     from tests.support.processes import REPO
 
     doc = (REPO / "docs" / "seed-config.md").read_text()
-    for section, options in TABLE_B1:
-        assert f"| [{section}]" in doc, section
+    part = doc[doc.index(heading) :]
+    rows: dict[str, list[tuple[str, str]]] = {}
+    section = ""
+    for line in part.splitlines()[1:]:
+        if line.startswith("## "):
+            break
+        if not line.startswith("| ") or line.startswith(("| section ", "|---")):
+            continue
+        cells = [cell.strip() for cell in line.strip("|").split(" | ")]
+        assert len(cells) == 5, line
+        section = cells[0].split("]")[0].removeprefix("[") if cells[0] else section
+        rows.setdefault(section, []).append((cells[1], cells[3]))
+    return rows
+
+
+@pytest.mark.parametrize(
+    ("heading", "table"),
+    [("## syncaria's file (table B.1)", "B1"), ("## The logfileanalyser's file (table B.2)", "B2")],
+)
+def test_the_docs_table_names_every_value_of_tables_b1_and_b2(heading: str, table: str) -> None:
+    """Every value of the table in its section's rows, each row honoured, a note or refused."""
+    from modules.localization.seedconfig import TABLE_B1
+
+    rows = doc_table(heading)
+    for section, options in TABLE_B1 if table == "B1" else TABLE_B2:
+        assert section in rows, (table, section)
+        values = " ".join(value for value, _ in rows[section])
         for option in options:
             name = option.rstrip("*?").removesuffix(" n")
-            assert name in doc, (section, name)
+            assert name in values, (table, section, name)
+    for section, section_rows in rows.items():
+        for value, status in section_rows:
+            assert set(status.split(", or ")) <= {"honoured", "note", "refused"}, (section, value, status)
