@@ -1,8 +1,9 @@
 """The seed's keys (table 8.2) and the Localisation panel in the web view, in a real browser (the
 OS's headless Chromium, driven by selenium) on a live ring with the world: with the focus on the
 page, ``e``, ↑ ↑ and ← drive the simulated robot, the panel's odometry line follows, ``s`` queues
-a square and space stops the robot and clears the queue; ``x`` has nothing to quit, ``z`` means
-nothing.
+a square and space stops the robot and clears the queue; ``a`` runs the action file ``tokenring web
+--action`` binds to it (300 mm straight on); ``d`` turns the motors off and the next ↑ is refused,
+the robot standing, until ``e``; ``x`` has nothing to quit, ``z`` means nothing.
 
 The judges of the motion are the world's ground truth (``world/truth`` on Zenoh, read here by
 hand) and main's own state over its PC link, never the page; the page is read as a user reads
@@ -34,16 +35,21 @@ def test_the_pages_keys_drive_the_robot_and_the_localisation_panel_follows(
 
     room = tmp_path / "hall.yaml"
     room.write_text(OPEN_HALL)
+    action = tmp_path / "leg.act"
+    action.write_text("# bound to a\ns 300\n")
+    # the sonar too: main plans no drive (the action file's, the square's) before it has spoken
     launcher = procs.tokenring(
-        "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor,copro",
+        "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor,sonar,copro",
         "--world", str(room), "--bitrate", "max", "--duration", "900",
     )  # fmt: skip
     with tap(endpoint) as session:
-        wait_ring(session, ring_name, [10, 20, 50], timeout=180)
+        wait_ring(session, ring_name, [10, 20, 30, 50], timeout=180)
         procs.watch(launcher_pids(session, ring_name))
         truth = Truth(session, ring_name)
         link = PcLink(session, ring_name, timeout=10)
-        web = procs.tokenring("web", "--ring", ring_name, "-e", endpoint, "--port", "0", "--json")
+        web = procs.tokenring(
+            "web", "--ring", ring_name, "-e", endpoint, "--port", "0", "--json", "--action", str(action)
+        )
         url = read_url(web, 60)
         driver = chromium()
         driver_pid = driver.service.process.pid
@@ -54,7 +60,7 @@ def test_the_pages_keys_drive_the_robot_and_the_localisation_panel_follows(
             )
             status = driver.find_element(By.ID, "key-status")
             note = driver.find_element(By.ID, "key-note").text
-            assert "a, b, c are unbound" in note, note
+            assert note.startswith("a leg.act; b, c are unbound"), note
 
             def text(selector: str) -> str:
                 """An element's text now (the panel redraws its lines: no element is kept)."""
@@ -105,6 +111,29 @@ def test_the_pages_keys_drive_the_robot_and_the_localisation_panel_follows(
             wait_until(lambda: "(queue empty)" in queue(), 60, f"the page's queue to empty ({queue()!r})")
             stopped = truth.settled()
             assert close(truth.settled(), stopped), "the robot went on after space"
+
+            press("a", expect="a: queued leg.act (1 actions")  # the action file: 300 mm straight on
+            truth.wait(lambda p: math.dist(p[:2], stopped[:2]) > 250, "drove the action file's leg")
+            wait_until(
+                lambda: link.request("state").get("navigator") in ("IDLE", "DONE"),
+                120,
+                "main's navigator to finish the action file",
+            )
+            leg_end = truth.settled()
+            assert math.dist(leg_end[:2], stopped[:2]) == pytest.approx(300, abs=40), (stopped, leg_end)
+
+            press("d", expect="motors off: moves are refused until e")
+            refusal = press(Keys.ARROW_UP, expect="refused, the motors are off (press e)")
+            assert refusal.startswith("↑: "), refusal
+            assert status.get_attribute("data-ok") == "false", refusal
+            assert close(truth.settled(), leg_end), "the robot moved with its motors off"
+
+            press("e", expect="motors on")
+            drive = press(Keys.ARROW_UP, expect="↑: speed +")
+            assert "refused" not in drive, drive
+            truth.wait(lambda p: math.dist(p[:2], leg_end[:2]) > 30, "drove again on e then ↑")
+            press(" ", expect="stopped; the queue is cleared")
+            truth.settled()
 
             press("x", expect="nothing to quit in a browser")
             press("z", expect="key z means nothing")
