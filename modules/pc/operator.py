@@ -18,14 +18,16 @@ s          queue a square (four legs of 1 m, turning left)
 Queueing and non-queueing, as the seed's ActionHandler had it: ``a``/``b``/``c``/``k``/``s`` queue
 their drives behind those under way (main's action runner, ``actions`` with ``append``); the
 others act at once, and a move key or the space bar clears the queue first. The arrows drive both
-tracks at the held speeds (SET_WHEEL_SPEEDS for a minute, renewed by :meth:`Operator.keep_alive`
-while the speed is held). Everything reaches the robot through main's PC link, as ``tokenring
-drive`` does; an answer that does not come is reported on the screen, never raised.
+tracks at the held speeds: a dead-man, SET_WHEEL_SPEEDS for :data:`HOLD_MS` renewed every
+:data:`RENEW_AFTER_S` by :meth:`Operator.keep_alive` while its holder lives, so a console or web
+view that dies without a word leaves the robot standing within the hold. Quitting calls
+:meth:`Operator.release`: what the keys started stops. Everything reaches the robot through
+main's PC link, as ``tokenring drive`` does; an answer that does not come is reported on the
+screen, never raised.
 """
 
 from __future__ import annotations
 
-import contextlib
 import math
 import time
 from collections.abc import Sequence
@@ -41,9 +43,10 @@ SPEED_STEP_MM_S = 25.0
 TURN_STEP_DEG_S = 10.0
 MAX_TRACK_MM_S = 100.0
 MAX_TURN_DEG_S = 30.0
-#: one SET_WHEEL_SPEEDS of the held speed lasts this long; renewed before it runs out
-HOLD_MS = 60_000
-RENEW_AFTER_S = 45.0
+#: one SET_WHEEL_SPEEDS of the held speed lasts this long, and is renewed this often: a renewal
+#: may take two of the three seconds to reach the motor before the robot stops
+HOLD_MS = 3_000
+RENEW_AFTER_S = 1.0
 #: how long d and e wait for the motor's state to show them (a loaded ring takes a few rounds)
 CONFIRM_S = 5.0
 #: what ``k`` and ``s`` queue (action-file lines, table B.4)
@@ -79,6 +82,7 @@ KEYS: tuple[Key, ...] = (
     Key("s", "s", "drive a square"),
 )
 KEY_NAMES = tuple(k.name for k in KEYS)
+KEY_LABELS = " ".join(k.label for k in KEYS)
 #: what a browser's ``KeyboardEvent.key`` and a terminal library call the keys, where they differ
 _ALIASES = {
     " ": "space",
@@ -147,7 +151,10 @@ class Operator:
         self.seed = seed
         self.speed_mm_s = 0.0
         self.turn_deg_s = 0.0
-        self.held_since: float | None = None  # when the held speed was last sent
+        self.clock = time.monotonic
+        self.held_since: float | None = None  # when the held speed's last sending began
+        self.held_until = 0.0  # when the last hold the motor took runs out, at the latest
+        self.queued = False  # this operator's keys queued drives (not stopped since)
 
     # -- keys ----------------------------------------------------------------------------------
     def press(self, raw: str) -> Outcome:
@@ -155,7 +162,7 @@ class Operator:
         key = key_name(raw)
         if key not in KEY_NAMES:
             shown = raw if raw.isprintable() and raw.strip() else repr(raw)
-            return Outcome(key, f"key {shown} means nothing here (the keys are listed below)", ok=False)
+            return Outcome(key, f"key {shown} means nothing here (the keys: {KEY_LABELS})", ok=False)
         if key in ("x", "q"):
             return Outcome(key, "quit", quit=True)
         try:
@@ -165,15 +172,11 @@ class Operator:
 
     def _press(self, key: str) -> Outcome:
         if key == "space":
-            self._clear_queue()
-            self._motor("STOP")
-            self.speed_mm_s = self.turn_deg_s = 0.0
-            self.held_since = None
+            self._stop()
             return Outcome(key, "stopped; the queue is cleared")
         if key == "d":
             self._clear_queue()
-            self.speed_mm_s = self.turn_deg_s = 0.0
-            self.held_since = None
+            self._drop_hold()
             self._motor("MOTORS_OFF")
             if not self._motor_state_is_off(True):
                 return Outcome(key, "motors off sent; the motor has not confirmed it yet", ok=False)
@@ -212,15 +215,60 @@ class Operator:
         self._send_held()
         drive = f"speed {self.speed_mm_s:+.0f} mm/s, turn {self.turn_deg_s:+.0f} °/s"
         if refused:
+            self._drop_hold()  # the motor refuses it: nothing to renew, and e starts from rest
             return Outcome(key, f"{drive}: refused, the motors are off (press e)", ok=False)
         return Outcome(key, drive)
 
-    def keep_alive(self) -> None:
-        """Renew the held speed before its SET_WHEEL_SPEEDS runs out (call it now and then)."""
-        if self.held_since is not None and time.monotonic() - self.held_since > RENEW_AFTER_S:
-            # a failure is tried again at the next call; the screen shows the robot standing
-            with contextlib.suppress(TokenRingError, UsageError):
-                self._send_held()
+    def keep_alive(self) -> Outcome | None:
+        """Renew the held speed every :data:`RENEW_AFTER_S` (call it several times a second while
+        the holder lives). A hold that ran out before a renewal reached the motor is forgotten
+        (the robot stood; it does not start again by itself): that is said, otherwise None."""
+        if self.held_since is None or self.clock() - self.held_since < RENEW_AFTER_S:
+            return None
+        if self.clock() >= self.held_until:
+            return self._lapsed("not renewed in time")
+        try:
+            self._send_held()
+            return None
+        except (TokenRingError, UsageError) as exc:
+            if self.clock() < self.held_until:
+                return None  # tried again at the next call, the hold still runs
+            return self._lapsed(str(exc))
+
+    def _lapsed(self, why: str) -> Outcome:
+        self._drop_hold()
+        return Outcome(
+            "hold", f"the held speed ran out ({why}): the robot stopped; ↑ ↓ drive again", ok=False
+        )
+
+    def release(self) -> Outcome | None:
+        """Stop what this operator's keys keep going (a held speed, a queue of drives), as space
+        does; None when nothing is. Called when its console quits or the last web page closes."""
+        held = self.held_since is not None
+        try:
+            if not held and not (self.queued and self._queue_runs()):
+                self.queued = False
+                return None
+            self._stop()
+        except (TokenRingError, UsageError) as exc:
+            self._drop_hold()
+            self.queued = False
+            why = f"its held speed runs out within {HOLD_MS / 1000:.0f} s" if held else "its queue runs on"
+            return Outcome("release", f"could not stop the robot ({exc}); {why}", ok=False)
+        return Outcome(
+            "release", "stopped the robot" + (", its held speed ended" if held else ", its queue cleared")
+        )
+
+    def _stop(self) -> None:
+        """Space: the queue cleared, the motor stopped, nothing held."""
+        self._clear_queue()
+        self._motor("STOP")
+        self._drop_hold()
+        self.queued = False
+
+    def _drop_hold(self) -> None:
+        self.speed_mm_s = self.turn_deg_s = 0.0
+        self.held_since = None
 
     def _send_held(self) -> None:
         left, right = track_speeds(self.speed_mm_s, self.turn_deg_s)
@@ -228,8 +276,11 @@ class Operator:
             self._motor("STOP")
             self.held_since = None
             return
-        self._motor("SET_WHEEL_SPEEDS", left_pct=left, right_pct=right, duration_ms=HOLD_MS)
-        self.held_since = time.monotonic()
+        self.held_since = self.clock()  # a failed renewal is retried at the next call, not at once
+        self._motor(
+            "SET_WHEEL_SPEEDS", left_pct=left, right_pct=right, duration_ms=HOLD_MS, timeout=HOLD_MS / 1000
+        )
+        self.held_until = self.clock() + HOLD_MS / 1000
 
     def _queue(self, key: str, text: str, name: str) -> Outcome:
         from modules.navigation.actions import parse_actions
@@ -237,9 +288,9 @@ class Operator:
         actions = parse_actions(text, name, seed=self.seed)  # a bad file is named here, nothing sent
         if self.held_since is not None:  # a queued drive starts from rest, not inside a held one
             self._motor("STOP")
-            self.speed_mm_s = self.turn_deg_s = 0.0
-            self.held_since = None
+            self._drop_hold()
         state = self.link.request("actions", text=text, name=name, append=True, speed_pct=ACTION_SPEED_PCT)
+        self.queued = True
         waiting = len(state.get("queue") or ()) if isinstance(state, dict) else len(actions)
         return Outcome(key, f"queued {Path(name).name} ({len(actions)} actions; {waiting} waiting)")
 
@@ -249,6 +300,11 @@ class Operator:
         state = self.link.request("state")
         if isinstance(state, dict) and state.get("running"):
             self.link.request("stop")
+
+    def _queue_runs(self) -> bool:
+        """main runs an action file with actions still to do (not an exploration)."""
+        state = self.link.request("state")
+        return isinstance(state, dict) and bool(state.get("running")) and bool(state.get("queue"))
 
     def _motors_off(self) -> bool:
         from tokenring import default_protocol
@@ -267,7 +323,7 @@ class Operator:
             time.sleep(0.05)
         return True
 
-    def _motor(self, name: str, **args: Any) -> None:
-        reply = self.link.command("motor", name, **args)
+    def _motor(self, name: str, timeout: float = 5.0, **args: Any) -> None:
+        reply = self.link.command("motor", name, timeout=timeout, **args)
         if not reply.get("acknowledged"):
             raise TokenRingError(f"the motor did not take {name} (transmitted: {reply.get('transmitted')})")

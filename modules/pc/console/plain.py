@@ -16,7 +16,7 @@ import tty
 from collections.abc import Iterator
 from typing import TextIO
 
-from modules.pc.console.keys import KeyRunner
+from modules.pc.console.keys import RELEASE_S, Ended, KeyRunner, ending_signals
 from modules.pc.console.screen import new_lines
 from modules.pc.console.state import ConsoleState
 from modules.pc.operator import Operator, Outcome
@@ -25,6 +25,8 @@ from modules.pc.operator import Operator, Outcome
 ARROWS = {b"\x1b[A": "up", b"\x1b[B": "down", b"\x1b[C": "right", b"\x1b[D": "left"}
 #: from a pipe, how long the localisation's messages are waited for at the end
 PIPE_PATIENCE_S = 5.0
+#: from a pipe, how long the keys before ``x`` may take (a slow ring: seconds each)
+PIPE_KEYS_S = 120.0
 ARROWS.update({b"\x1bOA": "up", b"\x1bOB": "down", b"\x1bOC": "right", b"\x1bOD": "left"})
 
 
@@ -47,7 +49,8 @@ def terminal_keys(fd: int, stop: threading.Event) -> Iterator[str]:
             for char in data.decode("utf-8", "replace"):
                 yield "space" if char == " " else char
     finally:
-        termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+        with contextlib.suppress(OSError, termios.error):  # a terminal gone (SIGHUP) keeps nothing
+            termios.tcsetattr(fd, termios.TCSADRAIN, saved)
 
 
 def line_keys(stream: TextIO) -> Iterator[str]:
@@ -64,15 +67,16 @@ def run_plain(
     keys: Iterator[str] | None = None,
     poll_s: float = 0.5,
 ) -> int:
-    """Take keys until ``x``/``q`` (or the end of the input); print messages and outcomes when
-    ``show`` (``stdout``), nothing otherwise (``none``)."""
+    """Take keys until ``x``/``q`` (or the end of the input, Ctrl-C, SIGTERM, SIGHUP); print
+    messages and outcomes when ``show`` (``stdout``), nothing otherwise (``none``). At the end
+    the robot is stopped if the keys left it driving. The exit code: 0, or 128 + the signal's."""
     stop = threading.Event()
     shown: list[str] = []
     lock = threading.Lock()
 
     def say(text: str) -> None:
         if show:
-            with lock:
+            with lock, contextlib.suppress(OSError):  # a closed terminal: nobody to tell
                 print(text, file=out, flush=True)
 
     def outcome(result: Outcome) -> None:
@@ -98,19 +102,24 @@ def run_plain(
     follower.start()
     if keys is None:
         keys = terminal_keys(sys.stdin.fileno(), stop) if sys.stdin.isatty() else line_keys(sys.stdin)
-    quit_key = False
+    quit_key, code = False, 0
     try:
-        with contextlib.suppress(KeyboardInterrupt):
+        with ending_signals(), contextlib.suppress(KeyboardInterrupt):
             for key in keys:
                 if key.lower() in ("x", "q"):
                     quit_key = True
                     break
                 runner.press(key)
+    except Ended as ended:
+        code = ended.code
     finally:
-        runner.stop(timeout=120.0)  # the keys before x are carried out first
+        # the keys before x are carried out first (a pipe's too); a signal drops those not begun
+        released = runner.stop(timeout=PIPE_KEYS_S if piped and not code else RELEASE_S, discard=bool(code))
         stop.set()
         follower.join(timeout=2.0)
-        drain(PIPE_PATIENCE_S if piped else 0.0)
+        drain(PIPE_PATIENCE_S if piped and not code else 0.0)
+        if released is not None:
+            outcome(released)
         if quit_key:
             say("quit")
-    return 0
+    return code

@@ -4,6 +4,11 @@ below, the last key's outcome and the keys of table 8.2 at the bottom."""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+import os
+import signal
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -13,7 +18,7 @@ from textual.containers import Grid
 from textual.events import Key
 from textual.widgets import RichLog, Static
 
-from modules.pc.console.keys import KeyRunner
+from modules.pc.console.keys import RELEASE_S, Ended, KeyRunner, ending_signals
 from modules.pc.console.state import ConsoleState
 from modules.pc.operator import Outcome, keys_help
 
@@ -26,7 +31,8 @@ PANELS = (
 
 
 class ConsoleScreen(App[int]):
-    """The live screen; exits with 0 on ``x``/``q``/Ctrl-C."""
+    """The live screen; exits with 0 on ``x``/``q``/Ctrl-C, 128 + the signal's number on SIGTERM
+    or SIGHUP (:func:`run_screen` then stops the robot)."""
 
     CSS = """
     Grid { grid-size: 2 2; grid-columns: 3fr 2fr; height: 3fr; }
@@ -50,6 +56,7 @@ class ConsoleScreen(App[int]):
         self.title_text = title
         self._shown_messages: list[str] = []
         self._polling = False
+        self._loop: asyncio.AbstractEventLoop | None = None
 
     def compose(self) -> ComposeResult:
         with Grid():
@@ -64,6 +71,7 @@ class ConsoleScreen(App[int]):
         for name, title in PANELS:
             self.query_one(f"#{name}", Static).border_title = title
         self.query_one("#messages", RichLog).border_title = "Messages"
+        self._loop = asyncio.get_running_loop()
         self.runner.start()
         self.set_interval(0.25, self.redraw)
         self.set_interval(0.5, self._ask_main)
@@ -103,14 +111,26 @@ class ConsoleScreen(App[int]):
         self.runner.press(event.character if event.key not in NAMED and event.character else event.key)
 
     def _outcome_from_thread(self, outcome: Outcome) -> None:
-        self.call_from_thread(self._show, outcome)
+        """Shown when the screen's loop gets to it: the key thread never waits for the screen
+        (which, quitting, waits for the key thread)."""
+        if self._loop is not None:
+            with contextlib.suppress(RuntimeError):  # the loop closed: the screen is gone
+                self._loop.call_soon_threadsafe(self._show, outcome)
 
     def _show(self, outcome: Outcome) -> None:
         mark = "" if outcome.ok else "✗ "
-        self.query_one("#status", Static).update(Text(f"{mark}{outcome.text}"))
+        with contextlib.suppress(Exception):  # the screen is being taken down
+            self.query_one("#status", Static).update(Text(f"{mark}{outcome.text}"))
 
-    def on_unmount(self) -> None:
-        self.runner.stop(timeout=2.0)
+    def end(self, signum: int) -> None:
+        """A signal in the main thread. SIGTERM: quit as ``x`` does. SIGHUP: the terminal is gone,
+        and Textual's writer would wait forever to give it back: stop the robot and leave."""
+        if signum == signal.SIGHUP:
+            self.runner.stop(timeout=RELEASE_S, discard=True)
+            os._exit(128 + signum)
+        if self._loop is None or self._loop.is_closed():
+            raise Ended(signum)
+        self._loop.call_soon_threadsafe(self.exit, 128 + signum)
 
 
 #: Textual's names of the keys table 8.2 names (the others are taken by their character)
@@ -134,6 +154,17 @@ def new_lines(shown: list[str], now: list[str]) -> list[str]:
 
 
 def run_screen(app: ConsoleScreen, **kwargs: Any) -> int:
-    """Run the screen until it quits; its exit code (0 unless it failed)."""
-    code = app.run(**kwargs)
+    """Run the screen until it quits, then stop what the keys left driving and say so on the
+    terminal given back; the exit code (0, 128 + a signal's number, 1 if the screen failed)."""
+    code: int | None = 1
+    try:
+        with ending_signals(app.end):
+            code = app.run(**kwargs)
+    except Ended as ended:
+        code = ended.code
+    finally:
+        released = app.runner.stop(timeout=RELEASE_S)
+        if released is not None:
+            with contextlib.suppress(OSError):  # a closed terminal: nobody to tell
+                print(("" if released.ok else "✗ ") + released.text, file=sys.stdout, flush=True)
     return 0 if code is None else int(code)

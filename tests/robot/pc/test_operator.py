@@ -1,6 +1,7 @@
 """The seed's keys (table 8.2) as the operator carries them out: what reaches main's PC link, in
-which order, and what the screen is told. The link is a recorder; the ring test is
-tests/robot/pc/test_console_tmux.py."""
+which order, and what the screen is told; the held speed's dead-man (short holds renewed while
+the holder lives) and the release when it quits. The link is a recorder, the clock a counter;
+the ring test is tests/robot/pc/test_console_tmux.py."""
 
 from __future__ import annotations
 
@@ -9,7 +10,16 @@ from typing import Any
 
 import pytest
 
-from modules.pc.operator import KEYS, Operator, circle_text, key_name, square_text, track_speeds
+from modules.pc.operator import (
+    HOLD_MS,
+    KEYS,
+    RENEW_AFTER_S,
+    Operator,
+    circle_text,
+    key_name,
+    square_text,
+    track_speeds,
+)
 from tokenring import TransportError, default_protocol
 
 
@@ -22,7 +32,7 @@ class Link:
         self.motor_state = motor_state
         self.fail: Exception | None = None
 
-    def command(self, target: str, name: str, **args: Any) -> dict[str, Any]:
+    def command(self, target: str, name: str, timeout: float = 5.0, **args: Any) -> dict[str, Any]:
         if self.fail:
             raise self.fail
         self.calls.append(("command", target, name, args))
@@ -31,6 +41,8 @@ class Link:
         return {"transmitted": True, "acknowledged": True}
 
     def request(self, verb: str, **payload: Any) -> dict[str, Any]:
+        if self.fail:
+            raise self.fail
         self.calls.append(("request", verb, payload))
         if verb == "stop":
             self.running = False
@@ -78,7 +90,7 @@ def test_arrows_accelerate_brake_and_turn_as_a_curve() -> None:
     operator.press("ArrowUp")
     assert link.commands()[-1] == (
         "SET_WHEEL_SPEEDS",
-        {"left_pct": 50, "right_pct": 50, "duration_ms": 60000},
+        {"left_pct": 50, "right_pct": 50, "duration_ms": HOLD_MS},
     )
     operator.press("left")
     name, args = link.commands()[-1]
@@ -177,10 +189,110 @@ def test_an_unanswered_link_is_a_line_on_the_screen_not_a_traceback() -> None:
 
 def test_d_says_so_when_the_motor_never_shows_its_motors_off(monkeypatch: pytest.MonkeyPatch) -> None:
     class DeafMotor(Link):
-        def command(self, target: str, name: str, **args: Any) -> dict[str, Any]:
+        def command(self, target: str, name: str, timeout: float = 5.0, **args: Any) -> dict[str, Any]:
             self.calls.append(("command", target, name, args))
             return {"transmitted": True, "acknowledged": True}  # taken, its state never follows
 
     monkeypatch.setattr("modules.pc.operator.CONFIRM_S", 0.2)
     outcome = Operator(DeafMotor()).press("d")
     assert not outcome.ok and "not confirmed" in outcome.text
+
+
+class Clock:
+    """time.monotonic as the test sets it."""
+
+    def __init__(self) -> None:
+        self.t = 1000.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def driving(link: Link | None = None) -> tuple[Operator, Link, Clock]:
+    """An operator that held 50 mm/s a moment ago, on a clock of the test's."""
+    link = link or Link()
+    operator = Operator(link)
+    operator.clock = clock = Clock()
+    operator.press("up")
+    operator.press("up")
+    return operator, link, clock
+
+
+def wheels(link: Link) -> int:
+    return sum(name == "SET_WHEEL_SPEEDS" for name, _ in link.commands())
+
+
+def test_the_hold_is_a_dead_man_short_and_renewed_every_second_while_called() -> None:
+    assert HOLD_MS / 1000 >= 3 * RENEW_AFTER_S  # two renewals may fail or be late before it stops
+    operator, link, clock = driving()
+    assert wheels(link) == 2
+    clock.t += RENEW_AFTER_S / 2
+    assert operator.keep_alive() is None and wheels(link) == 2  # not yet
+    for _ in range(5):
+        clock.t += RENEW_AFTER_S / 2
+        operator.keep_alive()
+    assert wheels(link) == 2 + 3  # three seconds, six calls: every second, not every call
+    assert link.commands()[-1] == (
+        "SET_WHEEL_SPEEDS",
+        {"left_pct": 50, "right_pct": 50, "duration_ms": HOLD_MS},
+    )
+
+
+def test_a_failed_renewal_is_retried_while_the_hold_runs_then_the_hold_is_forgotten() -> None:
+    operator, link, clock = driving()
+    link.fail = TransportError("main did not answer")
+    clock.t += RENEW_AFTER_S
+    assert operator.keep_alive() is None  # the hold still runs: tried again at the next call
+    clock.t += HOLD_MS / 1000
+    lapsed = operator.keep_alive()
+    assert lapsed is not None and not lapsed.ok and "the robot stopped" in lapsed.text
+    link.fail = None
+    clock.t += 10 * RENEW_AFTER_S
+    assert operator.keep_alive() is None and wheels(link) == 2  # it does not start again by itself
+    assert operator.press("up").text.startswith("speed +25 mm/s")  # from rest
+
+
+def test_a_holder_silent_longer_than_the_hold_does_not_restart_the_robot() -> None:
+    operator, link, clock = driving()
+    clock.t += HOLD_MS / 1000 + 1  # nobody called keep_alive (a page gone, a frozen screen)
+    lapsed = operator.keep_alive()
+    assert lapsed is not None and "not renewed in time" in lapsed.text
+    assert wheels(link) == 2 and operator.speed_mm_s == 0
+
+
+def test_release_stops_a_held_speed_as_space_does() -> None:
+    operator, link, _ = driving(Link(running=False))
+    outcome = operator.release()
+    assert outcome is not None and outcome.ok and outcome.text == "stopped the robot, its held speed ended"
+    assert link.commands()[-1] == ("STOP", {}) and operator.speed_mm_s == 0
+    calls = len(link.calls)
+    assert operator.release() is None and len(link.calls) == calls  # nothing held any more
+
+
+def test_release_stops_the_queue_this_operator_started_only_while_it_runs(tmp_path: Path) -> None:
+    link = Link()
+    assert Operator(link).release() is None and link.calls == []  # nothing started: nothing asked
+    operator = Operator(link)
+    operator.press("s")
+    outcome = operator.release()
+    assert outcome is not None and outcome.text == "stopped the robot, its queue cleared"
+    assert link.verbs()[-2:] == ["state", "stop"] and link.commands()[-1] == ("STOP", {})
+    operator.press("k")
+    link.running = False  # the circle was driven to its end meanwhile
+    calls = len(link.commands())
+    assert operator.release() is None and len(link.commands()) == calls and link.verbs()[-1] == "state"
+
+
+def test_release_on_a_ring_that_is_gone_says_so_and_raises_nothing() -> None:
+    operator, link, _ = driving()
+    link.fail = TransportError("main did not answer on the PC link of ring 'r'")
+    outcome = operator.release()
+    assert outcome is not None and not outcome.ok
+    assert (
+        "could not stop the robot" in outcome.text and f"runs out within {HOLD_MS // 1000} s" in outcome.text
+    )
+
+
+def test_a_key_that_means_nothing_lists_the_keys() -> None:
+    text = Operator(Link()).press("z").text
+    assert text == "key z means nothing here (the keys: a b c d e x q space ↑ ↓ ← → k s)"
