@@ -8,6 +8,11 @@
             ──► POST /api/action/<name> ──► an extension's WebAction (e.g. Explore 2)
             ──► POST /api/key ──► an extension's KeyHandler (one per ring; one thread, in order)
 
+A key handler's ``idle`` (renew what its keys hold) is called only while someone is there: a page
+connected (its WebSocket open) or a key posted within :data:`KEY_LIFE_S` (a script). When the
+last page goes, or a script falls silent, or the view stops, the handler's ``unattended`` is
+called if it has one (stop what its keys hold): what the keys hold must not outlive its holder.
+
 It is a tool on the ring like ``monitor``: it subscribes to the token's key expressions and asks
 the nodes' control keys, and the token path never waits for it (a slow browser only delays its
 own updates; the feed's queue is bounded). aiohttp serves it all from one asyncio loop; Zenoh's
@@ -21,6 +26,8 @@ import concurrent.futures
 import contextlib
 import json
 import logging
+import math
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -47,6 +54,8 @@ PAGE_KINDS = (
 )  # fmt: skip
 #: the longest key name a page may send (``KeyboardEvent.key`` names are short)
 MAX_KEY_CHARS = 32
+#: without a page connected, a posted key keeps what the keys hold renewed this long
+KEY_LIFE_S = 5.0
 
 
 def dumps(value: Any) -> str:
@@ -100,6 +109,7 @@ class WebView:
         self.keys = keys
         self._key_handler: KeyHandler | None = None
         self._key_thread: concurrent.futures.ThreadPoolExecutor | None = None
+        self._last_key = -math.inf  # when the last key was posted (time.monotonic)
         self.fault_timeout = fault_timeout
         self.nodes = {spec.id: spec.name for spec in protocol.nodes.values()}
         self._sockets: set[web.WebSocketResponse] = set()
@@ -167,6 +177,9 @@ class WebView:
             reader.cancel()
             self._sockets.discard(ws)
             await ws.close()
+            if not self._sockets:
+                self._last_key = -math.inf  # a key the page sent last does not outlive it
+                await self._release_keys("the last page closed")
         return ws
 
     async def fault(self, request: web.Request) -> web.Response:
@@ -252,6 +265,7 @@ class WebView:
         key = body.get("key") if isinstance(body, dict) else None
         if not isinstance(key, str) or not 0 < len(key) <= MAX_KEY_CHARS:
             return _error(f'a key is {{"key": NAME}}, NAME a KeyboardEvent.key of 1..{MAX_KEY_CHARS} chars')
+        self._last_key = time.monotonic()
         outcome = await asyncio.get_running_loop().run_in_executor(self._keys_worker(), self._press, key)
         return web.Response(text=dumps({"key": key, **outcome}), content_type="application/json")
 
@@ -282,12 +296,43 @@ class WebView:
             except TokenRingError as exc:
                 log.warning("keys: %s", exc)
 
+    def _release(self, why: str) -> None:
+        """On the keys' thread: the handler stops what its keys hold (if it can be told to)."""
+        unattended = getattr(self._key_handler, "unattended", None)
+        if not callable(unattended):
+            return
+        try:
+            answer = unattended()
+        except TokenRingError as exc:
+            log.warning("keys (%s): %s", why, exc)
+            return
+        if isinstance(answer, dict) and answer.get("text"):
+            log.info("keys (%s): %s", why, answer["text"])
+
+    async def _release_keys(self, why: str) -> None:
+        if self._key_handler is None or self._key_thread is None:
+            return
+        with contextlib.suppress(RuntimeError):  # the keys' thread is shut down: the view stopped
+            await asyncio.get_running_loop().run_in_executor(self._key_thread, self._release, why)
+
+    def _attended(self) -> bool:
+        """A page is connected, or a key was posted a moment ago."""
+        return bool(self._sockets) or time.monotonic() - self._last_key < KEY_LIFE_S
+
     async def _keep_alive(self, every_s: float) -> None:
+        """Renew what the keys hold while someone is there; release it once nobody is."""
         loop = asyncio.get_running_loop()
+        released = True
         while True:
             await asyncio.sleep(every_s)
-            if self._key_handler is not None:
+            if self._key_handler is None:
+                continue
+            if self._attended():
+                released = False
                 await loop.run_in_executor(self._keys_worker(), self._idle)
+            elif not released:
+                released = True
+                await self._release_keys("no page and no key")
 
     # -- running ------------------------------------------------------------------------------
     async def serve(
@@ -324,6 +369,7 @@ class WebView:
                 with contextlib.suppress(Exception):
                     await ws.close()
             await runner.cleanup()
+            await self._release_keys("the web view stops")
             if self._key_thread is not None:  # a key under way ends first (a PC-link call: seconds)
                 await asyncio.get_running_loop().run_in_executor(None, self._key_thread.shutdown)
             if self._owns_feed:

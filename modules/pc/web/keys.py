@@ -1,7 +1,9 @@
 """The seed's keys (table 8.2) in the web view: the page posts each key it has focus for, the ring's
 web server hands it to the one :class:`RobotKeys` of the ring it serves, and that carries it out
 with an :class:`~modules.pc.operator.Operator`, as ``tokenring console`` does (the same held speed,
-renewed while held; the same answers). A browser has nothing to quit: ``x``/``q`` say so.
+renewed while held; the same answers). A browser has nothing to quit: ``x``/``q`` say so. The
+server renews the held speed only while a page is connected, and releases it (the robot stops)
+when the last page goes.
 
 ``tokenring web --action FILE`` (up to three) binds the action files to ``a``, ``b``, ``c``.
 """
@@ -19,6 +21,8 @@ BROWSER = {"space": " ", "up": "ArrowUp", "down": "ArrowDown", "left": "ArrowLef
 #: what ``x``/``q`` answer in a browser
 NOTHING_TO_QUIT = "nothing to quit in a browser: close the tab (the ring and the robot go on)"
 MAX_FILES = 3
+#: how often the server offers the held speed for renewal (the operator renews it every second)
+RENEW_POLL_S = 0.25
 
 
 def add_options(parser: argparse.ArgumentParser) -> None:
@@ -67,7 +71,9 @@ def web_keys(args: argparse.Namespace) -> WebKeys:
         verb = "is" if len(unbound) == 1 else "are"
         free = f"{', '.join(unbound)} {verb} unbound (tokenring web --action FILE, up to three)"
         note = f"{note}; {free}" if note else free
-    return WebKeys(listed, lambda session, ring: RobotKeys.open(session, ring, files), note=note)
+    return WebKeys(
+        listed, lambda session, ring: RobotKeys.open(session, ring, files), note=note, idle_s=RENEW_POLL_S
+    )
 
 
 class RobotKeys:
@@ -91,3 +97,9 @@ class RobotKeys:
 
     def idle(self) -> None:
         self.operator.keep_alive()
+
+    def unattended(self) -> dict[str, Any] | None:
+        """Nobody is there any more (the last page closed): stop what the keys hold; what was
+        done, None if nothing."""
+        outcome = self.operator.release()
+        return None if outcome is None else {"text": outcome.text, "ok": outcome.ok}

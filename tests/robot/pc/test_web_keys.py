@@ -1,25 +1,34 @@
 """The robot's keys in the web view (modules/pc/web/keys.py): table 8.2 as the page lists them, the
-action files ``tokenring web --action`` binds, and what the handler answers (an Operator on a
-recorded PC link). The page in a browser on a live ring: test_web_keys_browser.py."""
+action files ``tokenring web --action`` binds, what the handler answers (an Operator on a
+recorded PC link), and the web server renewing a held speed only while a page is connected and
+stopping the robot when the last page goes. The page in a browser on a live ring:
+test_web_keys_browser.py."""
 
 from __future__ import annotations
 
 import argparse
+import asyncio
+import time
+from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
+import aiohttp
 import pytest
 
-from modules.pc.operator import Operator
+from modules.pc.operator import HOLD_MS, Operator
 from modules.pc.web.keys import NOTHING_TO_QUIT, RobotKeys, add_options, web_keys
 from tokenring import UsageError
+from tokenring.contract.protocol import default_protocol
+from tokenring.observe.feed import Feed
+from tokenring.web.server import WebView
 
 
 class Link:
     def __init__(self) -> None:
         self.calls: list[tuple[Any, ...]] = []
 
-    def command(self, target: str, name: str, **args: Any) -> dict[str, Any]:
+    def command(self, target: str, name: str, timeout: float = 5.0, **args: Any) -> dict[str, Any]:
         self.calls.append((target, name, args))
         return {"transmitted": True, "acknowledged": True}
 
@@ -81,3 +90,77 @@ def test_the_handler_answers_as_the_console_and_x_has_nothing_to_quit(tmp_path: 
     assert not unbound["ok"] and "no action file is bound to a" in unbound["text"]
     handler.idle()  # nothing held long enough to renew: nothing sent
     assert [c[1] for c in link.calls if c[0] == "motor"] == ["MOTORS_ON", "SET_WHEEL_SPEEDS"]
+    assert handler.unattended() == {"text": "stopped the robot, its held speed ended", "ok": True}
+    assert link.calls[-1] == ("motor", "STOP", {}) and handler.unattended() is None
+
+
+def motor_commands(link: Link) -> list[str]:
+    return [c[1] for c in link.calls if c[0] == "motor"]
+
+
+def serve_keys(link: Link, test: Callable[[str, aiohttp.ClientSession], Awaitable[None]]) -> None:
+    """The robot's keys (on ``link``) in a web view on a free port, without a ring; ``test(url, client)``."""
+    keys = web_keys(argparse.Namespace())
+    keys.open = lambda session, ring: RobotKeys(Operator(link))
+    view = WebView(None, "keys", default_protocol(), [], keys=keys, feed=Feed(None, "keys", []))
+
+    async def main() -> None:
+        stop, ready = asyncio.Event(), asyncio.Event()
+        url: list[str] = []
+        server = asyncio.create_task(
+            view.serve("127.0.0.1", 0, lambda at: (url.append(at), ready.set()), stop)
+        )
+        await asyncio.wait_for(ready.wait(), 30)
+        try:
+            async with aiohttp.ClientSession() as client:
+                await test(url[0], client)
+        finally:
+            stop.set()
+            await server
+
+    asyncio.run(main())
+
+
+async def until(condition: Callable[[], bool], what: str, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        await asyncio.sleep(0.02)
+
+
+async def press(client: aiohttp.ClientSession, url: str, key: str) -> dict[str, Any]:
+    async with client.post(url + "api/key", json={"key": key}) as answer:
+        return dict(await answer.json())
+
+
+def test_a_page_keeps_the_held_speed_renewed_and_its_closing_stops_the_robot(monkeypatch) -> None:
+    monkeypatch.setattr("modules.pc.operator.RENEW_AFTER_S", 0.05)  # renewals seen in a moment
+    link = Link()
+
+    async def test(url: str, client: aiohttp.ClientSession) -> None:
+        page = await client.ws_connect(url + "ws")
+        assert (await press(client, url, "ArrowUp"))["ok"]
+        await until(
+            lambda: motor_commands(link).count("SET_WHEEL_SPEEDS") >= 4, "renewals while the page is open"
+        )
+        await page.close()
+        await until(lambda: motor_commands(link)[-1] == "STOP", "the robot stopped as the page closed")
+
+    serve_keys(link, test)
+    after = motor_commands(link)
+    assert after[after.index("STOP") :] == ["STOP"]  # no renewal after it, nor on the view's end
+
+
+def test_keys_without_a_page_are_renewed_only_a_moment_after_the_last(monkeypatch) -> None:
+    monkeypatch.setattr("modules.pc.operator.RENEW_AFTER_S", 0.05)
+    monkeypatch.setattr("tokenring.web.server.KEY_LIFE_S", 0.5)
+    link = Link()
+
+    async def test(url: str, client: aiohttp.ClientSession) -> None:
+        began = time.monotonic()
+        assert (await press(client, url, "ArrowUp"))["ok"]  # a script: no page
+        await until(lambda: "STOP" in motor_commands(link), "the robot stopped after the script fell silent")
+        assert time.monotonic() - began < HOLD_MS / 1000 + 60  # a hang guard: it was let go
+        assert motor_commands(link).count("SET_WHEEL_SPEEDS") >= 2  # renewed while the key was fresh
+
+    serve_keys(link, test)
