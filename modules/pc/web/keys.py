@@ -19,7 +19,9 @@ from tokenring import UsageError, WebKey, WebKeys
 #: the browser's ``KeyboardEvent.key`` of the keys table 8.2 names by word
 BROWSER = {"space": " ", "up": "ArrowUp", "down": "ArrowDown", "left": "ArrowLeft", "right": "ArrowRight"}
 #: what ``x``/``q`` answer in a browser
-NOTHING_TO_QUIT = "nothing to quit in a browser: close the tab (the ring and the robot go on)"
+NOTHING_TO_QUIT = (
+    "nothing to quit in a browser: close the tab (the ring goes on; the robot stops with the last page)"
+)
 MAX_FILES = 3
 #: how often the server offers the held speed for renewal (the operator renews it every second)
 RENEW_POLL_S = 0.25
