@@ -1,8 +1,11 @@
 """``tokenring console`` in a real terminal (tmux) on a live ring: the seed's keys (table 8.2) move
-the simulated robot, the panels follow, and ``x`` quits leaving the ring running.
+the simulated robot, the panels follow, and ``x`` quits leaving the ring running. A console that
+quits, loses its terminal or is killed outright (SIGKILL) leaves the robot standing: quitting
+stops it, and the held speed is a dead-man (a short hold renewed while the console lives).
 
 The judge of the robot's motion is the world's ground truth (``world/truth`` on Zenoh, read here
-by hand), never the console's own panels; the screen is read as text (``capture-pane``).
+by hand) and the motor's own account of its moves, never the console's panels; the screen is
+read as text (``capture-pane``).
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ import os
 import re
 import shlex
 import shutil
+import signal
 import subprocess
 import time
 from collections.abc import Iterator
@@ -19,9 +23,12 @@ from pathlib import Path
 
 import pytest
 
+from modules.pc.operator import HOLD_MS, RENEW_AFTER_S
 from tests.support.processes import REPO, TOKENRING, pid_alive, wait_gone
-from tests.support.ringutil import launcher_pids, tap, wait_ring
-from tests.support.worldtruth import OPEN_HALL, Truth, close
+from tests.support.ringutil import control, launcher_pids, tap, wait_ring, wait_until
+from tests.support.worldtruth import OPEN_HALL, Pose, Truth, close
+
+MOTOR = 20
 
 
 class Terminal:
@@ -31,10 +38,13 @@ class Terminal:
     def __init__(self, name: str, command: str, width: int = 200, height: int = 50) -> None:
         self.name = name
         self.tmux = ["tmux", "-L", name, "-f", "/dev/null"]
+        # pytest-xdist's workers set COLUMNS=80 LINES=24: Textual would take them over the pane's size
+        env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
         subprocess.run(
             [*self.tmux, "new-session", "-d", "-s", name, "-x", str(width), "-y", str(height), command],
             check=True,
             cwd=REPO,
+            env=env,
         )
         out = subprocess.run(
             [*self.tmux, "display-message", "-p", "-t", name, "#{pane_pid}"],
@@ -118,13 +128,19 @@ def test_console_keys_drive_the_robot_and_x_leaves_the_ring_running(
         odometry = term.wait_for(r"odometry +steps (-?\d+) / (-?\d+)", timeout=120)
         start = truth.wait(lambda p: True, "reported a pose")
 
+        syncs = term.wait_for(SYNCS)
+        best = term.wait_for(BEST)
+
         term.keys("e")
         term.wait_for(r"motors on")
         term.keys("Up", "Up")
         moved = truth.wait(lambda p: p[0] > start[0] + 30, "drove forward on ↑")
         term.keys("Left")
         truth.wait(lambda p: p[2] > moved[2] + math.radians(3), "turned left on ←")
-        term.wait_for(r"odometry +steps (-?\d+) / (-?\d+)", differs=odometry.groups())  # the panel follows
+        # the panels follow: raw odometry, the synchronisations, the position store's best pose
+        term.wait_for(r"odometry +steps (-?\d+) / (-?\d+)", differs=odometry.groups())
+        term.wait_for(SYNCS, differs=syncs.groups())
+        term.wait_for(BEST, differs=best.groups())
 
         term.keys("s")  # a square queued behind nothing: it starts, its legs wait in the queue
         term.wait_for(r"▶ s 1000")
@@ -148,25 +164,39 @@ def test_console_keys_drive_the_robot_and_x_leaves_the_ring_running(
         assert close(truth.settled(), leg_end), "the robot moved with its motors off"
 
         term.keys("z")
-        term.wait_for(r"key z means nothing")
+        term.wait_for(r"key z means nothing here \(the keys: a b c d e x q space")
 
+        # x while the robot drives: the console stops it as it quits (the motor's STOP aborts the
+        # held move: the dead-man's hold did not have to run out), and the ring goes on
+        term.keys("e")
+        term.wait_for(r"motors on")
+        term.keys("Up")
+        before = driving(truth, session, ring_name)
         console_pids = _children(term.shell_pid)
         term.keys("x")
-        deadline = time.monotonic() + 30
-        while not exit_file.exists() and time.monotonic() < deadline:
-            time.sleep(0.1)
+        wait_until(exit_file.exists, 60, "the console's exit code")
         assert exit_file.read_text().strip() == "0", term.screen()
         assert not wait_gone(console_pids, 10.0), "the console left processes behind"
+        stood, _ = standstill(truth)
+        after = motor_moves(session, ring_name)
+        assert after["aborted"] == before["aborted"] + 1 and after["done"] == before["done"], (before, after)
+        assert close(truth.settled(), stood), "the robot went on after x"
         assert launcher.poll() is None and all(pid_alive(p) for p in launcher_pids(session, ring_name))
         wait_ring(session, ring_name, [10, 20, 30, 50], timeout=30)  # the ring goes on without it
 
-        # a closed terminal (SIGHUP) ends a second console; the ring goes on, nothing is left
+        # a closed terminal (SIGHUP) ends a second console while the robot drives: it stops the
+        # robot as x does; the ring goes on, nothing of the console is left
         second = Terminal(f"con2-{ring_name}", command)
         terminal_name.append(second)
         second.wait_for(r"odometry +steps", timeout=120)
+        second.keys("Up")
+        before = driving(truth, session, ring_name)
         console_pids = [second.shell_pid, *_children(second.shell_pid)]  # tmux runs it as the pane's process
         second.close()
         assert not wait_gone([second.shell_pid, *console_pids], 10.0), "a closed terminal left the console"
+        standstill(truth)
+        after = motor_moves(session, ring_name)
+        assert after["aborted"] == before["aborted"] + 1 and after["done"] == before["done"], (before, after)
         wait_ring(session, ring_name, [10, 20, 30, 50], timeout=30)
 
         # the seed's stdout interface, keys by name from a pipe: the messages (table B.5's lines,
@@ -216,6 +246,98 @@ def test_up_console_takes_the_terminal_and_x_stops_the_ring(
     assert exit_file.exists() and exit_file.read_text().strip() == "0", term.screen()
     assert re.search(r"the console ended \(exit code 0\): stopping the ring", term.screen())
     assert not wait_gone([*launchers, *nodes], 10.0), "x left processes of the ring running"
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(500)  # its hang guards: three interpreters boot and load, one drive
+def test_a_killed_console_leaves_the_robot_standing_within_its_hold(
+    procs, ring_name, endpoint, tmp_path: Path, terminal_name: list[Terminal]
+) -> None:
+    room = tmp_path / "hall.yaml"
+    room.write_text(OPEN_HALL)
+    launcher = procs.tokenring(
+        "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor,sonar",
+        "--world", str(room), "--bitrate", "max", "--duration", "900",
+    )  # fmt: skip
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10, 20, 30], timeout=180)
+        procs.watch(launcher_pids(session, ring_name))
+        truth = Truth(session, ring_name)
+        exit_file = tmp_path / "console.exit"
+        console = [*TOKENRING, "console", "--ring", ring_name, "--connect", endpoint]
+        command = " ".join(shlex.quote(part) for part in console)
+        term = Terminal(f"kill-{ring_name}", f"{command}; echo $? > {shlex.quote(str(exit_file))}")
+        terminal_name.append(term)
+        term.wait_for(r"odometry +steps", timeout=120)
+        term.keys("e")
+        term.wait_for(r"motors on")
+        term.keys("Up", "Up")
+        before = driving(truth, session, ring_name)
+        # its renewals extend the one move under way: the motor neither stops nor starts again
+        wait_until(lambda: motor_report(session, ring_name)["renewals"] >= 2, 60, "the held speed renewed")
+        assert motor_moves(session, ring_name) == before, "a renewal ended the move"
+
+        pids = _children(term.shell_pid)
+        [pid] = [p for p in pids if "console" in Path(f"/proc/{p}/cmdline").read_text()]
+        os.kill(pid, signal.SIGKILL)
+        killed = time.monotonic()
+        wait_until(exit_file.exists, 60, "the shell to see the console killed")
+        assert exit_file.read_text().strip() == str(128 + signal.SIGKILL)
+        assert not wait_gone(pids, 10.0), "the killed console left processes behind"
+
+        # nobody renews the held speed: its hold runs out and the motor ends the move (DONE)
+        _, stopped_at = standstill(truth)
+        after = motor_moves(session, ring_name)
+        assert after["done"] == before["done"] + 1 and after["aborted"] == before["aborted"], (before, after)
+        # the last renewal came at most a renewal period before the kill; the rest is the ring's delay
+        print(f"the robot stood {stopped_at - killed:.2f} s after the console was killed")
+        assert stopped_at - killed < HOLD_MS / 1000 + RENEW_AFTER_S + 10.0
+        assert launcher.poll() is None and all(pid_alive(p) for p in launcher_pids(session, ring_name))
+        assert control(session, ring_name, "launcher", "status")["nodes"]  # the ring answers
+        wait_ring(session, ring_name, [10, 20, 30], timeout=30)
+    launcher.terminate()
+    launcher.wait(60)  # how cleanly a ring stops is the first test's question, not this one's
+
+
+#: the synchronisation panel's count and the position store's best pose
+SYNCS = r"syncs +(\d+)"
+BEST = r"best +x +(-?\d+) mm +y +(-?\d+) mm"
+
+
+def motor_report(session, ring: str) -> dict:
+    """The motor program's own report (its moves, its renewals of a held move)."""
+    return dict(control(session, ring, MOTOR, "program")["report"])
+
+
+def motor_moves(session, ring: str) -> dict[str, int]:
+    """How the motor's moves ended so far: done (ran their course), aborted (a STOP) ..."""
+    return dict(motor_report(session, ring)["moves"])
+
+
+def driving(truth: Truth, session, ring: str) -> dict[str, int]:
+    """Once the true pose moves: the motor's move counts then (its held move still under way)."""
+    start = truth.wait(lambda p: True, "reported a pose")
+    truth.wait(lambda p: math.dist(p[:2], start[:2]) > 20, "the robot to drive")
+    return motor_moves(session, ring)
+
+
+def standstill(truth: Truth, updates: int = 20, timeout: float = 120.0) -> tuple[Pose, float]:
+    """The pose once ``updates`` truth updates in a row left it where it was, and when (monotonic)
+    it last moved."""
+    deadline = time.monotonic() + timeout
+    same, last, moved_at = 0, truth.pose, time.monotonic()
+    while same < updates:
+        assert time.monotonic() < deadline, f"the robot never stood still (true pose {truth.pose})"
+        seen = truth.count
+        while truth.count == seen:
+            time.sleep(0.02)
+        if close(truth.pose, last):
+            same += 1
+        else:
+            same, moved_at = 0, time.monotonic()
+        last = truth.pose
+    assert last is not None
+    return last, moved_at
 
 
 def _children(pid: int) -> list[int]:
