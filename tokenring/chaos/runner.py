@@ -3,7 +3,8 @@
 A scenario (strict YAML, see ``scenarios/``)::
 
     ring:                 # how to launch the ring (ignored with --ring: use a running one)
-      nodes: all          # or a list of names/IDs
+      nodes: all          # or a list of names/IDs (with --ring: the nodes to wait for; without,
+                          # the running ring's own, as its nodes answer)
       bitrate: max
       ack: adaptive
       respawn: false
@@ -84,6 +85,8 @@ class FaultStep:
 class Scenario:
     source: str
     nodes: list[int]
+    #: the scenario names its ring's nodes (else a running ring's are found by asking it)
+    nodes_named: bool = False
     bitrate: str = "max"
     ack: str = "adaptive"
     respawn: bool = False
@@ -138,7 +141,7 @@ def load_scenario(path: str | Path, protocol: Protocol | None = None) -> Scenari
         nodes = sorted({resolve(item, "ring.nodes") for item in node_list})
     else:
         raise fail("ring.nodes", "expected 'all' or a list of node names/IDs")
-    scenario = Scenario(source, nodes)
+    scenario = Scenario(source, nodes, nodes_named=node_list != "all")
     scenario.bitrate = str(ring.get("bitrate", "max"))
     from tokenring.contract.ring import parse_bitrate
 
@@ -550,7 +553,54 @@ def _quiesce(session: Any, ring: str, ledger: Path, nodes: set[int], say: Any) -
     return not waiting
 
 
+def ring_nodes(session: zenoh.Session, ring: str, timeout: float = FORM_S) -> list[int]:
+    """The nodes of a running ring: those that answer, once every node any of them sees live
+    answers too, the same twice in a row (a ring across hosts is whatever its inventory
+    placed, not protocol.yaml's)."""
+    deadline = time.monotonic() + timeout
+    answering: set[int] = set()
+    seen: set[int] = set()
+    before: set[int] = set()
+    while time.monotonic() < deadline:
+        answering, seen = set(), set()
+        for _, reply in query(session, keys.control(ring, "*", "stats"), timeout=1.5):
+            if reply.get("ok"):
+                answering.add(int(reply["result"]["id"]))
+                seen.update(int(i) for i in reply["result"].get("live", []))
+        if answering and seen <= answering and answering == before:
+            return sorted(answering)
+        before = answering if seen <= answering else set()
+        time.sleep(0.2)
+    if not answering:
+        raise TokenRingError(
+            f"ring {ring}: no node answered in {timeout:.0f} s (is it running, is --ring right?)"
+        )
+    raise TokenRingError(
+        f"ring {ring}: nodes {sorted(seen - answering)} are live but did not answer in {timeout:.0f} s "
+        "(name the ring's nodes in the scenario's ring.nodes to wait for them)"
+    )
+
+
+def check_faults_on(scenario: Scenario, ring: str, nodes: list[int], protocol: Protocol) -> None:
+    """Refuse a fault on a node the running ring does not have, naming its line."""
+    for index, step in enumerate(scenario.faults):
+        if step.node == "all":
+            continue
+        spec = protocol.node(int(step.node) if step.node.isdigit() else step.node)
+        if spec.id not in nodes:
+            names = ", ".join(protocol.by_id[i].name if i in protocol.by_id else str(i) for i in nodes)
+            raise UsageError(
+                f"{scenario.source}:{step.line}: faults.{index}.node: {spec.name} is not a node of "
+                f"ring {ring} (its nodes: {names})"
+            )
+
+
 def _run(session, ring, scenario, protocol, say, launcher, ledger=None) -> dict[str, Any]:
+    if launcher is None and not scenario.nodes_named:
+        scenario.nodes = ring_nodes(session, ring)
+        check_faults_on(scenario, ring, scenario.nodes, protocol)
+        names = ", ".join(protocol.by_id[i].name if i in protocol.by_id else str(i) for i in scenario.nodes)
+        say(f"ring {ring}: {len(scenario.nodes)} nodes ({names})")
     deadline = time.monotonic() + FORM_S
     live: dict[int, dict] = {}
     while time.monotonic() < deadline:
