@@ -459,6 +459,16 @@ class Launcher(NodeCommandLines):
         self.failures.append(line)
         self.say(line)
 
+    def reasons(self) -> list[str]:
+        """Why the run ends with exit code 1, one phrase each: the nodes that died (not of a
+        crash fault) and every failure said."""
+        deaths = [
+            f"node {name} (id {node_id}) {describe_exit(code)}"
+            for name, node_id, code in self.deaths
+            if code != CRASH_EXIT_CODE
+        ]
+        return deaths + self.failures
+
     def end_group(self, child: Child | ServiceChild | Share) -> None:
         """End what is left of a child's process group, once: its leader has exited (a PID,
         and so a group ID, may be reused once nothing holds it)."""

@@ -54,6 +54,8 @@ SSH_DEFAULTS = (
 )  # fmt: skip
 #: a share's output line, as its launcher prefixes it: ``   name | text``
 _PREFIXED = re.compile(r"^\s*(\S+) \| (.*)$")
+#: a share's last line, with why its run was not whole: ``stopped (exit code 1): REASONS``
+_STOPPED = re.compile(r"^stopped \(exit code \d+\)(?:: (.*))?$")
 
 
 @dataclass
@@ -166,6 +168,8 @@ class Share:
     last: deque[str] = field(default_factory=lambda: deque(maxlen=5))
     said: str = ""  # the last line ssh or the share's shell said itself (not a module's)
     connected: bool = False  # its launcher spoke: ssh reached the host and tokenring runs there
+    stopped: bool = False  # its launcher said its last line, "stopped (...)"
+    reasons: str = ""  # why the share's run was not whole, as its last line says
 
     def relay(self, say: Callable[[str, str], None]) -> Callable[[str], None]:
         """Its output lines under ``host/module`` (the share's launcher prefixed them with the
@@ -176,7 +180,11 @@ class Share:
             match = _PREFIXED.match(text)
             if match:
                 self.connected = True
-                say(match.group(2), f"{self.host.name}/{match.group(1)}")
+                module, said = match.group(1), match.group(2)
+                stopped = _STOPPED.match(said) if module == "up" else None
+                if stopped:
+                    self.stopped, self.reasons = True, stopped.group(1) or ""
+                say(said, f"{self.host.name}/{module}")
             else:
                 self.said = text
                 say(text, self.host.name)
@@ -235,23 +243,23 @@ class HostShares:
             if not self.booted:
                 continue  # wait_up() says it, with the inventory's line: the run stops
             host = share.host
-            why = self._why(share, code)
             again = code == SSH_FAILED or launcher.respawn
             if again:
-                if share.connected:  # lost now (not another attempt that failed): back to 1 s
+                new_loss = share.connected  # not another attempt that failed
+                if new_loss:  # back to 1 s
                     self._backoff.pop(host.name, None)
                 delay = self._backoff.get(host.name, RECONNECT_S)
                 self._backoff[host.name] = min(RECONNECT_MAX_S, delay * 2)
                 self._due[host.name] = time.monotonic() + delay
-                line = f"host {host.name} ({host.address}) {why}: "
-                if share.connected:  # counted once per loss, however many attempts it takes
+                line = self._said(share, code)
+                if new_loss:  # counted once per loss, however many attempts it takes
                     launcher.failure(
-                        line + f"its nodes are out of the ring; connecting again in {delay:.0f} s"
+                        f"{line}: its nodes are out of the ring; connecting again in {delay:.0f} s"
                     )
                 else:
-                    launcher.say(line + f"connecting again in {delay:.0f} s")
+                    launcher.say(f"{line}: connecting again in {delay:.0f} s")
             else:
-                launcher.failure(f"host {host.name} ({host.address}) {why}: the ring goes on without it")
+                launcher.failure(f"{self._said(share, code)}: the ring goes on without it")
         now = time.monotonic()
         for name, due in list(self._due.items()):
             if now >= due and not stopping:
@@ -264,10 +272,17 @@ class HostShares:
                     launcher.failure(f"host {name}: cannot run ssh: {exc}")
 
     def _why(self, share: Share, code: int) -> str:
+        """Why a share ended, in a few words: its ssh's, its own last line's, or its exit code."""
         if code == SSH_FAILED:
             return f"lost (ssh exited with code 255{': ' + share.said if share.said else ''})"
-        last = share.said or (share.last[-1] if share.last else "")
+        if share.reasons:
+            return f"{share.reasons} (its share {describe_exit(code)})"
+        last = share.said or ("" if share.stopped or not share.last else share.last[-1].strip())
         return f"share {describe_exit(code)}" + (f" ({last})" if last else "")
+
+    def _said(self, share: Share, code: int) -> str:
+        """One line naming the host and why its share ended."""
+        return f"host {share.host.name} ({share.host.address}): {self._why(share, code)}"
 
     def wait_up(self, wanted: set[int], timeout: float) -> bool:
         """Wait until every node of the inventory is live on the ring. A share that ends first
@@ -327,8 +342,8 @@ class HostShares:
                 code = process.wait(max(0.0, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
                 launcher.failure(
-                    f"host {share.host.name} did not stop within {SHARE_STOP_S:.0f} s: ending its ssh "
-                    "(its share stops when sshd finds the session gone)"
+                    f"host {share.host.name} ({share.host.address}) did not stop within {SHARE_STOP_S:.0f} s: "
+                    "ending its ssh (its share stops when sshd finds the session gone)"
                 )
                 with contextlib.suppress(ProcessLookupError):
                     process.send_signal(signal.SIGTERM)
@@ -339,8 +354,9 @@ class HostShares:
                     with contextlib.suppress(subprocess.TimeoutExpired):
                         process.wait(KILL_REAP_S)
                     code = process.poll()
+                share.reported = True  # said: the exit code of an ssh we ended tells nothing more
             if not share.reported and code not in (0, None, -signal.SIGTERM):
-                launcher.failure(f"host {share.host.name} {self._why(share, code)} as it stopped")
+                launcher.failure(self._said(share, code))
             share.reported = True
             if process.poll() is not None:
                 launcher.end_group(share)

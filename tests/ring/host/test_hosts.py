@@ -11,6 +11,7 @@ The quick tests refuse bad input: one line naming the inventory's file and line,
 from __future__ import annotations
 
 import json
+import os
 import re
 import signal
 import subprocess
@@ -519,3 +520,67 @@ def test_a_killed_launcher_leaves_nothing_on_any_host(procs, request, tmp_path):
     launcher.wait(30)
     wait_until(lambda: not hosts.leftovers(), 60, "nothing left on either host")
     print(f"host b empty {time.monotonic() - killed:.1f} s after the launcher's SIGKILL")
+
+
+def two_hosts_spec(hosts: SshHosts, tmp_path: Path, **extra: object) -> dict:
+    """Host a (the launcher's: main, motor) and host b (sonar, compass) over the test's ssh."""
+    a, b = hosts.hosts
+    return {
+        **extra,
+        "hosts": {
+            "a": {"address": a.address, "ssh": "local", "nodes": ["main", "motor"]},
+            "b": {
+                "address": b.address,
+                "ssh": {"identity": str(hosts.identity), "options": hosts.ssh_options},
+                "nodes": ["sonar", "compass"],
+                "tokenring": TOKENRING,
+                "store": str(tmp_path / "store-b"),
+            },
+        },
+    }
+
+
+@needs_ssh_hosts
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_a_remote_node_that_dies_makes_the_run_exit_1_naming_host_and_node(procs, request, tmp_path):
+    """Without ``--respawn`` a node killed on host b stays dead; when the run stops (SIGTERM)
+    b's share exits 1 saying why, and the launcher's own exit code is 1, with one line naming
+    the host and the node."""
+    hosts = SshHosts(tmp_path / "hosts", count=2)
+    request.addfinalizer(hosts.close)
+    a, b = hosts.hosts
+    ring = f"x{uuid.uuid4().hex[:8]}"
+    path = inventory(tmp_path / "ring.yaml", json.dumps(two_hosts_spec(hosts, tmp_path), indent=2))
+    log = tmp_path / "launcher.log"
+    with log.open("w") as out:
+        launcher = procs.start(
+            hosts.run(a, TOKENRING, "up", "--hosts", str(path), "--ring", ring, "--no-programs"),
+            stdout=out,
+            env={"TOKENRING_EXTENSIONS": ""},
+        )
+    try:
+
+        def whole() -> dict[int, dict] | None:
+            nodes = status(hosts, a, ring)
+            return nodes if one_ring(nodes, [10, 20, 30, 40]) else None
+
+        nodes = wait_until(whole, 120, "the ring over two hosts")
+        os.kill(nodes[30]["pid"], signal.SIGKILL)  # sonar, on host b (one PID space for the namespaces)
+        wait_until(
+            lambda: log_says(log, "b/up | node sonar (id 30) killed by SIGKILL"), 60, "b to report sonar"
+        )
+        wait_until(lambda: one_ring(status(hosts, a, ring), [10, 20, 40]), 60, "the ring without sonar")
+    finally:
+        launcher.send_signal(signal.SIGTERM)
+        try:
+            code = launcher.wait(60)
+        except subprocess.TimeoutExpired:
+            launcher.kill()
+            code = None
+    lines = log.read_text().splitlines()
+    assert code == 1, "\n".join(lines[-30:])
+    said = f"up | host b ({b.address}): node sonar (id 30) killed by SIGKILL (its share exited with code 1)"
+    assert said in [line.strip() for line in lines], "\n".join(lines[-30:])
+    assert lines[-1].endswith("up | stopped (exit code 1)")
+    wait_until(lambda: not hosts.leftovers(), 30, "no process left in either namespace")

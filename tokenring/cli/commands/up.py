@@ -333,7 +333,14 @@ def run(args: argparse.Namespace) -> int:
         code = 1
     if not boot_ok and code == 0:
         code = 1
-    launcher.say("stopped (interrupted)" if code == 130 else f"stopped (exit code {code})")
+    why = ""  # a host's share says why its run was not whole: the launcher of the ring names it
+    if args.share and code == 1:
+        why = "; ".join(launcher.reasons())
+    launcher.say(
+        "stopped (interrupted)"
+        if code == 130
+        else f"stopped (exit code {code})" + (f": {why}" if why else "")
+    )
     launcher.flush_output()
     return code
 
