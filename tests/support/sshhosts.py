@@ -51,7 +51,7 @@ class SshHost:
 class SshHosts:
     """``count`` hosts on a bridge, each reachable over ssh as root with the test's key."""
 
-    def __init__(self, directory: Path, count: int = 3) -> None:
+    def __init__(self, directory: Path, count: int = 3, client_alive: bool = True) -> None:
         if not Path(SSHD).exists():
             raise RuntimeError(f"{SSHD} is missing: install Debian's openssh-server (.ci/run does)")
         tag = uuid.uuid4().hex[:6]
@@ -61,6 +61,8 @@ class SshHosts:
         net = random.randrange(1, 250)
         self.hosts = [SshHost(f"trh{i}{tag}", f"10.213.{net}.{i + 1}", f"th{i}{tag}") for i in range(count)]
         self.cuts: list[list[str]] = []  # iptables rules in force, to take back
+        #: sshd finds a silent client gone within 6 s; else Debian's default: never (TCP's keepalive)
+        self.client_alive = client_alive
         self._namespaces: list[str] = []
         try:
             self._network()
@@ -132,8 +134,7 @@ class SshHosts:
                     "KbdInteractiveAuthentication no",
                     "PubkeyAuthentication yes",
                     # a client gone silently is found within 6 s: its session's command gets EOF
-                    "ClientAliveInterval 2",
-                    "ClientAliveCountMax 3",
+                    *(["ClientAliveInterval 2", "ClientAliveCountMax 3"] if self.client_alive else []),
                     "MaxStartups 50",
                     "LogLevel ERROR",
                     "",
@@ -166,6 +167,15 @@ class SshHosts:
 
     def sshd_pids(self) -> set[int]:
         return {h.sshd.pid for h in self.hosts if h.sshd is not None}
+
+    def besides_sshd(self, host: SshHost) -> set[int]:
+        """The processes in ``host``'s namespace that are not sshd's (its listener and sessions)."""
+        found = set()
+        for pid in netns_pids(host.name):
+            with contextlib.suppress(OSError):
+                if not Path(f"/proc/{pid}/comm").read_text().startswith("sshd"):  # sshd-session too
+                    found.add(pid)
+        return found
 
     def leftovers(self) -> dict[str, set[int]]:
         """The processes in each host's namespace besides its sshd listener."""

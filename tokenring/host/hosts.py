@@ -4,6 +4,7 @@ reached and which of protocol.yaml's nodes it runs. Every mistake names the file
 
     port: 7447                 # each host's Zenoh router listens on ADDRESS:PORT (default 7447)
     scheme: tcp                # tcp, or tls for a secured ring (up --zenoh-config node.json5)
+    lost_after: 30             # a share that hears nothing from the launcher this long stops
     hosts:
       pc:                      # the launcher's own host: the hub router, no SSH
         address: 10.0.0.1
@@ -30,9 +31,12 @@ from tokenring._util.strict_yaml import read_yaml
 from tokenring.errors import UsageError
 
 DEFAULT_PORT = 7447
+#: seconds a share runs on without a word from the launcher (docs/hosts.md says why 30)
+DEFAULT_LOST_AFTER_S = 30.0
+LOST_AFTER_RANGE_S = (5.0, 86_400.0)
 SCHEMES = ("tcp", "tls")
-TOP_KEYS = ("hosts", "port", "scheme")
-HOST_KEYS = ("address", "ssh", "nodes", "tokenring", "store", "zenoh_config", "port")
+TOP_KEYS = ("hosts", "port", "scheme", "lost_after")
+HOST_KEYS = ("address", "ssh", "nodes", "tokenring", "store", "zenoh_config", "port", "lost_after")
 SSH_KEYS = ("host", "user", "port", "identity", "options")
 
 
@@ -54,6 +58,7 @@ class Host:
     store: str | None = None
     zenoh_config: str | None = None
     zenoh_port: int = DEFAULT_PORT
+    lost_after: float = DEFAULT_LOST_AFTER_S  # its share stops after this long without the launcher
 
     def endpoint(self, scheme: str) -> str:
         """Where this host's router listens (and its nodes and the other routers reach it)."""
@@ -90,6 +95,13 @@ def _port(value: Any, fail: Any, entry: str) -> int:
     return value
 
 
+def _seconds(value: Any, fail: Any, entry: str) -> float:
+    low, high = LOST_AFTER_RANGE_S
+    if not isinstance(value, int | float) or isinstance(value, bool) or not low <= value <= high:
+        raise fail(entry, f"{value!r} is not a number of seconds {low:g}..{high:g}")
+    return float(value)
+
+
 def _text(value: Any, fail: Any, entry: str, what: str) -> str:
     if not isinstance(value, str) or not value.strip():
         raise fail(entry, f"expected {what}, not {value!r}")
@@ -116,6 +128,7 @@ def load_inventory(path: str | Path, protocol: Any) -> Inventory:
     if scheme not in SCHEMES:
         raise fail("scheme", f"{scheme!r} is not one of {', '.join(SCHEMES)}")
     port = _port(data.get("port", DEFAULT_PORT), fail, "port")
+    lost_after = _seconds(data.get("lost_after", DEFAULT_LOST_AFTER_S), fail, "lost_after")
     hosts: list[Host] = []
     for name, raw in data["hosts"].items():
         entry = f"hosts.{name}"
@@ -130,6 +143,7 @@ def load_inventory(path: str | Path, protocol: Any) -> Inventory:
             raise fail(entry, "no address (the host's name or IP address on the network)")
         host = Host(name, _text(raw["address"], fail, f"{entry}.address", "an address"), lines.get(entry, 1))
         host.zenoh_port = _port(raw.get("port", port), fail, f"{entry}.port")
+        host.lost_after = _seconds(raw.get("lost_after", lost_after), fail, f"{entry}.lost_after")
         ssh = raw.get("ssh", {})
         if ssh == "local":
             host.local = True

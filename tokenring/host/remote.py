@@ -5,14 +5,17 @@ The system's ``ssh`` client, not a library: the user's ssh_config, agent, ProxyJ
 known_hosts all apply as they do for any ``ssh`` the user types. A share is its host's Zenoh
 router (its nodes are its clients) and connects to the launcher's router, the hub. It stops
 when its standard input closes: the launcher closes it to stop the ring, and a dropped SSH
-session closes it too, so no share outlives its launcher's connection. A share whose SSH
-connection is lost (ssh's exit code 255) is started again until the launcher stops: its nodes
-rejoin when the host is back.
+session closes it too. The launcher also writes a line to it every :data:`HEARTBEAT_S`; a share
+that hears nothing for its host's ``lost_after`` stops by itself, so that a host cut off while
+the launcher stopped does not keep its share until its sshd notices. A share whose SSH
+connection is lost (ssh's exit code 255), or that stopped for want of the launcher, is started
+again until the launcher stops: its nodes rejoin when the host is back.
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import re
 import shlex
 import signal
@@ -39,6 +42,12 @@ if TYPE_CHECKING:
 SSH_FAILED = 255
 #: the shell's "command not found"
 NOT_FOUND = 127
+#: a share's exit code once it stopped for want of the launcher (sysexits' EX_TEMPFAIL)
+SHARE_LOST = 75
+#: a usage error's: a share refused to start (e.g. its host's previous share still holds the ring)
+REFUSED = 2
+#: how often the launcher tells each share it is there (a line on the share's input)
+HEARTBEAT_S = 1.0
 #: how long a share gets to stop its nodes once its input closed, before its ssh is ended
 SHARE_STOP_S = 10.0
 #: reconnecting a lost host: first after this long, doubling up to RECONNECT_MAX_S
@@ -100,7 +109,7 @@ def share_command(host: Host, settings: ShareSettings) -> list[str]:
     cmd = [*host.tokenring, "--log-level", settings.log_level, "up", "--share", str(settings.total)]
     cmd += ["--nodes", ",".join(host.nodes), "--ring", settings.ring, "--bitrate", settings.bitrate]
     cmd += ["--ack", settings.ack, "--router", "--listen", host.endpoint(settings.scheme)]
-    cmd += ["--connect", settings.hub]
+    cmd += ["--connect", settings.hub, "--lost-after", f"{host.lost_after:g}"]
     if settings.respawn:
         cmd.append("--respawn")
     if settings.profile:
@@ -191,6 +200,15 @@ class Share:
 
         return line
 
+    def beat(self) -> None:
+        """Tell the share the launcher is there: a line on its input, never blocking (a share
+        whose ssh reads nothing just misses it)."""
+        stdin = self.process.stdin
+        if stdin is None or stdin.closed or self.process.poll() is not None:
+            return
+        with contextlib.suppress(OSError, ValueError):
+            os.write(stdin.fileno(), b"\n")
+
 
 class HostShares:
     """Starts, watches, reconnects and stops the other hosts' shares, through the launcher's own
@@ -204,6 +222,8 @@ class HostShares:
         self._due: dict[str, float] = {}  # host -> when it is connected again
         self._backoff: dict[str, float] = {}
         self.booted = False  # every host came up once: from now on a lost one is reconnected
+        self._lost: set[str] = set()  # hosts lost once: a refusal of their new share is tried again
+        self._next_beat = 0.0
         self._lock = threading.RLock()
 
     def labels(self) -> list[str]:
@@ -218,6 +238,8 @@ class HostShares:
         argv = ssh_command(host, share_command(host, self.settings), self.settings.env)
         previous = self.shares.get(host.name)
         process = self.launcher.popen_child(argv, host.name, stdin=subprocess.PIPE, watch=False)
+        assert process.stdin is not None
+        os.set_blocking(process.stdin.fileno(), False)  # a heartbeat never holds up the supervisor
         share = Share(host, process, time.monotonic(), restarts=previous.restarts + 1 if previous else 0)
         assert process.stdout is not None
         self.launcher.output.watch(process.stdout, host.name, share.relay(self.launcher.say))
@@ -227,13 +249,18 @@ class HostShares:
         return share
 
     def due(self) -> list[float]:
-        return list(self._due.values())
+        return [*self._due.values(), self._next_beat]
 
     def check(self, stopping: bool) -> None:
-        """Report shares that ended; reconnect a lost host (ssh 255) and, with ``--respawn``, any."""
+        """Tell every share the launcher is there; report shares that ended; reconnect a lost
+        host (ssh 255, or its share stopped for want of the launcher) and, with ``--respawn``, any."""
         launcher = self.launcher
-        with self._lock:
+        with self._lock:  # begin_stop() closes the inputs under it: no beat to a closed (reused) fd
             shares = list(self.shares.values())
+            if not stopping and time.monotonic() >= self._next_beat:
+                self._next_beat = time.monotonic() + HEARTBEAT_S
+                for share in shares:
+                    share.beat()
         for share in shares:
             code = share.process.poll()
             if code is None or share.reported or stopping:
@@ -243,9 +270,14 @@ class HostShares:
             if not self.booted:
                 continue  # wait_up() says it, with the inventory's line: the run stops
             host = share.host
-            again = code == SSH_FAILED or launcher.respawn
-            if again:
-                new_loss = share.connected  # not another attempt that failed
+            lost = code in (SSH_FAILED, SHARE_LOST)
+            # back after a loss, a host's new share is refused while its old one still holds the
+            # ring there; that one stops within lost_after of its last word from the launcher
+            refused = code == REFUSED and host.name in self._lost
+            if lost or refused or launcher.respawn:
+                new_loss = share.connected and not refused  # not another attempt that failed
+                if lost:
+                    self._lost.add(host.name)
                 if new_loss:  # back to 1 s
                     self._backoff.pop(host.name, None)
                 delay = self._backoff.get(host.name, RECONNECT_S)
@@ -275,6 +307,8 @@ class HostShares:
         """Why a share ended, in a few words: its ssh's, its own last line's, or its exit code."""
         if code == SSH_FAILED:
             return f"lost (ssh exited with code 255{': ' + share.said if share.said else ''})"
+        if code == SHARE_LOST:
+            return f"lost (its share heard nothing from the launcher for {share.host.lost_after:g} s and stopped)"
         if share.reasons:
             return f"{share.reasons} (its share {describe_exit(code)})"
         last = share.said or ("" if share.stopped or not share.last else share.last[-1].strip())
@@ -321,11 +355,10 @@ class HostShares:
         """Close every share's input: each stops its nodes and exits."""
         self._due.clear()
         with self._lock:
-            shares = list(self.shares.values())
-        for share in shares:
-            if share.process.stdin is not None:
-                with contextlib.suppress(OSError):
-                    share.process.stdin.close()
+            for share in self.shares.values():
+                if share.process.stdin is not None:
+                    with contextlib.suppress(OSError):
+                        share.process.stdin.close()
 
     def stop(self) -> None:
         """Wait for the shares to exit (SHARE_STOP_S), then end their ssh; a share that did not
@@ -343,7 +376,8 @@ class HostShares:
             except subprocess.TimeoutExpired:
                 launcher.failure(
                     f"host {share.host.name} ({share.host.address}) did not stop within {SHARE_STOP_S:.0f} s: "
-                    "ending its ssh (its share stops when sshd finds the session gone)"
+                    f"ending its ssh (its share stops by itself {share.host.lost_after:g} s after the "
+                    "launcher's last word reached it)"
                 )
                 with contextlib.suppress(ProcessLookupError):
                     process.send_signal(signal.SIGTERM)

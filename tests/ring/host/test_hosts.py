@@ -16,6 +16,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 import uuid
 from pathlib import Path
@@ -25,6 +26,7 @@ import pytest
 from tests.support.processes import REPO, pid_alive, run_tokenring
 from tests.support.ringutil import wait_until, write_probe_programs
 from tests.support.sshhosts import SshHost, SshHosts, needs_ssh_hosts
+from tokenring.host.remote import HEARTBEAT_S
 
 TOKENRING = str(Path(sys.executable).with_name("tokenring"))
 
@@ -63,8 +65,14 @@ def inventory(path: Path, text: str) -> Path:
             ":4:",  # within host b
             "host b (127.0.0.1): unreachable over ssh",
         ),
+        (
+            "lost_after: 30\nhosts:\n  a: {address: 127.0.0.1, ssh: local, nodes: [main]}\n"
+            "  b: {address: 10.9.9.9, nodes: [motor], lost_after: 1}\n",
+            ":4:",
+            "hosts.b.lost_after: 1 is not a number of seconds 5..86400",
+        ),
     ],
-    ids=["syntax", "unknown-module", "twice", "unknown-key", "no-local", "unreachable"],
+    ids=["syntax", "unknown-module", "twice", "unknown-key", "no-local", "unreachable", "lost-after"],
 )
 def test_a_bad_inventory_is_one_line_naming_file_and_line(tmp_path, text, where, what):
     path = inventory(tmp_path / "ring.yaml", text)
@@ -110,11 +118,12 @@ def test_the_inventory_places_counted_nodes_and_ssh_gets_its_options_first(tmp_p
         tmp_path / "ring.yaml",
         "port: 7500\nhosts:\n  pc: {address: 10.0.0.1, ssh: local, nodes: 2}\n"
         "  b1:\n    address: 10.0.0.2\n    nodes: [charger]\n    tokenring: /opt/ring/bin/python -m tokenring\n"
-        "    store: /var/lib/my ring\n"
+        "    store: /var/lib/my ring\n    lost_after: 45\n"
         "    ssh: {host: b1-alias, user: robot, port: 2222, options: [-o, ServerAliveInterval=1]}\n",
     )
     found = load_inventory(path, default_protocol())
     assert [h.nodes for h in found.hosts] == [["main", "motor"], ["charger"]]
+    assert [h.lost_after for h in found.hosts] == [30.0, 45.0]  # the default, and b1's own
     b1 = found.remote[0]
     settings = ShareSettings(
         ring="lab", bitrate="10M", ack="adaptive", log_level="info", total=3, hub="tcp/10.0.0.1:7500",
@@ -128,8 +137,39 @@ def test_the_inventory_places_counted_nodes_and_ssh_gets_its_options_first(tmp_p
     assert remote.startswith(
         "exec env TOKENRING_EXTENSIONS= /opt/ring/bin/python -m tokenring --log-level info up --share 3 "
     )
-    assert "--nodes charger" in remote and "--listen tcp/10.0.0.2:7500 --connect tcp/10.0.0.1:7500" in remote
+    assert "--nodes charger" in remote
+    assert "--listen tcp/10.0.0.2:7500 --connect tcp/10.0.0.1:7500 --lost-after 45" in remote
     assert remote.endswith(" --store '/var/lib/my ring'")
+
+
+def test_a_share_that_hears_nothing_from_its_launcher_stops_by_itself(procs, ring_name, endpoint):
+    """``up --share`` as ssh runs it on a host: the launcher's lines on its input keep it
+    running past ``--lost-after``; once they stop for that long it stops its nodes by itself,
+    saying why, exit code 75 (which the launcher takes for a lost host: it connects again)."""
+    from tokenring.host.remote import SHARE_LOST
+
+    share = procs.tokenring(
+        "up", "--share", "1", "--lost-after", "5", "--nodes", "main", "--no-programs", "--ring", ring_name,
+        "--listen", endpoint, stdin=subprocess.PIPE, env={"TOKENRING_EXTENSIONS": ""},
+    )  # fmt: skip
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(share.stdout), daemon=True)
+    reader.start()
+    wait_until(lambda: any("node main (id 10) joined" in line for line in lines), 60, "main to join")
+    for _ in range(8):  # 8 s of heartbeats: longer than --lost-after
+        share.stdin.write("\n")
+        share.stdin.flush()
+        time.sleep(HEARTBEAT_S)
+    assert share.poll() is None, lines
+    silent = time.monotonic()
+    code = share.wait(60)
+    waited = time.monotonic() - silent
+    reader.join(10)
+    said = [line.strip() for line in lines]
+    assert code == SHARE_LOST, said
+    assert waited >= 5 - HEARTBEAT_S, f"stopped {waited:.1f} s after the last heartbeat"
+    assert "up | heard nothing from the launcher for 5 s: stopping this host's share" in said
+    assert said[-1] == "up | stopped (exit code 75): heard nothing from the launcher for 5 s"
 
 
 # -- three hosts ---------------------------------------------------------------------------------
@@ -584,3 +624,76 @@ def test_a_remote_node_that_dies_makes_the_run_exit_1_naming_host_and_node(procs
     assert said in [line.strip() for line in lines], "\n".join(lines[-30:])
     assert lines[-1].endswith("up | stopped (exit code 1)")
     wait_until(lambda: not hosts.leftovers(), 30, "no process left in either namespace")
+
+
+@needs_ssh_hosts
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_a_host_cut_off_stops_its_share_itself_and_comes_back(procs, request, tmp_path):
+    """Host b's sshd has Debian's defaults (no ClientAlive: it keeps a silent session for hours).
+    A long cut: host a re-forms without b, b's share stops by itself once it heard nothing from
+    the launcher for ``lost_after``, the launcher, trying again at most 10 s apart, starts a new
+    share once the cable is back and b's nodes rejoin. Cut again and Ctrl-C: the launcher gives
+    up on b after 10 s, b's share stops by itself, and once the cable is back the ssh sessions
+    end too: nothing is left in any namespace."""
+    hosts = SshHosts(tmp_path / "hosts", count=2, client_alive=False)
+    request.addfinalizer(hosts.close)
+    a, b = hosts.hosts
+    lost_after = 10
+    ring = f"x{uuid.uuid4().hex[:8]}"
+    spec = two_hosts_spec(hosts, tmp_path, lost_after=lost_after)
+    path = inventory(tmp_path / "ring.yaml", json.dumps(spec, indent=2))
+    log = tmp_path / "launcher.log"
+    with log.open("w") as out:
+        launcher = procs.start(
+            hosts.run(a, TOKENRING, "up", "--hosts", str(path), "--ring", ring, "--no-programs"),
+            stdout=out,
+            env={"TOKENRING_EXTENSIONS": ""},
+        )
+    everyone = [10, 20, 30, 40]
+
+    def share_stops_by_itself(cut: float) -> float:
+        # its last heartbeat came before the cut: it stops lost_after later, plus its nodes' leave
+        wait_until(lambda: not hosts.besides_sshd(b), lost_after + 30, "host b's share to stop by itself")
+        stopped = time.monotonic() - cut
+        assert stopped >= lost_after - HEARTBEAT_S, f"host b's share stopped {stopped:.1f} s after the cut"
+        assert hosts.leftovers().get(b.name), "b's sshd still holds the session it cannot tell is dead"
+        return stopped
+
+    try:
+        wait_until(lambda: one_ring(status(hosts, a, ring), everyone), 120, "the ring over two hosts")
+        assert hosts.besides_sshd(b), "host b runs its share"
+        hosts.cut(b)
+        cut = time.monotonic()
+        wait_until(lambda: one_ring(status(hosts, a, ring), [10, 20]), 120, "host a re-formed without b")
+        stopped = share_stops_by_itself(cut)
+        wait_until(
+            lambda: log_says(log, f"host b ({b.address}): lost (ssh exited with code 255"), 60, "b lost"
+        )
+        hosts.mend()
+        mended = time.monotonic()
+        wait_until(lambda: one_ring(status(hosts, a, ring), everyone), 120, "host b's nodes back in the ring")
+        rejoined = time.monotonic() - mended
+        hosts.cut(b)
+        cut = time.monotonic()
+        launcher.send_signal(signal.SIGINT)
+        stopped_again = share_stops_by_itself(cut)
+    finally:
+        launcher.send_signal(signal.SIGINT)
+        try:
+            code = launcher.wait(60)
+        except subprocess.TimeoutExpired:
+            launcher.kill()
+            code = None
+    text = log.read_text()
+    assert code == 130, text[-3000:]
+    assert f"host b ({b.address}) did not stop within 10 s: ending its ssh" in text
+    hosts.mend()
+    mended = time.monotonic()
+    # b's sshd learns that its client is gone once its retransmissions reach host a again
+    wait_until(lambda: not hosts.leftovers(), 120, "no process left in any namespace")
+    print(
+        f"host b's share stopped {stopped:.1f} s after the cut, its nodes rejoined {rejoined:.1f} s after "
+        f"the mend; after Ctrl-C during a cut, stopped {stopped_again:.1f} s after it, its sshd sessions "
+        f"{time.monotonic() - mended:.1f} s after the mend"
+    )

@@ -45,6 +45,7 @@ view, Foxglove; not the world simulator or a recording, whose state would be los
 """
 
 if TYPE_CHECKING:
+    import threading
     from pathlib import Path
 
     from tokenring.contract.protocol import Protocol
@@ -82,6 +83,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     # a host's share of a ring across hosts, started over ssh by `up --hosts` (remote.py): it
     # stops when its standard input closes; TOTAL is the whole ring's size
     p.add_argument("--share", type=int_within(1, 255), metavar="TOTAL", help=argparse.SUPPRESS)
+    # ... and stops by itself once it heard nothing from that launcher for S seconds
+    p.add_argument("--lost-after", type=seconds, metavar="S", help=argparse.SUPPRESS)
     p.add_argument("--duration", type=seconds, metavar="S", help="stop after S seconds")
     p.add_argument(
         "--bitrate",
@@ -306,8 +309,7 @@ def run(args: argparse.Namespace) -> int:
     )
     if inventory is not None:
         across_hosts(launcher, args, inventory, wire, node_env, download)
-    if args.share:
-        share_of_a_ring(launcher, args.share)
+    lost = share_of_a_ring(launcher, args.share, args.lost_after) if args.share else None
     install_signal_handlers(launcher)
     # the status says so from its first answer: nodes that are live before the download starts
     # are not yet running their programs
@@ -334,7 +336,11 @@ def run(args: argparse.Namespace) -> int:
     if not boot_ok and code == 0:
         code = 1
     why = ""  # a host's share says why its run was not whole: the launcher of the ring names it
-    if args.share and code == 1:
+    if lost is not None and lost.is_set():
+        from tokenring.host.remote import SHARE_LOST
+
+        code, why = SHARE_LOST, f"heard nothing from the launcher for {args.lost_after:g} s"
+    elif args.share and code == 1:
         why = "; ".join(launcher.reasons())
     launcher.say(
         "stopped (interrupted)"
@@ -435,26 +441,38 @@ def wait_for_hosts(launcher: Launcher, ids: set[int], timeout: float = 120.0) ->
         launcher.say(f"not every node is live after {timeout:.0f} s: going on with those that are")
 
 
-def share_of_a_ring(launcher: Launcher, total: int) -> None:
+def share_of_a_ring(launcher: Launcher, total: int, lost_after: float | None) -> threading.Event:
     """``--share TOTAL``: this launcher runs one host's share of a ring of TOTAL nodes for ``up
     --hosts`` (over ssh). It stops when its standard input closes (the launcher stops the ring, or
-    the ssh session dropped), and does not announce the ring's stop (the other hosts go on)."""
+    the ssh session dropped) or, with ``lost_after``, once nothing came on it for that long (the
+    launcher writes a line every second; a cut network closes nothing until sshd notices);
+    the event returned is set then. It does not announce the ring's stop (the other hosts go on)."""
     import os
+    import select
     import sys
     import threading
 
     launcher.expected_nodes = total
     launcher.announce_stop = False
+    lost = threading.Event()
 
     def lifeline() -> None:
         with contextlib.suppress(OSError, ValueError):
-            while os.read(sys.stdin.fileno(), 4096):
-                pass
-        if not launcher.stopping:
+            fd = sys.stdin.fileno()
+            while True:
+                if not select.select([fd], [], [], lost_after)[0]:
+                    lost.set()
+                    break
+                if not os.read(fd, 4096):
+                    break
+        if lost.is_set():
+            launcher.say(f"heard nothing from the launcher for {lost_after:g} s: stopping this host's share")
+        elif not launcher.stopping:
             launcher.say("the launcher's connection closed: stopping this host's share")
         launcher.request_stop()
 
     threading.Thread(target=lifeline, name="share-lifeline", daemon=True).start()
+    return lost
 
 
 def boot_load(
