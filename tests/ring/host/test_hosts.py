@@ -1,11 +1,16 @@
 """``tokenring up --hosts FILE``: one ring across hosts from one command, over ssh.
 
-The slow test runs three hosts made of network namespaces on a bridge, each with an sshd of its
-own (tests/support/sshhosts.py): one ``up --hosts`` on host a forms the ring, the programs are
-downloaded over it, ``status`` and the web view on host a see every node, faults reach nodes on
-host b (a hang resumed by b's launcher, a crash respawned by it), host c's cable is cut silently (its ssh session dies, and with it its share) while a and b re-form,
-and c's nodes rejoin once the cable is back; Ctrl-C then leaves no process in any namespace.
-The quick tests refuse bad input: one line naming the inventory's file and line, exit code 2.
+The slow tests run hosts made of network namespaces on a bridge, each with an sshd of its own
+(tests/support/sshhosts.py). Three hosts: one ``up --hosts`` on host a forms the ring, the
+programs are downloaded over it, ``status``, ``monitor``, the web view and the metrics on host a
+see every node, ``record --pcap`` captures frames of every node, a ``chaos`` scenario learns the
+ring's nodes and hangs one on host c, faults reach nodes on host b (a hang resumed by b's
+launcher, a crash respawned by it), host c's cable is cut silently (its ssh session dies, and
+with it its share) while a and b re-form, and c's nodes rejoin once the cable is back; Ctrl-C
+then leaves no process in any namespace. Two hosts: a remote node's death is the run's exit
+code 1, named with its host; a host whose sshd never notices a silent client has its share stop
+by itself, during a long cut and during Ctrl-C. The quick tests refuse bad input (one line naming
+the inventory's file and line, exit code 2) and run a share's heartbeat without ssh.
 """
 
 from __future__ import annotations
@@ -229,6 +234,78 @@ def log_says(log: Path, text: str) -> bool:
     return text in log.read_text()
 
 
+def tool(hosts: SshHosts, host: SshHost, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    """``tokenring ARGS`` on ``host`` (a hang guard: a loaded machine starts an interpreter slowly)."""
+    return subprocess.run(
+        hosts.run(host, TOKENRING, *args), capture_output=True, text=True, timeout=timeout, cwd=REPO
+    )
+
+
+#: asks the metrics page on a host for the nodes it has series of
+METRICS_NODES = """
+import json, re, sys, urllib.request
+with urllib.request.urlopen(f"http://127.0.0.1:{sys.argv[1]}/metrics", timeout=5) as answer:
+    text = answer.read().decode()
+print(json.dumps(sorted({int(i) for i in re.findall(r'^tokenring_node_info[{][^}]*node="([0-9]+)"', text, re.M)})))
+"""
+
+
+def metrics_nodes(hosts: SshHosts, host: SshHost, port: int) -> list[int]:
+    """The node IDs ``up --metrics`` on ``host`` serves figures of (none while it does not answer)."""
+    done = subprocess.run(
+        hosts.run(host, sys.executable, "-c", METRICS_NODES, str(port)),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    return json.loads(done.stdout) if done.returncode == 0 else []
+
+
+def tools_see_every_host(
+    hosts: SshHosts, host: SshHost, ring: str, folder: Path, everyone: list[int]
+) -> None:
+    """From the launcher's host: ``monitor`` sees every node, ``record --pcap`` captures frames
+    of every node, and a ``chaos`` scenario that names no nodes learns the ring's eight (not
+    protocol.yaml's) and hangs and resumes a node on host c."""
+    from tokenring.contract.protocol import default_protocol
+    from tokenring.observe.pcapng import open_pcapng
+
+    capture = folder / "ring.pcapng"
+    recording = subprocess.Popen(
+        hosts.run(
+            host, TOKENRING, "record", "--pcap", str(capture), "--ring", ring, "--duration", "3", "--quiet"
+        ),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=REPO,
+    )
+    try:
+        done = tool(hosts, host, "monitor", "--ring", ring, "--once", "--json")
+        assert done.returncode == 0, done.stderr
+        assert sorted(int(i) for i in json.loads(done.stdout)["nodes"]) == everyone, done.stdout[:2000]
+        _, err = recording.communicate(timeout=120)
+    finally:
+        if recording.poll() is None:
+            recording.kill()
+            recording.wait()
+    assert recording.returncode == 0, err
+    offsets = default_protocol().header.offsets
+    frames = list(open_pcapng(capture))
+    senders = {f.frame[offsets["sid"]] for f in frames}
+    assert senders == set(everyone) and {f.did for f in frames} == set(everyone), (len(frames), senders)
+
+    scenario = folder / "hang-lcd.yaml"  # no ring.nodes: the running ring's own
+    scenario.write_text(
+        "settle: 2.0\nfaults:\n  - {at: 0.5, node: lcd, kind: hang}\n  - {at: 2.0, node: lcd, kind: resume}\n"
+    )
+    done = tool(hosts, host, "chaos", str(scenario), "--ring", ring, "--json", "-", timeout=240)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    report = json.loads(done.stdout)
+    assert report["ok"] and all(f["recovered_ms"] is not None for f in report["faults"]), report
+    assert f"ring {ring}: 8 nodes (main, motor, sonar, compass, copro, map, lcd, charger)" in done.stderr
+
+
 @needs_ssh_hosts
 @pytest.mark.slow
 @pytest.mark.timeout(600)  # its hang guards: a loaded machine's ssh and status are slow
@@ -291,7 +368,9 @@ def test_one_command_runs_a_ring_across_three_hosts_over_ssh(procs, ssh_hosts, t
                 str(programs),
                 "--store",
                 str(tmp_path / "store-a"),
-                "--web",  # host a's own port space: the default port is free there
+                "--web",  # host a's own port space: the default ports are free there
+                "--metrics",
+                "9464",
                 "--respawn",
             ),
             stdout=out,
@@ -312,6 +391,12 @@ def test_one_command_runs_a_ring_across_three_hosts_over_ssh(procs, ssh_hosts, t
         wait_until(programs_run, 60, "every node running its downloaded program")
         for name in ("b/compass", "c/lcd", "b/up", "c/up", "a/main"):
             assert f"{name} | " in log.read_text(), name  # lines prefixed with host and module
+        # the launcher's metrics have every host's nodes; the tools on its host reach them all
+        tools_started = time.monotonic()
+        wait_until(lambda: metrics_nodes(hosts, a, 9464) == everyone, 60, "every node in the metrics")
+        tools_see_every_host(hosts, a, ring, tmp_path, everyone)
+        wait_until(lambda: ring_of(everyone), 60, "the whole ring after the chaos scenario")
+        tools = time.monotonic() - tools_started
 
         # a fault on a remote node: copro (host b) hangs, really stopped, and the ring routes
         # around it; resumed through host b's launcher (SIGCONT), it is back in the ring
@@ -373,8 +458,8 @@ def test_one_command_runs_a_ring_across_three_hosts_over_ssh(procs, ssh_hosts, t
         live = re.search(r"every host's nodes are live \(8 nodes, ([0-9.]+) s\)", log.read_text())
         assert live, "the launcher said when every host's nodes were live"
         print(
-            f"nodes live {live.group(1)} s, one ring seen {formed:.1f} s, re-formed after the cut "
-            f"{reformed:.1f} s, rejoined {rejoined:.1f} s after the mend"
+            f"nodes live {live.group(1)} s, one ring seen {formed:.1f} s, the tools {tools:.1f} s, "
+            f"re-formed after the cut {reformed:.1f} s, rejoined {rejoined:.1f} s after the mend"
         )
     except AssertionError as failure:
         tail = "\n".join(log.read_text().splitlines()[-60:])
