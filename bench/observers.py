@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import itertools
 import json
 import os
 import shutil
@@ -391,14 +392,7 @@ def format_summary(report: dict[str, Any]) -> str:
         "per condition, windows alternating",
         f"{'condition':<44} {'median ms':>10} {'p99 ms':>10}",
     ]
-    names = {
-        "web": "web view + browser",
-        "record": "MCAP recording",
-        "foxglove": "bridge + client",
-        "metrics": "metrics + scrapes",
-        "pcap": "pcapng capture",
-    }
-    watched = ", ".join(names[w] for w in report["observers"])
+    watched = ", ".join(OBSERVER_NAMES[w] for w in report["observers"])
     if len(report["observers"]) > 1:
         watched += f" ({report.get('processes', 'separate')})"
     labels = {"none": "nobody watching (baseline)", "all": watched}
@@ -412,6 +406,86 @@ def format_summary(report: dict[str, Any]) -> str:
         f"the observers' processes (with the browser) used {report['observer_cpu_pct']:.0f} % of a core"
     )
     return "\n".join(lines)
+
+
+OBSERVER_NAMES = {
+    "web": "web view + browser",
+    "record": "MCAP recording",
+    "foxglove": "Foxglove bridge + client",
+    "metrics": "metrics + scrapes",
+    "pcap": "pcapng capture",
+}
+
+
+def runs_of(document: dict[str, Any]) -> list[dict[str, Any]]:
+    """The summaries a result file holds: itself (``--json``), or lists of them by name."""
+    if "windows" in document:
+        return [document]
+    return [
+        run for value in document.values() if isinstance(value, list) for run in value if "windows" in run
+    ]
+
+
+def pairs(run: dict[str, Any]) -> list[tuple[dict[str, Any], dict[str, Any]]]:
+    """Each window pair of a run: nobody watching, then watched, one after the other."""
+    windows = run["windows"]
+    return [
+        (a, b) for a, b in itertools.pairwise(windows) if a["condition"] == "none" and b["condition"] == "all"
+    ]
+
+
+def verdict(run: dict[str, Any], key: str) -> str:
+    """A ratio with how many window pairs it held in: higher in every pair is a cost that is
+    there; higher in some and lower in others is within what the pairs spread."""
+    ratio = run[f"ratio_{'median' if key == 'median_ms' else 'p99'}"]
+    each = pairs(run)
+    higher = sum(b[key] > a[key] for a, b in each)
+    if higher == len(each):
+        return f"×{ratio:.3f}, higher in all {len(each)} pairs"
+    if higher == 0:
+        return f"×{ratio:.3f}, lower in all {len(each)} pairs"
+    return f"×{ratio:.3f}, higher in {higher} of {len(each)} pairs: within the noise"
+
+
+def section_md(files: list[tuple[str, dict[str, Any]]]) -> str:
+    """RESULTS.md's section from the ``observers-*.json`` files (name, document): every run's
+    median and p99 round trip watched against nobody watching in the same run, each ratio with
+    the window pairs it held in."""
+    rows = []
+    for name, document in files:
+        for run in runs_of(document):
+            watched = ", ".join(OBSERVER_NAMES.get(w, w) for w in run["observers"])
+            processes = run.get("processes", "separate")
+            if len(run["observers"]) > 1:
+                processes = (
+                    "one `tokenring watch` (as `up` starts it)"
+                    if processes == "one watcher"
+                    else ("a process each (`--separate`)")
+                )
+            else:
+                processes = "one process"
+            none, alls = run["none"], run["all"]
+            rows.append(
+                f"| {watched} | {processes} | {len(pairs(run))} × {run['rounds']} | "
+                f"{none['median_ms']:.2f} / {none['p99_ms']:.2f} | {alls['median_ms']:.2f} / {alls['p99_ms']:.2f} | "
+                f"{verdict(run, 'median_ms')} | {verdict(run, 'p99_ms')} | "
+                f"{run['observer_cpu_pct']:.0f} % | [{name}](results/{name}) |"
+            )
+    if not rows:
+        return ""
+    speeds = sorted({str(run["speed"]) for _, document in files for run in runs_of(document)})
+    return (
+        "## What watching costs (`python -m bench.observers`)\n\n"
+        f"The robot ring at `--speed` {' or '.join(speeds)} (world and eight programs, robot idle), main's round trip in "
+        "alternating windows of nobody watching and watched, each watched window right after its "
+        "baseline in the same run: medians over the windows of each window's median and p99 (ms); a "
+        "ratio's pairs say in how many window pairs the watched figure was the higher one. The "
+        "observers' CPU includes the browser's. Generated from the result files named (do not edit).\n\n"
+        "| observers | processes | pairs × rounds | baseline median / p99 | watched median / p99 | "
+        "median | p99 | observers' CPU | result |\n|---|---|---|---|---|---|---|---|---|\n"
+        + "\n".join(rows)
+        + "\n"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1191,6 +1191,22 @@ def darmstadt_md(out_dir: Path) -> str:
     return newest_section(out_dir, "darmstadt-*.json", section_md)
 
 
+def observers_md(out_dir: Path) -> str:
+    """What watching costs the round trip (``python -m bench.observers``): every ``observers-*.json``."""
+    from bench.observers import section_md
+
+    found = []
+    for path in sorted(out_dir.glob("observers-*.json")):
+        try:
+            found.append((path.name, json.loads(path.read_text())))
+        except (OSError, ValueError):
+            continue
+    try:
+        return section_md(found)
+    except (KeyError, TypeError):
+        return ""
+
+
 def nemesis_md(out_dir: Path) -> str:
     """The Nemesis section from ``nemesis-*.json`` (``python -m bench.nemesis``): per result file
     its runs summed; empty without one."""
@@ -1504,6 +1520,7 @@ def write_report(
         parts.append(download_md(sections["download"]))
     if "spurious" in sections:
         parts.append(spurious_md(sections["spurious"]))
+    parts.append(observers_md(out_dir))
     parts.append(nemesis_md(out_dir))
     parts.append(simcampaign_md(out_dir))
     parts.append(mutants_md(out_dir))
