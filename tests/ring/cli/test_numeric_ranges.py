@@ -41,6 +41,7 @@ OPTIONS = [
     ("up --duration {v}", "--duration", WEEK),
     ("up --boot-wave {v}", "--boot-wave", "1..255"),
     ("up --share {v}", "--share", "1..255"),
+    ("up --share 2 --lost-after {v}", "--lost-after", WEEK),
     ("up --web-port {v}", "--web-port", "1..65535"),
     ("up --foxglove-port {v}", "--foxglove-port", "1..65535"),
     ("up --metrics {v}", "--metrics", "1..65535"),
