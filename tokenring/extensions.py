@@ -149,6 +149,11 @@ class KeyHandler(typing.Protocol):
         """Called every :attr:`WebKeys.idle_s` seconds between keys (renew what a key holds)."""
         ...
 
+    def unattended(self) -> dict[str, Any] | None:
+        """Nobody is there any more (the last page closed, a script fell silent, the view
+        stops): undo what the keys hold; the answer for the log, None if nothing was held."""
+        ...
+
 
 @dataclass
 class WebKeys:

@@ -297,12 +297,11 @@ class WebView:
                 log.warning("keys: %s", exc)
 
     def _release(self, why: str) -> None:
-        """On the keys' thread: the handler stops what its keys hold (if it can be told to)."""
-        unattended = getattr(self._key_handler, "unattended", None)
-        if not callable(unattended):
+        """On the keys' thread: the handler stops what its keys hold."""
+        if self._key_handler is None:
             return
         try:
-            answer = unattended()
+            answer = self._key_handler.unattended()
         except TokenRingError as exc:
             log.warning("keys (%s): %s", why, exc)
             return

@@ -34,6 +34,7 @@ class Handler:
         self.most_at_once = 0
         self.started = threading.Event()
         self.release = threading.Event()
+        self.unattended_calls = 0
 
     def press(self, key: str) -> dict[str, Any]:
         self.threads.add(threading.current_thread().name)
@@ -48,6 +49,9 @@ class Handler:
 
     def idle(self) -> None:
         self.idles += 1
+
+    def unattended(self) -> None:
+        self.unattended_calls += 1
 
 
 def view_of(keys: WebKeys | None) -> WebView:
