@@ -14,10 +14,16 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from tokenring.errors import TokenRingError, TransportError, UsageError
-from tokenring.host.children import KILL_REAP_S, RESPAWN_DELAY_S, STOP_TIMEOUT_S, describe_exit
+from tokenring.host.children import KILL_REAP_S, RESPAWN_DELAY_S, describe_exit
 
 if TYPE_CHECKING:
     from tokenring.host.launcher import Launcher
+
+
+#: a service gets this long after SIGTERM before SIGKILL: longer than a node's, because a world
+#: simulator closes its session and its logs after the nodes' last requests, and on a loaded
+#: machine that took more than a node's 1.5 s (a stop then ended in a false failure)
+STOP_TIMEOUT_S = 5.0
 
 
 @dataclass
@@ -125,7 +131,7 @@ class ServiceSupervisor:
         launcher.failure(f"service {name} (pid {pid}) {describe_exit(code)}: {why}")
 
     def stop(self) -> None:
-        """SIGTERM each service, SIGKILL it after 1.5 s; one that failed to stop cleanly (an
+        """SIGTERM each service, SIGKILL it after :data:`STOP_TIMEOUT_S`; one that failed to stop cleanly (an
         exit code, or not stopping in time: a recorder may not have finished its file) counts."""
         launcher = self.launcher
         for name, process in self.children.items():
