@@ -44,8 +44,9 @@ TURN_STEP_DEG_S = 10.0
 MAX_TRACK_MM_S = 100.0
 MAX_TURN_DEG_S = 30.0
 #: one SET_WHEEL_SPEEDS of the held speed lasts this long, and is renewed this often: a renewal
-#: may take two of the three seconds to reach the motor before the robot stops
-HOLD_MS = 3_000
+#: may take four of the five seconds to reach the motor before the robot stops (with two, a
+#: renewal on a loaded machine came too late now and then and the robot stood)
+HOLD_MS = 5_000
 RENEW_AFTER_S = 1.0
 #: how long d and e wait for the motor's state to show them (a loaded ring takes a few rounds)
 CONFIRM_S = 5.0
