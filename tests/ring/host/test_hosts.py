@@ -610,18 +610,7 @@ def test_a_killed_launcher_leaves_nothing_on_any_host(procs, request, tmp_path):
     request.addfinalizer(hosts.close)
     a, b = hosts.hosts
     ring = f"k{uuid.uuid4().hex[:8]}"
-    spec = {
-        "hosts": {
-            "a": {"address": a.address, "ssh": "local", "nodes": ["main", "motor"]},
-            "b": {
-                "address": b.address,
-                "ssh": {"identity": str(hosts.identity), "options": hosts.ssh_options},
-                "nodes": ["sonar", "compass"],
-                "tokenring": TOKENRING,
-                "store": str(tmp_path / "store-b"),
-            },
-        }
-    }
+    spec = two_hosts_spec(hosts, tmp_path)
     # host b reached through an ssh_config of the test's own: its Host alias, key and known_hosts
     config = tmp_path / "ssh_config"
     config.write_text(

@@ -18,10 +18,8 @@ import pytest
 
 from modules.pc.operator import HOLD_MS, Operator
 from modules.pc.web.keys import NOTHING_TO_QUIT, RobotKeys, add_options, web_keys
+from tests.support.webserve import serve
 from tokenring import UsageError
-from tokenring.contract.protocol import default_protocol
-from tokenring.observe.feed import Feed
-from tokenring.web.server import WebView
 
 
 class Link:
@@ -102,23 +100,7 @@ def serve_keys(link: Link, test: Callable[[str, aiohttp.ClientSession], Awaitabl
     """The robot's keys (on ``link``) in a web view on a free port, without a ring; ``test(url, client)``."""
     keys = web_keys(argparse.Namespace())
     keys.open = lambda session, ring: RobotKeys(Operator(link))
-    view = WebView(None, "keys", default_protocol(), [], keys=keys, feed=Feed(None, "keys", []))
-
-    async def main() -> None:
-        stop, ready = asyncio.Event(), asyncio.Event()
-        url: list[str] = []
-        server = asyncio.create_task(
-            view.serve("127.0.0.1", 0, lambda at: (url.append(at), ready.set()), stop)
-        )
-        await asyncio.wait_for(ready.wait(), 30)
-        try:
-            async with aiohttp.ClientSession() as client:
-                await test(url[0], client)
-        finally:
-            stop.set()
-            await server
-
-    asyncio.run(main())
+    serve(keys, test)
 
 
 async def until(condition: Callable[[], bool], what: str, timeout: float = 60.0) -> None:
