@@ -127,26 +127,8 @@ class EchoMemory:
         """How far the centre can go straight forward (``reverse``: back) from ``pose`` before the
         collision circle comes within the margin of a remembered echo; 0 if it is within it
         already on that side, inf if nothing lies in the way."""
-        touch, _ = self._touches(pose, reverse)
-        if len(touch) == 0:
-            return math.inf
-        return max(0.0, float(touch.min()) - self.s.margin_mm)
-
-    def blocker(self, pose: Pose, reverse: bool = False) -> tuple[float, float] | None:
-        """The remembered echo the body would come near first going straight from ``pose``
-        (world mm), None if none lies in the way: where the thing is that :meth:`free_mm` keeps
-        clear of, for turning so that it lies beside the body."""
-        touch, points = self._touches(pose, reverse)
-        if len(touch) == 0:
-            return None
-        x, y = points[int(np.argmin(touch))]
-        return float(x), float(y)
-
-    def _touches(self, pose: Pose, reverse: bool) -> tuple[np.ndarray, np.ndarray]:
-        """For each remembered echo in the body's lane, how far the centre goes straight before
-        the collision circle touches it, and those echoes."""
         if len(self._points) == 0:
-            return np.zeros(0), self._points
+            return math.inf
         heading = pose[2] + (math.pi if reverse else 0.0)
         c, s = math.cos(heading), math.sin(heading)
         dx, dy = self._points[:, 0] - pose[0], self._points[:, 1] - pose[1]
@@ -158,5 +140,7 @@ class EchoMemory:
         in_lane = side < radius
         touch = along[in_lane] - np.sqrt(radius**2 - side[in_lane] ** 2)
         # one the body would overlap already lies where the body is: misplaced, not in the way
-        ahead = touch > -self.s.overlap_mm
-        return touch[ahead], self._points[in_lane][ahead]
+        touch = touch[touch > -self.s.overlap_mm]
+        if len(touch) == 0:
+            return math.inf
+        return max(0.0, float(touch.min()) - self.s.margin_mm)

@@ -265,7 +265,7 @@ class ExploreLeftWall(TurnJudging, IslandVisits, FrontierVisits, ReturnHome, Nav
             self.retry_inner = False
             ran_into = last is not None and last.reason in (REASON["STALL"], REASON["COLLISION"])
             if not ran_into:  # a back-off that ran into something is handled as any collision
-                return self._inner(sensors, last)
+                return self._inner(sensors)
         # (the gauge's back-off, however it ended, goes up to its wall: phase "gauge" below)
         if (
             last is not None
@@ -361,9 +361,7 @@ class ExploreLeftWall(TurnJudging, IslandVisits, FrontierVisits, ReturnHome, Nav
             self.rotation = 0.0
             self.phase = "follow"
             self.state = NAV["TURN"]
-            clip = self._clip_turn(last)
-            turn = self._turn(clip or -90.0, "inner", sensors, align=clip is None)
-            return turn or [self._segment()]
+            return self._turn(-90, "inner", sensors, align=True) or [self._segment()]
         if label not in ("face", "turned", "leave") and not self.islands:
             facing = self._face_nearest(sensors)
             if facing:
@@ -378,7 +376,7 @@ class ExploreLeftWall(TurnJudging, IslandVisits, FrontierVisits, ReturnHome, Nav
         if label == "clear":
             if blocked:  # something ahead already: an inner corner after all
                 self.phase = "follow"
-                return self._inner(sensors, last)
+                return self._inner(sensors)
             self.phase = "reacquire"
             self.state = NAV["TURN"]
             return self._turn(90, "outer", sensors) or [self._reacquire()]
@@ -397,7 +395,7 @@ class ExploreLeftWall(TurnJudging, IslandVisits, FrontierVisits, ReturnHome, Nav
                 return [self._segment()]
             if blocked:
                 self.phase = "follow"
-                return self._inner(sensors, last)
+                return self._inner(sensors)
             self.outer_tries += 1  # no wall: the end of a thin wall or a pillar — go round it
             if self.outer_tries >= 3:
                 self.phase, self.outer_tries = "find", 0
@@ -439,7 +437,7 @@ class ExploreLeftWall(TurnJudging, IslandVisits, FrontierVisits, ReturnHome, Nav
             if self.target is not None:  # round an island: count from here (not the turn onto it)
                 self.rotation = 0.0
         if label == "follow" and blocked:
-            return self._inner(sensors, last)
+            return self._inner(sensors)
         if label == "follow" and last.trigger == "left_beyond":
             self.phase, self.last_follow = "outer", None
             self.state = NAV["FOLLOW_WALL"]
@@ -493,22 +491,12 @@ class ExploreLeftWall(TurnJudging, IslandVisits, FrontierVisits, ReturnHome, Nav
             self._forward(s.gauge_mm, "gauge ahead"),
         ]
 
-    def _inner(self, sensors: Sensors, last: Outcome | None = None) -> list[Move]:
+    def _inner(self, sensors: Sensors) -> list[Move]:
         """The way ahead is blocked: turn right so the wall ahead is on the left."""
         self.state = NAV["TURN"]
-        clip = self._clip_turn(last)
+        angle = -90.0 + self._correction(with_distance=False)
         self.last_follow = None
-        if clip is not None:  # (a corner, no wall to align with)
-            return self._turn(clip, "inner", sensors)
-        return self._turn(-90.0 + self._correction(with_distance=False), "inner", sensors, align=True)
-
-    def _clip_turn(self, last: Outcome | None) -> float | None:
-        """The right turn that puts beside the body what the clearance stopped it short of, when
-        that lay off to the left (a corner the body would clip); None for anything else."""
-        bearing = last.blocked_bearing_deg if last is not None and last.trigger == "clearance" else None
-        if bearing is None or bearing < self.s.clip_bearing_deg:
-            return None
-        return -max(self.s.clip_turn_deg, 90.0 - bearing)
+        return self._turn(angle, "inner", sensors, align=True)
 
     def _reacquire(self) -> Move:
         return self._forward(

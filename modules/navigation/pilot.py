@@ -132,9 +132,6 @@ class Outcome:
     samples: list[tuple[int, list[int]]] = field(default_factory=list)  # (distance_mm, distances)
     trigger: str = ""
     poses: list[tuple[float, float, float] | None] = field(default_factory=list)  # the pose at each sample
-    #: ended by the clearance: the bearing (degrees, left positive, from the heading the move
-    #: drove) of the remembered echo that closed the way
-    blocked_bearing_deg: float | None = None
 
     @property
     def done(self) -> bool:
@@ -197,7 +194,6 @@ class Pilot:
         self._capped = False  # ... less than the move asked for: the clearance cut it short
         self._escaping = False  # the move under way is the escape the ALERT lock allows
         self._keep_clear = True  # the sequence under way keeps clear of remembered echoes
-        self._blocked_bearing: float | None = None  # where the echo lay that closed the way
         self.state = self.IDLE
         self.alert_lock = STOPPED
         self.moves: list[Move] = []
@@ -277,9 +273,7 @@ class Pilot:
             return
         amount = self._capped_amount(move, sensors)
         clear = math.inf if escape else self._clear_mm(move.direction, sensors)
-        self._blocked_bearing = None
         if clear < self.settings.min_clear_mm:
-            self._note_blocker(move.direction, sensors)
             self._finish(REASON["CLOSE"], "clearance", driven=0)
             return
         self._capped = clear < amount
@@ -381,7 +375,6 @@ class Pilot:
                 self._stop(REASON["ALERT"], f"alert on sonar {sorted(alert)}", lock=move.direction)
                 return None
             if self._closing(move, sensors):
-                self._note_blocker(move.direction, sensors)
                 self._stop(REASON["CLOSE"], "clearance")
                 return None
             new_sweep = sensors.sweep != self._abort_sweep
@@ -407,7 +400,6 @@ class Pilot:
                     return self._take()
                 if self._capped and self._clear_mm(move.direction, sensors) < self.settings.min_clear_mm:
                     # ended where the clearance cut it short, and the way is still closed there
-                    self._note_blocker(move.direction, sensors)
                     self._finish(REASON["CLOSE"], "clearance", driven=sensors.distance_mm)
                     return self._take()
                 self._next(sensors)
@@ -478,19 +470,6 @@ class Pilot:
             return math.inf
         free = self.clearance.free_mm(sensors.pose, reverse=direction == REVERSE)
         return free - self.settings.clearance_reserve_mm
-
-    def _note_blocker(self, direction: int, sensors: Sensors) -> None:
-        """Remember the bearing of the echo that closes the way, for the outcome."""
-        if self.clearance is None or sensors.pose is None:
-            return
-        reverse = direction == REVERSE
-        point = self.clearance.blocker(sensors.pose, reverse=reverse)
-        if point is None:
-            return
-        x, y, heading = sensors.pose
-        heading += math.pi if reverse else 0.0
-        bearing = math.atan2(point[1] - y, point[0] - x) - heading
-        self._blocked_bearing = math.degrees(math.remainder(bearing, 2 * math.pi))
 
     def _closing(self, move: Move, sensors: Sensors) -> bool:
         """A running straight move must stop now: the free way left is shorter than what it still
@@ -571,8 +550,6 @@ class Pilot:
             self._scanning = False
         move = self.moves[min(self.index, len(self.moves) - 1)] if self.moves else None
         self.outcome = Outcome(reason, move, self.index, driven, self._samples, trigger, self._poses)
-        if trigger == "clearance":
-            self.outcome.blocked_bearing_deg = self._blocked_bearing
         self.state = self.IDLE
 
     def _triggered(self, condition: Abort, sensors: Sensors) -> bool:

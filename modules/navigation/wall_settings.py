@@ -12,11 +12,6 @@ class WallSettings:
 
     wall_cm: int = 30  # the distance to keep from the left wall (side sonar reading)
     front_stop_cm: int = 25  # an obstacle this near ahead ends a segment: inner corner
-    #: the clearance closed the way on something this far left of the heading or more (a corner
-    #: the body would clip, not a wall across the way): turned right only until it lies beside
-    #: the body, by 90° less its bearing, and at least ``clip_turn_deg``
-    clip_bearing_deg: float = 15.0
-    clip_turn_deg: float = 20.0
     lost_margin_cm: int = 25  # the left sonar reading this much over wall_cm: the wall ended
     lost_sweeps: int = 2  # ... on this many sweeps in a row (one dropout is no corner)
     segment_mm: int = 600

@@ -143,15 +143,3 @@ def test_a_wall_beside_the_lane_is_passed_and_one_in_it_is_not():
     for x in range(0, 600, 40):  # 30 mm off them: 200 mm from the centre line, inside the lane
         inside.add((float(x), 0.0, 0.0), readings(**{f"s{RIGHT_FRONT}": 3, f"s{RIGHT_REAR}": 3}), x)
     assert inside.free_mm((-400.0, 0.0, 0.0)) < 400 - MARGIN
-
-
-def test_the_blocker_is_the_echo_the_body_would_come_near_first():
-    echoes = memory()
-    assert echoes.blocker((0.0, 0.0, 0.0)) is None
-    nose = SONAR_MOUNTS[FRONT].x
-    echoes.add((0.0, 0.0, 0.0), readings(**{f"s{FRONT}": round((900 - nose) / 10)}), 0)
-    x, y = echoes.blocker((0.0, 0.0, 0.0))
-    # on the front beam's arc at 900 mm: the arc's points nearest the centre line come first
-    assert math.hypot(x - nose, y) == pytest.approx(900 - nose, abs=5)
-    assert abs(math.degrees(math.atan2(y, x - nose))) <= 7.5 + 0.1
-    assert echoes.blocker((0.0, 0.0, math.pi)) is None  # looking away: nothing in the way

@@ -886,33 +886,3 @@ def test_an_alert_behind_is_backed_off_forwards_not_into_it_again():
         escape = nav.plan(Outcome(REASON["ALERT"], escape[-1], driven_mm=0), s, FORWARD)
         assert escape[0].direction == FORWARD, escape
         assert REVERSE not in [m.direction for m in escape], escape
-
-
-@pytest.mark.parametrize(
-    ("bearing", "expected"),
-    [(None, 90), (0.0, 90), (-30.0, 90), (30.0, 60), (60.0, 30), (85.0, 20)],
-)
-def test_explore2_turns_a_corner_it_would_clip_only_until_it_lies_beside_the_body(bearing, expected):
-    """The clearance stopped the way short of an echo off to the left (a corner the body would
-    clip, not a wall across the way): right by 90° less its bearing, at least 20°; a wall across
-    the way (or to the right) is turned from by 90° as ever."""
-    from modules.navigation.pilot import Outcome
-
-    nav = ExploreLeftWall(LAYOUT, NO_GAUGE)
-    find = nav.plan(None, sensors_with(), STOPPED)
-    blocked = Outcome(REASON["CLOSE"], find[0], trigger="clearance", blocked_bearing_deg=bearing)
-    turn = nav.plan(blocked, sensors_with(), STOPPED)
-    assert turn[0].label == "inner" and turn[0].direction == TURN_RIGHT and turn[0].amount == expected
-    # the same on a follow segment
-    nav.phase = "follow"
-    nav.lap_start = (0.0, 0.0, 0.0)
-    s = sensors_with(left_front=30, left_rear=30)
-    seg = settle(nav, Outcome(REASON["DONE"], turn[0]), s)
-    assert seg[-1].label == "follow"
-    again = nav.plan(
-        Outcome(REASON["CLOSE"], seg[-1], trigger="clearance", blocked_bearing_deg=bearing), s, STOPPED
-    )
-    assert again[0].label == "inner" and again[0].direction == TURN_RIGHT
-    assert (
-        again[0].amount == expected if bearing is not None and bearing >= 15 else 85 <= again[0].amount <= 95
-    )

@@ -171,36 +171,3 @@ def test_the_seed_pilot_keeps_no_clearance():
     b.tick(2, distances=reading(front=30))
     b.pilot.start([Move(FORWARD, 3000, label="drive")], b.sensors)
     assert b.motor_commands()[-1] == ("MOVE_FORWARD", {"distance_mm": 3000, "speed_pct": 100})
-
-
-def test_a_way_closed_off_to_the_left_says_where_the_echo_lay():
-    """A corner the body would clip on its left: the outcome gives its bearing (left positive),
-    so the navigator can turn only until it lies beside the body."""
-    b = Bench(pose=(0.0, 0.0, 0.0))
-    # the front-left sonar (45° left) reads 10 cm: an echo ahead and to the left, in the lane
-    b.tick(2, distances=_front_left(10))
-    assert b.pilot.start([Move(FORWARD, 1500, label="find")], b.sensors)
-    out = b.tick()
-    if out is None:  # the move was sent, capped short of the echo: let it end there
-        (name, args) = b.motor_commands()[-1]
-        assert name == "MOVE_FORWARD" and args["distance_mm"] < 400
-        b.drive_to(float(args["distance_mm"]), args["distance_mm"])
-        b.pilot.note_position_reached(MOVE_STATUS["DONE"], 1)
-        b.sensors.motor_state = MOTOR_STATE["IDLE"]
-        out = b.tick(3)
-    assert out is not None and out.trigger == "clearance"
-    assert out.blocked_bearing_deg is not None and 15 < out.blocked_bearing_deg < 90
-    # ended by anything else, no bearing
-    b2 = Bench()
-    b2.pilot.start([Move(FORWARD, 100, label="find")], b2.sensors)
-    b2.drive_to(100.0, 100)
-    b2.pilot.note_position_reached(MOVE_STATUS["DONE"], 1)
-    b2.sensors.motor_state = MOTOR_STATE["IDLE"]
-    done = b2.tick(3)
-    assert done is not None and done.done and done.blocked_bearing_deg is None
-
-
-def _front_left(cm: int) -> list[int]:
-    out = [FAR] * 8
-    out[LAYOUT.front[0]] = cm  # the front pair's left one
-    return out
