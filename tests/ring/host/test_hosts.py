@@ -219,15 +219,21 @@ with urllib.request.urlopen(f"http://127.0.0.1:{sys.argv[1]}/api/state", timeout
 """
 
 
-def web_nodes(hosts: SshHosts, host: SshHost, port: int) -> list[int]:
-    """The node IDs the web view on ``host`` shows (none while it does not answer)."""
+def asked_on(hosts: SshHosts, host: SshHost, script: str, port: int) -> list[int]:
+    """The node IDs ``script`` (WEB_NODES, METRICS_NODES) reads on ``host`` from ``port``'s page
+    (none while it does not answer)."""
     done = subprocess.run(
-        hosts.run(host, sys.executable, "-c", WEB_NODES, str(port)),
+        hosts.run(host, sys.executable, "-c", script, str(port)),
         capture_output=True,
         text=True,
         timeout=60,
     )
     return sorted(int(i) for i in json.loads(done.stdout)) if done.returncode == 0 else []
+
+
+def web_nodes(hosts: SshHosts, host: SshHost, port: int) -> list[int]:
+    """The node IDs the web view on ``host`` shows."""
+    return asked_on(hosts, host, WEB_NODES, port)
 
 
 def log_says(log: Path, text: str) -> bool:
@@ -251,14 +257,8 @@ print(json.dumps(sorted({int(i) for i in re.findall(r'^tokenring_node_info[{][^}
 
 
 def metrics_nodes(hosts: SshHosts, host: SshHost, port: int) -> list[int]:
-    """The node IDs ``up --metrics`` on ``host`` serves figures of (none while it does not answer)."""
-    done = subprocess.run(
-        hosts.run(host, sys.executable, "-c", METRICS_NODES, str(port)),
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    return json.loads(done.stdout) if done.returncode == 0 else []
+    """The node IDs ``up --metrics`` on ``host`` serves figures of."""
+    return asked_on(hosts, host, METRICS_NODES, port)
 
 
 def tools_see_every_host(
