@@ -74,7 +74,7 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
     from tokenring.contract import keys
     from tokenring.contract.protocol import load_protocol
     from tokenring.errors import UsageError
-    from tokenring.observe.feed import Feed, feed_sources
+    from tokenring.observe.feed import Feed, FeedSource, RingSource, feed_sources
     from tokenring.observe.recording import McapRecorder, Selection, Stopper
 
     if (
@@ -107,7 +107,13 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
     # the keyboard's options (files its keys run) are refused before the process joins the ring
     web_keys = extensions.web_keys(args) if watch.web_port is not None else None
     protocol = load_protocol(args.protocol)
-    sources = feed_sources(protocol, watch.ring)
+    # only counted (metrics) or captured (pcap): the robot's topics and the channels go unread,
+    # and the nodes are asked for their counters when Prometheus scrapes, not twice a second
+    counting_only = watch.web_port is None and watch.record is None and watch.foxglove_port is None
+    if counting_only:
+        sources: list[FeedSource] = [RingSource(protocol, poll_interval_s=0.0, channels_decoded=False)]
+    else:
+        sources = feed_sources(protocol, watch.ring)
     if watch.foxglove_port is not None:
         from tokenring.observe.foxglove import FoxgloveBridge
 
@@ -135,9 +141,11 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
                 watch.metrics_host, watch.metrics_port, option=watch.metrics_option
             )
         # the metrics' own source (the nodes' download counters) feeds nothing but the metrics
-        read = sources if watch.metrics is None else [*sources, watch.metrics.source()]
+        read = sources if watch.metrics is None or counting_only else [*sources, watch.metrics.source()]
         with tap_session(args) as session:
             feed = Feed(session, watch.ring, read)
+            if watch.metrics is not None and counting_only:
+                watch.metrics.ask_on_scrape(session)
             if watch.metrics is not None:
                 feed.add_sink(watch.metrics.on_message)
                 watch.metrics.dropped = lambda: feed.dropped

@@ -79,6 +79,11 @@ def ring_view(ring: str, who: int | str = "*") -> str:
     return f"{PREFIX}/{ring}/view/{who}"
 
 
+#: what a ``stats`` question may ask a node to add to its answer (``{"with": [...]}``): its
+#: active faults (the ``fault`` verb's list) and its system layer's report (``system``)
+STATS_EXTRAS = ("faults", "system")
+
+
 def control(ring: str, node_id: int | str, verb: str = "**") -> str:
     return f"{PREFIX}/{ring}/ctl/{node_id}/{verb}"
 

@@ -101,7 +101,7 @@ class NodeProcess:
         #: set to end :meth:`wait` (the process's signal handlers set the same one)
         self.stop_event = stop_event if stop_event is not None else StopEvent()
         self.control: dict[str, ControlHandler] = {
-            "stats": lambda _: self._stats(),
+            "stats": self._stats,
             "rounds": lambda _: self.os.round_times(),
             "visits": lambda _: self.os.stats.visits,
             "leave": self._request_leave,
@@ -133,11 +133,23 @@ class NodeProcess:
         self.pclink: PcLinkServer | None = None
         self.resident: ResidentHost | None = None
 
-    def _stats(self) -> dict[str, Any]:
-        """The node's snapshot with its regenerations by cause and its uptime (``stats`` verb)."""
+    def _stats(self, request: dict[str, Any] | None = None) -> dict[str, Any]:
+        """The node's snapshot with its regenerations by cause and its uptime (``stats`` verb).
+        ``{"with": ["faults", "system"]}`` adds its active faults and its system layer's report:
+        a watcher asks each node one question where it would ask three, and every answer is
+        the node's work between two token visits."""
+        extra = (request or {}).get("with", [])
+        if not isinstance(extra, list) or not all(
+            isinstance(e, str) and e in keys.STATS_EXTRAS for e in extra
+        ):
+            raise UsageError(f"stats: 'with' takes a list of {', '.join(keys.STATS_EXTRAS)}, not {extra!r}")
         snapshot = self.os.snapshot()
         snapshot["regenerations"] = self.regenerations.report()
         snapshot["uptime_s"] = snapshot["regenerations"]["uptime_s"]
+        if "faults" in extra:
+            snapshot["faults"] = self.faults.listing()["faults"]
+        if "system" in extra:
+            snapshot["system"] = self.system.report()
         return snapshot
 
     def _tell_faults(self, listing: dict[str, Any]) -> None:

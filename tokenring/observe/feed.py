@@ -193,10 +193,15 @@ EVENT_KINDS = {b"X": "excluded", b"J": "rejoin", b"L": "leaving", b"R": "regener
 
 @dataclass
 class RingSource(FeedSource):
-    """Frames, decoded channels (when their bytes change), round trips, events, node counters."""
+    """Frames, decoded channels (when their bytes change), round trips, events, node counters.
+
+    ``channels`` False leaves the channels undecoded (a watcher that only counts and captures
+    frames); ``poll_interval_s`` 0 asks the nodes nothing (no ``/ring/nodes``): every question
+    is answered by a node process between its token visits."""
 
     protocol: Protocol
     poll_interval_s: float = 0.5
+    channels_decoded: bool = True
     _last_channel: dict[str, bytes] = field(default_factory=dict)
     _last_frame: bytes = b""
     _wraps: dict[int, tuple[int, int]] = field(default_factory=dict)  # node -> (time, counter)
@@ -219,6 +224,7 @@ class RingSource(FeedSource):
                 f"{ch.name} when it changes",
             )
             for ch in self.channels()
+            if self.channels_decoded
         ]
         return out
 
@@ -269,6 +275,8 @@ class RingSource(FeedSource):
             if before is not None and (counter - before[1]) & 0xFF == 1:
                 trip = {"ms": (time_ns - before[0]) / 1e6, "node": did}
                 out.append(Message("/ring/roundtrip", time_ns, trip))
+        if not self.channels_decoded:
+            return out
         for ch in self.channels():
             raw = frame[ch.address : ch.end]
             if self._last_channel.get(ch.name) == raw:
@@ -279,17 +287,29 @@ class RingSource(FeedSource):
         return out
 
     def poll(self, session: Any, ring: str, time_ns: int) -> list[Message]:
-        from tokenring.transport.session import query
-
-        nodes: dict[str, Any] = {}
-        faults: dict[str, Any] = {}
-        for _, reply in query(session, keys.control(ring, "*", "stats"), timeout=0.5):
-            if reply.get("ok"):
-                nodes[str(reply["result"]["id"])] = reply["result"]
-        for _, reply in query(session, keys.control(ring, "*", "fault"), {"kind": "list"}, timeout=0.5):
-            if reply.get("ok"):
-                faults[str(reply["result"]["id"])] = reply["result"]["faults"]
+        nodes, faults, _ = ask_nodes(session, ring, ["faults"])
         return [Message("/ring/nodes", time_ns, {"nodes": nodes, "faults": faults})]
+
+
+def ask_nodes(
+    session: Any, ring: str, extras: list[str], timeout: float = 0.5
+) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
+    """Every answering node's ``stats`` by ID, and the ``extras`` it was asked to add (one
+    question a node: ``faults``, ``system``) split off into their own tables by ID."""
+    from tokenring.transport.session import query
+
+    tables: dict[str, dict[str, Any]] = {"nodes": {}, "faults": {}, "system": {}}
+    request = {"with": extras} if extras else None
+    for _, reply in query(session, keys.control(ring, "*", "stats"), request, timeout=timeout):
+        result = reply.get("result") if reply.get("ok") else None
+        if not isinstance(result, dict) or "id" not in result:
+            continue
+        node_id = str(result["id"])
+        for extra in extras:
+            if extra in result:
+                tables[extra][node_id] = result.pop(extra)
+        tables["nodes"][node_id] = result
+    return tables["nodes"], tables["faults"], tables["system"]
 
 
 # --------------------------------------------------------------------------------------------

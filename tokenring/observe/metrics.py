@@ -4,26 +4,29 @@
 Two kinds of figures, each taken where it is already kept:
 
 * **What the nodes count** (visits, retries, CRC rejects, duplicate passes, inbox full,
-  regenerations, active faults, what a download brought) is cumulative in each node, and the
-  watcher's feed already asks every node for it twice a second (:meth:`RingSource.poll
-  <tokenring.observe.feed.RingSource.poll>`, topic ``/ring/nodes``). :class:`RingMetrics` is a
-  custom *collector*: it keeps the latest answer of each node and turns it into metric families
-  when Prometheus scrapes. No second poll loop, no deltas kept here (``Counter.inc`` would need
-  them, and a node that restarts would have to be told from one that did nothing); a restarted
-  node's counters start again from zero, a counter reset Prometheus's ``rate`` understands.
+  regenerations, active faults, what a download brought) is cumulative in each node.
+  :class:`RingMetrics` is a custom *collector*: it keeps the latest answer of each node and
+  turns it into metric families when Prometheus scrapes. A watcher that only serves metrics
+  asks for the answers then (:meth:`RingMetrics.ask_on_scrape`, one ``stats`` question a node
+  with its faults and system report, at most every :data:`SCRAPE_ASK_MIN_S`); one that also
+  feeds the web view, a recording or the bridge takes its feed's (topic ``/ring/nodes``, twice a
+  second). No deltas kept here (``Counter.inc`` would need them, and a node that restarts would
+  have to be told from one that did nothing); a restarted node's counters start again from
+  zero, a counter reset Prometheus's ``rate`` understands.
 * **What only the watcher sees**: each round trip, timed on the frames it receives
   (``/ring/roundtrip``), and the ring's events (``/ring/event``). They exist nowhere to be read
   at scrape time, so they are accumulated here as they arrive, in ``prometheus_client``'s own
   :class:`~prometheus_client.Histogram` and :class:`~prometheus_client.Counter`.
 
-What a download brought each node is in its system layer's counters (control verb ``system``),
-which ``/ring/nodes`` does not carry: :class:`SystemSource` asks for them on the feed's own poll
-thread, every :data:`SYSTEM_POLL_S` seconds, and hands them here (it makes no message: a
-recording or the web view is the same with or without ``--metrics``).
+Beside a feed, what a download brought each node (its system layer's counters, control verb
+``system``, which ``/ring/nodes`` does not carry) comes from :class:`SystemSource`, on the
+feed's own poll thread every :data:`SYSTEM_POLL_S` seconds (it makes no message: a recording or
+the web view is the same with or without ``--metrics``).
 
 Everything is registered in a private :class:`~prometheus_client.CollectorRegistry` (the
 watcher's own process figures would be mistaken for the ring's) and served by
-``prometheus_client``'s HTTP server on its own thread: a scrape never waits for the feed.
+``prometheus_client``'s HTTP server on its own thread: a scrape never waits for the feed (in a
+watcher that only serves metrics it waits for the nodes' answers, half a second at most).
 """
 
 from __future__ import annotations
@@ -43,7 +46,7 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metri
 
 from tokenring.contract import keys
 from tokenring.errors import UsageError
-from tokenring.observe.feed import FeedSource, Message, decode_msgpack
+from tokenring.observe.feed import FeedSource, Message, ask_nodes, decode_msgpack
 
 log = logging.getLogger("tokenring.metrics")
 
@@ -79,6 +82,9 @@ ROUND_TRIP_BUCKETS = (
 STALE_S = 5.0
 #: seconds between two ``system`` queries (download progress changes at the pace of a download)
 SYSTEM_POLL_S = 2.0
+#: a watcher that only serves metrics asks the nodes when scraped, at most once in this many
+#: seconds (a faster scraper gets the same answers again)
+SCRAPE_ASK_MIN_S = 1.0
 #: seconds a node has to answer a ``system`` query (one that does not keeps its last answer)
 SYSTEM_TIMEOUT_S = 0.5
 #: the faults that stay active until ended (``tokenring fault``): one 0/1 series each per node
@@ -209,6 +215,9 @@ class RingMetrics:
     _faults: dict[int, _Seen] = field(default_factory=dict)
     _system: dict[int, _Seen] = field(default_factory=dict)
     _polled_at: float | None = None
+    _ask: Callable[[], None] | None = None
+    _asked_at: float | None = None
+    _ask_lock: threading.Lock = field(default_factory=threading.Lock)
     _server: Any = None
     _thread: threading.Thread | None = None
 
@@ -273,10 +282,37 @@ class RingMetrics:
         with self._lock:
             return sorted(self._nodes)
 
+    def ask_on_scrape(self, session: Any) -> None:
+        """Ask the nodes when Prometheus scrapes, as an exporter's collector does, instead of on
+        a feed's clock: a watcher that only serves metrics then asks nothing while nobody
+        scrapes, and one question a node (``stats`` with its faults and system report) when
+        one does. Every answer is a node's work between two token visits."""
+
+        def ask() -> None:
+            nodes, faults, system = ask_nodes(session, self.ring, list(keys.STATS_EXTRAS))
+            self.on_nodes(nodes, faults)
+            self.on_system({int(node_id): report for node_id, report in system.items()})
+
+        self._ask = ask
+
+    def _ask_if_due(self) -> None:
+        if self._ask is None:
+            return
+        with self._ask_lock:  # two scrapes at once ask once
+            now = self.clock()
+            if self._asked_at is not None and now - self._asked_at < SCRAPE_ASK_MIN_S:
+                return
+            try:
+                self._ask()
+            except Exception as exc:  # a ring that went away answers nothing: serve what is held
+                log.debug("asking the nodes at scrape time failed: %s", exc)
+            self._asked_at = self.clock()
+
     # -- read by the HTTP server's thread at scrape time ----------------------------------------
 
     def collect(self) -> Iterator[Metric]:
         """The nodes' latest answers as metric families (prometheus_client's Collector)."""
+        self._ask_if_due()
         now = self.clock()
         with self._lock:
             self._forget(now)

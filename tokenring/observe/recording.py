@@ -625,6 +625,18 @@ def iter_messages(recording: Recording, topics: Iterable[str] | None = None) -> 
 # playing
 
 
+def asked_with(query: Any) -> list[Any]:
+    """What a ``stats`` question asked to be added (``{"with": [...]}``); none if unreadable."""
+    import msgpack
+
+    try:
+        request = msgpack.unpackb(query.payload.to_bytes()) if query.payload is not None else {}
+    except Exception:  # a question that is not msgpack asks for nothing more
+        return []
+    extra = request.get("with") if isinstance(request, dict) else None
+    return extra if isinstance(extra, list) else []
+
+
 def rename_ring(key: str, recorded: str | None, ring: str | None) -> str:
     """``key`` moved from the recorded ring's namespace into ``ring``'s (unchanged if either is
     unknown or they are the same)."""
@@ -757,11 +769,12 @@ class Player:
             def answer(query: Any) -> None:
                 if verb == "stats" and node not in self.nodes:
                     return  # not live at this point of the recording: no answer, as live
-                result = (
-                    self.nodes[node]
-                    if verb == "stats"
-                    else {"id": int(node), "faults": self.faults.get(node, [])}
-                )
+                if verb == "stats":
+                    result = dict(self.nodes[node])
+                    if "faults" in asked_with(query):  # a watcher asks for both at once
+                        result["faults"] = self.faults.get(node, {})
+                else:
+                    result = {"id": int(node), "faults": self.faults.get(node, {})}
                 query.reply(
                     keys.control(self.ring, node, verb), msgpack.packb({"ok": True, "result": result})
                 )

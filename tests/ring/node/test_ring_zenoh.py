@@ -31,6 +31,7 @@ from tokenring.contract import keys
 from tokenring.contract.frame import Token
 from tokenring.contract.protocol import default_protocol
 from tokenring.contract.ring import EPOCH_MASK
+from tokenring.transport import query
 
 PROTOCOL = default_protocol()
 ALL_IDS = [n.id for n in PROTOCOL.default_nodes]  # optional nodes start only when named
@@ -83,6 +84,16 @@ def test_ring_of_eight_forms_counts_rounds_shares_data_and_delivers_commands(
             70: 80,
             80: 10,
         }
+        # a watcher's one question a node: its stats with its active faults and system report
+        folded = query(
+            session, keys.control(ring_name, "*", "stats"), {"with": ["faults", "system"]}, timeout=5.0
+        )
+        answers = {reply["result"]["id"]: reply["result"] for _, reply in folded if reply.get("ok")}
+        assert set(answers) == set(ALL_IDS)
+        assert all(a["faults"] == {} and a["system"]["state"] == "RUNNING" for a in answers.values()), answers
+        for hostile in ({"with": "faults"}, {"with": ["faults", ["x"]]}, {"with": ["secrets"]}):
+            _, refused = query(session, keys.control(ring_name, 20, "stats"), hostile)[0]
+            assert not refused["ok"] and "'with' takes a list of faults, system" in refused["error"], refused
         # the counter: every frame reaching main carries the counter main sent one round before + 1
         frames = FrameTap(session, ring_name, 10)
         wait_until(lambda: len(frames.take()) >= 60, 30, "60 frames to main")

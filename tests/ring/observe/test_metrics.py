@@ -13,15 +13,26 @@ import subprocess
 import urllib.request
 from collections.abc import Iterable
 
+import msgpack
 import pytest
+import zenoh
 from prometheus_client import generate_latest
 from prometheus_client.openmetrics.parser import text_string_to_metric_families as openmetrics_families
 from prometheus_client.parser import text_string_to_metric_families
 
 from tests.support.processes import REPO, run_tokenring
 from tests.support.ringutil import control, launcher_pids, tap, wait_ring, wait_until
+from tokenring.contract import keys
 from tokenring.observe.feed import Message
-from tokenring.observe.metrics import NODE_COUNTERS, ROUND_TRIP_BUCKETS, STALE_S, SYSTEM_COUNTERS, RingMetrics
+from tokenring.observe.metrics import (
+    NODE_COUNTERS,
+    ROUND_TRIP_BUCKETS,
+    SCRAPE_ASK_MIN_S,
+    STALE_S,
+    SYSTEM_COUNTERS,
+    RingMetrics,
+)
+from tokenring.transport import make_config
 from tokenring.transport.session import free_port
 
 #: what a node's ``stats`` answer holds of what the metrics read (tokenring/node/program_host.py)
@@ -117,6 +128,44 @@ def test_a_poll_a_round_trip_and_an_event_become_prometheus_families():
     assert value(found, "tokenring_faults_active", kind="delay", **motor) is None
     assert value(found, "tokenring_nodes_answering", ring="lab") == 0
     assert value(found, "tokenring_round_trip_seconds_count", ring="lab") == 2  # the watcher's own
+
+
+def test_a_watcher_serving_only_metrics_asks_the_nodes_when_scraped_at_most_once_a_second(ring_name):
+    clock = [100.0]
+    metrics = RingMetrics(ring_name, clock=lambda: clock[0])
+    asked: list[dict] = []
+
+    def motor_answers(query) -> None:  # a node's ``stats`` queryable: one more visit per question
+        request = msgpack.unpackb(query.payload.to_bytes()) if query.payload is not None else {}
+        asked.append(request)
+        stats = dict(STATS, stats={"visits": 7 + len(asked)}, faults={"delay": {}})
+        stats["system"] = {"stats": {"bytes_received": 900}, "state": "RUNNING"}
+        query.reply(query.key_expr, msgpack.packb({"ok": True, "result": stats}))
+
+    with zenoh.open(make_config()) as session:
+        node = session.declare_queryable(keys.control(ring_name, 20, "stats"), motor_answers)
+        metrics.ask_on_scrape(session)
+        motor = {"ring": ring_name, "node": "20", "name": "motor"}
+
+        def scrape() -> Samples:
+            return samples(text_string_to_metric_families(generate_latest(metrics.registry).decode()))[0]
+
+        assert asked == []  # nobody scraped: nobody was asked
+        found = scrape()
+        assert asked == [{"with": ["faults", "system"]}]  # one question a node, not three
+        assert value(found, "tokenring_visits_total", **motor) == 8
+        assert value(found, "tokenring_faults_active", kind="delay", **motor) == 1
+        assert value(found, "tokenring_download_bytes_received_total", **motor) == 900
+        assert value(found, "tokenring_program_state", state="RUNNING", **motor) == 1
+        clock[0] += SCRAPE_ASK_MIN_S / 2  # a scraper faster than that gets the same answers again
+        assert value(scrape(), "tokenring_visits_total", **motor) == 8 and len(asked) == 1
+        clock[0] += SCRAPE_ASK_MIN_S
+        assert value(scrape(), "tokenring_visits_total", **motor) == 9 and len(asked) == 2
+        node.undeclare()  # the node went away: the scrape serves what is held, for a while
+        clock[0] += SCRAPE_ASK_MIN_S
+        assert value(scrape(), "tokenring_visits_total", **motor) == 9
+        clock[0] += STALE_S
+        assert value(scrape(), "tokenring_visits_total", **motor) is None
 
 
 def test_the_dashboard_and_the_docs_name_only_metrics_that_are_served():
