@@ -11,11 +11,13 @@ messages, the recording grows) and stop, by PID, after it.
 
     python -m bench.observers --repeat 3 --rounds 1000 [--json F] [--speed 1] [--separate]
     python -m bench.observers --observers metrics,pcap     # what a Prometheus scrape and a capture cost
+    python -m bench.observers --observers metrics,pcap --scrape 15    # at Prometheus's usual interval
 
 The observers run as ``tokenring up --web --record --foxglove --metrics P --pcap F`` runs them:
 one ``tokenring watch`` process; ``--separate`` runs ``web``, ``record``, ``foxglove``, ``watch
---metrics`` and ``record --pcap`` as five. ``metrics`` is scraped over HTTP every second (proved
-live: a scrape returned the ring's counters); ``pcap`` is proved live by its file growing.
+--metrics`` and ``record --pcap`` as five. ``metrics`` is scraped over HTTP every ``--scrape``
+seconds, the first at once (proved live: a scrape returned the ring's counters); a watcher that
+only serves metrics asks the nodes at each scrape. ``pcap`` is proved live by its file growing.
 """
 
 from __future__ import annotations
@@ -46,7 +48,7 @@ MASTER = 10  # main: the round master times its rounds
 START_TIMEOUT_S = 120.0
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 OBSERVERS = ("web", "record", "foxglove", "metrics", "pcap")
-SCRAPE_S = 1.0  # the metrics scraper's interval: Prometheus's default is 15 s, this is harsher
+SCRAPE_S = 1.0  # the metrics scraper's default interval: 15 s is usual for Prometheus, this is harsher
 WINDOW_TIMEOUT_S = 300.0
 
 
@@ -162,10 +164,12 @@ class BridgeClient:
 
 
 class Scraper:
-    """Prometheus's part: GET the metrics page every :data:`SCRAPE_S` on a thread of its own."""
+    """Prometheus's part: GET the metrics page at once, then every ``interval_s``, on a thread of
+    its own."""
 
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, interval_s: float = SCRAPE_S) -> None:
         self.url = url
+        self.interval_s = interval_s
         self.good = 0
         self.error: str | None = None
         self._stop = threading.Event()
@@ -175,13 +179,17 @@ class Scraper:
     def _run(self) -> None:
         import urllib.request
 
-        while not self._stop.wait(SCRAPE_S):
+        wait = 0.0
+        while not self._stop.wait(wait):
             try:
                 with urllib.request.urlopen(self.url, timeout=5) as reply:
                     if b"tokenring_" in reply.read():
                         self.good += 1
+                        wait = self.interval_s
+                        continue
             except OSError as exc:
                 self.error = f"{type(exc).__name__}: {exc}"
+            wait = min(1.0, self.interval_s)  # not serving yet: ask again soon
 
     def close(self) -> None:
         self._stop.set()
@@ -217,7 +225,12 @@ class Browser:
 
 @contextlib.contextmanager
 def observers(
-    ring: str, endpoint: str, folder: Path, which: tuple[str, ...], separate: bool = False
+    ring: str,
+    endpoint: str,
+    folder: Path,
+    which: tuple[str, ...],
+    separate: bool = False,
+    scrape_s: float = SCRAPE_S,
 ) -> Iterator[dict[str, Any]]:
     """The web view with a browser on it, a recording, the bridge with a client (those in
     ``which``; one ``tokenring watch``, or a process each if ``separate``): all live, their
@@ -253,7 +266,7 @@ def observers(
     scraper: Scraper | None = None
     try:
         if "metrics" in which:
-            scraper = Scraper(f"http://127.0.0.1:{metrics_port}/metrics")
+            scraper = Scraper(f"http://127.0.0.1:{metrics_port}/metrics", scrape_s)
         if "web" in which:
             browser = Browser(f"http://127.0.0.1:{web_port}/")
         if "foxglove" in which:
@@ -306,6 +319,7 @@ def run(
     which: tuple[str, ...] = OBSERVERS,
     quiet: bool = False,
     separate: bool = False,
+    scrape_s: float = SCRAPE_S,
 ) -> dict[str, Any]:
     port = free_port()
     ring = f"obs{os.getpid()}"
@@ -336,7 +350,7 @@ def run(
                             values = measure_window(session, ring, rounds)
                             extra: dict[str, Any] = {}
                         else:
-                            with observers(ring, endpoint, folder, which, separate) as live:
+                            with observers(ring, endpoint, folder, which, separate, scrape_s) as live:
                                 cpu0, t0 = live["cpu"](), time.monotonic()
                                 values = measure_window(session, ring, rounds)
                                 extra = {
@@ -358,7 +372,7 @@ def run(
                         )
         finally:
             stop(up, 30.0)
-    return summarize(windows, repeat, rounds, speed, which, separate)
+    return summarize(windows, repeat, rounds, speed, which, separate, scrape_s)
 
 
 def summarize(
@@ -368,8 +382,11 @@ def summarize(
     speed: str,
     which: tuple[str, ...],
     separate: bool = False,
+    scrape_s: float = SCRAPE_S,
 ) -> dict[str, Any]:
     out: dict[str, Any] = {"repeat": repeat, "rounds": rounds, "speed": speed, "observers": list(which)}
+    if "metrics" in which:
+        out["scrape_s"] = scrape_s
     out["processes"] = "separate" if separate else "one watcher"
     out["windows"] = windows
     out["observer_cpu_pct"] = float(
@@ -392,7 +409,7 @@ def format_summary(report: dict[str, Any]) -> str:
         "per condition, windows alternating",
         f"{'condition':<44} {'median ms':>10} {'p99 ms':>10}",
     ]
-    watched = ", ".join(OBSERVER_NAMES[w] for w in report["observers"])
+    watched = ", ".join(observer_name(w, report) for w in report["observers"])
     if len(report["observers"]) > 1:
         watched += f" ({report.get('processes', 'separate')})"
     labels = {"none": "nobody watching (baseline)", "all": watched}
@@ -415,6 +432,14 @@ OBSERVER_NAMES = {
     "metrics": "metrics + scrapes",
     "pcap": "pcapng capture",
 }
+
+
+def observer_name(which: str, run: dict[str, Any]) -> str:
+    """What watched, as a table names it: the metrics with their scrape interval."""
+    name = OBSERVER_NAMES.get(which, which)
+    if which == "metrics":
+        name += f" every {run.get('scrape_s', SCRAPE_S):g} s"
+    return name
 
 
 def runs_of(document: dict[str, Any]) -> list[dict[str, Any]]:
@@ -454,7 +479,7 @@ def section_md(files: list[tuple[str, dict[str, Any]]]) -> str:
     rows = []
     for name, document in files:
         for run in runs_of(document):
-            watched = ", ".join(OBSERVER_NAMES.get(w, w) for w in run["observers"])
+            watched = ", ".join(observer_name(w, run) for w in run["observers"])
             processes = run.get("processes", "separate")
             if len(run["observers"]) > 1:
                 processes = (
@@ -508,13 +533,24 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="a process per observer (three tools by hand) instead of one watcher as `up` starts",
     )
+    parser.add_argument(
+        "--scrape",
+        type=float,
+        default=SCRAPE_S,
+        metavar="SECONDS",
+        help="the metrics scraper's interval (default %(default)s; Prometheus's is usually 15)",
+    )
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
+    if not args.scrape > 0:
+        parser.error(f"--scrape: give a positive number of seconds, not {args.scrape:g}")
     which = tuple(w.strip() for w in args.observers.split(",") if w.strip())
     unknown = set(which) - set(OBSERVERS)
     if unknown or not which:
         parser.error(f"--observers: choose from {', '.join(OBSERVERS)}")
-    report = run(args.repeat, min(args.rounds, 1024), args.speed, which, args.quiet, args.separate)
+    report = run(
+        args.repeat, min(args.rounds, 1024), args.speed, which, args.quiet, args.separate, args.scrape
+    )
     print(format_summary(report))
     if args.json:
         Path(args.json).write_text(json.dumps(report, indent=2) + "\n")

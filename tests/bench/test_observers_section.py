@@ -33,12 +33,19 @@ def test_a_median_that_moved_in_some_pairs_is_noise_and_a_p99_higher_in_all_is_a
         which=("metrics", "pcap"),
     )
     text = section_md([("observers-metrics-pcap-X.json", run)])
-    row = next(line for line in text.splitlines() if line.startswith("| metrics + scrapes, pcapng capture |"))
+    row = next(
+        line
+        for line in text.splitlines()
+        if line.startswith("| metrics + scrapes every 1 s, pcapng capture |")
+    )
     cells = [c.strip() for c in row.strip("|").split("|")]
     assert cells[1] == "one `tokenring watch` (as `up` starts it)" and cells[2] == "3 × 1000"
     assert cells[5] == f"×{run['ratio_median']:.3f}, higher in 1 of 3 pairs: within the noise"
     assert cells[6] == f"×{run['ratio_p99']:.3f}, higher in all 3 pairs"
     assert cells[8] == "[observers-metrics-pcap-X.json](results/observers-metrics-pcap-X.json)"
+    # at Prometheus's usual interval the row says so
+    slower = summarize(run["windows"], 3, 1000, "1", ("metrics", "pcap"), scrape_s=15.0)
+    assert "| metrics + scrapes every 15 s, pcapng capture |" in section_md([("observers-15.json", slower)])
 
 
 def test_a_file_of_named_runs_gives_a_row_each_and_no_runs_no_section():
