@@ -183,10 +183,12 @@ class SshHosts:
         return {ns: pids for ns, pids in found.items() if pids}
 
     # -- cutting the cable -----------------------------------------------------------------------
-    def cut(self, host: SshHost) -> None:
-        """Drop everything on ``host``'s cable, silently: nobody gets an error."""
-        for chain, flag in (("INPUT", "-i"), ("OUTPUT", "-o")):
-            rule = [chain, flag, host.dev, "-j", "DROP"]
+    def cut(self, host: SshHost, ssh_only: bool = False) -> None:
+        """Drop everything on ``host``'s cable, silently: nobody gets an error. ``ssh_only``:
+        only its sshd's traffic (the ring's goes on)."""
+        for chain, flag, port in (("INPUT", "-i", "--dport"), ("OUTPUT", "-o", "--sport")):
+            only = ["-p", "tcp", port, "22"] if ssh_only else []
+            rule = [chain, flag, host.dev, *only, "-j", "DROP"]
             sh("ip", "netns", "exec", host.name, "iptables", "-I", *rule)
             self.cuts.append([host.name, *rule])
 

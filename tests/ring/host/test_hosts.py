@@ -9,7 +9,8 @@ launcher, a crash respawned by it), host c's cable is cut silently (its ssh sess
 with it its share) while a and b re-form, and c's nodes rejoin once the cable is back; Ctrl-C
 then leaves no process in any namespace. Two hosts: a remote node's death is the run's exit
 code 1, named with its host; a host whose sshd never notices a silent client has its share stop
-by itself, during a long cut and during Ctrl-C. The quick tests refuse bad input (one line naming
+by itself, during a long cut and during Ctrl-C; a host back while its old share still runs is
+tried again until that one has stopped. The quick tests refuse bad input (one line naming
 the inventory's file and line, exit code 2) and run a share's heartbeat without ssh.
 """
 
@@ -771,3 +772,59 @@ def test_a_host_cut_off_stops_its_share_itself_and_comes_back(procs, request, tm
         f"the mend; after Ctrl-C during a cut, stopped {stopped_again:.1f} s after it, its sshd sessions "
         f"{time.monotonic() - mended:.1f} s after the mend"
     )
+
+
+@needs_ssh_hosts
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_a_host_back_before_its_old_share_stopped_is_tried_again_until_it_has(procs, request, tmp_path):
+    """Only host b's ssh traffic is cut (the ring's goes on): the launcher's ssh to b dies, and
+    once it is back b's old share still runs (its sshd cannot tell that the session is dead, and
+    the share has heard nothing from the launcher for less than ``lost_after``), so a new share
+    is refused there. The launcher tries again, counting the loss once, and once the old share
+    has stopped by itself a new one's nodes join."""
+    hosts = SshHosts(tmp_path / "hosts", count=2, client_alive=False)
+    request.addfinalizer(hosts.close)
+    a, b = hosts.hosts
+    lost_after = 30
+    ring = f"x{uuid.uuid4().hex[:8]}"
+    spec = two_hosts_spec(hosts, tmp_path, lost_after=lost_after)
+    path = inventory(tmp_path / "ring.yaml", json.dumps(spec, indent=2))
+    log = tmp_path / "launcher.log"
+    with log.open("w") as out:
+        launcher = procs.start(
+            hosts.run(a, TOKENRING, "up", "--hosts", str(path), "--ring", ring, "--no-programs"),
+            stdout=out,
+            env={"TOKENRING_EXTENSIONS": ""},
+        )
+    everyone = [10, 20, 30, 40]
+    refusal = re.compile(rf"host b \({re.escape(b.address)}\): .*in use.*: connecting again in \d+ s")
+    joined = re.compile(r"b/sonar \| .* node sonar \(id 30\) joined")
+    try:
+        wait_until(lambda: one_ring(status(hosts, a, ring), everyone), 120, "the ring over two hosts")
+        hosts.cut(b, ssh_only=True)
+        cut = time.monotonic()
+        wait_until(
+            lambda: log_says(log, f"host b ({b.address}): lost (ssh exited with code 255"), 60, "b lost"
+        )
+        hosts.mend()
+        assert time.monotonic() - cut < lost_after - 5, "the old share may have stopped: not the case tested"
+        wait_until(lambda: refusal.search(log.read_text()), 60, "a new share on b refused")
+        assert len(joined.findall(log.read_text())) == 1  # the old share runs on: no new nodes yet
+        wait_until(lambda: len(joined.findall(log.read_text())) == 2, lost_after + 60, "a new share's nodes")
+        back = time.monotonic() - cut
+        assert back >= lost_after - HEARTBEAT_S, f"a new share's nodes joined {back:.1f} s after the cut"
+        wait_until(lambda: one_ring(status(hosts, a, ring), everyone), 120, "every node in one ring")
+    finally:
+        launcher.send_signal(signal.SIGINT)
+        try:
+            code = launcher.wait(60)
+        except subprocess.TimeoutExpired:
+            launcher.kill()
+            code = None
+    text = log.read_text()
+    assert code == 130, text[-3000:]
+    # one loss, however many attempts it took: the refusals are said, not counted as failures
+    assert len(re.findall(r"host b .*its nodes are out of the ring", text)) == 1, text[-3000:]
+    wait_until(lambda: not hosts.leftovers(), 60, "no process left in either namespace")
+    print(f"a new share's nodes joined {back:.1f} s after the cut (lost_after {lost_after} s)")
