@@ -548,12 +548,7 @@ def test_a_secured_ring_across_hosts_obeys_only_its_operator(procs, ssh_hosts, t
         tail = "\n".join(log.read_text().splitlines()[-60:])
         raise AssertionError(f"{failure}\n--- launcher\n{tail}") from None
     finally:
-        launcher.send_signal(signal.SIGINT)
-        try:
-            code = launcher.wait(60)
-        except subprocess.TimeoutExpired:
-            launcher.kill()
-            code = None
+        code = interrupt(launcher)
     assert code == 130, log.read_text()[-3000:]
     wait_until(lambda: not hosts.leftovers(), 30, "no process left in any namespace")
 
@@ -701,6 +696,36 @@ def test_a_remote_node_that_dies_makes_the_run_exit_1_naming_host_and_node(procs
     wait_until(lambda: not hosts.leftovers(), 30, "no process left in either namespace")
 
 
+def two_hosts_up(
+    procs, request, tmp_path: Path, lost_after: float
+) -> tuple[SshHosts, str, Path, subprocess.Popen]:
+    """Two hosts whose sshd never notices a silent client, and ``up --hosts`` run on host a
+    (its output in ``launcher.log``): the hosts, the ring's name, the log and the launcher."""
+    hosts = SshHosts(tmp_path / "hosts", count=2, client_alive=False)
+    request.addfinalizer(hosts.close)
+    ring = f"x{uuid.uuid4().hex[:8]}"
+    spec = two_hosts_spec(hosts, tmp_path, lost_after=lost_after)
+    path = inventory(tmp_path / "ring.yaml", json.dumps(spec, indent=2))
+    log = tmp_path / "launcher.log"
+    with log.open("w") as out:
+        launcher = procs.start(
+            hosts.run(hosts.hosts[0], TOKENRING, "up", "--hosts", str(path), "--ring", ring, "--no-programs"),
+            stdout=out,
+            env={"TOKENRING_EXTENSIONS": ""},
+        )
+    return hosts, ring, log, launcher
+
+
+def interrupt(launcher: subprocess.Popen) -> int | None:
+    """Ctrl-C to the launcher; its exit code (None: it did not stop within 60 s, and was killed)."""
+    launcher.send_signal(signal.SIGINT)
+    try:
+        return launcher.wait(60)
+    except subprocess.TimeoutExpired:
+        launcher.kill()
+        return None
+
+
 @needs_ssh_hosts
 @pytest.mark.slow
 @pytest.mark.timeout(300)
@@ -711,20 +736,9 @@ def test_a_host_cut_off_stops_its_share_itself_and_comes_back(procs, request, tm
     share once the cable is back and b's nodes rejoin. Cut again and Ctrl-C: the launcher gives
     up on b after 10 s, b's share stops by itself, and once the cable is back the ssh sessions
     end too: nothing is left in any namespace."""
-    hosts = SshHosts(tmp_path / "hosts", count=2, client_alive=False)
-    request.addfinalizer(hosts.close)
-    a, b = hosts.hosts
     lost_after = 10
-    ring = f"x{uuid.uuid4().hex[:8]}"
-    spec = two_hosts_spec(hosts, tmp_path, lost_after=lost_after)
-    path = inventory(tmp_path / "ring.yaml", json.dumps(spec, indent=2))
-    log = tmp_path / "launcher.log"
-    with log.open("w") as out:
-        launcher = procs.start(
-            hosts.run(a, TOKENRING, "up", "--hosts", str(path), "--ring", ring, "--no-programs"),
-            stdout=out,
-            env={"TOKENRING_EXTENSIONS": ""},
-        )
+    hosts, ring, log, launcher = two_hosts_up(procs, request, tmp_path, lost_after)
+    a, b = hosts.hosts
     everyone = [10, 20, 30, 40]
 
     def share_stops_by_itself(cut: float) -> float:
@@ -754,12 +768,7 @@ def test_a_host_cut_off_stops_its_share_itself_and_comes_back(procs, request, tm
         launcher.send_signal(signal.SIGINT)
         stopped_again = share_stops_by_itself(cut)
     finally:
-        launcher.send_signal(signal.SIGINT)
-        try:
-            code = launcher.wait(60)
-        except subprocess.TimeoutExpired:
-            launcher.kill()
-            code = None
+        code = interrupt(launcher)
     text = log.read_text()
     assert code == 130, text[-3000:]
     assert f"host b ({b.address}) did not stop within 10 s: ending its ssh" in text
@@ -783,20 +792,9 @@ def test_a_host_back_before_its_old_share_stopped_is_tried_again_until_it_has(pr
     the share has heard nothing from the launcher for less than ``lost_after``), so a new share
     is refused there. The launcher tries again, counting the loss once, and once the old share
     has stopped by itself a new one's nodes join."""
-    hosts = SshHosts(tmp_path / "hosts", count=2, client_alive=False)
-    request.addfinalizer(hosts.close)
-    a, b = hosts.hosts
     lost_after = 30
-    ring = f"x{uuid.uuid4().hex[:8]}"
-    spec = two_hosts_spec(hosts, tmp_path, lost_after=lost_after)
-    path = inventory(tmp_path / "ring.yaml", json.dumps(spec, indent=2))
-    log = tmp_path / "launcher.log"
-    with log.open("w") as out:
-        launcher = procs.start(
-            hosts.run(a, TOKENRING, "up", "--hosts", str(path), "--ring", ring, "--no-programs"),
-            stdout=out,
-            env={"TOKENRING_EXTENSIONS": ""},
-        )
+    hosts, ring, log, launcher = two_hosts_up(procs, request, tmp_path, lost_after)
+    a, b = hosts.hosts
     everyone = [10, 20, 30, 40]
     refusal = re.compile(rf"host b \({re.escape(b.address)}\): .*in use.*: connecting again in \d+ s")
     joined = re.compile(r"b/sonar \| .* node sonar \(id 30\) joined")
@@ -816,12 +814,7 @@ def test_a_host_back_before_its_old_share_stopped_is_tried_again_until_it_has(pr
         assert back >= lost_after - HEARTBEAT_S, f"a new share's nodes joined {back:.1f} s after the cut"
         wait_until(lambda: one_ring(status(hosts, a, ring), everyone), 120, "every node in one ring")
     finally:
-        launcher.send_signal(signal.SIGINT)
-        try:
-            code = launcher.wait(60)
-        except subprocess.TimeoutExpired:
-            launcher.kill()
-            code = None
+        code = interrupt(launcher)
     text = log.read_text()
     assert code == 130, text[-3000:]
     # one loss, however many attempts it took: the refusals are said, not counted as failures
