@@ -27,6 +27,7 @@ import yaml
 from tests.support.processes import REPO, pid_alive, run_tokenring
 from tests.support.ringutil import tap, wait_until
 from tokenring.contract import keys
+from tokenring.contract.protocol import default_protocol
 from tokenring.observe.feed import Message, Topic
 from tokenring.transport.session import free_port, query
 
@@ -131,6 +132,12 @@ def launcher_status(session: Any, ring: str) -> dict[str, Any] | None:
     return replies[0][1]["result"] if replies and replies[0][1].get("ok") else None
 
 
+def every_node(status: dict[str, Any] | None) -> dict[str, Any] | None:
+    """The launcher's status once it lists every node of the default ring, else None."""
+    wanted = {n.id for n in default_protocol().default_nodes}
+    return status if status and {n["id"] for n in status["nodes"]} >= wanted else None
+
+
 def map_lines(scene: dict[str, Any]) -> list[dict[str, Any]]:
     return [point for e in scene["entities"] for line in e["lines"] for point in line["points"]]
 
@@ -147,7 +154,12 @@ def test_a_foxglove_client_sees_poses_the_map_and_round_trips_of_an_exploring_ri
     )  # fmt: skip
     with tap(endpoint) as session:
         wait_port(port, 90)  # a service: up before the nodes start
-        status = wait_until(lambda: launcher_status(session, ring_name), 60, "the launcher's status")
+        # the service starts before the nodes: a status that lists every node
+        status = wait_until(
+            lambda: every_node(launcher_status(session, ring_name)),
+            120,
+            "the launcher's status with every node",
+        )
         procs.watch([n["pid"] for n in status["nodes"]] + [s["pid"] for s in status["services"]])
         bridge = next(s for s in status["services"] if s["name"] == "watch")
         assert bridge["running"]
