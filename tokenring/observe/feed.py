@@ -195,9 +195,9 @@ EVENT_KINDS = {b"X": "excluded", b"J": "rejoin", b"L": "leaving", b"R": "regener
 class RingSource(FeedSource):
     """Frames, decoded channels (when their bytes change), round trips, events, node counters.
 
-    ``channels`` False leaves the channels undecoded (a watcher that only counts and captures
-    frames); ``poll_interval_s`` 0 asks the nodes nothing (no ``/ring/nodes``): every question
-    is answered by a node process between its token visits."""
+    ``channels_decoded`` False leaves the channels undecoded (a watcher that only counts and
+    captures frames); ``poll_interval_s`` 0 asks the nodes nothing (no ``/ring/nodes``): every
+    question is answered by a node process between its token visits."""
 
     protocol: Protocol
     poll_interval_s: float = 0.5
