@@ -108,9 +108,8 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
     web_keys = extensions.web_keys(args) if watch.web_port is not None else None
     protocol = load_protocol(args.protocol)
     # only counted (metrics) or captured (pcap): the robot's topics and the channels go unread,
-    # and the nodes are asked for their counters when Prometheus scrapes, not twice a second
-    counting_only = watch.web_port is None and watch.record is None and watch.foxglove_port is None
-    if counting_only:
+    # and the nodes are asked for their counters only when Prometheus scrapes
+    if watch.web_port is None and watch.record is None and watch.foxglove_port is None:
         sources: list[FeedSource] = [RingSource(protocol, poll_interval_s=0.0, channels_decoded=False)]
     else:
         sources = feed_sources(protocol, watch.ring)
@@ -140,13 +139,10 @@ def serve(args: argparse.Namespace, watch: Watch) -> int:
             watch.metrics_url = watch.metrics.serve(
                 watch.metrics_host, watch.metrics_port, option=watch.metrics_option
             )
-        # the metrics' own source (the nodes' download counters) feeds nothing but the metrics
-        read = sources if watch.metrics is None or counting_only else [*sources, watch.metrics.source()]
         with tap_session(args) as session:
-            feed = Feed(session, watch.ring, read)
-            if watch.metrics is not None and counting_only:
-                watch.metrics.ask_on_scrape(session)
+            feed = Feed(session, watch.ring, sources)
             if watch.metrics is not None:
+                watch.metrics.ask_on_scrape(session)
                 feed.add_sink(watch.metrics.on_message)
                 watch.metrics.dropped = lambda: feed.dropped
             if watch.record is not None:

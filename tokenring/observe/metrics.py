@@ -6,11 +6,11 @@ Two kinds of figures, each taken where it is already kept:
 * **What the nodes count** (visits, retries, CRC rejects, duplicate passes, inbox full,
   regenerations, active faults, what a download brought) is cumulative in each node.
   :class:`RingMetrics` is a custom *collector*: it keeps the latest answer of each node and
-  turns it into metric families when Prometheus scrapes. A watcher that only serves metrics
-  asks for the answers then (:meth:`RingMetrics.ask_on_scrape`, one ``stats`` question a node
-  with its faults and system report, at most every :data:`SCRAPE_ASK_MIN_S`); one that also
-  feeds the web view, a recording or the bridge takes its feed's (topic ``/ring/nodes``, twice a
-  second). No deltas kept here (``Counter.inc`` would need them, and a node that restarts would
+  turns it into metric families when Prometheus scrapes, asking for the answers then
+  (:meth:`RingMetrics.ask_on_scrape`, one ``stats`` question a node with its faults and system
+  report, at most every :data:`SCRAPE_ASK_MIN_S`): nothing is asked while nobody scrapes. A
+  watcher whose feed asks anyway (for the web view, a recording or the bridge: topic
+  ``/ring/nodes``, twice a second) keeps those answers too. No deltas kept here (``Counter.inc`` would need them, and a node that restarts would
   have to be told from one that did nothing); a restarted node's counters start again from
   zero, a counter reset Prometheus's ``rate`` understands.
 * **What only the watcher sees**: each round trip, timed on the frames it receives
@@ -18,15 +18,10 @@ Two kinds of figures, each taken where it is already kept:
   at scrape time, so they are accumulated here as they arrive, in ``prometheus_client``'s own
   :class:`~prometheus_client.Histogram` and :class:`~prometheus_client.Counter`.
 
-Beside a feed, what a download brought each node (its system layer's counters, control verb
-``system``, which ``/ring/nodes`` does not carry) comes from :class:`SystemSource`, on the
-feed's own poll thread every :data:`SYSTEM_POLL_S` seconds (it makes no message: a recording or
-the web view is the same with or without ``--metrics``).
-
 Everything is registered in a private :class:`~prometheus_client.CollectorRegistry` (the
 watcher's own process figures would be mistaken for the ring's) and served by
-``prometheus_client``'s HTTP server on its own thread: a scrape never waits for the feed (in a
-watcher that only serves metrics it waits for the nodes' answers, half a second at most).
+``prometheus_client``'s HTTP server on its own thread: a scrape never waits for the feed, only
+for the nodes' answers (half a second at most).
 """
 
 from __future__ import annotations
@@ -40,13 +35,12 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-import zenoh
 from prometheus_client import CollectorRegistry, Counter, Histogram
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 
 from tokenring.contract import keys
 from tokenring.errors import UsageError
-from tokenring.observe.feed import FeedSource, Message, ask_nodes, decode_msgpack
+from tokenring.observe.feed import Message, ask_nodes
 
 log = logging.getLogger("tokenring.metrics")
 
@@ -80,13 +74,9 @@ ROUND_TRIP_BUCKETS = (
 #: seconds a node's last answer is shown after it stopped answering (a poll it missed on a
 #: loaded host is no gap in its series); past that its series end, as the node has
 STALE_S = 5.0
-#: seconds between two ``system`` queries (download progress changes at the pace of a download)
-SYSTEM_POLL_S = 2.0
-#: a watcher that only serves metrics asks the nodes when scraped, at most once in this many
-#: seconds (a faster scraper gets the same answers again)
+#: the metrics ask the nodes when scraped, at most once in this many seconds (a faster scraper
+#: gets the same answers again)
 SCRAPE_ASK_MIN_S = 1.0
-#: seconds a node has to answer a ``system`` query (one that does not keeps its last answer)
-SYSTEM_TIMEOUT_S = 0.5
 #: the faults that stay active until ended (``tokenring fault``): one 0/1 series each per node
 FAULT_KINDS = ("hang", "delay", "drop", "corrupt", "duplicate", "lose", "partition")
 
@@ -151,54 +141,6 @@ class _Seen:
 
     at: float
     data: Any
-
-
-@dataclass
-class SystemSource(FeedSource):
-    """Asks every node for its system layer's counters (download progress) on the feed's poll
-    thread and hands them to ``metrics``; it makes no message."""
-
-    metrics: RingMetrics
-    poll_interval_s: float = SYSTEM_POLL_S
-
-    def poll(self, session: Any, ring: str, time_ns: int) -> list[Message]:
-        # one question per node the stats named, all at once: the answer does not say whose it
-        # is, so a wildcard question's answers could not be told apart
-        ids = self.metrics.node_ids()
-        reports: dict[int, dict[str, Any]] = {}
-        lock = threading.Lock()
-        everyone = threading.Event()
-
-        def answer(node_id: int) -> Callable[[Any], None]:
-            def on_reply(reply: Any) -> None:
-                if reply.ok is None:
-                    return
-                try:
-                    decoded = decode_msgpack(reply.ok.payload.to_bytes())
-                except Exception:  # an answer that is not one: the node counts as silent
-                    return
-                if (
-                    isinstance(decoded, dict)
-                    and decoded.get("ok")
-                    and isinstance(decoded.get("result"), dict)
-                ):
-                    with lock:
-                        reports[node_id] = decoded["result"]
-                        if len(reports) == len(ids):
-                            everyone.set()
-
-            return on_reply
-
-        for node_id in ids:
-            try:
-                session.get(keys.control(ring, node_id, "system"), answer(node_id), timeout=SYSTEM_TIMEOUT_S)
-            except zenoh.ZError as exc:  # the session is closing
-                log.debug("system query to %s failed: %s", node_id, exc)
-        if ids:
-            everyone.wait(SYSTEM_TIMEOUT_S)  # a hung node answers nothing: its last answer stays
-        with lock:
-            self.metrics.on_system(dict(reports))
-        return []
 
 
 @dataclass(eq=False)  # a collector is registered by identity (hashed)
@@ -277,16 +219,11 @@ class RingMetrics:
             for node_id in [i for i, seen in table.items() if now - seen.at > STALE_S]:
                 del table[node_id]
 
-    def node_ids(self) -> list[int]:
-        """The nodes whose stats the watcher holds."""
-        with self._lock:
-            return sorted(self._nodes)
-
     def ask_on_scrape(self, session: Any) -> None:
         """Ask the nodes when Prometheus scrapes, as an exporter's collector does, instead of on
-        a feed's clock: a watcher that only serves metrics then asks nothing while nobody
-        scrapes, and one question a node (``stats`` with its faults and system report) when
-        one does. Every answer is a node's work between two token visits."""
+        a clock of its own: nothing while nobody scrapes, and one question a node (``stats``
+        with its faults and system report) when one does. Every answer is a node's work between
+        two token visits."""
 
         def ask() -> None:
             nodes, faults, system = ask_nodes(session, self.ring, list(keys.STATS_EXTRAS))
@@ -467,10 +404,6 @@ class RingMetrics:
         if self._thread is not None:
             self._thread.join(timeout=5.0)
             self._thread = None
-
-    def source(self) -> SystemSource:
-        """The feed source that brings the nodes' system counters (download progress) here."""
-        return SystemSource(self)
 
 
 def _integers(table: Any) -> Iterator[tuple[str, int]]:
