@@ -80,6 +80,8 @@ class ProgramHost(TokenPathHost):
                 phase = "run"
                 program.run()
             except Exception as exc:  # a user program's bug must not take the node down
+                # read before on_program_error: the rollback it starts stops this program too
+                was_stopping = program.stop_requested.is_set() or self._halt.is_set()
                 last = traceback.format_exception_only(type(exc), exc)[-1].strip()
                 self.program_error = last
                 log.error("user program %s failed: %s", type(program).__name__, last)
@@ -88,9 +90,7 @@ class ProgramHost(TokenPathHost):
                     self.on_program_error()
                 # one that raises because it was being stopped (a blocking call cut short) is
                 # logged, not counted
-                if self.on_program_failed is not None and not (
-                    program.stop_requested.is_set() or self._halt.is_set()
-                ):
+                if self.on_program_failed is not None and not was_stopping:
                     self.on_program_failed(program_file(program), phase, last)
             finally:
                 warning.cancel()

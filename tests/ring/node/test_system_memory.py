@@ -303,3 +303,30 @@ def test_each_skip_of_the_target_gets_its_own_wait(tmp_path, monkeypatch):
         assert tx.done.wait(20), tx.progress()
         assert tx.ok, tx.error
         assert motor.installed is not None and motor.installed.source == source
+
+
+@in_virtual_time()
+def test_a_program_that_fails_is_counted_even_when_its_rollback_stops_it_first():
+    """The rollback a failure starts stops the failed program (its ``stop_requested``); when that
+    wins the race to the check, the failure must still reach the launcher (exit code 1)."""
+    from tokenring import UserProgram
+
+    class Fails(UserProgram):
+        module = "motor"
+
+        def run(self) -> None:
+            raise ZeroDivisionError("motor divided by zero")
+
+    ring = MemoryRing([10, 20])
+    motor = ring.nodes[20]
+    failures: list[tuple[str, str]] = []
+    # the rollback, run before the check as the other thread may: it stops the failed program
+    motor.on_program_error = lambda: motor.program.stop_requested.set()
+    motor.on_program_failed = lambda _program, phase, error: failures.append((phase, error))
+    try:
+        motor.start_program(Fails)
+        wait_for(lambda: motor.program_error, 5, "the program to fail")
+        wait_for(lambda: failures, 5, "the failure to be reported")
+        assert failures == [("run", "ZeroDivisionError: motor divided by zero")]
+    finally:
+        ring.close()
