@@ -12,6 +12,10 @@ map (ours, as copro ran it) is scored too. PNGs of every map go to ``--out``.
 ``--generated evaluation --seeds 1,2,3`` explores generated rooms instead (``bench/rooms.py``:
 the evaluation rooms are never the ones tuned on) and ends with the live maps' medians and worst
 deciles against issue 21's aims.
+
+``--record`` has each ring record itself to ``<out>/<room>.mcap`` (``up --record``: a watcher
+costing about a third of a core) and ``--hog N`` runs N busy cores beside each ring: the map
+must not depend on how busy the machine is (issue 57). Every run counts its collisions.
 """
 
 from __future__ import annotations
@@ -147,6 +151,8 @@ def run_room(
     ]  # fmt: skip
     if args.programs:
         cmd += ["--programs", args.programs]
+    if args.record:
+        cmd += ["--record", str(out / f"{room}.mcap")]
     started = time.monotonic()
     finished = ""
     ring_log = (out / f"{room}-ring.log").open("w", encoding="utf-8")
@@ -393,6 +399,7 @@ def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any
 
 
 def main(argv: list[str] | None = None) -> int:
+    from bench.spurious import cpu_hog
     from modules.mapping.vectorgen import OUR_METHOD, SEED_METHOD
     from modules.pc.mapfiles import load_map_file, load_truth, write_map
     from modules.pc.mapscore import score_map
@@ -425,11 +432,19 @@ def main(argv: list[str] | None = None) -> int:
         help="the ring's log level; its output goes to <out>/<room>-ring.log (info shows main's moves)",
     )
     parser.add_argument(
+        "--record", action="store_true", help="each ring records itself to <out>/<room>.mcap (up --record)"
+    )
+    parser.add_argument(
+        "--hog", type=int, default=0, metavar="N", help="N busy cores beside each ring (default 0)"
+    )
+    parser.add_argument(
         "--replay",
         action="store_true",
         help="no ring: replay the drives recorded in --out by an earlier run (<room>-drive.msgpack)",
     )
     args = parser.parse_args(argv)
+    if args.hog < 0:
+        parser.error(f"--hog {args.hog}: a number of cores, 0 or more")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
@@ -455,7 +470,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"[{number}/{len(runs)}] {room}: exploring for {args.duration:.0f} s at {args.speed:g}x ...",
                 flush=True,
             )
-            result = run_room(room, args, out, free_port(), world_file, seed)
+            with cpu_hog(args.hog > 0, args.duration + 120.0, max(1, args.hog)):
+                result = run_room(room, args, out, free_port(), world_file, seed)
             save_recording(recording, result)
         world, truth = load_truth(world_file)
         print(f"  {len(result['records'])} sweeps recorded, ring exit code {result['code']}", flush=True)
@@ -580,6 +596,8 @@ def results_document(args: argparse.Namespace, rooms: dict[str, dict[str, Any]],
             "duration_s": args.duration,
             "seed": args.seed,
             "bitrate": args.bitrate,
+            "record": bool(getattr(args, "record", False)),
+            "hog_cores": getattr(args, "hog", 0),
         },
         "aim": "ours with the filter: coverage >= 85 %, precision >= 90 %, corners closed",
         "rooms": rooms,
