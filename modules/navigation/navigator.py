@@ -142,7 +142,6 @@ class ExploreLeftWall(TurnJudging, IslandVisits, FrontierVisits, ReturnHome, Nav
     are here."""
 
     mode = 2
-    keeps_clear = True
 
     def __init__(self, layout: SonarLayout, settings: WallSettings | None = None) -> None:
         super().__init__(layout)
@@ -493,12 +492,11 @@ class ExploreLeftWall(TurnJudging, IslandVisits, FrontierVisits, ReturnHome, Nav
         ]
 
     def _inner(self, sensors: Sensors) -> list[Move]:
-        """The way ahead is blocked: turn right 90° and put the wall ahead parallel on the left
-        by the left pair (:meth:`_judge`). Not by the last segment's slope: what blocks may be a
-        pillar's corner or a face met at an angle, and that slope is the followed wall's."""
+        """The way ahead is blocked: turn right so the wall ahead is on the left."""
         self.state = NAV["TURN"]
+        angle = -90.0 + self._correction(with_distance=False)
         self.last_follow = None
-        return self._turn(-90.0, "inner", sensors, align=True)
+        return self._turn(angle, "inner", sensors, align=True)
 
     def _reacquire(self) -> Move:
         return self._forward(
