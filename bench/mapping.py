@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import subprocess
 import sys
 import threading
@@ -57,6 +58,8 @@ class Recorder:
         self.lock = threading.Lock()
         self.sub = session.declare_subscriber(keys.token(ring, protocol.node("copro").id), self._on)
         self.truth: list[tuple[int, float, float, float]] = []
+        self.collisions = 0  # the world's own count, from its truth stream
+        self.closest_mm: float | None = None  # the body's closest approach to a wall so far
         self.truth_sub = session.declare_subscriber(robot_keys.world(ring, "truth"), self._on_truth)
 
     def _on_truth(self, sample: Any) -> None:
@@ -65,6 +68,10 @@ class Recorder:
         msg = msgpack.unpackb(bytes(sample.payload.to_bytes()), raw=False)
         with self.lock:
             self.truth.append((int(msg["stamp_ms"]), float(msg["x"]), float(msg["y"]), float(msg["theta"])))
+            self.collisions = int(msg.get("collisions", self.collisions))
+            closest = msg.get("closest_mm")
+            if closest is not None and math.isfinite(float(closest)):
+                self.closest_mm = float(closest)
 
     def _on(self, sample: Any) -> None:
         frame = sample.payload.to_bytes()
@@ -182,6 +189,8 @@ def run_room(
         "compass_log": recorder.compass_log if recorder else [],
         "live": live,
         "finished": finished,
+        "collisions": recorder.collisions if recorder else None,
+        "closest_mm": recorder.closest_mm if recorder else None,
     }
 
 
@@ -189,8 +198,8 @@ def save_recording(path: Path, result: dict[str, Any]) -> None:
     """The drive as recorded (sweeps and motor samples), for ``--replay``."""
     import msgpack
 
-    keep = ("records", "motor_log", "truth", "compass_log")
-    path.write_bytes(msgpack.packb({key: result[key] for key in keep}))
+    keep = ("records", "motor_log", "truth", "compass_log", "collisions", "closest_mm")
+    path.write_bytes(msgpack.packb({key: result.get(key) for key in keep}))
 
 
 def load_recording(path: Path, live: Path) -> dict[str, Any]:
@@ -207,6 +216,8 @@ def load_recording(path: Path, live: Path) -> dict[str, Any]:
         "motor_log": data["motor_log"],
         "truth": data.get("truth", []),
         "compass_log": data.get("compass_log", []),
+        "collisions": data.get("collisions"),
+        "closest_mm": data.get("closest_mm"),
         "live": live,
         "finished": "(replayed)",
     }
@@ -518,6 +529,8 @@ def main(argv: list[str] | None = None) -> int:
             "ring_exit_code": result["code"],
             "sweeps": len(result["records"]),
             "finished": result.get("finished", ""),
+            "collisions": result.get("collisions"),
+            "closest_mm": result.get("closest_mm"),
             "pose_error": errors,
             "timing": timing,
             "compass_error": compass,
@@ -566,6 +579,18 @@ def main(argv: list[str] | None = None) -> int:
             f"{np.percentile(coverage, 10):.1%}; precision median {np.median(precision):.1%}, worst decile "
             f"{np.percentile(precision, 10):.1%}; corners closed {sum(r['corners_closed'] for r in live)}/"
             f"{sum(r['corners_total'] for r in live)} (issue 21's aims: 90 / 95 %, worst decile 80 / 90 %)"
+        )
+    counted = [r for r in rooms.values() if r.get("collisions") is not None]
+    if counted:
+        closest = [r["closest_mm"] for r in counted if r.get("closest_mm") is not None]
+        hit = sum(1 for r in counted if r["collisions"])
+        print(
+            f"{len(counted)} runs: {sum(r['collisions'] for r in counted)} collisions in {hit} runs"
+            + (
+                f"; closest approach median {np.median(closest):.0f} mm, worst {min(closest):.0f} mm"
+                if closest
+                else ""
+            )
         )
     target = args.json if args.json is not None else default_results_path()
     if target:
