@@ -34,6 +34,10 @@ from tests.support.ringutil import wait_until, write_probe_programs
 from tests.support.sshhosts import SshHost, SshHosts, needs_ssh_hosts
 from tokenring.host.remote import HEARTBEAT_S
 
+#: how long before a cut the share's last heartbeat may have come: one interval, and the launcher's
+#: supervising thread may send it late on a loaded machine
+LAST_BEAT_S = HEARTBEAT_S + 3.0
+
 TOKENRING = str(Path(sys.executable).with_name("tokenring"))
 
 
@@ -745,15 +749,15 @@ def test_a_host_cut_off_stops_its_share_itself_and_comes_back(procs, request, tm
         # its last heartbeat came before the cut: it stops lost_after later, plus its nodes' leave
         wait_until(lambda: not hosts.besides_sshd(b), lost_after + 30, "host b's share to stop by itself")
         stopped = time.monotonic() - cut
-        assert stopped >= lost_after - HEARTBEAT_S, f"host b's share stopped {stopped:.1f} s after the cut"
+        assert stopped >= lost_after - LAST_BEAT_S, f"host b's share stopped {stopped:.1f} s after the cut"
         assert hosts.leftovers().get(b.name), "b's sshd still holds the session it cannot tell is dead"
         return stopped
 
     try:
         wait_until(lambda: one_ring(status(hosts, a, ring), everyone), 120, "the ring over two hosts")
         assert hosts.besides_sshd(b), "host b runs its share"
+        cut = time.monotonic()  # (before: the cut takes effect while the command runs)
         hosts.cut(b)
-        cut = time.monotonic()
         wait_until(lambda: one_ring(status(hosts, a, ring), [10, 20]), 120, "host a re-formed without b")
         stopped = share_stops_by_itself(cut)
         wait_until(
@@ -763,8 +767,8 @@ def test_a_host_cut_off_stops_its_share_itself_and_comes_back(procs, request, tm
         mended = time.monotonic()
         wait_until(lambda: one_ring(status(hosts, a, ring), everyone), 120, "host b's nodes back in the ring")
         rejoined = time.monotonic() - mended
+        cut = time.monotonic()  # (before: the cut takes effect while the command runs)
         hosts.cut(b)
-        cut = time.monotonic()
         launcher.send_signal(signal.SIGINT)
         stopped_again = share_stops_by_itself(cut)
     finally:
@@ -800,8 +804,8 @@ def test_a_host_back_before_its_old_share_stopped_is_tried_again_until_it_has(pr
     joined = re.compile(r"b/sonar \| .* node sonar \(id 30\) joined")
     try:
         wait_until(lambda: one_ring(status(hosts, a, ring), everyone), 120, "the ring over two hosts")
+        cut = time.monotonic()  # (before: the cut takes effect while the command runs)
         hosts.cut(b, ssh_only=True)
-        cut = time.monotonic()
         wait_until(
             lambda: log_says(log, f"host b ({b.address}): lost (ssh exited with code 255"), 60, "b lost"
         )
@@ -811,7 +815,7 @@ def test_a_host_back_before_its_old_share_stopped_is_tried_again_until_it_has(pr
         assert len(joined.findall(log.read_text())) == 1  # the old share runs on: no new nodes yet
         wait_until(lambda: len(joined.findall(log.read_text())) == 2, lost_after + 60, "a new share's nodes")
         back = time.monotonic() - cut
-        assert back >= lost_after - HEARTBEAT_S, f"a new share's nodes joined {back:.1f} s after the cut"
+        assert back >= lost_after - LAST_BEAT_S, f"a new share's nodes joined {back:.1f} s after the cut"
         wait_until(lambda: one_ring(status(hosts, a, ring), everyone), 120, "every node in one ring")
     finally:
         code = interrupt(launcher)
