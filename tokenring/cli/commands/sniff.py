@@ -171,7 +171,11 @@ def run(args: argparse.Namespace) -> int:
             ended = True
         finally:
             with contextlib.suppress(zenoh.ZError):  # stopped on purpose: nothing was cut
-                session.put(keys.tap_left(ring, tap_id), b"")
+                # blocking, not dropped: on a busy link a dropped goodbye, with the token's end
+                # still delivered, reads to play as a tap cut off
+                session.put(
+                    keys.tap_left(ring, tap_id), b"", congestion_control=zenoh.CongestionControl.BLOCK
+                )
             alive.undeclare()
             drained.undeclare()
             subscriber.undeclare()
