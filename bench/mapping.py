@@ -27,6 +27,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -580,24 +581,29 @@ def main(argv: list[str] | None = None) -> int:
             f"{np.percentile(precision, 10):.1%}; corners closed {sum(r['corners_closed'] for r in live)}/"
             f"{sum(r['corners_total'] for r in live)} (issue 21's aims: 90 / 95 %, worst decile 80 / 90 %)"
         )
-    counted = [r for r in rooms.values() if r.get("collisions") is not None]
-    if counted:
-        closest = [r["closest_mm"] for r in counted if r.get("closest_mm") is not None]
-        hit = sum(1 for r in counted if r["collisions"])
-        print(
-            f"{len(counted)} runs: {sum(r['collisions'] for r in counted)} collisions in {hit} runs"
-            + (
-                f"; closest approach median {np.median(closest):.0f} mm, worst {min(closest):.0f} mm"
-                if closest
-                else ""
-            )
-        )
+    contact = collision_summary(rooms.values())
+    if contact:
+        print(contact)
     target = args.json if args.json is not None else default_results_path()
     if target:
         Path(target).parent.mkdir(parents=True, exist_ok=True)
         Path(target).write_text(json.dumps(results_document(args, rooms, rows), indent=1) + "\n")
         print(f"\nresults in {target}")
     return 0
+
+
+def collision_summary(rooms: Iterable[dict[str, Any]]) -> str:
+    """One line: the runs' collisions and in how many runs, and the closest approach's median and
+    worst; empty when no run counted them (a drive recorded before they were)."""
+    counted = [r for r in rooms if r.get("collisions") is not None]
+    if not counted:
+        return ""
+    hit = sum(1 for r in counted if r["collisions"])
+    line = f"{len(counted)} runs: {sum(r['collisions'] for r in counted)} collisions in {hit} runs"
+    closest = [r["closest_mm"] for r in counted if r.get("closest_mm") is not None]
+    if closest:
+        line += f"; closest approach median {np.median(closest):.0f} mm, worst {min(closest):.0f} mm"
+    return line
 
 
 def default_results_path() -> str:
@@ -621,8 +627,8 @@ def results_document(args: argparse.Namespace, rooms: dict[str, dict[str, Any]],
             "duration_s": args.duration,
             "seed": args.seed,
             "bitrate": args.bitrate,
-            "record": bool(getattr(args, "record", False)),
-            "hog_cores": getattr(args, "hog", 0),
+            "record": args.record,
+            "hog_cores": args.hog,
         },
         "aim": "ours with the filter: coverage >= 85 %, precision >= 90 %, corners closed",
         "rooms": rooms,

@@ -1,4 +1,4 @@
-"""bench.mapping's compass figures from a recorded drive (no ring)."""
+"""bench.mapping's figures from a recorded drive and the world's truth (no ring)."""
 
 from __future__ import annotations
 
@@ -68,3 +68,51 @@ def test_ring_timing_counts_missed_sweeps_slow_rounds_and_a_world_held_by_a_stal
     assert straight["moves"] == 4
     assert straight["true_over_counted_median"] == pytest.approx(1.01, abs=0.002)
     assert straight["off_by_2pct"] == 1
+
+
+class _Session:
+    """Just enough of a Zenoh session for the recorder: subscribers that are never called."""
+
+    class _Subscriber:
+        def undeclare(self) -> None:
+            pass
+
+    def declare_subscriber(self, _key: str, _handler: object) -> _Subscriber:
+        return self._Subscriber()
+
+
+class _Sample:
+    def __init__(self, message: dict) -> None:
+        import msgpack
+
+        packed = msgpack.packb(message)
+        self.payload = type("Payload", (), {"to_bytes": lambda _self: packed})()
+
+
+def test_each_run_counts_the_worlds_collisions_and_closest_approach_from_its_truth() -> None:
+    """The world's truth stream carries its own collision count and the body's closest approach:
+    the recorder keeps the latest of each (an infinite approach, nothing near yet, is none)."""
+    from bench.mapping import Recorder
+
+    recorder = Recorder(_Session(), "r")
+    truth = {"stamp_ms": 0, "x": 0.0, "y": 0.0, "theta": 0.0, "collisions": 0, "closest_mm": math.inf}
+    recorder._on_truth(_Sample(truth))
+    assert (recorder.collisions, recorder.closest_mm) == (0, None)
+    recorder._on_truth(_Sample({**truth, "stamp_ms": 100, "collisions": 2, "closest_mm": 0.0}))
+    recorder._on_truth(_Sample({**truth, "stamp_ms": 200, "collisions": 2, "closest_mm": 0.0}))
+    assert (recorder.collisions, recorder.closest_mm) == (2, 0.0)
+    assert len(recorder.truth) == 3
+
+
+def test_the_collision_line_sums_the_runs_that_counted_and_names_the_closest() -> None:
+    from bench.mapping import collision_summary
+
+    rooms = [
+        {"collisions": 0, "closest_mm": 60.0},
+        {"collisions": 3, "closest_mm": 0.0},
+        {"collisions": 1, "closest_mm": 20.0},
+        {"collisions": None, "closest_mm": None},  # recorded before runs counted them
+    ]
+    line = collision_summary(rooms)
+    assert line == "3 runs: 4 collisions in 2 runs; closest approach median 20 mm, worst 0 mm", line
+    assert collision_summary([{"collisions": None}]) == ""
