@@ -467,3 +467,47 @@ def test_the_docs_table_names_every_value_of_tables_b1_and_b2(heading: str, tabl
     for section, section_rows in rows.items():
         for value, status in section_rows:
             assert set(status.split(", or ")) <= {"honoured", "note", "refused"}, (section, value, status)
+
+
+#: the words of table B.2's files (the logfileanalyser's), so that random files reach past the
+#: first checks
+B2_WORDS = [
+    "[MAIN]", "[POSITION]", "[LOPS]", "[ODOMETRY]", "[GYROSCOP]", "[SONAR]", "[TIME]", "log.txt",
+    "out", "yes", "no", "pngcairo", "x11", '"pngcairo size 800,800"', '"lines lw 2"', "lines",
+    "points", "kalman", "odometrie", "lops", "truth", "gyro", "0", "1", "-1", "1e9", "#", "\n", " ", "\t", "[", "]", '"', "\x00",
+    "\u2028", "\ud800", "x" * 300,
+]  # fmt: skip
+
+
+@FUZZ
+@given(text=st.text(max_size=400))
+@example(text="[MAIN]\n\u2028")
+@example(text='[MAIN] "')
+def test_random_text_in_the_analysers_file_is_a_clean_error(text: str) -> None:
+    from modules.pc.seedplots import parse_config as parse_b2
+
+    one_line_or_nothing(lambda: parse_b2(text, "fuzz.cfg"))
+
+
+@FUZZ
+@given(data=st.binary(max_size=400))
+def test_random_bytes_in_the_analysers_file_are_a_clean_error(
+    data: bytes, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    from modules.pc.seedplots import read_config
+
+    path = tmp_path_factory.mktemp("fuzz") / "logfile.cfg"
+    path.write_bytes(data)
+    one_line_or_nothing(lambda: read_config(path))
+
+
+@FUZZ
+@given(words=st.lists(st.sampled_from(B2_WORDS), max_size=80))
+@example(words=["[POSITION]", "pngcairo", "kalman", "lines"])
+def test_files_of_the_analysers_words_are_a_clean_error_or_a_configuration(words: list[str]) -> None:
+    from modules.pc.seedplots import parse_config as parse_b2
+
+    text = " ".join(words)
+    main = "[MAIN]\nlog.txt out yes no no no no no\n"  # (a configuration, with [POSITION] after it)
+    one_line_or_nothing(lambda: parse_b2(text, "fuzz.cfg"))
+    one_line_or_nothing(lambda: parse_b2(main + text, "fuzz.cfg"))
