@@ -17,8 +17,7 @@ from collections.abc import Iterator
 from typing import TextIO
 
 from modules.pc.console.keys import RELEASE_S, Ended, KeyRunner, ending_signals
-from modules.pc.console.screen import new_lines
-from modules.pc.console.state import ConsoleState
+from modules.pc.console.state import ConsoleState, unseen_lines
 from modules.pc.operator import Operator, Outcome
 
 #: a terminal's escape sequences for the arrow keys
@@ -84,7 +83,7 @@ def run_plain(
 
     def follow() -> None:
         while not stop.wait(poll_s):
-            for line in new_lines(shown, state.message_lines()):
+            for line in unseen_lines(shown, state.message_lines())[0]:
                 say(line)
 
     def drain(patience_s: float) -> None:
@@ -93,7 +92,7 @@ def run_plain(
         deadline = time.monotonic() + patience_s
         while time.monotonic() < deadline and not (state.localization is not None and state.message_lines()):
             time.sleep(0.1)
-        for line in new_lines(shown, state.message_lines()):
+        for line in unseen_lines(shown, state.message_lines())[0]:
             say(line)
 
     runner = KeyRunner(operator, outcome).start()

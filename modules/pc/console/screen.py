@@ -19,7 +19,7 @@ from textual.events import Key
 from textual.widgets import RichLog, Static
 
 from modules.pc.console.keys import RELEASE_S, Ended, KeyRunner, ending_signals
-from modules.pc.console.state import ConsoleState
+from modules.pc.console.state import ConsoleState, unseen_lines
 from modules.pc.operator import Outcome, keys_help
 
 PANELS = (
@@ -98,7 +98,13 @@ class ConsoleScreen(App[int]):
         ):
             self.query_one(f"#{name}", Static).update(Text("\n".join(lines)))
         log = self.query_one("#messages", RichLog)
-        for line in new_lines(self._shown_messages, s.message_lines()):
+        now = s.message_lines()
+        fresh, earlier = unseen_lines(self._shown_messages, now)
+        if earlier:  # messages from before the screen opened, behind the first live ones: in order
+            log.clear()
+            self._shown_messages[:] = now
+            fresh = now
+        for line in fresh:
             log.write(Text(line))
 
     def on_key(self, event: Key) -> None:
@@ -135,22 +141,6 @@ class ConsoleScreen(App[int]):
 
 #: Textual's names of the keys table 8.2 names (the others are taken by their character)
 NAMED = ("up", "down", "left", "right", "space")
-
-
-def new_lines(shown: list[str], now: list[str]) -> list[str]:
-    """The lines of ``now`` after the last one already ``shown`` (a bounded list moves on), and
-    remember them as shown."""
-    if not shown:
-        fresh = now
-    else:
-        last = shown[-1]
-        try:
-            fresh = now[len(now) - 1 - now[::-1].index(last) + 1 :]
-        except ValueError:
-            fresh = now
-    shown.extend(fresh)
-    del shown[:-500]
-    return fresh
 
 
 def run_screen(app: ConsoleScreen, **kwargs: Any) -> int:

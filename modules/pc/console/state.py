@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import math
 import threading
+from collections import Counter
 from typing import Any
 
 from tokenring.observe import Message
@@ -248,3 +249,22 @@ def _deg(value: Any, digits: int = 2) -> str:
     if not isinstance(value, int | float) or not math.isfinite(value):
         return "?"
     return f"{math.degrees(value):.{digits}f}"
+
+
+def unseen_lines(shown: list[str], now: list[str]) -> tuple[list[str], bool]:
+    """The lines of ``now`` not in ``shown`` yet (remembered there as shown), and whether one of
+    them comes before a line already shown: the messages said before the console opened join
+    the list after the first live ones, so a screen shows the list afresh, in order, and a plain
+    terminal prints them as they come. ``now`` is a bounded list that moves on."""
+    remaining = Counter(shown)
+    fresh: list[str] = []
+    earlier = False
+    for line in now:
+        if remaining[line] > 0:
+            remaining[line] -= 1
+            earlier = earlier or bool(fresh)
+        else:
+            fresh.append(line)
+    shown.extend(fresh)
+    del shown[:-500]
+    return fresh, earlier

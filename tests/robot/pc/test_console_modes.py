@@ -155,3 +155,16 @@ def test_ui_none_drives_file_1_at_the_start_and_b_and_c_from_the_configuration(
         (tmp_path / "acts" / name, text, True) for name, text in texts.items()
     ]  # auto queued the first before any key; b and c the second and third
     assert told(run.stderr, cfg) == read_seed_config(cfg).note_lines() and told(run.stderr, cfg)
+
+
+def test_messages_said_before_the_console_opened_are_shown_though_they_come_late() -> None:
+    """The backlog (messages from before the console opened) joins the list after the first live
+    message: the screen shows the list afresh, in order; nothing is shown twice."""
+    from modules.pc.console.state import unseen_lines
+
+    shown: list[str] = []
+    assert unseen_lines(shown, ["I 900 live"]) == (["I 900 live"], False)
+    late = ["I 0 localisation started", "W 10 gyro", "I 900 live"]
+    assert unseen_lines(shown, late) == (["I 0 localisation started", "W 10 gyro"], True)
+    assert unseen_lines(shown, [*late, "I 950 next"]) == (["I 950 next"], False)
+    assert unseen_lines(shown, [*late[1:], "I 950 next", "I 950 next"]) == (["I 950 next"], False)
