@@ -52,7 +52,7 @@ PERIOD = re.compile(r"period +last (\d+) ms, mean (\d+) ms")
 NUMBER = r"(-?\d+(?:\.\d+)?)"
 PLACED = rf"x +{NUMBER} mm +y +{NUMBER} mm +ψ +{NUMBER}°"
 STORED = re.compile(rf"(\S+) +{PLACED} +([X-][Y-][P-])")
-BEST = re.compile(rf"filter +{PLACED} +σ {NUMBER}/{NUMBER} mm {NUMBER}° +\((ekf|odometry|none)\)")
+BEST = re.compile(rf"best +{PLACED} +σ {NUMBER}/{NUMBER} mm {NUMBER}° +\((ekf|odometry|none)\)")
 STARTED = re.compile(r"I +(\d+) (localisation started: .+)")
 SONAR = re.compile(r"sonar +((?:(?:\d+|--) )+)cm +sweep \d+ +\(\d+\)")
 

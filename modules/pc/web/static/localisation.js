@@ -159,13 +159,15 @@ function positionLines(state) {
     if (!p || typeof p !== "object") continue;
     lines.push([name, `${name.padEnd(10)} ${placed(p)}  ${validity(p)}`]);
   }
-  const filter = object(snapshot?.filter);
-  if (typeof filter.x_mm === "number") {
-    const s = object(filter.sigma);
-    lines.push(["filter", `${"filter".padEnd(10)} ${placed(filter)}  σ ${num(s.x_mm, 1)}/${num(s.y_mm, 1)} mm `
-      + `${num(degrees(s.heading_rad), 2)}°  (${filter.source ?? "?"})`]);
+  // the best pose (the filter's, with its σ) and the simulator's truth: named as the console does,
+  // apart from the store's own "filter" and "truth" entries above
+  const best = object(snapshot?.filter);
+  if (typeof best.x_mm === "number") {
+    const s = object(best.sigma);
+    lines.push(["best", `${"best".padEnd(10)} ${placed(best)}  σ ${num(s.x_mm, 1)}/${num(s.y_mm, 1)} mm `
+      + `${num(degrees(s.heading_rad), 2)}°  (${best.source ?? "?"})`]);
   }
-  if (state.truth) {
+  if (state.truth && !("truth" in object(snapshot?.positions))) {
     const [x, y, theta] = state.truth;
     lines.push(["truth", `${"truth".padEnd(10)} x ${num(x).padStart(7)} mm  y ${num(y).padStart(7)} mm  `
       + `ψ ${num(degrees(theta), 2).padStart(7)}°  (the simulator's)`]);
