@@ -9,7 +9,8 @@ circle, ``s`` a square, ``d`` motors off, ``x``/``q`` quit.
 The seed's command line (table 8.1) is taken as it was spelled: ``-Online`` (the default),
 ``-Moffline`` (replay the configuration's data log through the filter, without the ring) and
 ``-C<file>`` (the configuration: the seed's format or tokenring's YAML; user interface and action
-files come from it unless given here).
+files come from it unless given here). Without ``-C``, a ``default.cfg`` in the working directory
+is read, as the seed's program did.
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ the queue), ↑ accelerate, ↓ brake, ← left, → right, k circle, s square
 """
 
 UIS = ("ncurses", "stdout", "none")
+#: the configuration read when no -C is given, from the working directory (seed table 8.1)
+DEFAULT_CONFIG = "default.cfg"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -46,7 +49,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "-C",
         "--config",
         metavar="FILE",
-        help="the configuration (seed format .cfg, or YAML): user interface, action files, offline log",
+        help="the configuration (seed format .cfg, or YAML): user interface, action files, offline log "
+        f"(default: ./{DEFAULT_CONFIG} if there is one)",
     )
     p.add_argument("-O", dest="seed_online", metavar="nline", help="-Online: attach to the ring (default)")
     p.add_argument("-M", dest="seed_mode", metavar="MODE", help="-Moffline or -Monline (seed table 8.1)")
@@ -122,6 +126,11 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     mode = program_mode(args)
+    if args.config is None and not args.owner_pid and Path(DEFAULT_CONFIG).is_file():
+        import sys
+
+        args.config = DEFAULT_CONFIG
+        print(f"console: reading {DEFAULT_CONFIG} (no -C given; seed table 8.1)", file=sys.stderr)
     chosen = settings(args)
     if mode == "offline":
         return _offline(args, chosen)

@@ -121,3 +121,21 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, argv: list[str], needl
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and needle in lines[0], result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_without_c_a_default_cfg_in_the_working_directory_is_read(tmp_path: Path) -> None:
+    """Table 8.1: the configuration is default.cfg unless -C names another."""
+    (tmp_path / "default.cfg").write_text(
+        "[Main]\nsim none odo 1 yes no data.trlog 2 no\n[Sensors]\nodo yes yes yes yes yes yes\n"
+        "[Odometry]\nyes\n[Action]\nno\nmissing.act\n"
+    )
+    result = run_tokenring("console", "--ring", "nobody-here", timeout=60, cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    assert "reading default.cfg" in result.stderr and "missing.act" in result.stderr, result.stderr
+    assert "Traceback" not in result.stderr
+    mine = tmp_path / "mine.cfg"
+    mine.write_text(
+        "[Main]\nsim none odo 1 yes no data.trlog 2 no\n[Sensors]\nodo yes yes yes yes yes yes\n[Odometry]\nyes\n"
+    )
+    chosen = console.settings(parse("-C", str(mine)))
+    assert not any(chosen["files"]) and chosen["ui"] == "none"  # -C's file, not default.cfg's
