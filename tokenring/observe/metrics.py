@@ -118,7 +118,7 @@ SYSTEM_COUNTERS: dict[str, tuple[str, str]] = {
     "downloads_begun": ("tokenring_downloads_begun", "program downloads the node began receiving"),
     "chunks_received": ("tokenring_download_chunks_received", "program chunks received"),
     "chunk_repeats": ("tokenring_download_chunk_repeats", "program chunks received again"),
-    "bytes_received": ("tokenring_download_bytes_received", "program bytes received"),
+    "bytes_received": ("tokenring_download_received_bytes", "program bytes received"),
     "downloads_verified": ("tokenring_downloads_verified", "downloads whose digest held"),
     "downloads_rejected": ("tokenring_downloads_rejected", "downloads refused (digest, size, store)"),
     "installs": ("tokenring_program_installs", "programs installed in the node's store"),
@@ -369,6 +369,18 @@ class RingMetrics:
                     name, (f"tokenring_system_{name}", f"the system layer's {name}")
                 )
                 counter(metric, doc).add_metric(labels(node_id), value)
+            download = report.get("download")
+            if (
+                isinstance(download, dict)
+                and isinstance(download.get("chunks"), int)
+                and download["chunks"] > 0
+            ):
+                received = download.get("received")
+                if isinstance(received, int):
+                    gauge(
+                        "tokenring_download_progress_ratio",
+                        "the share of the download under way received so far (only while one runs)",
+                    ).add_metric(labels(node_id), min(max(received / download["chunks"], 0.0), 1.0))
             if isinstance(report.get("state"), str):
                 gauge(
                     "tokenring_program_state",

@@ -85,7 +85,10 @@ def test_a_poll_a_round_trip_and_an_event_become_prometheus_families():
     metrics.on_message(Message("/ring/roundtrip", 0, {"ms": 2000.0, "node": 10}))
     metrics.on_message(Message("/ring/event", 0, {"kind": "regenerated", "node": 10, "by": 20}))
     metrics.on_message(Message("/ring/frame", 0, {"did": 20, "crc_ok": True}))
-    metrics.on_system({20: {"stats": {"bytes_received": 900, "chunks_received": 3}, "state": "RUNNING"}})
+    metrics.on_system({
+        20: {"stats": {"bytes_received": 900, "chunks_received": 3}, "state": "RUNNING"},
+        30: {"stats": {}, "state": "NONE", "download": {"chunks": 8, "received": 2}},
+    })  # fmt: skip
 
     found, types = samples(text_string_to_metric_families(generate_latest(metrics.registry).decode()))
     motor = {"ring": "lab", "node": "20", "name": "motor"}
@@ -99,8 +102,11 @@ def test_a_poll_a_round_trip_and_an_event_become_prometheus_families():
     assert value(found, "tokenring_node_members", **motor) == 2
     assert value(found, "tokenring_faults_active", kind="delay", **motor) == 1
     assert value(found, "tokenring_faults_active", kind="drop", **motor) == 0
-    assert value(found, "tokenring_download_bytes_received_total", **motor) == 900
+    assert value(found, "tokenring_download_received_bytes_total", **motor) == 900
     assert value(found, "tokenring_program_state", state="RUNNING", **motor) == 1
+    sonar = {"ring": "lab", "node": "30", "name": "30"}
+    assert value(found, "tokenring_download_progress_ratio", **sonar) == 0.25  # 2 of 8 chunks
+    assert value(found, "tokenring_download_progress_ratio", **motor) is None  # none under way
     assert value(found, "tokenring_ring_events_total", ring="lab", kind="regenerated") == 1
     assert value(found, "tokenring_watch_frames_total", ring="lab") == 1
     assert value(found, "tokenring_nodes_answering", ring="lab") == 1
@@ -155,7 +161,7 @@ def test_a_watcher_serving_only_metrics_asks_the_nodes_when_scraped_at_most_once
         assert asked == [{"with": ["faults", "system"]}]  # one question a node, not three
         assert value(found, "tokenring_visits_total", **motor) == 8
         assert value(found, "tokenring_faults_active", kind="delay", **motor) == 1
-        assert value(found, "tokenring_download_bytes_received_total", **motor) == 900
+        assert value(found, "tokenring_download_received_bytes_total", **motor) == 900
         assert value(found, "tokenring_program_state", state="RUNNING", **motor) == 1
         clock[0] += SCRAPE_ASK_MIN_S / 2  # a scraper faster than that gets the same answers again
         assert value(scrape(), "tokenring_visits_total", **motor) == 8 and len(asked) == 1
@@ -176,7 +182,10 @@ def test_the_dashboard_and_the_docs_name_only_metrics_that_are_served():
     metrics.on_message(Message("/ring/nodes", 0, {"nodes": {"20": node}, "faults": {"20": {}}}))
     metrics.on_message(Message("/ring/roundtrip", 0, {"ms": 4.2, "node": 10}))
     metrics.on_message(Message("/ring/event", 0, {"kind": "regenerated", "node": 10, "by": 20}))
-    metrics.on_system({20: {"stats": dict.fromkeys(SYSTEM_COUNTERS, 1), "state": "RUNNING"}})
+    download = {"chunks": 4, "received": 1}  # (the progress gauge is served while one runs)
+    metrics.on_system(
+        {20: {"stats": dict.fromkeys(SYSTEM_COUNTERS, 1), "state": "RUNNING", "download": download}}
+    )
     found, types = samples(text_string_to_metric_families(generate_latest(metrics.registry).decode()))
     served = {name for name, _ in found} | set(types)
 
@@ -289,7 +298,7 @@ def test_up_metrics_move_while_the_ring_runs_and_show_a_fault(procs, ring_name, 
         assert (value(histogram, "tokenring_round_trip_seconds_sum", ring=ring_name) or 0) > 0
         # motor's program came over the ring: what the download brought is counted
         wait_until(
-            lambda: (value(scrape(url), "tokenring_download_bytes_received_total", **motor) or 0) > 0,
+            lambda: (value(scrape(url), "tokenring_download_received_bytes_total", **motor) or 0) > 0,
             60,
             "motor's downloaded bytes",
         )

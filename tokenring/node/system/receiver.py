@@ -408,9 +408,12 @@ class SystemReceiver(SystemParts):
     def report(self) -> dict[str, Any]:
         """The control verb ``system``: counters, the installed program, the error log."""
         installed = self.installed
+        download = self._download
         return {
             "stats": vars(self.stats).copy(),
             "state": self.program_state().name,
+            # the download under way: its chunks, and how many have come in order so far
+            "download": None if download is None else {"chunks": download.chunks, "received": download.next},
             "runs_installed": self._runs_installed(),
             "installed": None
             if installed is None
