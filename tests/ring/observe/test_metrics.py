@@ -318,6 +318,26 @@ def test_up_metrics_move_while_the_ring_runs_and_show_a_fault(procs, ring_name, 
             60,
             "motor's delay cleared",
         )
+        # frames motor corrupts are rejected by CRC where they land; frames it sends twice are
+        # duplicate passes: both counted by the nodes, both in the scrape
+        for kind, value_arg, metric, labels in (
+            ("corrupt", "0.2", "tokenring_frames_rejected_total", {"reason": "crc"}),
+            ("duplicate", "", "tokenring_duplicate_passes_total", {}),
+        ):
+            before = total(scrape(url), metric, ring=ring_name, **labels)
+            inject = run_tokenring(
+                "fault", "motor", kind, *([value_arg] if value_arg else []), *ring, timeout=60
+            )
+            assert inject.returncode == 0, inject.stderr
+            wait_until(
+                lambda metric=metric, labels=labels, before=before: (
+                    total(scrape(url), metric, ring=ring_name, **labels) > before
+                ),
+                60,
+                f"{metric} to count motor's {kind} frames",
+            )
+            clear = run_tokenring("fault", "motor", "clear", *ring, timeout=60)
+            assert clear.returncode == 0, clear.stderr
         # a token lost at main: the ring regenerates it, and the scrape says so
         before = total(scrape(url), "tokenring_tokens_regenerated_total", ring=ring_name)
         lose = run_tokenring("fault", "main", "lose", *ring, "--timeout", "3", timeout=60)
