@@ -16,6 +16,11 @@ The compass's calibration turn is pair 1's (seed 001 §4.3): :class:`CompassCali
 compass to listen and has the pilot turn the robot once round in eight 45° stops, waiting at each
 for the compass's samples (the compass never commands the motor).
 
+A job of main's own (Explore 1 and 2, the calibration runs: the Hamburg robot's, whose drive
+has no switch) on a drive that is off (``up --sensors darmstadt`` boots it off, as the Darmstadt
+Pioneer's) gets one MOTORS_ON from main, logged, before its first move; an action file switches
+the drive on itself with its ``e`` (seed 000 §6.7), as the seed's did, and gets none.
+
 ``--algorithms main=seed`` (read once in :meth:`Program.setup`) runs the seed's strategies and
 pilot instead (:func:`explore_navigator`, :func:`make_pilots`): ALERT on any sonar, Explore 1's
 turn stopped at the CLOSE area, Explore 2 the calibration run then plain left-wall following.
@@ -61,6 +66,10 @@ from tokenring.runtime import current as current_runtime
 log = logging.getLogger("tokenring.main")
 NAV_NAMES = {v: k for k, v in NAV.items()}
 COMPASS_CALIBRATING = default_protocol().enums["compass_state"]["CALIBRATING"]
+#: motor.data samples (distinct stamps) still showing OFF after main's MOTORS_ON that mean the
+#: motor did not take it (up to three can predate it: see PilotSettings.off_samples); the job
+#: then plans, and its first move ends MOTORS_OFF
+POWER_SAMPLES = 4
 
 
 def explore_navigator(mode: int, layout: SonarLayout, seed: bool) -> tuple[Navigator, int] | None:
@@ -117,6 +126,10 @@ class Program(UserProgram):
         self.compass_calibrating = False  # compass.data says CALIBRATING (read with the sensors)
         # self-localisation (seed §4.3 item 5): the filtered pose corrects the motor between moves
         self.corrector = PoseCorrector(CorrectionSettings.from_env())
+        #: main's MOTORS_ON for its own job: None (none sent for this job), the stamps of the
+        #: motor.data samples seen OFF since it was sent, or "on" once motor.data showed it
+        self.job_power: set[int] | str | None = None
+        self.motors_on_sent = 0  # MOTORS_ON main sent for its own jobs
         self._publish()
 
     # -- sending ------------------------------------------------------------------------------------
@@ -216,7 +229,7 @@ class Program(UserProgram):
             and self.calibration_heading is None
             and sensors.pose is not None
             and (sensors.pose_filtered or not self.rest_filtered)
-            and sensors.motor_state == MOTOR_STATE["IDLE"]
+            and sensors.motor_state in (MOTOR_STATE["IDLE"], MOTOR_STATE["OFF"])  # (OFF: it stands)
         ):
             self.rest_heading = sensors.pose[2]
             self.rest_filtered = sensors.pose_filtered
@@ -239,6 +252,8 @@ class Program(UserProgram):
                 return
         if pilot.busy or not self.sensors.ready:  # no plan before sonar and motor have spoken
             return
+        if self._power_drive(nav):  # main's own job on a drive that is off: MOTORS_ON first
+            return
         if self._correct_motor():  # a correction under way: no move until motor and filter show it
             return
         if isinstance(nav, CompassCalibration):  # it waits on the compass's samples
@@ -260,6 +275,33 @@ class Program(UserProgram):
                 ", ".join(f"{m.label or m.direction} {m.amount}" for m in moves),
             )
         pilot.start(moves, self.sensors, keep_clear=nav.keeps_clear)
+
+    def _power_drive(self, nav: Navigator) -> bool:
+        """Before a move of main's own job (not an action file's: its ``e`` switches the drive on)
+        with motor.data saying OFF at the job's first plan: MOTORS_ON, once per job, and no plan
+        until motor.data shows the drive on (or :data:`POWER_SAMPLES` samples still show it
+        off). Switched off later (the operator's ``d``), the drive stays off: the pilot's next
+        move ends MOTORS_OFF and the job stops. True: wait."""
+        from modules.navigation.actions import ActionNavigator
+
+        off = self.sensors.motor_state == MOTOR_STATE["OFF"]
+        if isinstance(nav, ActionNavigator) or self.job_power == "on":
+            return False
+        if not off:  # on at the job's first plan, or after main's MOTORS_ON: never sent again
+            self.job_power = "on"
+            return False
+        if self.job_power is None:
+            log.info(
+                "the drive is off: MOTORS_ON for %s (main's own job; an action file says e itself)",
+                type(nav).__name__,
+            )
+            self._send("motor", "MOTORS_ON")
+            self.motors_on_sent += 1
+            self.job_power = set()
+            return True
+        assert isinstance(self.job_power, set)
+        self.job_power.add(self.sensors.stamp_ms)
+        return len(self.job_power) < POWER_SAMPLES
 
     def _observe_poses(self) -> None:
         """Feed motor.data and copro.data to the self-localisation (once both have spoken)."""
@@ -290,6 +332,7 @@ class Program(UserProgram):
             self._drain_pilot()
         self._leave_compass_calibration()
         self.navigator, self.pair, self.pilot = navigator, pair, self.pilots[pair]
+        self.job_power = None
         self.last_outcome = None
         self.finished = None
         log.info("navigator %s started (pair %d)", type(navigator).__name__, pair)
@@ -469,4 +512,4 @@ class Program(UserProgram):
         )
 
     def report(self) -> dict[str, Any]:
-        return {**self.state(), "history": self.history}
+        return {**self.state(), "history": self.history, "motors_on_sent": self.motors_on_sent}
