@@ -14,6 +14,9 @@ implausible glide correction) are refused with ERROR BAD_ARGUMENT to the sender:
 
 The drive's power (the Darmstadt operator's keys ``d``/``e``, seed 000 §6.7, table 8.2): on at
 boot, as the Hamburg drive has no switch, so nothing changes for a robot nobody switches off.
+With ``TOKENRING_MOTOR_POWER=off`` (set by ``up --sensors darmstadt``) it boots off, as the
+Darmstadt Pioneer did: it answered drive commands only after "Motoren an" (§6.7; §8.2: "first
+switch the motors on, key e"), so an action file starts with ``e`` and the operator presses it.
 MOTORS_OFF ends a move under way (POSITION_REACHED ABORTED, as for STOP), switches the drive
 off in the world (``hw/motor/power``) and motor.data's ``state`` reads OFF until MOTORS_ON
 powers it again (state IDLE; on already, MOTORS_ON leaves a move alone). While off, a move
@@ -45,10 +48,10 @@ the motor never hears of a wall, a stall or lost power (no feedback: it issues e
 reports DONE); SET_WHEEL_SPEEDS, not a seed command, only aborts a move (both tracks always step
 together: straight moves and turns on the spot). The 2001 drive had no power switch either:
 MOTORS_OFF is no seed command and only aborts a move (the drive stays on, the state never reads
-OFF), MOTORS_ON aborts a move and is counted. Not the seed's: speed 0 and an undefined or
-implausible glide correction are still refused with ERROR (the seed text says nothing of them;
-a 0 % move would never end), and speeds above 100 % are accepted, as the seed had no check (the
-motor then stalls and loses its steps).
+OFF; a boot setting of off is ignored, the drive boots on), MOTORS_ON aborts a move and is
+counted. Not the seed's: speed 0 and an undefined or implausible glide correction are still
+refused with ERROR (the seed text says nothing of them; a 0 % move would never end), and speeds
+above 100 % are accepted, as the seed had no check (the motor then stalls and loses its steps).
 """
 
 from __future__ import annotations
@@ -61,6 +64,7 @@ from collections import deque
 from modules.description.robot import (
     DEFAULT_MOTOR_CURRENT_MA,
     MAX_SPEED_MM_S,
+    MOTOR_POWER_ENV,
     MOTOR_SIP_ENV,
     MOTOR_TICK_MS,
     STEP_MM,
@@ -115,6 +119,16 @@ def sip_period_ms(environ: dict[str, str] | None = None) -> int:
     return period
 
 
+def powered_at_boot(environ: dict[str, str] | None = None) -> bool:
+    """The drive's power at boot from :data:`MOTOR_POWER_ENV`: on (unset, ``on``) or off (``off``)."""
+    text = (os.environ if environ is None else environ).get(MOTOR_POWER_ENV, "")
+    if text.strip().lower() in ("", "on"):
+        return True
+    if text.strip().lower() == "off":
+        return False
+    raise ValueError(f"{MOTOR_POWER_ENV}={text!r}: on or off expected")
+
+
 class Program(UserProgram):
     module = "motor"
 
@@ -141,8 +155,10 @@ class Program(UserProgram):
         self.stamp_ms = self.clock.now_ms()
         self.moves = {"done": 0, "aborted": 0, "stalled": 0, "collision": 0}
         self.refused = 0
-        self.powered = True  # the drive's power: on at boot (the Hamburg drive has no switch)
-        self.hw.power(True)
+        self.powered = self._boot_power()
+        self.hw.power(self.powered)
+        if not self.powered:
+            self.state = OFF
         self.motors_on = 0  # MOTORS_ON commands taken
         self.motors_off = 0  # MOTORS_OFF commands taken (seed mode: and ignored)
         self.ignored = 0  # seed mode: commands the seed dropped ("Befehl falsch", unknown ones)
@@ -156,6 +172,18 @@ class Program(UserProgram):
         if self.sip_ms:
             self._take_sip(self._sip_due(self.clock.now_ms()) or 0)
         self._publish()
+
+    def _boot_power(self) -> bool:
+        """On, as the Hamburg drive (no switch); off with the setting, as the Darmstadt Pioneer."""
+        powered = powered_at_boot()
+        if not powered and self.seed:
+            log.info(
+                "motor (seed): the 2001 drive has no switch: on at boot, %s=off ignored", MOTOR_POWER_ENV
+            )
+            return True
+        if not powered:
+            log.info("motor: the drive is off at boot (%s=off): MOTORS_ON (key e) powers it", MOTOR_POWER_ENV)
+        return powered
 
     # -- the loop -------------------------------------------------------------------------------
     def run(self) -> None:

@@ -105,7 +105,8 @@ class RobotExtension(Extension):
             "Darmstadt sensors as well (darmstadt: the gyroscope, node gyro; the floor correlator, "
             "node correlator, except on the seed's body, --algorithms seed or body=seed, whose was "
             "defective; LOPS, the positioning system beside the ring; the motor sends its odometry "
-            "as the Pioneer's SIPs, every 100 ms of its clock)",
+            "as the Pioneer's SIPs, every 100 ms of its clock, and its drive is off at boot, as "
+            "the Pioneer's: tokenring drive motors on, or an action file's e, before a move)",
         )
         world.add_argument(
             "--algorithms",
@@ -186,9 +187,16 @@ class RobotExtension(Extension):
         if args.sensors == "darmstadt":  # the Pioneer's SIPs (an explicit setting wins, 0 = off)
             import os
 
-            from modules.description.robot import MOTOR_SIP_ENV, SIP_PERIOD_MS
+            from modules.description.robot import MOTOR_POWER_ENV, MOTOR_SIP_ENV, SIP_PERIOD_MS
+            from modules.motor import powered_at_boot
 
             plan.env[MOTOR_SIP_ENV] = os.environ.get(MOTOR_SIP_ENV, str(SIP_PERIOD_MS))
+            # its drive off at boot until MOTORS_ON (the key e; §6.7); an explicit setting wins
+            plan.env[MOTOR_POWER_ENV] = os.environ.get(MOTOR_POWER_ENV, "off")
+            try:
+                powered_at_boot(plan.env)
+            except ValueError as exc:
+                raise UsageError(str(exc)) from None
         if args.localizer:
             from modules.localization.config import config_path, load_config, seed_notes, sensor_set_layer
 

@@ -24,6 +24,10 @@ SIP_PERIOD_MS = 100
 #: the motor's setting for a SIP stream: sample and publish the counters only at the grid times
 #: k·period of its clock (ms; unset or 0: every loop tick, the Hamburg motor)
 MOTOR_SIP_ENV = "TOKENRING_MOTOR_SIP_MS"
+#: the motor's setting for the drive's power at boot: "on" (unset: the Hamburg drive, which has
+#: no switch) or "off" (the Darmstadt Pioneer answered drive commands only after "Motoren an",
+#: the operator's key e: seed 000 §6.7, §8.2)
+MOTOR_POWER_ENV = "TOKENRING_MOTOR_POWER"
 ROBOT_RADIUS_MM = 190.0  # the collision circle the simulator uses
 
 # -- compass (seed §3.3.3) -------------------------------------------------------------------------

@@ -8,7 +8,7 @@
     tokenring drive set-pose 1000 600 90        # x mm, y mm, angle degrees counter-clockwise from +X
     tokenring drive glide 90 -12.5              # RECALC_GLIDE_FACTOR: target degrees, error degrees
     tokenring drive motors off                  # MOTORS_OFF: unpower the drive (Darmstadt key d)
-    tokenring drive motors on                   # MOTORS_ON: power it again (key e)
+    tokenring drive motors on                   # MOTORS_ON: power it (key e; Darmstadt set: off at boot)
     tokenring drive pose                        # just print the poses
 
 Every command goes into motor's inbox through main, which relays it over the ring; the tool then
@@ -40,14 +40,14 @@ EXAMPLES = """examples:
   tokenring drive set-pose 1000 600 90        # x mm, y mm, angle degrees counter-clockwise from +X
   tokenring drive glide 90 -12.5              # RECALC_GLIDE_FACTOR: target degrees, error degrees
   tokenring drive motors off                  # unpower the drive: moves are refused until ...
-  tokenring drive motors on                   # ... it is powered again (on at boot)
+  tokenring drive motors on                   # ... it is powered (off at boot with up --sensors darmstadt)
   tokenring drive pose --json                 # just the poses
 """
 
 MOVING, STALLED, COLLISION, OFF = 1, 2, 3, 4
 STATE_NAMES = {0: "idle", 1: "moving", 2: "stalled", 3: "collision", 4: "off"}
 MOVES = ("MOVE_FORWARD", "MOVE_REVERSE", "TURN_LEFT", "TURN_RIGHT", "SET_WHEEL_SPEEDS")
-MOTORS_OFF_MESSAGE = "the motors are off: `tokenring drive motors on` first"
+MOTORS_OFF_MESSAGE = "the motors are off: `tokenring drive motors on` first (in tokenring console: key e)"
 #: motor.data samples (distinct stamps) not showing a switch the motor took that mean it made
 #: none: up to three can predate the motor carrying it out (the newest before it, the one its
 #: loop was making, a SIP sample taken before the command ran)

@@ -317,6 +317,8 @@ def test_a_feed_opened_on_a_running_ring_sees_earlier_messages_and_the_odometry_
                 wait_until(lambda: odometry_steps() and odometry_steps()[-1] is not None, 60, "odometry")
                 before = odometry_steps()[-1]
                 link = open_link(session, ring_name, wait=60.0)
+                # the Darmstadt drive is off at boot: "Motoren an" first (the operator's e, §6.7)
+                assert link.command("motor", "MOTORS_ON", timeout=30.0)["acknowledged"]
                 sent = link.command("motor", "MOVE_FORWARD", timeout=30.0, distance_mm=300, speed_pct=60)
                 assert sent["acknowledged"], sent
                 wait_until(lambda: odometry_steps()[-1] != before, 120, "the odometry sample to move")

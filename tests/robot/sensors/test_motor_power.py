@@ -1,6 +1,8 @@
 """The motor's MOTORS_OFF / MOTORS_ON (issue 54, Darmstadt §6.7 and table 8.2): on at boot; off, a
 move under way ends ABORTED, the world's drive is unpowered, motor.data says OFF and every move
-command is refused with ERROR MOTORS_OFF; on again, it drives. Seed mode has no switch.
+command is refused with ERROR MOTORS_OFF; on again, it drives. Seed mode has no switch. With
+``TOKENRING_MOTOR_POWER=off`` (``up --sensors darmstadt``) it boots off, as the Darmstadt Pioneer,
+which answered drive commands only after "Motoren an" (the key e).
 
 The motor's real loop runs against an in-process simulator on a manual clock (the fake node of
 ``test_motor_sip.py``: time passes only while the program waits for a command), so every run is
@@ -16,7 +18,8 @@ import pytest
 
 import modules.motor as motor_module
 from modules.description import load_world
-from modules.description.robot import MOTOR_SIP_ENV
+from modules.description.robot import MOTOR_POWER_ENV, MOTOR_SIP_ENV
+from modules.motor import powered_at_boot
 from modules.sensors.odometry import steps_for_distance
 from modules.variants import ENV
 from modules.world.clients import MotorHardware
@@ -57,8 +60,14 @@ def run_motor(
     commands: list[tuple[float, str, dict]],
     end_ms: float,
     algorithm: str = "ours",
+    power: str | None = None,
 ) -> tuple[Any, WatchedOS, Simulator]:
+    """The motor's real loop to ``end_ms``; ``power``: its setting for the drive at boot (None: unset)."""
     monkeypatch.delenv(MOTOR_SIP_ENV, raising=False)
+    if power is None:
+        monkeypatch.delenv(MOTOR_POWER_ENV, raising=False)
+    else:
+        monkeypatch.setenv(MOTOR_POWER_ENV, power)
     monkeypatch.setenv(ENV, f"motor={algorithm}")
     clock = ManualClock(1000.0)
     sim = Simulator(load_world("empty"), seed=3, clock=clock)  # start (1000, 1500) facing +X
@@ -177,3 +186,76 @@ def test_seed_mode_has_no_switch_motors_off_only_aborts_the_move(monkeypatch) ->
     assert OFF not in states(fake) and motor.powered and sim.truth()["drive"]
     assert motor.report()["ignored"] == 1 and motor.motors_off == 1
     assert motor.moves == {"done": 1, "aborted": 1, "stalled": 0, "collision": 0}
+
+
+@pytest.mark.parametrize("power", [None, "on", " ON "])
+def test_on_at_boot_without_the_setting_or_with_on(monkeypatch, power) -> None:
+    motor, fake, sim = run_motor(monkeypatch, [(1100.0, "MOVE_FORWARD", FORWARD_1M)], 12_000.0, power=power)
+    assert fake.channel.writes[0][1]["state"] == IDLE
+    assert motor.powered and sim.truth()["drive"] and motor.steps == [1845, 1845]
+    assert [(n, a["status"]) for _, n, a in fake.sent] == [("POSITION_REACHED", DONE)]
+
+
+def test_off_at_boot_with_the_setting_until_motors_on(monkeypatch, caplog) -> None:
+    """The Darmstadt Pioneer: off from the first sample on, a move refused and nothing stepped;
+    after MOTORS_ON (the operator's e) the same move drives."""
+    commands = [
+        (1100.0, "MOVE_FORWARD", {"distance_mm": 200, "speed_pct": 100}),
+        (2000.0, "MOTORS_ON", {}),
+        (2500.0, "MOVE_FORWARD", {"distance_mm": 200, "speed_pct": 100}),
+    ]
+    with caplog.at_level(logging.INFO, logger="tokenring.motor"):
+        motor, fake, sim = run_motor(monkeypatch, commands, end_ms=6_000.0, power="off")
+    assert fake.channel.writes[0] == (1000.0, {**fake.channel.writes[0][1], "state": OFF})
+    assert states(fake, until_ms=2000.0) == {OFF}
+    assert fake.arrivals[0][1]["drive"] is False  # the world's drive unpowered from boot
+    assert fake.arrivals[1][1]["x"] == 1000.0 and fake.arrivals[1][1]["steps"] == [0, 0]
+    assert fake.sent[0] == ("main", "ERROR", {"error": MOTORS_OFF_ERROR, "about": CODES["MOVE_FORWARD"]})
+    assert fake.sent[1] == ("main", "POSITION_REACHED", {"status": DONE, "move_seq": 103})
+    assert states(fake, since_ms=2000.0) == {IDLE, MOVING}
+    assert motor.powered and sim.truth()["drive"] and sim.truth()["steps_unpowered"] == [0, 0]
+    assert motor.steps == [steps_for_distance(200)] * 2
+    assert sim.truth()["x"] - 1000.0 == pytest.approx(200 * 1.01, abs=5)
+    assert motor.report()["motors_on"] == 1 and motor.refused == 1
+    assert any("off at boot (TOKENRING_MOTOR_POWER=off)" in r.getMessage() for r in caplog.records)
+
+
+def test_seed_mode_has_no_switch_and_boots_on_whatever_the_setting(monkeypatch) -> None:
+    motor, fake, sim = run_motor(
+        monkeypatch, [(1100.0, "MOVE_FORWARD", FORWARD_1M)], 12_000.0, algorithm="seed", power="off"
+    )
+    assert motor.powered and sim.truth()["drive"] and OFF not in states(fake)
+    assert fake.sent == [("main", "POSITION_REACHED", {"status": DONE, "move_seq": 101})]
+
+
+def test_the_power_setting_is_on_or_off() -> None:
+    assert powered_at_boot({}) and powered_at_boot({MOTOR_POWER_ENV: "on"})
+    assert powered_at_boot({MOTOR_POWER_ENV: ""})
+    assert not powered_at_boot({MOTOR_POWER_ENV: "off"}) and not powered_at_boot({MOTOR_POWER_ENV: " Off"})
+    for bad in ("0", "no", "of", "false"):
+        with pytest.raises(ValueError, match=f"{MOTOR_POWER_ENV}=.*on or off"):
+            powered_at_boot({MOTOR_POWER_ENV: bad})
+
+
+@pytest.mark.parametrize(
+    ("sensors", "environ", "told"),
+    [("hamburg", None, None), ("darmstadt", None, "off"), ("darmstadt", "on", "on")],
+)
+def test_up_sensors_darmstadt_boots_the_drive_off(monkeypatch, sensors, environ, told) -> None:
+    """``up --sensors darmstadt`` tells the motor to boot off; a setting of the caller's wins."""
+    from tests.robot.test_plugin import plan
+
+    if environ is None:
+        monkeypatch.delenv(MOTOR_POWER_ENV, raising=False)
+    else:
+        monkeypatch.setenv(MOTOR_POWER_ENV, environ)
+    assert plan("--sensors", sensors).env.get(MOTOR_POWER_ENV) == told
+
+
+def test_up_refuses_a_bad_power_setting_before_anything_starts(monkeypatch) -> None:
+    from tests.robot.test_plugin import plan
+    from tokenring import UsageError
+
+    monkeypatch.setenv(MOTOR_POWER_ENV, "maybe")
+    with pytest.raises(UsageError, match=f"{MOTOR_POWER_ENV}='maybe': on or off"):
+        plan("--sensors", "darmstadt")

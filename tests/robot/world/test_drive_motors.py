@@ -1,6 +1,8 @@
 """``tokenring drive motors off|on`` on a real ring with a world (issue 54, the Darmstadt operator's
 keys ``d``/``e``): off, the tool sends no move and says why, a move that reaches the motor anyway
-is refused with ERROR MOTORS_OFF and the robot stays where it is; on again, it drives."""
+is refused with ERROR MOTORS_OFF and the robot stays where it is; on again, it drives. With the
+Darmstadt sensors (``up --sensors darmstadt``) the drive is off from boot, as the Pioneer's, until
+``motors on`` (seed 000 §6.7, §8.2)."""
 
 from __future__ import annotations
 
@@ -21,7 +23,10 @@ from tokenring.transport.session import free_port
 ENUMS = default_protocol().enums
 OFF = ENUMS["motor_state"]["OFF"]
 MOTORS_OFF_ERROR = ENUMS["error_code"]["MOTORS_OFF"]
-REFUSAL = "tokenring drive: error: the motors are off: `tokenring drive motors on` first"
+REFUSAL = (
+    "tokenring drive: error: the motors are off: `tokenring drive motors on` first "
+    "(in tokenring console: key e)"
+)
 
 
 def drive(endpoint: str, ring: str, *args: str) -> tuple[int, dict | str]:
@@ -85,6 +90,40 @@ def test_drive_motors_off_refuses_moves_and_motors_on_drives_again(procs, ring_n
         code, result = drive(endpoint, ring_name, "forward", "200", "--speed", "100")
         assert code == 0 and isinstance(result, dict) and result["status"] == "done", result
         assert result["true"]["x_mm"] == pytest.approx(before["x_mm"] + 200 * 1.01, abs=5)
+    launcher.terminate()
+    assert launcher.wait(60) == 0
+
+
+@pytest.mark.slow
+def test_the_darmstadt_drive_is_off_at_boot_until_motors_on(procs, ring_name, endpoint, tmp_path):
+    room = tmp_path / "hall.yaml"
+    room.write_text(ROOM)
+    launcher = procs.tokenring(
+        "up", "--ring", ring_name, "--listen", endpoint, "--nodes", "main,motor,gyro,correlator",
+        "--programs", str(programs(tmp_path, ["motor", "gyro", "correlator"])), "--world", str(room),
+        "--sensors", "darmstadt", "--speed", "20", "--bitrate", "max", "--duration", "600",
+    )  # fmt: skip
+    with tap(endpoint) as session:
+        wait_ring(session, ring_name, [10, 20, 90, 100], timeout=180)
+        procs.watch(launcher_pids(session, ring_name))
+        link = PcLink(session, ring_name)
+        wait_until(lambda: link.read("motor.data")["state"] == OFF, 60, "motor.data saying OFF")
+        before = world_state(session, ring_name)
+        assert before["drive"] is False  # the world's drive unpowered from boot
+
+        code, message = drive(endpoint, ring_name, "forward", "200", "--speed", "100")
+        assert code == 1 and isinstance(message, str), message
+        assert REFUSAL in message.splitlines() and "Traceback" not in message
+        after = world_state(session, ring_name)
+        assert pose(after) == pose(before) and after["steps"] == before["steps"] == [0, 0]
+
+        code, result = drive(endpoint, ring_name, "motors", "on")
+        assert code == 0 and isinstance(result, dict) and result["motors"] == "on", result
+        code, result = drive(endpoint, ring_name, "forward", "200", "--speed", "100")
+        assert code == 0 and isinstance(result, dict) and result["status"] == "done", result
+        moved = world_state(session, ring_name)
+        assert moved["x_mm"] == pytest.approx(before["x_mm"] + 200 * 1.01, abs=5), (before, moved)
+        assert moved["y_mm"] == pytest.approx(before["y_mm"], abs=5) and moved["collisions"] == 0
     launcher.terminate()
     assert launcher.wait(60) == 0
 
