@@ -23,6 +23,18 @@ def plan(*argv: str):
     return RobotExtension().plan_up(args, load_protocol(REPO / "protocol.yaml"))
 
 
+def motor_setting(
+    monkeypatch: pytest.MonkeyPatch, sensors: str, name: str, environ: str | None
+) -> str | None:
+    """What ``up --sensors SENSORS`` tells the nodes in the setting ``name`` (an environment
+    variable), with the caller's own ``environ`` value set beforehand (None: unset)."""
+    if environ is None:
+        monkeypatch.delenv(name, raising=False)
+    else:
+        monkeypatch.setenv(name, environ)
+    return plan("--sensors", sensors).env.get(name)
+
+
 @pytest.mark.parametrize("sensors", [[], ["--sensors", "hamburg"], ["--sensors", "darmstadt"]])
 def test_the_world_s_speed_up_is_the_ring_s_whatever_the_sensors(sensors: list[str]) -> None:
     """--speed K runs the world K times faster, and the emulated wire with it: a round of the

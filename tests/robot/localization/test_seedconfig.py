@@ -22,6 +22,8 @@ from modules.localization.seedconfig import (
     read_sections,
     read_seed_config,
 )
+from modules.pc.seedplots import parse_config as parse_analyser_config
+from modules.pc.seedplots import read_config as read_analyser_config
 from tokenring.errors import TokenRingError
 
 HALL_RECEIVERS = [[100.0, 100.0], [4900.0, 100.0], [100.0, 4900.0]]
@@ -393,9 +395,12 @@ def one_line_or_nothing(call) -> None:
 @given(text=st.text(max_size=400))
 @example(text="[Main]\n\u2028")
 @example(text='[A] "')
+@example(text='[MAIN] "')
 def test_random_text_is_a_clean_error(text: str) -> None:
+    """Table B.1's readers (syncaria's file, tokenring's YAML) and table B.2's (the analyser's)."""
     one_line_or_nothing(lambda: read_seed_config(text, "fuzz.cfg"))
     one_line_or_nothing(lambda: parse_config(text, "fuzz.cfg"))
+    one_line_or_nothing(lambda: parse_analyser_config(text, "fuzz.cfg"))
 
 
 @FUZZ
@@ -405,6 +410,7 @@ def test_random_bytes_are_a_clean_error(data: bytes, tmp_path_factory: pytest.Te
     path.write_bytes(data)
     one_line_or_nothing(lambda: load_config(path))
     one_line_or_nothing(lambda: read_seed_config(data, "fuzz.cfg"))
+    one_line_or_nothing(lambda: read_analyser_config(path))
 
 
 @FUZZ
@@ -480,34 +486,10 @@ B2_WORDS = [
 
 
 @FUZZ
-@given(text=st.text(max_size=400))
-@example(text="[MAIN]\n\u2028")
-@example(text='[MAIN] "')
-def test_random_text_in_the_analysers_file_is_a_clean_error(text: str) -> None:
-    from modules.pc.seedplots import parse_config as parse_b2
-
-    one_line_or_nothing(lambda: parse_b2(text, "fuzz.cfg"))
-
-
-@FUZZ
-@given(data=st.binary(max_size=400))
-def test_random_bytes_in_the_analysers_file_are_a_clean_error(
-    data: bytes, tmp_path_factory: pytest.TempPathFactory
-) -> None:
-    from modules.pc.seedplots import read_config
-
-    path = tmp_path_factory.mktemp("fuzz") / "logfile.cfg"
-    path.write_bytes(data)
-    one_line_or_nothing(lambda: read_config(path))
-
-
-@FUZZ
 @given(words=st.lists(st.sampled_from(B2_WORDS), max_size=80))
 @example(words=["[POSITION]", "pngcairo", "kalman", "lines"])
 def test_files_of_the_analysers_words_are_a_clean_error_or_a_configuration(words: list[str]) -> None:
-    from modules.pc.seedplots import parse_config as parse_b2
-
     text = " ".join(words)
     main = "[MAIN]\nlog.txt out yes no no no no no\n"  # (a configuration, with [POSITION] after it)
-    one_line_or_nothing(lambda: parse_b2(text, "fuzz.cfg"))
-    one_line_or_nothing(lambda: parse_b2(main + text, "fuzz.cfg"))
+    one_line_or_nothing(lambda: parse_analyser_config(text, "fuzz.cfg"))
+    one_line_or_nothing(lambda: parse_analyser_config(main + text, "fuzz.cfg"))

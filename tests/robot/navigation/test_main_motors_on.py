@@ -18,7 +18,14 @@ import pytest
 from modules import main as main_module
 from modules.navigation.actions import ActionNavigator, parse_actions
 from modules.navigation.pilot import Sensors
-from tests.robot.navigation.test_main_setpos import copro_data, main_program, motor_data, sent, visit
+from tests.robot.navigation.test_main_setpos import (
+    before_calibration,
+    copro_data,
+    main_program,
+    motor_data,
+    sent,
+    visit,
+)
 from tokenring.contract.protocol import default_protocol
 
 ENUMS = default_protocol().enums
@@ -114,15 +121,7 @@ def test_explore_from_the_lcd_or_the_pc_switches_the_drive_on_first(monkeypatch)
 def test_a_robot_standing_with_its_drive_off_is_at_rest_for_the_calibration_heading() -> None:
     """The heading an action file squares up to after the compass's turn is noted at rest: a
     drive that is off stands as well as an idle one."""
-    from types import SimpleNamespace
-
-    main = SimpleNamespace(
-        navigator=None,
-        rest_heading=None,
-        rest_filtered=False,
-        calibration_heading=None,
-        compass_calibrating=False,
-    )
+    main = before_calibration()
     main.sensors = Sensors(pose=(1000.0, 1000.0, 0.3), pose_filtered=True, motor_state=OFF)
     main_module.Program._note_calibration_turn(main)
     assert main.rest_heading == 0.3

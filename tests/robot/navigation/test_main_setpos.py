@@ -298,22 +298,29 @@ def test_main_pilot_busy_sends_nothing(monkeypatch: pytest.MonkeyPatch, choice: 
 # -- the heading an action file squares up to after the compass's calibration turn ---------------
 
 
-def test_before_copro_filters_the_calibration_turn_keeps_the_motors_heading() -> None:
-    """The turn began before copro's filter published a pose (a slow start with --sensors
-    darmstadt): the heading kept is the motor's, where the robot was put down; once a fused
-    heading came, only a fused one replaces it."""
+def before_calibration() -> Any:
+    """The state :meth:`Program._note_calibration_turn` reads and writes, before any heading was
+    noted (its ``sensors`` are the test's to set)."""
     from types import SimpleNamespace
 
-    def sensors(heading: float, filtered: bool) -> Sensors:
-        return Sensors(pose=(1000.0, 1000.0, heading), pose_filtered=filtered, motor_state=IDLE)
-
-    main = SimpleNamespace(
+    return SimpleNamespace(
         navigator=None,
         rest_heading=None,
         rest_filtered=False,
         calibration_heading=None,
         compass_calibrating=False,
     )
+
+
+def test_before_copro_filters_the_calibration_turn_keeps_the_motors_heading() -> None:
+    """The turn began before copro's filter published a pose (a slow start with --sensors
+    darmstadt): the heading kept is the motor's, where the robot was put down; once a fused
+    heading came, only a fused one replaces it."""
+
+    def sensors(heading: float, filtered: bool) -> Sensors:
+        return Sensors(pose=(1000.0, 1000.0, heading), pose_filtered=filtered, motor_state=IDLE)
+
+    main = before_calibration()
     note = main_module.Program._note_calibration_turn
     main.sensors = sensors(0.0, filtered=False)
     note(main)
@@ -327,13 +334,7 @@ def test_before_copro_filters_the_calibration_turn_keeps_the_motors_heading() ->
     main.sensors = sensors(0.9, filtered=True)  # turning
     note(main)
     assert main.calibration_heading == 0.02
-    without_filter = SimpleNamespace(
-        navigator=None,
-        rest_heading=None,
-        rest_filtered=False,
-        calibration_heading=None,
-        compass_calibrating=False,
-    )
+    without_filter = before_calibration()
     without_filter.sensors = sensors(0.0, filtered=False)
     note(without_filter)
     without_filter.compass_calibrating = True

@@ -243,13 +243,9 @@ def test_the_power_setting_is_on_or_off() -> None:
 )
 def test_up_sensors_darmstadt_boots_the_drive_off(monkeypatch, sensors, environ, told) -> None:
     """``up --sensors darmstadt`` tells the motor to boot off; a setting of the caller's wins."""
-    from tests.robot.test_plugin import plan
+    from tests.robot.test_plugin import motor_setting
 
-    if environ is None:
-        monkeypatch.delenv(MOTOR_POWER_ENV, raising=False)
-    else:
-        monkeypatch.setenv(MOTOR_POWER_ENV, environ)
-    assert plan("--sensors", sensors).env.get(MOTOR_POWER_ENV) == told
+    assert motor_setting(monkeypatch, sensors, MOTOR_POWER_ENV, environ) == told
 
 
 def test_up_refuses_a_bad_power_setting_before_anything_starts(monkeypatch) -> None:

@@ -240,10 +240,6 @@ def test_the_sip_stream_on_an_in_process_ring(monkeypatch) -> None:
 )
 def test_up_sensors_darmstadt_turns_the_sip_stream_on(monkeypatch, sensors, environ, told) -> None:
     """``up --sensors darmstadt`` tells the motor to send SIPs; a setting of the caller's wins."""
-    from tests.robot.test_plugin import plan
+    from tests.robot.test_plugin import motor_setting
 
-    if environ is None:
-        monkeypatch.delenv(MOTOR_SIP_ENV, raising=False)
-    else:
-        monkeypatch.setenv(MOTOR_SIP_ENV, environ)
-    assert plan("--sensors", sensors).env.get(MOTOR_SIP_ENV) == told
+    assert motor_setting(monkeypatch, sensors, MOTOR_SIP_ENV, environ) == told
