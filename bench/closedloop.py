@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -40,20 +41,23 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def contact_summary(results: list[dict[str, Any]]) -> str:
-    """Bumper contacts (each a failure), the footprint's closest approach, ALERTs and homecomings."""
-    if not results:
-        return "no runs"
-    hit = [r for r in results if r.get("collisions")]
-    closest = [r["closest_mm"] for r in results if r.get("closest_mm") is not None]
-    near = (
-        f"closest approach median {np.median(closest):.0f} mm, worst {min(closest):.0f} mm" if closest else ""
-    )
-    return (
-        f"{len(results)} runs: {sum(r.get('collisions', 0) for r in results)} collisions in {len(hit)} runs; "
-        f"{near}; {sum(r.get('alerts', 0) for r in results)} ALERTs; "
-        f"{sum(bool(r.get('home')) for r in results)} ended at home"
-    )
+def contact_summary(results: Iterable[dict[str, Any]]) -> str:
+    """One line of the runs' contacts (each a failure): collisions and in how many runs, the
+    footprint's closest approach, and the ALERTs and homecomings where the runs counted them;
+    empty when no run counted collisions (a drive recorded before they were)."""
+    counted = [r for r in results if r.get("collisions") is not None]
+    if not counted:
+        return ""
+    hit = sum(1 for r in counted if r["collisions"])
+    parts = [f"{len(counted)} runs: {sum(r['collisions'] for r in counted)} collisions in {hit} runs"]
+    closest = [r["closest_mm"] for r in counted if r.get("closest_mm") is not None]
+    if closest:
+        parts.append(f"closest approach median {np.median(closest):.0f} mm, worst {min(closest):.0f} mm")
+    if any("alerts" in r for r in counted):
+        parts.append(f"{sum(r.get('alerts', 0) for r in counted)} ALERTs")
+    if any("home" in r for r in counted):
+        parts.append(f"{sum(bool(r.get('home')) for r in counted)} ended at home")
+    return "; ".join(parts)
 
 
 def summary(rows: list[dict[str, Any]]) -> str:
@@ -322,7 +326,7 @@ def main(argv: list[str] | None = None) -> int:
         print()
         print(format_rows(rows))
         print(summary([result["rows"][0] for result in results]))
-        print(contact_summary(results))
+        print(contact_summary(results) or "no runs")
     if args.plot and results:
         rooms = args.generated or args.world
         plot_distribution(

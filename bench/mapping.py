@@ -27,7 +27,6 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -411,6 +410,7 @@ def compass_error(result: dict[str, Any], settle_ms: int = 400) -> dict[str, Any
 
 
 def main(argv: list[str] | None = None) -> int:
+    from bench.closedloop import contact_summary
     from bench.spurious import cpu_hog
     from modules.mapping.vectorgen import OUR_METHOD, SEED_METHOD
     from modules.pc.mapfiles import load_map_file, load_truth, write_map
@@ -581,7 +581,7 @@ def main(argv: list[str] | None = None) -> int:
             f"{np.percentile(precision, 10):.1%}; corners closed {sum(r['corners_closed'] for r in live)}/"
             f"{sum(r['corners_total'] for r in live)} (issue 21's aims: 90 / 95 %, worst decile 80 / 90 %)"
         )
-    contact = collision_summary(rooms.values())
+    contact = contact_summary(rooms.values())
     if contact:
         print(contact)
     target = args.json if args.json is not None else default_results_path()
@@ -590,20 +590,6 @@ def main(argv: list[str] | None = None) -> int:
         Path(target).write_text(json.dumps(results_document(args, rooms, rows), indent=1) + "\n")
         print(f"\nresults in {target}")
     return 0
-
-
-def collision_summary(rooms: Iterable[dict[str, Any]]) -> str:
-    """One line: the runs' collisions and in how many runs, and the closest approach's median and
-    worst; empty when no run counted them (a drive recorded before they were)."""
-    counted = [r for r in rooms if r.get("collisions") is not None]
-    if not counted:
-        return ""
-    hit = sum(1 for r in counted if r["collisions"])
-    line = f"{len(counted)} runs: {sum(r['collisions'] for r in counted)} collisions in {hit} runs"
-    closest = [r["closest_mm"] for r in counted if r.get("closest_mm") is not None]
-    if closest:
-        line += f"; closest approach median {np.median(closest):.0f} mm, worst {min(closest):.0f} mm"
-    return line
 
 
 def default_results_path() -> str:

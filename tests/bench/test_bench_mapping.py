@@ -105,7 +105,7 @@ def test_each_run_counts_the_worlds_collisions_and_closest_approach_from_its_tru
 
 
 def test_the_collision_line_sums_the_runs_that_counted_and_names_the_closest() -> None:
-    from bench.mapping import collision_summary
+    from bench.closedloop import contact_summary
 
     rooms = [
         {"collisions": 0, "closest_mm": 60.0},
@@ -113,6 +113,6 @@ def test_the_collision_line_sums_the_runs_that_counted_and_names_the_closest() -
         {"collisions": 1, "closest_mm": 20.0},
         {"collisions": None, "closest_mm": None},  # recorded before runs counted them
     ]
-    line = collision_summary(rooms)
+    line = contact_summary(rooms)
     assert line == "3 runs: 4 collisions in 2 runs; closest approach median 20 mm, worst 0 mm", line
-    assert collision_summary([{"collisions": None}]) == ""
+    assert contact_summary([{"collisions": None}]) == ""
