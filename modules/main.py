@@ -282,11 +282,9 @@ class Program(UserProgram):
         until motor.data shows the drive on (or :data:`POWER_SAMPLES` samples still show it
         off). Switched off later (the operator's ``d``), the drive stays off: the pilot's next
         move ends MOTORS_OFF and the job stops. True: wait."""
-        from modules.navigation.actions import ActionNavigator
-
-        off = self.sensors.motor_state == MOTOR_STATE["OFF"]
-        if isinstance(nav, ActionNavigator) or self.job_power == "on":
+        if not nav.powers_the_drive or self.job_power == "on":
             return False
+        off = self.sensors.motor_state == MOTOR_STATE["OFF"]
         if not off:  # on at the job's first plan, or after main's MOTORS_ON: never sent again
             self.job_power = "on"
             return False

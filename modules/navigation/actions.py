@@ -422,6 +422,7 @@ class ActionNavigator(_navigator_base()):  # type: ignore[misc]
     """
 
     keeps_clear = True
+    powers_the_drive = False  # its e does, as the seed's files did (§6.7)
 
     mode = 0
     MAX_RETRIES = 5

@@ -20,6 +20,9 @@ class Navigator:
     #: Explore 2 not yet: with it, the reacquire round a small pillar was blocked by echoes of
     #: the pillar's corner placed off it, and the island was never gone round
     keeps_clear = False
+    #: main switches a drive that is off on before this navigator's first move: its own jobs are
+    #: the Hamburg robot's, whose drive has no switch. An action file does it with its own ``e``
+    powers_the_drive = True
 
     def __init__(self, layout: SonarLayout) -> None:
         self.layout = layout
